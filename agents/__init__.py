@@ -1,0 +1,1 @@
+"""Agents that steer the flat body onto stationary ellipses (Stable-Baselines3)."""

@@ -1,0 +1,72 @@
+"""The ``flatbody`` command.
+
+Sub-commands live in the modules named in :data:`COMMAND_MODULES`; each has a
+``register(subparsers)`` that adds its parsers with ``set_defaults(handler=...)``. Modules
+keep heavy imports inside their handlers so that ``flatbody --help`` stays fast.
+
+Exit codes: 0 success; 1 an integration or run failed (one line says when and why); 2 bad
+input (one line names the field and the allowed range).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMAND_MODULES: tuple[str, ...] = (
+    "flatbody_env.commands",
+)
+"""Modules that contribute sub-commands (in help order)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> Parser:
+    parser = Parser(
+        prog="flatbody",
+        description="A flat affinely-rigid body with thickness: simulate, analyse, record, train.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:  # an optional layer that is not installed
+            if exc.name and name.startswith(exc.name):
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .integrators import IntegrationError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "handler", None) is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.handler(args) or 0)
+    except IntegrationError as exc:
+        sys.stderr.write(f"flatbody: {exc}\n")
+        return 1
+    except ValueError as exc:
+        sys.stderr.write(f"flatbody: error: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("flatbody: interrupted\n")
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,33 @@
+"""Integrators behind one seam (:mod:`.base`): methods chosen by name.
+
+``get_method(name)`` returns a method; ``available_methods()`` lists them. The scipy
+``solve_ivp`` family (:mod:`.scipy_methods`) is the reference.
+"""
+
+from __future__ import annotations
+
+from .base import CHARTS, IntegrationError, Method, MethodInfo, Solution, Tolerances, available_methods, get_method, register_method
+
+_LOADED = False
+
+
+def _load_all() -> None:
+    """Import the modules that register methods (once)."""
+    global _LOADED
+    if _LOADED:
+        return
+    _LOADED = True
+    from . import scipy_methods  # noqa: F401
+
+
+__all__ = [
+    "CHARTS",
+    "IntegrationError",
+    "Method",
+    "MethodInfo",
+    "Solution",
+    "Tolerances",
+    "available_methods",
+    "get_method",
+    "register_method",
+]

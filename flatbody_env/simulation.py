@@ -1,0 +1,279 @@
+"""``simulate``: integrate a scene and return a :class:`Trajectory` in the paper's variables.
+
+Model selection ("model no more than a scene needs")
+-----------------------------------------------------
+``model="auto"`` integrates the two-polar equations (eqs. (44)–(49) of [1], 11 variables,
+cheapest) when the scene provably stays away from the chart's singular set λ = μ, and the
+regular matrix formulation (NOTES §5 of [2], 18 variables plus two constraints) otherwise:
+
+* J1 = J2 (p_θ and σ₋ = s3 − p_θ conserved) and the energy bound of the centrifugal barrier
+  σ₋²/(4J(λ−μ)²) ≤ H − inf V gives |λ − μ| ≥ |σ₋| / √(4J (H − inf V)) ≥ :data:`GAP_MIN`
+  along the whole trajectory → ``"two-polar"``;
+* otherwise (J1 ≠ J2, σ₋ too small, or no lower bound of V known) → ``"regular"``.
+
+A method name that belongs to one chart (``"DOP853"`` two-polar, ``"DOP853-regular"``) is
+mapped to its twin in the chosen chart when one exists.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .body import Body
+from .conserved import casimir, laboratory_spin
+from .hamiltonian import hamiltonian
+from .integrators import IntegrationError, Tolerances, get_method
+from .scene import Scene, SceneError, load_scene
+from .state import STATE_NAMES, pack, unpack
+
+GAP_MIN = 1e-2
+"""Smallest guaranteed |λ − μ| for which ``model="auto"`` keeps the two-polar chart."""
+
+MODELS = ("auto", "two-polar", "regular")
+DEFAULT_SAMPLES = 101
+
+
+def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
+    """A rigorous lower bound of |λ − μ| along the uncontrolled isotropic motion (0 if none).
+
+    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], NOTES §3) non-negative,
+    σ₋²/(4J(λ−μ)²) ≤ H − inf V, so |λ − μ| ≥ |σ₋| / √(4J(H − inf V)).
+    """
+    y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
+    if not body.inertia.is_isotropic:
+        return 0.0
+    lb = body.potential_lower_bound
+    if not math.isfinite(lb):
+        return 0.0
+    sigma_minus = abs(y[2] - y[3])
+    avail = hamiltonian(y, body) - lb
+    if avail <= 0.0:
+        return math.inf if sigma_minus > 0 else 0.0
+    return sigma_minus / math.sqrt(4.0 * body.inertia.J1 * avail)
+
+
+def choose_model(state: Mapping[str, float] | np.ndarray, body: Body) -> str:
+    """``"two-polar"`` or ``"regular"`` per the rule in the module docstring."""
+    return "two-polar" if gap_lower_bound(state, body) >= GAP_MIN else "regular"
+
+
+@dataclass
+class Trajectory:
+    """A solution in the paper's variables.
+
+    Attributes
+    ----------
+    t : ndarray (n,)
+        Times.
+    state : dict[str, ndarray (n,)]
+        The eleven state entries (:data:`flatbody_env.state.STATE_NAMES`).
+    energy : ndarray (n,)
+        H (eq. (41) of [1]).
+    casimir : ndarray (n,)
+        |s|².
+    p_theta : ndarray (n,)
+        p_θ (conserved for J1 = J2).
+    rotation : ndarray (n, 3, 3) or None
+        R(t), when asked for (``with_rotation=True``) or when the regular model ran.
+    method, model : str
+        What integrated it.
+    nfev : int
+        Right-hand-side evaluations.
+    wall_time : float
+        Seconds spent integrating.
+    """
+
+    t: np.ndarray
+    state: dict[str, np.ndarray]
+    energy: np.ndarray
+    casimir: np.ndarray
+    p_theta: np.ndarray
+    rotation: np.ndarray | None
+    method: str
+    model: str
+    nfev: int = 0
+    wall_time: float = 0.0
+    scene: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def lab_spin(self) -> np.ndarray | None:
+        """R s, shape (n, 3) (conserved with the corrected bracket, NOTES §4), or None without R."""
+        if self.rotation is None:
+            return None
+        s = np.stack([self.state["s1"], self.state["s2"], self.state["s3"]], axis=-1)
+        return laboratory_spin(self.rotation, s)
+
+    @property
+    def y(self) -> np.ndarray:
+        """Packed states, shape (11, n)."""
+        return np.stack([self.state[name] for name in STATE_NAMES])
+
+    def drift(self) -> dict[str, float]:
+        """Max |q(t) − q(0)| of H, |s|², p_θ (and |R s − R₀ s₀| when R is known)."""
+        out = {
+            "energy": float(np.max(np.abs(self.energy - self.energy[0]))),
+            "casimir": float(np.max(np.abs(self.casimir - self.casimir[0]))),
+            "p_theta": float(np.max(np.abs(self.p_theta - self.p_theta[0]))),
+        }
+        ls = self.lab_spin
+        if ls is not None:
+            out["lab_spin"] = float(np.max(np.linalg.norm(ls - ls[0], axis=-1)))
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form: ``{"t", "state", "energy", "casimir", "p_theta", ["rotation"], "meta"}``."""
+        out: dict[str, Any] = {
+            "t": self.t.tolist(),
+            "state": {name: self.state[name].tolist() for name in STATE_NAMES},
+            "energy": self.energy.tolist(),
+            "casimir": self.casimir.tolist(),
+            "p_theta": self.p_theta.tolist(),
+        }
+        if self.rotation is not None:
+            out["rotation"] = self.rotation.tolist()
+        out["meta"] = {"scene": self.scene, "method": self.method, "model": self.model, "nfev": self.nfev, "wall_time": self.wall_time, **self.extra}
+        return out
+
+
+def _resolve_times(t_end: float, times: Sequence[float] | np.ndarray | None) -> np.ndarray:
+    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.floating, np.integer)) or not math.isfinite(float(t_end)) or t_end <= 0:
+        raise ValueError(f"t_end: must be a finite number > 0 (allowed range (0, inf)), got {t_end!r}")
+    if times is None:
+        return np.linspace(0.0, float(t_end), DEFAULT_SAMPLES)
+    arr = np.asarray(times, dtype=float).ravel()
+    if arr.size == 0:
+        raise ValueError("times: must hold at least one time in [0, t_end]")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("times: must be finite numbers")
+    if np.any(arr < 0) or np.any(arr > t_end):
+        raise ValueError(f"times: every time must lie in [0, t_end] = [0, {t_end:g}]")
+    if np.any(np.diff(arr) <= 0):
+        raise ValueError("times: must be strictly increasing")
+    if arr[0] != 0.0:
+        arr = np.concatenate([[0.0], arr])
+    return arr
+
+
+def _check_tol(name: str, value: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) or not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name}: must be a finite number > 0 (allowed range (0, inf)), got {value!r}")
+    return float(value)
+
+
+def simulate(
+    scene: Scene | Mapping[str, Any] | str,
+    *,
+    t_end: float,
+    times: Sequence[float] | np.ndarray | None = None,
+    method: str = "DOP853",
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    with_rotation: bool = False,
+    step: float | None = None,
+    model: str = "auto",
+    energy_tol: float | None = None,
+) -> Trajectory:
+    """Integrate a scene from t = 0 to ``t_end``.
+
+    Parameters
+    ----------
+    scene : Scene, dict or str
+        A :class:`~flatbody_env.scene.Scene`, a scene dict, a JSON path or a built-in name.
+    t_end : float
+        Final time, > 0.
+    times : sequence of float, optional
+        Output times in [0, t_end] (0 is prepended if missing); default 101 even samples.
+    method : str
+        Integrator name (``flatbody methods``); default scipy ``DOP853``.
+    rtol, atol : float
+        Tolerances of adaptive methods.
+    with_rotation : bool
+        Also integrate R (Ṙ = R W(ω), eq. (25) of [1]) and return ``Trajectory.rotation``.
+    step : float, optional
+        Step size of fixed-step methods.
+    model : {"auto", "two-polar", "regular"}
+        The formulation (module docstring).
+    energy_tol : float, optional
+        Allowed |H(t) − H(0)| before the run is declared failed; default
+        ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H(0)|)``; ``math.inf`` disables the check.
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    ValueError
+        Bad arguments or scene (naming the field).
+    IntegrationError
+        The integration failed; the message says when and why.
+    """
+    try:
+        sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    except SceneError:
+        raise
+    times_arr = _resolve_times(t_end, times)
+    rtol = _check_tol("rtol", rtol)
+    atol = _check_tol("atol", atol)
+    if step is not None:
+        step = _check_tol("step", step)
+    if model not in MODELS:
+        raise ValueError(f"model: must be one of {', '.join(MODELS)}, got {model!r}")
+    body = sc.body
+    y0 = pack(sc.state)
+    meth = get_method(method)
+    chosen = model
+    if model == "auto":
+        chosen = meth.info.chart if meth.info.chart == "regular" else choose_model(y0, body)
+        if body.spin_convention == "paper":
+            chosen = "two-polar"
+    if chosen != meth.info.chart:
+        twin = _twin(method, chosen)
+        if twin is None:
+            raise ValueError(f"method: {method!r} integrates the {meth.info.chart} chart, but model={chosen!r} was asked for")
+        meth = get_method(twin)
+    H0 = hamiltonian(y0, body)
+    if energy_tol is None:
+        energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+    tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol))
+    start = time.perf_counter()
+    sol = meth.integrate(body, y0, times_arr, tol=tol, with_rotation=with_rotation)
+    wall = time.perf_counter() - start
+    state = unpack(sol.Y)
+    energy = sol.stats.get("energy")
+    if energy is None:
+        energy = np.array([hamiltonian(sol.Y[:, k], body) for k in range(sol.Y.shape[1])])
+    return Trajectory(
+        t=np.asarray(sol.t, float),
+        state=state,
+        energy=np.asarray(energy, float),
+        casimir=casimir(state["s1"], state["s2"], state["s3"]),
+        p_theta=state["p_theta"].copy(),
+        rotation=sol.rotation,
+        method=meth.info.name,
+        model=meth.info.chart,
+        nfev=sol.nfev,
+        wall_time=wall,
+        scene=sc.name,
+    )
+
+
+def _twin(method: str, chart: str) -> str | None:
+    from .integrators import available_methods
+
+    names = {m.name: m for m in available_methods()}
+    base = method[: -len("-regular")] if method.endswith("-regular") else method
+    candidate = base if chart == "two-polar" else f"{base}-regular"
+    if candidate in names and names[candidate].chart == chart:
+        return candidate
+    return None
+
+
+__all__ = ["GAP_MIN", "MODELS", "Trajectory", "simulate", "choose_model", "gap_lower_bound", "IntegrationError"]
