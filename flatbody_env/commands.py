@@ -1,4 +1,4 @@
-"""Sub-commands of the physics layer: ``simulate``, ``scenes``, ``methods``, ``demo``."""
+"""Sub-commands of the physics layer: ``simulate``, ``scenes``, ``methods`` (``demo`` lives in :mod:`agents.commands`)."""
 
 from __future__ import annotations
 
@@ -157,16 +157,6 @@ def _methods(args) -> int:
     return 0
 
 
-def _demo(args) -> int:
-    from .scene import load_scene
-    from .simulation import simulate
-
-    scene = load_scene("default")
-    traj = simulate(scene, t_end=scene.t_end, with_rotation=True)
-    print(format_summary(scene, traj, rows=11))
-    return 0
-
-
 def register(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
     add_scene_arguments(p)
@@ -185,6 +175,3 @@ def register(sub) -> None:
     p = sub.add_parser("methods", help="list the integrators")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=_methods)
-
-    p = sub.add_parser("demo", help="the main job: simulate the default scene and print a summary")
-    p.set_defaults(handler=_demo)

@@ -1,0 +1,148 @@
+"""A hand-designed controller for ``FlatBody-v0``: passivity-based damping toward the target ellipse.
+
+Dynamics it relies on (eqs. (44)–(49) of [1], spin bracket per NOTES E3/E4 of [2]; the controls
+enter as in :mod:`flatbody_env.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
+
+.. math::
+
+    \\dot s = s \\times \\omega + \\tau, \\quad \\omega = \\partial H/\\partial s \\quad (44)\\text{–}(45), \\qquad
+    \\dot p_\\theta = 0 \\quad (46), \\qquad
+    \\dot q = \\partial H/\\partial p, \\; \\dot p = -\\partial H/\\partial q + f\\,e_\\varrho \\quad (47)\\text{–}(49),
+
+for q = (λ, μ, ϱ) and p = (p_λ, p_μ, p_ϱ). The gyroscopic term s × ω does no work, so the
+power of the controls is
+
+.. math:: \\dot H = \\omega \\cdot \\tau + \\dot\\varrho\\, f .
+
+A target stationary ellipse (eqs. (50)–(54)) with s1 = s2 = 0, p = 0 is a critical point of the
+energy–momentum function H − ω3* s3 at fixed p_θ (∂H/∂s3 = ω3, ∂H/∂q = 0 there), and a minimum
+in the shape directions when it is spectrally stable (NOTES §7: the Hessian of the effective
+potential W is positive definite; the task samples only such targets). The controller makes
+
+.. math::
+
+    L = H - \\omega_3^* s_3 + \\tfrac{c}{2}(s_3 - s_3^*)^2 + \\tfrac{k_\\varrho}{2}(\\varrho - \\varrho^*)^2
+
+decrease along motions (a Lyapunov function, energy–Casimir style):
+
+.. math::
+
+    \\dot L = \\omega_1\\tau_1 + \\omega_2\\tau_2 + \\big(\\omega_3 - \\omega_3^* + c(s_3 - s_3^*)\\big)\\tau_3
+              + \\dot\\varrho\\,\\big(f + k_\\varrho(\\varrho - \\varrho^*)\\big) \\le 0
+
+with
+
+* **spin damping** τ_i = −k_ω ω_i (i = 1, 2), ω1 = s1/(Jμ² + J3ϱ²), ω2 = s2/(Jλ² + J3ϱ²): the
+  tumbling decays (a torque changes s, and ω = I⁻¹ s);
+* **spin regulation** τ3 = −k_3 (ω3 − ω3* + c (s3 − s3*)): proportional on s3 toward s3*, plus
+  the term ω3 − ω3*, which is how the shape (λ, μ) is steered: ω3 = σ₊/(2Ju²) + σ₋/(2Jv²)
+  (u = λ + μ, v = λ − μ, σ± = s3 ± p_θ) changes with the shape, so feeding it back through s3
+  modulates the centrifugal forces −∂𝒯/∂(λ, μ) against the shape oscillation and damps it;
+* **PD on the thickness** f = −k_ϱ (ϱ − ϱ*) − d_ϱ ϱ̇.
+
+Each term is saturated at the action limits (a saturated damping term still has the sign that
+makes L̇ ≤ 0). The velocities come from the inverse Legendre map
+(:func:`flatbody_env.hamiltonian.kinetic_kernel`).
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [2] ``shared/physics/NOTES.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from flatbody_env.body import Body
+from flatbody_env.hamiltonian import kinetic_kernel
+from flatbody_env.task import control_mask
+
+
+def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The packed state y (11,) and the target (λ*, μ*, ϱ*, s3*) from an observation (16,)."""
+    obs = np.asarray(obs, dtype=np.float64)
+    y = np.empty(11)
+    y[:10] = obs[:10]
+    y[10] = math.atan2(obs[10], obs[11])
+    return y, obs[12:16].copy()
+
+
+@dataclass(frozen=True, kw_only=True)
+class HeuristicGains:
+    """Gains of :class:`HeuristicController` (physical units; see the module docstring)."""
+
+    k_omega: float = 4.0
+    """Spin damping τ_{1,2} = −k_ω ω_{1,2}."""
+    k_s3: float = 4.0
+    """τ3 = −k_3 (ω3 − ω3* + c (s3 − s3*))."""
+    c_s3: float = 1.0
+    """Weight c of the proportional s3 term."""
+    k_rho: float = 4.0
+    """Thickness stiffness k_ϱ."""
+    d_rho: float = 3.0
+    """Thickness damping d_ϱ."""
+
+
+class HeuristicController:
+    """The passivity-based controller of the module docstring, with SB3's ``predict`` signature.
+
+    Parameters
+    ----------
+    body : Body
+        The environment's body (``env.unwrapped.body``).
+    control : str
+        The environment's control mode (which of τ1, τ2, τ3, f the action drives).
+    limits : array of shape (4,)
+        Torque and force limits (``env.unwrapped.limits``); actions are u / limit, clipped to [−1, 1].
+    gains : HeuristicGains
+    """
+
+    def __init__(self, body: Body, control: str, limits: np.ndarray, gains: HeuristicGains | None = None) -> None:
+        self.body = body
+        self.mask = control_mask(control)
+        self.limits = np.asarray(limits, dtype=np.float64)
+        self.gains = gains or HeuristicGains()
+        self._P = body.kernel_params()
+        self._vel = np.empty(7)
+        self._vel_t = np.empty(7)
+        self._force = np.empty(4)
+
+    @classmethod
+    def for_env(cls, env, gains: HeuristicGains | None = None) -> "HeuristicController":
+        u = env.unwrapped
+        return cls(u.body, u.control, u.limits, gains)
+
+    def control(self, y: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Physical controls u = (τ1, τ2, τ3, f_ϱ) for state y (11,) and target (λ*, μ*, ϱ*, s3*)."""
+        g = self.gains
+        kinetic_kernel(y, self._P, self._vel, self._force)
+        w1, w2, w3, _, _, _, rho_dot = self._vel
+        yt = np.array([0.0, 0.0, target[3], y[3], 0.0, 0.0, 0.0, target[0], target[1], target[2], y[10]])
+        kinetic_kernel(yt, self._P, self._vel_t, self._force)
+        w3_star = self._vel_t[2]
+        return np.array([
+            -g.k_omega * w1,
+            -g.k_omega * w2,
+            -g.k_s3 * (w3 - w3_star + g.c_s3 * (y[2] - target[3])),
+            -g.k_rho * (y[9] - target[2]) - g.d_rho * rho_dot,
+        ])
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised action in [−1, 1]ⁿ for one observation (16,)."""
+        y, target = state_from_observation(obs)
+        u = self.control(y, target)
+        if not self.mask.any():
+            return np.zeros(1, dtype=np.float32)
+        a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
+        return a.astype(np.float32)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.action(obs), None
+        return np.stack([self.action(o) for o in obs]), None
