@@ -76,11 +76,24 @@ class Agent:
                 self.vecnormalize = pickle.load(fh)
             self.vecnormalize.training = False
         self.path = folder
-        self.env_kwargs: dict[str, Any] = dict((self.config.get("hyperparams") or {}).get("env_kwargs") or {})
+        hp = self.config.get("hyperparams") or {}
+        self.env_kwargs: dict[str, Any] = dict(hp.get("env_kwargs") or {})
+        self.residual = hp.get("residual") or None
+        self._base = None
+        if self.residual == "heuristic":
+            from flatbody_env.env import FlatBodyEnv
+
+            from .heuristic import HeuristicController
+
+            proto = FlatBodyEnv(**self.env_kwargs)
+            self._base = HeuristicController(proto.body, proto.control, proto.limits)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         o = self.vecnormalize.normalize_obs(obs) if self.vecnormalize is not None else obs
         actions, _ = self.model.predict(o, deterministic=True)
+        if self._base is not None:  # residual on the hand-designed controller
+            base, _ = self._base.predict(obs)
+            actions = np.clip(base + actions, -1.0, 1.0)
         return actions
 
 

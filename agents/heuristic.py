@@ -146,3 +146,34 @@ class HeuristicController:
         if obs.ndim == 1:
             return self.action(obs), None
         return np.stack([self.action(o) for o in obs]), None
+
+
+def residual_vec_env(venv, env_kwargs=None):
+    """Wrap an SB3 VecEnv over ``FlatBody-v0`` so that actions are residuals on the heuristic.
+
+    The executed action is clip(a_heuristic(obs) + a_policy, −1, 1) (residual policy learning:
+    the agent starts from the hand-designed controller and learns corrections). Must wrap the raw
+    environment (inside ``VecNormalize``): the heuristic reads physical observations.
+    """
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    from flatbody_env.env import FlatBodyEnv
+
+    proto = FlatBodyEnv(**(env_kwargs or {}))
+    ctl = HeuristicController(proto.body, proto.control, proto.limits)
+
+    class ResidualOnHeuristic(VecEnvWrapper):
+        def reset(self):
+            self._obs = self.venv.reset()
+            return self._obs
+
+        def step_async(self, actions):
+            base, _ = ctl.predict(self._obs)
+            self.venv.step_async(np.clip(base + np.asarray(actions, dtype=np.float32), -1.0, 1.0))
+
+        def step_wait(self):
+            obs, rewards, dones, infos = self.venv.step_wait()
+            self._obs = obs
+            return obs, rewards, dones, infos
+
+    return ResidualOnHeuristic(venv)

@@ -38,7 +38,7 @@ import yaml
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs")
+_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual")
 _ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -95,13 +95,24 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
     return kw
 
 
-def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None):
-    """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env)."""
+def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None):
+    """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env).
+
+    ``residual="heuristic"``: the policy's actions are residuals added to the hand-designed
+    controller's (:func:`agents.heuristic.residual_vec_env`).
+    """
     from stable_baselines3.common.vec_env import VecMonitor
 
     from .vec_env import FlatBodySB3VecEnv
 
-    return VecMonitor(FlatBodySB3VecEnv(n_envs, seed=seed, **(env_kwargs or {})))
+    venv = FlatBodySB3VecEnv(n_envs, seed=seed, **(env_kwargs or {}))
+    if residual:
+        if residual != "heuristic":
+            raise ValueError(f"residual: must be 'heuristic' or empty, got {residual!r}")
+        from .heuristic import residual_vec_env
+
+        venv = residual_vec_env(venv, env_kwargs)
+    return VecMonitor(venv)
 
 
 def _algo_class(algo: str):
@@ -238,7 +249,7 @@ def train(
             algo_kwargs[key] = int(algo_kwargs[key])
 
     out.mkdir(parents=True, exist_ok=True)
-    env = make_vec_env(nenv, seed, hp.get("env_kwargs"))
+    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"))
     cls = _algo_class(algo)
     start = 0
     if resume:
