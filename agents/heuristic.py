@@ -1,6 +1,7 @@
-"""A hand-designed controller for ``FlatBody-v0``: passivity-based damping toward the target ellipse.
+"""Hand-designed controllers for ``FlatBody-v0``: LQR about the target ellipse (the ``heuristic``
+baseline) and a passivity-based damping law (:class:`PassivityController`, for comparison).
 
-Dynamics it relies on (eqs. (44)–(49) of [1], spin bracket per NOTES E3/E4 of [2]; the controls
+Dynamics both rely on (eqs. (44)–(49) of [1], spin bracket per NOTES E3/E4 of [2]; the controls
 enter as in :mod:`flatbody_env.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
 
 .. math::
@@ -9,7 +10,26 @@ enter as in :mod:`flatbody_env.equations`): with H = 𝒯 + V (eqs. (32), (37)�
     \\dot p_\\theta = 0 \\quad (46), \\qquad
     \\dot q = \\partial H/\\partial p, \\; \\dot p = -\\partial H/\\partial q + f\\,e_\\varrho \\quad (47)\\text{–}(49),
 
-for q = (λ, μ, ϱ) and p = (p_λ, p_μ, p_ϱ). The gyroscopic term s × ω does no work, so the
+for q = (λ, μ, ϱ), p = (p_λ, p_μ, p_ϱ). θ is cyclic for J1 = J2 and p_θ is conserved by every
+control, so the controlled state is x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) ∈ ℝ⁹.
+
+LQR (:class:`HeuristicController`)
+---------------------------------
+The target stationary ellipse x* (s1 = s2 = 0, p = 0, eqs. (50)–(54)) is an equilibrium of the
+reduced system. Linearising eqs. (44)–(49) there (central differences of
+:func:`flatbody_env.equations.rhs`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
+f = f_max a₄). The shape block tells what the controls can do: at linear order the thickness
+force moves only (ϱ, p_ϱ) and τ1, τ2 only (s1, s2); the in-plane shape (λ, μ, p_λ, p_μ) — two
+oscillation modes of the effective potential W (NOTES §6) — is reached *only through s3*: τ3
+changes s3, and s3 enters the centrifugal forces −∂𝒯/∂(λ, μ) through σ± = s3 ± p_θ. One of
+those modes is weakly controllable (for the default body its closed-loop damping saturates near
+Re λ ≈ −0.09 s⁻¹ whatever the weights): this sets how fast any controller can settle the shape.
+The gain K solves the continuous algebraic Riccati equation for weights Q (on x) and R (on a);
+the action is a = clip(−K (x − x*), −1, 1). K is recomputed when the target changes.
+
+Passivity (:class:`PassivityController`)
+----------------------------------------
+The gyroscopic term s × ω does no work, so the
 power of the controls is
 
 .. math:: \\dot H = \\omega \\cdot \\tau + \\dot\\varrho\\, f .
@@ -73,7 +93,7 @@ def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, kw_only=True)
 class HeuristicGains:
-    """Gains of :class:`HeuristicController` (physical units; see the module docstring)."""
+    """Gains of :class:`PassivityController` (physical units; see the module docstring)."""
 
     k_omega: float = 4.0
     """Spin damping τ_{1,2} = −k_ω ω_{1,2}."""
@@ -87,7 +107,7 @@ class HeuristicGains:
     """Thickness damping d_ϱ."""
 
 
-class HeuristicController:
+class PassivityController:
     """The passivity-based controller of the module docstring, with SB3's ``predict`` signature.
 
     Parameters
@@ -112,7 +132,7 @@ class HeuristicController:
         self._force = np.empty(4)
 
     @classmethod
-    def for_env(cls, env, gains: HeuristicGains | None = None) -> "HeuristicController":
+    def for_env(cls, env, gains: HeuristicGains | None = None) -> "PassivityController":
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, gains)
 
@@ -139,6 +159,105 @@ class HeuristicController:
             return np.zeros(1, dtype=np.float32)
         a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
         return a.astype(np.float32)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.action(obs), None
+        return np.stack([self.action(o) for o in obs]), None
+
+
+REDUCED_STATE = (0, 1, 2, 4, 5, 6, 7, 8, 9)
+"""Indices of x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) in the packed state (θ cyclic, p_θ conserved)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class LQRWeights:
+    """Weights of :class:`HeuristicController`: Q = diag(q_spin ×3, q_momentum ×3, q_shape ×3), R = r·I."""
+
+    q_spin: float = 1.0
+    q_momentum: float = 10.0
+    q_shape: float = 10.0
+    r: float = 0.1
+
+
+def linearize(body: Body, y_star: np.ndarray, limits: np.ndarray, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """(A (9, 9), B (9, 4)) of eqs. (44)–(49) at y_star in the reduced state, normalised actions.
+
+    Central differences of :func:`flatbody_env.equations.rhs`; B's column j is the response to
+    the control u_j = limits_j (an action a_j = 1).
+    """
+    from flatbody_env.equations import rhs
+
+    n = len(REDUCED_STATE)
+    A = np.zeros((n, n))
+    B = np.zeros((n, 4))
+    for j, i in enumerate(REDUCED_STATE):
+        e = np.zeros(11)
+        e[i] = h
+        A[:, j] = ((rhs(0.0, y_star + e, None, body) - rhs(0.0, y_star - e, None, body)) / (2 * h))[list(REDUCED_STATE)]
+    for j in range(4):
+        du = np.zeros(4)
+        du[j] = h * limits[j]
+        B[:, j] = ((rhs(0.0, y_star, du, body) - rhs(0.0, y_star, -du, body)) / (2 * h))[list(REDUCED_STATE)]
+    return A, B
+
+
+class HeuristicController:
+    """LQR about the target ellipse (module docstring), with SB3's ``predict`` signature.
+
+    Parameters
+    ----------
+    body : Body
+        The environment's body (``env.unwrapped.body``), J1 = J2.
+    control : str
+        The environment's control mode (which of τ1, τ2, τ3, f the action drives).
+    limits : array of shape (4,)
+        Torque and force limits (``env.unwrapped.limits``).
+    weights : LQRWeights
+    """
+
+    def __init__(self, body: Body, control: str, limits: np.ndarray, weights: LQRWeights | None = None) -> None:
+        self.body = body
+        self.mask = control_mask(control)
+        self.limits = np.asarray(limits, dtype=np.float64)
+        self.weights = weights or LQRWeights()
+        self._cache: dict[tuple[float, ...], np.ndarray] = {}
+
+    @classmethod
+    def for_env(cls, env, weights: LQRWeights | None = None) -> "HeuristicController":
+        u = env.unwrapped
+        return cls(u.body, u.control, u.limits, weights)
+
+    def gain(self, y_star: np.ndarray) -> np.ndarray:
+        """K (k, 9) for the target state y_star (cached per target), k = the driven controls."""
+        key = tuple(np.round(y_star[:10], 12))
+        K = self._cache.get(key)
+        if K is None:
+            from scipy.linalg import solve_continuous_are
+
+            A, B = linearize(self.body, y_star, self.limits)
+            B = B[:, self.mask]
+            w = self.weights
+            Q = np.diag([w.q_spin] * 3 + [w.q_momentum] * 3 + [w.q_shape] * 3)
+            R = w.r * np.eye(B.shape[1])
+            P = solve_continuous_are(A, B, Q, R)
+            K = np.linalg.solve(R, B.T @ P)
+            if len(self._cache) > 1024:
+                self._cache.clear()
+            self._cache[key] = K
+        return K
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised action in [−1, 1]ⁿ for one observation (16,)."""
+        if not self.mask.any():
+            return np.zeros(1, dtype=np.float32)
+        y, target = state_from_observation(obs)
+        y_star = np.array([0.0, 0.0, target[3], y[3], 0.0, 0.0, 0.0, target[0], target[1], target[2], 0.0])
+        K = self.gain(y_star)
+        dx = (y - y_star)[list(REDUCED_STATE)]
+        return np.clip(-K @ dx, -1.0, 1.0).astype(np.float32)
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
