@@ -13,8 +13,10 @@ seed for seed). Per episode:
 * ``return``, ``length``, ``failed`` (integrator failure or left the domain).
 
 Policies: the agent (an SB3 model, observations normalised by its frozen VecNormalize
-statistics, deterministic actions), and the baselines ``zero`` (a = 0), ``random`` (uniform
-actions from a seeded generator) and ``heuristic`` (:class:`agents.heuristic.HeuristicController`).
+statistics, deterministic actions; for a residual agent the LQR action is added), and the
+baselines ``zero`` (a = 0), ``random`` (uniform actions from a seeded generator), ``heuristic``
+(LQR about the target, :class:`agents.heuristic.HeuristicController`) and ``passivity``
+(:class:`agents.heuristic.PassivityController`).
 """
 
 from __future__ import annotations
@@ -26,7 +28,9 @@ from typing import Any
 
 import numpy as np
 
-BASELINES = ("zero", "random", "heuristic")
+BASELINES = ("zero", "random", "heuristic", "passivity")
+"""``heuristic``: LQR about the target (:class:`agents.heuristic.HeuristicController`);
+``passivity``: the energy-based damping law (:class:`agents.heuristic.PassivityController`)."""
 METRICS = ("success_rate", "final_distance", "final_distance_median", "reach_rate", "time_to_reach", "energy_change",
            "abs_energy_change", "action_effort", "return", "failure_rate")
 
@@ -106,10 +110,11 @@ def random_policy(action_dim: int, seed: int) -> Policy:
     return lambda obs: rng.uniform(-1.0, 1.0, size=(obs.shape[0], action_dim)).astype(np.float32)
 
 
-def heuristic_policy(env) -> Policy:
-    from .heuristic import HeuristicController
+def heuristic_policy(env, kind: str = "heuristic") -> Policy:
+    from .heuristic import HeuristicController, PassivityController
 
-    ctl = HeuristicController(env.body, env._proto.control, env._proto.limits)
+    cls = HeuristicController if kind == "heuristic" else PassivityController
+    ctl = cls(env.body, env._proto.control, env._proto.limits)
     return lambda obs: ctl.predict(obs)[0]
 
 
@@ -139,8 +144,8 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
                 pol = zero_policy(adim)
             elif policy == "random":
                 pol = random_policy(adim, seed + start)
-            elif policy == "heuristic":
-                pol = heuristic_policy(env)
+            elif policy in ("heuristic", "passivity"):
+                pol = heuristic_policy(env, policy)
             else:
                 raise ValueError(f"baseline: must be one of {', '.join(BASELINES)}, got {policy!r}")
         else:

@@ -33,12 +33,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual")
+_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "success_bonus")
 _ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -95,11 +96,14 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
     return kw
 
 
-def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None):
+def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
+                 success_bonus: float = 0.0):
     """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env).
 
     ``residual="heuristic"``: the policy's actions are residuals added to the hand-designed
-    controller's (:func:`agents.heuristic.residual_vec_env`).
+    controller's (:func:`agents.heuristic.residual_vec_env`). ``success_bonus`` > 0: training
+    reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so
+    that precision at the target pays; VecMonitor sits inside, so logged returns are the task's.
     """
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -112,7 +116,27 @@ def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | Non
         from .heuristic import residual_vec_env
 
         venv = residual_vec_env(venv, env_kwargs)
-    return VecMonitor(venv)
+    venv = VecMonitor(venv)
+    if success_bonus:
+        venv = _success_bonus(venv, float(success_bonus))
+    return venv
+
+
+def _success_bonus(venv, bonus: float):
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class SuccessBonus(VecEnvWrapper):
+        """reward + bonus · 1[distance ≤ tolerance] (training only)."""
+
+        def reset(self):
+            return self.venv.reset()
+
+        def step_wait(self):
+            obs, rewards, dones, infos = self.venv.step_wait()
+            rewards = rewards + bonus * np.array([bool(i.get("is_success")) for i in infos], dtype=np.float32)
+            return obs, rewards, dones, infos
+
+    return SuccessBonus(venv)
 
 
 def _algo_class(algo: str):
@@ -249,7 +273,7 @@ def train(
             algo_kwargs[key] = int(algo_kwargs[key])
 
     out.mkdir(parents=True, exist_ok=True)
-    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"))
+    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)))
     cls = _algo_class(algo)
     start = 0
     if resume:

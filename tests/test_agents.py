@@ -156,7 +156,7 @@ def test_train_resume_evaluate_smoke(tmp_path):
     p = _cli("evaluate", str(out), "--episodes", "2", "--seed", "5", "--json")
     assert p.returncode == 0, p.stderr
     report = json.loads(p.stdout)
-    assert set(report["baselines"]) == {"zero", "random", "heuristic"}
+    assert set(report["baselines"]) == {"zero", "random", "heuristic", "passivity"}
     for s in [report["agent"], *report["baselines"].values()]:
         assert {"success_rate", "final_distance", "time_to_reach", "energy_change", "action_effort"} <= set(s)
         assert 0.0 <= s["success_rate"] <= 1.0 and s["final_distance"] >= 0.0
