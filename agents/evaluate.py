@@ -83,6 +83,7 @@ class Agent:
         hp = self.config.get("hyperparams") or {}
         self.env_kwargs: dict[str, Any] = dict(hp.get("env_kwargs") or {})
         self.residual = hp.get("residual") or None
+        self.residual_scale = float(hp.get("residual_scale", 1.0))
         self._base = None
         if self.residual == "heuristic":
             from flatbody_env.env import FlatBodyEnv
@@ -97,7 +98,7 @@ class Agent:
         actions, _ = self.model.predict(o, deterministic=True)
         if self._base is not None:  # residual on the hand-designed controller
             base, _ = self._base.predict(obs)
-            actions = np.clip(base + actions, -1.0, 1.0)
+            actions = np.clip(base + self.residual_scale * np.clip(actions, -1.0, 1.0), -1.0, 1.0)
         return actions
 
 

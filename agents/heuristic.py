@@ -267,10 +267,10 @@ class HeuristicController:
         return np.stack([self.action(o) for o in obs]), None
 
 
-def residual_vec_env(venv, env_kwargs=None):
+def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0):
     """Wrap an SB3 VecEnv over ``FlatBody-v0`` so that actions are residuals on the heuristic.
 
-    The executed action is clip(a_heuristic(obs) + a_policy, −1, 1) (residual policy learning:
+    The executed action is clip(a_heuristic(obs) + scale · a_policy, −1, 1) (residual policy learning:
     the agent starts from the hand-designed controller and learns corrections). Must wrap the raw
     environment (inside ``VecNormalize``): the heuristic reads physical observations.
     """
@@ -288,7 +288,7 @@ def residual_vec_env(venv, env_kwargs=None):
 
         def step_async(self, actions):
             base, _ = ctl.predict(self._obs)
-            self.venv.step_async(np.clip(base + np.asarray(actions, dtype=np.float32), -1.0, 1.0))
+            self.venv.step_async(np.clip(base + scale * np.asarray(actions, dtype=np.float32), -1.0, 1.0))
 
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()

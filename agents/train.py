@@ -39,7 +39,7 @@ import yaml
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "success_bonus")
+_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "residual_scale", "success_bonus")
 _ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -97,11 +97,11 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
 
 
 def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
-                 success_bonus: float = 0.0):
+                 success_bonus: float = 0.0, residual_scale: float = 1.0):
     """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env).
 
     ``residual="heuristic"``: the policy's actions are residuals added to the hand-designed
-    controller's (:func:`agents.heuristic.residual_vec_env`). ``success_bonus`` > 0: training
+    controller's, scaled by ``residual_scale`` (:func:`agents.heuristic.residual_vec_env`). ``success_bonus`` > 0: training
     reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so
     that precision at the target pays; VecMonitor sits inside, so logged returns are the task's.
     """
@@ -115,7 +115,7 @@ def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | Non
             raise ValueError(f"residual: must be 'heuristic' or empty, got {residual!r}")
         from .heuristic import residual_vec_env
 
-        venv = residual_vec_env(venv, env_kwargs)
+        venv = residual_vec_env(venv, env_kwargs, residual_scale)
     venv = VecMonitor(venv)
     if success_bonus:
         venv = _success_bonus(venv, float(success_bonus))
@@ -273,7 +273,7 @@ def train(
             algo_kwargs[key] = int(algo_kwargs[key])
 
     out.mkdir(parents=True, exist_ok=True)
-    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)))
+    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)))
     cls = _algo_class(algo)
     start = 0
     if resume:
