@@ -204,11 +204,31 @@ def test_demo_runs_with_defaults(tmp_path):
 
 
 @pytest.mark.slow
+def test_shipped_evaluation_reproduces():
+    """A fresh 100-episode evaluation reproduces the shipped ``evaluation.json`` (README table).
+
+    Exact with the integrator the table was made with; a different default integrator moves the
+    trajectories slightly, hence the tolerances.
+    """
+    from agents.evaluate import evaluate_all, shipped_model_dir
+
+    saved = json.loads((shipped_model_dir() / "evaluation.json").read_text())
+    report = evaluate_all(episodes=saved["episodes"], seed=saved["seed"])
+    for name, new, old in [("agent", report["agent"], saved["agent"])] + [
+        (k, report["baselines"][k], saved["baselines"][k]) for k in ("zero", "heuristic", "passivity")
+    ]:
+        assert new["success_rate"] == pytest.approx(old["success_rate"], abs=0.05), name
+        assert new["final_distance"] == pytest.approx(old["final_distance"], rel=0.05), name
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 7 acceptance not met by the shipped agent: 36 % success, mean final "
+                   "distance 0.1055 vs 0.0968 for the LQR controller (docs/README-agents.md)")
 def test_shipped_agent_acceptance():
-    """Issue 7 acceptance, measured: 100 seeded episodes, agent vs the hand-designed controller."""
+    """Issue 7 acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
     from agents.evaluate import evaluate_all
 
     report = evaluate_all(episodes=100, seed=10_000)
     agent, heur = report["agent"], report["baselines"]["heuristic"]
+    assert agent["success_rate"] >= 0.9
     assert agent["final_distance"] < heur["final_distance"]
-    assert agent["success_rate"] >= heur["success_rate"]
