@@ -365,16 +365,16 @@ def _n_steps(span, hmax):
 def _rk4_advance(y, span, hmax, u, P, gap_sign, check_gap, work, vel, force, counters):
     n = _n_steps(span, hmax)
     h = span / n
-    for _ in range(n):
+    for j in range(n):
         turn = _rk4_step(y, h, u, P, work[0], work[1], work[2], work[3], work[4], vel, force)
         counters[0] += 4
         counters[1] += 1
         if turn > MAX_TURN:
-            return UNDER_RESOLVED
+            return UNDER_RESOLVED, j * h
         st = _state_status(y, gap_sign, check_gap)
         if st != OK:
-            return st
-    return OK
+            return st, (j + 1) * h
+    return OK, span
 
 
 # --------------------------------------------------------------------------------------------- splitting
@@ -481,18 +481,18 @@ def strang_step(y, h, u, P, tmp, vel, force):
 def _split_advance(y, span, hmax, coeffs, u, P, gap_sign, check_gap, tmp, vel, force, counters):
     n = _n_steps(span, hmax)
     h = span / n
-    for _ in range(n):
+    for j in range(n):
         turn = 0.0
         for c in coeffs:
             turn = max(turn, strang_step(y, c * h, u, P, tmp, vel, force))
         counters[0] += coeffs.size
         counters[1] += 1
         if turn > MAX_TURN:
-            return UNDER_RESOLVED
+            return UNDER_RESOLVED, j * h
         st = _state_status(y, gap_sign, check_gap)
         if st != OK:
-            return st
-    return OK
+            return st, (j + 1) * h
+    return OK, span
 
 
 # --------------------------------------------------------------------------------------------- fixed-step drivers
@@ -522,8 +522,8 @@ def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail)
         Y[i, 0] = y[i]
     fail[0] = times[0]
     for k in range(1, times.size):
-        st = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
-        fail[0] = times[k]
+        st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
+        fail[0] = times[k - 1] + dt_done
         for i in range(N):
             Y[i, k] = y[i]
         if st != OK:
@@ -541,7 +541,7 @@ def _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, 
     for i in range(N):
         out[i] = y[i]
     gap_sign = 1.0 if y[7] > y[8] else -1.0
-    st = _fixed_advance(kind, out, dt, h, coeffs, u, P, gap_sign, not may_cross(y, u, P), work, vel, force, counters)
+    st, dt_done = _fixed_advance(kind, out, dt, h, coeffs, u, P, gap_sign, not may_cross(y, u, P), work, vel, force, counters)
     if st != OK:
         return st
     if energy_tol < np.inf and no_control(u):
