@@ -18,6 +18,10 @@ from .state import STATE_NAMES, pack, unpack
 
 __version__ = "0.1.0"
 
+from .registration import register_envs as _register_envs
+
+_register_envs()
+
 __all__ = [
     "Body",
     "CustomPotential",

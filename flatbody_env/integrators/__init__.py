@@ -6,7 +6,22 @@
 
 from __future__ import annotations
 
-from .base import CHARTS, IntegrationError, Method, MethodInfo, Solution, Tolerances, available_methods, get_method, register_method
+from .base import (
+    BatchStepResult,
+    CHARTS,
+    IntegrationError,
+    Method,
+    MethodInfo,
+    Solution,
+    Stepper,
+    StepResult,
+    Tolerances,
+    available_methods,
+    get_method,
+    make_batch_stepper,
+    make_stepper,
+    register_method,
+)
 
 _LOADED = False
 
@@ -22,13 +37,18 @@ def _load_all() -> None:
 
 
 __all__ = [
+    "BatchStepResult",
     "CHARTS",
     "IntegrationError",
     "Method",
     "MethodInfo",
     "Solution",
+    "StepResult",
+    "Stepper",
     "Tolerances",
     "available_methods",
     "get_method",
+    "make_batch_stepper",
+    "make_stepper",
     "register_method",
 ]

@@ -120,3 +120,98 @@ def available_methods() -> list[MethodInfo]:
 
     _load_all()
     return [m.info for m in _REGISTRY.values()]
+
+
+@dataclass
+class StepResult:
+    """One environment step: the new paper state (and R), or a failure flag with the reason.
+
+    On failure ``y`` and ``R`` are the state at the start of the step (never NaN).
+    """
+
+    y: np.ndarray
+    R: np.ndarray | None
+    ok: bool
+    reason: str = ""
+    kind: str = ""
+    nfev: int = 0
+
+
+class Stepper(Protocol):
+    def __call__(self, y: np.ndarray, R: np.ndarray | None, u: np.ndarray, dt: float) -> StepResult: ...
+
+
+def make_stepper(name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> Stepper:
+    """A per-step integrator for environments: ``stepper(y, R, u, dt) -> StepResult``.
+
+    Methods may offer a fast path (a ``make_stepper(body, tol, with_rotation)`` method, e.g. a
+    compiled single-step kernel); otherwise each step is one :meth:`Method.integrate` call over
+    [0, dt] with the action held constant (a fresh solver per step: NOTES §8 warns against
+    carrying an adaptive solver across action changes). Failures come back as flags.
+    """
+    method = get_method(name)
+    fast = getattr(method, "make_stepper", None)
+    if fast is not None:
+        return fast(body, tol, with_rotation=with_rotation)
+    return _IntegrateStepper(name, body, tol, with_rotation)
+
+
+class _IntegrateStepper:
+    """The generic stepper: one :meth:`Method.integrate` call per step (picklable)."""
+
+    def __init__(self, name: str, body: Body, tol: Tolerances, with_rotation: bool) -> None:
+        self.name = name
+        self.body = body
+        self.tol = tol
+        self.with_rotation = with_rotation
+
+    def __call__(self, y: np.ndarray, R: np.ndarray | None, u: np.ndarray, dt: float) -> StepResult:
+        method = get_method(self.name)
+        try:
+            sol = method.integrate(self.body, y, np.array([0.0, dt]), tol=self.tol, u=u, R0=R, with_rotation=self.with_rotation)
+        except IntegrationError as exc:
+            return StepResult(y=y, R=R, ok=False, reason=exc.reason, kind=exc.kind)
+        Rn = sol.rotation[-1] if self.with_rotation and sol.rotation is not None else None
+        return StepResult(y=sol.Y[:, -1].copy(), R=Rn, ok=True, nfev=sol.nfev)
+
+
+@dataclass
+class BatchStepResult:
+    """One step of N bodies: new states (N, 11) (the old state where a body failed) and flags."""
+
+    Y: np.ndarray
+    ok: np.ndarray
+    reasons: list[str]
+
+
+def make_batch_stepper(name: str, body: Body, tol: Tolerances):
+    """``batch(Y (N, 11), U (N, 4), dt) -> BatchStepResult`` for vector environments.
+
+    Methods may offer a compiled batch (``make_batch_stepper(body, tol)``: N bodies in one
+    compiled call); otherwise this loops the single-body stepper of :func:`make_stepper`.
+    """
+    method = get_method(name)
+    fast = getattr(method, "make_batch_stepper", None)
+    if fast is not None:
+        return fast(body, tol)
+    return _LoopBatchStepper(make_stepper(name, body, tol))
+
+
+class _LoopBatchStepper:
+    """The generic batch: the single-body stepper in a Python loop (picklable)."""
+
+    def __init__(self, single: Stepper) -> None:
+        self.single = single
+
+    def __call__(self, Y: np.ndarray, U: np.ndarray, dt: float) -> BatchStepResult:
+        out = Y.copy()
+        ok = np.ones(Y.shape[0], dtype=bool)
+        reasons = [""] * Y.shape[0]
+        for i in range(Y.shape[0]):
+            r = self.single(Y[i], None, U[i], dt)
+            if r.ok:
+                out[i] = r.y
+            else:
+                ok[i] = False
+                reasons[i] = f"{r.kind}: {r.reason}"
+        return BatchStepResult(Y=out, ok=ok, reasons=reasons)

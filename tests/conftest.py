@@ -1,0 +1,62 @@
+"""Shared fixtures: bodies for every potential, random states, an independent Hamiltonian."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flatbody_env.body import Body, Inertia
+from flatbody_env.hamiltonian import VELOCITY_NAMES
+from flatbody_env.kinematics import configuration_rate
+from flatbody_env.potentials import CustomPotential, ThicknessPotential, V1, V2, V3
+
+
+def _custom() -> CustomPotential:
+    # V = (λ² + μ²)/2 + 0.3 (λμ)⁻¹ + 0.2 λμϱ² (couples ϱ to the plane; symmetric in λ ↔ μ)
+    return CustomPotential(
+        value=lambda l, m, r: 0.5 * (l * l + m * m) + 0.3 / (l * m) + 0.2 * l * m * r * r,
+        gradient=lambda l, m, r: (l - 0.3 / (l * l * m) + 0.2 * m * r * r, m - 0.3 / (l * m * m) + 0.2 * l * r * r, 0.4 * l * m * r),
+        label="test-custom",
+    )
+
+
+BODIES = {
+    "V1": Body(inertia=Inertia.isotropic(1.0, 0.7), potential=V1(k=1.3), thickness=ThicknessPotential(a=1.0, b=1.0)),
+    "V2": Body(inertia=Inertia.isotropic(0.9, 1.1), potential=V2(c=0.8, d=1.2), thickness=ThicknessPotential(a=0.5, b=2.0)),
+    "V3": Body(inertia=Inertia.isotropic(1.0, 1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1.0, b=1.0)),
+    "custom": Body(inertia=Inertia.isotropic(1.2, 0.8), potential=_custom(), thickness=ThicknessPotential(a=1.0, b=0.5)),
+    "V3-anisotropic": Body(inertia=Inertia(J1=1.3, J2=0.7, J3=0.5), potential=V3(kappa=0.9), thickness=ThicknessPotential(a=1.0, b=2.0)),
+    "V2-anisotropic": Body(inertia=Inertia(J1=0.6, J2=1.4, J3=1.0), potential=V2(c=1.0, d=0.5), thickness=ThicknessPotential(a=1.0, b=1.0)),
+}
+
+
+@pytest.fixture(params=sorted(BODIES))
+def body(request) -> Body:
+    return BODIES[request.param]
+
+
+def random_state(rng: np.random.Generator) -> np.ndarray:
+    """A generic packed state away from λ = μ and the boundaries."""
+    lam = rng.uniform(1.1, 2.0)
+    mu = rng.uniform(0.4, 0.95)
+    if rng.random() < 0.5:
+        lam, mu = mu, lam
+    return np.concatenate([rng.normal(size=7), [lam, mu, rng.uniform(0.5, 1.5), rng.uniform(-np.pi, np.pi)]])
+
+
+def independent_mass_matrix(y: np.ndarray, body: Body) -> np.ndarray:
+    """M_ij = Tr(J A_iᵀ A_j) with A_i = ∂Φ̇/∂v_i from eq. (27) of the paper (matrices, not eq. (30))."""
+    lam, mu, rho, theta = y[7:11]
+    E = np.eye(7)
+    A = configuration_rate(lam, mu, rho, theta, {name: E[:, i] for i, name in enumerate(VELOCITY_NAMES)})
+    J = body.inertia.matrix
+    AtA = np.einsum("iba,jbc->ijac", A, A)  # (A_iᵀ A_j)_ac
+    M = np.einsum("ca,ijac->ij", J, AtA)  # Tr(J A_iᵀ A_j)
+    return 0.5 * (M + M.T)
+
+
+def independent_hamiltonian(y: np.ndarray, body: Body) -> float:
+    """H = ½ pᵀ M⁻¹ p + V with M built from matrices (independent of the closed forms)."""
+    M = independent_mass_matrix(y, body)
+    p = y[:7]
+    return 0.5 * p @ np.linalg.solve(M, p) + body.potential_terms(y[7], y[8], y[9])[0]
