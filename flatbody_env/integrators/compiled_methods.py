@@ -27,6 +27,10 @@ under-resolved, max-steps, unsupported).
 
 Environment API
 ---------------
+Through the seam: ``make_stepper(name, body, tol)`` / ``make_batch_stepper(name, body, tol)`` of
+:mod:`.base` find :meth:`CompiledTwoPolar.make_stepper` / ``make_batch_stepper`` (one compiled call
+per env step; failures as ``StepResult.ok = False`` with ``kind``); the regular-chart methods use
+the generic per-step :meth:`integrate` path (it converts and returns R). Underneath,
 :func:`env_stepper` (name) → :class:`EnvStepper` with two compiled functions and no Python work per
 sub-step::
 
@@ -63,7 +67,7 @@ from ..regular import paper_from_regular, regular_from_paper
 from . import rattle_kernels as _rk
 from . import twopolar_kernels as _tk
 from .base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
-from .failure import KINDS, raise_for
+from .failure import KINDS, failure_reason, raise_for
 
 
 def kernel_params(body: Body) -> np.ndarray:
@@ -149,6 +153,29 @@ class CompiledTwoPolar:
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
         return Solution(t=times.copy(), Y=Y, rotation=None, nfev=int(counters[0]), stats=stats)
+
+    # -- the environment seam (flatbody_env.integrators.base.make_stepper / make_batch_stepper) --
+    def _check_env(self, body: Body, tol: Tolerances) -> None:
+        name = self.info.name
+        _check_compiled_body(body, name)
+        _check_step(name, tol, not self.info.adaptive)
+        if self.kind == "split" and not body.inertia.is_isotropic:
+            raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
+
+    def make_stepper(self, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> "CompiledStepper":
+        """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step)."""
+        if with_rotation:
+            raise ValueError(
+                f"with_rotation: {self.info.name} does not integrate R; track the rotation with a regular-chart "
+                "method (RATTLE-suzuki4) or scipy DOP853"
+            )
+        self._check_env(body, tol)
+        return CompiledStepper(self.info.name, body, tol)
+
+    def make_batch_stepper(self, body: Body, tol: Tolerances) -> "CompiledBatchStepper":
+        """Compiled batch stepper ``(Y (N, 11), U (N, 4), dt) -> BatchStepResult`` (one compiled call)."""
+        self._check_env(body, tol)
+        return CompiledBatchStepper(self.info.name, body, tol)
 
 
 class CompiledRattle:
@@ -275,6 +302,65 @@ RATTLE_SUZUKI4 = register_method(
 
 
 # --------------------------------------------------------------------------------------------- env API
+class _EnvBase:
+    """Picklable holder of a method name and its settings; the compiled kernel is looked up lazily."""
+
+    def __init__(self, name: str, body: Body, tol: Tolerances) -> None:
+        self.name = name
+        self.P = kernel_params(body)
+        self.h = float(tol.step) if tol.step is not None else 0.0
+        self.rtol = float(tol.rtol)
+        self.atol = float(tol.atol)
+        self.energy_tol = float(tol.energy_tol)
+        self._stepper = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_stepper"] = None
+        return state
+
+    @property
+    def stepper(self) -> "EnvStepper":
+        if self._stepper is None:
+            self._stepper = env_stepper(self.name)
+        return self._stepper
+
+
+class CompiledStepper(_EnvBase):
+    """``stepper(y, R, u, dt) -> StepResult``; R is passed through unchanged (two-polar state only).
+    ``nfev`` is not counted on this path (reported as 0)."""
+
+    def __call__(self, y, R, u, dt):
+        from .base import StepResult
+
+        y = np.ascontiguousarray(y, dtype=np.float64)
+        out = np.empty(11)
+        st = self.stepper.step(y, _controls(u), self.P, float(dt), self.h, self.rtol, self.atol, self.energy_tol, out)
+        if st != 0:
+            return StepResult(y=y.copy(), R=R, ok=False, reason=failure_reason(st), kind=KINDS[st])
+        return StepResult(y=out, R=R, ok=True)
+
+
+class CompiledBatchStepper(_EnvBase):
+    """``batch(Y (N, 11), U (N, 4), dt) -> BatchStepResult``: transposes to the kernels'
+    structure-of-arrays layout and runs all bodies in one compiled call."""
+
+    def __call__(self, Y, U, dt):
+        from .base import BatchStepResult
+
+        Y = np.asarray(Y, dtype=np.float64)
+        Ys = np.ascontiguousarray(Y.T)
+        Us = np.ascontiguousarray(np.asarray(U, dtype=np.float64).T)
+        OUT = np.empty_like(Ys)
+        STATUS = np.zeros(Ys.shape[1], np.int64)
+        self.stepper.batch(Ys, Us, self.P, float(dt), self.h, self.rtol, self.atol, self.energy_tol, OUT, STATUS)
+        ok = STATUS == 0
+        out = OUT.T.copy()
+        out[~ok] = Y[~ok]
+        reasons = ["" if s == 0 else f"{KINDS[s]}: {failure_reason(s)}" for s in STATUS]
+        return BatchStepResult(Y=out, ok=ok, reasons=reasons)
+
+
 @dataclass(frozen=True)
 class EnvStepper:
     """Compiled one-step functions of a method for the environment (module docstring)."""
@@ -336,4 +422,4 @@ def warm_up(names=None) -> None:
         meth.integrate(body, y, times, tol=tol)
 
 
-__all__ = ["CompiledRattle", "CompiledTwoPolar", "ENV_METHODS", "EnvStepper", "env_stepper", "kernel_params", "paper_states", "warm_up"]
+__all__ = ["CompiledBatchStepper", "CompiledRattle", "CompiledStepper", "CompiledTwoPolar", "ENV_METHODS", "EnvStepper", "env_stepper", "kernel_params", "paper_states", "warm_up"]

@@ -68,6 +68,11 @@ MAX_TURN = 1.0
 """Largest chart rotation h·max(|ω3|, |θ̇|) (rad) a fixed step may take before ``"under-resolved"``."""
 
 
+def failure_reason(status: int) -> str:
+    """One line saying why a kernel returned ``status``."""
+    return _REASONS.get(int(status), f"status {int(status)}")
+
+
 def raise_for(status: int, *, t: float, method: str, detail: str = "") -> None:
     """Raise the :class:`IntegrationError` for a non-zero ``status`` (no-op for 0)."""
     status = int(status)
@@ -79,5 +84,5 @@ def raise_for(status: int, *, t: float, method: str, detail: str = "") -> None:
     raise IntegrationError(reason, t=t, method=method, kind=KINDS[status] if 0 <= status < len(KINDS) else "failure")
 
 
-__all__ = ["KINDS", "MAX_TURN", "raise_for", "OK", "NON_FINITE", "STEP_COLLAPSE", "CHART_SINGULARITY", "DOMAIN",
+__all__ = ["KINDS", "MAX_TURN", "failure_reason", "raise_for", "OK", "NON_FINITE", "STEP_COLLAPSE", "CHART_SINGULARITY", "DOMAIN",
            "ENERGY", "CONSTRAINT", "UNDER_RESOLVED", "MAX_STEPS", "UNSUPPORTED"]
