@@ -183,6 +183,9 @@ def failure_study(
     (or, on the horizon axis, once the next run is predicted to)."""
     from tqdm import tqdm
 
+    from flatbody_env.integrators.compiled_methods import warm_up
+
+    warm_up()  # load (or compile) the kernels before anything is timed
     axes = {
         "gap": ("delta", QUICK_GAP_DELTAS if quick else GAP_DELTAS, _gap_reference, "relative_gap", GAP_T_END),
         "rho": ("p_rho", QUICK_RHO_P if quick else RHO_P, _rho_reference, "rho_min", RHO_T_END),

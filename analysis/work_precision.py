@@ -81,7 +81,7 @@ class WorkPrecisionPoint:
     repeats: int
     nfev: int
     status: str
-    """``"ok"`` or the :class:`IntegrationError` kind."""
+    """``"ok"``, the :class:`IntegrationError` kind, or ``"skipped"`` (over the time budget)."""
     reason: str = ""
 
 
@@ -155,16 +155,29 @@ def _settings(adaptive: bool, quick: bool, scene: str):
     return [("step", h) for h in steps]
 
 
+def _predicted_wall(points, method: str, setting: str, t_end: float) -> float:
+    """Wall time predicted from the same method and setting on the regular scene, scaled by the horizon."""
+    for p in points:
+        if p.scene == "regular" and p.method == method and p.setting == setting and p.status == "ok":
+            return p.wall_time * t_end / p.t_end
+    return 0.0
+
+
 def work_precision(
     scenes=SCENES, methods=DEFAULT_METHODS, *, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True
 ) -> tuple[list[WorkPrecisionPoint], list[ReferenceInfo]]:
     """Sweep every method over its settings on every scene.
 
     A method's sweep on a scene stops once one run takes longer than ``max_run_s`` (tighter
-    settings only cost more). Failures are recorded with their kind, not skipped.
+    settings only cost more), or once the same setting on the regular scene, scaled by the
+    horizon, predicts that (recorded with status ``"skipped"``). Failures are recorded with
+    their kind.
     """
     from tqdm import tqdm
 
+    from flatbody_env.integrators.compiled_methods import warm_up
+
+    warm_up()  # load (or compile) the kernels before anything is timed
     horizons = QUICK_HORIZONS if quick else HORIZONS
     infos = {m: get_method(m).info for m in methods}
     jobs = []
@@ -200,6 +213,21 @@ def work_precision(
         info = infos[m]
         tol = Tolerances(rtol=value, atol=1e-3 * value) if kind == "rtol" else Tolerances(step=value)
         times = np.linspace(0.0, t_end, 101) if energy else np.array([0.0, t_end])
+        setting = f"{kind}={value:g}" if kind == "rtol" else f"h={value:g}"
+        predicted = _predicted_wall(points, m, setting, t_end)
+        if predicted > max_run_s:
+            # the same method and setting on the regular scene, scaled by the horizon, says it would take too long
+            points.append(
+                WorkPrecisionPoint(
+                    scene=sc_name, method=m, chart=info.chart, compiled=info.compiled, adaptive=info.adaptive, setting=setting,
+                    rtol=value if kind == "rtol" else math.nan, step=value if kind == "step" else math.nan, t_end=t_end,
+                    error=math.nan, error_kind="energy" if energy else "state", wall_time=math.nan, repeats=0, nfev=0,
+                    status="skipped", reason=f"predicted {predicted:.1f} s > max_run_s = {max_run_s:g} s",
+                )
+            )
+            stopped.add((sc_name, m))
+            bar.update(1)
+            continue
         sol, wall, runs, status, reason = timed_run(m, scene, times, tol, repeats=repeats)
         if sol is None:
             err = math.nan
