@@ -7,7 +7,7 @@ side by side in one process (ratios are the reliable part on a shared 2-core mac
    error; the wall time at the target error (1e-9) by log-log interpolation between the two
    bracketing settings; speed-up = scipy ``solve_ivp`` DOP853's time / the method's time at that
    error. Also DOP853-numba against scipy at the *same* rtol (identical steps).
-2. *close approach* (σ₋ = 1e-3, the built-in scene, and σ₋ = 1e-6), t = 20: wall time at equal
+2. *close approach* (σ₋ = 1e-3, the built-in scene, and σ₋ = 1e-6, 1e-9), t = 20: wall time at equal
    error (1e-8) of the regular-chart RATTLE-suzuki4 and of every two-polar method; ratio = the
    cheapest two-polar time / RATTLE-suzuki4's (two-polar methods that fail are left out).
 3. *long horizon*, t = 1e4: the energy error max|H − H₀| (101 samples) per method/setting.
@@ -262,7 +262,7 @@ def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
 
     warm_up()  # compile time is measured separately (in fresh processes)
-    deltas = (1e-3,) if quick else (1e-3, 1e-6)
+    deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
     total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS)
     bar = tqdm(total=total, desc="bench integrators", unit="task", disable=not progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)

@@ -124,6 +124,9 @@ def plot_failure_study(csv_path, png_path) -> Path:
             ax.set_xlabel(labels.get(st, st))
             if st == "rho":
                 ax.invert_xaxis()
+                from matplotlib.ticker import NullFormatter
+
+                ax.xaxis.set_minor_formatter(NullFormatter())
             if st == "gap":
                 ax.invert_xaxis()
     fig.legend(loc="lower center", ncol=min(8, len(methods)), fontsize=8, frameon=False)

@@ -215,6 +215,12 @@ class CompiledRattle:
         counters = np.zeros(3, np.int64)
         fail = np.zeros(2)
         st = _rk.rattle_solve(self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail)
+        if KINDS[st] == "chart-singularity":
+            raise IntegrationError(
+                "the paper chart's frame could not be followed through lambda ~ mu (the regular state itself is fine; "
+                "ask for output times away from the pass or a smaller step)",
+                t=fail[0], method=name, kind="chart-singularity",
+            )
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         Y, rotation = paper_states(Z, DEC, body, times, name)
         return Solution(

@@ -58,7 +58,7 @@ import numpy as np
 
 from ..potentials import KIND_V1, KIND_V2, KIND_V3
 from ..regular import MAX_CHART_JUMP
-from .failure import CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
+from .failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
 from .jit import JIT_OPTIONS, potential_kernel
 from .twopolar_kernels import SUZUKI4
 
@@ -392,7 +392,7 @@ def rattle_solve(coeffs, z0, dec0, times, u, P, h, keep_order, energy_tol, Z, DE
                 return st
             if not follow_step(zp, z, hs, ref, keep_order, new, q, tmp):
                 fail[0] = t
-                return CONSTRAINT
+                return CHART_SINGULARITY
             for i in range(13):
                 ref[i] = new[i]
         for i in range(NZ):
