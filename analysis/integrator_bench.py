@@ -112,7 +112,7 @@ def _reference(scene, t_end, method, kw, cross, cross_kw):
 
 def _regular(repeats, max_run_s, t_end, bar):
     sc = load_scene("regular")
-    ref, floor = _reference(sc, t_end, "DOP853-numba", dict(rtol=1e-13, atol=1e-15), "RATTLE-suzuki4", dict(step=0.002))
+    ref, floor = _reference(sc, t_end, "DOP853-numba", dict(rtol=1e-13, atol=1e-15), "RATTLE-suzuki4", dict(step=0.001))
     curves = {}
     for m in REGULAR_METHODS:
         bar.set_postfix_str(f"regular {m}")

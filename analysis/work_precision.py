@@ -58,7 +58,7 @@ ENERGY_BUDGET_FACTOR = 3.0
 """The long-horizon scene gets this many times ``max_run_s`` per run (so the reference family shows up)."""
 
 REFERENCE = ("DOP853-numba", dict(rtol=1e-13, atol=1e-15))
-CROSS_CHECK = ("RATTLE-suzuki4", dict(step=0.002))
+CROSS_CHECK = ("RATTLE-suzuki4", dict(step=0.001))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -134,7 +134,7 @@ def timed_run(method: str, scene: Scene, times: np.ndarray, tol: Tolerances, *, 
 
 
 def reference_state(scene: Scene, t_end: float) -> tuple[np.ndarray, ReferenceInfo]:
-    """Tight final state at ``t_end`` (DOP853-numba, rtol 1e-13) and its agreement with RATTLE-suzuki4 (h = 0.002)."""
+    """Tight final state at ``t_end`` (DOP853-numba, rtol 1e-13) and its agreement with RATTLE-suzuki4 (h = 0.001)."""
     y0 = pack(scene.state)
     times = np.array([0.0, t_end])
     t0 = time.perf_counter()
