@@ -44,6 +44,7 @@ DEFAULT_METHODS = (
     "splitting-suzuki4",
     "RATTLE",
     "RATTLE-suzuki4",
+    "RATTLE-kahanli6",
 )
 GAP_DELTAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
 QUICK_GAP_DELTAS = (1e-1, 1e-3, 1e-5, 1e-7)

@@ -22,7 +22,7 @@ _STYLE = {
     "DOP853-regular": ("#17becf", "o"),
     "DOP853-numba": ("#d62728", "o"), "RK4": ("#ff7f0e", "s"),
     "splitting-strang": ("#aec7e8", "^"), "splitting-suzuki4": ("#1f77b4", "^"), "splitting-yoshida4": ("#9467bd", "v"),
-    "RATTLE": ("#98df8a", "D"), "RATTLE-suzuki4": ("#2ca02c", "D"),
+    "RATTLE": ("#98df8a", "D"), "RATTLE-suzuki4": ("#2ca02c", "D"), "RATTLE-kahanli6": ("#006400", "P"),
 }
 
 

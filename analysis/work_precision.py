@@ -44,6 +44,7 @@ DEFAULT_METHODS = (
     "splitting-yoshida4",
     "RATTLE",
     "RATTLE-suzuki4",
+    "RATTLE-kahanli6",
 )
 RTOLS = (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)
 STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625)

@@ -12,6 +12,7 @@ name                   adaptive  order  chart      algorithm
 ``splitting-yoshida4`` no        4      two-polar  Yoshida triple-jump composition of Strang
 ``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (NOTES §5)
 ``RATTLE-suzuki4``     no        4      regular    Suzuki 5-stage composition of RATTLE
+``RATTLE-kahanli6``    no        6      regular    Kahan–Li 9-stage composition of RATTLE
 =====================  ========  =====  =========  =================================================
 
 Fixed-step methods need ``Tolerances(step=h)`` (``simulate(..., step=h)``, ``--step H``); each
@@ -306,6 +307,14 @@ RATTLE_SUZUKI4 = register_method(
     )
 )
 
+RATTLE_KAHANLI6 = register_method(
+    CompiledRattle(
+        MethodInfo(name="RATTLE-kahanli6", adaptive=False, order=6, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
+                   description="Kahan-Li 9-stage order-6 composition of RATTLE, regular chart, passes through lambda = mu; "
+                   "p_theta only for J1 = J2"),
+        _tk.KAHAN_LI6,
+    )
+)
 
 # --------------------------------------------------------------------------------------------- env API
 class _EnvBase:
@@ -422,7 +431,7 @@ def warm_up(names=None) -> None:
     from .base import get_method
 
     times = np.array([0.0, 0.1])
-    for name in names or [m for m in ENV_METHODS] + ["RATTLE"]:
+    for name in names or [m for m in ENV_METHODS] + ["RATTLE", "RATTLE-kahanli6"]:
         meth = get_method(name)
         tol = Tolerances(rtol=1e-8, atol=1e-8, step=None if meth.info.adaptive else 0.05)
         meth.integrate(body, y, times, tol=tol)

@@ -79,6 +79,13 @@ SUZUKI4 = np.array([_P4, _P4, 1.0 - 4.0 * _P4, _P4, _P4])
 _W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
 YOSHIDA4 = np.array([_W1, 1.0 - 2.0 * _W1, _W1])
 """Yoshida's (triple-jump) fourth-order composition."""
+KAHAN_LI6 = np.array([
+    0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981, 0.082213596293550800230,
+    0.79854399093482996340,
+    0.082213596293550800230, -0.70624617255763935981, 0.33259913678935943860, 0.39216144400731413928,
+])
+"""Kahan & Li's 9-stage sixth-order composition s9odr6a (Math. Comp. 66, 1997; HLW Geometric Numerical
+Integration §V.3.2) of a symmetric second-order step."""
 
 
 # --------------------------------------------------------------------------------------------- checks
