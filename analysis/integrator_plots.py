@@ -124,8 +124,10 @@ def plot_failure_study(csv_path, png_path) -> Path:
             ax.set_xlabel(labels.get(st, st))
             if st == "rho":
                 ax.invert_xaxis()
-                from matplotlib.ticker import NullFormatter
+                from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
+                ax.xaxis.set_major_locator(FixedLocator([0.05, 0.1, 0.2, 0.5]))
+                ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
                 ax.xaxis.set_minor_formatter(NullFormatter())
             if st == "gap":
                 ax.invert_xaxis()
