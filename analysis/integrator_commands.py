@@ -79,7 +79,7 @@ def _chart(args) -> int:
     elif not csv_path.exists():
         raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
     plot_work_precision(csv_path, png_path, ref_path)
-    print(f"wrote {csv_path}, {ref_path}, {png_path}")
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {ref_path}, {png_path}")
     return 0
 
 
@@ -111,7 +111,7 @@ def _failure(args) -> int:
     elif not csv_path.exists():
         raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
     plot_failure_study(csv_path, png_path)
-    print(f"wrote {csv_path}, {png_path}")
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {png_path}")
     return 0
 
 
@@ -153,7 +153,7 @@ def _bench(args) -> int:
     elif not json_path.exists():
         raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
     plot_bench(json_path, png_path)
-    print(f"wrote {json_path}, {csv_path}, {png_path}")
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {json_path}, {csv_path}, {png_path}")
     return 0
 
 
