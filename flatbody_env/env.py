@@ -17,8 +17,8 @@ import numpy as np
 from gymnasium import spaces
 
 from .body import Body, default_body
-from .conserved import casimir
 from .equilibria import StationaryEllipse
+from .env_kernels import CFG_SIZE, post_step
 from .hamiltonian import hamiltonian
 from .integrators import Tolerances, get_method, make_stepper
 from .scene import SceneError, scene_from_dict
@@ -180,6 +180,15 @@ class FlatBodyEnv(gym.Env):
         self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
         self.momentum_bound = float(momentum_bound)
         self.gap_min = float(gap_min)
+        t = self.task
+        self._cfg = np.array(
+            [t.w_shape, t.w_spin, t.w_tumble, t.w_rest, t.w_action, t.failure_penalty, t.success_tolerance,
+             *self.stretch_bounds, *self.rho_bounds, self.momentum_bound, self.gap_min, 1.0 if self._chart == "two-polar" else 0.0],
+            dtype=np.float64,
+        )
+        assert self._cfg.size == CFG_SIZE
+        self._P = np.array(self.body.kernel_params(), dtype=np.float64)
+        self._work = (np.empty(11), np.empty(6), np.empty(4), np.empty(7), np.empty(4))
 
         n_act = int(self._mask.sum()) or 1
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
@@ -241,7 +250,7 @@ class FlatBodyEnv(gym.Env):
         self._R = np.eye(3) if self.track_rotation else None
         self.time = 0.0
         self._last_action = np.zeros(self.action_space.shape)
-        return self._observation(), self._info(terms=None, failure=None, left=None, nfev=0)
+        return self._observation(), self._reset_info()
 
     def step(self, action):
         if self._target is None:
@@ -254,20 +263,22 @@ class FlatBodyEnv(gym.Env):
         if self._mask.any():
             u[self._mask] = a * self.limits[self._mask]
         result = self._stepper(self._y, self._R, u, self.dt)
+        act = a if self._mask.any() else np.zeros_like(a)
+        y_out, terms_arr, sc, vel, force = self._work
+        obs = np.empty(16, dtype=np.float32)
+        ended = post_step(self._y, result.y, 0 if result.ok else 1, act, act.size, self._tvec, self._cfg, self._P, y_out, obs, terms_arr, sc, vel, force)
         failure = None if result.ok else f"{result.kind}: {result.reason}"
-        left = None
-        if result.ok:
-            left = self._left_domain(result.y)
-            if not left:
-                self._y = result.y
-                self._R = result.R if self.track_rotation else None
-                self.time += self.dt
-        terminated = bool(failure or left)
+        left = self._left_domain(result.y) if result.ok and ended else None
+        if not ended:
+            self._y = y_out.copy()
+            if self.track_rotation:
+                self._R = result.R
+            self.time += self.dt
         self._last_action = a
-        terms = self.task.reward_terms(self._y, self.body, self._tvec, a if self._mask.any() else np.zeros_like(a), terminated)
-        reward = float(sum(terms.values()))
-        info = self._info(terms=terms, failure=failure, left=left, nfev=result.nfev)
-        return self._observation(), reward, terminated, False, info
+        terms = dict(zip(REWARD_TERMS, terms_arr.tolist()))
+        reward = float(terms_arr.sum())
+        info = self._step_info(terms, failure, left, result.nfev, sc)
+        return obs, reward, bool(ended), False, info
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -300,23 +311,35 @@ class FlatBodyEnv(gym.Env):
         obs = np.concatenate([y[:10], [math.sin(y[10]), math.cos(y[10])], self._tvec])
         return obs.astype(np.float32)
 
-    def _info(self, *, terms, failure, left, nfev) -> dict[str, Any]:
-        y = self._y
-        distance = float(self.task.distance(y, self.body, self._tvec))
-        info: dict[str, Any] = {
+    def _step_info(self, terms, failure, left, nfev, sc) -> dict[str, Any]:
+        distance = float(sc[0])
+        return {
             "t": self.time,
             "distance": distance,
             "is_success": bool(distance <= self.task.success_tolerance and not failure and not left),
-            "energy": float(hamiltonian(y, self.body)),
-            "casimir": float(casimir(y[0], y[1], y[2])),
-            "p_theta": float(y[3]),
+            "energy": float(sc[1]),
+            "casimir": float(sc[2]),
+            "p_theta": float(self._y[3]),
             "integrator": {"method": self.integrator, "nfev": int(nfev)},
             "integrator_failure": failure,
             "left_domain": left,
+            "reward_terms": terms,
         }
-        if terms is not None:
-            info["reward_terms"] = terms
-        return info
+
+    def _reset_info(self) -> dict[str, Any]:
+        y = self._y
+        distance = float(self.task.distance(y, self.body, self._tvec))
+        return {
+            "t": self.time,
+            "distance": distance,
+            "is_success": bool(distance <= self.task.success_tolerance),
+            "energy": float(hamiltonian(y, self.body)),
+            "casimir": float(y[0] ** 2 + y[1] ** 2 + y[2] ** 2),
+            "p_theta": float(y[3]),
+            "integrator": {"method": self.integrator, "nfev": 0},
+            "integrator_failure": None,
+            "left_domain": None,
+        }
 
 
 def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
