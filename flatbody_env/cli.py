@@ -18,6 +18,7 @@ import sys
 COMMAND_MODULES: tuple[str, ...] = (
     "flatbody_env.commands",
     "flatbody_env.env_benchmark",
+    "flatbody_env.recording_commands",
 )
 """Modules that contribute sub-commands (in help order)."""
 

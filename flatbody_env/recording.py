@@ -290,10 +290,15 @@ def _as_block(
         v = np.asarray(values, dtype=np.float64).ravel()
         if v.shape != (n,):
             raise ValueError(f"reward_terms[{name!r}]: expected shape ({n},), got {v.shape}")
+        _check_finite(f"reward_terms[{name!r}]", v)
         terms[str(name)] = v
     tgt = {}
     for name, values in (target or {}).items():
-        v = np.broadcast_to(np.asarray(values, dtype=np.float64), (n,)).copy()
+        try:
+            v = np.broadcast_to(np.asarray(values, dtype=np.float64), (n,)).copy()
+        except ValueError:
+            raise ValueError(f"target[{name!r}]: expected a number or shape ({n},), got shape {np.shape(values)}") from None
+        _check_finite(f"target[{name!r}]", v)
         tgt[str(name)] = v
     return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy, actions=act, reward_terms=terms, target=tgt)
 
@@ -454,32 +459,55 @@ class Recorder:
             self.flush()
 
     def flush(self) -> None:
-        """Send the buffered steps as one block (no-op when empty)."""
+        """Send the buffered steps as one block (no-op when empty).
+
+        The body, tensors and state series go out for every buffered step; actions, reward
+        terms and targets for the steps that carry them (a reset has no action or reward).
+        """
         if not self._buf:
             return
         buf, self._buf = self._buf, []
-        actions = None
-        if any(b["action"] is not None for b in buf):
-            if any(b["action"] is None for b in buf):
-                raise ValueError("action: give an action at every step of an episode or at none")
-            actions = np.stack([b["action"] for b in buf])
-        terms: dict[str, list[float]] = {}
-        names = sorted({k for b in buf if b["reward_terms"] for k in b["reward_terms"]})
-        for k in names:
-            terms[k] = [float(b["reward_terms"].get(k, math.nan)) if b["reward_terms"] else math.nan for b in buf]
-        tnames = sorted({k for b in buf if b["target"] for k in b["target"]})
-        target = {k: [float(b["target"].get(k, math.nan)) if b["target"] else math.nan for b in buf] for k in tnames}
         block = _as_block(
             [b["t"] for b in buf],
             np.stack([b["y"] for b in buf], axis=1),
             np.stack([b["R"] for b in buf]),
             energy=[b["energy"] for b in buf],
             step=np.array([b["step"] for b in buf], dtype=np.int64),
-            actions=actions,
-            reward_terms=terms,
-            target=target,
+            actions=None,
+            reward_terms=None,
+            target=None,
         )
         self.send_block(block)
+        with_action = [b for b in buf if b["action"] is not None]
+        if with_action:
+            sizes = {b["action"].size for b in with_action}
+            if len(sizes) != 1:
+                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
+            self._send_actions(
+                np.array([b["step"] for b in with_action], dtype=np.int64),
+                np.array([b["t"] for b in with_action]),
+                np.stack([b["action"] for b in with_action]),
+            )
+        for key, prefix, label in (("reward_terms", "/series/reward/", "{}"), ("target", "/series/target/", "target {}")):
+            names = sorted({k for b in buf if b[key] for k in b[key]})
+            for name in names:
+                rows = [b for b in buf if b[key] and name in b[key]]
+                values = np.array([float(b[key][name]) for b in rows])
+                _check_finite(f"{key}[{name!r}]", values)
+                self._env_series(
+                    prefix + _safe_name(name),
+                    label.format(name),
+                    np.array([b["step"] for b in rows], dtype=np.int64),
+                    np.array([b["t"] for b in rows]),
+                    values,
+                )
+
+    def note(self, text: str, *, step: int, t: float, level: str = "WARN") -> None:
+        """Log one event (e.g. an integrator failure) as a ``TextLog`` on ``/events``."""
+        rr = self._rr
+        self.rec.set_time("step", sequence=int(step))
+        self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9)), "ns"))
+        self.rec.log("/events", rr.TextLog(str(text), level=level))
 
     def send_block(self, block: _Block) -> None:
         """Log a whole block of steps column-wise (one ``send_columns`` per entity)."""
@@ -524,22 +552,30 @@ class Recorder:
             rec.send_columns("/tensors/G", indexes=tidx, columns=[self._tensor_column(G[sel])])
             rec.send_columns("/tensors/C", indexes=tidx, columns=[self._tensor_column(C[sel])])
         if block.actions is not None:
-            k = block.actions.shape[1]
-            names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
-            if len(names) != k:
-                raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
-            for i, name in enumerate(names):
-                self._env_series(f"/series/action/{_safe_name(name)}", name, idx, block.actions[:, i])
+            self._send_actions(block.step, block.t, block.actions)
         for name, values in block.reward_terms.items():
-            self._env_series(f"/series/reward/{_safe_name(name)}", name, idx, values)
+            self._env_series(f"/series/reward/{_safe_name(name)}", name, block.step, block.t, values)
         for name, values in block.target.items():
-            self._env_series(f"/series/target/{_safe_name(name)}", f"target {name}", idx, values)
+            self._env_series(f"/series/target/{_safe_name(name)}", f"target {name}", block.step, block.t, values)
 
-    def _env_series(self, path: str, label: str, idx, values: np.ndarray) -> None:
+    def _send_actions(self, step: np.ndarray, t: np.ndarray, actions: np.ndarray) -> None:
+        k = actions.shape[1]
+        names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
+        if len(names) != k:
+            raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
+        _check_finite("actions", actions)
+        for i, name in enumerate(names):
+            self._env_series(f"/series/action/{_safe_name(name)}", name, step, t, actions[:, i])
+
+    def _env_series(self, path: str, label: str, step: np.ndarray, t: np.ndarray, values: np.ndarray) -> None:
         rr = self._rr
         if path not in self._static_env:
             self.rec.log(path, rr.SeriesLines(names=str(label)), static=True)
             self._static_env.add(path)
+        idx = [
+            rr.TimeColumn("step", sequence=step),
+            rr.TimeColumn("sim_time", duration=np.round(np.asarray(t) * 1e9).astype(np.int64).astype("timedelta64[ns]")),
+        ]
         self.rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _tensor_column(self, M: np.ndarray):
@@ -923,6 +959,13 @@ def verify_recording(path: str | Path) -> str:
     return out
 
 
+def sdk_version() -> str:
+    """The installed rerun-sdk version (play recordings back with a viewer of this version)."""
+    import rerun as rr
+
+    return str(rr.__version__)
+
+
 def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
     """A readable account of a recording, read back from the file: entities, rows, first values."""
     data = read_recording(path)
@@ -966,6 +1009,7 @@ __all__ = [
     "record_arrays",
     "record_trajectory",
     "rotation_from_quaternions",
+    "sdk_version",
     "summarize_recording",
     "symmetric_entries",
     "symmetric_from_entries",
