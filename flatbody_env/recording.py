@@ -377,6 +377,8 @@ class Recorder:
         self._tensor_batch_type = None
         self._rr = rr
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id or str(uuid.uuid4()), send_properties=True)
+        if not self.rec.is_enabled():
+            raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
         self.rec.save(str(self.path), default_blueprint=_blueprint(rr, env=episode))
         self.rec.send_recording_name(title)
         self._log_static(title, description, spokes)
@@ -842,6 +844,8 @@ class RecordingData:
     entities: dict[str, EntityData]
     static: dict[str, dict[str, Any]]
     blueprints: int
+    views: list[tuple[str, str]] = field(default_factory=list)
+    """(view class, display name) of the default blueprint's views, e.g. ``("3D", "…")``."""
 
     def __getitem__(self, path: str) -> EntityData:
         return self.entities[path]
@@ -912,6 +916,17 @@ def read_recording(path: str | Path) -> RecordingData:
         else:
             sim = np.full(step.shape, np.nan)
         parts.setdefault(chunk.entity_path, []).append((step, sim, comps))
+    views: list[tuple[str, str]] = []
+    for bp in reader.blueprints():
+        for chunk in reader.stream(store=bp):
+            rb = chunk.to_record_batch()
+            names = rb.schema.names
+            if "ViewBlueprint:class_identifier" in names:
+                cls = rb.column("ViewBlueprint:class_identifier").to_pylist()
+                disp = rb.column("ViewBlueprint:display_name").to_pylist() if "ViewBlueprint:display_name" in names else [None] * len(cls)
+                for c, d in zip(cls, disp):
+                    if c:
+                        views.append((str(c[0]), str(d[0]) if d else ""))
     entities = {}
     for ent, plist in parts.items():
         step = np.concatenate([p[0] for p in plist])
@@ -935,6 +950,7 @@ def read_recording(path: str | Path) -> RecordingData:
         entities=entities,
         static=static,
         blueprints=len(reader.blueprints()),
+        views=sorted(views),
     )
 
 
@@ -970,6 +986,8 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
     """A readable account of a recording, read back from the file: entities, rows, first values."""
     data = read_recording(path)
     lines = [f"{path}: application {data.application_id!r}, recording {data.recording_id}, {data.blueprints} blueprint(s)"]
+    if data.views:
+        lines.append("default blueprint: " + "; ".join(f"{c} '{d}'" for c, d in data.views))
     lines.append(f"{'entity':<26} {'rows':>6} {'steps':>13} {'sim_time [s]':>19}  components")
     for ent in sorted(data.entities):
         e = data.entities[ent]

@@ -95,6 +95,9 @@ def test_entities_timelines_and_counts(recorded, traj):
     assert set(BODY_ENTITIES) <= present, set(BODY_ENTITIES) - present
     assert data.application_id == "flatbody"
     assert data.blueprints == 1
+    kinds = [c for c, _ in data.views]
+    assert kinds.count("3D") == 2 and kinds.count("Tensor") == 2 and kinds.count("TextDocument") == 1
+    assert kinds.count("TimeSeries") == 6 and ("TimeSeries", "reward terms") not in data.views
     temporal = [e for e in BODY_ENTITIES if e in data.entities]
     assert "/world/body" in temporal and "/series/G" in temporal
     for ent in temporal:
@@ -349,6 +352,7 @@ def test_wrapper_records_episodes_in_blocks(tmp_path):
     assert set(e for e in data.entities if e.startswith("/series/target/")) == {f"/series/target/{k}" for k in ("lambda", "mu", "rho", "s3")}
     np.testing.assert_array_equal(data["/series/target/s3"].step, np.arange(24))
     assert "/events" not in data.entities
+    assert ("TimeSeries", "reward terms") in data.views and ("TimeSeries", "actions") in data.views
     second = read_recording(tmp_path / "ep-1.rrd")
     np.testing.assert_array_equal(second["/world/body"].step, np.arange(6))
 
@@ -364,6 +368,13 @@ def test_wrapper_skips_and_notes_a_failed_step(tmp_path):
     np.testing.assert_array_equal(data["/world/body"].step, np.arange(6))
     np.testing.assert_array_equal(data["/events"].step, [6, 7, 8])
     assert "integration failure" in data["/events"].components["TextLog:text"][0][0]
+
+
+def test_rerun_off_is_an_error_not_a_missing_file(tmp_path, monkeypatch, traj, scene):
+    monkeypatch.setenv("RERUN", "off")
+    with pytest.raises(ValueError, match="RERUN"):
+        record_trajectory(traj, scene.body, tmp_path / "off.rrd")
+    assert not (tmp_path / "off.rrd").exists()
 
 
 def test_importing_the_env_layer_and_cli_does_not_import_rerun():
