@@ -997,17 +997,20 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
         )
     for ent in sorted(data.static):
         lines.append(f"{ent:<26} {'static':>6}  " + ", ".join(sorted(data.static[ent])))
-    first = [("/series/lambda", "Scalars:scalars"), ("/series/mu", "Scalars:scalars"), ("/series/rho", "Scalars:scalars"), ("/series/energy", "Scalars:scalars")]
     lines.append("")
-    lines.append("first rows read back:")
-    for ent, comp in first:
+    lines.append(f"first and last {rows} rows read back:")
+    for name in ("lambda", "mu", "rho", "theta", "energy", "casimir", "p_theta"):
+        ent = f"/series/{name}"
         if ent in data.entities:
-            v = np.asarray(data.entities[ent].components[comp])[:rows, 0]
-            lines.append(f"  {ent:<16} " + "  ".join(f"{x:.6f}" for x in v))
+            v = np.asarray(data.entities[ent].components["Scalars:scalars"])[:, 0]
+            head = "  ".join(f"{x:.6f}" for x in v[:rows])
+            tail = "  ".join(f"{x:.6f}" for x in v[-rows:])
+            lines.append(f"  {ent:<16} {head}  …  {tail}")
     for ent in ("/tensors/G", "/tensors/C"):
         if ent in data.entities:
-            M = data.entities[ent].components["Tensor:data"][0]
-            lines.append(f"  {ent} at step {int(data.entities[ent].step[0])}:")
+            e = data.entities[ent]
+            M = e.components["Tensor:data"][-1]
+            lines.append(f"  {ent} at step {int(e.step[-1])} (sim_time {e.sim_time[-1]:g}):")
             lines.extend("    [" + "  ".join(f"{x:+.6f}" for x in row) + "]" for row in M)
     return "\n".join(lines)
 
