@@ -47,7 +47,6 @@ References
 
 from __future__ import annotations
 
-import math
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -479,7 +478,7 @@ class Recorder:
             reward_terms=None,
             target=None,
         )
-        self.send_block(block)
+        self._send_block(block)
         with_action = [b for b in buf if b["action"] is not None]
         if with_action:
             sizes = {b["action"].size for b in with_action}
@@ -511,7 +510,7 @@ class Recorder:
         self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9)), "ns"))
         self.rec.log("/events", rr.TextLog(str(text), level=level))
 
-    def send_block(self, block: _Block) -> None:
+    def _send_block(self, block: _Block) -> None:
         """Log a whole block of steps column-wise (one ``send_columns`` per entity)."""
         rr = self._rr
         rec = self.rec
@@ -794,7 +793,7 @@ def record_arrays(
         energy = hamiltonian_series(Y, body)
     block = _as_block(t, states, rotations, energy=energy, step=step, actions=actions, reward_terms=reward_terms, target=target)
     with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, action_names=action_names, recording_id=recording_id) as rec:
-        rec.send_block(block)
+        rec._send_block(block)
     return Path(path)
 
 

@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from .commands import _load, _positive, add_integration_arguments, add_scene_arguments
+from .commands import _load, add_integration_arguments, add_scene_arguments
 
 
 def _count(name: str, minimum: int = 1):
