@@ -42,6 +42,21 @@ def _numeric(d: Any) -> dict[str, float]:
     return out
 
 
+def _check_contract(u) -> None:
+    """A clear error when the unwrapped env lacks what the recorder reads (module docstring)."""
+    from .state import STATE_NAMES
+
+    for name in ("body", "state", "rotation", "time"):
+        if not hasattr(u, name):
+            raise ValueError(f"env.unwrapped.{name}: missing — RerunRecorder needs body, state, rotation, time (see flatbody_env.wrappers)")
+    state = u.state
+    if not isinstance(state, dict) or any(k not in state for k in STATE_NAMES):
+        raise ValueError(f"env.unwrapped.state: expected a dict with the entries {', '.join(STATE_NAMES)}")
+    R = u.rotation
+    if R is None or np.shape(R) != (3, 3):
+        raise ValueError(f"env.unwrapped.rotation: expected a 3×3 rotation R (the env must integrate R while recorded), got {None if R is None else np.shape(R)}")
+
+
 class RerunRecorder(gym.Wrapper):
     """Record episodes of a flat-body environment to rerun ``.rrd`` files.
 
@@ -161,6 +176,7 @@ class RerunRecorder(gym.Wrapper):
             from .recording import Recorder
 
             u = self.env.unwrapped
+            _check_contract(u)
             self._rec = Recorder(
                 self.episode_path(self._episode),
                 u.body,

@@ -377,6 +377,16 @@ def test_rerun_off_is_an_error_not_a_missing_file(tmp_path, monkeypatch, traj, s
     assert not (tmp_path / "off.rrd").exists()
 
 
+def test_wrapper_names_a_broken_contract(tmp_path):
+    class NoRotation(FakeFlatBodyEnv):
+        rotation = None
+
+    env = RerunRecorder(NoRotation(n_steps=3), tmp_path / "x.rrd")
+    with pytest.raises(ValueError, match="env.unwrapped.rotation"):
+        env.reset()
+    assert not (tmp_path / "x.rrd").exists()
+
+
 def test_importing_the_env_layer_and_cli_does_not_import_rerun():
     code = "import sys, flatbody_env, flatbody_env.wrappers, flatbody_env.recording, flatbody_env.cli as c; c.build_parser(); print('rerun' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
