@@ -654,10 +654,18 @@ def _blueprint(rr, *, env: bool):
     import rerun.blueprint as rrb
 
     views = [
-        rrb.TimeSeriesView(name="λ, μ, ϱ", origin="/series", contents=["/series/lambda", "/series/mu", "/series/rho", "/series/target/**"]),
+        rrb.TimeSeriesView(
+            name="λ, μ, ϱ",
+            origin="/series",
+            contents=["/series/lambda", "/series/mu", "/series/rho", "/series/target/lambda", "/series/target/mu", "/series/target/rho"],
+        ),
         rrb.TimeSeriesView(name="θ", origin="/series", contents=["/series/theta"]),
-        rrb.TimeSeriesView(name="energy", origin="/series", contents=["/series/energy"]),
-        rrb.TimeSeriesView(name="|s|², p_θ", origin="/series", contents=["/series/casimir", "/series/p_theta"]),
+        rrb.TimeSeriesView(name="energy", origin="/series", contents=["/series/energy", "/series/target/energy"]),
+        rrb.TimeSeriesView(
+            name="|s|², p_θ, s3",
+            origin="/series",
+            contents=["/series/casimir", "/series/p_theta", "/series/target/s3", "/series/target/p_theta"],
+        ),
         rrb.TimeSeriesView(name="G entries", origin="/series/G"),
         rrb.TimeSeriesView(name="C entries", origin="/series/C"),
     ]
@@ -665,6 +673,7 @@ def _blueprint(rr, *, env: bool):
         views = [
             rrb.TimeSeriesView(name="reward terms", origin="/series/reward"),
             rrb.TimeSeriesView(name="actions", origin="/series/action"),
+            rrb.TimeSeriesView(name="target", origin="/series/target"),
             *views,
         ]
     series = rrb.Tabs(*views)

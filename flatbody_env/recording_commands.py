@@ -1,4 +1,4 @@
-"""Sub-commands for rerun recordings: ``record``, ``record-env``, ``record-info``, ``record-bench``.
+"""Sub-commands for rerun recordings: ``record``, ``record-env``, ``record-info``, ``bench recording``.
 
 Heavy imports (rerun through :mod:`flatbody_env.recording`, gymnasium, matplotlib) happen in
 the handlers only.
@@ -70,13 +70,15 @@ def _make_env(env_id: str, max_steps: int | None):
 
     import flatbody_env  # noqa: F401  (registers the package's environments on import)
 
-    kwargs = {}
+    kwargs = {"track_rotation": True}  # the recorder draws R(t): FlatBodyEnv integrates it on request
     if max_steps is not None:
         kwargs["max_episode_steps"] = max_steps
     try:
         return gym.make(env_id, **kwargs)
     except gym.error.Error as exc:
         raise ValueError(f"env-id: cannot make {env_id!r} ({exc})") from None
+    except TypeError as exc:
+        raise ValueError(f"env-id: {env_id!r} does not take track_rotation=True, which recording needs ({exc})") from None
 
 
 def _record_env(args) -> int:
@@ -277,11 +279,14 @@ def register(sub) -> None:
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
-    p = sub.add_parser("record-bench", help="benchmark: time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000)")
+
+
+def register_bench(bench_sub) -> None:
+    p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000)")
     p.add_argument("--steps", type=_count("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
     p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
     p.add_argument("--repeats", type=_count("repeats"), default=5, help="runs per size (median reported; default 5)")
     p.add_argument("--block", type=_count("block"), default=256, help="block size of the live-recorder measurement")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
-    p.add_argument("--out-dir", default="bench-results", metavar="DIR", help="where recording.json and recording.png go")
+    p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
     p.set_defaults(handler=_record_bench)

@@ -7,13 +7,17 @@ The contract the wrapped environment meets (``env.unwrapped``)
 --------------------------------------------------------------
 * ``body`` — a :class:`flatbody_env.body.Body`;
 * ``state`` — a dict of the eleven :data:`flatbody_env.state.STATE_NAMES`, floats;
-* ``rotation`` — R, a 3×3 float64 rotation (the env integrates R while recording);
+* ``rotation`` — R, a 3×3 float64 rotation: ``FlatBodyEnv`` integrates R only when made with
+  ``track_rotation=True`` (``gym.make("FlatBody-v0", track_rotation=True)``), else it is None and
+  the wrapper stops with a ``ValueError`` saying so;
 * ``time`` — the simulated time (float);
 * ``target`` — a dict with at least ``lambda``, ``mu``, ``rho``, ``s3`` (numeric entries are
   plotted on ``/series/target/NAME``);
-* optional ``action_names`` — names of the action components (default τ1, τ2, τ3, f_ϱ for four);
+* optional ``action_names`` — names of the action components; else derived from ``control``
+  (:data:`flatbody_env.task.CONTROLS`: the driven ones of τ1, τ2, τ3, f_ϱ);
 * ``step`` returns ``info["reward_terms"]`` — a dict name → float (plotted on
-  ``/series/reward/NAME``, with the step's reward as ``total``).
+  ``/series/reward/NAME``, with the step's reward as ``total``); a truthy
+  ``info["integrator_failure"]`` or ``info["left_domain"]`` is logged as a ``TextLog`` on ``/events``.
 """
 
 from __future__ import annotations
@@ -54,7 +58,27 @@ def _check_contract(u) -> None:
         raise ValueError(f"env.unwrapped.state: expected a dict with the entries {', '.join(STATE_NAMES)}")
     R = u.rotation
     if R is None or np.shape(R) != (3, 3):
-        raise ValueError(f"env.unwrapped.rotation: expected a 3×3 rotation R (the env must integrate R while recorded), got {None if R is None else np.shape(R)}")
+        raise ValueError(
+            "env.unwrapped.rotation: expected a 3×3 rotation R, got "
+            f"{None if R is None else np.shape(R)} — make the env with track_rotation=True "
+            '(gym.make("FlatBody-v0", track_rotation=True)) so that it integrates R'
+        )
+
+
+def _action_names(u) -> tuple[str, ...] | None:
+    """Names of the action entries: ``u.action_names`` if given, else from ``u.control``."""
+    names = getattr(u, "action_names", None)
+    if names is not None:
+        return tuple(str(n) for n in names)
+    control = getattr(u, "control", None)
+    if isinstance(control, str):
+        from .recording import ACTION_NAMES
+        from .task import CONTROLS, control_mask
+
+        if control in CONTROLS:
+            picked = tuple(n for n, m in zip(ACTION_NAMES, control_mask(control)) if m)
+            return picked or ("ignored",)
+    return None
 
 
 class RerunRecorder(gym.Wrapper):
@@ -156,6 +180,10 @@ class RerunRecorder(gym.Wrapper):
             act = np.asarray(action, dtype=np.float64).ravel()
             if not np.all(np.isfinite(act)):
                 act = None
+        if info is not None:
+            for key in ("integrator_failure", "left_domain"):
+                if info.get(key):
+                    self._rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=self._step, t=t)
         self._rec.append(
             t,
             state,
@@ -186,7 +214,7 @@ class RerunRecorder(gym.Wrapper):
                 + ". Actions and rewards are drawn at the step they lead to.",
                 block=self._block,
                 tensor_every=self._tensor_every,
-                action_names=getattr(u, "action_names", None),
+                action_names=_action_names(u),
                 episode=True,
             )
             self._append()

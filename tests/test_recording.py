@@ -272,7 +272,7 @@ class FakeFlatBodyEnv(gym.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, n_steps: int = 23, dt: float = 0.05, fail_at: int | None = None):
+    def __init__(self, n_steps: int = 23, dt: float = 0.05, fail_at: int | None = None, track_rotation: bool = True):
         sc = load_scene("default")
         self.body = sc.body
         self.n_steps = n_steps
@@ -435,3 +435,58 @@ def test_record_env_command(tmp_path, capsys):
         assert "env-id" in capsys.readouterr().err
     finally:
         gym.registry.pop("FakeFlatBodyForRecording-v0", None)
+
+
+# --------------------------------------------------------------------------------------------------
+# the real FlatBody-v0
+# --------------------------------------------------------------------------------------------------
+
+
+def test_wrapper_on_flatbody_v0(tmp_path):
+    from flatbody_env.task import REWARD_TERMS
+
+    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=30), tmp_path / "fb.rrd", block=8)
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    steps = 0
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
+        steps += 1
+        done = term or trunc
+    env.close()
+    assert env.recorded_paths == [tmp_path / "fb.rrd"]
+    verify_recording(tmp_path / "fb.rrd")
+    data = read_recording(tmp_path / "fb.rrd")
+    np.testing.assert_array_equal(data["/world/body"].step, np.arange(steps + 1))
+    np.testing.assert_allclose(data["/world/body"].sim_time[1:] - data["/world/body"].sim_time[:-1], 0.05, atol=1e-9)
+    assert {e for e in data.entities if e.startswith("/series/action/")} == {f"/series/action/{n}" for n in ("tau1", "tau2", "tau3", "f_rho")}
+    assert {e for e in data.entities if e.startswith("/series/reward/")} == {f"/series/reward/{n}" for n in (*REWARD_TERMS, "total")}
+    assert {"/series/target/lambda", "/series/target/s3"} <= set(data.entities)
+    # G, C from the logged λ, μ, ϱ, θ and quaternions, as for scene recordings
+    lam, mu, rho, theta = (_series(data, k) for k in ("lambda", "mu", "rho", "theta"))
+    R = rotation_from_quaternions(data["/world/body"].components["Ellipsoids3D:quaternions"][:, 0, :])
+    Phi = _phi(lam, mu, rho, theta, R)
+    np.testing.assert_allclose(data["/tensors/G"].components["Tensor:data"], np.swapaxes(Phi, 1, 2) @ Phi, atol=1e-5, rtol=1e-5)
+    np.testing.assert_allclose(data["/tensors/C"].components["Tensor:data"], np.linalg.inv(Phi @ np.swapaxes(Phi, 1, 2)), atol=1e-5, rtol=1e-5)
+    # a torque-only env names three actions
+    env = RerunRecorder(gym.make("FlatBody-v0", control="torque", track_rotation=True), tmp_path / "tq.rrd")
+    env.reset(seed=0)
+    env.step(np.zeros(3, np.float32))
+    env.close()
+    data = read_recording(tmp_path / "tq.rrd")
+    assert {e for e in data.entities if e.startswith("/series/action/")} == {f"/series/action/{n}" for n in ("tau1", "tau2", "tau3")}
+
+
+def test_flatbody_v0_without_rotation_tracking_is_named(tmp_path):
+    env = RerunRecorder(gym.make("FlatBody-v0"), tmp_path / "x.rrd")
+    with pytest.raises(ValueError, match="track_rotation=True"):
+        env.reset(seed=0)
+
+
+def test_record_env_command_on_flatbody_v0(tmp_path, capsys):
+    out = tmp_path / "fb.rrd"
+    assert main(["record-env", "--episodes", "1", "--max-steps", "20", "--policy", "random", "--out", str(out), "--verify"]) == 0
+    data = read_recording(out)
+    assert data["/series/lambda"].step.size == 21
+    assert data["/series/reward/total"].step.size == 20
