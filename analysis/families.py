@@ -36,7 +36,7 @@ from scipy.optimize import root
 from flatbody_env.body import Body, Inertia
 from flatbody_env.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
 
-from .stability import analyse_stability
+from .stability import analyse_stability, stability_of_shape
 from .stationary import (
     DEFAULT_TOL,
     SearchBox,
@@ -281,6 +281,8 @@ def _trace(prob: _Problem, X0: np.ndarray, direction: float, p_lo: float, p_hi: 
         if not (p_lo <= Xn[-1] <= p_hi):
             # land exactly on the boundary of the parameter range
             pb = p_hi if Xn[-1] > p_hi else p_lo
+            if abs(pb - X[-1]) <= 1e-12 * max(1.0, abs(pb)):
+                break
             frac = (pb - X[-1]) / (Xn[-1] - X[-1])
             zb = _solve_at(prob, X[:-1] + frac * (Xn[:-1] - X[:-1]), pb)
             if zb is not None:
@@ -476,6 +478,38 @@ def stability_grid(body: Body, s3_values, p_theta_values, *, box: SearchBox | No
     return rows
 
 
+SHAPE_COLUMNS = ("lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot", "energy", "kind", "classification",
+                 "nonlinear", "max_real_part")
+
+
+def shape_stability_grid(body: Body, lam_values, mu_values) -> list[dict[str, Any]]:
+    """For each shape (λ, μ) with λ > μ on the grid: the spins that make it stationary (inverse problem,
+    NOTES §6) — one rigid-like (|s3| > |p_θ|) and one circulating (|p_θ| > |s3|) solution with σ₊ ≥ 0 —
+    and their stability. Shapes that cannot be stationary give no row."""
+    rows = []
+    for lam in lam_values:
+        for mu in mu_values:
+            if not float(lam) > float(mu):
+                continue
+            for st in stability_of_shape(body, float(lam), float(mu)):
+                e = st.ellipse
+                rows.append({"lambda": e.lam, "mu": e.mu, "rho": e.rho, "s3": e.s3, "p_theta": e.p_theta, "omega3": e.omega3,
+                             "theta_dot": e.theta_dot, "energy": e.energy, "kind": e.kind, "classification": st.classification,
+                             "nonlinear": st.nonlinear, "max_real_part": st.max_real_part})
+    return rows
+
+
+def write_table_csv(rows: list[dict[str, Any]], path: str | Path, columns: tuple[str, ...] = SHAPE_COLUMNS) -> Path:
+    """Write plain rows (e.g. of :func:`shape_stability_grid`) as CSV."""
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(columns))
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: (repr(row[k]) if isinstance(row[k], float) else row[k]) for k in columns})
+    return path
+
+
 # --------------------------------------------------------------------------------------------
 def family_rows(family: Family) -> list[dict[str, Any]]:
     rows = []
@@ -540,6 +574,9 @@ __all__ = [
     "family_rows",
     "follow_family",
     "read_family_csv",
+    "SHAPE_COLUMNS",
+    "shape_stability_grid",
     "stability_grid",
+    "write_table_csv",
     "write_family_csv",
 ]

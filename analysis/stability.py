@@ -148,9 +148,14 @@ def _reduced_rhs(body: Body, x: np.ndarray, theta: float) -> np.ndarray:
 
 
 def _derivative(f, x: np.ndarray, i: int) -> np.ndarray:
-    """∂f/∂x_i: exact central difference for momenta, fourth-order Richardson for λ, μ, ϱ."""
+    """∂f/∂x_i: exact central difference for momenta, fourth-order Richardson for λ, μ, ϱ.
+
+    The step in λ, μ is a small fraction of min(x_i, |λ − μ|): the equations vary on the scale of
+    the gap λ − μ near the circle (terms in σ₋²/(λ − μ)³).
+    """
     if i in _POSITIONS:
-        h = 2e-3 * abs(x[i])
+        scale = abs(x[i]) if i == 9 else min(abs(x[i]), abs(x[7] - x[8]))
+        h = 2e-3 * scale
 
         def d(hh):
             xp = x.copy()

@@ -16,6 +16,7 @@ import sys
 
 COMMAND_MODULES: tuple[str, ...] = (
     "flatbody_env.commands",
+    "analysis.commands",
 )
 """Modules that contribute sub-commands (in help order)."""
 
