@@ -6,7 +6,8 @@ A family follows the branch-N solutions (eqs. (52)–(54) of [1]) while one para
 :func:`analysis.stationary.equilibrium_equations`, each step predicts along the tangent T (the
 null vector of [F_z | F_p]) and corrects by Newton on {F = 0, T·(X − X_pred) = 0}, so the
 continuation passes folds (turning points in p), where two solutions meet and disappear. A fold
-is detected as a sign change of T's p-component and refined by solving {F = 0, det F_z = 0}.
+is detected where p turns back along the branch and is reported only when {F = 0, det F_z = 0}
+has a solution there (so a sharp bend near the circle λ = μ is not mistaken for a fold).
 
 Seeds: all solutions at several parameter values (the root finder of :mod:`analysis.stationary`);
 a seed already on a traced branch is skipped (checked by a Newton solve from the branch). Along
@@ -329,9 +330,9 @@ def _ends_at_circle(prob: _Problem, X: np.ndarray, Xn: np.ndarray) -> bool:
     return bool(np.linalg.norm(zs - zi) > 0.5 * np.linalg.norm(Xn[:-1] - X[:-1]) + 1e-9)
 
 
-def _refine_fold(prob: _Problem, Xa: np.ndarray, Xb: np.ndarray, Ta: float, Tb: float) -> np.ndarray:
-    w = Ta / (Ta - Tb)
-    X0 = Xa + w * (Xb - Xa)
+def _refine_fold(prob: _Problem, Xa: np.ndarray, Xm: np.ndarray, Xb: np.ndarray) -> np.ndarray | None:
+    """Solve {F = 0, det F_z = 0} from the extreme point Xm of the parameter; None unless it converges
+    to a genuine fold (F ≈ 0, F_z singular) between the neighbours Xa, Xb."""
 
     def g(X):
         Jz = prob.jac(X)[:, :-1]
@@ -339,12 +340,19 @@ def _refine_fold(prob: _Problem, Xa: np.ndarray, Xb: np.ndarray, Ta: float, Tb: 
 
     try:
         with np.errstate(all="ignore"):
-            sol = root(g, X0, method="hybr", options={"xtol": 1e-12})
-        if sol.success and np.linalg.norm(sol.x - X0) < 2 * np.linalg.norm(Xb - Xa) + 1e-12:
-            return sol.x
+            sol = root(g, Xm, method="hybr", options={"xtol": 1e-13})
     except (ValueError, ZeroDivisionError):
-        pass
-    return X0
+        return None
+    X = sol.x
+    if not np.all(np.isfinite(X)) or np.any(X[:-1] <= 0):
+        return None
+    span = np.linalg.norm(Xb - Xa) + 1e-12
+    if np.linalg.norm(X - Xm) > span:
+        return None
+    Jz = prob.jac(X)[:, :-1]
+    if np.max(np.abs(prob.F(X))) > 1e-9 or abs(np.linalg.det(Jz)) > 1e-6 * max(1.0, np.linalg.norm(Jz)) ** Jz.shape[0]:
+        return None
+    return X
 
 
 def follow_family(
@@ -433,14 +441,14 @@ def follow_family(
         pts = [pts[k] for k in keep]
         fam = [fam[k] for k in keep]
         branches.append(tuple(fam))
-        Ts = [_tangent(prob, X, None, 1.0) for X in pts]
-        for k in range(1, len(Ts)):
-            Ts[k] = Ts[k] if Ts[k] @ Ts[k - 1] >= 0 else -Ts[k]
+        for k in range(1, len(pts) - 1):
+            d0, d1 = pts[k][-1] - pts[k - 1][-1], pts[k + 1][-1] - pts[k][-1]
+            if d0 * d1 < 0:
+                Xf = _refine_fold(prob, pts[k - 1], pts[k], pts[k + 1])
+                if Xf is not None:
+                    events.append(FamilyEvent(kind="fold", branch=bi, param=float(Xf[-1]), lam=float(Xf[0]), mu=float(Xf[1]),
+                                              detail="turning point in the parameter: two stationary ellipses merge"))
         for k in range(len(pts) - 1):
-            if Ts[k][-1] * Ts[k + 1][-1] < 0:
-                Xf = _refine_fold(prob, pts[k], pts[k + 1], Ts[k][-1], Ts[k + 1][-1])
-                events.append(FamilyEvent(kind="fold", branch=bi, param=float(Xf[-1]), lam=float(Xf[0]), mu=float(Xf[1]),
-                                          detail="turning point in the parameter: two stationary ellipses merge"))
             if fam[k].classification != fam[k + 1].classification:
                 a, c = fam[k], fam[k + 1]
                 events.append(FamilyEvent(kind="stability-change", branch=bi, param=0.5 * (a.param + c.param),
