@@ -330,7 +330,6 @@ def _grid(lo: float, hi: float, n: int) -> np.ndarray:
 def _sign_change_seeds(F: tuple[np.ndarray, ...], coords: tuple[np.ndarray, ...], valid: np.ndarray) -> list[np.ndarray]:
     """Centres of grid cells in which every equation takes both signs (cells marked valid)."""
     nd = len(coords)
-    cells = tuple(slice(0, s - 1) for s in F[0].shape)
     ok = valid.copy()
     for Fi in F:
         pos = np.zeros(ok.shape, bool)
@@ -343,7 +342,6 @@ def _sign_change_seeds(F: tuple[np.ndarray, ...], coords: tuple[np.ndarray, ...]
     seeds = []
     for idx in zip(*np.nonzero(ok)):
         seeds.append(np.array([math.sqrt(c[i] * c[i + 1]) for c, i in zip(coords, idx)]))
-    del cells
     return seeds
 
 
@@ -463,7 +461,6 @@ def solve_branch(
     F = tuple(np.where(np.isfinite(Fi), Fi, np.nan) for Fi in F)
     # cells must not straddle the singular set λ = μ; symmetric V: search λ > μ only
     D = L - M
-    cell = tuple(slice(0, s - 1) for s in D.shape)
     corners_pos = np.ones(tuple(s - 1 for s in D.shape), bool)
     corners_neg = np.ones_like(corners_pos)
     finite = np.ones_like(corners_pos)
@@ -474,7 +471,6 @@ def solve_branch(
         for Fi in F:
             finite &= np.isfinite(Fi[sl])
     valid = (corners_pos if symmetric else (corners_pos | corners_neg)) & finite
-    del cell
     seeds = _sign_change_seeds(tuple(np.nan_to_num(Fi) for Fi in F), coords, valid)
 
     if coupled:
