@@ -21,3 +21,6 @@ def __getattr__(name):
     import importlib
 
     return getattr(importlib.import_module(f".{module}", __name__), name)
+
+
+__all__ = sorted(_WHERE)
