@@ -355,6 +355,29 @@ def _refine_fold(prob: _Problem, Xa: np.ndarray, Xm: np.ndarray, Xb: np.ndarray)
     return X
 
 
+def _refine_change(prob: _Problem, Xa: np.ndarray, Xb: np.ndarray, cls_a: str, iterations: int = 40) -> np.ndarray:
+    """Bisect in the parameter between two branch points of different classification (the branch is
+    single-valued there unless a fold lies between; then the midpoint is returned)."""
+    lo, hi = Xa, Xb
+    for _ in range(iterations):
+        pm = 0.5 * (lo[-1] + hi[-1])
+        zi = 0.5 * (lo[:-1] + hi[:-1])
+        z = _solve_at(prob, zi, pm)
+        if z is None:
+            break
+        Xm = np.concatenate([z, [pm]])
+        fp = prob.point(Xm, 1e-9)
+        if fp is None:
+            break
+        if fp.classification == cls_a:
+            lo = Xm
+        else:
+            hi = Xm
+        if abs(hi[-1] - lo[-1]) < 1e-10 * max(1.0, abs(pm)):
+            break
+    return 0.5 * (lo + hi)
+
+
 def follow_family(
     body: Body,
     param: str,
@@ -451,8 +474,9 @@ def follow_family(
         for k in range(len(pts) - 1):
             if fam[k].classification != fam[k + 1].classification:
                 a, c = fam[k], fam[k + 1]
-                events.append(FamilyEvent(kind="stability-change", branch=bi, param=0.5 * (a.param + c.param),
-                                          lam=0.5 * (a.lam + c.lam), mu=0.5 * (a.mu + c.mu),
+                Xs = _refine_change(prob, pts[k], pts[k + 1], a.classification)
+                events.append(FamilyEvent(kind="stability-change", branch=bi, param=float(Xs[-1]),
+                                          lam=float(Xs[0]), mu=float(Xs[1]),
                                           detail=f"{a.classification} -> {c.classification}"))
     return Family(param_name=param, param_range=(float(start), float(stop)), s3=float(s3), p_theta=float(p_theta), body=body,
                   branches=tuple(branches), events=tuple(events))
