@@ -19,6 +19,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "flatbody_env.commands",
     "flatbody_env.env_benchmark",
     "flatbody_env.recording_commands",
+    "analysis.commands",
 )
 """Modules that contribute sub-commands (in help order)."""
 
