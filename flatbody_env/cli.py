@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "flatbody_env.env_benchmark",
     "flatbody_env.recording_commands",
     "analysis.commands",
+    "analysis.integrator_commands",
 )
 """Modules that contribute sub-commands (in help order)."""
 
