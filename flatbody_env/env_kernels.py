@@ -135,3 +135,23 @@ def post_step_batch(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
     """
     for k in range(Y_old.shape[1]):
         ENDED[k] = post_step(Y_old[:, k], Y_new[:, k], status[k], A[k], n_act, T[k], cfg, P, Y_out[:, k], OBS[k], TERMS[:, k], SC[:, k], vel, force)
+
+
+def controls_kernel(action, mask, limits, a_out, u_out):
+    """Clip the action to [−1, 1] into ``a_out`` and scale the driven controls into ``u_out`` (4,).
+
+    ``mask`` (4,) marks which of (τ1, τ2, τ3, f_ϱ) the action drives, in order; ``limits`` (4,)
+    holds torque_limit ×3 and force_limit. Returns False if the action is not finite.
+    """
+    for i in range(action.size):
+        if not math.isfinite(action[i]):
+            return False
+        a_out[i] = min(1.0, max(-1.0, action[i]))
+    k = 0
+    for j in range(4):
+        if mask[j]:
+            u_out[j] = a_out[k] * limits[j]
+            k += 1
+        else:
+            u_out[j] = 0.0
+    return True
