@@ -178,8 +178,9 @@ def register(sub) -> None:
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
     p.set_defaults(handler=_failure, repeats=1)
 
-    p = sub.add_parser("bench", help="benchmarks (not timed tests): 'flatbody bench integrators'")
-    bsub = p.add_subparsers(dest="bench_target", metavar="TARGET", parser_class=type(p))
+
+
+def register_bench(bsub) -> None:
     b = bsub.add_parser("integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time")
     b.add_argument("--quick", action="store_true", help="shorter horizons, one close-approach case, 1 repeat")
     b.add_argument("--repeats", type=_repeats, default=3, help="timing repeats (minimum taken; default 3)")
