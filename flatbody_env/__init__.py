@@ -22,8 +22,23 @@ from .registration import register_envs as _register_envs
 
 _register_envs()
 
+
+def __getattr__(name: str):
+    """Lazy access to the environment classes (they import gymnasium's spaces)."""
+    if name == "FlatBodyEnv":
+        from .env import FlatBodyEnv
+
+        return FlatBodyEnv
+    if name == "FlatBodyVectorEnv":
+        from .vector_env import FlatBodyVectorEnv
+
+        return FlatBodyVectorEnv
+    raise AttributeError(f"module 'flatbody_env' has no attribute {name!r}")
+
 __all__ = [
     "Body",
+    "FlatBodyEnv",
+    "FlatBodyVectorEnv",
     "CustomPotential",
     "Inertia",
     "IntegrationError",

@@ -1,7 +1,8 @@
 """The ``flatbody`` command.
 
 Sub-commands live in the modules named in :data:`COMMAND_MODULES`; each has a
-``register(subparsers)`` that adds its parsers with ``set_defaults(handler=...)``. Modules
+``register(subparsers)`` that adds its parsers with ``set_defaults(handler=...)``, and may have a
+``register_bench(bench_subparsers)`` that adds targets of ``flatbody bench TARGET``. Modules
 keep heavy imports inside their handlers so that ``flatbody --help`` stays fast.
 
 Exit codes: 0 success; 1 an integration or run failed (one line says when and why); 2 bad
@@ -16,6 +17,10 @@ import sys
 
 COMMAND_MODULES: tuple[str, ...] = (
     "flatbody_env.commands",
+    "flatbody_env.env_benchmark",
+    "flatbody_env.recording_commands",
+    "analysis.commands",
+    "analysis.integrator_commands",
     "agents.commands",
 )
 """Modules that contribute sub-commands (in help order)."""
@@ -35,14 +40,16 @@ def build_parser() -> Parser:
         description="A flat affinely-rigid body with thickness: simulate, analyse, record, train.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:  # an optional layer that is not installed
-            if exc.name and name.startswith(exc.name):
-                continue
-            raise
-        module.register(sub)
+    modules = [importlib.import_module(name) for name in COMMAND_MODULES]
+    for module in modules:
+        if hasattr(module, "register"):
+            module.register(sub)
+    bench = sub.add_parser("bench", help="benchmarks: print figures and write JSON/CSV and PNG (not timed tests)")
+    bench_sub = bench.add_subparsers(dest="target", metavar="TARGET", parser_class=Parser)
+    bench.set_defaults(handler=lambda args: (bench.print_help(), 2)[1])
+    for module in modules:
+        if hasattr(module, "register_bench"):
+            module.register_bench(bench_sub)
     return parser
 
 

@@ -12,7 +12,9 @@ regular matrix formulation (NOTES §5 of [2], 18 variables plus two constraints)
 * otherwise (J1 ≠ J2, σ₋ too small, or no lower bound of V known) → ``"regular"``.
 
 A method name that belongs to one chart (``"DOP853"`` two-polar, ``"DOP853-regular"``) is
-mapped to its twin in the chosen chart when one exists.
+mapped to its twin in the chosen chart when one exists; a method without a twin (the compiled
+ones, e.g. ``"RK4"``) runs in its own chart, and a failure near λ = μ is reported
+(:class:`IntegrationError`), not hidden. Fixed-step methods need ``step=``.
 """
 
 from __future__ import annotations
@@ -34,6 +36,9 @@ from .state import STATE_NAMES, pack, unpack
 
 GAP_MIN = 1e-2
 """Smallest guaranteed |λ − μ| for which ``model="auto"`` keeps the two-polar chart."""
+
+FIXED_STEP_ENERGY_TOL = 1e-3
+"""Default relative energy tolerance of fixed-step methods (a blow-up detector, not an accuracy target)."""
 
 MODELS = ("auto", "two-polar", "regular")
 DEFAULT_SAMPLES = 101
@@ -197,12 +202,13 @@ def simulate(
     with_rotation : bool
         Also integrate R (Ṙ = R W(ω), eq. (25) of [1]) and return ``Trajectory.rotation``.
     step : float, optional
-        Step size of fixed-step methods.
+        Step size of fixed-step methods (required for them, refused by adaptive ones).
     model : {"auto", "two-polar", "regular"}
         The formulation (module docstring).
     energy_tol : float, optional
         Allowed |H(t) − H(0)| before the run is declared failed; default
-        ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H(0)|)``; ``math.inf`` disables the check.
+        ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H(0)|)`` for adaptive methods and
+        ``FIXED_STEP_ENERGY_TOL · max(1, |H(0)|)`` for fixed-step ones; ``math.inf`` disables the check.
 
     Returns
     -------
@@ -236,12 +242,23 @@ def simulate(
             chosen = "two-polar"
     if chosen != meth.info.chart:
         twin = _twin(method, chosen)
-        if twin is None:
+        if twin is None and model != "auto":
             raise ValueError(f"method: {method!r} integrates the {meth.info.chart} chart, but model={chosen!r} was asked for")
-        meth = get_method(twin)
+        if twin is not None:
+            meth = get_method(twin)
+        # model="auto" and no twin: the method asked for by name runs in its own chart; near
+        # lambda = mu its failure is detected and reported (IntegrationError), never hidden.
+    if meth.info.adaptive and step is not None:
+        raise ValueError(f"step: {meth.info.name} is adaptive; step= (--step) applies to fixed-step methods only")
+    if not meth.info.adaptive and step is None:
+        raise ValueError(f"step: {meth.info.name} is a fixed-step method; give step= (CLI: --step H), e.g. step=0.01")
     H0 = hamiltonian(y0, body)
     if energy_tol is None:
-        energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+        if meth.info.adaptive:
+            energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+        else:
+            # fixed step: the tolerance only catches blow-ups (see docs/README-integrators.md)
+            energy_tol = FIXED_STEP_ENERGY_TOL * max(1.0, abs(H0))
     tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol))
     start = time.perf_counter()
     sol = meth.integrate(body, y0, times_arr, tol=tol, with_rotation=with_rotation)

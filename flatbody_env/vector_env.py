@@ -1,8 +1,9 @@
 """``FlatBodyVectorEnv``: N bodies of ``FlatBody-v0`` advanced together, natively batched.
 
-One call of the integrator's batch stepper (:func:`flatbody_env.integrators.make_batch_stepper`;
-compiled methods advance all N bodies in one compiled call) per ``step``; rewards, observations
-and domain checks are vectorised numpy. It truncates by itself after ``max_episode_steps`` and
+With a compiled integrator (the default) a ``step`` is two compiled calls: the method's batch
+stepper advances all N bodies (structure-of-arrays), then
+:func:`flatbody_env.env_kernels.post_step_batch` checks the domain, observes and scores all N.
+Other integrators go through :func:`flatbody_env.integrators.make_batch_stepper` (a loop). It truncates by itself after ``max_episode_steps`` and
 autoresets in Gymnasium's default NEXT_STEP mode: the step after a body's episode ended resets
 that body (its action is ignored, reward 0, terminated = truncated = False).
 
@@ -20,12 +21,12 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .conserved import casimir
+from . import env_kernels
 from .env import FlatBodyEnv
 from .hamiltonian import hamiltonian
 from .integrators import make_batch_stepper
 from .registration import MAX_EPISODE_STEPS
-from .task import target_vector
+from .task import REWARD_TERMS, target_vector
 
 
 class FlatBodyVectorEnv(VectorEnv):
@@ -64,13 +65,35 @@ class FlatBodyVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.body = self._proto.body
         self.task = self._proto.task
-        self._batch = make_batch_stepper(self._proto.integrator, self.body, self._proto.tolerances)
-        self._Y = np.zeros((num_envs, 11))
+        p = self._proto
+        self._fast = p._fast
+        if self._fast is None:
+            self._batch = make_batch_stepper(p.integrator, self.body, p.tolerances)
+            self._post_batch = env_kernels.post_step_batch
+        else:
+            self._post_batch = self._fast.kernels.post_step_batch
+        n_act = p._a.size
+        self._Ys = np.zeros((11, num_envs))
+        self._OUT = np.zeros((11, num_envs))
+        self._Ynext = np.zeros((11, num_envs))
+        self._U = np.zeros((4, num_envs))
+        self._STATUS = np.zeros(num_envs, dtype=np.int64)
+        self._A = np.zeros((num_envs, n_act))
+        self._OBS = np.zeros((num_envs, 16), dtype=np.float32)
+        self._TERMS = np.zeros((6, num_envs))
+        self._SC = np.zeros((4, num_envs))
+        self._ENDED = np.zeros(num_envs, dtype=np.int64)
+        self._work = (np.empty(7), np.empty(4))
         self._targets: list[Any] = [None] * num_envs
         self._T = np.zeros((num_envs, 4))
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
+
+    @property
+    def _Y(self) -> np.ndarray:
+        """States as (N, 11) (a view of the structure-of-arrays storage)."""
+        return self._Ys.T
 
     # --- helpers ---------------------------------------------------------------------------------------
     def _reset_one(self, i: int, options: dict[str, Any] | None) -> None:
@@ -78,7 +101,7 @@ class FlatBodyVectorEnv(VectorEnv):
         p._np_random = self._rngs[i]
         p.reset(options=options)
         self._rngs[i] = p.np_random
-        self._Y[i] = p._y
+        self._Ys[:, i] = p._y
         self._targets[i] = p._target
         self._T[i] = target_vector(p._target)
         self._steps[i] = 0
@@ -87,23 +110,28 @@ class FlatBodyVectorEnv(VectorEnv):
         Y = self._Y
         return np.concatenate([Y[:, :10], np.sin(Y[:, 10:11]), np.cos(Y[:, 10:11]), self._T], axis=1).astype(np.float32)
 
-    def _infos(self, terms, failures, lefts) -> dict[str, Any]:
-        Yt = self._Y.T
-        distance = self.task.distance(Yt, self.body, self._T.T)
+    def _infos(self, terms, sc, failures, lefts) -> dict[str, Any]:
         bad = np.array([bool(f) or bool(l) for f, l in zip(failures, lefts)])
         info: dict[str, Any] = {
             "t": self._steps * self._proto.dt,
-            "distance": distance,
-            "is_success": (distance <= self.task.success_tolerance) & ~bad,
-            "energy": np.array([hamiltonian(self._Y[i], self.body) for i in range(self.num_envs)]),
-            "casimir": casimir(Yt[0], Yt[1], Yt[2]),
-            "p_theta": Yt[3].copy(),
+            "distance": sc[0].copy(),
+            "is_success": (sc[0] <= self.task.success_tolerance) & ~bad,
+            "energy": sc[1].copy(),
+            "casimir": sc[2].copy(),
+            "p_theta": self._Ys[3].copy(),
             "integrator_failure": np.array(failures, dtype=object),
             "left_domain": np.array(lefts, dtype=object),
         }
         if terms is not None:
             info["reward_terms"] = terms
         return info
+
+    def _score_current(self) -> np.ndarray:
+        """distance, energy, |s|² of the current states (for reset infos)."""
+        status = np.zeros(self.num_envs, dtype=np.int64)
+        self._post_batch(self._Ys, self._Ys, status, self._A * 0.0, self._A.shape[1], self._T, self._proto._cfg, self._proto._P,
+                         self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED, *self._work)
+        return self._SC.copy()
 
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -116,46 +144,60 @@ class FlatBodyVectorEnv(VectorEnv):
             self._reset_one(i, options)
         self._autoreset[:] = False
         blank = [""] * self.num_envs
-        return self._observations(), self._infos(None, blank, blank)
+        sc = self._score_current()
+        return self._observations(), self._infos(None, sc, blank, blank)
 
     def step(self, actions):
         A = np.asarray(actions, dtype=np.float64).reshape((self.num_envs,) + self.single_action_space.shape)
         if not np.all(np.isfinite(A)):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
-        A = np.clip(A, -1.0, 1.0)
         p = self._proto
         mask = p._mask
-        U = np.zeros((self.num_envs, 4))
+        np.clip(A, -1.0, 1.0, out=self._A)
         if mask.any():
-            U[:, mask] = A * p.limits[mask]
+            self._U[mask] = self._A.T * p.limits[mask, None]
+        else:
+            self._A[:] = 0.0
         resetting = self._autoreset.copy()
-        result = self._batch(self._Y, U, p.dt)
-        failures = ["" if ok else reason for ok, reason in zip(result.ok, result.reasons)]
+        if self._fast is not None:
+            tol = p.tolerances
+            self._fast.stepper.batch(self._Ys, self._U, p._P, p.dt, p._h_guess, tol.rtol, tol.atol, np.inf, self._OUT, self._STATUS)
+            status = self._STATUS
+        else:
+            result = self._batch(self._Ys.T, self._U.T, p.dt)
+            self._OUT[:] = result.Y.T
+            status = (~result.ok).astype(np.int64)
+        self._post_batch(self._Ys, self._OUT, status, self._A, self._A.shape[1], self._T, p._cfg, p._P,
+                         self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED, *self._work)
+        ended = self._ENDED.astype(bool) & ~resetting
+        failures = [""] * self.num_envs
         lefts = [""] * self.num_envs
-        for i in range(self.num_envs):
-            if resetting[i]:
-                continue
-            if result.ok[i]:
-                left = p._left_domain(result.Y[i])
-                if left:
-                    lefts[i] = left
-                else:
-                    self._Y[i] = result.Y[i]
-        terminated = np.array([bool(failures[i] or lefts[i]) for i in range(self.num_envs)]) & ~resetting
-        self._steps[~resetting] += 1
-        truncated = (self._steps >= self.max_episode_steps) & ~terminated & ~resetting
-        act = A if mask.any() else np.zeros_like(A)
-        terms = self.task.reward_terms(self._Y.T, self.body, self._T.T, act, terminated)
-        rewards = np.sum(np.stack(list(terms.values())), axis=0)
+        for i in np.flatnonzero(ended):
+            if status[i] != 0:
+                failures[i] = result.reasons[i] if self._fast is None else f"{self._fast.kinds[status[i]]}: {self._fast.reason(status[i])}"
+            else:
+                lefts[i] = p._left_domain(self._OUT[:, i]) or ""
+        keep = ~resetting
+        self._Ys[:, keep] = self._Ynext[:, keep]
+        self._steps[keep] += 1
+        terminated = ended
+        truncated = (self._steps >= self.max_episode_steps) & ~terminated & keep
+        obs = self._OBS.copy()
+        rewards = self._TERMS.sum(axis=0)
+        terms = dict(zip(REWARD_TERMS, self._TERMS.copy()))
+        sc = self._SC.copy()
         for i in np.flatnonzero(resetting):
             self._reset_one(i, None)
-            failures[i] = ""
             rewards[i] = 0.0
             for v in terms.values():
                 v[i] = 0.0
+            obs[i] = self._observations()[i]
+            y = self._Ys[:, i]
+            sc[0, i] = self.task.distance(y, self.body, self._T[i])
+            sc[2, i] = y[0] ** 2 + y[1] ** 2 + y[2] ** 2
+            sc[1, i] = hamiltonian(y, self.body)
         self._autoreset = terminated | truncated
-        info = self._infos(terms, failures, lefts)
-        return self._observations(), rewards, terminated, truncated, info
+        return obs, rewards, terminated, truncated, self._infos(terms, sc, failures, lefts)
 
     def close_extras(self, **kwargs: Any) -> None:
         self._proto.close()

@@ -33,6 +33,7 @@ def _load_all() -> None:
         return
     _LOADED = True
     from . import scipy_methods  # noqa: F401
+    from . import compiled_methods  # noqa: F401
 
 
 __all__ = [

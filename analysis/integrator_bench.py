@@ -1,0 +1,322 @@
+"""``flatbody bench integrators``: same-run speed and accuracy figures of the integrators.
+
+Not a timed test: it prints figures and writes them to JSON/CSV (+ PNG). Everything is measured
+side by side in one process (ratios are the reliable part on a shared 2-core machine).
+
+1. *regular* scene, t = 100: wall time (min of repeats) of each method against its final-state
+   error; the wall time at the target error (1e-9) by log-log interpolation between the two
+   bracketing settings; speed-up = scipy ``solve_ivp`` DOP853's time / the method's time at that
+   error. Also DOP853-numba against scipy at the *same* rtol (identical steps).
+2. *close approach* (σ₋ = 1e-3, the built-in scene, and σ₋ = 1e-6, 1e-9), t = 20: wall time at equal
+   error (1e-8) of the regular-chart RATTLE methods and of every two-polar method; ratio = the
+   cheapest two-polar time / the cheapest regular-chart time (methods that fail are left out).
+3. *long horizon*, t = 1e4: the energy error max|H − H₀| (101 samples) per method/setting.
+4. *one short step* dt = 0.05: µs per call through ``integrate`` (all methods) and through the
+   compiled environment stepper (compiled methods; single and batched over 1024 bodies).
+5. *compile time*: first call with an empty numba cache and the cached call, in fresh processes.
+
+Public names: :func:`bench_integrators` → :class:`BenchReport` (``.as_dict()``); uses the physics
+and integrator layers only.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from flatbody_env.hamiltonian import hamiltonian, hamiltonian_series
+from flatbody_env.integrators import Tolerances, get_method
+from flatbody_env.scene import load_scene
+from flatbody_env.state import pack
+
+from .failure_study import gap_scene
+from .work_precision import timed_run
+
+TARGET_REGULAR = 1e-9
+TARGET_CLOSE = 1e-8
+RTOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
+STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
+REGULAR_METHODS = ("DOP853", "DOP853-numba", "RK4", "splitting-suzuki4", "splitting-yoshida4", "RATTLE-suzuki4", "RATTLE-kahanli6")
+CLOSE_METHODS = ("RATTLE-suzuki4", "RATTLE-kahanli6", "DOP853-numba", "DOP853", "RK4", "splitting-suzuki4")
+LONG_RUNS = (
+    ("DOP853", dict(rtol=1e-6, atol=1e-9)),
+    ("DOP853-numba", dict(rtol=1e-6, atol=1e-9)),
+    ("DOP853-numba", dict(rtol=1e-10, atol=1e-13)),
+    ("RK4", dict(step=0.1)),
+    ("splitting-strang", dict(step=0.05)),
+    ("splitting-suzuki4", dict(step=0.1)),
+    ("splitting-yoshida4", dict(step=0.1)),
+    ("RATTLE-suzuki4", dict(step=0.1)),
+)
+
+
+@dataclass
+class BenchReport:
+    """All figures of one bench run (see the module docstring)."""
+
+    machine: dict
+    regular: dict
+    close_approach: list
+    long_horizon: list
+    short_step: list
+    compile_times: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _curve(method, scene, t_end, ref, repeats, max_run_s):
+    info = get_method(method).info
+    settings = [("rtol", r) for r in RTOLS] if info.adaptive else [("step", h) for h in STEPS]
+    out = []
+    for kind, v in settings:
+        tol = Tolerances(rtol=v, atol=1e-3 * v) if kind == "rtol" else Tolerances(step=v)
+        sol, wall, runs, status, reason = timed_run(method, scene, np.array([0.0, t_end]), tol, repeats=repeats)
+        err = float(np.max(np.abs(sol.Y[:, -1] - ref))) if sol is not None else math.nan
+        out.append({"setting": f"{kind}={v:g}", "error": err, "wall_time": wall, "nfev": sol.nfev if sol else 0, "status": status})
+        if wall > max_run_s:
+            break
+    return out
+
+
+def wall_at(curve, target):
+    """Wall time at error ``target``: log-log interpolation between the bracketing settings (None if not bracketed)."""
+    pts = [(c["error"], c["wall_time"]) for c in curve if c["status"] == "ok" and c["error"] > 0 and math.isfinite(c["error"])]
+    pts.sort(key=lambda p: -p[0])
+    best = None
+    for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
+        if e1 >= target >= e2:
+            if e1 == e2:
+                w = min(w1, w2)
+            else:
+                s = (math.log(target) - math.log(e1)) / (math.log(e2) - math.log(e1))
+                w = math.exp(math.log(w1) + s * (math.log(w2) - math.log(w1)))
+            best = w if best is None else min(best, w)
+    return best
+
+
+def _reference(scene, t_end, method, kw, cross, cross_kw):
+    y0 = pack(scene.state)
+    ends = np.array([0.0, t_end])
+    ref = get_method(method).integrate(scene.body, y0, ends, tol=Tolerances(**kw)).Y[:, -1]
+    crs = get_method(cross).integrate(scene.body, y0, ends, tol=Tolerances(**cross_kw)).Y[:, -1]
+    return ref, float(np.max(np.abs(ref - crs)))
+
+
+def _regular(repeats, max_run_s, t_end, bar):
+    sc = load_scene("regular")
+    ref, floor = _reference(sc, t_end, "DOP853-numba", dict(rtol=1e-13, atol=1e-15), "RATTLE-suzuki4", dict(step=0.001))
+    curves = {}
+    for m in REGULAR_METHODS:
+        bar.set_postfix_str(f"regular {m}")
+        curves[m] = _curve(m, sc, t_end, ref, repeats, max_run_s)
+        bar.update(1)
+    w_ref = wall_at(curves["DOP853"], TARGET_REGULAR)
+    at = []
+    for m in REGULAR_METHODS:
+        w = wall_at(curves[m], TARGET_REGULAR)
+        at.append({"method": m, "wall_time": w, "speedup": (w_ref / w) if (w and w_ref) else None})
+    same = []
+    for a, b in zip(curves["DOP853"], curves["DOP853-numba"]):
+        if a["status"] == "ok" and b["status"] == "ok":
+            same.append({"setting": a["setting"], "scipy_s": a["wall_time"], "numba_s": b["wall_time"], "ratio": a["wall_time"] / b["wall_time"],
+                         "scipy_nfev": a["nfev"], "numba_nfev": b["nfev"], "scipy_error": a["error"], "numba_error": b["error"]})
+    return {"t_end": t_end, "target_error": TARGET_REGULAR, "reference_floor": floor, "curves": curves, "at_target": at,
+            "same_rtol": same}
+
+
+def _close(repeats, max_run_s, bar, deltas):
+    out = []
+    for delta in deltas:
+        sc = gap_scene(delta)
+        t_end = sc.t_end
+        ref, floor = _reference(sc, t_end, "DOP853-regular", dict(rtol=1e-12, atol=1e-12), "RATTLE-suzuki4", dict(step=0.002))
+        curves = {}
+        for m in CLOSE_METHODS:
+            bar.set_postfix_str(f"close δ={delta:g} {m}")
+            curves[m] = _curve(m, sc, t_end, ref, repeats, max_run_s)
+            bar.update(1)
+        at = [{"method": m, "wall_time": wall_at(curves[m], TARGET_CLOSE), "chart": get_method(m).info.chart} for m in CLOSE_METHODS]
+        regs = [(a["wall_time"], a["method"]) for a in at if a["chart"] == "regular" and a["wall_time"]]
+        reg, reg_name = min(regs) if regs else (None, "")
+        two = [a["wall_time"] for a in at if a["chart"] == "two-polar" and a["wall_time"]]
+        out.append({
+            "delta": delta, "t_end": t_end, "target_error": TARGET_CLOSE, "reference_floor": floor, "curves": curves, "at_target": at,
+            "cheapest_regular": reg_name,
+            "regular_vs_cheapest_two_polar": (min(two) / reg) if (two and reg) else None,
+            "two_polar_reaching_target": [a["method"] for a in at if a["chart"] == "two-polar" and a["wall_time"]],
+        })
+    return out
+
+
+def _long(bar, t_end):
+    sc = load_scene("long-horizon")
+    y0 = pack(sc.state)
+    H0 = hamiltonian(y0, sc.body)
+    times = np.linspace(0.0, t_end, 101)
+    out = []
+    for m, kw in LONG_RUNS:
+        bar.set_postfix_str(f"long {m}")
+        sol, wall, runs, status, reason = timed_run(m, sc, times, Tolerances(**kw), repeats=1)
+        dH = float(np.max(np.abs(hamiltonian_series(sol.Y, sc.body) - H0))) if sol is not None else math.nan
+        out.append({"method": m, "setting": ", ".join(f"{k}={v:g}" for k, v in kw.items()), "t_end": t_end, "energy_error": dH,
+                    "energy_error_final": float(abs(hamiltonian_series(sol.Y[:, -1:], sc.body)[0] - H0)) if sol is not None else math.nan,
+                    "wall_time": wall, "nfev": sol.nfev if sol is not None else 0, "status": status})
+        bar.update(1)
+    return out
+
+
+def _short_step(bar, n_batch=1024):
+    from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper, kernel_params
+    from flatbody_env.regular import regular_from_paper
+
+    sc = load_scene("default")
+    y = pack(sc.state)
+    P = kernel_params(sc.body)
+    u = np.zeros(4)
+    dt = 0.05
+    out = []
+    times = np.array([0.0, dt])
+    for m in ("RK45", "DOP853", "LSODA", "DOP853-regular") + ENV_METHODS:
+        meth = get_method(m)
+        tol = Tolerances(rtol=1e-8, atol=1e-10) if meth.info.adaptive else Tolerances(step=dt)
+        n = 30 if not meth.info.compiled else 300
+        best = math.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                meth.integrate(sc.body, y, times, tol=tol)
+            best = min(best, (time.perf_counter() - t0) / n)
+        out.append({"method": m, "path": "integrate", "us_per_step": best * 1e6})
+        bar.update(1)
+    for m in ENV_METHODS:
+        st = env_stepper(m)
+        x = y if st.state == "paper" else regular_from_paper(y, sc.body)
+        o = np.empty_like(x)
+        h = 0.0 if not st.fixed_step else dt
+        n = 20000
+        best = math.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            for _ in range(n):
+                st.step(x, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
+            best = min(best, (time.perf_counter() - t0) / n)
+        X = np.repeat(x[:, None], n_batch, axis=1)
+        U = np.zeros((4, n_batch))
+        O = np.empty_like(X)
+        S = np.zeros(n_batch, np.int64)
+        bbest = math.inf
+        for _ in range(5):
+            t0 = time.perf_counter()
+            st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S)
+            bbest = min(bbest, (time.perf_counter() - t0) / n_batch)
+        out.append({"method": m, "path": "env", "us_per_step": best * 1e6, "batch_us_per_body_step": bbest * 1e6, "batch_size": n_batch})
+        bar.update(1)
+    return out
+
+
+_COMPILE_SNIPPET = """
+import time, json, sys
+t0 = time.perf_counter()
+from flatbody_env.integrators.compiled_methods import warm_up
+t_import = time.perf_counter() - t0
+out = {"import_s": t_import}
+for name in sys.argv[1:]:
+    t0 = time.perf_counter()
+    warm_up([name])
+    out[name] = time.perf_counter() - t0
+print(json.dumps(out))
+"""
+
+
+def compile_times(names=None) -> list[dict]:
+    """First-call time with an empty numba cache and with the cache filled, each in a fresh process."""
+    import json
+
+    from flatbody_env.integrators.compiled_methods import ENV_METHODS
+
+    names = list(names or ENV_METHODS)
+    env = dict(os.environ)
+    with tempfile.TemporaryDirectory() as cache:
+        env["NUMBA_CACHE_DIR"] = cache
+        runs = []
+        for _ in range(2):
+            res = subprocess.run([sys.executable, "-c", _COMPILE_SNIPPET, *names], env=env, capture_output=True, text=True, check=True)
+            runs.append(json.loads(res.stdout.strip().splitlines()[-1]))
+    cold, warm = runs
+    return [{"method": n, "first_call_s": cold[n], "cached_s": warm[n]} for n in names] + [
+        {"method": "(import)", "first_call_s": cold["import_s"], "cached_s": warm["import_s"]},
+        {"method": "(all)", "first_call_s": sum(cold[n] for n in names), "cached_s": sum(warm[n] for n in names)},
+    ]
+
+
+def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
+                      with_compile: bool = True) -> BenchReport:
+    from tqdm import tqdm
+
+    from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
+
+    warm_up()  # compile time is measured separately (in fresh processes)
+    deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
+    total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS)
+    bar = tqdm(total=total, desc="bench integrators", unit="task", disable=not progress)
+    regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
+    close = _close(1 if quick else repeats, max_run_s, bar, deltas)
+    long_h = _long(bar, 1e3 if quick else 1e4)
+    short = _short_step(bar)
+    bar.close()
+    comp = compile_times() if with_compile else []
+    import platform
+
+    import numba
+
+    machine = {"python": platform.python_version(), "numba": numba.__version__, "cpu_count": os.cpu_count(), "platform": platform.platform(),
+               "quick": quick}
+    return BenchReport(machine=machine, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp)
+
+
+def format_report(rep: BenchReport) -> str:
+    """The printed summary."""
+    L = []
+    r = rep.regular
+    L.append(f"regular scene, t = {r['t_end']:g}: wall time at final error {r['target_error']:g} "
+             f"(reference floor {r['reference_floor']:.1e})")
+    for a in r["at_target"]:
+        w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  (not bracketed)"
+        s = f"  {a['speedup']:7.1f}x vs scipy DOP853" if a.get("speedup") else ""
+        L.append(f"  {a['method']:<20} {w}{s}")
+    L.append("  same rtol, DOP853-numba vs scipy DOP853 (identical steps):")
+    for s in r["same_rtol"]:
+        L.append(f"    {s['setting']:<11} scipy {s['scipy_s'] * 1e3:8.2f} ms  numba {s['numba_s'] * 1e3:7.3f} ms  ratio {s['ratio']:6.1f}x  "
+                 f"nfev {s['scipy_nfev']}/{s['numba_nfev']}  error {s['numba_error']:.1e}")
+    for c in rep.close_approach:
+        L.append(f"close approach, s3 - p_theta = {c['delta']:g}, t = {c['t_end']:g}: wall time at error {c['target_error']:g} "
+                 f"(reference floor {c['reference_floor']:.1e})")
+        for a in c["at_target"]:
+            w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  does not reach it (fails or not bracketed)"
+            L.append(f"  {a['method']:<20} {a['chart']:<10} {w}")
+        ratio = c["regular_vs_cheapest_two_polar"]
+        L.append(f"  cheapest two-polar / cheapest regular-chart ({c['cheapest_regular']}) = {ratio:.2f}x" if ratio
+                 else f"  no two-polar method reaches the target; {c['cheapest_regular']} does")
+    L.append("long horizon: energy error max|H - H0|")
+    for x in rep.long_horizon:
+        L.append(f"  {x['method']:<20} {x['setting']:<22} t={x['t_end']:g}  {x['energy_error']:.2e}  ({x['wall_time']:.2f} s, {x['status']})")
+    L.append("one short step dt = 0.05 (us per call)")
+    for x in rep.short_step:
+        extra = f"   batch of {x['batch_size']}: {x['batch_us_per_body_step']:.3f} us/body-step" if x["path"] == "env" else ""
+        L.append(f"  {x['method']:<20} {x['path']:<10} {x['us_per_step']:10.2f}{extra}")
+    if rep.compile_times:
+        L.append("compile time (fresh processes): first call with empty numba cache / cached")
+        for x in rep.compile_times:
+            L.append(f"  {x['method']:<20} {x['first_call_s']:7.2f} s / {x['cached_s']:6.3f} s")
+    return "\n".join(L)
+
+
+__all__ = ["BenchReport", "bench_integrators", "compile_times", "format_report", "wall_at"]

@@ -1,0 +1,141 @@
+"""Charts drawn from saved tables (matplotlib, Agg backend); no analysis happens here.
+
+:func:`plot_family` reads a family CSV (:func:`analysis.families.write_family_csv`) and draws λ
+and μ against the varied parameter, each point coloured by its stability classification, with
+folds and stability changes marked; a second panel shows the largest real part of the
+eigenvalues (the growth rate of the unstable ones).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .families import read_family_csv
+
+COLOURS = {"elliptic": "#1f77b4", "hyperbolic": "#d62728", "degenerate": "#7f7f7f"}
+LABELS = {
+    "elliptic": "elliptic (spectrally stable)",
+    "hyperbolic": "hyperbolic (unstable)",
+    "degenerate": "degenerate (inconclusive)",
+}
+
+
+def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None = None) -> Path:
+    """Draw the family chart of ``csv_path`` into ``png_path`` (PNG) and return the path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = read_family_csv(csv_path)
+    points = [r for r in rows if not r["event"]]
+    events = [r for r in rows if r["event"]]
+    if not points:
+        raise ValueError(f"family: {csv_path} holds no points (no stationary ellipse in the range)")
+    pname = points[0]["param_name"]
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7.5, 7.0), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    branches = sorted({r["branch"] for r in points})
+    seen: set[str] = set()
+    for b in branches:
+        pts = [r for r in points if r["branch"] == b]
+        p = np.array([r["param"] for r in pts])
+        lam = np.array([r["lambda"] for r in pts])
+        mu = np.array([r["mu"] for r in pts])
+        mre = np.array([r["max_real_part"] for r in pts])
+        cls = [r["classification"] for r in pts]
+        ax.plot(p, lam, "-", color="0.8", lw=1, zorder=1)
+        ax.plot(p, mu, "--", color="0.8", lw=1, zorder=1)
+        ax2.plot(p, mre, "-", color="0.8", lw=1, zorder=1)
+        for c in COLOURS:
+            m = np.array([x == c for x in cls])
+            if not m.any():
+                continue
+            label = LABELS[c] if c not in seen else None
+            seen.add(c)
+            ax.scatter(p[m], lam[m], s=12, color=COLOURS[c], marker="o", label=label, zorder=2)
+            ax.scatter(p[m], mu[m], s=12, color=COLOURS[c], marker="s", zorder=2)
+            ax2.scatter(p[m], mre[m], s=10, color=COLOURS[c], zorder=2)
+    for ev in events:
+        if ev["event"] == "fold":
+            ax.plot([ev["param"]], [ev["lambda"]], "k*", ms=11, zorder=3)
+            ax.plot([ev["param"]], [ev["mu"]], "k*", ms=11, zorder=3)
+        else:
+            ax.axvline(ev["param"], color="k", lw=0.7, ls=":", zorder=0)
+            ax2.axvline(ev["param"], color="k", lw=0.7, ls=":", zorder=0)
+    ax.plot([], [], "ko", ms=4, label="λ (circles)")
+    ax.plot([], [], "ks", ms=4, label="μ (squares)")
+    if any(ev["event"] == "fold" for ev in events):
+        ax.plot([], [], "k*", ms=9, label="fold")
+    if any(ev["event"] == "stability-change" for ev in events):
+        ax.plot([], [], "k:", lw=0.8, label="stability change")
+    ax.set_ylabel("stretches λ, μ")
+    ax.legend(fontsize=8, loc="best")
+    ax.grid(alpha=0.3)
+    ax2.set_ylabel("max Re(eigenvalue)")
+    ax2.set_xlabel({"s3": "s3", "p_theta": "p_θ"}.get(pname, pname))
+    ax2.grid(alpha=0.3)
+    first = points[0]
+    if title is None:
+        fixed = [] if pname == "s3" else [f"s3 = {first['s3']:g}"]
+        fixed += [] if pname == "p_theta" else [f"p_θ = {first['p_theta']:g}"]
+        title = f"Stationary ellipses (branch N) vs {pname}" + (f", {', '.join(fixed)}" if fixed else "")
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    out = Path(png_path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | None = None) -> Path:
+    """Draw a shape stability map (CSV of :func:`analysis.families.shape_stability_grid`): one panel per kind
+    (rigid-like, circulating), each shape (λ, μ) coloured by classification; energy–Casimir certified
+    stable points filled, spectrally stable but uncertified ones hollow."""
+    import csv
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(csv_path)
+    if not path.exists():
+        raise ValueError(f"map: no file {str(path)!r}")
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows or "classification" not in rows[0]:
+        raise ValueError(f"map: {path} holds no shape rows")
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6), sharey=True)
+    for ax, kind in zip(axes, ("rigid", "circulating")):
+        sel = [r for r in rows if r["kind"] == kind]
+        for c, colour in COLOURS.items():
+            for certified in (True, False):
+                pts = [r for r in sel if r["classification"] == c and ((r["nonlinear"] == "stable") == certified)]
+                if not pts:
+                    continue
+                lam = [float(r["lambda"]) for r in pts]
+                mu = [float(r["mu"]) for r in pts]
+                label = LABELS[c] + (" + energy-Casimir" if certified and c == "elliptic" else "")
+                ax.scatter(lam, mu, s=14, marker="s", label=label,
+                           facecolors=colour if certified or c != "elliptic" else "none", edgecolors=colour)
+        ax.set_title("rigid-like |s3| > |p_θ|" if kind == "rigid" else "circulating |p_θ| > |s3|", fontsize=10)
+        ax.set_xlabel("λ")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("μ")
+    handles, labels = axes[0].get_legend_handles_labels()
+    for h2, l2 in zip(*axes[1].get_legend_handles_labels()):
+        if l2 not in labels:
+            handles.append(h2)
+            labels.append(l2)
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3)
+    fig.suptitle(title or "Stationary ellipses by shape: stability (inverse problem)", fontsize=11)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    out = Path(png_path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+__all__ = ["COLOURS", "plot_family", "plot_shape_map"]

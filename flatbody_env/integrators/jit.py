@@ -1,0 +1,69 @@
+"""Compiled copies of the physics layer's scalar kernels (numba, on-disk cache).
+
+The physics layer stays free of numba: :func:`flatbody_env.hamiltonian.kinetic_kernel`,
+:func:`flatbody_env.potentials.potential_kernel`, :func:`flatbody_env.equations.rhs_core` and
+:func:`flatbody_env.equations.rhs_kernel` are plain-float Python functions. numba compiles a
+function's calls to globals only when those globals are numba dispatchers themselves, so each
+kernel is copied here with
+
+.. code-block:: python
+
+    types.FunctionType(f.__code__, {**f.__globals__, **jitted_callees}, f.__name__)
+
+(the same code object, i.e. the physics module's source, with the called kernels re-bound to
+their jitted copies) and wrapped by ``numba.njit(cache=True)``. No formula is restated here.
+numba's cache keys on the code object's file and line, so the compiled machine code lands in
+``flatbody_env/__pycache__`` (or ``$NUMBA_CACHE_DIR``) and is re-used by later processes;
+editing a physics module invalidates it (numba compares the source file's time stamp).
+
+Public names: :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_core`,
+:data:`rhs_kernel` (jitted twins of the physics kernels, same signatures) and
+:func:`energy_kernel` (H = 𝒯 + V, eq. (41) of [1]).
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numba
+
+from .. import equations as _equations
+from .. import hamiltonian as _hamiltonian
+from .. import potentials as _potentials
+
+JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+"""Options of every compiled function of the integrators (``error_model="numpy"``: x/0 gives
+inf/nan instead of raising, so failures surface as status flags)."""
+
+
+def jit_copy(func, **callees):
+    """A numba-compiled copy of the plain-Python ``func`` whose called globals ``callees`` are
+    replaced by (jitted) substitutes. ``func`` itself is left untouched."""
+    glob = dict(func.__globals__)
+    glob.update(callees)
+    clone = types.FunctionType(func.__code__, glob, func.__name__, func.__defaults__, func.__closure__)
+    clone.__module__ = func.__module__
+    clone.__qualname__ = func.__qualname__
+    clone.__doc__ = func.__doc__
+    return numba.njit(**JIT_OPTIONS)(clone)
+
+
+kinetic_kernel = jit_copy(_hamiltonian.kinetic_kernel)
+potential_kernel = jit_copy(_potentials.potential_kernel)
+rhs_core = jit_copy(_equations.rhs_core, kinetic_kernel=kinetic_kernel)
+rhs_kernel = jit_copy(_equations.rhs_kernel, potential_kernel=potential_kernel, rhs_core=rhs_core)
+
+
+@numba.njit(**JIT_OPTIONS)
+def energy_kernel(y, P, vel, force):
+    """H = 𝒯 + V of the packed state ``y`` (11,) with kernel parameters ``P`` (9,) (eq. (41) of [1]);
+    ``vel`` (7,), ``force`` (4,) are work space."""
+    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], y[7], y[8], y[9])
+    return kinetic_kernel(y, P, vel, force) + v
+
+
+__all__ = ["JIT_OPTIONS", "jit_copy", "kinetic_kernel", "potential_kernel", "rhs_core", "rhs_kernel", "energy_kernel"]

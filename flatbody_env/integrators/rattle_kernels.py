@@ -1,0 +1,453 @@
+"""Compiled RATTLE on the regular φψ formulation (NOTES §5 of [2], :mod:`flatbody_env.regular`).
+
+Configuration q = (φ1, φ2, ψ) ∈ ℝ⁹ (columns of Φ), velocity v = q̇, constant mass
+diag(J1, J1, J1, J2, J2, J2, J3, J3, J3), holonomic Kirchhoff–Love constraints (eq. (21) of [1])
+g1 = ψ·φ1 = 0, g2 = ψ·φ2 = 0 with ∂g1 = (ψ, 0, φ1), ∂g2 = (0, ψ, φ2). One RATTLE step of size h
+(Andersen 1983; Hairer–Lubich–Wanner VII.1):
+
+.. math::
+    q_{n+1} = q_n + h v_n + \\tfrac{h^2}{2} M^{-1}(F(q_n) - G(q_n)^T\\Lambda), \\quad g(q_{n+1}) = 0,
+
+    v_{n+1} = \\frac{q_{n+1}-q_n}{h} + \\tfrac h2 M^{-1}(F(q_{n+1}) - G(q_{n+1})^T\\mu), \\quad
+    G(q_{n+1}) v_{n+1} = 0,
+
+Λ by Newton's method on the two quadratic constraints, μ from a 2×2 linear system (the matrix
+of :func:`flatbody_env.regular.regular_rhs`). RATTLE is symmetric and symplectic (order 2); it
+conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage composition
+(:data:`~.twopolar_kernels.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
+(:data:`~.twopolar_kernels.KAHAN_LI6`) to order 6; forces are re-used across stages.
+
+Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (NOTES §5):
+F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
+V_ϱ′ comes from :func:`flatbody_env.potentials.potential_kernel` (in-plane kind 0); the invariant
+gradient (V_tr, V_det) from :func:`invariant_gradient_kernel`, the compiled twin of the potentials'
+``invariant_gradient`` methods (V1; V2 with c = d; V3 — tested against them). V2 with c ≠ d
+is no function of the invariants (erratum E9) and is refused by the method layer.
+
+Chart following. The paper's state needs the two-polar decomposition Φ = R D U(θ)⁻¹ chosen by
+continuity (NOTES §5). :func:`decompose_kernel` is a compiled twin of
+:func:`flatbody_env.kinematics.decompose` for the Kirchhoff–Love Φ (closed-form 2×2 eigen-
+decomposition of φᵀφ; the four discrete candidates; ``keep_order``). After every step the
+decomposition is continued from the previous one; when the chart frame jumps by more than
+:data:`~flatbody_env.regular.MAX_CHART_JUMP` (near λ = μ it turns by ±π/2 within a tiny time) the
+step is re-walked on the cubic Hermite interpolant of Φ with adaptive sub-intervals. At output
+times the method layer converts to the paper's state with
+:func:`flatbody_env.regular.paper_from_regular` given that decomposition.
+
+Environment API (regular state z (18,), layout of :mod:`flatbody_env.regular`)::
+
+    status = rattle_env_step(z, u, P, dt, h, rtol, atol, energy_tol, out)
+    batch_rattle_env_step(Z, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)   # Z, OUT (18, N)
+
+Only the dilatation force f_ϱ = u[3] is applied; non-zero torques return status 9
+(``"unsupported"``): in Φ-space they depend on the chart's frame (singular at λ = μ for τ3).
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [2] ``shared/physics/NOTES.md``.
+.. [3] H. C. Andersen, RATTLE, J. Comput. Phys. 52 (1983); E. Hairer, C. Lubich, G. Wanner,
+   *Geometric Numerical Integration*, §VII.1; M. Suzuki, Phys. Lett. A 146 (1990).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..potentials import KIND_V1, KIND_V2, KIND_V3
+from ..regular import MAX_CHART_JUMP
+from .failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
+from .jit import JIT_OPTIONS, potential_kernel
+from .twopolar_kernels import SUZUKI4
+
+njit = numba.njit(**JIT_OPTIONS)
+
+NZ = 18
+NEWTON_MAX = 30
+
+
+@njit
+def invariant_gradient_kernel(kind, c1, tr, det):
+    """(∂V/∂tr, ∂V/∂det) of the in-plane potential (NOTES §5): V1 = k/2·tr, V2 (c = d) = c·tr(1 + 1/det),
+    V3 = κ(det^{−1/2} + tr/2)."""
+    if kind == KIND_V1:
+        return 0.5 * c1, 0.0
+    if kind == KIND_V2:
+        return c1 * (1.0 + 1.0 / det), -c1 * tr / (det * det)
+    if kind == KIND_V3:
+        return 0.5 * c1, -0.5 * c1 * det**-1.5
+    return 0.0, 0.0
+
+
+@njit
+def _dot3(z, a, b):
+    return z[a] * z[b] + z[a + 1] * z[b + 1] + z[a + 2] * z[b + 2]
+
+
+@njit
+def forces(q, P, f_rho, F):
+    """F = −∂V/∂q (+ the dilatation force along ψ) at q (9,) into F (9,); returns det φᵀφ."""
+    n11 = _dot3(q, 0, 0)
+    n22 = _dot3(q, 3, 3)
+    n12 = _dot3(q, 0, 3)
+    tr = n11 + n22
+    det = n11 * n22 - n12 * n12
+    vt, vd = invariant_gradient_kernel(P[3], P[4], tr, det)
+    rho = math.sqrt(_dot3(q, 6, 6))
+    v, gl, gm, gr = potential_kernel(0.0, 0.0, 0.0, P[6], P[7], 1.0, 1.0, rho)
+    for i in range(3):
+        F[i] = -2.0 * vt * q[i] - 2.0 * vd * (n22 * q[i] - n12 * q[3 + i])
+        F[3 + i] = -2.0 * vt * q[3 + i] - 2.0 * vd * (n11 * q[3 + i] - n12 * q[i])
+        F[6 + i] = (f_rho - gr) * q[6 + i] / rho
+    return det
+
+
+@njit
+def stretches(z):
+    """(λ, μ, ϱ) with λ ≥ μ from the invariants of z."""
+    n11 = _dot3(z, 0, 0)
+    n22 = _dot3(z, 3, 3)
+    n12 = _dot3(z, 0, 3)
+    half = 0.5 * (n11 + n22)
+    disc = math.sqrt(0.25 * (n11 - n22) ** 2 + n12 * n12)
+    lam = math.sqrt(half + disc)
+    det = n11 * n22 - n12 * n12
+    mu = math.sqrt(det) / lam if det > 0.0 else 0.0
+    return lam, mu, math.sqrt(_dot3(z, 6, 6))
+
+
+@njit
+def regular_energy_kernel(z, P):
+    """H = ½ Σ J_A |Φ̇_A|² + V (NOTES §5) of z (18,)."""
+    T = 0.5 * (P[0] * _dot3(z, 9, 9) + P[1] * _dot3(z, 12, 12) + P[2] * _dot3(z, 15, 15))
+    lam, mu, rho = stretches(z)
+    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], lam, mu, rho)
+    return T + v
+
+
+@njit
+def rattle_step(z, h, P, f_rho, F, qt, Fn):
+    """One RATTLE step of size h in place. F (9,) holds the forces at z on entry and at the new
+    position on return. Returns the status."""
+    J1 = P[0]
+    J2 = P[1]
+    J3 = P[2]
+    c = 0.5 * h * h
+    for i in range(3):
+        qt[i] = z[i] + h * z[9 + i] + c * F[i] / J1
+        qt[3 + i] = z[3 + i] + h * z[12 + i] + c * F[3 + i] / J2
+        qt[6 + i] = z[6 + i] + h * z[15 + i] + c * F[6 + i] / J3
+    scale = _dot3(z, 6, 6) + _dot3(z, 0, 0) + _dot3(z, 3, 3)
+    L1 = 0.0
+    L2 = 0.0
+    converged = False
+    p1 = np.empty(3)
+    p2 = np.empty(3)
+    ps = np.empty(3)
+    for it in range(NEWTON_MAX):
+        for i in range(3):
+            p1[i] = qt[i] - c * L1 * z[6 + i] / J1
+            p2[i] = qt[3 + i] - c * L2 * z[6 + i] / J2
+            ps[i] = qt[6 + i] - c * (L1 * z[i] + L2 * z[3 + i]) / J3
+        g1 = ps[0] * p1[0] + ps[1] * p1[1] + ps[2] * p1[2]
+        g2 = ps[0] * p2[0] + ps[1] * p2[1] + ps[2] * p2[2]
+        if abs(g1) + abs(g2) <= 4e-16 * scale:
+            converged = True
+            break
+        d11 = 0.0
+        d12 = 0.0
+        d21 = 0.0
+        d22 = 0.0
+        for i in range(3):
+            d11 -= c * (ps[i] * z[6 + i] / J1 + p1[i] * z[i] / J3)
+            d12 -= c * p1[i] * z[3 + i] / J3
+            d21 -= c * p2[i] * z[i] / J3
+            d22 -= c * (ps[i] * z[6 + i] / J2 + p2[i] * z[3 + i] / J3)
+        dd = d11 * d22 - d12 * d21
+        if not (abs(dd) > 0.0) or not math.isfinite(dd):
+            return NON_FINITE if not math.isfinite(dd) else CONSTRAINT
+        L1 -= (d22 * g1 - d12 * g2) / dd
+        L2 -= (d11 * g2 - d21 * g1) / dd
+    if not converged:
+        # round-off floor: accept when the last Newton correction no longer changes the iterate
+        if not (abs(g1) + abs(g2) <= 1e-12 * scale):
+            return CONSTRAINT if math.isfinite(g1 + g2) else NON_FINITE
+    for i in range(3):
+        z[9 + i] = (p1[i] - z[i]) / h
+        z[12 + i] = (p2[i] - z[3 + i]) / h
+        z[15 + i] = (ps[i] - z[6 + i]) / h
+        z[i] = p1[i]
+        z[3 + i] = p2[i]
+        z[6 + i] = ps[i]
+    det = forces(z, P, f_rho, F)
+    if not (det > 0.0):
+        return DOMAIN if math.isfinite(det) else NON_FINITE
+    k = 0.5 * h
+    for i in range(3):
+        z[9 + i] += k * F[i] / J1
+        z[12 + i] += k * F[3 + i] / J2
+        z[15 + i] += k * F[6 + i] / J3
+    pp = _dot3(z, 6, 6)
+    a11 = pp / J1 + _dot3(z, 0, 0) / J3
+    a22 = pp / J2 + _dot3(z, 3, 3) / J3
+    a12 = _dot3(z, 0, 3) / J3
+    r1 = _dot3(z, 6, 9) + _dot3(z, 0, 15)
+    r2 = _dot3(z, 6, 12) + _dot3(z, 3, 15)
+    dA = a11 * a22 - a12 * a12
+    m1 = (a22 * r1 - a12 * r2) / dA
+    m2 = (a11 * r2 - a12 * r1) / dA
+    for i in range(3):
+        z[9 + i] -= m1 * z[6 + i] / J1
+        z[12 + i] -= m2 * z[6 + i] / J2
+        z[15 + i] -= (m1 * z[i] + m2 * z[3 + i]) / J3
+    for i in range(NZ):
+        if not math.isfinite(z[i]):
+            return NON_FINITE
+    return OK
+
+
+@njit
+def composed_step(z, h, coeffs, P, f_rho, F, qt, Fn):
+    """A composition (coefficients ``coeffs``) of RATTLE steps; returns the status."""
+    for c in coeffs:
+        st = rattle_step(z, c * h, P, f_rho, F, qt, Fn)
+        if st != OK:
+            return st
+    return OK
+
+
+# --------------------------------------------------------------------------------------------- chart
+@njit
+def decompose_kernel(Phi9, ref, keep_order, out):
+    """Compiled twin of :func:`flatbody_env.kinematics.decompose` with a reference.
+
+    Phi9: q (9,) = (φ1, φ2, ψ); ref, out (13,) = (R row-major (9), λ, μ, ϱ, θ). The candidate
+    nearest ``ref`` (score ‖R − R_ref‖_F + |θ − θ_ref| + |λ − λ_ref| + |μ − μ_ref|) among the
+    quarter/half-turn ambiguities is written to ``out``. Returns the frame jump
+    |θ − θ_ref| + ‖R − R_ref‖_F.
+    """
+    n11 = _dot3(Phi9, 0, 0)
+    n22 = _dot3(Phi9, 3, 3)
+    n12 = _dot3(Phi9, 0, 3)
+    half = 0.5 * (n11 + n22)
+    disc = math.sqrt(0.25 * (n11 - n22) ** 2 + n12 * n12)
+    lam = math.sqrt(half + disc)
+    det = n11 * n22 - n12 * n12
+    mu = math.sqrt(max(det, 0.0)) / lam
+    th = 0.5 * math.atan2(2.0 * n12, n11 - n22)
+    c = math.cos(th)
+    s = math.sin(th)
+    w1 = np.empty(3)
+    w2 = np.empty(3)
+    for i in range(3):
+        w1[i] = (Phi9[i] * c + Phi9[3 + i] * s) / lam
+        w2[i] = (-Phi9[i] * s + Phi9[3 + i] * c) / mu
+    nrm = np.empty(3)
+    nrm[0] = w1[1] * w2[2] - w1[2] * w2[1]
+    nrm[1] = w1[2] * w2[0] - w1[0] * w2[2]
+    nrm[2] = w1[0] * w2[1] - w1[1] * w2[0]
+    rho = Phi9[6] * nrm[0] + Phi9[7] * nrm[1] + Phi9[8] * nrm[2]
+    best = np.inf
+    bjump = np.inf
+    cols = np.empty((3, 3))
+    for swap in range(2):
+        for hlf in range(2):
+            if swap == 0:
+                lc = lam
+                mc = mu
+                tc = th
+                sg = -1.0 if hlf else 1.0
+                for i in range(3):
+                    cols[i, 0] = sg * w1[i]
+                    cols[i, 1] = sg * w2[i]
+                    cols[i, 2] = nrm[i]
+            else:
+                lc = mu
+                mc = lam
+                tc = th + 0.5 * math.pi
+                sg = -1.0 if hlf else 1.0
+                for i in range(3):
+                    cols[i, 0] = sg * w2[i]
+                    cols[i, 1] = -sg * w1[i]
+                    cols[i, 2] = nrm[i]
+            if hlf:
+                tc += math.pi
+            if keep_order and (lc - mc) * (ref[9] - ref[10]) < 0.0:
+                continue
+            tc = tc + 2.0 * math.pi * np.round((ref[12] - tc) / (2.0 * math.pi))
+            dR = 0.0
+            for i in range(3):
+                for j in range(3):
+                    d = cols[i, j] - ref[3 * i + j]
+                    dR += d * d
+            dR = math.sqrt(dR)
+            score = dR + abs(tc - ref[12]) + abs(lc - ref[9]) + abs(mc - ref[10])
+            if score < best:
+                best = score
+                bjump = abs(tc - ref[12]) + dR
+                for i in range(3):
+                    for j in range(3):
+                        out[3 * i + j] = cols[i, j]
+                out[9] = lc
+                out[10] = mc
+                out[11] = rho
+                out[12] = tc
+    return bjump
+
+
+@njit
+def _hermite(z0, z1, h, s, q):
+    s2 = s * s
+    s3 = s2 * s
+    a = 2.0 * s3 - 3.0 * s2 + 1.0
+    b = s3 - 2.0 * s2 + s
+    c = -2.0 * s3 + 3.0 * s2
+    d = s3 - s2
+    for i in range(9):
+        q[i] = a * z0[i] + b * h * z0[9 + i] + c * z1[i] + d * h * z1[9 + i]
+
+
+@njit
+def follow_step(z0, z1, h, ref, keep_order, out, q, tmp):
+    """Continue the decomposition ``ref`` (at z0) to z1 (one step h later) into ``out``.
+
+    Walks the Hermite interpolant with adaptive sub-intervals whenever the frame jumps by
+    more than MAX_CHART_JUMP. Returns False if the frame cannot be followed (interval below
+    1e-300 relative)."""
+    jump = decompose_kernel(z1, ref, keep_order, out)
+    if jump <= MAX_CHART_JUMP:
+        return True
+    for i in range(13):
+        tmp[i] = ref[i]
+    s = 0.0
+    ds = 0.5
+    while s < 1.0:
+        sn = min(1.0, s + ds)
+        _hermite(z0, z1, h, sn, q)
+        jump = decompose_kernel(q, tmp, keep_order, out)
+        if jump <= MAX_CHART_JUMP or ds < 1e-15:
+            if ds < 1e-15 and jump > MAX_CHART_JUMP:
+                return False
+            for i in range(13):
+                tmp[i] = out[i]
+            s = sn
+            ds = min(0.5, 2.0 * ds)
+        else:
+            ds *= 0.5
+    decompose_kernel(z1, tmp, keep_order, out)
+    return True
+
+
+# --------------------------------------------------------------------------------------------- drivers
+@njit
+def _torque_free(u):
+    return u[0] == 0.0 and u[1] == 0.0 and u[2] == 0.0
+
+
+@njit
+def rattle_solve(coeffs, z0, dec0, times, u, P, h, keep_order, energy_tol, Z, DEC, counters, fail):
+    """Composed RATTLE through every output time.
+
+    Z (18, n) receives the regular states, DEC (13, n) the decompositions followed by
+    continuity from dec0 (13,); counters (3,) int64 [force evaluations, steps, chart sub-steps];
+    fail (2,) [t of failure, last |H − H₀|]. Returns the status.
+    """
+    if not _torque_free(u):
+        return UNSUPPORTED
+    F = np.empty(9)
+    qt = np.empty(9)
+    Fn = np.empty(9)
+    q = np.empty(9)
+    tmp = np.empty(13)
+    z = z0.copy()
+    zp = np.empty(NZ)
+    ref = dec0.copy()
+    new = np.empty(13)
+    f_rho = u[3]
+    forces(z, P, f_rho, F)
+    counters[0] += 1
+    check_energy = energy_tol < np.inf and f_rho == 0.0
+    H0 = regular_energy_kernel(z, P)
+    for i in range(NZ):
+        Z[i, 0] = z[i]
+    for i in range(13):
+        DEC[i, 0] = ref[i]
+    fail[0] = times[0]
+    t = times[0]
+    for k in range(1, times.size):
+        span = times[k] - times[k - 1]
+        n = max(1, int(math.ceil(span / h - 1e-9)))
+        hs = span / n
+        for j in range(n):
+            for i in range(NZ):
+                zp[i] = z[i]
+            st = composed_step(z, hs, coeffs, P, f_rho, F, qt, Fn)
+            counters[0] += coeffs.size
+            counters[1] += 1
+            t = times[k - 1] + (j + 1) * hs
+            if st != OK:
+                fail[0] = t
+                return st
+            if not follow_step(zp, z, hs, ref, keep_order, new, q, tmp):
+                fail[0] = t
+                return CHART_SINGULARITY
+            for i in range(13):
+                ref[i] = new[i]
+        for i in range(NZ):
+            Z[i, k] = z[i]
+        for i in range(13):
+            DEC[i, k] = ref[i]
+        fail[0] = times[k]
+        if check_energy:
+            dH = abs(regular_energy_kernel(z, P) - H0)
+            fail[1] = dH
+            if dH > energy_tol:
+                return ENERGY
+    return OK
+
+
+@njit
+def _rattle_env(z, u, P, dt, h, energy_tol, out, F, qt, Fn):
+    for i in range(NZ):
+        out[i] = z[i]
+    if not _torque_free(u):
+        return UNSUPPORTED
+    forces(out, P, u[3], F)
+    n = max(1, int(math.ceil(dt / h - 1e-9)))
+    hs = dt / n
+    for j in range(n):
+        st = composed_step(out, hs, SUZUKI4, P, u[3], F, qt, Fn)
+        if st != OK:
+            return st
+    if energy_tol < np.inf and u[3] == 0.0:
+        if abs(regular_energy_kernel(out, P) - regular_energy_kernel(z, P)) > energy_tol:
+            return ENERGY
+    return OK
+
+
+@njit
+def rattle_env_step(z, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of RATTLE-Suzuki4 on the regular state z (18,); returns the status."""
+    return _rattle_env(z, u, P, dt, h, energy_tol, out, np.empty(9), np.empty(9), np.empty(9))
+
+
+@njit
+def batch_rattle_env_step(Z, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    """:func:`rattle_env_step` for N bodies; Z, OUT (18, N), U (4, N), STATUS (N,)."""
+    F = np.empty(9)
+    qt = np.empty(9)
+    Fn = np.empty(9)
+    z = np.empty(NZ)
+    u = np.empty(4)
+    out = np.empty(NZ)
+    for b in range(Z.shape[1]):
+        for i in range(NZ):
+            z[i] = Z[i, b]
+        for i in range(4):
+            u[i] = U[i, b]
+        STATUS[b] = _rattle_env(z, u, P, dt, h, energy_tol, out, F, qt, Fn)
+        for i in range(NZ):
+            OUT[i, b] = out[i]

@@ -1,0 +1,626 @@
+"""Compiled (numba) integrators of the two-polar equations (eqs. (44)–(49) of [1], NOTES §3 of [2]).
+
+Three families, all built on the physics kernels (jitted copies, :mod:`.jit`):
+
+* ``dop853_*`` — a port of scipy's ``DOP853`` (Hairer's coefficients, taken from
+  ``scipy.integrate._ivp.dop853_coefficients``; the same initial-step choice, error norm
+  (the 5th/3rd-order blend) and step control: safety 0.9, factors in [0.2, 10], exponent −1/8).
+  It steps exactly onto every output time instead of using dense output.
+* ``rk4_*`` — the classical fixed-step Runge–Kutta method of order 4; each output interval is
+  divided into ⌈Δt/h⌉ equal steps.
+* ``split_*`` — the Poisson splitting of NOTES §8 (isotropic J1 = J2), every piece an exact flow.
+  With ℋ = T_q + V + H1 + H2 + H3,
+
+  - T_q = (p_λ² + p_μ²)/(2J) + p_ϱ²/(2J3): drift of (λ, μ, ϱ);
+  - V (+ the force f_ϱ): kick of (p_λ, p_μ, p_ϱ); it commutes with H1, H2, H3 and the torque;
+  - H1 = s1²/(2I1): rotation of (s2, s3) by ω1 h, kicks of p_μ, p_ϱ (NOTES §8);
+  - H2 = s2²/(2I2): rotation of (s1, s3) by ω2 h, kicks of p_λ, p_ϱ;
+  - H3 = σ₊²/(4J(λ+μ)²) + σ₋²/(4J(λ−μ)²): rotation of (s1, s2) by ω3 h, θ += θ̇ h, kicks of p_λ, p_μ;
+  - the torque τ: s += h τ.
+
+  Each piece's rates are read off :func:`flatbody_env.hamiltonian.kinetic_kernel` evaluated on the
+  state with the other momenta zeroed (so no formula is restated). Strang's symmetric step is
+  T(h/2) τ(h/2) V(h) H1(h/2) H2(h/2) H3(h) H2(h/2) H1(h/2) τ(h/2) T(h/2) (order 2); compositions
+  with the coefficient vectors :data:`SUZUKI4` (5 stages) and :data:`YOSHIDA4` (3 stages) give
+  order 4. Rotations keep |s|² to round-off and no piece changes p_θ.
+
+Every kernel returns an integer status (:mod:`.failure`): non-finite values, λ, μ, ϱ ≤ 0,
+λ − μ changing sign while σ₋ ≠ 0 (chart singularity), step collapse (DOP853), chart
+under-resolution (fixed steps that turn θ by more than 1 rad), energy error beyond tolerance
+(without controls).
+
+Environment API (one env step, no Python per sub-step; ``P`` = ``Body.kernel_params()`` as a
+writable float64 array (9,); arrays C-contiguous float64)::
+
+    status = <method>_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out)
+    batch_<method>_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)
+
+with y, out (11,); u (4,); Y, OUT (11, N) and U (4, N) structure-of-arrays (row k = state entry k
+of every body); STATUS (N,) int64. ``h`` is the largest sub-step of fixed-step methods and the
+initial step guess of DOP853 (0: automatic); rtol/atol are read by DOP853 only; energy_tol = inf
+switches the energy check off. Method names: ``dop853``, ``rk4``, ``strang``, ``suzuki4``,
+``yoshida4``.
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [2] ``shared/physics/NOTES.md``.
+.. [3] E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*, §II.4, II.10.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _dop
+
+from .failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
+from .jit import JIT_OPTIONS, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
+
+njit = numba.njit(**JIT_OPTIONS)
+
+N = 11
+_A = np.ascontiguousarray(_dop.A[: _dop.N_STAGES, : _dop.N_STAGES])
+_B = np.ascontiguousarray(_dop.B)
+_E3 = np.ascontiguousarray(_dop.E3)
+_E5 = np.ascontiguousarray(_dop.E5)
+_SAFETY = 0.9
+_MIN_FACTOR = 0.2
+_MAX_FACTOR = 10.0
+_ERROR_EXPONENT = -1.0 / 8.0  # scipy: -1/(error_estimator_order + 1), order 7
+DOP853_MAX_STEPS = 50_000_000
+
+_P4 = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
+STRANG = np.array([1.0])
+SUZUKI4 = np.array([_P4, _P4, 1.0 - 4.0 * _P4, _P4, _P4])
+"""Suzuki's 5-stage fourth-order composition of a symmetric second-order step."""
+_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+YOSHIDA4 = np.array([_W1, 1.0 - 2.0 * _W1, _W1])
+"""Yoshida's (triple-jump) fourth-order composition."""
+KAHAN_LI6 = np.array([
+    0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981, 0.082213596293550800230,
+    0.79854399093482996340,
+    0.082213596293550800230, -0.70624617255763935981, 0.33259913678935943860, 0.39216144400731413928,
+])
+"""Kahan & Li's 9-stage sixth-order composition s9odr6a (Math. Comp. 66, 1997; HLW Geometric Numerical
+Integration §V.3.2) of a symmetric second-order step."""
+
+
+# --------------------------------------------------------------------------------------------- checks
+@njit
+def _finite(y):
+    for i in range(y.size):
+        if not math.isfinite(y[i]):
+            return False
+    return True
+
+
+@njit
+def _state_status(y, gap_sign, check_gap):
+    """Status of a state after a step: non-finite, domain, chart singularity."""
+    if not _finite(y):
+        return NON_FINITE
+    if y[7] <= 0.0 or y[8] <= 0.0 or y[9] <= 0.0:
+        return DOMAIN
+    if check_gap and (y[7] - y[8]) * gap_sign <= 0.0:
+        return CHART_SINGULARITY
+    return OK
+
+
+@njit
+def may_cross(y, u, P):
+    """True when λ = μ is passable in the chart: J1 = J2, σ₋ = s3 − p_θ = 0 and τ3 = 0 (NOTES §5)."""
+    return P[0] == P[1] and y[2] == y[3] and u[2] == 0.0
+
+
+@njit
+def no_control(u):
+    for i in range(u.size):
+        if u[i] != 0.0:
+            return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------- DOP853
+@njit
+def _rms(x, scale):
+    acc = 0.0
+    for i in range(x.size):
+        r = x[i] / scale[i]
+        acc += r * r
+    return math.sqrt(acc / x.size)
+
+
+@njit
+def dop853_initial_step(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, counters):
+    """scipy's ``select_initial_step`` (Hairer–Nørsett–Wanner §II.4) with error order 7."""
+    interval = abs(t_bound - t0)
+    if interval == 0.0:
+        return 0.0
+    scale = np.empty(N)
+    for i in range(N):
+        scale[i] = atol + abs(y[i]) * rtol
+    d0 = _rms(y, scale)
+    d1 = _rms(f, scale)
+    if d0 < 1e-5 or d1 < 1e-5:
+        h0 = 1e-6
+    else:
+        h0 = 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    y1 = np.empty(N)
+    for i in range(N):
+        y1[i] = y[i] + h0 * f[i]
+    rhs_kernel(y1, u, P, work, vel, force)
+    counters[0] += 1
+    for i in range(N):
+        y1[i] = work[i] - f[i]
+    d2 = _rms(y1, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    return min(100.0 * h0, h1, interval)
+
+
+@njit
+def _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force):
+    for i in range(N):
+        K[0, i] = f[i]
+    for s in range(1, 12):
+        for i in range(N):
+            acc = 0.0
+            for j in range(s):
+                acc += K[j, i] * _A[s, j]
+            ytmp[i] = y[i] + h * acc
+        rhs_kernel(ytmp, u, P, K[s], vel, force)
+    for i in range(N):
+        acc = 0.0
+        for j in range(12):
+            acc += K[j, i] * _B[j]
+        ynew[i] = y[i] + h * acc
+    rhs_kernel(ynew, u, P, K[12], vel, force)
+
+
+@njit
+def _dop853_error(y, ynew, K, h, rtol, atol):
+    e5 = 0.0
+    e3 = 0.0
+    for i in range(N):
+        sc = atol + max(abs(y[i]), abs(ynew[i])) * rtol
+        a5 = 0.0
+        a3 = 0.0
+        for j in range(13):
+            a5 += K[j, i] * _E5[j]
+            a3 += K[j, i] * _E3[j]
+        a5 /= sc
+        a3 /= sc
+        e5 += a5 * a5
+        e3 += a3 * a3
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    return abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * N)
+
+
+@njit
+def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters):
+    """Advance ``y`` (and its derivative ``f``) in place from t to exactly t_bound.
+
+    counters: [nfev, accepted, rejected]. Returns (status, t reached, next |h|).
+    """
+    while t < t_bound:
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        if h_abs < min_step:
+            h_abs = min_step
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                return STEP_COLLAPSE, t, h_abs
+            if counters[1] + counters[2] > DOP853_MAX_STEPS:
+                return MAX_STEPS, t, h_abs
+            t_new = t + h_abs
+            if t_new > t_bound:
+                t_new = t_bound
+            h = t_new - t
+            h_abs = abs(h)
+            _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force)
+            counters[0] += 12
+            err = _dop853_error(y, ynew, K, h, rtol, atol)
+            if err < 1.0:
+                if err == 0.0:
+                    factor = _MAX_FACTOR
+                else:
+                    factor = min(_MAX_FACTOR, _SAFETY * err**_ERROR_EXPONENT)
+                if rejected:
+                    factor = min(1.0, factor)
+                h_abs *= factor
+                break
+            factor = _SAFETY * err**_ERROR_EXPONENT
+            if not factor > _MIN_FACTOR:  # also for err = nan, like scipy's max(0.2, nan)
+                factor = _MIN_FACTOR
+            h_abs *= factor
+            rejected = True
+            counters[2] += 1
+        counters[1] += 1
+        t = t_new
+        for i in range(N):
+            y[i] = ynew[i]
+            f[i] = K[12, i]
+        st = _state_status(y, gap_sign, check_gap)
+        if st != OK:
+            return st, t, h_abs
+    return OK, t, h_abs
+
+
+@njit
+def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
+    """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
+
+    counters (3,) int64: [nfev, accepted, rejected]; fail (2,): [t of failure, |H − H₀| at the
+    last check]. Returns the status.
+    """
+    vel = np.empty(7)
+    force = np.empty(4)
+    K = np.empty((13, N))
+    ynew = np.empty(N)
+    ytmp = np.empty(N)
+    y = y0.copy()
+    f = np.empty(N)
+    rhs_kernel(y, u, P, f, vel, force)
+    counters[0] += 1
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    check_gap = not may_cross(y, u, P)
+    check_energy = energy_tol < np.inf and no_control(u)
+    H0 = energy_kernel(y, P, vel, force)
+    for i in range(N):
+        Y[i, 0] = y[i]
+    t = times[0]
+    fail[0] = t
+    h_abs = dop853_initial_step(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, counters)
+    for k in range(1, times.size):
+        st, t, h_abs = dop853_advance(y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters)
+        fail[0] = t
+        for i in range(N):
+            Y[i, k] = y[i]
+        if st != OK:
+            return st
+        if check_energy:
+            dH = abs(energy_kernel(y, P, vel, force) - H0)
+            fail[1] = dH
+            if dH > energy_tol:
+                return ENERGY
+    return OK
+
+
+@njit
+def _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters):
+    for i in range(N):
+        out[i] = y[i]
+    rhs_kernel(out, u, P, f, vel, force)
+    counters[0] += 1
+    if h <= 0.0:
+        h = dop853_initial_step(out, f, 0.0, dt, u, P, rtol, atol, vel, force, ytmp, counters)
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    st, t, h = dop853_advance(out, f, 0.0, dt, h, u, P, rtol, atol, gap_sign, not may_cross(y, u, P), K, ynew, ytmp, vel, force, counters)
+    if st != OK:
+        return st
+    if energy_tol < np.inf and no_control(u):
+        if abs(energy_kernel(out, P, vel, force) - energy_kernel(y, P, vel, force)) > energy_tol:
+            return ENERGY
+    return OK
+
+
+@njit
+def dop853_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of DOP853 from t = 0 to exactly dt (module docstring)."""
+    counters = np.zeros(3, np.int64)
+    return _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, np.empty((13, N)), np.empty(N), np.empty(N),
+                       np.empty(7), np.empty(4), np.empty(N), counters)
+
+
+@njit
+def batch_dop853_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,)."""
+    K = np.empty((13, N))
+    ynew = np.empty(N)
+    ytmp = np.empty(N)
+    vel = np.empty(7)
+    force = np.empty(4)
+    f = np.empty(N)
+    y = np.empty(N)
+    u = np.empty(4)
+    out = np.empty(N)
+    counters = np.zeros(3, np.int64)
+    for b in range(Y.shape[1]):
+        for i in range(N):
+            y[i] = Y[i, b]
+        for i in range(4):
+            u[i] = U[i, b]
+        STATUS[b] = _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+        for i in range(N):
+            OUT[i, b] = out[i]
+
+
+# --------------------------------------------------------------------------------------------- RK4
+@njit
+def _rk4_step(y, h, u, P, k1, k2, k3, k4, ytmp, vel, force):
+    """One classical RK4 step in place; returns the chart turn h·max(|ω3|, |θ̇|) at the start."""
+    rhs_kernel(y, u, P, k1, vel, force)
+    turn = h * max(abs(vel[2]), abs(vel[3]))
+    for i in range(N):
+        ytmp[i] = y[i] + 0.5 * h * k1[i]
+    rhs_kernel(ytmp, u, P, k2, vel, force)
+    for i in range(N):
+        ytmp[i] = y[i] + 0.5 * h * k2[i]
+    rhs_kernel(ytmp, u, P, k3, vel, force)
+    for i in range(N):
+        ytmp[i] = y[i] + h * k3[i]
+    rhs_kernel(ytmp, u, P, k4, vel, force)
+    for i in range(N):
+        y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    return turn
+
+
+@njit
+def _n_steps(span, hmax):
+    n = int(math.ceil(span / hmax - 1e-9))
+    return max(n, 1)
+
+
+@njit
+def _rk4_advance(y, span, hmax, u, P, gap_sign, check_gap, work, vel, force, counters):
+    n = _n_steps(span, hmax)
+    h = span / n
+    for j in range(n):
+        turn = _rk4_step(y, h, u, P, work[0], work[1], work[2], work[3], work[4], vel, force)
+        counters[0] += 4
+        counters[1] += 1
+        if turn > MAX_TURN:
+            return UNDER_RESOLVED, j * h
+        st = _state_status(y, gap_sign, check_gap)
+        if st != OK:
+            return st, (j + 1) * h
+    return OK, span
+
+
+# --------------------------------------------------------------------------------------------- splitting
+@njit
+def _masked_rates(y, tmp, keep, P, vel, force):
+    """kinetic_kernel on y with every momentum except those flagged in ``keep`` set to zero."""
+    for i in range(7):
+        tmp[i] = y[i] if keep[i] else 0.0
+    for i in range(7, N):
+        tmp[i] = y[i]
+    kinetic_kernel(tmp, P, vel, force)
+
+
+_KEEP_T = np.array([False, False, False, False, True, True, True])
+_KEEP_H1 = np.array([True, False, False, False, False, False, False])
+_KEEP_H2 = np.array([False, True, False, False, False, False, False])
+_KEEP_H3 = np.array([False, False, True, True, False, False, False])
+
+
+@njit
+def _drift(y, h, P, tmp, vel, force):
+    _masked_rates(y, tmp, _KEEP_T, P, vel, force)
+    y[7] += h * vel[4]
+    y[8] += h * vel[5]
+    y[9] += h * vel[6]
+
+
+@njit
+def _kick(y, h, u, P):
+    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], y[7], y[8], y[9])
+    y[4] -= h * gl
+    y[5] -= h * gm
+    y[6] += h * (u[3] - gr)
+
+
+@njit
+def _torque(y, h, u):
+    y[0] += h * u[0]
+    y[1] += h * u[1]
+    y[2] += h * u[2]
+
+
+@njit
+def _flow_h1(y, h, P, tmp, vel, force):
+    _masked_rates(y, tmp, _KEEP_H1, P, vel, force)
+    a = P[8] * vel[0] * h
+    c = math.cos(a)
+    s = math.sin(a)
+    s2 = y[1]
+    s3 = y[2]
+    y[1] = c * s2 - s * s3
+    y[2] = s * s2 + c * s3
+    y[5] += h * force[2]
+    y[6] += h * force[3]
+
+
+@njit
+def _flow_h2(y, h, P, tmp, vel, force):
+    _masked_rates(y, tmp, _KEEP_H2, P, vel, force)
+    b = P[8] * vel[1] * h
+    c = math.cos(b)
+    s = math.sin(b)
+    s1 = y[0]
+    s3 = y[2]
+    y[0] = c * s1 + s * s3
+    y[2] = -s * s1 + c * s3
+    y[4] += h * force[1]
+    y[6] += h * force[3]
+
+
+@njit
+def _flow_h3(y, h, P, tmp, vel, force):
+    _masked_rates(y, tmp, _KEEP_H3, P, vel, force)
+    a = P[8] * vel[2] * h
+    c = math.cos(a)
+    s = math.sin(a)
+    s1 = y[0]
+    s2 = y[1]
+    y[0] = c * s1 - s * s2
+    y[1] = s * s1 + c * s2
+    y[10] += h * vel[3]
+    y[4] += h * force[1]
+    y[5] += h * force[2]
+    return abs(h) * max(abs(vel[2]), abs(vel[3]))
+
+
+@njit
+def strang_step(y, h, u, P, tmp, vel, force):
+    """One symmetric Strang step (module docstring) in place; returns the chart turn of H3."""
+    _drift(y, 0.5 * h, P, tmp, vel, force)
+    _torque(y, 0.5 * h, u)
+    _kick(y, h, u, P)
+    _flow_h1(y, 0.5 * h, P, tmp, vel, force)
+    _flow_h2(y, 0.5 * h, P, tmp, vel, force)
+    turn = _flow_h3(y, h, P, tmp, vel, force)
+    _flow_h2(y, 0.5 * h, P, tmp, vel, force)
+    _flow_h1(y, 0.5 * h, P, tmp, vel, force)
+    _torque(y, 0.5 * h, u)
+    _drift(y, 0.5 * h, P, tmp, vel, force)
+    return turn
+
+
+@njit
+def _split_advance(y, span, hmax, coeffs, u, P, gap_sign, check_gap, tmp, vel, force, counters):
+    n = _n_steps(span, hmax)
+    h = span / n
+    for j in range(n):
+        turn = 0.0
+        for c in coeffs:
+            turn = max(turn, strang_step(y, c * h, u, P, tmp, vel, force))
+        counters[0] += coeffs.size
+        counters[1] += 1
+        if turn > MAX_TURN:
+            return UNDER_RESOLVED, j * h
+        st = _state_status(y, gap_sign, check_gap)
+        if st != OK:
+            return st, (j + 1) * h
+    return OK, span
+
+
+# --------------------------------------------------------------------------------------------- fixed-step drivers
+@njit
+def _fixed_advance(kind, y, span, hmax, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters):
+    if kind == 0:
+        return _rk4_advance(y, span, hmax, u, P, gap_sign, check_gap, work, vel, force, counters)
+    return _split_advance(y, span, hmax, coeffs, u, P, gap_sign, check_gap, work[0], vel, force, counters)
+
+
+@njit
+def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail):
+    """Fixed-step integration through every output time (kind 0: RK4, 1: splitting with ``coeffs``).
+
+    Y (11, len(times)) receives the states; counters (3,) int64 [nfev, steps, 0]; fail (2,)
+    [t of failure, last |H − H₀|]. Returns the status.
+    """
+    vel = np.empty(7)
+    force = np.empty(4)
+    work = np.empty((5, N))
+    y = y0.copy()
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    check_gap = not may_cross(y, u, P)
+    check_energy = energy_tol < np.inf and no_control(u)
+    H0 = energy_kernel(y, P, vel, force)
+    for i in range(N):
+        Y[i, 0] = y[i]
+    fail[0] = times[0]
+    for k in range(1, times.size):
+        st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
+        fail[0] = times[k - 1] + dt_done
+        for i in range(N):
+            Y[i, k] = y[i]
+        if st != OK:
+            return st
+        if check_energy:
+            dH = abs(energy_kernel(y, P, vel, force) - H0)
+            fail[1] = dH
+            if dH > energy_tol:
+                return ENERGY
+    return OK
+
+
+@njit
+def _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, counters):
+    for i in range(N):
+        out[i] = y[i]
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    st, dt_done = _fixed_advance(kind, out, dt, h, coeffs, u, P, gap_sign, not may_cross(y, u, P), work, vel, force, counters)
+    if st != OK:
+        return st
+    if energy_tol < np.inf and no_control(u):
+        if abs(energy_kernel(out, P, vel, force) - energy_kernel(y, P, vel, force)) > energy_tol:
+            return ENERGY
+    return OK
+
+
+@njit
+def _fixed_batch(kind, coeffs, Y, U, P, dt, h, energy_tol, OUT, STATUS):
+    work = np.empty((5, N))
+    vel = np.empty(7)
+    force = np.empty(4)
+    y = np.empty(N)
+    u = np.empty(4)
+    out = np.empty(N)
+    counters = np.zeros(3, np.int64)
+    for b in range(Y.shape[1]):
+        for i in range(N):
+            y[i] = Y[i, b]
+        for i in range(4):
+            u[i] = U[i, b]
+        STATUS[b] = _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, counters)
+        for i in range(N):
+            OUT[i, b] = out[i]
+
+
+@njit
+def rk4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of RK4 (⌈dt/h⌉ equal sub-steps); returns the status."""
+    return _fixed_env(0, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+
+
+@njit
+def strang_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of the Strang splitting; returns the status."""
+    return _fixed_env(1, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+
+
+@njit
+def suzuki4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of the Suzuki-4 splitting; returns the status."""
+    return _fixed_env(1, SUZUKI4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+
+
+@njit
+def yoshida4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of the Yoshida-4 splitting; returns the status."""
+    return _fixed_env(1, YOSHIDA4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+
+
+@njit
+def batch_rk4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+
+
+@njit
+def batch_strang_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+
+
+@njit
+def batch_suzuki4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+
+
+@njit
+def batch_yoshida4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+
+
+@njit
+def rhs_compiled(y, u, P, out):
+    """dy/dt by the jitted physics kernel (for tests: equals :func:`flatbody_env.equations.rhs`)."""
+    rhs_kernel(y, u, P, out, np.empty(7), np.empty(4))
