@@ -108,3 +108,40 @@ def register(sub) -> None:
     p.add_argument("--seed", type=_int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.set_defaults(handler=_demo)
+
+    _extend_record(sub)
+
+
+def _extend_record(sub) -> None:
+    """Add ``--agent MODEL`` to ``flatbody record`` (the env layer's command; agents extend it so the
+    env layer never imports agents)."""
+    rec = sub.choices.get("record")
+    if rec is None:
+        return
+    rec.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
+                     help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
+    rec.add_argument("--seed", type=_int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
+    scene_handler = rec.get_default("handler")
+
+    def handler(args) -> int:
+        if args.agent is None:
+            return scene_handler(args)
+        if args.scene_file or args.scene:
+            raise ValueError("agent: --agent records an environment episode; give no scene")
+        from .demo import format_demo, record_episode, rollout
+        from .evaluate import Agent
+
+        agent = Agent(args.agent or None)
+        ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs)
+        print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+        path = record_episode(ep, args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+        msg = f"wrote {path} ({ep['t'].size} steps)"
+        if args.verify:
+            from flatbody_env.recording import verify_recording
+
+            verify_recording(path)  # raises ValueError with rerun's output on failure
+            msg += "; rerun rrd verify: ok"
+        print(msg)
+        return 0
+
+    rec.set_defaults(handler=handler)

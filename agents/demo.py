@@ -93,6 +93,22 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
     return "\n".join(lines)
 
 
+def record_episode(ep: dict[str, Any], out: str | Path, *, title: str) -> Path:
+    """Write a :func:`rollout` episode to a rerun recording (``flatbody_env.recording``)."""
+    from flatbody_env import recording
+
+    k = ep["actions"].shape[1]
+    return recording.record_arrays(
+        ep["t"], ep["states"], ep["rotations"], ep["body"], out,
+        energy=ep["energy"],
+        actions=ep["actions"],
+        action_names=("tau1", "tau2", "tau3", "f_rho") if k == 4 else None,
+        reward_terms=ep["reward_terms"],
+        target={name: ep["target"][name] for name in ("lambda", "mu", "rho", "s3", "p_theta", "energy")},
+        title=title,
+    )
+
+
 def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd") -> int:
     """Run the demo; returns the exit code (0 also when the agent misses: the summary says so)."""
     from .evaluate import Agent
@@ -102,24 +118,6 @@ def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None 
     label = "the shipped agent" if model is None else f"agent {agent.path}"
     print(format_demo(ep, seed=seed, label=label))
     if out:
-        try:
-            from flatbody_env import recording
-        except ImportError:
-            print(f"recording unavailable (flatbody_env.recording is not installed): {out} not written")
-            return 0
-        import inspect
-
-        extra = {
-            "energy": ep["energy"],
-            "target": {name: ep["target"][name] for name in ("lambda", "mu", "rho", "s3", "p_theta", "energy")},
-            "action_names": ("tau1", "tau2", "tau3", "f_rho")[: ep["actions"].shape[1]] if ep["actions"].shape[1] == 4 else None,
-            "title": f"flatbody demo (seed {seed})",
-        }
-        accepted = inspect.signature(recording.record_arrays).parameters
-        extra = {key: v for key, v in extra.items() if key in accepted and v is not None}
-        recording.record_arrays(
-            ep["t"], ep["states"], ep["rotations"], ep["body"], out,
-            actions=ep["actions"], reward_terms=ep["reward_terms"], **extra,
-        )
+        record_episode(ep, out, title=f"flatbody demo (seed {seed})")
         print(f"wrote {out} (open with: rerun {out})")
     return 0

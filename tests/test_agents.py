@@ -232,3 +232,19 @@ def test_shipped_agent_acceptance():
     agent, heur = report["agent"], report["baselines"]["heuristic"]
     assert agent["success_rate"] >= 0.9
     assert agent["final_distance"] < heur["final_distance"]
+
+
+def test_record_agent_episode(tmp_path, capsys):
+    """``flatbody record --agent``: the shipped agent's episode, read back with rerun's reader."""
+    from flatbody_env.cli import main
+    from flatbody_env.recording import read_recording
+
+    out = tmp_path / "agent.rrd"
+    assert main(["record", "--agent", "--seed", "3", "--out", str(out)]) == 0
+    data = read_recording(out)
+    assert any(path.startswith("/series/action/") for path in data.entities)
+    assert any(path.startswith("/series/reward/") for path in data.entities)
+    assert "/world/body" in data.entities
+    with pytest.raises(SystemExit) as info:
+        raise SystemExit(main(["record", "--agent", "--scene", "default", "--out", str(out)]))
+    assert info.value.code == 2
