@@ -5,22 +5,12 @@ Heavy imports (torch, SB3) happen inside the handlers so that ``flatbody --help`
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 
+from flatbody_env.commands import int_at_least
 
-def _int_at_least(name: str, low: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{name}: must be an integer >= {low}, got {value}")
-        return value
 
-    return parse
 
 
 def _train(args) -> int:
@@ -81,23 +71,23 @@ def register(sub) -> None:
     p = sub.add_parser("train", help="train an SB3 agent (PPO or SAC) on FlatBody-v0 with the YAML hyperparameters")
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
     p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
-    p.add_argument("--seed", type=_int_at_least("seed", 0), default=0, help="random seed (default 0)")
-    p.add_argument("--n-timesteps", type=_int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
-    p.add_argument("--n-envs", type=_int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="random seed (default 0)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
-    p.add_argument("--checkpoint-freq", type=_int_at_least("checkpoint_freq", 0), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
+    p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
-    p.add_argument("--threads", type=_int_at_least("threads", 1), default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=int_at_least("threads", 1), default=1, help="torch threads (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_train)
 
     p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
     p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--episodes", type=_int_at_least("episodes", 1), default=100, metavar="N", help="episodes (default 100)")
-    p.add_argument("--seed", type=_int_at_least("seed", 0), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1), default=100, metavar="N", help="episodes (default 100)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
@@ -105,7 +95,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
     p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--seed", type=_int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.set_defaults(handler=_demo)
 
@@ -120,7 +110,7 @@ def _extend_record(sub) -> None:
         return
     rec.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
                      help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
-    rec.add_argument("--seed", type=_int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
+    rec.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
     scene_handler = rec.get_default("handler")
 
     def handler(args) -> int:

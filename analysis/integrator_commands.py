@@ -14,8 +14,9 @@ Every command can redraw its PNG from the saved tables with ``--plot-only``.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
+
+from flatbody_env.commands import int_at_least, positive_float
 
 DEFAULT_OUT = "runs/integrators"
 
@@ -26,29 +27,6 @@ def _methods(text_list):
     for m in text_list:
         get_method(m)  # ValueError naming the allowed methods
     return tuple(text_list)
-
-
-def _positive(name):
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
-        if not v > 0 or v != v or v == float("inf"):
-            raise argparse.ArgumentTypeError(f"{name}: must be a finite number > 0 (allowed range (0, inf)), got {text}")
-        return v
-
-    return parse
-
-
-def _repeats(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"repeats: expected an integer >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"repeats: must be >= 1, got {text}")
-    return v
 
 
 def _budget(args) -> float:
@@ -119,7 +97,7 @@ def _bench(args) -> int:
     import csv
     import json
 
-    from .integrator_bench import BenchReport, bench_integrators, format_report
+    from .integrator_bench import bench_integrators, format_report
     from .integrator_plots import plot_bench
 
     out = Path(args.out)
@@ -160,8 +138,8 @@ def _bench(args) -> int:
 def _common(p, what):
     p.add_argument("--quick", action="store_true", help=f"a short {what} (shorter horizons, fewer settings, 1 repeat)")
     p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (see 'flatbody methods'); default: a representative set")
-    p.add_argument("--repeats", type=_repeats, default=3, help="timing repeats (minimum taken; default 3)")
-    p.add_argument("--max-run-s", type=_positive("max_run_s"), default=None, metavar="S",
+    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
+    p.add_argument("--max-run-s", type=positive_float("max_run_s"), default=None, metavar="S",
                    help="stop a method's sweep once one run takes (or is predicted to take) longer (default 5; 1 with --quick)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved table")
@@ -183,8 +161,8 @@ def register(sub) -> None:
 def register_bench(bsub) -> None:
     b = bsub.add_parser("integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time")
     b.add_argument("--quick", action="store_true", help="shorter horizons, one close-approach case, 1 repeat")
-    b.add_argument("--repeats", type=_repeats, default=3, help="timing repeats (minimum taken; default 3)")
-    b.add_argument("--max-run-s", type=_positive("max_run_s"), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
+    b.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
+    b.add_argument("--max-run-s", type=positive_float("max_run_s"), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
     b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
     b.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")

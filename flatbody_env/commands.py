@@ -19,7 +19,9 @@ def _float_list(text: str) -> list[float]:
     return values
 
 
-def _positive(name: str):
+def positive_float(name: str):
+    """argparse type: a finite number > 0; the error names ``name`` and the allowed range."""
+
     def parse(text: str) -> float:
         try:
             value = float(text)
@@ -27,6 +29,21 @@ def _positive(name: str):
             raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
         if not math.isfinite(value) or value <= 0:
             raise argparse.ArgumentTypeError(f"{name}: must be a finite number > 0 (allowed range (0, inf)), got {text}")
+        return value
+
+    return parse
+
+
+def int_at_least(name: str, low: int = 1):
+    """argparse type: an integer ≥ ``low``; the error names ``name`` and the allowed range."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{name}: must be an integer >= {low}, got {value}")
         return value
 
     return parse
@@ -53,11 +70,11 @@ def add_scene_arguments(p) -> None:
 
 def add_integration_arguments(p) -> None:
     """Method and tolerance flags shared by commands that integrate."""
-    p.add_argument("--t-end", type=_positive("t_end"), metavar="T", help="final time (default: the scene's t_end)")
+    p.add_argument("--t-end", type=positive_float("t_end"), metavar="T", help="final time (default: the scene's t_end)")
     p.add_argument("--method", default="DOP853", help="integrator (see 'flatbody methods'); default DOP853")
-    p.add_argument("--rtol", type=_positive("rtol"), default=1e-10, help="relative tolerance (adaptive methods)")
-    p.add_argument("--atol", type=_positive("atol"), default=1e-10, help="absolute tolerance (adaptive methods)")
-    p.add_argument("--step", type=_positive("step"), default=None, metavar="H", help="step size (fixed-step methods)")
+    p.add_argument("--rtol", type=positive_float("rtol"), default=1e-10, help="relative tolerance (adaptive methods)")
+    p.add_argument("--atol", type=positive_float("atol"), default=1e-10, help="absolute tolerance (adaptive methods)")
+    p.add_argument("--step", type=positive_float("step"), default=None, metavar="H", help="step size (fixed-step methods)")
     p.add_argument("--model", default="auto", choices=("auto", "two-polar", "regular"), help="formulation (default auto)")
 
 
@@ -162,7 +179,7 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--times", metavar="t1,t2,...", help="output times (default: an even grid)")
-    p.add_argument("--samples", type=int, default=None, metavar="N", help="number of evenly spaced output times (default 101)")
+    p.add_argument("--samples", type=int_at_least("samples", 2), default=None, metavar="N", help="number of evenly spaced output times (default 101)")
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
     p.add_argument("--out", metavar="FILE", help="write the JSON here instead of stdout")
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")

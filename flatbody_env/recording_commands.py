@@ -12,20 +12,9 @@ import sys
 import time
 from pathlib import Path
 
-from .commands import _load, add_integration_arguments, add_scene_arguments
+from .commands import _load, add_integration_arguments, add_scene_arguments, int_at_least
 
 
-def _count(name: str, minimum: int = 1):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"{name}: must be an integer ≥ {minimum}, got {value}")
-        return value
-
-    return parse
 
 
 def _rrd_path(text: str) -> str:
@@ -200,7 +189,7 @@ def _record_bench(args) -> int:
         "rerun_sdk": sdk_version(),
         "python": platform.python_version(),
         "machine": platform.machine(),
-        "cpus": __import__("os").cpu_count(),
+        "cpus": __import__("os").cpuint_at_least(),
     }
     json_path = out_dir / "recording.json"
     json_path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
@@ -256,26 +245,26 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=_count("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
-    p.add_argument("--tensor-every", type=_count("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
+    p.add_argument("--samples", type=int_at_least("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
     p.add_argument("--env-id", default="FlatBody-v0", help="gymnasium id (default FlatBody-v0)")
-    p.add_argument("--episodes", type=_count("episodes"), default=1, metavar="N", help="episodes to run (default 1)")
+    p.add_argument("--episodes", type=int_at_least("episodes"), default=1, metavar="N", help="episodes to run (default 1)")
     p.add_argument("--policy", choices=("zero", "random"), default="zero", help="actions: zero control or uniform random (default zero)")
-    p.add_argument("--seed", type=_count("seed", 0), default=0, help="seed of the first episode (then seed+1, ...)")
-    p.add_argument("--max-steps", type=_count("max_steps"), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
-    p.add_argument("--tensor-every", type=_count("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of the first episode (then seed+1, ...)")
+    p.add_argument("--max-steps", type=int_at_least("max_steps"), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps")
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="episode 0's file; episode k ≥ 1 goes to RUN-k.rrd ({episode} in the name formats it)")
     p.add_argument("--verify", action="store_true", help="check each file with 'rerun rrd verify'")
     p.set_defaults(handler=_record_env)
 
     p = sub.add_parser("record-info", help="read a recording back offline and summarize it (entities, rows, first values)")
     p.add_argument("file", metavar="RUN.rrd")
-    p.add_argument("--rows", type=_count("rows"), default=3, help="values shown per series (default 3)")
+    p.add_argument("--rows", type=int_at_least("rows"), default=3, help="values shown per series (default 3)")
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
@@ -283,10 +272,10 @@ def register(sub) -> None:
 
 def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000)")
-    p.add_argument("--steps", type=_count("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
+    p.add_argument("--steps", type=int_at_least("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
     p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
-    p.add_argument("--repeats", type=_count("repeats"), default=5, help="runs per size (median reported; default 5)")
-    p.add_argument("--block", type=_count("block"), default=256, help="block size of the live-recorder measurement")
+    p.add_argument("--repeats", type=int_at_least("repeats"), default=5, help="runs per size (median reported; default 5)")
+    p.add_argument("--block", type=int_at_least("block"), default=256, help="block size of the live-recorder measurement")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
     p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
     p.set_defaults(handler=_record_bench)
