@@ -50,6 +50,7 @@ import numpy as np
 from scipy.optimize import root
 
 from flatbody_env.body import Body
+from flatbody_env.equilibria import squared_sigmas
 from flatbody_env.equations import rhs
 from flatbody_env.hamiltonian import hamiltonian, velocities_from_momenta
 from flatbody_env.potentials import KIND_CUSTOM, V1, V2, potential_kernel
@@ -610,8 +611,7 @@ def spins_for_shape(
         rho_v = _fixed_rho(body, rho)
     _, gl, gm, _ = body.potential_terms(lam, mu, rho_v)
     u, v = lam + mu, lam - mu
-    sp2 = 2.0 * J * u**3 * 0.5 * (gl + gm)
-    sm2 = 2.0 * J * v**3 * 0.5 * (gl - gm)
+    sp2, sm2 = squared_sigmas(body, lam, mu, rho_v)
     scale = 2.0 * J * (abs(u) ** 3 + abs(v) ** 3) * (abs(gl) + abs(gm)) + 1e-300
     if sp2 < -1e-14 * scale or sm2 < -1e-14 * scale:
         return []

@@ -91,6 +91,20 @@ def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
     return float(brentq(g, lo, hi, xtol=1e-15, rtol=1e-15))
 
 
+def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float, float]:
+    """The inverse problem of eqs. (52)–(53) of [1] (NOTES §6 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
+
+    .. math:: \\sigma_+^2 = 2Ju^3\\,\\partial V/\\partial u, \\qquad \\sigma_-^2 = 2Jv^3\\,\\partial V/\\partial v,
+
+    with u = λ + μ, v = λ − μ, ∂V/∂u = (V_λ + V_μ)/2, ∂V/∂v = (V_λ − V_μ)/2 (J1 = J2 = J). A negative
+    value means no stationary ellipse has this shape.
+    """
+    J = body.inertia.J1
+    _, gl, gm, _ = body.potential_terms(lam, mu, rho)
+    u, v = lam + mu, lam - mu
+    return J * u**3 * (gl + gm), J * v**3 * (gl - gm)
+
+
 def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm: float) -> np.ndarray:
     """Hessian of W in (λ, μ, ϱ), W of the module docstring."""
     J = body.inertia.J1
@@ -138,10 +152,8 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
         raise ValueError(f"lambda, mu: need λ, μ > 0 and λ ≠ μ, got {lam}, {mu}")
     J = body.inertia.J1
     rho = equilibrium_thickness(body, lam, mu)
-    _, gl, gm, _ = body.potential_terms(lam, mu, rho)
     u, v = lam + mu, lam - mu
-    Vu, Vv = 0.5 * (gl + gm), 0.5 * (gl - gm)
-    sp2, sm2 = 2 * J * u**3 * Vu, 2 * J * v**3 * Vv
+    sp2, sm2 = squared_sigmas(body, lam, mu, rho)
     if sp2 < 0 or sm2 < 0:
         raise ValueError(
             f"lambda, mu: no stationary ellipse with shape ({lam:g}, {mu:g}) for this potential "
