@@ -110,8 +110,8 @@ class FlatBodyEnv(gym.Env):
     NOTES §7) with λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5] (default body) that the controls can reach
     within the episode: its settling rate r (the slowest closed-loop pole of the cheap-control LQR
     about the target, :func:`flatbody_env.controllability.settling_rate`) is at least
-    ``min_settling_rate`` = 0.15 s⁻¹, so that the slowest mode shrinks at least e³ ≈ 20-fold in
-    20 s (``"torque+dilatation"``; see :mod:`flatbody_env.task`, "Reachable within the episode");
+    ``min_settling_rate`` = 0.15 s⁻¹, so that under such feedback the slowest mode shrinks
+    e³ ≈ 20-fold or more in 20 s (``"torque+dilatation"``; see :mod:`flatbody_env.task`, "Reachable within the episode");
     or the one given by ``reset(options={"target": {"lambda": ..., "mu": ...}})`` (not filtered). The initial state has the target's
     p_θ (conserved by every control), shape and spin within ``initial_noise`` (15 %) of the target,
     small momenta and a uniform θ; without torque |s| equals |s3*| (the Casimir is conserved).

@@ -18,17 +18,18 @@ Casimir |s|² is conserved too, so for ``control="dilatation"`` (and ``"none"``)
 spin is drawn on the sphere |s| = |s3*|; with torque |s| is free.
 
 Reachable within the episode. The in-plane shape (λ, μ, p_λ, p_μ) is reached only through s3
-(τ3), and one of its two oscillation modes only weakly: linearised about the target, no linear
-feedback settles that mode faster than the target's settling rate r
-(:func:`flatbody_env.controllability.settling_rate`, the slowest pole of the cheap-control LQR,
-a limit that more gain does not raise). r depends on the shape alone (not on the sign of (s3, p_θ)):
+(τ3), and one of its two oscillation modes only weakly: linearised about the target, optimal
+linear feedback (LQR, equally weighted errors) settles that mode no faster than the target's
+settling rate r however cheap the control (:func:`flatbody_env.controllability.settling_rate`, the
+slowest pole of the cheap-control LQR, a limit that more gain does not raise; the LQR of
+``agents`` settles at 1.01–1.2 r). r depends on the shape alone (not on the sign of (s3, p_θ)):
 it falls steeply away from the edge of existence of the family (λ*μ* → 1 for V3). Measured for
-the default body over the old ranges λ* ∈ [1.25, 1.7], λ*/μ* ∈ [1.3, 2]: r from 0.002 to 0.23 s⁻¹,
-median ≈ 0.05 — an error in the slow mode shrinks by e^(−0.05·20) ≈ 0.37 over a 20 s episode,
-while the start is 0.2–0.35 away and success needs 0.05: most of those targets were out of reach
-(the LQR controller reached 40 % of them). Rule: a target is sampled only if
+the default body over 200 targets of the earlier ranges λ* ∈ [1.25, 1.7], λ*/μ* ∈ [1.3, 2]: r from
+0.006 to 0.27 s⁻¹, median 0.056 — an error in the slow mode shrinks by e^(−0.056·20) ≈ 0.33 over a
+20 s episode, while the start is 0.2–0.35 away and success needs 0.05: most of those targets were
+out of reach (the LQR controller reached 40 % of them). Rule: a target is sampled only if
 r ≥ :attr:`min_settling_rate` (0.15 s⁻¹ by default), so that over the registered episode
-(T = 20 s) the slowest mode shrinks at least by e^(−r T) = e^(−3) ≈ 1/20 — from the largest
+(T = 20 s) the slowest mode shrinks under such feedback by e^(−r T) ≤ e^(−3) ≈ 1/20 — from the largest
 initial distance ≈ 0.35 to ≈ 0.017, three times inside the tolerance (the bare requirement
 r T ≥ ln(0.35/0.05) would be r ≥ 0.097 s⁻¹). The default ranges λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5]
 contain the fast shapes near the edge of existence: of 400 draws, 264 are existing and stable and

@@ -255,8 +255,6 @@ def test_shipped_evaluation_reproduces():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 7 acceptance not met by the shipped agent: 36 % success, mean final "
-                   "distance 0.1055 vs 0.0968 for the LQR controller (docs/README-agents.md)")
 def test_shipped_agent_acceptance():
     """Issue 7 acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
     from agents.evaluate import evaluate_all
