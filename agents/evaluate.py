@@ -13,7 +13,7 @@ seed for seed). Per episode:
 * ``return``, ``length``, ``failed`` (integrator failure or left the domain).
 
 Policies: the agent (an SB3 model, observations normalised by its frozen VecNormalize
-statistics, deterministic actions; for a residual agent the LQR action is added), and the
+statistics, deterministic actions; for a residual agent combined with the LQR action, :class:`agents.heuristic.ResidualAction`), and the
 baselines ``zero`` (a = 0), ``random`` (uniform actions from a seeded generator), ``heuristic``
 (LQR about the target, :class:`agents.heuristic.HeuristicController`) and ``passivity``
 (:class:`agents.heuristic.PassivityController`).
@@ -84,21 +84,19 @@ class Agent:
         self.env_kwargs: dict[str, Any] = dict(hp.get("env_kwargs") or {})
         self.residual = hp.get("residual") or None
         self.residual_scale = float(hp.get("residual_scale", 1.0))
+        self.residual_gate = float(hp.get("residual_gate", 0.0))
         self._base = None
         if self.residual == "heuristic":
-            from flatbody_env.env import FlatBodyEnv
+            from .heuristic import ResidualAction
 
-            from .heuristic import HeuristicController
-
-            proto = FlatBodyEnv(**self.env_kwargs)
-            self._base = HeuristicController(proto.body, proto.control, proto.limits)
+            self._base = ResidualAction(self.env_kwargs, self.residual_scale, self.residual_gate,
+                                        str(hp.get("residual_mode", "additive")))
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         o = self.vecnormalize.normalize_obs(obs) if self.vecnormalize is not None else obs
         actions, _ = self.model.predict(o, deterministic=True)
         if self._base is not None:  # residual on the hand-designed controller
-            base, _ = self._base.predict(obs)
-            actions = np.clip(base + self.residual_scale * np.clip(actions, -1.0, 1.0), -1.0, 1.0)
+            actions = self._base(obs, actions)
         return actions
 
 

@@ -17,13 +17,14 @@ LQR (:class:`HeuristicController`)
 ---------------------------------
 The target stationary ellipse x* (s1 = s2 = 0, p = 0, eqs. (50)–(54)) is an equilibrium of the
 reduced system. Linearising eqs. (44)–(49) there (central differences of
-:func:`flatbody_env.equations.rhs`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
+:func:`flatbody_env.equations.rhs`, :func:`flatbody_env.controllability.linearize`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
 f = f_max a₄). The shape block tells what the controls can do: at linear order the thickness
 force moves only (ϱ, p_ϱ) and τ1, τ2 only (s1, s2); the in-plane shape (λ, μ, p_λ, p_μ) — two
 oscillation modes of the effective potential W (NOTES §6) — is reached *only through s3*: τ3
 changes s3, and s3 enters the centrifugal forces −∂𝒯/∂(λ, μ) through σ± = s3 ± p_θ. One of
-those modes is weakly controllable (for the default body its closed-loop damping saturates near
-Re λ ≈ −0.09 s⁻¹ whatever the weights): this sets how fast any controller can settle the shape.
+those modes is weakly controllable: its closed-loop pole saturates at a finite value whatever the
+weights (:func:`flatbody_env.controllability.settling_rate`), which sets how fast any linear
+controller can settle the shape; the task samples only targets where that rate is ≥ 0.15 s⁻¹.
 The gain K solves the continuous algebraic Riccati equation for weights Q (on x) and R (on a);
 the action is a = clip(−K (x − x*), −1, 1). K is recomputed when the target changes.
 
@@ -78,6 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flatbody_env.body import Body
+from flatbody_env.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
 from flatbody_env.hamiltonian import kinetic_kernel
 from flatbody_env.task import control_mask
 
@@ -168,10 +170,6 @@ class PassivityController:
         return np.stack([self.action(o) for o in obs]), None
 
 
-REDUCED_STATE = (0, 1, 2, 4, 5, 6, 7, 8, 9)
-"""Indices of x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) in the packed state (θ cyclic, p_θ conserved)."""
-
-
 @dataclass(frozen=True, kw_only=True)
 class LQRWeights:
     """Weights of :class:`HeuristicController`: Q = diag(q_spin ×3, q_momentum ×3, q_shape ×3), R = r·I."""
@@ -180,28 +178,6 @@ class LQRWeights:
     q_momentum: float = 10.0
     q_shape: float = 10.0
     r: float = 0.1
-
-
-def linearize(body: Body, y_star: np.ndarray, limits: np.ndarray, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
-    """(A (9, 9), B (9, 4)) of eqs. (44)–(49) at y_star in the reduced state, normalised actions.
-
-    Central differences of :func:`flatbody_env.equations.rhs`; B's column j is the response to
-    the control u_j = limits_j (an action a_j = 1).
-    """
-    from flatbody_env.equations import rhs
-
-    n = len(REDUCED_STATE)
-    A = np.zeros((n, n))
-    B = np.zeros((n, 4))
-    for j, i in enumerate(REDUCED_STATE):
-        e = np.zeros(11)
-        e[i] = h
-        A[:, j] = ((rhs(0.0, y_star + e, None, body) - rhs(0.0, y_star - e, None, body)) / (2 * h))[list(REDUCED_STATE)]
-    for j in range(4):
-        du = np.zeros(4)
-        du[j] = h * limits[j]
-        B[:, j] = ((rhs(0.0, y_star, du, body) - rhs(0.0, y_star, -du, body)) / (2 * h))[list(REDUCED_STATE)]
-    return A, B
 
 
 class HeuristicController:
@@ -267,19 +243,64 @@ class HeuristicController:
         return np.stack([self.action(o) for o in obs]), None
 
 
-def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0):
+RESIDUAL_MODES = ("additive", "gain")
+
+
+class ResidualAction:
+    """The executed action of a residual agent on the LQR (:class:`HeuristicController`, a_LQR).
+
+    * ``mode="additive"``: clip(a_LQR + scale · g(d) · a_policy, −1, 1), where
+      g(d) = min(1, d / gate) fades the residual out near the target (d = the task's distance of
+      the observed state; ``gate`` = 0: g = 1), so that the closed loop keeps the LQR's
+      equilibrium at the target.
+    * ``mode="gain"``: clip(a_LQR ⊙ (1 + scale · a_policy), −1, 1): the policy rescales each
+      component of the LQR's action (state-dependent gain scheduling, factor in
+      [1 − scale, 1 + scale]); the target stays an equilibrium (a_LQR = 0 there) whatever the
+      policy outputs.
+
+    Reads physical (unnormalised) observations (N, 16).
+    """
+
+    def __init__(self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive") -> None:
+        from flatbody_env.env import FlatBodyEnv
+
+        if not (math.isfinite(scale) and scale >= 0):
+            raise ValueError(f"residual_scale: must be a finite number >= 0, got {scale!r}")
+        if not (math.isfinite(gate) and gate >= 0):
+            raise ValueError(f"residual_gate: must be a finite number >= 0, got {gate!r}")
+        if mode not in RESIDUAL_MODES:
+            raise ValueError(f"residual_mode: must be one of {', '.join(RESIDUAL_MODES)}, got {mode!r}")
+        self.mode = mode
+        proto = FlatBodyEnv(**(env_kwargs or {}))
+        self.body, self.task = proto.body, proto.task
+        self.controller = HeuristicController(proto.body, proto.control, proto.limits)
+        self.scale, self.gate = float(scale), float(gate)
+
+    def __call__(self, obs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        base, _ = self.controller.predict(obs)
+        a = self.scale * np.clip(np.asarray(actions, dtype=np.float64).reshape(base.shape), -1.0, 1.0)
+        if self.mode == "gain":
+            return np.clip(base * (1.0 + a), -1.0, 1.0).astype(np.float32)
+        if self.gate > 0:
+            y = np.empty((11, obs.shape[0]))
+            y[:10] = obs[:, :10].T
+            y[10] = np.arctan2(obs[:, 10], obs[:, 11])
+            d = self.task.distance(y, self.body, obs[:, 12:16].T)
+            a = a * np.minimum(1.0, d / self.gate)[:, None]
+        return np.clip(base + a, -1.0, 1.0).astype(np.float32)
+
+
+def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive"):
     """Wrap an SB3 VecEnv over ``FlatBody-v0`` so that actions are residuals on the heuristic.
 
-    The executed action is clip(a_heuristic(obs) + scale · a_policy, −1, 1) (residual policy learning:
-    the agent starts from the hand-designed controller and learns corrections). Must wrap the raw
-    environment (inside ``VecNormalize``): the heuristic reads physical observations.
+    The executed action is :class:`ResidualAction` (residual policy learning: the agent starts
+    from the hand-designed controller and learns corrections). Must wrap the raw environment
+    (inside ``VecNormalize``): the heuristic reads physical observations.
     """
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    from flatbody_env.env import FlatBodyEnv
-
-    proto = FlatBodyEnv(**(env_kwargs or {}))
-    ctl = HeuristicController(proto.body, proto.control, proto.limits)
+    residual = ResidualAction(env_kwargs, scale, gate, mode)
 
     class ResidualOnHeuristic(VecEnvWrapper):
         def reset(self):
@@ -287,8 +308,7 @@ def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0):
             return self._obs
 
         def step_async(self, actions):
-            base, _ = ctl.predict(self._obs)
-            self.venv.step_async(np.clip(base + scale * np.asarray(actions, dtype=np.float32), -1.0, 1.0))
+            self.venv.step_async(residual(self._obs, actions))
 
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()

@@ -39,7 +39,7 @@ import yaml
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "residual_scale", "success_bonus")
+_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "residual_scale", "residual_gate", "residual_mode", "success_bonus", "precision_bonus")
 _ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -97,13 +97,18 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
 
 
 def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
-                 success_bonus: float = 0.0, residual_scale: float = 1.0):
+                 success_bonus: float = 0.0, residual_scale: float = 1.0, residual_gate: float = 0.0,
+                 precision_bonus: float = 0.0, residual_mode: str = "additive"):
     """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env).
 
     ``residual="heuristic"``: the policy's actions are residuals added to the hand-designed
-    controller's, scaled by ``residual_scale`` (:func:`agents.heuristic.residual_vec_env`). ``success_bonus`` > 0: training
+    controller's, scaled by ``residual_scale`` and faded out within ``residual_gate`` of the target,
+    or (``residual_mode="gain"``) rescale its components (:class:`agents.heuristic.ResidualAction`). ``success_bonus`` > 0: training
     reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so
-    that precision at the target pays; VecMonitor sits inside, so logged returns are the task's.
+    that reaching the target pays; ``precision_bonus`` > 0: training reward
+    + precision_bonus · max(0, ln(tolerance / max(d, 1e-6))), so that precision inside the tolerance
+    pays too (relative precision: halving d pays the same at every scale);
+    VecMonitor sits inside, so logged returns are the task's.
     """
     from stable_baselines3.common.vec_env import VecMonitor
 
@@ -115,18 +120,21 @@ def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | Non
             raise ValueError(f"residual: must be 'heuristic' or empty, got {residual!r}")
         from .heuristic import residual_vec_env
 
-        venv = residual_vec_env(venv, env_kwargs, residual_scale)
+        venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode)
     venv = VecMonitor(venv)
-    if success_bonus:
-        venv = _success_bonus(venv, float(success_bonus))
+    if success_bonus or precision_bonus:
+        from flatbody_env.env import FlatBodyEnv
+
+        tol = FlatBodyEnv(**(env_kwargs or {})).task.success_tolerance
+        venv = _success_bonus(venv, float(success_bonus), float(precision_bonus), tol)
     return venv
 
 
-def _success_bonus(venv, bonus: float):
+def _success_bonus(venv, bonus: float, precision: float = 0.0, tol: float = 0.05):
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
     class SuccessBonus(VecEnvWrapper):
-        """reward + bonus · 1[distance ≤ tolerance] (training only)."""
+        """reward + bonus · 1[success] + precision · max(0, ln(tol / distance)) (training only)."""
 
         def reset(self):
             return self.venv.reset()
@@ -134,6 +142,9 @@ def _success_bonus(venv, bonus: float):
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()
             rewards = rewards + bonus * np.array([bool(i.get("is_success")) for i in infos], dtype=np.float32)
+            if precision:
+                d = np.array([i.get("distance", np.inf) for i in infos], dtype=np.float64)
+                rewards = rewards + (precision * np.maximum(0.0, np.log(tol / np.maximum(d, 1e-6)))).astype(np.float32)
             return obs, rewards, dones, infos
 
     return SuccessBonus(venv)
@@ -273,7 +284,9 @@ def train(
             algo_kwargs[key] = int(algo_kwargs[key])
 
     out.mkdir(parents=True, exist_ok=True)
-    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)))
+    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)),
+                         float(hp.get("residual_gate", 0.0)), float(hp.get("precision_bonus", 0.0)),
+                         str(hp.get("residual_mode", "additive")))
     cls = _algo_class(algo)
     start = 0
     if resume:

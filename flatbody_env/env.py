@@ -107,8 +107,12 @@ class FlatBodyEnv(gym.Env):
     ## Starting State
 
     A target is a spectrally stable stationary ellipse of the circulation family (|s3| < |p_θ|,
-    NOTES §7) with λ* ∈ [1.25, 1.7], λ*/μ* ∈ [1.3, 2] (default body), or the one given by
-    ``reset(options={"target": {"lambda": ..., "mu": ...}})``. The initial state has the target's
+    NOTES §7) with λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5] (default body) that the controls can reach
+    within the episode: its settling rate r (the slowest closed-loop pole of the cheap-control LQR
+    about the target, :func:`flatbody_env.controllability.settling_rate`) is at least
+    ``min_settling_rate`` = 0.15 s⁻¹, so that under such feedback the slowest mode shrinks
+    e³ ≈ 20-fold or more in 20 s (``"torque+dilatation"``; see :mod:`flatbody_env.task`, "Reachable within the episode");
+    or the one given by ``reset(options={"target": {"lambda": ..., "mu": ...}})`` (not filtered). The initial state has the target's
     p_θ (conserved by every control), shape and spin within ``initial_noise`` (15 %) of the target,
     small momenta and a uniform θ; without torque |s| equals |s3*| (the Casimir is conserved).
     ``reset(options={"state": {...eleven names...}})`` sets the state exactly.
@@ -269,7 +273,7 @@ class FlatBodyEnv(gym.Env):
         if "target" in options:
             self._target = self.task.target_from(options["target"], self.body)
         else:
-            self._target = self.task.sample_target(self.np_random, self.body)
+            self._target = self.task.sample_target(self.np_random, self.body, limits=self.limits, control=self.control)
         self._tvec = target_vector(self._target)
         if "state" in options:
             state = options["state"]

@@ -9,13 +9,36 @@ Targets
 A target is a spectrally stable stationary ellipse of branch N (eqs. (50)–(54) of [1]) of the
 "circulation" family |s3| < |p_θ| (NOTES §7: q < 0 there), built from a shape (λ*, μ*) sampled
 in :attr:`ReachStationaryEllipse.target_lambda` × aspect ratio :attr:`target_aspect` by the
-inverse problem (:func:`flatbody_env.equilibria.stationary_from_shape`); unstable or
-non-existent shapes are re-drawn.
+inverse problem (:func:`flatbody_env.equilibria.stationary_from_shape`); unstable,
+non-existent and unreachable shapes (below) are re-drawn.
 
 Reachability. Every control leaves p_θ conserved (ṗ_θ = 0, eq. (46) of [1]: a torque acts on s,
 the dilatation force on p_ϱ), so the initial state gets the target's p_θ. Without torque the
 Casimir |s|² is conserved too, so for ``control="dilatation"`` (and ``"none"``) the initial
 spin is drawn on the sphere |s| = |s3*|; with torque |s| is free.
+
+Reachable within the episode. The in-plane shape (λ, μ, p_λ, p_μ) is reached only through s3
+(τ3), and one of its two oscillation modes only weakly: linearised about the target, optimal
+linear feedback (LQR, equally weighted errors) settles that mode no faster than the target's
+settling rate r however cheap the control (:func:`flatbody_env.controllability.settling_rate`, the
+slowest pole of the cheap-control LQR, a limit that more gain does not raise; the LQR of
+``agents`` settles at 1.01–1.2 r). r depends on the shape alone (not on the sign of (s3, p_θ)):
+it falls steeply away from the edge of existence of the family (λ*μ* → 1 for V3). Measured for
+the default body over 200 targets of the earlier ranges λ* ∈ [1.25, 1.7], λ*/μ* ∈ [1.3, 2]: r from
+0.006 to 0.27 s⁻¹, median 0.056 — an error in the slow mode shrinks by e^(−0.056·20) ≈ 0.33 over a
+20 s episode, while the start is 0.2–0.35 away and success needs 0.05: most of those targets were
+out of reach (the LQR controller reached 40 % of them). Rule: a target is sampled only if
+r ≥ :attr:`min_settling_rate` (0.15 s⁻¹ by default), so that over the registered episode
+(T = 20 s) the slowest mode shrinks under such feedback by e^(−r T) ≤ e^(−3) ≈ 1/20 — from the largest
+initial distance ≈ 0.35 to ≈ 0.017, three times inside the tolerance (the bare requirement
+r T ≥ ln(0.35/0.05) would be r ≥ 0.097 s⁻¹). The default ranges λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5]
+contain the fast shapes near the edge of existence: of 400 draws, 264 are existing and stable and
+81 of those pass (r ≥ 0.15). Measured: the LQR controller about the target (``agents``) reaches the
+tolerance in 100 of 100 seeded episodes (largest final distance 0.019); with the filter at 0.1 it
+still reaches all (largest 0.045). The filter applies where the controls stabilise targets at
+linear order (``"torque+dilatation"``); with torque only ϱ, and with dilatation only the shape, is
+not linearly controllable (r = 0 for every target), so for those modes it is not applied.
+``min_settling_rate=0`` switches it off.
 
 Reward terms (each ≤ 0; their sum is the reward; each weight is a keyword)
 --------------------------------------------------------------------------
@@ -48,12 +71,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .body import Body
+from .controllability import settling_rate, target_state
 from .equilibria import StationaryEllipse, stationary_from_shape
 from .state import STATE_SIZE
 
 CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
 REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
 TARGET_NAMES = ("lambda", "mu", "rho", "s3")
+DEFAULT_LIMITS = (0.5, 0.5, 0.5, 1.0)
+"""(τ1, τ2, τ3, f_ϱ) limits of :class:`~flatbody_env.env.FlatBodyEnv`'s defaults (torque_limit, force_limit)."""
 
 
 def control_mask(control: str) -> np.ndarray:
@@ -76,15 +102,17 @@ class ReachStationaryEllipse:
     w_action: float = 0.05
     failure_penalty: float = 10.0
     success_tolerance: float = 0.05
-    target_lambda: tuple[float, float] = (1.25, 1.7)
+    target_lambda: tuple[float, float] = (1.3, 2.0)
     """Range of the target λ*."""
-    target_aspect: tuple[float, float] = (1.3, 2.0)
+    target_aspect: tuple[float, float] = (1.5, 3.5)
     """Range of λ*/μ*."""
     initial_noise: float = 0.15
     """Relative size of the initial offset from the target."""
+    min_settling_rate: float = 0.15
+    """Reachability filter: least :func:`~flatbody_env.controllability.settling_rate` (s⁻¹) of a sampled target."""
 
     def __post_init__(self) -> None:
-        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise"):
+        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise", "min_settling_rate"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"{name}: must be a finite number >= 0, got {value!r}")
@@ -96,9 +124,23 @@ class ReachStationaryEllipse:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
 
     # --- targets --------------------------------------------------------------------------------
-    def sample_target(self, rng: np.random.Generator, body: Body) -> StationaryEllipse:
-        """A stable stationary ellipse of the circulation family (module docstring)."""
-        for _ in range(200):
+    def reachable(self, target: StationaryEllipse, body: Body, limits=DEFAULT_LIMITS, control: str = "torque+dilatation") -> bool:
+        """Whether ``target`` passes the reachability filter (module docstring, "Reachability").
+
+        True when the controls settle it at a rate ≥ :attr:`min_settling_rate`; also True for
+        every target when the controls cannot stabilise any target at linear order (``control``
+        without τ3 or without f_ϱ: the filter does not apply) or when the filter is off (0).
+        """
+        mask = control_mask(control)
+        if self.min_settling_rate == 0 or not (mask[2] and mask[3]):
+            return True
+        y = target_state(target.lam, target.mu, target.rho, target.s3, target.p_theta)
+        return settling_rate(body, y, limits, mask) >= self.min_settling_rate
+
+    def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
+                      control: str = "torque+dilatation") -> StationaryEllipse:
+        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring)."""
+        for _ in range(500):
             lam = rng.uniform(*self.target_lambda)
             mu = lam / rng.uniform(*self.target_aspect)
             sign = 1.0 if rng.random() < 0.5 else -1.0
@@ -106,10 +148,11 @@ class ReachStationaryEllipse:
                 target = stationary_from_shape(body, lam, mu, branch="circulation", sign=sign)
             except ValueError:
                 continue
-            if target.stable:
+            if target.stable and self.reachable(target, body, limits, control):
                 return target
         raise ValueError(
-            "target_lambda/target_aspect: no stable stationary ellipse found for this body in the target ranges"
+            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
+            "found for this body in the target ranges"
         )
 
     def target_from(self, spec: Mapping[str, float] | StationaryEllipse, body: Body) -> StationaryEllipse:
