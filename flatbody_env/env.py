@@ -18,7 +18,7 @@ from gymnasium import spaces
 
 from .body import Body, default_body
 from .equilibria import StationaryEllipse
-from .env_kernels import CFG_SIZE, post_step
+from .env_kernels import CFG_SIZE, domain_code, post_step
 from .hamiltonian import hamiltonian
 from .integrators import Tolerances, get_method, make_stepper
 from .scene import SceneError, scene_from_dict
@@ -370,22 +370,23 @@ class FlatBodyEnv(gym.Env):
 
     # --- helpers -----------------------------------------------------------------------------------------
     def _left_domain(self, y: np.ndarray) -> str | None:
-        if not np.all(np.isfinite(y)):
+        """None inside the documented domain, else what left it (the test itself is
+        :func:`flatbody_env.env_kernels.domain_code`, shared with the compiled path)."""
+        code = domain_code(y, self._cfg)
+        if code == 0:
+            return None
+        if code == 1:
             return "non-finite state"
         lo, hi = self.stretch_bounds
-        for i, name in ((7, "lambda"), (8, "mu")):
-            if not lo <= y[i] <= hi:
-                return f"{name} = {y[i]:.4g} outside [{lo:g}, {hi:g}]"
-        rlo, rhi = self.rho_bounds
-        if not rlo <= y[9] <= rhi:
-            return f"rho = {y[9]:.4g} outside [{rlo:g}, {rhi:g}]"
-        big = np.abs(y[:7]) > self.momentum_bound
-        if big.any():
-            k = int(np.argmax(big))
+        if code in (2, 3):
+            name, k = ("lambda", 7) if code == 2 else ("mu", 8)
+            return f"{name} = {y[k]:.4g} outside [{lo:g}, {hi:g}]"
+        if code == 4:
+            return f"rho = {y[9]:.4g} outside [{self.rho_bounds[0]:g}, {self.rho_bounds[1]:g}]"
+        if code == 5:
+            k = int(np.argmax(np.abs(y[:7]) > self.momentum_bound))
             return f"{STATE_NAMES[k]} = {y[k]:.4g} beyond the momentum bound {self.momentum_bound:g}"
-        if self._chart == "two-polar" and abs(y[7] - y[8]) < self.gap_min * (y[7] + y[8]):
-            return f"|lambda - mu|/(lambda + mu) < gap_min = {self.gap_min:g} (two-polar chart singular at lambda = mu)"
-        return None
+        return f"|lambda - mu|/(lambda + mu) < gap_min = {self.gap_min:g} (two-polar chart singular at lambda = mu)"
 
     def _observation(self) -> np.ndarray:
         y = self._y
