@@ -60,11 +60,9 @@ class FlatBodySB3VecEnv(VecEnv):
             }
             if dones[i]:
                 d["terminal_observation"] = obs[i].copy()
-                v._reset_one(i, None)
+                obs[i], _ = v._reset_one(i, None)  # SAME_STEP: the reset observation replaces it
             infos.append(d)
-        if dones.any():
-            v._autoreset[:] = False
-            obs = v._observations()
+        v._autoreset[:] = False
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:

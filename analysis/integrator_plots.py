@@ -39,6 +39,15 @@ def _plt():
     return plt
 
 
+def _save(plt, fig, png_path) -> Path:
+    """Write the figure as PNG (creating the folder) and close it."""
+    png_path = Path(png_path)
+    png_path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    return png_path
+
+
 def plot_work_precision(csv_path, png_path, references_json=None) -> Path:
     plt = _plt()
     rows = read_csv(csv_path)
@@ -83,11 +92,7 @@ def plot_work_precision(csv_path, png_path, references_json=None) -> Path:
     fig.suptitle("Work-precision: x = error vs reference (grey: below the reference's agreement floor), "
                  "x at 1 = failed run", fontsize=10)
     fig.tight_layout(rect=(0, 0.06, 1, 0.96))
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=110)
-    plt.close(fig)
-    return png_path
+    return _save(plt, fig, png_path)
 
 
 def plot_failure_study(csv_path, png_path) -> Path:
@@ -134,11 +139,7 @@ def plot_failure_study(csv_path, png_path) -> Path:
     fig.legend(loc="lower center", ncol=min(8, len(methods)), fontsize=8, frameon=False)
     fig.suptitle("Where methods fail: adaptive rtol 1e-10, fixed step h = 0.01 (harder to the right)", fontsize=10)
     fig.tight_layout(rect=(0, 0.06, 1, 0.96))
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=110)
-    plt.close(fig)
-    return png_path
+    return _save(plt, fig, png_path)
 
 
 def plot_bench(json_path, png_path) -> Path:
@@ -169,11 +170,7 @@ def plot_bench(json_path, png_path) -> Path:
     axes[2].set_title("one short step dt=0.05 [µs]", fontsize=9)
     axes[2].tick_params(axis="y", labelsize=7)
     fig.tight_layout()
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=110)
-    plt.close(fig)
-    return png_path
+    return _save(plt, fig, png_path)
 
 
 __all__ = ["plot_bench", "plot_failure_study", "plot_work_precision"]

@@ -23,7 +23,6 @@ from gymnasium.vector.utils import batch_space
 
 from . import env_kernels
 from .env import FlatBodyEnv
-from .hamiltonian import hamiltonian
 from .integrators import make_batch_stepper
 from .registration import MAX_EPISODE_STEPS
 from .task import REWARD_TERMS, target_vector
@@ -96,26 +95,23 @@ class FlatBodyVectorEnv(VectorEnv):
         return self._Ys.T
 
     # --- helpers ---------------------------------------------------------------------------------------
-    def _reset_one(self, i: int, options: dict[str, Any] | None) -> None:
+    def _reset_one(self, i: int, options: dict[str, Any] | None):
+        """Reset body i exactly as a single env would; returns that env's (obs, info)."""
         p = self._proto
         p._np_random = self._rngs[i]
-        p.reset(options=options)
+        obs, info = p.reset(options=options)
         self._rngs[i] = p.np_random
         self._Ys[:, i] = p._y
         self._targets[i] = p._target
         self._T[i] = target_vector(p._target)
         self._steps[i] = 0
+        return obs, info
 
-    def _observations(self) -> np.ndarray:
-        Y = self._Y
-        return np.concatenate([Y[:, :10], np.sin(Y[:, 10:11]), np.cos(Y[:, 10:11]), self._T], axis=1).astype(np.float32)
-
-    def _infos(self, terms, sc, failures, lefts) -> dict[str, Any]:
-        bad = np.array([bool(f) or bool(l) for f, l in zip(failures, lefts)])
+    def _infos(self, terms, sc, failures, lefts, ended) -> dict[str, Any]:
         info: dict[str, Any] = {
             "t": self._steps * self._proto.dt,
             "distance": sc[0].copy(),
-            "is_success": (sc[0] <= self.task.success_tolerance) & ~bad,
+            "is_success": (sc[0] <= self.task.success_tolerance) & ~ended,
             "energy": sc[1].copy(),
             "casimir": sc[2].copy(),
             "p_theta": self._Ys[3].copy(),
@@ -126,13 +122,6 @@ class FlatBodyVectorEnv(VectorEnv):
             info["reward_terms"] = terms
         return info
 
-    def _score_current(self) -> np.ndarray:
-        """distance, energy, |s|² of the current states (for reset infos)."""
-        status = np.zeros(self.num_envs, dtype=np.int64)
-        self._post_batch(self._Ys, self._Ys, status, self._A * 0.0, self._A.shape[1], self._T, self._proto._cfg, self._proto._P,
-                         self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED, *self._work)
-        return self._SC.copy()
-
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         if seed is not None:
@@ -140,12 +129,14 @@ class FlatBodyVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed: expected {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        obs = np.empty((self.num_envs, 16), dtype=np.float32)
+        sc = np.zeros((4, self.num_envs))
         for i in range(self.num_envs):
-            self._reset_one(i, options)
+            obs[i], info = self._reset_one(i, options)
+            sc[0, i], sc[1, i], sc[2, i] = info["distance"], info["energy"], info["casimir"]
         self._autoreset[:] = False
         blank = [""] * self.num_envs
-        sc = self._score_current()
-        return self._observations(), self._infos(None, sc, blank, blank)
+        return obs, self._infos(None, sc, blank, blank, np.zeros(self.num_envs, dtype=bool))
 
     def step(self, actions):
         A = np.asarray(actions, dtype=np.float64).reshape((self.num_envs,) + self.single_action_space.shape)
@@ -187,17 +178,13 @@ class FlatBodyVectorEnv(VectorEnv):
         terms = dict(zip(REWARD_TERMS, self._TERMS.copy()))
         sc = self._SC.copy()
         for i in np.flatnonzero(resetting):
-            self._reset_one(i, None)
             rewards[i] = 0.0
             for v in terms.values():
                 v[i] = 0.0
-            obs[i] = self._observations()[i]
-            y = self._Ys[:, i]
-            sc[0, i] = self.task.distance(y, self.body, self._T[i])
-            sc[2, i] = y[0] ** 2 + y[1] ** 2 + y[2] ** 2
-            sc[1, i] = hamiltonian(y, self.body)
+            obs[i], info = self._reset_one(i, None)
+            sc[0, i], sc[1, i], sc[2, i] = info["distance"], info["energy"], info["casimir"]
         self._autoreset = terminated | truncated
-        return obs, rewards, terminated, truncated, self._infos(terms, sc, failures, lefts)
+        return obs, rewards, terminated, truncated, self._infos(terms, sc, failures, lefts, ended)
 
     def close_extras(self, **kwargs: Any) -> None:
         self._proto.close()
