@@ -3,7 +3,7 @@
 The shipped agent steers the body from a seeded off-equilibrium state onto a stable stationary
 ellipse (``FlatBody-v0``, default task) for one 400-step episode; the command prints the target,
 the distance over time and whether the episode ended on the target, and writes a rerun recording
-(through :func:`flatbody_env.recording.record_arrays`, when that module is present).
+(through :func:`flatbody_env.recording.writer.record_arrays`, when that module is present).
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
         "",
         f"{'t':>7} {'distance':>9} {'lambda':>8} {'mu':>8} {'rho':>8} {'s3':>8} {'|(w1,w2)|':>9} {'energy':>9}",
     ]
-    from flatbody_env.task import ReachStationaryEllipse
+    from flatbody_env.env.task import ReachStationaryEllipse
 
     w1, w2 = ReachStationaryEllipse.omega12(y, ep["body"])
     for k in np.unique(np.linspace(0, t.size - 1, rows).round().astype(int)):
@@ -94,8 +94,8 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
 
 
 def record_episode(ep: dict[str, Any], out: str | Path, *, title: str) -> Path:
-    """Write a :func:`rollout` episode to a rerun recording (``flatbody_env.recording``)."""
-    from flatbody_env import recording
+    """Write a :func:`rollout` episode to a rerun recording (``flatbody_env.recording.writer``)."""
+    from flatbody_env.recording import writer as recording
 
     k = ep["actions"].shape[1]
     return recording.record_arrays(
@@ -111,7 +111,7 @@ def record_episode(ep: dict[str, Any], out: str | Path, *, title: str) -> Path:
 
 def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd") -> int:
     """Run the demo; returns the exit code (0 also when the agent misses: the summary says so)."""
-    from .evaluate import Agent
+    from agents.evaluate import Agent
 
     agent = Agent(model)
     ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs)

@@ -1,7 +1,7 @@
 """Evaluate agents and baselines on ``FlatBody-v0`` over seeded episodes.
 
 Episode i is reset with seed ``seed + i`` — the same target and initial state for every policy
-(the batched :class:`~flatbody_env.vector_env.FlatBodyVectorEnv` reproduces single-env resets
+(the batched :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` reproduces single-env resets
 seed for seed). Per episode:
 
 * ``success``: ``info["is_success"]`` at the end of the episode (distance ≤ the task tolerance
@@ -87,7 +87,7 @@ class Agent:
         self.residual_gate = float(hp.get("residual_gate", 0.0))
         self._base = None
         if self.residual == "heuristic":
-            from .heuristic import ResidualAction
+            from agents.heuristic import ResidualAction
 
             self._base = ResidualAction(self.env_kwargs, self.residual_scale, self.residual_gate,
                                         str(hp.get("residual_mode", "additive")))
@@ -110,7 +110,7 @@ def random_policy(action_dim: int, seed: int) -> Policy:
 
 
 def heuristic_policy(env, kind: str = "heuristic") -> Policy:
-    from .heuristic import HeuristicController, PassivityController
+    from agents.heuristic import HeuristicController, PassivityController
 
     cls = HeuristicController if kind == "heuristic" else PassivityController
     ctl = cls(env.body, env._proto.control, env._proto.limits)
@@ -123,8 +123,8 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
 
     ``policy`` is a batch policy or a baseline name (:data:`BASELINES`).
     """
-    from flatbody_env.registration import MAX_EPISODE_STEPS
-    from flatbody_env.vector_env import FlatBodyVectorEnv
+    from flatbody_env.env.registration import MAX_EPISODE_STEPS
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
     if not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes: must be an integer >= 1, got {episodes!r}")

@@ -2,7 +2,7 @@
 baseline) and a passivity-based damping law (:class:`PassivityController`, for comparison).
 
 Dynamics both rely on (eqs. (44)–(49) of [1], spin bracket per NOTES E3/E4 of [2]; the controls
-enter as in :mod:`flatbody_env.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
+enter as in :mod:`flatbody_env.physics.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
 
 .. math::
 
@@ -17,13 +17,13 @@ LQR (:class:`HeuristicController`)
 ---------------------------------
 The target stationary ellipse x* (s1 = s2 = 0, p = 0, eqs. (50)–(54)) is an equilibrium of the
 reduced system. Linearising eqs. (44)–(49) there (central differences of
-:func:`flatbody_env.equations.rhs`, :func:`flatbody_env.controllability.linearize`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
+:func:`flatbody_env.physics.equations.rhs`, :func:`flatbody_env.physics.controllability.linearize`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
 f = f_max a₄). The shape block tells what the controls can do: at linear order the thickness
 force moves only (ϱ, p_ϱ) and τ1, τ2 only (s1, s2); the in-plane shape (λ, μ, p_λ, p_μ) — two
 oscillation modes of the effective potential W (NOTES §6) — is reached *only through s3*: τ3
 changes s3, and s3 enters the centrifugal forces −∂𝒯/∂(λ, μ) through σ± = s3 ± p_θ. One of
 those modes is weakly controllable: its closed-loop pole saturates at a finite value whatever the
-weights (:func:`flatbody_env.controllability.settling_rate`), which sets how fast any linear
+weights (:func:`flatbody_env.physics.controllability.settling_rate`), which sets how fast any linear
 controller can settle the shape; the task samples only targets where that rate is ≥ 0.15 s⁻¹.
 The gain K solves the continuous algebraic Riccati equation for weights Q (on x) and R (on a);
 the action is a = clip(−K (x − x*), −1, 1). K is recomputed when the target changes.
@@ -63,7 +63,7 @@ with
 
 Each term is saturated at the action limits (a saturated damping term still has the sign that
 makes L̇ ≤ 0). The velocities come from the inverse Legendre map
-(:func:`flatbody_env.hamiltonian.kinetic_kernel`).
+(:func:`flatbody_env.physics.hamiltonian.kinetic_kernel`).
 
 References
 ----------
@@ -78,10 +78,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flatbody_env.body import Body
-from flatbody_env.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
-from flatbody_env.hamiltonian import kinetic_kernel
-from flatbody_env.task import control_mask
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
+from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.env.task import control_mask
 
 
 def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -262,7 +262,7 @@ class ResidualAction:
     """
 
     def __init__(self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive") -> None:
-        from flatbody_env.env import FlatBodyEnv
+        from flatbody_env.env.env import FlatBodyEnv
 
         if not (math.isfinite(scale) and scale >= 0):
             raise ValueError(f"residual_scale: must be a finite number >= 0, got {scale!r}")

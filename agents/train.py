@@ -112,18 +112,18 @@ def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | Non
     """
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from .vec_env import FlatBodySB3VecEnv
+    from agents.vec_env import FlatBodySB3VecEnv
 
     venv = FlatBodySB3VecEnv(n_envs, seed=seed, **(env_kwargs or {}))
     if residual:
         if residual != "heuristic":
             raise ValueError(f"residual: must be 'heuristic' or empty, got {residual!r}")
-        from .heuristic import residual_vec_env
+        from agents.heuristic import residual_vec_env
 
         venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode)
     venv = VecMonitor(venv)
     if success_bonus or precision_bonus:
-        from flatbody_env.env import FlatBodyEnv
+        from flatbody_env.env.env import FlatBodyEnv
 
         tol = FlatBodyEnv(**(env_kwargs or {})).task.success_tolerance
         venv = _success_bonus(venv, float(success_bonus), float(precision_bonus), tol)

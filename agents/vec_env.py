@@ -1,4 +1,4 @@
-"""An SB3 ``VecEnv`` over :class:`~flatbody_env.vector_env.FlatBodyVectorEnv`.
+"""An SB3 ``VecEnv`` over :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv`.
 
 Stable-Baselines3 2.x cannot consume a ``gymnasium.vector.VectorEnv``: it expects SAME_STEP
 autoreset (a finished sub-environment is reset inside the same ``step``, its last observation
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from flatbody_env.vector_env import FlatBodyVectorEnv
+from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
 
 class FlatBodySB3VecEnv(VecEnv):

@@ -1,7 +1,7 @@
 """Analysis of the flat body: stationary ellipses, stability, invariants (uses physics + integrators only)."""
 
 # Stationary ellipses, stability, families, invariants (issue 5): exported lazily (PEP 562) so that
-# importing ``analysis.commands`` for ``flatbody --help`` does not load scipy.optimize.
+# importing ``flatbody_env.cli.analysis`` for ``flatbody --help`` does not load scipy.optimize.
 _LAZY = {
     "families": ("Family", "FamilyEvent", "FamilyPoint", "follow_family", "shape_stability_grid", "stability_grid"),
     "invariants": ("DriftRow", "InvariantReport", "invariants_along", "load_trajectory"),

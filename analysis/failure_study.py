@@ -26,13 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flatbody_env.hamiltonian import hamiltonian, hamiltonian_series
+from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.scene import Scene, load_scene
 from flatbody_env.simulation import FIXED_STEP_ENERGY_TOL
-from flatbody_env.state import pack
+from flatbody_env.physics.state import pack
 
-from .work_precision import timed_run
+from analysis.work_precision import timed_run
 
 STUDIES = ("gap", "rho", "horizon")
 DEFAULT_METHODS = (

@@ -34,18 +34,11 @@ from typing import Any
 import numpy as np
 from scipy.optimize import root
 
-from flatbody_env.body import Body, Inertia
-from flatbody_env.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
+from flatbody_env.physics.body import Body, Inertia
+from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
 
-from .stability import analyse_stability, stability_of_shape
-from .stationary import (
-    DEFAULT_TOL,
-    SearchBox,
-    build_ellipse,
-    check_isotropic,
-    equilibrium_equations,
-    stationary_ellipses,
-)
+from analysis.stability import analyse_stability, stability_of_shape
+from analysis.stationary import DEFAULT_TOL, SearchBox, build_ellipse, check_isotropic, equilibrium_equations, stationary_ellipses
 
 SPIN_PARAMETERS = ("s3", "p_theta")
 BODY_PARAMETERS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")

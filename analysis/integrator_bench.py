@@ -31,13 +31,13 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from flatbody_env.hamiltonian import hamiltonian, hamiltonian_series
+from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.scene import load_scene
-from flatbody_env.state import pack
+from flatbody_env.physics.state import pack
 
-from .failure_study import gap_scene
-from .work_precision import timed_run
+from analysis.failure_study import gap_scene
+from analysis.work_precision import timed_run
 
 TARGET_REGULAR = 1e-9
 TARGET_CLOSE = 1e-8
@@ -175,7 +175,7 @@ def _long(bar, t_end):
 
 def _short_step(bar, n_batch=1024):
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper, kernel_params
-    from flatbody_env.regular import regular_from_paper
+    from flatbody_env.physics.regular import regular_from_paper
 
     sc = load_scene("default")
     y = pack(sc.state)

@@ -14,7 +14,7 @@ import json
 import math
 from pathlib import Path
 
-from .work_precision import read_csv
+from analysis.work_precision import read_csv
 
 _STYLE = {
     "RK23": ("#bbbbbb", "v"), "RK45": ("#999999", "^"), "DOP853": ("#000000", "o"), "Radau": ("#8c564b", "s"),

@@ -36,12 +36,12 @@ from typing import Any
 
 import numpy as np
 
-from flatbody_env.body import Body
-from flatbody_env.conserved import casimir, laboratory_spin
-from flatbody_env.hamiltonian import hamiltonian_series, velocities_from_momenta
-from flatbody_env.kinematics import cauchy_rate, cauchy_tensor, deformation_invariants, green_rate, green_tensor
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.invariants import casimir, laboratory_spin
+from flatbody_env.physics.hamiltonian import hamiltonian_series, velocities_from_momenta
+from flatbody_env.physics.kinematics import cauchy_rate, cauchy_tensor, deformation_invariants, green_rate, green_tensor
 from flatbody_env.simulation import Trajectory
-from flatbody_env.state import STATE_NAMES
+from flatbody_env.physics.state import STATE_NAMES
 
 CONSERVED = ("energy", "casimir", "p_theta", "lab_spin")
 """Quantities conserved along every uncontrolled isotropic motion (NOTES §4)."""

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .families import read_family_csv
+from analysis.families import read_family_csv
 
 COLOURS = {"elliptic": "#1f77b4", "hyperbolic": "#d62728", "degenerate": "#7f7f7f"}
 LABELS = {

@@ -3,7 +3,7 @@
 For J1 = J2 the angle θ is cyclic (ṗ_θ = 0, eq. (46) of [1]), so a stationary ellipse is an
 equilibrium of the *reduced* system x = (s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ, λ, μ, ϱ) — the
 state without θ (:data:`REDUCED_NAMES`). :func:`reduced_jacobian` differentiates the package's
-right-hand side :func:`flatbody_env.equations.rhs` numerically: central differences are exact
+right-hand side :func:`flatbody_env.physics.equations.rhs` numerically: central differences are exact
 for the momenta (the equations are quadratic in them) and Richardson-extrapolated (fourth order)
 for λ, μ, ϱ; the error is ~1e-11 relative.
 
@@ -41,20 +41,12 @@ from typing import Any
 import numpy as np
 from scipy.linalg import null_space
 
-from flatbody_env.body import Body
-from flatbody_env.equations import rhs
-from flatbody_env.hamiltonian import kinetic_kernel
-from flatbody_env.state import STATE_NAMES
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.equations import rhs
+from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics.state import STATE_NAMES
 
-from .stationary import (
-    DEFAULT_TOL,
-    SearchBox,
-    StationaryEllipse,
-    check_isotropic,
-    spins_for_shape,
-    stationary_ellipses,
-    steady_rotations,
-)
+from analysis.stationary import DEFAULT_TOL, SearchBox, StationaryEllipse, check_isotropic, spins_for_shape, stationary_ellipses, steady_rotations
 
 REDUCED_NAMES: tuple[str, ...] = STATE_NAMES[:10]
 """The reduced state (θ is cyclic for J1 = J2 and dropped)."""
@@ -176,7 +168,7 @@ def _derivative(f, x: np.ndarray, i: int) -> np.ndarray:
 def reduced_jacobian(body: Body, y: np.ndarray) -> np.ndarray:
     """∂ẋ/∂x of the reduced system (θ dropped) at the packed state ``y`` (11,), shape (10, 10).
 
-    Order :data:`REDUCED_NAMES`. Differentiates :func:`flatbody_env.equations.rhs` (eqs. (44)–(49)
+    Order :data:`REDUCED_NAMES`. Differentiates :func:`flatbody_env.physics.equations.rhs` (eqs. (44)–(49)
     of [1] with the corrected bracket, NOTES E3–E4).
     """
     check_isotropic(body)

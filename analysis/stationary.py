@@ -16,10 +16,10 @@ i.e. stationarity of the amended potential W = σ₊²/(4Ju²) + σ₋²/(4Jv²)
    \\dot\\theta = \\frac{\\sigma_+}{2Ju^2} - \\frac{\\sigma_-}{2Jv^2}.
 
 V1 has the closed form (λ+μ)⁴ = σ₊²/(kJ), (λ−μ)⁴ = σ₋²/(kJ) (NOTES §6), used by
-:func:`v1_closed_form`; every other potential (V2, V3, :class:`~flatbody_env.potentials.CustomPotential`)
+:func:`v1_closed_form`; every other potential (V2, V3, :class:`~flatbody_env.physics.potentials.CustomPotential`)
 is solved numerically by :func:`stationary_ellipses`: sign changes of the equations on a
 logarithmic grid over a search box seed a Newton (MINPACK ``hybr``) solve; each root is then
-verified on the package's equations of motion (:func:`flatbody_env.equations.rhs`): the
+verified on the package's equations of motion (:func:`flatbody_env.physics.equations.rhs`): the
 *residual* of a solution is max |dy/dt| over the ten reduced components (θ excluded, it is
 cyclic), and only roots with residual ≤ ``tol`` (default 1e-10) are returned.
 
@@ -49,12 +49,12 @@ from typing import Any
 import numpy as np
 from scipy.optimize import root
 
-from flatbody_env.body import Body
-from flatbody_env.equilibria import squared_sigmas
-from flatbody_env.equations import rhs
-from flatbody_env.hamiltonian import hamiltonian, velocities_from_momenta
-from flatbody_env.potentials import KIND_CUSTOM, V1, V2, potential_kernel
-from flatbody_env.state import STATE_NAMES
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.equilibria import squared_sigmas
+from flatbody_env.physics.equations import rhs
+from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
+from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, potential_kernel
+from flatbody_env.physics.state import STATE_NAMES
 
 DEFAULT_TOL = 1e-10
 """Largest accepted residual max |dy/dt| (θ excluded) of a returned solution."""
@@ -103,7 +103,7 @@ class StationaryEllipse:
     branch: str
     """``"N"`` (s1 = s2 = 0, eqs. (52)–(54)), ``"A1"`` / ``"A2"`` (rotation about material axis 1 / 2)."""
     state: dict[str, float]
-    """The full state (the eleven :data:`~flatbody_env.state.STATE_NAMES`), θ = 0."""
+    """The full state (the eleven :data:`~flatbody_env.physics.state.STATE_NAMES`), θ = 0."""
     omega: tuple[float, float, float]
     """Co-moving angular velocity (ω1, ω2, ω3)."""
     theta_dot: float
@@ -111,7 +111,7 @@ class StationaryEllipse:
     energy: float
     """H (eq. (41) of [1])."""
     residual: float
-    """max |dy/dt| over the ten reduced components (θ excluded), from :func:`flatbody_env.equations.rhs`."""
+    """max |dy/dt| over the ten reduced components (θ excluded), from :func:`flatbody_env.physics.equations.rhs`."""
     method: str = "numeric"
     """``"closed-form"`` (V1), ``"numeric"`` (root finding) or ``"inverse"`` (from a shape)."""
 
@@ -277,7 +277,7 @@ def make_state(branch: str, params: tuple[float, float], lam: float, mu: float, 
 
 
 def residual_of(body: Body, y: np.ndarray) -> float:
-    """max |dy/dt| over the ten reduced components (θ excluded) from :func:`flatbody_env.equations.rhs`."""
+    """max |dy/dt| over the ten reduced components (θ excluded) from :func:`flatbody_env.physics.equations.rhs`."""
     f = rhs(0.0, np.asarray(y, float), None, body)
     return float(np.max(np.abs(f[:10])))
 

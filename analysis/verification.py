@@ -23,15 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flatbody_env.body import Body
-from flatbody_env.conserved import laboratory_spin
-from flatbody_env.hamiltonian import velocities_from_momenta
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.invariants import laboratory_spin
+from flatbody_env.physics.hamiltonian import velocities_from_momenta
 from flatbody_env.scene import Scene
 from flatbody_env.simulation import Trajectory, simulate
-from flatbody_env.state import STATE_NAMES
+from flatbody_env.physics.state import STATE_NAMES
 
-from .stability import StabilityResult
-from .stationary import StationaryEllipse, check_isotropic
+from analysis.stability import StabilityResult
+from analysis.stationary import StationaryEllipse, check_isotropic
 
 STATIONARY_DRIFT_TOL = 1e-8
 GROWTH_REL_TOL = 0.10

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.hamiltonian import hamiltonian, hamiltonian_series
+from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.scene import Scene, load_scene
-from flatbody_env.state import pack
+from flatbody_env.physics.state import pack
 
 SCENES = ("regular", "close-approach", "small-rho-bounce", "long-horizon")
 ENERGY_SCENES = ("long-horizon",)

@@ -1,45 +1,78 @@
 """flatbody_env — a flat affinely-rigid body with thickness: physics, simulation, environment.
 
-The model is the paper's (``shared/paper/000_b5acfe912a09eb12.txt``, sections 3–3.4) with the
-corrections of ``shared/physics/NOTES.md``. Scripting entry points::
+Scripting entry points (importing them loads numpy and scipy only)::
 
     from flatbody_env import load_scene, simulate
     traj = simulate(load_scene("default"), t_end=20.0)
+
+The wings: :mod:`flatbody_env.physics` (the model), :mod:`flatbody_env.integrators`,
+:mod:`flatbody_env.env` (``FlatBody-v0``), :mod:`flatbody_env.recording` (rerun files) and
+:mod:`flatbody_env.cli` (the ``flatbody`` command). ``FlatBody-v0`` is registered with Gymnasium
+as soon as both this package and ``gymnasium`` are imported, in either order, without this
+package importing gymnasium itself.
 """
 
 from __future__ import annotations
 
-from .body import Body, Inertia, default_body
-from .integrators import IntegrationError, available_methods, get_method
-from .potentials import CustomPotential, ThicknessPotential, V1, V2, V3
-from .scene import Scene, SceneError, builtin_scenes, load_scene
-from .simulation import Trajectory, simulate
-from .state import STATE_NAMES, pack, unpack
+import sys
+
+from flatbody_env.integrators import IntegrationError, available_methods, get_method
+from flatbody_env.physics.body import Body, Inertia, default_body
+from flatbody_env.physics.potentials import CustomPotential, ThicknessPotential, V1, V2, V3
+from flatbody_env.physics.state import STATE_NAMES, pack, unpack
+from flatbody_env.scene import Scene, SceneError, builtin_scenes, load_scene
+from flatbody_env.simulation import Trajectory, simulate
 
 __version__ = "0.1.0"
 
-from .registration import register_envs as _register_envs
 
-_register_envs()
+def _register_when_gymnasium_is_imported() -> None:
+    """Register ``FlatBody-v0`` now if gymnasium is loaded, else right after it is first imported."""
+    if "gymnasium" in sys.modules:
+        import flatbody_env.env  # noqa: F401  (registers on import)
+
+        return
+    import importlib.abc
+    import importlib.machinery
+
+    class _AfterGymnasium(importlib.abc.MetaPathFinder):
+        def find_spec(self, fullname, path, target=None):
+            if fullname != "gymnasium":
+                return None
+            spec = importlib.machinery.PathFinder.find_spec(fullname, path)
+            if spec is None or spec.loader is None:
+                return None
+            exec_module = spec.loader.exec_module
+
+            def exec_then_register(module):
+                exec_module(module)
+                sys.meta_path[:] = [f for f in sys.meta_path if not isinstance(f, _AfterGymnasium)]
+                import flatbody_env.env  # noqa: F401  (registers on import)
+
+            spec.loader.exec_module = exec_then_register
+            return spec
+
+    if not any(type(f).__name__ == "_AfterGymnasium" for f in sys.meta_path):
+        sys.meta_path.insert(0, _AfterGymnasium())
+
+
+_register_when_gymnasium_is_imported()
 
 
 def __getattr__(name: str):
-    """Lazy access to the environment classes (they import gymnasium's spaces)."""
-    if name == "FlatBodyEnv":
-        from .env import FlatBodyEnv
+    """Lazy access to the environment classes (they import gymnasium)."""
+    if name in ("FlatBodyEnv", "FlatBodyVectorEnv"):
+        import flatbody_env.env as env
 
-        return FlatBodyEnv
-    if name == "FlatBodyVectorEnv":
-        from .vector_env import FlatBodyVectorEnv
-
-        return FlatBodyVectorEnv
+        return getattr(env, name)
     raise AttributeError(f"module 'flatbody_env' has no attribute {name!r}")
+
 
 __all__ = [
     "Body",
+    "CustomPotential",
     "FlatBodyEnv",
     "FlatBodyVectorEnv",
-    "CustomPotential",
     "Inertia",
     "IntegrationError",
     "STATE_NAMES",

@@ -30,9 +30,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from .body import SPIN_CONVENTIONS, Body, Inertia
-from .potentials import ThicknessPotential, V1, V2, V3
-from .state import STATE_NAMES, validate_state
+from flatbody_env.physics.body import SPIN_CONVENTIONS, Body, Inertia
+from flatbody_env.physics.potentials import ThicknessPotential, V1, V2, V3
+from flatbody_env.physics.state import STATE_NAMES, validate_state
 
 _TOP_KEYS = {"name", "description", "params", "potential", "thickness", "state", "spin_convention", "t_end"}
 _POTENTIAL_KEYS = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}
@@ -44,7 +44,7 @@ class SceneError(ValueError):
 
 @dataclass(frozen=True, kw_only=True)
 class Scene:
-    """A body and an initial state (paper's variables, :mod:`flatbody_env.state`)."""
+    """A body and an initial state (paper's variables, :mod:`flatbody_env.physics.state`)."""
 
     name: str
     body: Body

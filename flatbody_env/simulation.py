@@ -27,12 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from .body import Body
-from .conserved import casimir, laboratory_spin
-from .hamiltonian import hamiltonian
-from .integrators import IntegrationError, Tolerances, get_method
-from .scene import Scene, SceneError, load_scene
-from .state import STATE_NAMES, pack, unpack
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.invariants import casimir, laboratory_spin
+from flatbody_env.physics.hamiltonian import hamiltonian
+from flatbody_env.integrators import IntegrationError, Tolerances, get_method
+from flatbody_env.scene import Scene, SceneError, load_scene
+from flatbody_env.physics.state import STATE_NAMES, pack, unpack
 
 GAP_MIN = 1e-2
 """Smallest guaranteed |λ − μ| for which ``model="auto"`` keeps the two-polar chart."""
@@ -77,7 +77,7 @@ class Trajectory:
     t : ndarray (n,)
         Times.
     state : dict[str, ndarray (n,)]
-        The eleven state entries (:data:`flatbody_env.state.STATE_NAMES`).
+        The eleven state entries (:data:`flatbody_env.physics.state.STATE_NAMES`).
     energy : ndarray (n,)
         H (eq. (41) of [1]).
     casimir : ndarray (n,)
@@ -283,7 +283,7 @@ def simulate(
 
 
 def _twin(method: str, chart: str) -> str | None:
-    from .integrators import available_methods
+    from flatbody_env.integrators import available_methods
 
     names = {m.name: m for m in available_methods()}
     base = method[: -len("-regular")] if method.endswith("-regular") else method

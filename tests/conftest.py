@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from flatbody_env.body import Body, Inertia
-from flatbody_env.hamiltonian import VELOCITY_NAMES
-from flatbody_env.kinematics import configuration_rate
-from flatbody_env.potentials import CustomPotential, ThicknessPotential, V1, V2, V3
+from flatbody_env.physics.body import Body, Inertia
+from flatbody_env.physics.hamiltonian import VELOCITY_NAMES
+from flatbody_env.physics.kinematics import configuration_rate
+from flatbody_env.physics.potentials import CustomPotential, ThicknessPotential, V1, V2, V3
 
 
 def _custom() -> CustomPotential:

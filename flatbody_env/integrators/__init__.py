@@ -6,22 +6,7 @@
 
 from __future__ import annotations
 
-from .base import (
-    BatchStepResult,
-    CHARTS,
-    IntegrationError,
-    Method,
-    MethodInfo,
-    Solution,
-    Stepper,
-    StepResult,
-    Tolerances,
-    available_methods,
-    get_method,
-    make_batch_stepper,
-    make_stepper,
-    register_method,
-)
+from flatbody_env.integrators.base import BatchStepResult, CHARTS, IntegrationError, Method, MethodInfo, Solution, Stepper, StepResult, Tolerances, available_methods, get_method, make_batch_stepper, make_stepper, register_method
 
 _LOADED = False
 
@@ -32,8 +17,8 @@ def _load_all() -> None:
     if _LOADED:
         return
     _LOADED = True
-    from . import scipy_methods  # noqa: F401
-    from . import compiled_methods  # noqa: F401
+    from flatbody_env.integrators import scipy_methods  # noqa: F401
+    from flatbody_env.integrators import compiled_methods  # noqa: F401
 
 
 __all__ = [

@@ -1,7 +1,7 @@
 """The integrator seam: a method is looked up by name and integrates a body from a paper state.
 
 Every method, whatever its chart or algorithm, takes the paper's packed state (layout in
-:mod:`flatbody_env.state`) and returns the paper's state at the requested times: charts other
+:mod:`flatbody_env.physics.state`) and returns the paper's state at the requested times: charts other
 than the two-polar one convert on the way in and out. Controls are constant over a call
 (``u``, shape (4,)): an environment calls a method once per step.
 
@@ -17,7 +17,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..body import Body
+from flatbody_env.physics.body import Body
 
 CHARTS = ("two-polar", "regular")
 
@@ -107,7 +107,7 @@ def register_method(method: Method) -> Method:
 
 
 def get_method(name: str) -> Method:
-    from . import _load_all
+    from flatbody_env.integrators import _load_all
 
     _load_all()
     if name not in _REGISTRY:
@@ -116,7 +116,7 @@ def get_method(name: str) -> Method:
 
 
 def available_methods() -> list[MethodInfo]:
-    from . import _load_all
+    from flatbody_env.integrators import _load_all
 
     _load_all()
     return [m.info for m in _REGISTRY.values()]

@@ -18,7 +18,7 @@ name                   adaptive  order  chart      algorithm
 Fixed-step methods need ``Tolerances(step=h)`` (``simulate(..., step=h)``, ``--step H``); each
 output interval is cut into ⌈Δt/h⌉ equal steps. Adaptive ``DOP853-numba`` reads rtol/atol and
 steps exactly onto every output time. Compiled methods need a built-in potential (V1, V2, V3):
-a :class:`~flatbody_env.potentials.CustomPotential` runs Python code and is refused with a
+a :class:`~flatbody_env.physics.potentials.CustomPotential` runs Python code and is refused with a
 ValueError (use the scipy methods). They do not integrate R in the two-polar chart
 (``with_rotation=True`` → ValueError; the regular-chart methods return R from the decomposition).
 
@@ -39,10 +39,10 @@ sub-step::
     status = stepper.step(y, u, P, dt, h, rtol, atol, energy_tol, out)         # -> int
     stepper.batch(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)         # in place
 
-* ``y``, ``out``: float64 (n,) with n = 11 (paper state, :mod:`flatbody_env.state`) for two-polar
-  methods and n = 18 (regular state z, :mod:`flatbody_env.regular`) for ``stepper.state ==
-  "regular"``; convert once with :func:`flatbody_env.regular.regular_from_paper` /
-  :func:`~flatbody_env.regular.paper_from_regular`.
+* ``y``, ``out``: float64 (n,) with n = 11 (paper state, :mod:`flatbody_env.physics.state`) for two-polar
+  methods and n = 18 (regular state z, :mod:`flatbody_env.physics.regular`) for ``stepper.state ==
+  "regular"``; convert once with :func:`flatbody_env.physics.regular.regular_from_paper` /
+  :func:`~flatbody_env.physics.regular.paper_from_regular`.
 * ``u`` (4,): controls (τ1, τ2, τ3, f_ϱ), constant over the step; ``P`` (9,): a *writable* float64
   copy of ``Body.kernel_params()`` (:func:`kernel_params`).
 * ``dt``: the env step; ``h``: the largest sub-step (fixed-step methods) or the first step guess
@@ -61,14 +61,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..body import Body
-from ..kinematics import Decomposition
-from ..potentials import V2
-from ..regular import paper_from_regular, regular_from_paper
-from . import rattle_kernels as _rk
-from . import twopolar_kernels as _tk
-from .base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
-from .failure import KINDS, failure_reason, raise_for
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.kinematics import Decomposition
+from flatbody_env.physics.potentials import V2
+from flatbody_env.physics.regular import paper_from_regular, regular_from_paper
+from flatbody_env.integrators import rattle_kernels as _rk
+from flatbody_env.integrators import twopolar_kernels as _tk
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
+from flatbody_env.integrators.failure import KINDS, failure_reason, raise_for
 
 
 def kernel_params(body: Body) -> np.ndarray:
@@ -346,7 +346,7 @@ class CompiledStepper(_EnvBase):
     ``nfev`` is not counted on this path (reported as 0)."""
 
     def __call__(self, y, R, u, dt):
-        from .base import StepResult
+        from flatbody_env.integrators.base import StepResult
 
         y = np.ascontiguousarray(y, dtype=np.float64)
         out = np.empty(11)
@@ -361,7 +361,7 @@ class CompiledBatchStepper(_EnvBase):
     structure-of-arrays layout and runs all bodies in one compiled call."""
 
     def __call__(self, Y, U, dt):
-        from .base import BatchStepResult
+        from flatbody_env.integrators.base import BatchStepResult
 
         Y = np.asarray(Y, dtype=np.float64)
         Ys = np.ascontiguousarray(Y.T)
@@ -414,7 +414,7 @@ def env_stepper(name: str) -> EnvStepper:
 
 def warm_up(names=None) -> None:
     """Compile (or load from the on-disk cache) the kernels of the given methods (default: all)."""
-    from ..body import default_body
+    from flatbody_env.physics.body import default_body
 
     body = default_body()
     P = kernel_params(body)
@@ -428,7 +428,7 @@ def warm_up(names=None) -> None:
         st.step(x, u, P, 0.05, 0.05, 1e-8, 1e-8, np.inf, out)
         X = np.repeat(x[:, None], 2, axis=1)
         st.batch(X, np.zeros((4, 2)), P, 0.05, 0.05, 1e-8, 1e-8, np.inf, np.empty_like(X), np.zeros(2, np.int64))
-    from .base import get_method
+    from flatbody_env.integrators.base import get_method
 
     times = np.array([0.0, 0.1])
     for name in names or [m for m in ENV_METHODS] + ["RATTLE", "RATTLE-kahanli6"]:

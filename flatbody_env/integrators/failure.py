@@ -24,7 +24,7 @@ code   kind                   meaning
 
 from __future__ import annotations
 
-from .base import IntegrationError
+from flatbody_env.integrators.base import IntegrationError
 
 OK = 0
 NON_FINITE = 1

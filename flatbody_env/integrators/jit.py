@@ -1,8 +1,8 @@
 """Compiled copies of the physics layer's scalar kernels (numba, on-disk cache).
 
-The physics layer stays free of numba: :func:`flatbody_env.hamiltonian.kinetic_kernel`,
-:func:`flatbody_env.potentials.potential_kernel`, :func:`flatbody_env.equations.rhs_core` and
-:func:`flatbody_env.equations.rhs_kernel` are plain-float Python functions. numba compiles a
+The physics layer stays free of numba: :func:`flatbody_env.physics.hamiltonian.kinetic_kernel`,
+:func:`flatbody_env.physics.potentials.potential_kernel`, :func:`flatbody_env.physics.equations.rhs_core` and
+:func:`flatbody_env.physics.equations.rhs_kernel` are plain-float Python functions. numba compiles a
 function's calls to globals only when those globals are numba dispatchers themselves, so each
 kernel is copied here with
 
@@ -31,9 +31,9 @@ import types
 
 import numba
 
-from .. import equations as _equations
-from .. import hamiltonian as _hamiltonian
-from .. import potentials as _potentials
+from flatbody_env.physics import equations as _equations
+from flatbody_env.physics import hamiltonian as _hamiltonian
+from flatbody_env.physics import potentials as _potentials
 
 JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 """Options of every compiled function of the integrators (``error_model="numpy"``: x/0 gives

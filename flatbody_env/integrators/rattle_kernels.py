@@ -1,4 +1,4 @@
-"""Compiled RATTLE on the regular φψ formulation (NOTES §5 of [2], :mod:`flatbody_env.regular`).
+"""Compiled RATTLE on the regular φψ formulation (NOTES §5 of [2], :mod:`flatbody_env.physics.regular`).
 
 Configuration q = (φ1, φ2, ψ) ∈ ℝ⁹ (columns of Φ), velocity v = q̇, constant mass
 diag(J1, J1, J1, J2, J2, J2, J3, J3, J3), holonomic Kirchhoff–Love constraints (eq. (21) of [1])
@@ -12,29 +12,29 @@ g1 = ψ·φ1 = 0, g2 = ψ·φ2 = 0 with ∂g1 = (ψ, 0, φ1), ∂g2 = (0, ψ, φ
     G(q_{n+1}) v_{n+1} = 0,
 
 Λ by Newton's method on the two quadratic constraints, μ from a 2×2 linear system (the matrix
-of :func:`flatbody_env.regular.regular_rhs`). RATTLE is symmetric and symplectic (order 2); it
+of :func:`flatbody_env.physics.regular.regular_rhs`). RATTLE is symmetric and symplectic (order 2); it
 conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage composition
 (:data:`~.twopolar_kernels.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
 (:data:`~.twopolar_kernels.KAHAN_LI6`) to order 6; forces are re-used across stages.
 
 Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (NOTES §5):
 F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
-V_ϱ′ comes from :func:`flatbody_env.potentials.potential_kernel` (in-plane kind 0); the invariant
+V_ϱ′ comes from :func:`flatbody_env.physics.potentials.potential_kernel` (in-plane kind 0); the invariant
 gradient (V_tr, V_det) from :func:`invariant_gradient_kernel`, the compiled twin of the potentials'
 ``invariant_gradient`` methods (V1; V2 with c = d; V3 — tested against them). V2 with c ≠ d
 is no function of the invariants (erratum E9) and is refused by the method layer.
 
 Chart following. The paper's state needs the two-polar decomposition Φ = R D U(θ)⁻¹ chosen by
 continuity (NOTES §5). :func:`decompose_kernel` is a compiled twin of
-:func:`flatbody_env.kinematics.decompose` for the Kirchhoff–Love Φ (closed-form 2×2 eigen-
+:func:`flatbody_env.physics.kinematics.decompose` for the Kirchhoff–Love Φ (closed-form 2×2 eigen-
 decomposition of φᵀφ; the four discrete candidates; ``keep_order``). After every step the
 decomposition is continued from the previous one; when the chart frame jumps by more than
-:data:`~flatbody_env.regular.MAX_CHART_JUMP` (near λ = μ it turns by ±π/2 within a tiny time) the
+:data:`~flatbody_env.physics.regular.MAX_CHART_JUMP` (near λ = μ it turns by ±π/2 within a tiny time) the
 step is re-walked on the cubic Hermite interpolant of Φ with adaptive sub-intervals. At output
 times the method layer converts to the paper's state with
-:func:`flatbody_env.regular.paper_from_regular` given that decomposition.
+:func:`flatbody_env.physics.regular.paper_from_regular` given that decomposition.
 
-Environment API (regular state z (18,), layout of :mod:`flatbody_env.regular`)::
+Environment API (regular state z (18,), layout of :mod:`flatbody_env.physics.regular`)::
 
     status = rattle_env_step(z, u, P, dt, h, rtol, atol, energy_tol, out)
     batch_rattle_env_step(Z, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)   # Z, OUT (18, N)
@@ -57,11 +57,11 @@ import math
 import numba
 import numpy as np
 
-from ..potentials import KIND_V1, KIND_V2, KIND_V3
-from ..regular import MAX_CHART_JUMP
-from .failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
-from .jit import JIT_OPTIONS, potential_kernel
-from .twopolar_kernels import SUZUKI4
+from flatbody_env.physics.potentials import KIND_V1, KIND_V2, KIND_V3
+from flatbody_env.physics.regular import MAX_CHART_JUMP
+from flatbody_env.integrators.failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
+from flatbody_env.integrators.jit import JIT_OPTIONS, potential_kernel
+from flatbody_env.integrators.twopolar_kernels import SUZUKI4
 
 njit = numba.njit(**JIT_OPTIONS)
 
@@ -222,7 +222,7 @@ def composed_step(z, h, coeffs, P, f_rho, F, qt, Fn):
 # --------------------------------------------------------------------------------------------- chart
 @njit
 def decompose_kernel(Phi9, ref, keep_order, out):
-    """Compiled twin of :func:`flatbody_env.kinematics.decompose` with a reference.
+    """Compiled twin of :func:`flatbody_env.physics.kinematics.decompose` with a reference.
 
     Phi9: q (9,) = (φ1, φ2, ψ); ref, out (13,) = (R row-major (9), λ, μ, ϱ, θ). The candidate
     nearest ``ref`` (score ‖R − R_ref‖_F + |θ − θ_ref| + |λ − λ_ref| + |μ − μ_ref|) among the

@@ -1,7 +1,7 @@
 """The reference family: scipy ``solve_ivp`` (RK23, RK45, DOP853, Radau, BDF, LSODA) in both charts.
 
-``NAME`` integrates the two-polar equations (eqs. (44)–(49) of [1], :mod:`flatbody_env.equations`);
-``NAME-regular`` integrates the regular matrix formulation (NOTES §5, :mod:`flatbody_env.regular`)
+``NAME`` integrates the two-polar equations (eqs. (44)–(49) of [1], :mod:`flatbody_env.physics.equations`);
+``NAME-regular`` integrates the regular matrix formulation (NOTES §5, :mod:`flatbody_env.physics.regular`)
 and converts back to the paper's state at the output times, following the chart's discrete
 branch by continuity.
 
@@ -22,12 +22,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..body import Body
-from ..equations import rhs, rhs_with_rotation
-from ..hamiltonian import hamiltonian
-from ..kinematics import Decomposition
-from ..regular import FrameTracker, constraint_residual, follow_chart, paper_from_regular, regular_energy, regular_from_paper, regular_rhs
-from .base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.equations import rhs, rhs_with_rotation
+from flatbody_env.physics.hamiltonian import hamiltonian
+from flatbody_env.physics.kinematics import Decomposition
+from flatbody_env.physics.regular import FrameTracker, constraint_residual, follow_chart, paper_from_regular, regular_energy, regular_from_paper, regular_rhs
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
 
 _ORDERS = {"RK23": 3, "RK45": 5, "DOP853": 8, "Radau": 5, "BDF": 5, "LSODA": 12}
 _DESCRIPTIONS = {

@@ -18,7 +18,7 @@ Three families, all built on the physics kernels (jitted copies, :mod:`.jit`):
   - H3 = σ₊²/(4J(λ+μ)²) + σ₋²/(4J(λ−μ)²): rotation of (s1, s2) by ω3 h, θ += θ̇ h, kicks of p_λ, p_μ;
   - the torque τ: s += h τ.
 
-  Each piece's rates are read off :func:`flatbody_env.hamiltonian.kinetic_kernel` evaluated on the
+  Each piece's rates are read off :func:`flatbody_env.physics.hamiltonian.kinetic_kernel` evaluated on the
   state with the other momenta zeroed (so no formula is restated). Strang's symmetric step is
   T(h/2) τ(h/2) V(h) H1(h/2) H2(h/2) H3(h) H2(h/2) H1(h/2) τ(h/2) T(h/2) (order 2); compositions
   with the coefficient vectors :data:`SUZUKI4` (5 stages) and :data:`YOSHIDA4` (3 stages) give
@@ -56,8 +56,8 @@ import numba
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop
 
-from .failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
-from .jit import JIT_OPTIONS, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
+from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
+from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
 
 njit = numba.njit(**JIT_OPTIONS)
 
@@ -622,5 +622,5 @@ def batch_yoshida4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)
 
 @njit
 def rhs_compiled(y, u, P, out):
-    """dy/dt by the jitted physics kernel (for tests: equals :func:`flatbody_env.equations.rhs`)."""
+    """dy/dt by the jitted physics kernel (for tests: equals :func:`flatbody_env.physics.equations.rhs`)."""
     rhs_kernel(y, u, P, out, np.empty(7), np.empty(4))

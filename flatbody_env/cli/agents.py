@@ -1,0 +1,137 @@
+"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job).
+
+Heavy imports (torch, SB3) happen inside the handlers so that ``flatbody --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from flatbody_env.cli.args import int_at_least
+
+
+
+
+def _train(args) -> int:
+    from agents.train import train
+
+    command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
+    result = train(
+        args.algo,
+        args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}",
+        seed=args.seed,
+        n_timesteps=args.n_timesteps,
+        n_envs=args.n_envs,
+        overrides=args.hyperparams or [],
+        hyperparams_file=args.hyperparams_file,
+        env_id=args.env,
+        resume=args.resume,
+        checkpoint_freq=args.checkpoint_freq,
+        keep_checkpoints=args.keep_checkpoints,
+        threads=args.threads,
+        progress=not args.no_progress,
+        command=command,
+    )
+    note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
+    print(f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}")
+    return 0
+
+
+def _evaluate(args) -> int:
+    from agents.evaluate import evaluate_all, format_table
+
+    report = evaluate_all(
+        args.model,
+        episodes=args.episodes,
+        seed=args.seed,
+        baselines=not args.no_baselines,
+        progress=not args.json,
+    )
+    if args.out:
+        from pathlib import Path
+
+        Path(args.out).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(format_table(report))
+    return 0
+
+
+def _demo(args) -> int:
+    from agents.demo import run_demo
+
+    return run_demo(model=args.model, seed=args.seed, out=args.out)
+
+
+def register(sub) -> None:
+    from agents.train import ALGOS, ENV_ID
+
+    p = sub.add_parser("train", help="train an SB3 agent (PPO or SAC) on FlatBody-v0 with the YAML hyperparameters")
+    p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
+    p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="random seed (default 0)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
+    p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
+    p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
+    p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
+    p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
+    p.add_argument("--threads", type=int_at_least("threads", 1), default=1, help="torch threads (default 1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_train)
+
+    p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
+    p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1), default=100, metavar="N", help="episodes (default 100)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
+    p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
+    p.set_defaults(handler=_evaluate)
+
+    p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
+    p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
+    p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
+    p.set_defaults(handler=_demo)
+
+    _extend_record(sub)
+
+
+def _extend_record(sub) -> None:
+    """Add ``--agent MODEL`` to ``flatbody record`` (the env layer's command; agents extend it so the
+    env layer never imports agents)."""
+    rec = sub.choices.get("record")
+    if rec is None:
+        return
+    rec.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
+                     help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
+    rec.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
+    scene_handler = rec.get_default("handler")
+
+    def handler(args) -> int:
+        if args.agent is None:
+            return scene_handler(args)
+        if args.scene_file or args.scene:
+            raise ValueError("agent: --agent records an environment episode; give no scene")
+        from agents.demo import format_demo, record_episode, rollout
+        from agents.evaluate import Agent
+
+        agent = Agent(args.agent or None)
+        ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs)
+        print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+        path = record_episode(ep, args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+        msg = f"wrote {path} ({ep['t'].size} steps)"
+        if args.verify:
+            from flatbody_env.recording.writer import verify_recording
+
+            verify_recording(path)  # raises ValueError with rerun's output on failure
+            msg += "; rerun rrd verify: ok"
+        print(msg)
+        return 0
+
+    rec.set_defaults(handler=handler)

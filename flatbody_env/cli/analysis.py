@@ -1,0 +1,337 @@
+"""Sub-commands of the analysis service: ``ellipses``, ``stability``, ``family``, ``stability-map``, ``invariants``.
+
+The body is given by flags (``--potential V1|V2|V3`` with ``--k`` / ``--c --d`` / ``--kappa``,
+``--a --b`` for V_ϱ, ``--J --J3``; unset constants take the default body's values: J = J3 = 1,
+κ = k = c = d = 1, a = b = 1) or by ``--scene FILE`` (a scene JSON or a built-in scene name),
+whose state also supplies s3 and p_θ unless ``--s3`` / ``--p-theta`` are given.
+
+Bad input → exit code 2 with one line (a ``ValueError`` naming the flag and the allowed range).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+_CONSTANTS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
+_FOR_POTENTIAL = {"k": "V1", "c": "V2", "d": "V2", "kappa": "V3"}
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def add_body_arguments(p) -> None:
+    """Flags that define the body and the spins (s3, p_θ)."""
+    g = p.add_argument_group("body (default: J = J3 = 1, V3 kappa = 1, V_rho a = b = 1)")
+    g.add_argument("--scene", metavar="FILE", help="take the constants (and s3, p_theta) from a scene JSON or built-in scene")
+    g.add_argument("--potential", choices=("V1", "V2", "V3"), default=None, help="in-plane potential (default V3)")
+    g.add_argument("--k", type=float, default=None, help="V1 stiffness k > 0")
+    g.add_argument("--c", type=float, default=None, help="V2 constant c > 0")
+    g.add_argument("--d", type=float, default=None, help="V2 constant d > 0")
+    g.add_argument("--kappa", type=float, default=None, help="V3 constant kappa > 0")
+    g.add_argument("--a", type=float, default=None, help="thickness potential a > 0")
+    g.add_argument("--b", type=float, default=None, help="thickness potential b > 0")
+    g.add_argument("--J", type=float, default=None, help="in-plane inertia J > 0")
+    g.add_argument("--J3", type=float, default=None, help="thickness inertia J3 > 0")
+    p.add_argument("--s3", type=float, default=None, help="spin component s3 (conserved with |s|)")
+    p.add_argument("--p-theta", dest="p_theta", type=float, default=None, help="material momentum p_theta")
+
+
+def add_box_arguments(p) -> None:
+    p.add_argument("--lam-range", default="0.02,50", metavar="LO,HI", help="search range of lambda (default 0.02,50)")
+    p.add_argument("--mu-range", default="0.02,50", metavar="LO,HI", help="search range of mu (default 0.02,50)")
+    p.add_argument("--grid", type=int, default=121, metavar="N", help="grid points per axis of the root search (default 121)")
+
+
+def _range(flag: str, text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(x) for x in text.split(","))
+    except ValueError:
+        raise ValueError(f"{flag}: expected LO,HI (two numbers, 0 < LO < HI), got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+        raise ValueError(f"{flag}: need 0 < LO < HI (finite), got {text!r}")
+    return lo, hi
+
+
+def _box(args):
+    from analysis.stationary import SearchBox
+
+    if not 8 <= args.grid <= 2001:
+        raise ValueError(f"--grid: must be an integer in [8, 2001], got {args.grid}")
+    return SearchBox(lam=_range("--lam-range", args.lam_range), mu=_range("--mu-range", args.mu_range), n=args.grid)
+
+
+def _finite(flag: str, value: float) -> float:
+    if not math.isfinite(value):
+        raise ValueError(f"{flag}: must be a finite number, got {value!r}")
+    return value
+
+
+def _positive(flag: str, value: float) -> float:
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{flag}: must be a finite number > 0 (allowed range (0, inf)), got {value:g}")
+    return value
+
+
+def resolve_body(args, *, need_spins: bool = True):
+    """(body, s3, p_theta) from the flags (or the scene); ValueError naming the flag on bad input."""
+    from flatbody_env.physics.body import Body, Inertia
+    from flatbody_env.physics.potentials import ThicknessPotential, V1, V2, V3
+
+    given = [c for c in _CONSTANTS if getattr(args, c) is not None]
+    s3 = args.s3
+    pt = args.p_theta
+    if args.scene is not None:
+        from flatbody_env.scene import load_scene
+
+        if given or args.potential is not None:
+            bad = _flag(given[0]) if given else "--potential"
+            raise ValueError(f"{bad}: give the constants either by flags or by --scene, not both")
+        scene = load_scene(args.scene)
+        body = scene.body
+        s3 = scene.state["s3"] if s3 is None else s3
+        pt = scene.state["p_theta"] if pt is None else pt
+    else:
+        pot_name = args.potential or "V3"
+        for c in given:
+            if c in _FOR_POTENTIAL and _FOR_POTENTIAL[c] != pot_name:
+                raise ValueError(f"{_flag(c)}: applies to {_FOR_POTENTIAL[c]} only (the potential is {pot_name})")
+        val = {c: (1.0 if getattr(args, c) is None else _positive(_flag(c), getattr(args, c))) for c in _CONSTANTS}
+        pot = {"V1": lambda: V1(k=val["k"]), "V2": lambda: V2(c=val["c"], d=val["d"]), "V3": lambda: V3(kappa=val["kappa"])}[pot_name]()
+        body = Body(inertia=Inertia.isotropic(val["J"], val["J3"]), potential=pot, thickness=ThicknessPotential(a=val["a"], b=val["b"]))
+    if need_spins:
+        if s3 is None:
+            raise ValueError("--s3: required (a finite number), or give --scene")
+        if pt is None:
+            raise ValueError("--p-theta: required (a finite number), or give --scene")
+        s3 = _finite("--s3", float(s3))
+        pt = _finite("--p-theta", float(pt))
+    if not body.inertia.is_isotropic:
+        raise ValueError("--scene: the analysis needs an isotropic body (J1 = J2)")
+    return body, s3, pt
+
+
+def _solutions(args, body, s3, pt):
+    from analysis.stationary import stationary_ellipses, steady_rotations
+
+    box = _box(args)
+    out = []
+    if args.branch in ("N", "all"):
+        out += stationary_ellipses(body, s3, pt, box=box)
+    if args.branch in ("A", "all"):
+        if args.spin is None:
+            if args.branch == "A":
+                raise ValueError("--spin: required with --branch A (the spin s about the in-plane axis, finite and non-zero)")
+        else:
+            out += steady_rotations(body, _finite("--spin", args.spin), box=box)
+    return out
+
+
+def _header(body, s3, pt) -> str:
+    return f"body: {body.describe()};  s3 = {s3:g}, p_theta = {pt:g}"
+
+
+def _ellipses(args) -> int:
+    body, s3, pt = resolve_body(args)
+    sols = _solutions(args, body, s3, pt)
+    if args.json:
+        print(json.dumps({"solutions": [e.to_dict() for e in sols]}))
+        return 0
+    print(_header(body, s3, pt))
+    if not sols:
+        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/README-analysis.md)")
+        return 0
+    print(f"{'#':>2} {'branch':<6} {'lambda':>12} {'mu':>12} {'rho':>10} {'omega3':>11} {'theta_dot':>11} {'energy':>13} {'residual':>9}  kind")
+    for i, e in enumerate(sols):
+        print(f"{i:>2} {e.branch:<6} {e.lam:12.8f} {e.mu:12.8f} {e.rho:10.6f} {e.omega3:11.6f} {e.theta_dot:11.6f} "
+              f"{e.energy:13.8f} {e.residual:9.1e}  {e.kind if e.branch == 'N' else 'in-plane axis ' + e.branch[1]}")
+    return 0
+
+
+def _stability(args) -> int:
+    from analysis.stability import analyse_stability
+
+    body, s3, pt = resolve_body(args)
+    results = [analyse_stability(body, e) for e in _solutions(args, body, s3, pt)]
+    if args.json:
+        print(json.dumps({"solutions": [r.to_dict() for r in results]}))
+        return 0
+    print(_header(body, s3, pt))
+    if not results:
+        print("no stationary ellipse in the search box")
+        return 0
+    for i, r in enumerate(results):
+        e = r.ellipse
+        print(f"\n#{i} branch {e.branch}: lambda = {e.lam:.8f}, mu = {e.mu:.8f}, rho = {e.rho:.6f} ({e.kind})")
+        print(f"   classification: {r.classification}; nonlinear: {r.nonlinear}; max Re = {r.max_real_part:.6g}"
+              + (f"; out-of-plane q = {r.out_of_plane_q:.6g}" if r.out_of_plane_q is not None else ""))
+        print("   eigenvalues: " + ", ".join(f"{z.real:+.6f}{z.imag:+.6f}i" for z in r.eigenvalues))
+        print("   zero modes: " + (", ".join(f"{m.quantity}" for m in r.zero_modes) or "none identified")
+              + (f" (+{r.unexplained_zero_modes} unexplained)" if r.unexplained_zero_modes else ""))
+        print(f"   energy-Casimir test: {r.energy_casimir}")
+        for note in r.notes:
+            print(f"   note: {note}")
+    return 0
+
+
+def _family(args) -> int:
+    from analysis.families import PARAMETERS, follow_family, write_family_csv
+
+    body, s3, pt = resolve_body(args, need_spins=False)
+    if args.vary not in PARAMETERS:
+        raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {args.vary!r}")
+    start, stop = _finite("--from", args.start), _finite("--to", args.stop)
+    s3 = 2.0 if s3 is None else _finite("--s3", float(s3))
+    pt = 0.5 if pt is None else _finite("--p-theta", float(pt))
+    if args.seeds < 2 or args.seeds > 200:
+        raise ValueError(f"--seeds: must be an integer in [2, 200], got {args.seeds}")
+    step = None if args.step is None else _positive("--step", args.step)
+    fam = follow_family(body, args.vary, start, stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args), step=step,
+                        progress=sys.stderr.isatty())
+    out = args.out
+    if out is None and args.plot is not None:
+        out = str(Path(args.plot).with_suffix(".csv"))
+    if out is not None:
+        write_family_csv(fam, out)
+    if args.plot is not None:
+        from analysis.plots import plot_family
+
+        plot_family(out, args.plot)
+    npts = sum(len(b) for b in fam.branches)
+    if args.json:
+        print(json.dumps({
+            "param": args.vary, "range": [start, stop], "s3": s3, "p_theta": pt, "branches": len(fam.branches), "points": npts,
+            "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
+                       for e in fam.events],
+            "csv": out, "plot": args.plot,
+        }))
+        return 0
+    fixed = {"s3": f"p_theta = {pt:g}", "p_theta": f"s3 = {s3:g}"}.get(args.vary, f"s3 = {s3:g}, p_theta = {pt:g}")
+    print(f"body: {body.describe()}; {fixed}; {args.vary} in [{start:g}, {stop:g}]")
+    print(f"{len(fam.branches)} branch(es), {npts} points")
+    for bi, br in enumerate(fam.branches):
+        if not br:
+            continue
+        counts = {}
+        for fp in br:
+            counts[fp.classification] = counts.get(fp.classification, 0) + 1
+        print(f"  branch {bi}: {args.vary} from {br[0].param:.6g} to {br[-1].param:.6g}, {len(br)} points, "
+              + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    for e in fam.events:
+        print(f"  {e.kind} on branch {e.branch} at {args.vary} = {e.param:.6g} (lambda = {e.lam:.6g}, mu = {e.mu:.6g}) {e.detail}")
+    if out is not None:
+        print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+def _stability_map(args) -> int:
+    import numpy as np
+
+    from analysis.families import shape_stability_grid, write_table_csv
+
+    body, _, _ = resolve_body(args, need_spins=False)
+    lo_l, hi_l = _range("--lam-range", args.lam_range)
+    lo_m, hi_m = _range("--mu-range", args.mu_range)
+    if not 4 <= args.grid <= 400:
+        raise ValueError(f"--grid: must be an integer in [4, 400], got {args.grid}")
+    rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, args.grid), np.linspace(lo_m, hi_m, args.grid))
+    out = args.out
+    if out is None and args.plot is not None:
+        out = str(Path(args.plot).with_suffix(".csv"))
+    if out is not None:
+        write_table_csv(rows, out)
+    if args.plot is not None:
+        from analysis.plots import plot_shape_map
+
+        plot_shape_map(out, args.plot, title=f"Stationary ellipses by shape, {body.describe()}")
+    if args.json:
+        print(json.dumps({"rows": rows}))
+        return 0
+    print(f"body: {body.describe()}; {len(rows)} stationary ellipses on a {args.grid} x {args.grid} shape grid")
+    for kind in ("rigid", "circulating"):
+        sel = [r for r in rows if r["kind"] == kind]
+        counts: dict[str, int] = {}
+        for r in sel:
+            key = r["classification"] + (" (energy-Casimir stable)" if r["nonlinear"] == "stable" else "")
+            counts[key] = counts.get(key, 0) + 1
+        print(f"  {kind}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    if out is not None:
+        print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+def _invariants(args) -> int:
+    from analysis.invariants import format_drift_table, invariants_along, load_trajectory
+
+    data = load_trajectory(args.trajectory)
+    body = None
+    given = [c for c in _CONSTANTS if getattr(args, c) is not None]
+    if args.scene is not None or given or args.potential is not None:
+        body, _, _ = resolve_body(args, need_spins=False)
+    else:
+        name = (data.get("meta") or {}).get("scene")
+        from flatbody_env.scene import builtin_scenes
+
+        scenes = builtin_scenes()
+        if name in scenes:
+            body = scenes[name].body
+    report = invariants_along(data, body)
+    if args.json:
+        print(json.dumps(report.to_dict()))
+        return 0
+    print(format_drift_table(report))
+    if body is None:
+        print("\n(no body known: give --scene or the constant flags for H and the rates dG/dt, dC/dt)")
+    if report.C is None:
+        print("(no rotation in the file: save it with 'flatbody simulate --with-rotation' for C, dC/dt and R s)")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("ellipses", help="stationary ellipses for given s3, p_theta (eqs. 52-54 of the paper)")
+    add_body_arguments(p)
+    add_box_arguments(p)
+    p.add_argument("--branch", choices=("N", "A", "all"), default="N", help="N: s1 = s2 = 0 (paper); A: in-plane axis (needs --spin)")
+    p.add_argument("--spin", type=float, default=None, help="spin about the in-plane axis for branch A")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=_ellipses)
+
+    p = sub.add_parser("stability", help="eigenvalues and classification of each stationary ellipse")
+    add_body_arguments(p)
+    add_box_arguments(p)
+    p.add_argument("--branch", choices=("N", "A", "all"), default="N", help="N: s1 = s2 = 0 (paper); A: in-plane axis (needs --spin)")
+    p.add_argument("--spin", type=float, default=None, help="spin about the in-plane axis for branch A")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=_stability)
+
+    p = sub.add_parser("family", help="follow stationary ellipses over a parameter (continuation, folds, stability)")
+    add_body_arguments(p)
+    add_box_arguments(p)
+    p.add_argument("--vary", default="s3", help="s3, p_theta or a constant (k, c, d, kappa, a, b, J, J3); default s3")
+    p.add_argument("--from", dest="start", type=float, default=0.05, help="start of the range (default 0.05)")
+    p.add_argument("--to", dest="stop", type=float, default=4.0, help="end of the range (default 4)")
+    p.add_argument("--seeds", type=int, default=5, help="parameter values at which all solutions are sought (default 5)")
+    p.add_argument("--step", type=float, default=None, help="largest continuation step (default range/60)")
+    p.add_argument("--out", metavar="FILE.csv", help="write the family table (CSV)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the family chart coloured by stability (PNG)")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(handler=_family)
+
+    p = sub.add_parser("stability-map", help="stability of the stationary ellipses over a grid of shapes (lambda, mu)")
+    add_body_arguments(p)
+    p.add_argument("--lam-range", default="1.02,3", metavar="LO,HI", help="lambda range (default 1.02,3)")
+    p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
+    p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30)")
+    p.add_argument("--out", metavar="FILE.csv", help="write the table (CSV)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
+    p.add_argument("--json", action="store_true", help="print JSON rows")
+    p.set_defaults(handler=_stability_map)
+
+    p = sub.add_parser("invariants", help="invariants and drift table along a saved trajectory")
+    p.add_argument("trajectory", metavar="TRAJECTORY.json", help="from 'flatbody simulate --with-rotation --out FILE'")
+    add_body_arguments(p)
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=_invariants)

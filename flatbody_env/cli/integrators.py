@@ -1,0 +1,169 @@
+"""Sub-commands of the integrator studies: ``chart``, ``failure-study``, ``bench integrators``.
+
+* ``flatbody chart [--quick] [--scenes ...] [--methods ...] [--out DIR]`` — the work-precision
+  study (:mod:`analysis.work_precision`) → ``DIR/work_precision.csv``, ``references.json``,
+  ``work_precision.png``.
+* ``flatbody failure-study [--quick] [--studies gap rho horizon] [--out DIR]`` —
+  :mod:`analysis.failure_study` → ``DIR/failure_study.csv``, ``failure_study.png``.
+* ``flatbody bench integrators [--quick] [--no-compile] [--out DIR]`` —
+  :mod:`analysis.integrator_bench` → prints the figures, writes ``bench_integrators.json``,
+  ``bench_integrators.csv``, ``bench_integrators.png``.
+
+Every command can redraw its PNG from the saved tables with ``--plot-only``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from flatbody_env.cli.args import int_at_least, positive_float
+
+DEFAULT_OUT = "runs/integrators"
+
+
+def _methods(text_list):
+    from flatbody_env.integrators import get_method
+
+    for m in text_list:
+        get_method(m)  # ValueError naming the allowed methods
+    return tuple(text_list)
+
+
+def _budget(args) -> float:
+    if args.max_run_s is not None:
+        return args.max_run_s
+    return 1.0 if args.quick else 5.0
+
+
+def _chart(args) -> int:
+    from analysis.integrator_plots import plot_work_precision
+    from analysis.work_precision import DEFAULT_METHODS, SCENES, work_precision, write_json, write_records
+
+    out = Path(args.out)
+    csv_path, ref_path, png_path = out / "work_precision.csv", out / "references.json", out / "work_precision.png"
+    if not args.plot_only:
+        scenes = tuple(args.scenes) if args.scenes else SCENES
+        for s in scenes:
+            if s not in SCENES:
+                raise ValueError(f"scenes: unknown scene {s!r} (allowed: {', '.join(SCENES)})")
+        methods = _methods(args.methods) if args.methods else DEFAULT_METHODS
+        repeats = 1 if args.quick else args.repeats
+        points, refs = work_precision(scenes, methods, quick=args.quick, repeats=repeats, max_run_s=_budget(args))
+        write_records(points, csv_path)
+        write_json(refs, ref_path)
+        for r in refs:
+            print(f"reference {r.scene} (t = {r.t_end:g}): {r.method} {r.setting}; cross-check {r.cross_method} "
+                  f"{r.cross_setting}: agreement floor {r.agreement:.2e}")
+    elif not csv_path.exists():
+        raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
+    plot_work_precision(csv_path, png_path, ref_path)
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {ref_path}, {png_path}")
+    return 0
+
+
+def _failure(args) -> int:
+    from analysis.failure_study import DEFAULT_METHODS, STUDIES, failure_study
+    from analysis.integrator_plots import plot_failure_study
+    from analysis.work_precision import write_records
+
+    out = Path(args.out)
+    csv_path, png_path = out / "failure_study.csv", out / "failure_study.png"
+    if not args.plot_only:
+        studies = tuple(args.studies) if args.studies else STUDIES
+        for s in studies:
+            if s not in STUDIES:
+                raise ValueError(f"studies: unknown study {s!r} (allowed: {', '.join(STUDIES)})")
+        methods = _methods(args.methods) if args.methods else DEFAULT_METHODS
+        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args))
+        write_records(points, csv_path)
+        fails = [p for p in points if p.status != "ok"]
+        print(f"{len(points)} runs, {len(fails)} detected failures:")
+        seen = set()
+        for p in fails:
+            key = (p.study, p.method)
+            if key in seen:
+                continue
+            seen.add(key)
+            print(f"  {p.study:<8} {p.method:<20} first fails at {p.parameter_name} = {p.parameter:g} "
+                  f"({p.measured_name} = {p.measured:.3g}): {p.status}")
+    elif not csv_path.exists():
+        raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
+    plot_failure_study(csv_path, png_path)
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {png_path}")
+    return 0
+
+
+def _bench(args) -> int:
+    import csv
+    import json
+
+    from analysis.integrator_bench import bench_integrators, format_report
+    from analysis.integrator_plots import plot_bench
+
+    out = Path(args.out)
+    json_path, csv_path, png_path = out / "bench_integrators.json", out / "bench_integrators.csv", out / "bench_integrators.png"
+    if not args.plot_only:
+        rep = bench_integrators(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
+        print(format_report(rep))
+        out.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(rep.as_dict(), indent=2) + "\n", encoding="utf-8")
+        with csv_path.open("w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["section", "case", "method", "setting_or_path", "figure", "value"])
+            for a in rep.regular["at_target"]:
+                w.writerow(["regular", f"t={rep.regular['t_end']:g}", a["method"], f"error={rep.regular['target_error']:g}", "wall_time_s", a["wall_time"]])
+                w.writerow(["regular", f"t={rep.regular['t_end']:g}", a["method"], f"error={rep.regular['target_error']:g}", "speedup_vs_scipy_DOP853", a["speedup"]])
+            for s in rep.regular["same_rtol"]:
+                w.writerow(["regular", "same rtol", "DOP853-numba", s["setting"], "ratio_vs_scipy_DOP853", s["ratio"]])
+            for c in rep.close_approach:
+                for a in c["at_target"]:
+                    w.writerow(["close-approach", f"delta={c['delta']:g}", a["method"], f"error={c['target_error']:g}", "wall_time_s", a["wall_time"]])
+                w.writerow(["close-approach", f"delta={c['delta']:g}", c["cheapest_regular"], "", "cheapest_two_polar_over_regular", c["regular_vs_cheapest_two_polar"]])
+            for x in rep.long_horizon:
+                w.writerow(["long-horizon", f"t={x['t_end']:g}", x["method"], x["setting"], "energy_error", x["energy_error"]])
+            for x in rep.short_step:
+                w.writerow(["short-step", "dt=0.05", x["method"], x["path"], "us_per_step", x["us_per_step"]])
+                if x["path"] == "env":
+                    w.writerow(["short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"]])
+            for x in rep.compile_times:
+                w.writerow(["compile", "", x["method"], "first call", "seconds", x["first_call_s"]])
+                w.writerow(["compile", "", x["method"], "cached", "seconds", x["cached_s"]])
+    elif not json_path.exists():
+        raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
+    plot_bench(json_path, png_path)
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {json_path}, {csv_path}, {png_path}")
+    return 0
+
+
+def _common(p, what):
+    p.add_argument("--quick", action="store_true", help=f"a short {what} (shorter horizons, fewer settings, 1 repeat)")
+    p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (see 'flatbody methods'); default: a representative set")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
+    p.add_argument("--max-run-s", type=positive_float("max_run_s"), default=None, metavar="S",
+                   help="stop a method's sweep once one run takes (or is predicted to take) longer (default 5; 1 with --quick)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
+    p.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved table")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("chart", help="work-precision diagram of the integrators (CSV + PNG)")
+    _common(p, "chart")
+    p.add_argument("--scenes", nargs="+", metavar="SCENE", help="regular close-approach small-rho-bounce long-horizon (default all)")
+    p.set_defaults(handler=_chart)
+
+    p = sub.add_parser("failure-study", help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon")
+    _common(p, "study")
+    p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
+    p.set_defaults(handler=_failure, repeats=1)
+
+
+
+def register_bench(bsub) -> None:
+    b = bsub.add_parser("integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time")
+    b.add_argument("--quick", action="store_true", help="shorter horizons, one close-approach case, 1 repeat")
+    b.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
+    b.add_argument("--max-run-s", type=positive_float("max_run_s"), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
+    b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
+    b.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
+    b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
+    b.set_defaults(handler=_bench)

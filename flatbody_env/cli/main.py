@@ -1,0 +1,74 @@
+"""The ``flatbody`` command.
+
+Sub-commands live in the modules of :data:`COMMAND_MODULES` (the app layer: the only place that
+imports :mod:`analysis` and :mod:`agents`).
+
+Exit codes: 0 success; 1 an integration or run failed (one line says when and why); 2 bad
+input (one line names the field and the allowed range).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from flatbody_env.cli import agents, analysis, bench, integrators, record, simulate
+
+COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents)
+"""The declared command registry: modules that contribute sub-commands, in help order. Each has
+``register(subparsers)`` and may have ``register_bench(bench_subparsers)``; they keep heavy imports
+inside their handlers so that ``flatbody --help`` stays fast."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> Parser:
+    parser = Parser(
+        prog="flatbody",
+        description="A flat affinely-rigid body with thickness: simulate, analyse, record, train.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    modules = COMMAND_MODULES
+    for module in modules:
+        if hasattr(module, "register"):
+            module.register(sub)
+    bench = sub.add_parser("bench", help="benchmarks: print figures and write JSON/CSV and PNG (not timed tests)")
+    bench_sub = bench.add_subparsers(dest="target", metavar="TARGET", parser_class=Parser)
+    bench.set_defaults(handler=lambda args: (bench.print_help(), 2)[1])
+    for module in modules:
+        if hasattr(module, "register_bench"):
+            module.register_bench(bench_sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from flatbody_env.integrators import IntegrationError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "handler", None) is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.handler(args) or 0)
+    except IntegrationError as exc:
+        sys.stderr.write(f"flatbody: {exc}\n")
+        return 1
+    except ValueError as exc:
+        sys.stderr.write(f"flatbody: error: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("flatbody: interrupted\n")
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,281 @@
+"""Sub-commands for rerun recordings: ``record``, ``record-env``, ``record-info``, ``bench recording``.
+
+Heavy imports (rerun through :mod:`flatbody_env.recording.writer`, gymnasium, matplotlib) happen in
+the handlers only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg
+
+
+
+
+def _rrd_path(text: str) -> str:
+    if not text.endswith(".rrd"):
+        raise argparse.ArgumentTypeError(f"out: a rerun recording file must end in .rrd, got {text!r}")
+    return text
+
+
+def _record(args) -> int:
+    import numpy as np
+
+    from flatbody_env.recording.writer import record_trajectory, verify_recording
+    from flatbody_env.simulation import simulate
+
+    scene = load_scene_arg(args)
+    t_end = args.t_end if args.t_end is not None else scene.t_end
+    traj = simulate(
+        scene,
+        t_end=t_end,
+        times=np.linspace(0.0, t_end, args.samples),
+        method=args.method,
+        rtol=args.rtol,
+        atol=args.atol,
+        step=args.step,
+        model=args.model,
+        with_rotation=True,
+    )
+    start = time.perf_counter()
+    path = record_trajectory(traj, scene.body, args.out, title=args.title, tensor_every=args.tensor_every)
+    elapsed = time.perf_counter() - start
+    msg = f"wrote {path} ({traj.t.size} steps of scene {scene.name}, t = 0…{t_end:g}, {traj.method} {traj.model}; logged in {elapsed * 1e3:.0f} ms, importing rerun included)"
+    if args.verify:
+        verify_recording(path)
+        msg += "; rerun rrd verify: ok"
+    print(msg)
+    print(f"play back with: rerun {path}   (viewer 0.41, the SDK's version)", file=sys.stderr)
+    return 0
+
+
+def _make_env(env_id: str, max_steps: int | None):
+    import gymnasium as gym
+
+    import flatbody_env  # noqa: F401  (registers the package's environments on import)
+
+    kwargs = {"track_rotation": True}  # the recorder draws R(t): FlatBodyEnv integrates it on request
+    if max_steps is not None:
+        kwargs["max_episode_steps"] = max_steps
+    try:
+        return gym.make(env_id, **kwargs)
+    except gym.error.Error as exc:
+        raise ValueError(f"env-id: cannot make {env_id!r} ({exc})") from None
+    except TypeError as exc:
+        raise ValueError(f"env-id: {env_id!r} does not take track_rotation=True, which recording needs ({exc})") from None
+
+
+def _record_env(args) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from flatbody_env.recording.writer import verify_recording
+    from flatbody_env.recording.wrapper import RerunRecorder
+
+    env = RerunRecorder(_make_env(args.env_id, args.max_steps), args.out, tensor_every=args.tensor_every)
+    space = env.action_space
+    space.seed(args.seed)
+    zero = np.clip(np.zeros(space.shape, dtype=space.dtype), space.low, space.high) if hasattr(space, "low") else None
+    if args.policy == "zero" and zero is None:
+        raise ValueError("policy: 'zero' needs a Box action space; use --policy random")
+    total_steps = 0
+    try:
+        for ep in range(args.episodes):
+            env.reset(seed=args.seed + ep)
+            done = False
+            with tqdm(desc=f"episode {ep}", unit="step", disable=not sys.stderr.isatty(), leave=False) as bar:
+                while not done:
+                    action = zero if args.policy == "zero" else space.sample()
+                    _, _, terminated, truncated, _ = env.step(action)
+                    done = terminated or truncated
+                    total_steps += 1
+                    bar.update()
+    finally:
+        env.close()
+    for path in env.recorded_paths:
+        if args.verify:
+            verify_recording(path)
+        print(f"wrote {path}" + ("; rerun rrd verify: ok" if args.verify else ""))
+    print(f"{args.episodes} episode(s), {total_steps} steps, policy {args.policy}", file=sys.stderr)
+    return 0
+
+
+def _record_info(args) -> int:
+    from flatbody_env.recording.writer import summarize_recording, verify_recording
+
+    path = Path(args.file)
+    if not path.exists():
+        raise ValueError(f"file: no file {args.file!r}")
+    print(summarize_recording(path, rows=args.rows))
+    if not args.no_verify:
+        out = verify_recording(path)
+        print(f"rerun rrd verify: {out.splitlines()[-1] if out else 'ok'}")
+    return 0
+
+
+def _record_bench(args) -> int:
+    import platform
+    import tempfile
+
+    import numpy as np
+
+    from flatbody_env.recording.writer import Recorder, record_trajectory, sdk_version
+    from flatbody_env.scene import load_scene
+    from flatbody_env.simulation import simulate
+
+    scene = load_scene(args.scene)
+    sizes = sorted({*args.sizes, args.steps})
+    out_dir = Path(args.out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows = []
+    live = None
+    first_call = None
+    with tempfile.TemporaryDirectory() as tmp:
+        # the process's first recording pays for importing rerun: timed apart, not in the medians
+        warm = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, 1000), with_rotation=True)
+        start = time.perf_counter()
+        record_trajectory(warm, scene.body, Path(tmp) / "warm-up.rrd")
+        first_call = {"steps": 1000, "seconds": time.perf_counter() - start}
+        for n in sizes:
+            traj = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, n), with_rotation=True)
+            times = []
+            size_bytes = 0
+            for r in range(args.repeats):
+                path = Path(tmp) / f"bench-{n}-{r}.rrd"
+                start = time.perf_counter()
+                record_trajectory(traj, scene.body, path)
+                times.append(time.perf_counter() - start)
+                size_bytes = path.stat().st_size
+                path.unlink()
+            rows.append(
+                {
+                    "steps": n,
+                    "median_s": float(np.median(times)),
+                    "min_s": float(np.min(times)),
+                    "max_s": float(np.max(times)),
+                    "us_per_step": float(np.median(times)) / n * 1e6,
+                    "file_bytes": size_bytes,
+                }
+            )
+            print(f"whole trajectory, {n:>6} steps: median {np.median(times):.3f} s (min {np.min(times):.3f}, max {np.max(times):.3f}) over {args.repeats} runs, {size_bytes / 1e6:.1f} MB")
+            if n == args.steps:
+                Y, R, E = traj.y, traj.rotation, traj.energy
+                path = Path(tmp) / "bench-live.rrd"
+                start = time.perf_counter()
+                with Recorder(path, scene.body, block=args.block) as rec:
+                    for k in range(n):
+                        rec.append(traj.t[k], Y[:, k], R[k], energy=E[k])
+                live_s = time.perf_counter() - start
+                live = {"steps": n, "block": args.block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
+                print(f"live Recorder.append, {n} steps in blocks of {args.block}: {live_s:.3f} s ({live_s / n * 1e6:.1f} µs/step)")
+    target = next(r for r in rows if r["steps"] == args.steps)
+    result = {
+        "benchmark": "recording",
+        "what": "record_trajectory(traj, body, path): whole trajectory to a finished .rrd (send_columns), wall time",
+        "scene": scene.name,
+        "steps": args.steps,
+        "median_s": target["median_s"],
+        "budget_s": 1.0,
+        "within_budget": target["median_s"] <= 1.0,
+        "repeats": args.repeats,
+        "sizes": rows,
+        "live": live,
+        "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
+        "rerun_sdk": sdk_version(),
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpus": __import__("os").cpu_count(),
+    }
+    json_path = out_dir / "recording.json"
+    json_path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    png_path = out_dir / "recording.png"
+    _bench_chart(result, png_path)
+    print(f"first call of the process ({first_call['steps']} steps, includes importing rerun): {first_call['seconds']:.3f} s")
+    verdict = "within" if result["within_budget"] else "OVER"
+    print(f"logging a {args.steps}-step trajectory: {target['median_s']:.3f} s (median of {args.repeats}) — {verdict} the 1 s budget")
+    print(f"wrote {json_path} and {png_path}")
+    return 0
+
+
+def _bench_chart(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = [r["steps"] for r in result["sizes"]]
+    med = [r["median_s"] for r in result["sizes"]]
+    lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
+    hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
+    if result.get("live"):
+        lv = result["live"]
+        ax.plot([lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})")
+    ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("steps")
+    ax.set_ylabel("wall time to a finished .rrd [s]")
+    ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"sizes: expected comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 2:
+        raise argparse.ArgumentTypeError("sizes: every size must be an integer ≥ 2")
+    return values
+
+
+def register(sub) -> None:
+    p = sub.add_parser("record", help="simulate a scene and write a rerun recording (.rrd) for offline playback")
+    add_scene_arguments(p)
+    add_integration_arguments(p)
+    p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
+    p.add_argument("--samples", type=int_at_least("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
+    p.add_argument("--title", default=None, help="recording name shown in the viewer")
+    p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
+    p.set_defaults(handler=_record)
+
+    p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
+    p.add_argument("--env-id", default="FlatBody-v0", help="gymnasium id (default FlatBody-v0)")
+    p.add_argument("--episodes", type=int_at_least("episodes"), default=1, metavar="N", help="episodes to run (default 1)")
+    p.add_argument("--policy", choices=("zero", "random"), default="zero", help="actions: zero control or uniform random (default zero)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of the first episode (then seed+1, ...)")
+    p.add_argument("--max-steps", type=int_at_least("max_steps"), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps")
+    p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="episode 0's file; episode k ≥ 1 goes to RUN-k.rrd ({episode} in the name formats it)")
+    p.add_argument("--verify", action="store_true", help="check each file with 'rerun rrd verify'")
+    p.set_defaults(handler=_record_env)
+
+    p = sub.add_parser("record-info", help="read a recording back offline and summarize it (entities, rows, first values)")
+    p.add_argument("file", metavar="RUN.rrd")
+    p.add_argument("--rows", type=int_at_least("rows"), default=3, help="values shown per series (default 3)")
+    p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
+    p.set_defaults(handler=_record_info)
+
+
+
+def register_bench(bench_sub) -> None:
+    p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000)")
+    p.add_argument("--steps", type=int_at_least("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
+    p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
+    p.add_argument("--repeats", type=int_at_least("repeats"), default=5, help="runs per size (median reported; default 5)")
+    p.add_argument("--block", type=int_at_least("block"), default=256, help="block size of the live-recorder measurement")
+    p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
+    p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
+    p.set_defaults(handler=_record_bench)

@@ -1,0 +1,126 @@
+"""Sub-commands of the physics layer: ``simulate``, ``scenes``, ``methods`` (``demo`` lives in :mod:`flatbody_env.cli.agents`)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, float_list, int_at_least, load_scene_arg
+
+
+def _simulate(args) -> int:
+    from flatbody_env.simulation import simulate
+
+    scene = load_scene_arg(args)
+    t_end = args.t_end if args.t_end is not None else scene.t_end
+    times = None
+    if args.times:
+        times = float_list(args.times)
+    elif args.samples is not None:
+        import numpy as np
+
+        times = np.linspace(0.0, t_end, args.samples)
+    traj = simulate(
+        scene,
+        t_end=t_end,
+        times=times,
+        method=args.method,
+        rtol=args.rtol,
+        atol=args.atol,
+        step=args.step,
+        model=args.model,
+        with_rotation=args.with_rotation,
+    )
+    if args.summary:
+        print(format_summary(scene, traj))
+        if not args.out:
+            return 0
+    text = json.dumps(traj.to_dict())
+    if args.out:
+        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        if not args.summary:
+            print(f"wrote {args.out} ({traj.t.size} samples, {traj.method}, {traj.model} model)", file=sys.stderr)
+    else:
+        sys.stdout.write(text + "\n")
+    return 0
+
+
+def format_summary(scene, traj, rows: int = 6) -> str:
+    """A short human-readable table of a trajectory and its invariants."""
+    import numpy as np
+
+    lines = [
+        f"scene {scene.name}: {scene.body.describe()}",
+        f"integrated to t = {traj.t[-1]:g} with {traj.method} ({traj.model} model): "
+        f"{traj.nfev} RHS evaluations, {traj.wall_time * 1e3:.1f} ms",
+        "",
+        f"{'t':>9} {'lambda':>10} {'mu':>10} {'rho':>10} {'theta':>10} {'|s|':>10} {'energy':>14}",
+    ]
+    idx = np.unique(np.linspace(0, traj.t.size - 1, rows).round().astype(int))
+    st = traj.state
+    for k in idx:
+        s = math.sqrt(traj.casimir[k])
+        lines.append(
+            f"{traj.t[k]:9.3f} {st['lambda'][k]:10.5f} {st['mu'][k]:10.5f} {st['rho'][k]:10.5f} "
+            f"{st['theta'][k]:10.4f} {s:10.6f} {traj.energy[k]:14.10f}"
+        )
+    lines.append("")
+    gap = float(np.min(np.abs(st["lambda"] - st["mu"])))
+    lines.append(f"closest approach to lambda = mu: |lambda - mu| = {gap:.3g}; rho in [{st['rho'].min():.4g}, {st['rho'].max():.4g}]")
+    drift = traj.drift()
+    lines.append("invariant drift (max |q(t) - q(0)|): " + ", ".join(f"{k} {v:.2e}" for k, v in drift.items()))
+    return "\n".join(lines)
+
+
+def _scenes(args) -> int:
+    from flatbody_env.scene import builtin_scenes
+
+    scenes = builtin_scenes()
+    if args.json:
+        print(json.dumps({name: sc.to_dict() for name, sc in scenes.items()}, indent=2))
+        return 0
+    width = max(len(n) for n in scenes)
+    for name, sc in scenes.items():
+        print(f"{name:<{width}}  t_end={sc.t_end:<8g} {sc.body.describe()}")
+        print(f"{'':<{width}}  {sc.description}")
+    return 0
+
+
+def _methods(args) -> int:
+    from flatbody_env.integrators import available_methods
+
+    infos = available_methods()
+    if args.json:
+        print(json.dumps([m.as_dict() for m in infos], indent=2))
+        return 0
+    header = f"{'name':<22} {'adaptive':<8} {'order':>5} {'chart':<10} {'compiled':<8} preserves"
+    print(header)
+    print("-" * len(header))
+    for m in infos:
+        print(
+            f"{m.name:<22} {'yes' if m.adaptive else 'no':<8} {m.order:>5} {m.chart:<10} "
+            f"{'yes' if m.compiled else 'no':<8} {', '.join(m.preserves) or '-'}"
+        )
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
+    add_scene_arguments(p)
+    add_integration_arguments(p)
+    p.add_argument("--times", metavar="t1,t2,...", help="output times (default: an even grid)")
+    p.add_argument("--samples", type=int_at_least("samples", 2), default=None, metavar="N", help="number of evenly spaced output times (default 101)")
+    p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
+    p.add_argument("--out", metavar="FILE", help="write the JSON here instead of stdout")
+    p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")
+    p.set_defaults(handler=_simulate)
+
+    p = sub.add_parser("scenes", help="list the built-in scenes")
+    p.add_argument("--json", action="store_true", help="print the scenes as JSON")
+    p.set_defaults(handler=_scenes)
+
+    p = sub.add_parser("methods", help="list the integrators")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=_methods)

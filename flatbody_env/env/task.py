@@ -1,0 +1,232 @@
+"""The task: reach and hold a stationary ellipse (dm_control's Task half of the environment).
+
+The task knows nothing of integrators: it samples a target and an initial state, scores a state
+and decides success. :class:`~flatbody_env.env.env.FlatBodyEnv` composes it with a body and an
+integrator.
+
+Targets
+-------
+A target is a spectrally stable stationary ellipse of branch N (eqs. (50)–(54) of [1]) of the
+"circulation" family |s3| < |p_θ| (NOTES §7: q < 0 there), built from a shape (λ*, μ*) sampled
+in :attr:`ReachStationaryEllipse.target_lambda` × aspect ratio :attr:`target_aspect` by the
+inverse problem (:func:`flatbody_env.physics.equilibria.stationary_from_shape`); unstable,
+non-existent and unreachable shapes (below) are re-drawn.
+
+Reachability. Every control leaves p_θ conserved (ṗ_θ = 0, eq. (46) of [1]: a torque acts on s,
+the dilatation force on p_ϱ), so the initial state gets the target's p_θ. Without torque the
+Casimir |s|² is conserved too, so for ``control="dilatation"`` (and ``"none"``) the initial
+spin is drawn on the sphere |s| = |s3*|; with torque |s| is free.
+
+Reachable within the episode. The in-plane shape (λ, μ, p_λ, p_μ) is reached only through s3
+(τ3), and one of its two oscillation modes only weakly: linearised about the target, optimal
+linear feedback (LQR, equally weighted errors) settles that mode no faster than the target's
+settling rate r however cheap the control (:func:`flatbody_env.physics.controllability.settling_rate`, the
+slowest pole of the cheap-control LQR, a limit that more gain does not raise; the LQR of
+``agents`` settles at 1.01–1.2 r). r depends on the shape alone (not on the sign of (s3, p_θ)):
+it falls steeply away from the edge of existence of the family (λ*μ* → 1 for V3). Measured for
+the default body over 200 targets of the earlier ranges λ* ∈ [1.25, 1.7], λ*/μ* ∈ [1.3, 2]: r from
+0.006 to 0.27 s⁻¹, median 0.056 — an error in the slow mode shrinks by e^(−0.056·20) ≈ 0.33 over a
+20 s episode, while the start is 0.2–0.35 away and success needs 0.05: most of those targets were
+out of reach (the LQR controller reached 40 % of them). Rule: a target is sampled only if
+r ≥ :attr:`min_settling_rate` (0.15 s⁻¹ by default), so that over the registered episode
+(T = 20 s) the slowest mode shrinks under such feedback by e^(−r T) ≤ e^(−3) ≈ 1/20 — from the largest
+initial distance ≈ 0.35 to ≈ 0.017, three times inside the tolerance (the bare requirement
+r T ≥ ln(0.35/0.05) would be r ≥ 0.097 s⁻¹). The default ranges λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5]
+contain the fast shapes near the edge of existence: of 400 draws, 264 are existing and stable and
+81 of those pass (r ≥ 0.15). Measured: the LQR controller about the target (``agents``) reaches the
+tolerance in 100 of 100 seeded episodes (largest final distance 0.019); with the filter at 0.1 it
+still reaches all (largest 0.045). The filter applies where the controls stabilise targets at
+linear order (``"torque+dilatation"``); with torque only ϱ, and with dilatation only the shape, is
+not linearly controllable (r = 0 for every target), so for those modes it is not applied.
+``min_settling_rate=0`` switches it off.
+
+Reward terms (each ≤ 0; their sum is the reward; each weight is a keyword)
+--------------------------------------------------------------------------
+============  ====================================================  ==================
+name          value                                                  weight (default)
+============  ====================================================  ==================
+``shape``     −w ‖(λ − λ*, μ − μ*, ϱ − ϱ*)‖                          ``w_shape`` (1.0)
+``spin``      −w |s3 − s3*|                                          ``w_spin`` (0.5)
+``tumble``    −w ‖(ω1, ω2)‖  (target: ω1 = ω2 = 0)                  ``w_tumble`` (0.5)
+``rest``      −w ‖(p_λ, p_μ, p_ϱ)‖  (target: all 0)                  ``w_rest`` (0.5)
+``action``    −w ‖a‖²  (a ∈ [−1, 1]ⁿ, before scaling)                ``w_action`` (0.05)
+``failure``   −penalty on a step that ends the episode by failure    ``failure_penalty`` (10)
+============  ====================================================  ==================
+
+Success: the distance d = ‖(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ)‖ to the target is at most
+``success_tolerance`` (0.05).
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [2] ``shared/physics/NOTES.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.controllability import settling_rate, target_state
+from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
+from flatbody_env.physics.state import STATE_SIZE
+
+CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
+REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
+TARGET_NAMES = ("lambda", "mu", "rho", "s3")
+DEFAULT_LIMITS = (0.5, 0.5, 0.5, 1.0)
+"""(τ1, τ2, τ3, f_ϱ) limits of :class:`~flatbody_env.env.env.FlatBodyEnv`'s defaults (torque_limit, force_limit)."""
+
+
+def control_mask(control: str) -> np.ndarray:
+    """Which of (τ1, τ2, τ3, f_ϱ) an action drives, shape (4,) bool."""
+    if control not in CONTROLS:
+        raise ValueError(f"control: must be one of {', '.join(CONTROLS)}, got {control!r}")
+    torque = "torque" in control
+    dil = "dilatation" in control
+    return np.array([torque, torque, torque, dil])
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReachStationaryEllipse:
+    """Reach and hold a stationary ellipse (module docstring)."""
+
+    w_shape: float = 1.0
+    w_spin: float = 0.5
+    w_tumble: float = 0.5
+    w_rest: float = 0.5
+    w_action: float = 0.05
+    failure_penalty: float = 10.0
+    success_tolerance: float = 0.05
+    target_lambda: tuple[float, float] = (1.3, 2.0)
+    """Range of the target λ*."""
+    target_aspect: tuple[float, float] = (1.5, 3.5)
+    """Range of λ*/μ*."""
+    initial_noise: float = 0.15
+    """Relative size of the initial offset from the target."""
+    min_settling_rate: float = 0.15
+    """Reachability filter: least :func:`~flatbody_env.physics.controllability.settling_rate` (s⁻¹) of a sampled target."""
+
+    def __post_init__(self) -> None:
+        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise", "min_settling_rate"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"{name}: must be a finite number >= 0, got {value!r}")
+        for name in ("target_lambda", "target_aspect"):
+            lo, hi = getattr(self, name)
+            if not (0 < lo <= hi and math.isfinite(hi)):
+                raise ValueError(f"{name}: must be a range (lo, hi) with 0 < lo <= hi, got {(lo, hi)!r}")
+        if self.target_aspect[0] <= 1.0:
+            raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
+
+    # --- targets --------------------------------------------------------------------------------
+    def reachable(self, target: StationaryEllipse, body: Body, limits=DEFAULT_LIMITS, control: str = "torque+dilatation") -> bool:
+        """Whether ``target`` passes the reachability filter (module docstring, "Reachability").
+
+        True when the controls settle it at a rate ≥ :attr:`min_settling_rate`; also True for
+        every target when the controls cannot stabilise any target at linear order (``control``
+        without τ3 or without f_ϱ: the filter does not apply) or when the filter is off (0).
+        """
+        mask = control_mask(control)
+        if self.min_settling_rate == 0 or not (mask[2] and mask[3]):
+            return True
+        y = target_state(target.lam, target.mu, target.rho, target.s3, target.p_theta)
+        return settling_rate(body, y, limits, mask) >= self.min_settling_rate
+
+    def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
+                      control: str = "torque+dilatation") -> StationaryEllipse:
+        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring)."""
+        for _ in range(500):
+            lam = rng.uniform(*self.target_lambda)
+            mu = lam / rng.uniform(*self.target_aspect)
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            try:
+                target = stationary_from_shape(body, lam, mu, branch="circulation", sign=sign)
+            except ValueError:
+                continue
+            if target.stable and self.reachable(target, body, limits, control):
+                return target
+        raise ValueError(
+            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
+            "found for this body in the target ranges"
+        )
+
+    def target_from(self, spec: Mapping[str, float] | StationaryEllipse, body: Body) -> StationaryEllipse:
+        """A target from ``{"lambda", "mu"[, "branch", "sign"]}`` or a ready StationaryEllipse."""
+        if isinstance(spec, StationaryEllipse):
+            return spec
+        if not isinstance(spec, Mapping) or "lambda" not in spec or "mu" not in spec:
+            raise ValueError('target: expected {"lambda": ..., "mu": ...} (and optionally "branch", "sign")')
+        unknown = set(spec) - {"lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"}
+        if unknown:
+            raise ValueError(f"target.{sorted(unknown)[0]}: unknown field (allowed: lambda, mu, branch, sign)")
+        lam, mu = float(spec["lambda"]), float(spec["mu"])
+        if not (math.isfinite(lam) and math.isfinite(mu) and lam > 0 and mu > 0) or lam == mu:
+            raise ValueError(f"target.lambda: need finite λ, μ > 0 with λ ≠ μ, got {lam}, {mu}")
+        return stationary_from_shape(body, lam, mu, branch=spec.get("branch", "circulation"), sign=float(spec.get("sign", 1.0)))
+
+    def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
+        """A state near the target from which the controls can reach it (module docstring)."""
+        n = self.initial_noise
+        y = np.zeros(STATE_SIZE)
+        s3t = target.s3
+        scale = max(abs(s3t), 0.1)
+        s1, s2 = rng.uniform(-n, n, size=2) * scale
+        if "torque" in control:
+            s3 = s3t * (1.0 + rng.uniform(-n, n))
+        else:  # |s|² conserved: stay on the target's sphere |s| = |s3*|
+            s3 = math.copysign(math.sqrt(max(s3t * s3t - s1 * s1 - s2 * s2, 0.0)), s3t)
+        y[0:3] = (s1, s2, s3)
+        y[3] = target.p_theta
+        y[4:7] = rng.uniform(-n, n, size=3)
+        y[7] = target.lam * math.exp(rng.uniform(-n, n))
+        y[8] = min(target.mu * math.exp(rng.uniform(-n, n)), 0.95 * y[7])
+        y[9] = target.rho * math.exp(rng.uniform(-n, n))
+        y[10] = rng.uniform(-math.pi, math.pi)
+        return y
+
+    # --- scoring (vectorised: y of shape (11,) or (11, N)) ---------------------------------------------
+    @staticmethod
+    def omega12(y: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray]:
+        """(ω1, ω2) = (s1/(Jμ² + J3ϱ²), s2/(Jλ² + J3ϱ²)) (inverse Legendre map after eq. (31) of [1])."""
+        J, J3 = body.inertia.J1, body.inertia.J3
+        j3r2 = J3 * y[9] * y[9]
+        return y[0] / (J * y[8] * y[8] + j3r2), y[1] / (J * y[7] * y[7] + j3r2)
+
+    @staticmethod
+    def errors(y: np.ndarray, body: Body, target: np.ndarray) -> np.ndarray:
+        """(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ), shape (9,) or (9, N); ``target`` = (λ*, μ*, ϱ*, s3*)."""
+        w1, w2 = ReachStationaryEllipse.omega12(y, body)
+        return np.stack([y[7] - target[0], y[8] - target[1], y[9] - target[2], y[2] - target[3], w1, w2, y[4], y[5], y[6]])
+
+    def distance(self, y: np.ndarray, body: Body, target: np.ndarray):
+        """‖errors‖ (float, or shape (N,))."""
+        return np.linalg.norm(self.errors(y, body, target), axis=0)
+
+    def reward_terms(self, y: np.ndarray, body: Body, target: np.ndarray, action: np.ndarray, failed) -> dict:
+        """The named terms (module docstring); floats for one body, arrays of shape (N,) for N.
+
+        ``action`` has shape (n,) or (N, n); ``failed`` is a bool or a bool array (N,).
+        """
+        e = self.errors(y, body, target)
+        action = np.asarray(action, dtype=np.float64)
+        terms = {
+            "shape": -self.w_shape * np.linalg.norm(e[0:3], axis=0),
+            "spin": -self.w_spin * np.abs(e[3]),
+            "tumble": -self.w_tumble * np.hypot(e[4], e[5]),
+            "rest": -self.w_rest * np.linalg.norm(e[6:9], axis=0),
+            "action": -self.w_action * np.sum(action * action, axis=-1),
+            "failure": np.where(failed, -self.failure_penalty, 0.0),
+        }
+        if np.ndim(y) == 1:
+            return {k: float(v) for k, v in terms.items()}
+        return terms
+
+
+def target_vector(target: StationaryEllipse) -> np.ndarray:
+    """(λ*, μ*, ϱ*, s3*) — the target entries of the observation (:data:`TARGET_NAMES`)."""
+    return np.array([target.lam, target.mu, target.rho, target.s3])

@@ -1,0 +1,133 @@
+"""Equations of motion of the flat body in the two-polar chart (eqs. (42)–(49) of [1]).
+
+With ω = ∂H/∂s and the corrected Lie–Poisson bracket {s_i, s_j} = +ε_ijk s_k (erratum E3 of
+[2]; it follows from eq. (25) and eq. (28) of [1]),
+
+.. math::
+    \\dot s = \\omega \\times s + \\tau, \\qquad
+    \\dot q = \\partial H/\\partial p, \\qquad
+    \\dot p = -\\partial H/\\partial q + f \\quad (q = \\theta, \\lambda, \\mu, \\varrho),
+
+which for J1 = J2 are eqs. (44)–(49) of [1] with the overall sign of (44)–(46) reversed
+(erratum E4) and ``ρ`` read as ``ϱ`` in (46) (E5). The option ``spin_convention="paper"`` of
+:class:`~flatbody_env.physics.body.Body` integrates the printed eqs. (44)–(46), ṡ = s × ω, instead.
+
+Controls enter as a co-moving torque τ = (τ1, τ2, τ3) on the spin and a generalised force
+f on ϱ ("dilatation"), ``u = (τ1, τ2, τ3, f)``, held constant by the caller over a step.
+
+Orientation (only when a scene needs it): Ṙ = R W(ω) with W(ω) of eq. (25) of [1], the
+*negative* of the usual hat map (NOTES §1).
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [2] ``shared/physics/NOTES.md``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics.potentials import potential_kernel
+
+CONTROL_NAMES: tuple[str, ...] = ("tau1", "tau2", "tau3", "f_rho")
+"""Control inputs: co-moving torque on s (3) and generalised force on ϱ."""
+NO_CONTROL = np.zeros(4)
+NO_CONTROL.setflags(write=False)
+
+
+def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
+    """Right-hand side given the potential gradient (scalar kernel, no numpy calls).
+
+    Parameters
+    ----------
+    y : array (11,)
+        Packed state.
+    u : array (4,)
+        Controls (τ1, τ2, τ3, f_ϱ).
+    P : array (9,)
+        Kernel parameters (:meth:`Body.kernel_params`).
+    gl, gm, gr : float
+        ∂V/∂λ, ∂V/∂μ, ∂V/∂ϱ.
+    out : array (11,), output
+        dy/dt.
+    vel, force : arrays (7,), (4,)
+        Work space; on return the velocities and kinetic forces of :func:`kinetic_kernel`.
+    """
+    kinetic_kernel(y, P, vel, force)
+    conv = P[8]
+    s1 = y[0]
+    s2 = y[1]
+    s3 = y[2]
+    w1 = vel[0]
+    w2 = vel[1]
+    w3 = vel[2]
+    # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of NOTES.md)
+    out[0] = conv * (w2 * s3 - w3 * s2) + u[0]
+    out[1] = conv * (w3 * s1 - w1 * s3) + u[1]
+    if P[0] == P[1]:
+        # ds3/dt = J(λ² − μ²) s1 s2 / (I1 I2), cancellation-free (NOTES §3)
+        lam = y[7]
+        mu = y[8]
+        j3r2 = P[2] * y[9] * y[9]
+        out[2] = conv * P[0] * (lam - mu) * (lam + mu) * s1 * s2 / ((P[0] * mu * mu + j3r2) * (P[0] * lam * lam + j3r2)) + u[2]
+    else:
+        out[2] = conv * (w1 * s2 - w2 * s1) + u[2]
+    out[3] = force[0]  # ṗ_θ (= 0 for J1 = J2, eq. (46))
+    out[4] = force[1] - gl  # eq. (47)
+    out[5] = force[2] - gm  # eq. (48)
+    out[6] = force[3] - gr + u[3]  # eq. (49) + dilatation force
+    out[7] = vel[4]  # λ̇ = p_λ / J
+    out[8] = vel[5]  # μ̇ = p_μ / J
+    out[9] = vel[6]  # ϱ̇ = p_ϱ / J3
+    out[10] = vel[3]  # θ̇
+
+
+def rhs_kernel(y, u, P, out, vel, force):
+    """:func:`rhs_core` with a built-in potential (P[3] ∈ {1, 2, 3}); scalar kernel."""
+    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], y[7], y[8], y[9])
+    rhs_core(y, u, P, gl, gm, gr, out, vel, force)
+
+
+def rhs(t: float, y: np.ndarray, u: np.ndarray | None, params: Body) -> np.ndarray:
+    """dy/dt of the packed state (eqs. (44)–(49) of [1], corrected bracket by default).
+
+    Parameters
+    ----------
+    t : float
+        Time (the system is autonomous; kept for the ``solve_ivp`` signature).
+    y : ndarray, shape (11,)
+        Packed state, layout in :mod:`flatbody_env.physics.state`.
+    u : ndarray, shape (4,) or None
+        Controls (τ1, τ2, τ3, f_ϱ), constant over the step; None for none.
+    params : Body
+        Inertia, potential and spin convention.
+
+    Returns
+    -------
+    ndarray, shape (11,)
+    """
+    out = np.empty(11)
+    _, gl, gm, gr = params.potential_terms(y[7], y[8], y[9])
+    rhs_core(y, NO_CONTROL if u is None else u, params.kernel_params(), gl, gm, gr, out, np.empty(7), np.empty(4))
+    return out
+
+
+def hat_paper(omega: np.ndarray) -> np.ndarray:
+    """W(ω) of eq. (25) of [1]: [[0, ω3, −ω2], [−ω3, 0, ω1], [ω2, −ω1, 0]] (= −hat(ω))."""
+    w1, w2, w3 = omega
+    return np.array([[0.0, w3, -w2], [-w3, 0.0, w1], [w2, -w1, 0.0]])
+
+
+def rhs_with_rotation(t: float, z: np.ndarray, u: np.ndarray | None, params: Body) -> np.ndarray:
+    """dz/dt for z = (y, vec(R)) of shape (20,): eqs. (44)–(49) plus Ṙ = R W(ω) (eq. (25) of [1])."""
+    y = z[:11]
+    out = np.empty(20)
+    vel = np.empty(7)
+    _, gl, gm, gr = params.potential_terms(y[7], y[8], y[9])
+    rhs_core(y, NO_CONTROL if u is None else u, params.kernel_params(), gl, gm, gr, out, vel, np.empty(4))
+    R = z[11:].reshape(3, 3)
+    out[11:] = (R @ hat_paper(vel[:3])).ravel()
+    return out

@@ -1,0 +1,175 @@
+"""Stationary ellipses from a target shape (the inverse problem of eqs. (52)–(54) of [1]) and their
+spectral stability — what the environment's task needs to pick reachable, stable targets.
+
+Branch N of [1] (s1 = s2 = 0, ω1 = ω2 = 0, p_λ = p_μ = p_ϱ = 0, J1 = J2 = J): with u = λ + μ,
+v = λ − μ and σ± = s3 ± p_θ, eqs. (52)–(53) are the stationarity of the effective potential
+(NOTES §6 of [2])
+
+.. math:: W(\\lambda, \\mu, \\varrho) = \\frac{\\sigma_+^2}{4Ju^2} + \\frac{\\sigma_-^2}{4Jv^2} + V(\\lambda, \\mu, \\varrho),
+
+so a shape (λ, μ) is stationary for σ₊² = 2Ju³ ∂V/∂u and σ₋² = 2Jv³ ∂V/∂v (the inverse problem),
+and eq. (54) fixes ϱ* by ∂V/∂ϱ = 0. Then ω3 = σ₊/(2Ju²) + σ₋/(2Jv²) and
+θ̇ = σ₊/(2Ju²) − σ₋/(2Jv²) (the inverse Legendre transform after eq. (31) of [1]).
+
+Spectral stability (NOTES §7): the linearisation splits into an out-of-plane block, unstable iff
+q = (s3/I2 − ω3)(ω3 − s3/I1) > 0, and a shape block (λ, μ, ϱ with their momenta; s3 and p_θ are
+constants of the planar motion) whose frequencies are those of the Hessian of W: stable iff it is
+positive definite. The complete Jacobian analysis lives in :mod:`analysis`.
+
+References
+----------
+.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, section 3.4.
+.. [2] ``shared/physics/NOTES.md``, §6–§7.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.hamiltonian import hamiltonian
+
+BRANCHES = ("rotation", "circulation")
+"""``rotation``: |s3| > |p_θ| (σ₊σ₋ > 0, ω3 dominant); ``circulation``: |s3| < |p_θ| (θ̇ dominant)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class StationaryEllipse:
+    """A relative equilibrium of branch N (eqs. (50)–(54) of [1])."""
+
+    lam: float
+    mu: float
+    rho: float
+    s3: float
+    p_theta: float
+    omega3: float
+    theta_dot: float
+    energy: float
+    q: float
+    """Out-of-plane coefficient q of NOTES §7: s̈1 = q s1; unstable iff q > 0."""
+    shape_hessian_min: float
+    """Smallest eigenvalue of the Hessian of W in (λ, μ, ϱ); the shape block is stable iff > 0."""
+
+    @property
+    def stable(self) -> bool:
+        """Spectrally stable: q < 0 and the shape Hessian positive definite."""
+        return self.q < 0.0 and self.shape_hessian_min > 0.0
+
+    @property
+    def state(self) -> dict[str, float]:
+        """The full paper state at θ = 0."""
+        return {
+            "s1": 0.0,
+            "s2": 0.0,
+            "s3": self.s3,
+            "p_theta": self.p_theta,
+            "p_lambda": 0.0,
+            "p_mu": 0.0,
+            "p_rho": 0.0,
+            "lambda": self.lam,
+            "mu": self.mu,
+            "rho": self.rho,
+            "theta": 0.0,
+        }
+
+
+def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
+    """ϱ* with ∂V/∂ϱ(λ, μ, ϱ*) = 0 (eq. (54) of [1]); (a/b)^{1/3} for eq. (40) alone."""
+    if body.potential.kind != 0 and body.thickness is not None:
+        return body.thickness.rho_star
+
+    def g(r: float) -> float:
+        return body.potential_terms(lam, mu, r)[3]
+
+    lo, hi = 1e-3, 1e3
+    if g(lo) * g(hi) > 0:
+        raise ValueError("thickness: the potential has no equilibrium thickness (∂V/∂ϱ = 0) in [1e-3, 1e3]")
+    return float(brentq(g, lo, hi, xtol=1e-15, rtol=1e-15))
+
+
+def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float, float]:
+    """The inverse problem of eqs. (52)–(53) of [1] (NOTES §6 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
+
+    .. math:: \\sigma_+^2 = 2Ju^3\\,\\partial V/\\partial u, \\qquad \\sigma_-^2 = 2Jv^3\\,\\partial V/\\partial v,
+
+    with u = λ + μ, v = λ − μ, ∂V/∂u = (V_λ + V_μ)/2, ∂V/∂v = (V_λ − V_μ)/2 (J1 = J2 = J). A negative
+    value means no stationary ellipse has this shape.
+    """
+    J = body.inertia.J1
+    _, gl, gm, _ = body.potential_terms(lam, mu, rho)
+    u, v = lam + mu, lam - mu
+    return J * u**3 * (gl + gm), J * v**3 * (gl - gm)
+
+
+def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm: float) -> np.ndarray:
+    """Hessian of W in (λ, μ, ϱ), W of the module docstring."""
+    J = body.inertia.J1
+    u, v = lam + mu, lam - mu
+    # kinetic part in (u, v): diag(3σ₊²/(2Ju⁴), 3σ₋²/(2Jv⁴)); λ = (u+v)/2, μ = (u−v)/2 ⇒ u = λ+μ, v = λ−μ
+    Kuv = np.diag([1.5 * sp * sp / (J * u**4), 1.5 * sm * sm / (J * v**4)])
+    T = np.array([[1.0, 1.0], [1.0, -1.0]])  # ∂(u, v)/∂(λ, μ)
+    H = np.zeros((3, 3))
+    H[:2, :2] = T.T @ Kuv @ T
+    h = 1e-5 * max(1.0, lam, mu, rho)
+    x0 = np.array([lam, mu, rho])
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = h
+        gp = np.array(body.potential_terms(*(x0 + e))[1:])
+        gm = np.array(body.potential_terms(*(x0 - e))[1:])
+        H[:, i] += (gp - gm) / (2 * h)
+    return 0.5 * (H + H.T)
+
+
+def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
+    """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, NOTES §6).
+
+    Parameters
+    ----------
+    body : Body
+        Isotropic in the plane (J1 = J2).
+    lam, mu : float
+        Target stretches, λ ≠ μ, both > 0.
+    branch : {"rotation", "circulation"}
+        Sign of σ₊σ₋ (see :data:`BRANCHES`).
+    sign : {+1, −1}
+        Overall sign of (s3, p_θ) (time reversal; same stability).
+
+    Raises
+    ------
+    ValueError
+        If no stationary ellipse has this shape (∂V/∂u < 0 or v ∂V/∂v < 0: e.g. V3 needs λμ ≥ 1).
+    """
+    if not body.inertia.is_isotropic:
+        raise ValueError("params: stationary ellipses of branch N need J1 = J2 (isotropic in the plane)")
+    if branch not in BRANCHES:
+        raise ValueError(f"branch: must be one of {BRANCHES}, got {branch!r}")
+    if not (lam > 0 and mu > 0) or lam == mu:
+        raise ValueError(f"lambda, mu: need λ, μ > 0 and λ ≠ μ, got {lam}, {mu}")
+    J = body.inertia.J1
+    rho = equilibrium_thickness(body, lam, mu)
+    u, v = lam + mu, lam - mu
+    sp2, sm2 = squared_sigmas(body, lam, mu, rho)
+    if sp2 < 0 or sm2 < 0:
+        raise ValueError(
+            f"lambda, mu: no stationary ellipse with shape ({lam:g}, {mu:g}) for this potential "
+            f"(needs dV/du >= 0 and (lambda-mu) dV/dv >= 0)"
+        )
+    sp = math.copysign(math.sqrt(sp2), sign)
+    sm = math.sqrt(sm2) * (1.0 if branch == "rotation" else -1.0) * math.copysign(1.0, sign)
+    s3, pt = 0.5 * (sp + sm), 0.5 * (sp - sm)
+    omega3 = sp / (2 * J * u * u) + sm / (2 * J * v * v)
+    theta_dot = sp / (2 * J * u * u) - sm / (2 * J * v * v)
+    J3 = body.inertia.J3
+    I1, I2 = J * mu * mu + J3 * rho * rho, J * lam * lam + J3 * rho * rho
+    q = (s3 / I2 - omega3) * (omega3 - s3 / I1)
+    hmin = float(np.linalg.eigvalsh(_shape_hessian(body, lam, mu, rho, sp, sm))[0])
+    state = np.array([0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0])
+    return StationaryEllipse(
+        lam=lam, mu=mu, rho=rho, s3=s3, p_theta=pt, omega3=omega3, theta_dot=theta_dot,
+        energy=hamiltonian(state, body), q=q, shape_hessian_min=hmin,
+    )

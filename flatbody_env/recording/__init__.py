@@ -1,0 +1,1 @@
+"""Rerun recordings (``.rrd``) of scenes and environment episodes for offline playback."""
