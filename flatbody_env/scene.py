@@ -23,19 +23,17 @@ Built-in scenes ship in ``flatbody_env/scenes/*.json`` (:func:`builtin_scenes`).
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from flatbody_env.physics.body import SPIN_CONVENTIONS, Body, Inertia
-from flatbody_env.physics.potentials import ThicknessPotential, V1, V2, V3
+from flatbody_env.physics import validation
+from flatbody_env.physics.body import Body
 from flatbody_env.physics.state import STATE_NAMES, validate_state
 
 _TOP_KEYS = {"name", "description", "params", "potential", "thickness", "state", "spin_convention", "t_end"}
-_POTENTIAL_KEYS = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}
 
 
 class SceneError(ValueError):
@@ -71,88 +69,21 @@ class Scene:
         return out
 
 
-def _number(where: str, value: Any, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(f"{where}: must be a finite number{' > 0' if positive else ''}, got {value!r}")
-    x = float(value)
-    if not math.isfinite(x):
-        raise SceneError(f"{where}: must be a finite number, got {value!r}")
-    if positive and x <= 0.0:
-        raise SceneError(f"{where}: must be > 0 (allowed range (0, inf)), got {value!r}")
-    return x
-
-
-def _mapping(where: str, value: Any) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise SceneError(f"{where}: expected an object, got {type(value).__name__}")
-    return value
-
-
-def _keys(where: str, obj: Mapping[str, Any], allowed: set[str] | tuple[str, ...], required: tuple[str, ...]) -> None:
-    unknown = sorted(set(obj) - set(allowed))
-    if unknown:
-        raise SceneError(f"{where}.{unknown[0]}: unknown field (allowed: {', '.join(sorted(allowed))})")
-    for key in required:
-        if key not in obj:
-            raise SceneError(f"{where}.{key}: missing field")
-
-
-def _inertia(params: Mapping[str, Any]) -> Inertia:
-    if "J" in params:
-        _keys("params", params, {"J", "J3"}, ("J", "J3"))
-        J = _number("params.J", params["J"], positive=True)
-        return Inertia(J1=J, J2=J, J3=_number("params.J3", params["J3"], positive=True))
-    if "J1" in params or "J2" in params:
-        _keys("params", params, {"J1", "J2", "J3"}, ("J1", "J2", "J3"))
-        return Inertia(
-            J1=_number("params.J1", params["J1"], positive=True),
-            J2=_number("params.J2", params["J2"], positive=True),
-            J3=_number("params.J3", params["J3"], positive=True),
-        )
-    _keys("params", params, {"J", "J1", "J2", "J3"}, ())
-    raise SceneError("params.J: missing field (give J and J3, or J1, J2 and J3; each > 0)")
-
-
-def _potential(pot: Mapping[str, Any]):
-    if "name" not in pot:
-        raise SceneError("potential.name: missing field (allowed: V1, V2, V3)")
-    name = pot["name"]
-    if name not in _POTENTIAL_KEYS:
-        raise SceneError(f"potential.name: unknown potential {name!r} (allowed: V1, V2, V3)")
-    keys = _POTENTIAL_KEYS[name]
-    _keys("potential", pot, {"name", *keys}, keys)
-    values = {k: _number(f"potential.{k}", pot[k], positive=True) for k in keys}
-    return {"V1": V1, "V2": V2, "V3": V3}[name](**values)
-
-
 def scene_from_dict(data: Mapping[str, Any], *, default_name: str = "scene") -> Scene:
     """Validate a scene dict (module docstring) and build a :class:`Scene`."""
-    data = _mapping("scene", data)
-    _keys("scene", data, _TOP_KEYS, ("params", "potential", "thickness", "state"))
-    inertia = _inertia(_mapping("params", data["params"]))
-    potential = _potential(_mapping("potential", data["potential"]))
-    thick = data["thickness"]
-    thickness = None
-    if thick is not None:
-        thick = _mapping("thickness", thick)
-        _keys("thickness", thick, {"a", "b"}, ("a", "b"))
-        thickness = ThicknessPotential(a=_number("thickness.a", thick["a"], positive=True), b=_number("thickness.b", thick["b"], positive=True))
-    convention = data.get("spin_convention", "corrected")
-    if convention not in SPIN_CONVENTIONS:
-        raise SceneError(f"spin_convention: must be one of {', '.join(SPIN_CONVENTIONS)}, got {convention!r}")
-    state = _mapping("state", data["state"])
     try:
+        data = validation.mapping("scene", data)
+        validation.keys("scene", data, _TOP_KEYS, ("params", "potential", "thickness", "state"))
+        body = Body.from_dict({k: data[k] for k in ("params", "potential", "thickness", "spin_convention") if k in data})
+        state = validation.mapping("state", data["state"])
         validate_state(state)
+        t_end = validation.number("t_end", data["t_end"], positive=True) if "t_end" in data else 20.0
+        name = validation.string("name", data.get("name", default_name))
+        description = validation.string("description", data.get("description", ""))
+    except SceneError:
+        raise
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-    t_end = _number("t_end", data["t_end"], positive=True) if "t_end" in data else 20.0
-    name = data.get("name", default_name)
-    if not isinstance(name, str):
-        raise SceneError(f"name: must be a string, got {name!r}")
-    description = data.get("description", "")
-    if not isinstance(description, str):
-        raise SceneError(f"description: must be a string, got {description!r}")
-    body = Body(inertia=inertia, potential=potential, thickness=thickness, spin_convention=convention)
     return Scene(
         name=name,
         body=body,

@@ -78,8 +78,7 @@ def _positive(flag: str, value: float) -> float:
 
 def resolve_body(args, *, need_spins: bool = True):
     """(body, s3, p_theta) from the flags (or the scene); ValueError naming the flag on bad input."""
-    from flatbody_env.physics.body import Body, Inertia
-    from flatbody_env.physics.potentials import ThicknessPotential, V1, V2, V3
+    from flatbody_env.physics.body import Body
 
     given = [c for c in _CONSTANTS if getattr(args, c) is not None]
     s3 = args.s3
@@ -100,8 +99,12 @@ def resolve_body(args, *, need_spins: bool = True):
             if c in _FOR_POTENTIAL and _FOR_POTENTIAL[c] != pot_name:
                 raise ValueError(f"{_flag(c)}: applies to {_FOR_POTENTIAL[c]} only (the potential is {pot_name})")
         val = {c: (1.0 if getattr(args, c) is None else _positive(_flag(c), getattr(args, c))) for c in _CONSTANTS}
-        pot = {"V1": lambda: V1(k=val["k"]), "V2": lambda: V2(c=val["c"], d=val["d"]), "V3": lambda: V3(kappa=val["kappa"])}[pot_name]()
-        body = Body(inertia=Inertia.isotropic(val["J"], val["J3"]), potential=pot, thickness=ThicknessPotential(a=val["a"], b=val["b"]))
+        fields = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}[pot_name]
+        body = Body.from_dict({
+            "params": {"J": val["J"], "J3": val["J3"]},
+            "potential": {"name": pot_name, **{c: val[c] for c in fields}},
+            "thickness": {"a": val["a"], "b": val["b"]},
+        })
     if need_spins:
         if s3 is None:
             raise ValueError("--s3: required (a finite number), or give --scene")

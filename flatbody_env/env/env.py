@@ -21,7 +21,6 @@ from flatbody_env.physics.equilibria import StationaryEllipse
 from flatbody_env.env.kernels import CFG_SIZE, domain_code, post_step
 from flatbody_env.physics.hamiltonian import hamiltonian
 from flatbody_env.integrators import Tolerances, get_method, make_stepper
-from flatbody_env.scene import SceneError, scene_from_dict
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
 from flatbody_env.env.task import CONTROLS, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse, control_mask, target_vector
 
@@ -464,12 +463,7 @@ def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
     if isinstance(body, Body):
         return body
     if isinstance(body, Mapping):
-        data = {"thickness": None, **dict(body)}
-        data["state"] = dict(zip(STATE_NAMES, (0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.2, 0.8, 1.0, 0.0)))
-        try:
-            return scene_from_dict(data).body
-        except SceneError as exc:
-            raise ValueError(f"body: {exc}") from None
+        return Body.from_dict(body, where="body")
     raise ValueError(f"body: expected a Body or a dict with params/potential/thickness, got {type(body).__name__}")
 
 

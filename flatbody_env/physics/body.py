@@ -32,10 +32,13 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.physics.potentials import KIND_CUSTOM, CustomPotential, InPlanePotential, ThicknessPotential, V1, V2, V3, _check_positive, potential_kernel
 
 SPIN_CONVENTIONS = ("corrected", "paper")
@@ -147,6 +150,60 @@ class Body:
             lb += self.thickness.lower_bound
         return lb
 
+    # --- data -------------------------------------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "") -> "Body":
+        """A body from its JSON form ``{"params", "potential", "thickness"[, "spin_convention"]}``.
+
+        ``params`` is ``{"J", "J3"}`` (isotropic) or ``{"J1", "J2", "J3"}``; ``potential`` is
+        ``{"name": "V1", "k"}``, ``{"name": "V2", "c", "d"}`` or ``{"name": "V3", "kappa"}``
+        (eqs. (37)–(39) of the paper); ``thickness`` is ``{"a", "b"}`` (eq. (40)) or null. Other
+        top-level fields are the caller's business (a scene adds ``state``, ``t_end``, …).
+
+        Raises
+        ------
+        ValueError
+            Naming the field (prefixed by ``where``) and the allowed range.
+        """
+        pre = f"{where}." if where else ""
+        data = validation.mapping(where or "body", data)
+        validation.keys(where or "body", data, set(data) | {"params", "potential", "thickness"}, ("params", "potential"))
+        inertia = _inertia_from(pre + "params", validation.mapping(pre + "params", data["params"]))
+        potential = _potential_from(pre + "potential", validation.mapping(pre + "potential", data["potential"]))
+        thick = data.get("thickness")
+        thickness = None
+        if thick is not None:
+            thick = validation.mapping(pre + "thickness", thick)
+            validation.keys(pre + "thickness", thick, ("a", "b"), ("a", "b"))
+            thickness = ThicknessPotential(
+                a=validation.number(pre + "thickness.a", thick["a"], positive=True),
+                b=validation.number(pre + "thickness.b", thick["b"], positive=True),
+            )
+        convention = validation.string(pre + "spin_convention", data.get("spin_convention", "corrected"), choices=SPIN_CONVENTIONS)
+        return cls(inertia=inertia, potential=potential, thickness=thickness, spin_convention=convention)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form read by :meth:`from_dict` (a custom potential has none: ``ValueError``)."""
+        J = self.inertia
+        params = {"J": J.J1, "J3": J.J3} if J.is_isotropic else {"J1": J.J1, "J2": J.J2, "J3": J.J3}
+        pot = self.potential
+        if isinstance(pot, V1):
+            potential = {"name": "V1", "k": pot.k}
+        elif isinstance(pot, V2):
+            potential = {"name": "V2", "c": pot.c, "d": pot.d}
+        elif isinstance(pot, V3):
+            potential = {"name": "V3", "kappa": pot.kappa}
+        else:
+            raise ValueError("potential: a custom potential (Python callables) has no JSON form")
+        out: dict[str, Any] = {
+            "params": params,
+            "potential": potential,
+            "thickness": None if self.thickness is None else {"a": self.thickness.a, "b": self.thickness.b},
+        }
+        if self.spin_convention != "corrected":
+            out["spin_convention"] = self.spin_convention
+        return out
+
     def describe(self) -> str:
         J = self.inertia
         pot = self.potential
@@ -162,6 +219,33 @@ class Body:
         inert = f"J={J.J1:g}" if J.is_isotropic else f"J1={J.J1:g}, J2={J.J2:g}"
         conv = "" if self.spin_convention == "corrected" else ", spin_convention='paper'"
         return f"{inert}, J3={J.J3:g}, {ptxt}{ttxt}{conv}"
+
+
+_POTENTIAL_FIELDS = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}
+
+
+def _inertia_from(where: str, params: Mapping[str, Any]) -> Inertia:
+    if "J" in params:
+        validation.keys(where, params, ("J", "J3"), ("J", "J3"))
+        J = validation.number(f"{where}.J", params["J"], positive=True)
+        return Inertia(J1=J, J2=J, J3=validation.number(f"{where}.J3", params["J3"], positive=True))
+    if "J1" in params or "J2" in params:
+        validation.keys(where, params, ("J1", "J2", "J3"), ("J1", "J2", "J3"))
+        return Inertia(**{k: validation.number(f"{where}.{k}", params[k], positive=True) for k in ("J1", "J2", "J3")})
+    validation.keys(where, params, ("J", "J1", "J2", "J3"))
+    raise ValueError(f"{where}.J: missing field (give J and J3, or J1, J2 and J3; each > 0)")
+
+
+def _potential_from(where: str, pot: Mapping[str, Any]):
+    if "name" not in pot:
+        raise ValueError(f"{where}.name: missing field (allowed: V1, V2, V3)")
+    name = pot["name"]
+    if not isinstance(name, str) or name not in _POTENTIAL_FIELDS:
+        raise ValueError(f"{where}.name: unknown potential {name!r} (allowed: V1, V2, V3)")
+    fields = _POTENTIAL_FIELDS[name]
+    validation.keys(where, pot, ("name", *fields), fields)
+    values = {k: validation.number(f"{where}.{k}", pot[k], positive=True) for k in fields}
+    return {"V1": V1, "V2": V2, "V3": V3}[name](**values)
 
 
 def default_body() -> Body:
