@@ -10,22 +10,40 @@ from pathlib import Path
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, float_list, int_at_least, load_scene_arg
 
 
-def _simulate(args) -> int:
+def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="DOP853", rtol=1e-10, atol=1e-10,
+                        step=None, model="auto", with_rotation=False):
+    """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
+
+    ``scene`` is a :class:`~flatbody_env.scene.Scene`; ``t_end`` defaults to the scene's; ``times``
+    (explicit output times) wins over ``samples`` (an even grid of that many points).
+    """
     from flatbody_env.simulation import simulate
 
-    scene = load_scene_arg(args)
-    t_end = args.t_end if args.t_end is not None else scene.t_end
-    times = None
-    if args.times:
-        times = float_list(args.times)
-    elif args.samples is not None:
+    t_end = t_end if t_end is not None else scene.t_end
+    if times is None and samples is not None:
         import numpy as np
 
-        times = np.linspace(0.0, t_end, args.samples)
-    traj = simulate(
+        times = np.linspace(0.0, t_end, samples)
+    return simulate(
         scene,
         t_end=t_end,
         times=times,
+        method=method,
+        rtol=rtol,
+        atol=atol,
+        step=step,
+        model=model,
+        with_rotation=with_rotation,
+    )
+
+
+def _simulate(args) -> int:
+    scene = load_scene_arg(args)
+    traj = simulate_trajectory(
+        scene,
+        t_end=args.t_end,
+        times=float_list(args.times) if args.times else None,
+        samples=args.samples,
         method=args.method,
         rtol=args.rtol,
         atol=args.atol,
@@ -74,12 +92,26 @@ def format_summary(scene, traj, rows: int = 6) -> str:
     return "\n".join(lines)
 
 
+def scenes_answer() -> dict:
+    """What ``flatbody scenes --json`` prints: ``{name: scene JSON}`` of the built-in scenes."""
+    from flatbody_env.scene import builtin_scenes
+
+    return {name: sc.to_dict() for name, sc in builtin_scenes().items()}
+
+
+def methods_answer() -> list:
+    """What ``flatbody methods --json`` prints: one ``MethodInfo.as_dict()`` per integrator."""
+    from flatbody_env.integrators import available_methods
+
+    return [m.as_dict() for m in available_methods()]
+
+
 def _scenes(args) -> int:
     from flatbody_env.scene import builtin_scenes
 
     scenes = builtin_scenes()
     if args.json:
-        print(json.dumps({name: sc.to_dict() for name, sc in scenes.items()}, indent=2))
+        print(json.dumps(scenes_answer(), indent=2))
         return 0
     width = max(len(n) for n in scenes)
     for name, sc in scenes.items():
@@ -93,7 +125,7 @@ def _methods(args) -> int:
 
     infos = available_methods()
     if args.json:
-        print(json.dumps([m.as_dict() for m in infos], indent=2))
+        print(json.dumps(methods_answer(), indent=2))
         return 0
     header = f"{'name':<22} {'adaptive':<8} {'order':>5} {'chart':<10} {'compiled':<8} preserves"
     print(header)
