@@ -130,6 +130,7 @@ class Service:
 
     def __init__(self, data_dir: str | Path, workers: int, limits: Limits) -> None:
         self.store = JobStore(data_dir)
+        self.store.lock()
         self.runner = JobRunner(self.store, workers)
         self.workers = workers
         self.limits = limits
@@ -151,6 +152,7 @@ class Service:
         self.runner.stop()
         if self.pool is not None:
             self.pool.shutdown(wait=False, cancel_futures=True)
+        self.store.unlock()
 
     async def answer(self, name: str, payload: dict[str, Any]) -> AnswerResponse:
         """Compute ``answers.ANSWERS[name](payload)`` in a worker process; the answer or the error response."""

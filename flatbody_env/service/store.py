@@ -85,6 +85,30 @@ class JobStore:
         finally:
             db.close()
 
+    def lock(self) -> None:
+        """Hold the data dir for this process (one service per data dir), until :meth:`unlock`.
+
+        Raises
+        ------
+        ValueError
+            ``data-dir: ... is in use by another flatbody serve``.
+        """
+        import fcntl
+
+        fh = open(self.data_dir / "service.lock", "a+", encoding="utf-8")  # noqa: SIM115 - held until unlock()
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            raise ValueError(f"data-dir: {self.data_dir} is in use by another flatbody serve (one service per data dir)") from None
+        self._lock_file = fh
+
+    def unlock(self) -> None:
+        fh = getattr(self, "_lock_file", None)
+        if fh is not None:
+            fh.close()
+            self._lock_file = None
+
     def job_dir(self, job_id: str) -> Path:
         """``DATA_DIR/jobs/ID`` (the job's artifacts)."""
         return self.data_dir / "jobs" / job_id
