@@ -121,7 +121,7 @@ class BodyLimit:
         await self.app(scope, replay, send)
 
     async def _refuse(self, scope, receive, send) -> None:
-        response = error(413, "too-large", f"request body: at most {self.max_bytes} bytes", field="body")
+        response = error(413, "too-large", f"body: the request body may hold at most {self.max_bytes} bytes", field="body")
         await response(scope, receive, send)
 
 
@@ -219,6 +219,8 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         errs = exc.errors()
         first = errs[0] if errs else {"loc": (), "msg": "invalid request"}
         loc = [str(x) for x in first.get("loc", ()) if x not in ("body", "query", "path")]
+        if str(first.get("type", "")).startswith("union_tag"):
+            loc.append(str((first.get("ctx") or {}).get("discriminator", "kind")).strip("'"))
         field = ".".join(loc) or "body"
         msg = str(first.get("msg", "invalid")).replace("\n", " ")
         ctx = first.get("ctx") or {}
@@ -303,7 +305,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """A job's status, progress, result (when done) or error (when failed)."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         return AnswerResponse(_public(job))
 
     @app.get("/jobs/{job_id}/artifact", tags=["jobs"], response_class=FileResponse,
@@ -314,9 +316,9 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json)."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         if job["status"] != "done":
-            return error(409, "conflict", f"job: {job_id} is {job['status']}; its files come when it is done", field="job_id")
+            return error(409, "conflict", f"job_id: job {job_id} is {job['status']}; its files come when it is done", field="job_id")
         names = job["artifacts"]
         chosen = names[0] if name is None and names else name
         if chosen not in names:
@@ -332,7 +334,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """Cancel a queued or running job (its process is stopped) and delete the job and its files."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         cancelled = await asyncio.to_thread(service.runner.cancel, job_id)
         deleted = await asyncio.to_thread(service.store.delete, job_id)
         return AnswerResponse({"id": job_id, "cancelled": cancelled, "deleted": deleted})
