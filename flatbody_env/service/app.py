@@ -31,7 +31,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from flatbody_env.service import models
-from flatbody_env.service.jobs import JobRunner, die_with_parent, process_context
+from flatbody_env.service.jobs import JobRunner, die_with_service, process_context
 from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
 from flatbody_env.service.store import JobStore
 
@@ -144,7 +144,8 @@ class Service:
     def _new_pool(self) -> None:
         from flatbody_env.service.answers import warm_up
 
-        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(), initializer=die_with_parent)
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(),
+                                        initializer=die_with_service, initargs=(os.getpid(),))
         for _ in range(self.workers):
             self.pool.submit(warm_up)
 
@@ -231,6 +232,8 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 400:  # a body that cannot be decoded (FastAPI says 400): bad input, as every other
+            return error(422, "validation", f"body: not valid JSON ({exc.detail})", field="body")
         kind = {404: "not-found", 409: "conflict", 413: "too-large"}.get(exc.status_code, "validation")
         return error(exc.status_code, kind, str(exc.detail))
 
@@ -294,7 +297,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         job_id = service.runner.submit(job["kind"], job["params"])
         return AnswerResponse({"id": job_id}, status_code=202)
 
-    @app.get("/jobs", tags=["jobs"], response_model=models.JobList)
+    @app.get("/jobs", tags=["jobs"], response_model=models.JobList, responses={422: _ERRORS[422]})
     async def list_jobs(limit: int = Query(100, ge=1, le=1000)):
         """The newest jobs first (without their results)."""
         jobs = await asyncio.to_thread(service.store.list, limit)
