@@ -332,3 +332,17 @@ def test_unknown_jobs_and_artifacts(client):
     assert_error(client.get("/jobs/0123/artifact"), 404, "job_id")
     job = wait_job(client.get, client.post("/jobs", json={"kind": "stability-map", "params": {"grid": 4}}).json()["id"])
     assert_error(client.get(f"/jobs/{job['id']}/artifact", params={"name": "../jobs.sqlite3"}), 404, "name")
+
+
+def test_the_page_and_its_files_are_served(client):
+    page = client.get("/")
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    for ref in ('id="find-ellipses"', 'id="start-record"', "/page/page.js", "/page/page.css"):
+        assert ref in page.text
+    js = client.get("/page/page.js")
+    assert js.status_code == 200 and "/ellipses" in js.text and "rerun " in js.text
+    assert client.get("/page/page.css").status_code == 200
+    doc = client.get("/openapi.json").json()
+    assert {"/health", "/scenes", "/methods", "/ellipses", "/stability", "/simulate", "/invariants", "/jobs", "/jobs/{job_id}",
+            "/jobs/{job_id}/artifact"} <= set(doc["paths"])
+    assert client.get("/docs").status_code == 200
