@@ -152,7 +152,7 @@ class Service:
     def stop(self) -> None:
         self.runner.stop()
         if self.pool is not None:
-            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool.shutdown(wait=True, cancel_futures=True)  # waits for a running request (bounded by the limits)
         self.store.unlock()
 
     async def answer(self, name: str, payload: dict[str, Any]) -> AnswerResponse:
@@ -294,7 +294,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         checked = await service.answer("check-job", job)
         if checked.status_code != 200:
             return checked
-        job_id = service.runner.submit(job["kind"], job["params"])
+        job_id = await asyncio.to_thread(service.runner.submit, job["kind"], job["params"])
         return AnswerResponse({"id": job_id}, status_code=202)
 
     @app.get("/jobs", tags=["jobs"], response_model=models.JobList, responses={422: _ERRORS[422]})

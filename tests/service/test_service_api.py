@@ -346,3 +346,14 @@ def test_the_page_and_its_files_are_served(client):
     assert {"/health", "/scenes", "/methods", "/ellipses", "/stability", "/simulate", "/invariants", "/jobs", "/jobs/{job_id}",
             "/jobs/{job_id}/artifact"} <= set(doc["paths"])
     assert client.get("/docs").status_code == 200
+
+
+def test_oversized_chunked_body_is_413(client):
+    chunk = b" " * (1 << 20)
+
+    def chunks():  # no content-length: the limit is counted as the body streams in
+        for _ in range(DEFAULT_LIMITS.max_body_bytes // len(chunk) + 1):
+            yield chunk
+
+    r = client.post("/invariants", content=chunks(), headers={"content-type": "application/json"})
+    assert_error(r, 413, "body")
