@@ -12,14 +12,17 @@ import sys
 import time
 from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 
 
 def _rrd_path(text: str) -> str:
-    if not text.endswith(".rrd"):
-        raise argparse.ArgumentTypeError(f"out: a rerun recording file must end in .rrd, got {text!r}")
+    try:
+        check_output_path("out", text.replace("{episode}", "0"), (".rrd",))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (a rerun recording file must end in .rrd)") from None
     return text
 
 
@@ -41,9 +44,15 @@ def _record(args) -> int:
         step=args.step,
         model=args.model,
         with_rotation=True,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
+    from flatbody_env.cli.output import atomic_path
+
     start = time.perf_counter()
-    path = record_trajectory(traj, scene.body, args.out, title=args.title, tensor_every=args.tensor_every)
+    with atomic_path(args.out) as tmp:  # a killed run never leaves a half-written RUN.rrd
+        record_trajectory(traj, scene.body, tmp, title=args.title, tensor_every=args.tensor_every)
+    path = Path(args.out)
     elapsed = time.perf_counter() - start
     msg = f"wrote {path} ({traj.t.size} steps of scene {scene.name}, t = 0…{t_end:g}, {traj.method} {traj.model}; logged in {elapsed * 1e3:.0f} ms, importing rerun included)"
     if args.verify:
@@ -109,9 +118,16 @@ def _record_info(args) -> int:
     from flatbody_env.recording.writer import summarize_recording, verify_recording
 
     path = Path(args.file)
-    if not path.exists():
-        raise ValueError(f"file: no file {args.file!r}")
-    print(summarize_recording(path, rows=args.rows))
+    if path.suffix != ".rrd":
+        raise ValueError(f"file: expected a rerun recording ending in .rrd, got {args.file[:60]!r}")
+    if not path.is_file():
+        raise ValueError(f"file: no regular file {args.file[:60]!r}")
+    try:
+        summary = summarize_recording(path, rows=args.rows)
+    except (RuntimeError, OSError, ValueError) as exc:  # rerun refuses a file that is no recording
+        first = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"file: {args.file[:60]!r} is not a readable rerun recording ({first})") from None
+    print(summary)
     if not args.no_verify:
         out = verify_recording(path)
         print(f"rerun rrd verify: {out.splitlines()[-1] if out else 'ok'}")
@@ -245,7 +261,7 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
     p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")

@@ -5,19 +5,22 @@ from __future__ import annotations
 import json
 import math
 import sys
-from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, float_list, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 def _simulate(args) -> int:
+    from flatbody_env.cli.output import atomic_write
     from flatbody_env.simulation import simulate
 
     scene = load_scene_arg(args)
     t_end = args.t_end if args.t_end is not None else scene.t_end
     times = None
-    if args.times:
-        times = float_list(args.times)
+    if args.times is not None and args.samples is not None:
+        raise ValueError("--times: give --times or --samples, not both")
+    if args.times is not None:
+        times = args.times
     elif args.samples is not None:
         import numpy as np
 
@@ -32,6 +35,8 @@ def _simulate(args) -> int:
         step=args.step,
         model=args.model,
         with_rotation=args.with_rotation,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
     if args.summary:
         print(format_summary(scene, traj))
@@ -39,7 +44,7 @@ def _simulate(args) -> int:
             return 0
     text = json.dumps(traj.to_dict())
     if args.out:
-        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        atomic_write(args.out, text + "\n")
         if not args.summary:
             print(f"wrote {args.out} ({traj.t.size} samples, {traj.method}, {traj.model} model)", file=sys.stderr)
     else:
@@ -110,10 +115,13 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
     add_scene_arguments(p)
     add_integration_arguments(p)
-    p.add_argument("--times", metavar="t1,t2,...", help="output times (default: an even grid)")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=None, metavar="N", help="number of evenly spaced output times (default 101)")
+    p.add_argument("--times", type=times_list, metavar="t1,t2,...",
+                   help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
+                   "it is also in the JSON's 'initial_state'); default: an even grid")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=None, metavar="N",
+                   help=f"number of evenly spaced output times in [0, t_end] (default 101, at most {MAX_SAMPLES})")
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
-    p.add_argument("--out", metavar="FILE", help="write the JSON here instead of stdout")
+    p.add_argument("--out", type=output_file("--out"), metavar="FILE", help="write the JSON here instead of stdout (replaced atomically)")
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")
     p.set_defaults(handler=_simulate)
 

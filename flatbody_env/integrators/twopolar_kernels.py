@@ -207,7 +207,9 @@ def _dop853_error(y, ynew, K, h, rtol, atol):
 def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters):
     """Advance ``y`` (and its derivative ``f``) in place from t to exactly t_bound.
 
-    counters: [nfev, accepted, rejected]. Returns (status, t reached, next |h|).
+    counters: [nfev, accepted, rejected(, budget of nfev)]; past the budget (or
+    :data:`DOP853_MAX_STEPS` steps) the status is ``MAX_STEPS`` (kind ``"budget"``).
+    Returns (status, t reached, next |h|).
     """
     while t < t_bound:
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -217,7 +219,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
         while True:
             if h_abs < min_step:
                 return STEP_COLLAPSE, t, h_abs
-            if counters[1] + counters[2] > DOP853_MAX_STEPS:
+            if counters[1] + counters[2] > DOP853_MAX_STEPS or (counters.size > 3 and counters[0] > counters[3]):
                 return MAX_STEPS, t, h_abs
             t_new = t + h_abs
             if t_new > t_bound:
@@ -257,7 +259,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
 def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
     """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
 
-    counters (3,) int64: [nfev, accepted, rejected]; fail (2,): [t of failure, |H − H₀| at the
+    counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
     last check]. Returns the status.
     """
     vel = np.empty(7)
