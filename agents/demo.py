@@ -31,7 +31,7 @@ def rollout(agent, *, seed: int, env_kwargs: dict[str, Any] | None = None) -> di
     u = env.unwrapped
     obs, info = env.reset(seed=seed)
     k = env.action_space.shape[0]
-    t, states, rots, acts, dist, energy = [0.0], [u._y.copy()], [u.rotation], [], [info["distance"]], [info["energy"]]
+    t, states, rots, acts, dist, energy = [0.0], [u.physics_state], [u.rotation], [], [info["distance"]], [info["energy"]]
     terms: dict[str, list[float]] = {}
     done = False
     while not done:
@@ -39,7 +39,7 @@ def rollout(agent, *, seed: int, env_kwargs: dict[str, Any] | None = None) -> di
         obs, _, term, trunc, info = env.step(a)
         done = term or trunc
         t.append(info["t"])
-        states.append(u._y.copy())
+        states.append(u.physics_state)
         rots.append(u.rotation)
         acts.append(np.clip(a, -1, 1).astype(np.float64))
         dist.append(info["distance"])

@@ -389,6 +389,10 @@ class EnvStepper:
     state: str
     """``"paper"`` (11 entries) or ``"regular"`` (18 entries)."""
     fixed_step: bool
+    step_counted: object = None
+    """``step`` with a trailing ``counters`` (3,) int64 argument (accumulates [nfev, steps, rejected])."""
+    batch_counted: object = None
+    """``batch`` with a trailing ``NFEV`` (N,) int64 output (each body's function evaluations)."""
 
     @property
     def size(self) -> int:
@@ -396,12 +400,16 @@ class EnvStepper:
 
 
 _ENV = {
-    "DOP853-numba": (_tk.dop853_env_step, _tk.batch_dop853_env_step, "paper", False),
-    "RK4": (_tk.rk4_env_step, _tk.batch_rk4_env_step, "paper", True),
-    "splitting-strang": (_tk.strang_env_step, _tk.batch_strang_env_step, "paper", True),
-    "splitting-suzuki4": (_tk.suzuki4_env_step, _tk.batch_suzuki4_env_step, "paper", True),
-    "splitting-yoshida4": (_tk.yoshida4_env_step, _tk.batch_yoshida4_env_step, "paper", True),
-    "RATTLE-suzuki4": (_rk.rattle_env_step, _rk.batch_rattle_env_step, "regular", True),
+    "DOP853-numba": (_tk.dop853_env_step, _tk.batch_dop853_env_step, "paper", False,
+                     _tk.dop853_env_step_counted, _tk.batch_dop853_env_step_counted),
+    "RK4": (_tk.rk4_env_step, _tk.batch_rk4_env_step, "paper", True, _tk.rk4_env_step_counted, _tk.batch_rk4_env_step_counted),
+    "splitting-strang": (_tk.strang_env_step, _tk.batch_strang_env_step, "paper", True,
+                         _tk.strang_env_step_counted, _tk.batch_strang_env_step_counted),
+    "splitting-suzuki4": (_tk.suzuki4_env_step, _tk.batch_suzuki4_env_step, "paper", True,
+                          _tk.suzuki4_env_step_counted, _tk.batch_suzuki4_env_step_counted),
+    "splitting-yoshida4": (_tk.yoshida4_env_step, _tk.batch_yoshida4_env_step, "paper", True,
+                           _tk.yoshida4_env_step_counted, _tk.batch_yoshida4_env_step_counted),
+    "RATTLE-suzuki4": (_rk.rattle_env_step, _rk.batch_rattle_env_step, "regular", True, None, None),
 }
 ENV_METHODS = tuple(_ENV)
 """Methods with an environment stepper."""
@@ -411,8 +419,9 @@ def env_stepper(name: str) -> EnvStepper:
     """The compiled per-step functions of method ``name`` (one of :data:`ENV_METHODS`)."""
     if name not in _ENV:
         raise ValueError(f"method: no environment stepper for {name!r} (allowed: {', '.join(ENV_METHODS)})")
-    step, batch, state, fixed = _ENV[name]
-    return EnvStepper(name=name, step=step, batch=batch, state=state, fixed_step=fixed)
+    step, batch, state, fixed, step_counted, batch_counted = _ENV[name]
+    return EnvStepper(name=name, step=step, batch=batch, state=state, fixed_step=fixed, step_counted=step_counted,
+                      batch_counted=batch_counted)
 
 
 def warm_up(names=None) -> None:
