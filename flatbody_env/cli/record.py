@@ -27,9 +27,12 @@ def _rrd_path(text: str) -> str:
 
 
 def _record(args) -> int:
+    if args.agent is not None:
+        return _record_agent(args)
     import numpy as np
 
-    from flatbody_env.recording.writer import record_trajectory, verify_recording
+    from flatbody_env.recording.reader import verify_recording
+    from flatbody_env.recording.writer import record_trajectory
     from flatbody_env.simulation import simulate
 
     scene = load_scene_arg(args)
@@ -63,6 +66,27 @@ def _record(args) -> int:
     return 0
 
 
+def _record_agent(args) -> int:
+    """``flatbody record --agent [MODEL]``: one seeded episode of a trained agent, recorded through
+    the env recorder (the same path as ``flatbody demo`` and ``flatbody record-env``)."""
+    if args.scene_file or args.scene:
+        raise ValueError("agent: --agent records an environment episode; give no scene")
+    from agents.demo import format_demo, rollout
+    from agents.evaluate import Agent
+
+    agent = Agent(args.agent or None)
+    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+    print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+    msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
+    if args.verify:
+        from flatbody_env.recording.reader import verify_recording
+
+        verify_recording(ep["path"])  # raises ValueError with rerun's output on failure
+        msg += "; rerun rrd verify: ok"
+    print(msg)
+    return 0
+
+
 def _make_env(env_id: str, max_steps: int | None):
     import gymnasium as gym
 
@@ -83,7 +107,7 @@ def _record_env(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from flatbody_env.recording.writer import verify_recording
+    from flatbody_env.recording.reader import verify_recording
     from flatbody_env.recording.wrapper import RerunRecorder
 
     env = RerunRecorder(_make_env(args.env_id, args.max_steps), args.out, tensor_every=args.tensor_every)
@@ -115,7 +139,7 @@ def _record_env(args) -> int:
 
 
 def _record_info(args) -> int:
-    from flatbody_env.recording.writer import summarize_recording, verify_recording
+    from flatbody_env.recording.reader import summarize_recording, verify_recording
 
     path = Path(args.file)
     if path.suffix != ".rrd":
@@ -140,7 +164,8 @@ def _record_bench(args) -> int:
 
     import numpy as np
 
-    from flatbody_env.recording.writer import Recorder, record_trajectory, sdk_version
+    from flatbody_env.recording.reader import sdk_version
+    from flatbody_env.recording.writer import Recorder, record_trajectory
     from flatbody_env.scene import load_scene
     from flatbody_env.simulation import simulate
 
@@ -265,6 +290,9 @@ def register(sub) -> None:
     p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
+    p.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
+                   help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
