@@ -77,4 +77,5 @@ def add_integration_arguments(p) -> None:
     p.add_argument("--rtol", type=positive_float("rtol"), default=1e-10, help="relative tolerance (adaptive methods)")
     p.add_argument("--atol", type=positive_float("atol"), default=1e-10, help="absolute tolerance (adaptive methods)")
     p.add_argument("--step", type=positive_float("step"), default=None, metavar="H", help="step size (fixed-step methods)")
-    p.add_argument("--model", default="auto", choices=("auto", "two-polar", "regular"), help="formulation (default auto)")
+    p.add_argument("--model", default="auto", choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
+                   help="rung of the model ladder (default auto: the lowest the scene allows)")
