@@ -2,9 +2,15 @@
 
 Model selection ("model no more than a scene needs")
 -----------------------------------------------------
-``model="auto"`` integrates the two-polar equations (eqs. (44)–(49) of [1], 11 variables,
-cheapest) when the scene provably stays away from the chart's singular set λ = μ, and the
-regular matrix formulation (NOTES §5 of [2], 18 variables plus two constraints) otherwise:
+``model="auto"`` picks the lowest rung of the model ladder (:mod:`flatbody_env.integrators.ladder`)
+that the initial state, the body and the controls allow: a stationary ellipse (exact), planar
+motion with V1 (exact in-plane), planar motion (two small systems) — these three with an
+adaptive method only — then the two-polar equations (eqs. (44)–(49) of [1], 11 variables)
+when the scene provably stays away from the chart's singular set λ = μ, and the regular
+matrix formulation (18 variables plus two constraints) otherwise. ``model=`` names a rung to
+force it (a ``ValueError`` says which invariant the scene breaks); ``Trajectory.model`` and
+``meta["rung"]`` name the rung, ``meta["rung_invariant"]`` / ``meta["rung_measured"]`` why.
+Between the two full models:
 
 * J1 = J2 (p_θ and σ₋ = s3 − p_θ conserved) and the energy bound of the centrifugal barrier
   σ₋²/(4J(λ−μ)²) ≤ H − inf V gives |λ − μ| ≥ |σ₋| / √(4J (H − inf V)) ≥ :data:`GAP_MIN`
@@ -48,13 +54,12 @@ from flatbody_env.physics import validation
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
 from flatbody_env.scene import Scene, load_scene
 
-GAP_MIN = 1e-2
-"""Smallest guaranteed |λ − μ| for which ``model="auto"`` keeps the two-polar chart."""
+from flatbody_env.integrators.ladder import GAP_MIN, LADDER_RUNGS, RUNGS, RungChoice, check_rung, choose_rung, rung_model, rung_reasons
 
 FIXED_STEP_ENERGY_TOL = 1e-3
 """Default relative energy tolerance of fixed-step methods (a blow-up detector, not an accuracy target)."""
 
-MODELS = ("auto", "two-polar", "regular")
+MODELS = ("auto",) + RUNGS
 DEFAULT_SAMPLES = 101
 
 
@@ -77,9 +82,26 @@ def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> floa
     return sigma_minus / math.sqrt(4.0 * body.inertia.J1 * avail)
 
 
-def choose_model(state: Mapping[str, float] | np.ndarray, body: Body) -> str:
-    """``"two-polar"`` or ``"regular"`` per the rule in the module docstring."""
-    return "two-polar" if gap_lower_bound(state, body) >= GAP_MIN else "regular"
+def choose_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> str:
+    """The rung ``model="auto"`` runs (:data:`MODELS`), per the rule in the module docstring."""
+    return explain_model(state, body, u, ladder=ladder).rung
+
+
+def explain_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> RungChoice:
+    """The rung ``model="auto"`` runs and why (:class:`~flatbody_env.integrators.ladder.RungChoice`);
+    ``ladder=False`` chooses between the two full models only."""
+    y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
+    if ladder:
+        low = choose_rung(y, body, u)
+        if low is not None:
+            return low
+    bound = gap_lower_bound(y, body) if u is None or not np.any(u) else 0.0
+    if bound >= GAP_MIN:
+        return RungChoice(rung="two-polar", invariant=f"J1 = J2 and the energy bound keeps |lambda - mu| >= {bound:.3g} >= {GAP_MIN:g}",
+                          measured={"gap_lower_bound": float(bound)})
+    why = "; ".join(f"{r}: {t}" for r, t in rung_reasons(y, body, u).items() if t)
+    return RungChoice(rung="regular", invariant=f"no lower rung holds (two-polar: |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} guaranteed"
+                      + (f"; {why})" if why else ")"), measured={"gap_lower_bound": float(bound)})
 
 
 @dataclass
@@ -315,8 +337,8 @@ def simulate(
         Also integrate R (Ṙ = R W(ω), eq. (25) of [1]) and return ``Trajectory.rotation``.
     step : float, optional
         Step size of fixed-step methods (required for them, refused by adaptive ones).
-    model : {"auto", "two-polar", "regular"}
-        The formulation (module docstring).
+    model : {"auto", "stationary", "planar-V1", "planar", "two-polar", "regular"}
+        The rung of the model ladder (module docstring).
     energy_tol : float, optional
         Allowed |H(t) − H(0)| before the run is declared failed; default
         ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H(0)|)`` for adaptive methods and
@@ -346,11 +368,20 @@ def simulate(
     body = sc.body
     y0 = pack(sc.state)
     meth = get_method(method)
+    if model in LADDER_RUNGS or (model == "auto" and meth.info.adaptive and meth.info.chart != "regular" and step is None):
+        low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
+        if low is not None:
+            return _simulate_rung(sc, low, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time)
     chosen = model
     if model == "auto":
-        chosen = meth.info.chart if meth.info.chart == "regular" else choose_model(y0, body)
+        choice = explain_model(y0, body, ladder=False)
+        chosen = meth.info.chart if meth.info.chart == "regular" else choice.rung
         if body.spin_convention == "paper":
             chosen = "two-polar"
+        if chosen != choice.rung:
+            choice = RungChoice(rung=chosen, invariant=f"method {method!r} runs in the {chosen} chart", measured=choice.measured)
+    else:
+        choice = RungChoice(rung=chosen, invariant=f"model={model!r} was asked for")
     if chosen != meth.info.chart:
         twin = _twin(method, chosen)
         if twin is None and model != "auto":
@@ -359,6 +390,9 @@ def simulate(
             meth = get_method(twin)
         # model="auto" and no twin: the method asked for by name runs in its own chart; near
         # lambda = mu its failure is detected and reported (IntegrationError), never hidden.
+        if twin is None:
+            choice = RungChoice(rung=meth.info.chart, invariant=f"method {method!r} has no twin in the {chosen} chart and runs in its own",
+                                measured=choice.measured)
     # rtol, atol, step, energy_tol and the budget are validated by Tolerances (one home)
     tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time)
     check_step(meth.info, tol)
@@ -395,6 +429,31 @@ def simulate(
         scene=sc.name,
         initial_state=unpack(y0),
         initial_energy=float(H0),
+        extra=choice.as_meta(),
+    )
+
+
+def _simulate_rung(sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
+    """Integrate on a rung below the full models (:mod:`flatbody_env.integrators.ladder`)."""
+    model = rung_model(choice.rung)
+    y0 = pack(sc.state)
+    H0 = hamiltonian(y0, sc.body)
+    if energy_tol is None:
+        energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+    tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol), max_nfev=max_nfev, max_wall_time=max_wall_time)
+    # rungs integrate from grid[0] = 0 as the full models do: a grid without 0 gets it prepended and its row dropped
+    prepended = times_arr[0] != 0.0
+    grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
+    keep = slice(1, None) if prepended else slice(None)
+    start = time.perf_counter()
+    sol = model.integrate(sc.body, y0, grid, tol=tol, with_rotation=with_rotation)
+    wall = time.perf_counter() - start
+    state = unpack(sol.Y[:, keep])
+    return Trajectory(
+        t=np.asarray(sol.t, float)[keep], state=state, energy=np.asarray(sol.stats["energy"], float)[keep],
+        casimir=casimir(state["s1"], state["s2"], state["s3"]), p_theta=state["p_theta"].copy(),
+        rotation=None if sol.rotation is None else sol.rotation[keep], method=model.info.name, model=choice.rung,
+        nfev=sol.nfev, wall_time=wall, scene=sc.name, extra=choice.as_meta(), initial_state=unpack(y0), initial_energy=float(H0),
     )
 
 
@@ -409,4 +468,4 @@ def _twin(method: str, chart: str) -> str | None:
     return None
 
 
-__all__ = ["GAP_MIN", "MODELS", "Trajectory", "read_trajectory", "simulate", "choose_model", "gap_lower_bound", "IntegrationError"]
+__all__ = ["GAP_MIN", "MODELS", "Trajectory", "read_trajectory", "simulate", "choose_model", "explain_model", "gap_lower_bound", "IntegrationError"]

@@ -191,7 +191,8 @@ def add_integration_arguments(p) -> None:
     p.add_argument("--rtol", type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="relative tolerance (adaptive methods), in [1e-16, 1]")
     p.add_argument("--atol", type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="absolute tolerance (adaptive methods), in [1e-16, 1]")
     p.add_argument("--step", type=positive_float("step", validation.T_END_MAX), default=None, metavar="H", help="step size (fixed-step methods)")
-    p.add_argument("--model", default="auto", choices=("auto", "two-polar", "regular"), help="formulation (default auto)")
+    p.add_argument("--model", default="auto", choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
+                   help="rung of the model ladder (default auto: the lowest the scene allows)")
     p.add_argument("--max-nfev", type=int_at_least("max_nfev", 1, 10**12), default=DEFAULT_MAX_NFEV, metavar="N",
                    help=f"work budget: right-hand-side evaluations (default {DEFAULT_MAX_NFEV:.0e})")
     p.add_argument("--max-seconds", type=positive_float("max_seconds"), default=DEFAULT_MAX_WALL_TIME, metavar="S",

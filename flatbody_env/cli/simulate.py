@@ -47,6 +47,8 @@ def _simulate(args) -> int:
         atomic_write(args.out, text + "\n")
         if not args.summary:
             print(f"wrote {args.out} ({traj.t.size} samples, {traj.method}, {traj.model} model)", file=sys.stderr)
+            for line in _rung_lines(traj):
+                print(line, file=sys.stderr)
     else:
         sys.stdout.write(text + "\n")
     return 0
@@ -60,6 +62,7 @@ def format_summary(scene, traj, rows: int = 6) -> str:
         f"scene {scene.name}: {scene.body.describe()}",
         f"integrated to t = {traj.t[-1]:g} with {traj.method} ({traj.model} model): "
         f"{traj.nfev} RHS evaluations, {traj.wall_time * 1e3:.1f} ms",
+        *_rung_lines(traj),
         "",
         f"{'t':>9} {'lambda':>10} {'mu':>10} {'rho':>10} {'theta':>10} {'|s|':>10} {'energy':>14}",
     ]
@@ -77,6 +80,15 @@ def format_summary(scene, traj, rows: int = 6) -> str:
     drift = traj.drift()
     lines.append("invariant drift (max |q(t) - q(0)|): " + ", ".join(f"{k} {v:.2e}" for k, v in drift.items()))
     return "\n".join(lines)
+
+
+def _rung_lines(traj) -> list[str]:
+    """The rung of the model ladder and why it was chosen (the invariant and its measured size)."""
+    rung = traj.extra.get("rung")
+    if rung is None:
+        return []
+    measured = ", ".join(f"{k} = {v:.3g}" for k, v in traj.extra.get("rung_measured", {}).items())
+    return [f"rung: {rung} -- {traj.extra.get('rung_invariant', '')}" + (f" [{measured}]" if measured else "")]
 
 
 def _scenes(args) -> int:
