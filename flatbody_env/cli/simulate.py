@@ -10,25 +10,37 @@ from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments
 from flatbody_env.physics.validation import MAX_SAMPLES
 
 
-def _simulate(args) -> int:
-    from flatbody_env.cli.output import atomic_write
+def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="DOP853", rtol=1e-10, atol=1e-10,
+                        step=None, model="auto", with_rotation=False, max_nfev=None, max_wall_time=None):
+    """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
+
+    ``scene`` is a :class:`~flatbody_env.scene.Scene`; ``t_end`` defaults to the scene's; ``times``
+    (explicit output times, returned exactly) or ``samples`` (an even grid of that many points), not both;
+    ``max_nfev`` / ``max_wall_time`` bound the work (None: the defaults of :func:`flatbody_env.simulate`).
+    """
     from flatbody_env.simulation import simulate
 
-    scene = load_scene_arg(args)
-    t_end = args.t_end if args.t_end is not None else scene.t_end
-    times = None
-    if args.times is not None and args.samples is not None:
-        raise ValueError("--times: give --times or --samples, not both")
-    if args.times is not None:
-        times = args.times
-    elif args.samples is not None:
+    if times is not None and samples is not None:
+        raise ValueError("times: give times (--times) or samples (--samples), not both")
+    t_end = t_end if t_end is not None else scene.t_end
+    if times is None and samples is not None:
         import numpy as np
 
-        times = np.linspace(0.0, t_end, args.samples)
-    traj = simulate(
+        times = np.linspace(0.0, t_end, samples)
+    budget = {k: v for k, v in (("max_nfev", max_nfev), ("max_wall_time", max_wall_time)) if v is not None}
+    return simulate(scene, t_end=t_end, times=times, method=method, rtol=rtol, atol=atol, step=step, model=model,
+                    with_rotation=with_rotation, **budget)
+
+
+def _simulate(args) -> int:
+    from flatbody_env.cli.output import atomic_write
+
+    scene = load_scene_arg(args)
+    traj = simulate_trajectory(
         scene,
-        t_end=t_end,
-        times=times,
+        t_end=args.t_end,
+        times=args.times,
+        samples=args.samples,
         method=args.method,
         rtol=args.rtol,
         atol=args.atol,
@@ -91,12 +103,26 @@ def _rung_lines(traj) -> list[str]:
     return [f"rung: {rung} -- {traj.extra.get('rung_invariant', '')}" + (f" [{measured}]" if measured else "")]
 
 
+def scenes_answer() -> dict:
+    """What ``flatbody scenes --json`` prints: ``{name: scene JSON}`` of the built-in scenes."""
+    from flatbody_env.scene import builtin_scenes
+
+    return {name: sc.to_dict() for name, sc in builtin_scenes().items()}
+
+
+def methods_answer() -> list:
+    """What ``flatbody methods --json`` prints: one ``MethodInfo.as_dict()`` per integrator."""
+    from flatbody_env.integrators import available_methods
+
+    return [m.as_dict() for m in available_methods()]
+
+
 def _scenes(args) -> int:
     from flatbody_env.scene import builtin_scenes
 
     scenes = builtin_scenes()
     if args.json:
-        print(json.dumps({name: sc.to_dict() for name, sc in scenes.items()}, indent=2))
+        print(json.dumps(scenes_answer(), indent=2))
         return 0
     width = max(len(n) for n in scenes)
     for name, sc in scenes.items():
@@ -110,7 +136,7 @@ def _methods(args) -> int:
 
     infos = available_methods()
     if args.json:
-        print(json.dumps([m.as_dict() for m in infos], indent=2))
+        print(json.dumps(methods_answer(), indent=2))
         return 0
     header = f"{'name':<22} {'adaptive':<8} {'order':>5} {'chart':<10} {'compiled':<8} preserves"
     print(header)
