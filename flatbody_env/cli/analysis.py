@@ -205,12 +205,7 @@ def _family(args) -> int:
         plot_family(out, args.plot)
     npts = sum(len(b) for b in fam.branches)
     if args.json:
-        print(json.dumps({
-            "param": args.vary, "range": [start, stop], "s3": s3, "p_theta": pt, "branches": len(fam.branches), "points": npts,
-            "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
-                       for e in fam.events],
-            "csv": out, "plot": args.plot,
-        }))
+        print(json.dumps(family_summary(fam, csv=out, plot=args.plot)))
         return 0
     fixed = {"s3": f"p_theta = {pt:g}", "p_theta": f"s3 = {s3:g}"}.get(args.vary, f"s3 = {s3:g}, p_theta = {pt:g}")
     print(f"body: {body.describe()}; {fixed}; {args.vary} in [{start:g}, {stop:g}]")
@@ -228,6 +223,17 @@ def _family(args) -> int:
     if out is not None:
         print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))
     return 0
+
+
+def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> dict:
+    """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row)."""
+    return {
+        "param": fam.param_name, "range": list(fam.param_range), "s3": fam.s3, "p_theta": fam.p_theta,
+        "branches": len(fam.branches), "points": sum(len(b) for b in fam.branches),
+        "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
+                   for e in fam.events],
+        "csv": csv, "plot": plot,
+    }
 
 
 def _stability_map(args) -> int:
