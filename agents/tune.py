@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -270,8 +271,12 @@ def tune_worker(cfg: TuneConfig, worker: int = 0, n_trials: int | None = None) -
     if left <= 0:
         return 0
     before = {t.number for t in study.get_trials(deepcopy=False)}
-    study.optimize(lambda t: objective(t, cfg, space), n_trials=min(left, n_trials or left),
-                   callbacks=[optuna.study.MaxTrialsCallback(cfg.trials, states=finished)], catch=(ValueError, RuntimeError))
+    # states=None counts running trials too: a worker stops as soon as the study holds cfg.trials
+    # trials in any state, so workers finishing at the same instant are the only way to overshoot
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*mini-batch.*", category=UserWarning)  # sampled batch sizes vs rollout size
+        study.optimize(lambda t: objective(t, cfg, space), n_trials=min(left, n_trials or left),
+                       callbacks=[optuna.study.MaxTrialsCallback(cfg.trials, states=None)], catch=(ValueError, RuntimeError))
     return len({t.number for t in study.get_trials(deepcopy=False)} - before)
 
 
