@@ -192,14 +192,7 @@ def _family_run(body, vary, start, stop, *, s3=None, p_theta=None, seeds=5, box=
         from analysis.plots import plot_family
 
         atomic_write(plot, lambda tmp: plot_family(out, tmp))
-    answer = {
-        "param": vary, "range": [start, stop], "s3": s3, "p_theta": pt, "branches": len(fam.branches),
-        "points": sum(len(b) for b in fam.branches),
-        "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
-                   for e in fam.events],
-        "csv": out, "plot": plot,
-    }
-    return fam, answer
+    return fam, family_summary(fam, csv=out, plot=plot)
 
 
 def family_answer(body, vary: str, start: float, stop: float, **options) -> dict:
@@ -231,6 +224,17 @@ def _family(args) -> int:
     if out is not None:
         print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))
     return 0
+
+
+def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> dict:
+    """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row)."""
+    return {
+        "param": fam.param_name, "range": list(fam.param_range), "s3": fam.s3, "p_theta": fam.p_theta,
+        "branches": len(fam.branches), "points": sum(len(b) for b in fam.branches),
+        "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
+                   for e in fam.events],
+        "csv": csv, "plot": plot,
+    }
 
 
 def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot=None) -> dict:
