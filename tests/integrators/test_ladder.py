@@ -29,7 +29,8 @@ from flatbody_env.physics.state import pack
 from flatbody_env.scene import load_scene
 from flatbody_env.simulation import choose_model, simulate
 
-from conftest import BODIES, independent_hamiltonian
+from conftest import BODIES
+from oracles import independent_hamiltonian
 
 TIGHT = Tolerances(rtol=1e-13, atol=1e-13)
 RUNG_TOL = Tolerances(rtol=1e-12, atol=1e-12)
