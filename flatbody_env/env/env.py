@@ -264,11 +264,10 @@ class FlatBodyEnv(gym.Env):
 
     # --- gymnasium API ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; ``options``: ``{"target": {"lambda", "mu"[, "branch", "sign"]}, "state": {...}}``,
+        each checked by :mod:`flatbody_env.physics.validation` (``ValueError`` naming ``options.…``)."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"target", "state"}
-        if unknown:
-            raise ValueError(f"options.{sorted(unknown)[0]}: unknown option (allowed: target, state)")
+        options = _checked_options(options)
         if "target" in options:
             self._target = self.task.target_from(options["target"], self.body)
         else:
@@ -468,3 +467,30 @@ def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
 
 
 __all__ = ["FlatBodyEnv", "DEFAULT_INTEGRATOR", "OBSERVATION_NAMES", "CONTROLS", "REWARD_TERMS", "TARGET_NAMES"]
+
+
+def _checked_options(options: Any) -> dict[str, Any]:
+    """``reset(options=...)`` validated before use: types, finite numbers within the documented
+    ranges (:mod:`flatbody_env.physics.validation`); ``ValueError`` naming ``options.…``."""
+    from flatbody_env.physics import validation as v
+
+    if options is None:
+        return {}
+    options = dict(v.mapping("options", options))
+    v.keys("options", options, ("target", "state"))
+    target = options.get("target")
+    if target is not None and not isinstance(target, StationaryEllipse):
+        target = v.mapping("options.target", target)
+        v.keys("options.target", target, ("lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"), ("lambda", "mu"))
+        checked = {k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1]) for k in ("lambda", "mu")}
+        if "branch" in target:
+            checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
+        if "sign" in target:
+            checked["sign"] = v.number("options.target.sign", target["sign"], low=-1.0, high=1.0)
+            if checked["sign"] not in (-1.0, 1.0):
+                raise ValueError(f"options.target.sign: must be +1 or -1, got {checked['sign']!r}")
+        options["target"] = checked
+    if "state" in options:
+        options["state"] = v.mapping("options.state", options["state"])
+    return options
+
