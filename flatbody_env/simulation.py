@@ -49,7 +49,7 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.invariants import casimir, laboratory_spin
 from flatbody_env.physics.hamiltonian import hamiltonian
 from flatbody_env.integrators import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, IntegrationError, Tolerances, get_method
-from flatbody_env.integrators.base import check_step
+from flatbody_env.integrators.base import Solution, check_step
 from flatbody_env.physics import validation
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
 from flatbody_env.scene import Scene, load_scene
@@ -408,7 +408,10 @@ def simulate(
     prepended = times_arr[0] != 0.0
     grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
     start = time.perf_counter()
-    sol = meth.integrate(body, y0, grid, tol=tol, with_rotation=with_rotation)
+    if grid.size == 1:  # only t = 0 asked for: the initial state, nothing to integrate
+        sol = Solution(t=grid.copy(), Y=y0[:, None].copy(), rotation=np.eye(3)[None] if with_rotation else None, nfev=0)
+    else:
+        sol = meth.integrate(body, y0, grid, tol=tol, with_rotation=with_rotation)
     wall = time.perf_counter() - start
     keep = slice(1, None) if prepended else slice(None)
     Y = sol.Y[:, keep]

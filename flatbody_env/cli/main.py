@@ -63,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         sys.stderr.write(f"flatbody: error: {_one_line(exc)}\n")
         return 2
+    except BrokenPipeError:
+        return 0
     except OSError as exc:  # I/O failures (disk full, permissions changed mid-run, output.OutputError)
         where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
         sys.stderr.write(f"flatbody: I/O error{where}: {_one_line(exc.strerror or exc)}\n")
@@ -70,8 +72,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("flatbody: interrupted\n")
         return 130
-    except BrokenPipeError:
-        return 0
 
 
 def _one_line(exc) -> str:
