@@ -113,7 +113,7 @@ def heuristic_policy(env, kind: str = "heuristic") -> Policy:
     from agents.heuristic import HeuristicController, PassivityController
 
     cls = HeuristicController if kind == "heuristic" else PassivityController
-    ctl = cls(env.body, env._proto.control, env._proto.limits)
+    ctl = cls(env.body, env.control, env.limits)
     return lambda obs: ctl.predict(obs)[0]
 
 

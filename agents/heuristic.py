@@ -1,7 +1,7 @@
 """Hand-designed controllers for ``FlatBody-v0``: LQR about the target ellipse (the ``heuristic``
 baseline) and a passivity-based damping law (:class:`PassivityController`, for comparison).
 
-Dynamics both rely on (eqs. (44)–(49) of [1], spin bracket per NOTES E3/E4 of [2]; the controls
+Dynamics both rely on (eqs. (44)–(49) of [1], spin bracket per errata E3/E4 of [2]; the controls
 enter as in :mod:`flatbody_env.physics.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
 
 .. math::
@@ -20,7 +20,7 @@ reduced system. Linearising eqs. (44)–(49) there (central differences of
 :func:`flatbody_env.physics.equations.rhs`, :func:`flatbody_env.physics.controllability.linearize`) gives ẋ ≈ A δx + B a with the normalised action a (τ = τ_max a₁..₃,
 f = f_max a₄). The shape block tells what the controls can do: at linear order the thickness
 force moves only (ϱ, p_ϱ) and τ1, τ2 only (s1, s2); the in-plane shape (λ, μ, p_λ, p_μ) — two
-oscillation modes of the effective potential W (NOTES §6) — is reached *only through s3*: τ3
+oscillation modes of the effective potential W ([2]) — is reached *only through s3*: τ3
 changes s3, and s3 enters the centrifugal forces −∂𝒯/∂(λ, μ) through σ± = s3 ± p_θ. One of
 those modes is weakly controllable: its closed-loop pole saturates at a finite value whatever the
 weights (:func:`flatbody_env.physics.controllability.settling_rate`), which sets how fast any linear
@@ -37,7 +37,7 @@ power of the controls is
 
 A target stationary ellipse (eqs. (50)–(54)) with s1 = s2 = 0, p = 0 is a critical point of the
 energy–momentum function H − ω3* s3 at fixed p_θ (∂H/∂s3 = ω3, ∂H/∂q = 0 there), and a minimum
-in the shape directions when it is spectrally stable (NOTES §7: the Hessian of the effective
+in the shape directions when it is spectrally stable ([2]: the Hessian of the effective
 potential W is positive definite; the task samples only such targets). The controller makes
 
 .. math::
@@ -67,8 +67,8 @@ makes L̇ ≤ 0). The velocities come from the inverse Legendre map
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension.
+.. [2] ``docs/physics.md``: the corrected equations and the paper's errata.
 """
 
 from __future__ import annotations
@@ -81,16 +81,7 @@ import numpy as np
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
 from flatbody_env.physics.hamiltonian import kinetic_kernel
-from flatbody_env.env.task import control_mask
-
-
-def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The packed state y (11,) and the target (λ*, μ*, ϱ*, s3*) from an observation (16,)."""
-    obs = np.asarray(obs, dtype=np.float64)
-    y = np.empty(11)
-    y[:10] = obs[:10]
-    y[10] = math.atan2(obs[10], obs[11])
-    return y, obs[12:16].copy()
+from flatbody_env.env.task import control_mask, state_from_observation  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -283,10 +274,8 @@ class ResidualAction:
         if self.mode == "gain":
             return np.clip(base * (1.0 + a), -1.0, 1.0).astype(np.float32)
         if self.gate > 0:
-            y = np.empty((11, obs.shape[0]))
-            y[:10] = obs[:, :10].T
-            y[10] = np.arctan2(obs[:, 10], obs[:, 11])
-            d = self.task.distance(y, self.body, obs[:, 12:16].T)
+            y, target = state_from_observation(obs)
+            d = self.task.distance(y, self.body, target)
             a = a * np.minimum(1.0, d / self.gate)[:, None]
         return np.clip(base + a, -1.0, 1.0).astype(np.float32)
 

@@ -3,7 +3,8 @@
 Stable-Baselines3 2.x cannot consume a ``gymnasium.vector.VectorEnv``: it expects SAME_STEP
 autoreset (a finished sub-environment is reset inside the same ``step``, its last observation
 kept in ``infos[i]["terminal_observation"]``) and ``infos[i]["TimeLimit.truncated"]``. This
-adapter drives the native batch with those semantics.
+adapter runs the native batch in its SAME_STEP autoreset mode and translates the infos; it uses
+the vector env's public API only.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from flatbody_env.env.vector_env import FlatBodyVectorEnv
@@ -29,7 +31,7 @@ class FlatBodySB3VecEnv(VecEnv):
     """
 
     def __init__(self, num_envs: int, seed: int | None = None, **kwargs: Any) -> None:
-        self.venv = FlatBodyVectorEnv(num_envs=num_envs, **kwargs)
+        self.venv = FlatBodyVectorEnv(num_envs=num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)
         super().__init__(num_envs, self.venv.single_observation_space, self.venv.single_action_space)
         self._seed = seed
         self._actions: np.ndarray | None = None
@@ -44,8 +46,7 @@ class FlatBodySB3VecEnv(VecEnv):
         self._actions = np.asarray(actions)
 
     def step_wait(self):
-        v = self.venv
-        obs, rewards, terminated, truncated, info = v.step(self._actions)
+        obs, rewards, terminated, truncated, info = self.venv.step(self._actions)
         dones = terminated | truncated
         infos: list[dict[str, Any]] = []
         for i in range(self.num_envs):
@@ -59,23 +60,21 @@ class FlatBodySB3VecEnv(VecEnv):
                 "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
             }
             if dones[i]:
-                d["terminal_observation"] = obs[i].copy()
-                obs[i], _ = v._reset_one(i, None)  # SAME_STEP: the reset observation replaces it
+                d["terminal_observation"] = info["final_obs"][i].copy()
             infos.append(d)
-        v._autoreset[:] = False
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices=None) -> list[Any]:
-        return [getattr(self.venv._proto, attr_name) for _ in self._get_indices(indices)]
+        return [getattr(self.venv.single_env, attr_name) for _ in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        setattr(self.venv._proto, attr_name, value)
+        setattr(self.venv.single_env, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-        return [getattr(self.venv._proto, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+        return [getattr(self.venv.single_env, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
 
     def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]

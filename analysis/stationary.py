@@ -36,8 +36,9 @@ both orders are distinct ellipses (the c-axis long or short, NOTES §6) and both
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, section 3.4, eqs. (50)–(54).
-.. [2] ``shared/physics/NOTES.md``, §6 (and errata E7, E8).
+.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
+   dimension (a flat body with thickness), section 3.4, eqs. (50)–(54).
+.. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §6 (and errata E7, E8).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ import numpy as np
 from scipy.optimize import root
 
 from flatbody_env.physics.body import Body
-from flatbody_env.physics.equilibria import squared_sigmas
+from flatbody_env.physics.equilibria import StationaryEllipse, squared_sigmas
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, potential_kernel
@@ -94,70 +95,6 @@ class SearchBox:
             raise ValueError(f"box.n: must be an integer in [8, 2001], got {self.n!r}")
         if not (isinstance(self.n_rho, int) and 4 <= self.n_rho <= 401):
             raise ValueError(f"box.n_rho: must be an integer in [4, 401], got {self.n_rho!r}")
-
-
-@dataclass(frozen=True, kw_only=True)
-class StationaryEllipse:
-    """One relative equilibrium: λ, μ, ϱ, ω, θ̇ constant (eq. (50) of [1])."""
-
-    branch: str
-    """``"N"`` (s1 = s2 = 0, eqs. (52)–(54)), ``"A1"`` / ``"A2"`` (rotation about material axis 1 / 2)."""
-    state: dict[str, float]
-    """The full state (the eleven :data:`~flatbody_env.physics.state.STATE_NAMES`), θ = 0."""
-    omega: tuple[float, float, float]
-    """Co-moving angular velocity (ω1, ω2, ω3)."""
-    theta_dot: float
-    """Material angular velocity θ̇."""
-    energy: float
-    """H (eq. (41) of [1])."""
-    residual: float
-    """max |dy/dt| over the ten reduced components (θ excluded), from :func:`flatbody_env.physics.equations.rhs`."""
-    method: str = "numeric"
-    """``"closed-form"`` (V1), ``"numeric"`` (root finding) or ``"inverse"`` (from a shape)."""
-
-    @property
-    def omega3(self) -> float:
-        return self.omega[2]
-
-    @property
-    def lam(self) -> float:
-        return self.state["lambda"]
-
-    @property
-    def mu(self) -> float:
-        return self.state["mu"]
-
-    @property
-    def rho(self) -> float:
-        return self.state["rho"]
-
-    @property
-    def s3(self) -> float:
-        return self.state["s3"]
-
-    @property
-    def p_theta(self) -> float:
-        return self.state["p_theta"]
-
-    @property
-    def y(self) -> np.ndarray:
-        """Packed state, shape (11,)."""
-        return np.array([self.state[name] for name in STATE_NAMES], dtype=float)
-
-    @property
-    def kind(self) -> str:
-        """``"rigid"`` when |ω3| > |θ̇| (the figure turns in space), ``"circulating"`` when |θ̇| > |ω3|."""
-        return "rigid" if abs(self.omega[2]) >= abs(self.theta_dot) else "circulating"
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"state", "omega3", "theta_dot", "energy", "residual"}`` (the ``flatbody ellipses --json`` row)."""
-        return {
-            "state": {name: float(self.state[name]) for name in STATE_NAMES},
-            "omega3": float(self.omega[2]),
-            "theta_dot": float(self.theta_dot),
-            "energy": float(self.energy),
-            "residual": float(self.residual),
-        }
 
 
 # --------------------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ Every command can redraw its PNG from the saved tables with ``--plot-only``.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from flatbody_env.cli.args import int_at_least, positive_float
@@ -61,6 +62,13 @@ def _chart(args) -> int:
     return 0
 
 
+def failure_rows(points) -> list[dict]:
+    """The ``failure-study --json`` rows: one plain dict per :class:`analysis.failure_study.FailurePoint`."""
+    import dataclasses
+
+    return [dataclasses.asdict(p) for p in points]
+
+
 def _failure(args) -> int:
     from analysis.failure_study import DEFAULT_METHODS, STUDIES, failure_study
     from analysis.integrator_plots import plot_failure_study
@@ -74,8 +82,13 @@ def _failure(args) -> int:
             if s not in STUDIES:
                 raise ValueError(f"studies: unknown study {s!r} (allowed: {', '.join(STUDIES)})")
         methods = _methods(args.methods) if args.methods else DEFAULT_METHODS
-        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args))
+        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args), progress=not args.json)
         write_records(points, csv_path)
+        if args.json:
+            order = {(s, m): (i, j) for i, s in enumerate(studies) for j, m in enumerate(methods)}
+            print(json.dumps({"rows": failure_rows(sorted(points, key=lambda p: order[p.study, p.method]))}))
+            plot_failure_study(csv_path, png_path)
+            return 0
         fails = [p for p in points if p.status != "ok"]
         print(f"{len(points)} runs, {len(fails)} detected failures:")
         seen = set()
@@ -154,6 +167,7 @@ def register(sub) -> None:
     p = sub.add_parser("failure-study", help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon")
     _common(p, "study")
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
+    p.add_argument("--json", action="store_true", help="also print the rows as JSON (by study, then method)")
     p.set_defaults(handler=_failure, repeats=1)
 
 

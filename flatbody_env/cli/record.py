@@ -12,21 +12,27 @@ import sys
 import time
 from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 
 
 def _rrd_path(text: str) -> str:
-    if not text.endswith(".rrd"):
-        raise argparse.ArgumentTypeError(f"out: a rerun recording file must end in .rrd, got {text!r}")
+    try:
+        check_output_path("out", text.replace("{episode}", "0"), (".rrd",))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (a rerun recording file must end in .rrd)") from None
     return text
 
 
 def _record(args) -> int:
+    if args.agent is not None:
+        return _record_agent(args)
     import numpy as np
 
-    from flatbody_env.recording.writer import record_trajectory, verify_recording
+    from flatbody_env.recording.reader import verify_recording
+    from flatbody_env.recording.writer import record_trajectory
     from flatbody_env.simulation import simulate
 
     scene = load_scene_arg(args)
@@ -41,9 +47,15 @@ def _record(args) -> int:
         step=args.step,
         model=args.model,
         with_rotation=True,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
+    from flatbody_env.cli.output import atomic_path
+
     start = time.perf_counter()
-    path = record_trajectory(traj, scene.body, args.out, title=args.title, tensor_every=args.tensor_every)
+    with atomic_path(args.out) as tmp:  # a killed run never leaves a half-written RUN.rrd
+        record_trajectory(traj, scene.body, tmp, title=args.title, tensor_every=args.tensor_every)
+    path = Path(args.out)
     elapsed = time.perf_counter() - start
     msg = f"wrote {path} ({traj.t.size} steps of scene {scene.name}, t = 0…{t_end:g}, {traj.method} {traj.model}; logged in {elapsed * 1e3:.0f} ms, importing rerun included)"
     if args.verify:
@@ -51,6 +63,27 @@ def _record(args) -> int:
         msg += "; rerun rrd verify: ok"
     print(msg)
     print(f"play back with: rerun {path}   (viewer 0.41, the SDK's version)", file=sys.stderr)
+    return 0
+
+
+def _record_agent(args) -> int:
+    """``flatbody record --agent [MODEL]``: one seeded episode of a trained agent, recorded through
+    the env recorder (the same path as ``flatbody demo`` and ``flatbody record-env``)."""
+    if args.scene_file or args.scene:
+        raise ValueError("agent: --agent records an environment episode; give no scene")
+    from agents.demo import format_demo, rollout
+    from agents.evaluate import Agent
+
+    agent = Agent(args.agent or None)
+    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+    print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+    msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
+    if args.verify:
+        from flatbody_env.recording.reader import verify_recording
+
+        verify_recording(ep["path"])  # raises ValueError with rerun's output on failure
+        msg += "; rerun rrd verify: ok"
+    print(msg)
     return 0
 
 
@@ -74,7 +107,7 @@ def _record_env(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from flatbody_env.recording.writer import verify_recording
+    from flatbody_env.recording.reader import verify_recording
     from flatbody_env.recording.wrapper import RerunRecorder
 
     env = RerunRecorder(_make_env(args.env_id, args.max_steps), args.out, tensor_every=args.tensor_every)
@@ -106,12 +139,19 @@ def _record_env(args) -> int:
 
 
 def _record_info(args) -> int:
-    from flatbody_env.recording.writer import summarize_recording, verify_recording
+    from flatbody_env.recording.reader import summarize_recording, verify_recording
 
     path = Path(args.file)
-    if not path.exists():
-        raise ValueError(f"file: no file {args.file!r}")
-    print(summarize_recording(path, rows=args.rows))
+    if path.suffix != ".rrd":
+        raise ValueError(f"file: expected a rerun recording ending in .rrd, got {args.file[:60]!r}")
+    if not path.is_file():
+        raise ValueError(f"file: no regular file {args.file[:60]!r}")
+    try:
+        summary = summarize_recording(path, rows=args.rows)
+    except (RuntimeError, OSError, ValueError) as exc:  # rerun refuses a file that is no recording
+        first = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"file: {args.file[:60]!r} is not a readable rerun recording ({first})") from None
+    print(summary)
     if not args.no_verify:
         out = verify_recording(path)
         print(f"rerun rrd verify: {out.splitlines()[-1] if out else 'ok'}")
@@ -124,7 +164,8 @@ def _record_bench(args) -> int:
 
     import numpy as np
 
-    from flatbody_env.recording.writer import Recorder, record_trajectory, sdk_version
+    from flatbody_env.recording.reader import sdk_version
+    from flatbody_env.recording.writer import Recorder, record_trajectory
     from flatbody_env.scene import load_scene
     from flatbody_env.simulation import simulate
 
@@ -245,10 +286,13 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
     p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
+    p.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
+                   help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")

@@ -5,44 +5,41 @@ from __future__ import annotations
 import json
 import math
 import sys
-from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, float_list, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="DOP853", rtol=1e-10, atol=1e-10,
-                        step=None, model="auto", with_rotation=False):
+                        step=None, model="auto", with_rotation=False, max_nfev=None, max_wall_time=None):
     """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
 
     ``scene`` is a :class:`~flatbody_env.scene.Scene`; ``t_end`` defaults to the scene's; ``times``
-    (explicit output times) wins over ``samples`` (an even grid of that many points).
+    (explicit output times, returned exactly) or ``samples`` (an even grid of that many points), not both;
+    ``max_nfev`` / ``max_wall_time`` bound the work (None: the defaults of :func:`flatbody_env.simulate`).
     """
     from flatbody_env.simulation import simulate
 
+    if times is not None and samples is not None:
+        raise ValueError("times: give times (--times) or samples (--samples), not both")
     t_end = t_end if t_end is not None else scene.t_end
     if times is None and samples is not None:
         import numpy as np
 
         times = np.linspace(0.0, t_end, samples)
-    return simulate(
-        scene,
-        t_end=t_end,
-        times=times,
-        method=method,
-        rtol=rtol,
-        atol=atol,
-        step=step,
-        model=model,
-        with_rotation=with_rotation,
-    )
+    budget = {k: v for k, v in (("max_nfev", max_nfev), ("max_wall_time", max_wall_time)) if v is not None}
+    return simulate(scene, t_end=t_end, times=times, method=method, rtol=rtol, atol=atol, step=step, model=model,
+                    with_rotation=with_rotation, **budget)
 
 
 def _simulate(args) -> int:
+    from flatbody_env.cli.output import atomic_write
+
     scene = load_scene_arg(args)
     traj = simulate_trajectory(
         scene,
         t_end=args.t_end,
-        times=float_list(args.times) if args.times else None,
+        times=args.times,
         samples=args.samples,
         method=args.method,
         rtol=args.rtol,
@@ -50,6 +47,8 @@ def _simulate(args) -> int:
         step=args.step,
         model=args.model,
         with_rotation=args.with_rotation,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
     if args.summary:
         print(format_summary(scene, traj))
@@ -57,9 +56,11 @@ def _simulate(args) -> int:
             return 0
     text = json.dumps(traj.to_dict())
     if args.out:
-        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        atomic_write(args.out, text + "\n")
         if not args.summary:
             print(f"wrote {args.out} ({traj.t.size} samples, {traj.method}, {traj.model} model)", file=sys.stderr)
+            for line in _rung_lines(traj):
+                print(line, file=sys.stderr)
     else:
         sys.stdout.write(text + "\n")
     return 0
@@ -73,6 +74,7 @@ def format_summary(scene, traj, rows: int = 6) -> str:
         f"scene {scene.name}: {scene.body.describe()}",
         f"integrated to t = {traj.t[-1]:g} with {traj.method} ({traj.model} model): "
         f"{traj.nfev} RHS evaluations, {traj.wall_time * 1e3:.1f} ms",
+        *_rung_lines(traj),
         "",
         f"{'t':>9} {'lambda':>10} {'mu':>10} {'rho':>10} {'theta':>10} {'|s|':>10} {'energy':>14}",
     ]
@@ -90,6 +92,15 @@ def format_summary(scene, traj, rows: int = 6) -> str:
     drift = traj.drift()
     lines.append("invariant drift (max |q(t) - q(0)|): " + ", ".join(f"{k} {v:.2e}" for k, v in drift.items()))
     return "\n".join(lines)
+
+
+def _rung_lines(traj) -> list[str]:
+    """The rung of the model ladder and why it was chosen (the invariant and its measured size)."""
+    rung = traj.extra.get("rung")
+    if rung is None:
+        return []
+    measured = ", ".join(f"{k} = {v:.3g}" for k, v in traj.extra.get("rung_measured", {}).items())
+    return [f"rung: {rung} -- {traj.extra.get('rung_invariant', '')}" + (f" [{measured}]" if measured else "")]
 
 
 def scenes_answer() -> dict:
@@ -142,10 +153,13 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
     add_scene_arguments(p)
     add_integration_arguments(p)
-    p.add_argument("--times", metavar="t1,t2,...", help="output times (default: an even grid)")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=None, metavar="N", help="number of evenly spaced output times (default 101)")
+    p.add_argument("--times", type=times_list, metavar="t1,t2,...",
+                   help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
+                   "it is also in the JSON's 'initial_state'); default: an even grid")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=None, metavar="N",
+                   help=f"number of evenly spaced output times in [0, t_end] (default 101, at most {MAX_SAMPLES})")
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
-    p.add_argument("--out", metavar="FILE", help="write the JSON here instead of stdout")
+    p.add_argument("--out", type=output_file("--out"), metavar="FILE", help="write the JSON here instead of stdout (replaced atomically)")
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")
     p.set_defaults(handler=_simulate)
 

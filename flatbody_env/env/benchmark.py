@@ -95,22 +95,20 @@ def episode_error(num_envs: int = 8, steps: int = 400, seed: int = 0, **env_kwar
 
     env = FlatBodyVectorEnv(num_envs=num_envs, max_episode_steps=steps + 1, **env_kwargs)
     env.reset(seed=seed)
-    proto = env._proto
-    ref = make_stepper("DOP853", proto.body if proto.body is not None else default_body(), Tolerances(rtol=1e-13, atol=1e-13))
-    Yref = env._Y.copy()
+    ref = make_stepper("DOP853", env.body if env.body is not None else default_body(), Tolerances(rtol=1e-13, atol=1e-13))
+    Yref = env.states
     rng = np.random.default_rng(seed)
     worst = 0.0
     for _ in range(steps):
         A = rng.uniform(-1, 1, size=(num_envs,) + env.single_action_space.shape)
-        U = np.zeros((num_envs, 4))
-        U[:, proto._mask] = A * proto.limits[proto._mask]
+        U = env.controls(A)
         _, _, term, _, _ = env.step(A)
         for i in range(num_envs):
-            r = ref(Yref[i], None, U[i], proto.dt)
+            r = ref(Yref[i], None, U[i], env.dt)
             Yref[i] = r.y
         alive = ~term
         if alive.any():
-            worst = max(worst, float(np.max(np.abs(env._Y[alive] - Yref[alive]))))
+            worst = max(worst, float(np.max(np.abs(env.states[alive] - Yref[alive]))))
         if term.all():
             break
     return worst

@@ -2,8 +2,12 @@
 
 The environment only composes three parts (dm_control's Environment/Task split): the body
 (:class:`~flatbody_env.physics.body.Body`, physics of [1] with the corrections of [2]), an integrator
-chosen by name through the seam :func:`flatbody_env.integrators.make_stepper`, and the task
-:class:`~flatbody_env.env.task.ReachStationaryEllipse`.
+chosen by name through the seam :func:`flatbody_env.integrators.steppers.make_env_step`, and the task
+:class:`~flatbody_env.env.task.ReachStationaryEllipse` (observation, reward terms, termination).
+There is one step path: the seam's stepper (compiled where the method has a compiled environment
+stepper, the generic one otherwise), then the bookkeeping kernel
+:func:`flatbody_env.env.kernels.post_step` (its compiled twin when the stepper is compiled), then
+:func:`build_info`.
 """
 
 from __future__ import annotations
@@ -16,13 +20,16 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from flatbody_env.env import kernels as python_kernels
+from flatbody_env.env.task import (
+    CONTROLS, OBSERVATION_NAMES, OBSERVATION_SIZE, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse, control_mask, domain_code,
+    target_vector,
+)
+from flatbody_env.integrators import Tolerances, get_method
+from flatbody_env.integrators.steppers import make_env_step
 from flatbody_env.physics.body import Body, default_body
 from flatbody_env.physics.equilibria import StationaryEllipse
-from flatbody_env.env.kernels import CFG_SIZE, domain_code, post_step
-from flatbody_env.physics.hamiltonian import hamiltonian
-from flatbody_env.integrators import Tolerances, get_method, make_stepper
-from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
-from flatbody_env.env.task import CONTROLS, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse, control_mask, target_vector
+from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE, pack, unpack, validate_state
 
 DEFAULT_INTEGRATOR = "DOP853-numba"
 """Default integrator: compiled DOP853 at rtol = atol = :data:`DEFAULT_TOLERANCE`, first step guessed
@@ -37,12 +44,9 @@ DEFAULT_TOLERANCE = 1e-11
 """rtol = atol of the default integrator (see :data:`DEFAULT_INTEGRATOR`)."""
 
 ROTATION_INTEGRATOR = "DOP853"
-"""Integrator used when R must be carried (rendering, recording) and the chosen one cannot."""
+"""Integrator used when R must be carried (rendering, recording) and the chosen one cannot;
+``info["integrator"]["method"]`` then names it."""
 
-OBSERVATION_NAMES: tuple[str, ...] = (
-    "s1", "s2", "s3", "p_theta", "p_lambda", "p_mu", "p_rho", "lambda", "mu", "rho", "sin_theta", "cos_theta",
-    "target_lambda", "target_mu", "target_rho", "target_s3",
-)
 
 
 class FlatBodyEnv(gym.Env):
@@ -53,7 +57,7 @@ class FlatBodyEnv(gym.Env):
     The body of [1] (section 3): a plate whose configuration is Φ = R·diag(λ, μ, ϱ)·U(θ)⁻¹ —
     two in-plane stretches λ, μ, a thickness ϱ, a material rotation θ and an orientation R —
     moving under the Hamiltonian H = 𝒯 (eq. (32)) + V_λμ (eqs. (37)–(39)) + V_ϱ (eq. (40)) with the
-    equations of motion (44)–(49) (spin bracket corrected per NOTES E3/E4 of [2]). A stationary
+    equations of motion (44)–(49) (spin bracket corrected per errata E3/E4 of [2]). A stationary
     ellipse (eqs. (50)–(54)) keeps λ, μ, ϱ and the angular velocities constant while G and C
     rotate. The agent applies a co-moving torque on the spin and/or a force on the thickness to
     bring the body onto a target stationary ellipse and keep it there.
@@ -106,7 +110,7 @@ class FlatBodyEnv(gym.Env):
     ## Starting State
 
     A target is a spectrally stable stationary ellipse of the circulation family (|s3| < |p_θ|,
-    NOTES §7) with λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5] (default body) that the controls can reach
+    [2]) with λ* ∈ [1.3, 2], λ*/μ* ∈ [1.5, 3.5] (default body) that the controls can reach
     within the episode: its settling rate r (the slowest closed-loop pole of the cheap-control LQR
     about the target, :func:`flatbody_env.physics.controllability.settling_rate`) is at least
     ``min_settling_rate`` = 0.15 s⁻¹, so that under such feedback the slowest mode shrinks
@@ -115,6 +119,13 @@ class FlatBodyEnv(gym.Env):
     p_θ (conserved by every control), shape and spin within ``initial_noise`` (15 %) of the target,
     small momenta and a uniform θ; without torque |s| equals |s3*| (the Casimir is conserved).
     ``reset(options={"state": {...eleven names...}})`` sets the state exactly.
+
+    ## Info
+
+    Built in one place (:func:`build_info`) for ``reset``, ``step`` and the vector env: ``t``,
+    ``distance``, ``is_success``, ``energy`` (H, eq. (41)), ``casimir`` (|s|²), ``p_theta``,
+    ``integrator`` ({"method": the method that really ran, "nfev": its right-hand-side
+    evaluations in this step}), ``integrator_failure``, ``left_domain`` and (``step``) ``reward_terms``.
 
     ## Episode End
 
@@ -132,10 +143,10 @@ class FlatBodyEnv(gym.Env):
     track_rotation=False, stretch_bounds=(0.2, 4.0), rho_bounds=(0.1, 4.0), momentum_bound=50.0,
     gap_min=1e-3, **task_kwargs)`` where ``body`` is a :class:`~flatbody_env.physics.body.Body` or a scene-like
     dict ``{"params", "potential", "thickness"}`` (default: J = J3 = 1, V3 with κ = 1 and V_ϱ with
-    a = b = 1 — barriers against every collapse, NOTES E10) and ``task_kwargs`` are the weights and
+    a = b = 1 — barriers against every collapse, erratum E10 of [2]) and ``task_kwargs`` are the weights and
     ranges of :class:`~flatbody_env.env.task.ReachStationaryEllipse`. ``integrator`` is any name of
     ``flatbody methods``; the default :data:`DEFAULT_INTEGRATOR` is the fastest method measured to keep
-    the episode state error ≤ 1e-8 (README, "Environment").
+    the episode state error ≤ 1e-8 (``docs/env.md``).
 
     ## Version History
 
@@ -143,8 +154,8 @@ class FlatBodyEnv(gym.Env):
 
     References
     ----------
-    .. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-    .. [2] ``shared/physics/NOTES.md``.
+    .. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension.
+    .. [2] ``docs/physics.md``: the corrected equations and the paper's errata.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
@@ -168,7 +179,7 @@ class FlatBodyEnv(gym.Env):
         gap_min: float = 1e-3,
         **task_kwargs: Any,
     ) -> None:
-        self._mask = control_mask(control)
+        self.mask = control_mask(control)
         self.control = control
         self.body = _as_body(body)
         if not self.body.inertia.is_isotropic:
@@ -184,70 +195,67 @@ class FlatBodyEnv(gym.Env):
         self.dt = float(dt)
         self.integrator = integrator
         info = get_method(integrator).info  # ValueError for an unknown name
-        self._chart = info.chart
         self.render_mode = render_mode
         self.track_rotation = bool(track_rotation or render_mode is not None)
-        self._fixed_step = not info.adaptive
-        if self._fixed_step and step is None:
+        if not info.adaptive and step is None:
             step = self.dt  # one fixed step per env step unless step= asks for sub-steps
         self.tolerances = Tolerances(rtol=rtol, atol=atol, step=step)
-        self.stepping_integrator = integrator
+        # adaptive methods: the first step guessed as one whole env step (accepted in one step at
+        # the default tolerance; rejected and halved where needed)
+        first_step = 0.0 if not info.adaptive else self.dt
         try:
-            self._stepper = make_stepper(integrator, self.body, self.tolerances, with_rotation=self.track_rotation)
+            self.stepper = make_env_step(integrator, self.body, self.tolerances, with_rotation=self.track_rotation, first_step=first_step)
         except ValueError:
             if not self.track_rotation:
                 raise
-            # compiled two-polar methods do not carry R: drawing/recording integrates with the reference
-            self.stepping_integrator = ROTATION_INTEGRATOR
-            self._stepper = make_stepper(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol), with_rotation=True)
-        self._fast = None
-        if self.stepping_integrator == integrator and not self.track_rotation and self.body.compiled:
-            self._fast = _fast_stepper(integrator)
+            # methods that do not carry R: drawing/recording integrates with the reference (info names it)
+            self.stepper = make_env_step(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol), with_rotation=True)
         self.task = ReachStationaryEllipse(**task_kwargs)
         self.limits = np.array([torque_limit, torque_limit, torque_limit, force_limit])
         self.stretch_bounds = (float(stretch_bounds[0]), float(stretch_bounds[1]))
         self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
         self.momentum_bound = float(momentum_bound)
         self.gap_min = float(gap_min)
-        t = self.task
-        self._cfg = np.array(
-            [t.w_shape, t.w_spin, t.w_tumble, t.w_rest, t.w_action, t.failure_penalty, t.success_tolerance,
-             *self.stretch_bounds, *self.rho_bounds, self.momentum_bound, self.gap_min, 1.0 if self._chart == "two-polar" else 0.0],
-            dtype=np.float64,
-        )
-        assert self._cfg.size == CFG_SIZE
+        self._cfg = self.task.kernel_config(stretch_bounds=self.stretch_bounds, rho_bounds=self.rho_bounds, momentum_bound=self.momentum_bound,
+                                            gap_min=self.gap_min, check_gap=info.chart == "two-polar")
         self._P = np.array(self.body.kernel_params(), dtype=np.float64)
-        self._work = (np.empty(11), np.empty(6), np.empty(4), np.empty(7), np.empty(4))
-        self._mask_u8 = self._mask.astype(np.uint8)
-        self._a = np.zeros(max(int(self._mask.sum()), 1))
-        self._zero_action = np.zeros_like(self._a)
-        self._u = np.zeros(4)
-        self._ynew = np.empty(11)
-        self._h = float(self.tolerances.step) if self.tolerances.step is not None else 0.0
-        # fixed-step methods: the sub-step; DOP853: the first step guessed as one whole env step
-        # (accepted in one step at the default tolerance; rejected and halved where needed)
-        self._h_guess = self._h if self._fixed_step else self.dt
-        self._has_action = bool(self._mask.any())
+        self._mask_u8 = self.mask.astype(np.uint8)
 
-        n_act = int(self._mask.sum()) or 1
+        n_act = int(self.mask.sum()) or 1
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
         m, (slo, shi), (rlo, rhi) = self.momentum_bound, self.stretch_bounds, self.rho_bounds
         low = np.array([-m] * 7 + [slo, slo, rlo, -1.0, -1.0, slo, slo, rlo, -m], dtype=np.float32)
         high = np.array([m] * 7 + [shi, shi, rhi, 1.0, 1.0, shi, shi, rhi, m], dtype=np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
 
-        self._y = np.zeros(11)
+        # work arrays of the one step path
+        self._a = np.zeros(n_act)
+        self._u = np.zeros(4)
+        self._ynew = np.empty(STATE_SIZE)
+        self._yout = np.empty(STATE_SIZE)
+        self._terms = np.empty(len(REWARD_TERMS))
+        self._sc = np.empty(4)
+        self._vel = np.empty(7)
+        self._force = np.empty(4)
+        self._counters = np.zeros(3, np.int64)
+        self._Rnew = np.eye(3)
+
+        self._y = np.zeros(STATE_SIZE)
         self._R: np.ndarray | None = np.eye(3) if self.track_rotation else None
         self._target: StationaryEllipse | None = None
         self._tvec = np.zeros(4)
         self.time = 0.0
-        self._last_action = np.zeros(n_act)
 
-    # --- public state -------------------------------------------------------------------------------
+    # --- public state and configuration ---------------------------------------------------------------
     @property
     def state(self) -> dict[str, float]:
         """The body's state as the eleven named fields (float64)."""
         return unpack(self._y)
+
+    @property
+    def physics_state(self) -> np.ndarray:
+        """The body's packed state y (11,) float64 (a copy; layout :mod:`flatbody_env.physics.state`)."""
+        return self._y.copy()
 
     @property
     def rotation(self) -> np.ndarray | None:
@@ -262,102 +270,116 @@ class FlatBodyEnv(gym.Env):
             return {}
         return {"lambda": t.lam, "mu": t.mu, "rho": t.rho, "s3": t.s3, "p_theta": t.p_theta, "omega3": t.omega3, "theta_dot": t.theta_dot, "energy": t.energy}
 
+    @property
+    def target_vector(self) -> np.ndarray:
+        """The target entries of the observation (λ*, μ*, ϱ*, s3*) (4,) (a copy)."""
+        return self._tvec.copy()
+
+    @property
+    def stepping_integrator(self) -> str:
+        """The method that really integrates (``integrator``, or :data:`ROTATION_INTEGRATOR` when R
+        must be carried and ``integrator`` cannot)."""
+        return self.stepper.method
+
+    @property
+    def kernels(self):
+        """The bookkeeping kernels matching the stepper: :mod:`flatbody_env.env.compiled` when the
+        stepper runs compiled, else :mod:`flatbody_env.env.kernels` (same source)."""
+        if self.stepper.compiled:
+            from flatbody_env.env import compiled
+
+            return compiled
+        return python_kernels
+
+    @property
+    def kernel_params(self) -> np.ndarray:
+        """The body's kernel parameters P (9,) as the kernels take them (read only)."""
+        return self._P
+
+    @property
+    def kernel_config(self) -> np.ndarray:
+        """The task/domain configuration vector ``cfg`` of the kernels (:mod:`flatbody_env.env.task`; read only)."""
+        return self._cfg
+
     # --- gymnasium API ---------------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"target", "state"}
-        if unknown:
-            raise ValueError(f"options.{sorted(unknown)[0]}: unknown option (allowed: target, state)")
+    def sample_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None = None) -> tuple[np.ndarray, StationaryEllipse]:
+        """The initial state y (11,) and the target that :meth:`reset` draws from ``rng`` with ``options``
+        (the env itself is not changed; ``rng`` advances exactly as in ``reset``)."""
+        options = _checked_options(options)
         if "target" in options:
-            self._target = self.task.target_from(options["target"], self.body)
+            target = self.task.target_from(options["target"], self.body)
         else:
-            self._target = self.task.sample_target(self.np_random, self.body, limits=self.limits, control=self.control)
-        self._tvec = target_vector(self._target)
+            target = self.task.sample_target(rng, self.body, limits=self.limits, control=self.control)
         if "state" in options:
             state = options["state"]
             try:
                 validate_state(state, where="options.state")
             except ValueError as exc:
                 raise ValueError(str(exc)) from None
-            self._y = pack(state, validate=False)
+            y = pack(state, validate=False)
         else:
-            self._y = self.task.sample_initial_state(self.np_random, self._target, self.control)
-        left = self._left_domain(self._y)
+            y = self.task.sample_initial_state(rng, target, self.control)
+        left = self.left_domain(y)
         if left:
             raise ValueError(f"options.state: starts outside the domain ({left})")
+        return y, target
+
+    def observe(self, y: np.ndarray, target_vector: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+        """The observation (16,) float32 and the reset ``info`` of state ``y`` with target (λ*, μ*, ϱ*, s3*)."""
+        obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
+        self.kernels.post_step(y, y, 0, self._a, 0, target_vector, self._cfg, self._P, self._yout, obs, self._terms, self._sc, self._vel, self._force)
+        return obs, build_info(t=0.0, scalars=self._sc, p_theta=y[3], ended=False, failure=None, left=None, method=self.stepper.method,
+                               nfev=0, terms=None, success_tolerance=self.task.success_tolerance)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self._y, self._target = self.sample_episode(self.np_random, options)
+        self._tvec = target_vector(self._target)
         self._R = np.eye(3) if self.track_rotation else None
         self.time = 0.0
-        self._last_action = np.zeros(self.action_space.shape)
-        return self._observation(), self._reset_info()
+        return self.observe(self._y, self._tvec)
+
+    def controls(self, action) -> tuple[np.ndarray, np.ndarray]:
+        """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies
+        (:func:`flatbody_env.env.kernels.controls_kernel`). ValueError for a non-finite or wrong-sized action."""
+        a = np.asarray(action, dtype=np.float64)
+        if a.ndim != 1:
+            a = a.ravel()
+        if a.size != self._a.size or not self.kernels.controls_kernel(a, self._mask_u8, self.limits, self._a, self._u):
+            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
+        return self._a.copy(), self._u.copy()
 
     def step(self, action):
         if self._target is None:
             raise RuntimeError("FlatBodyEnv: call reset() before step()")
-        if self._fast is not None:
-            return self._step_fast(action)
-        a = np.asarray(action, dtype=np.float64).reshape(self.action_space.shape)
-        if not np.all(np.isfinite(a)):
-            raise ValueError("action: must be finite numbers in [-1, 1]")
-        a = np.clip(a, -1.0, 1.0)
-        u = np.zeros(4)
-        if self._mask.any():
-            u[self._mask] = a * self.limits[self._mask]
-        result = self._stepper(self._y, self._R, u, self.dt)
-        act = a if self._mask.any() else np.zeros_like(a)
-        y_out, terms_arr, sc, vel, force = self._work
-        obs = np.empty(16, dtype=np.float32)
-        ended = post_step(self._y, result.y, 0 if result.ok else 1, act, act.size, self._tvec, self._cfg, self._P, y_out, obs, terms_arr, sc, vel, force)
-        failure = None if result.ok else f"{result.kind}: {result.reason}"
-        left = self._left_domain(result.y) if result.ok and ended else None
-        if not ended:
-            self._y = y_out.copy()
-            if self.track_rotation:
-                self._R = result.R
-            self.time += self.dt
-        terms = dict(zip(REWARD_TERMS, terms_arr.tolist()))
-        info = self._step_info(terms, failure, left, result.nfev, sc)
-        return obs, float(terms_arr.sum()), bool(ended), False, info
-
-    def _step_fast(self, action):
-        """One compiled integrator call and one compiled bookkeeping call (same results as the slow path)."""
-        fast = self._fast
-        ek = fast.kernels
+        k = self.kernels
         a = np.asarray(action, dtype=np.float64)
         if a.ndim != 1:
             a = a.ravel()
-        if a.size != self._a.size or not ek.controls_kernel(a, self._mask_u8, self.limits, self._a, self._u):
+        if a.size != self._a.size or not k.controls_kernel(a, self._mask_u8, self.limits, self._a, self._u):
             raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
-        tol = self.tolerances
         y = self._y
-        st = fast.stepper.step(y, self._u, self._P, self.dt, self._h_guess, tol.rtol, tol.atol, np.inf, self._ynew)
-        y_out, terms_arr, sc, vel, force = self._work
-        obs = np.empty(16, dtype=np.float32)
-        act = self._a if self._has_action else self._zero_action
-        ended = ek.post_step(y, self._ynew, st, act, act.size, self._tvec, self._cfg, self._P, y_out, obs, terms_arr, sc, vel, force)
+        self._counters[:] = 0
+        st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)
+        obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
+        terms = self._terms
+        ended = k.post_step(y, self._ynew, st, self._a, self._a.size, self._tvec, self._cfg, self._P, self._yout, obs, terms, self._sc,
+                            self._vel, self._force)
         failure = left = None
         if ended:
             if st != 0:
-                failure = f"{fast.kinds[st]}: {fast.reason(st)}"
+                failure = self.stepper.describe(st)
             else:
-                left = self._left_domain(self._ynew)
+                left = self.left_domain(self._ynew)
         else:
-            y[:] = y_out
+            y[:] = self._yout
+            if self._R is not None:
+                self._R = self._Rnew.copy()
             self.time += self.dt
-        tl = terms_arr.tolist()
-        distance, energy, cas, _ = sc.tolist()
-        info = {
-            "t": self.time,
-            "distance": distance,
-            "is_success": distance <= self.task.success_tolerance and not ended,
-            "energy": energy,
-            "casimir": cas,
-            "p_theta": float(y[3]),
-            "integrator": {"method": self.integrator, "nfev": 0},
-            "integrator_failure": failure,
-            "left_domain": left,
-            "reward_terms": dict(zip(REWARD_TERMS, tl)),
-        }
+        tl = terms.tolist()
+        info = build_info(t=self.time, scalars=self._sc, p_theta=y[3], ended=bool(ended), failure=failure, left=left,
+                          method=self.stepper.method, nfev=int(self._counters[0]), terms=dict(zip(REWARD_TERMS, tl)),
+                          success_tolerance=self.task.success_tolerance)
         return obs, sum(tl), bool(ended), False, info
 
     def render(self):
@@ -367,10 +389,9 @@ class FlatBodyEnv(gym.Env):
 
         return render_frame(self._y, self._R if self._R is not None else np.eye(3), self.target, self.time)
 
-    # --- helpers -----------------------------------------------------------------------------------------
-    def _left_domain(self, y: np.ndarray) -> str | None:
-        """None inside the documented domain, else what left it (the test itself is
-        :func:`flatbody_env.env.kernels.domain_code`, shared with the compiled path)."""
+    def left_domain(self, y: np.ndarray) -> str | None:
+        """None inside the documented domain, else what left it (the test itself is the task's
+        :func:`~flatbody_env.env.task.domain_code`)."""
         code = domain_code(y, self._cfg)
         if code == 0:
             return None
@@ -387,74 +408,45 @@ class FlatBodyEnv(gym.Env):
             return f"{STATE_NAMES[k]} = {y[k]:.4g} beyond the momentum bound {self.momentum_bound:g}"
         return f"|lambda - mu|/(lambda + mu) < gap_min = {self.gap_min:g} (two-polar chart singular at lambda = mu)"
 
-    def _observation(self) -> np.ndarray:
-        y = self._y
-        obs = np.concatenate([y[:10], [math.sin(y[10]), math.cos(y[10])], self._tvec])
-        return obs.astype(np.float32)
 
-    def _step_info(self, terms, failure, left, nfev, sc) -> dict[str, Any]:
-        distance = float(sc[0])
-        return {
-            "t": self.time,
+def build_info(*, t, scalars, p_theta, ended, failure, left, method: str, nfev, terms, success_tolerance: float) -> dict[str, Any]:
+    """The ``info`` of ``reset`` and ``step`` (the one builder; class docstring, "Info").
+
+    One body: floats, ``failure``/``left`` a str or None, ``terms`` a dict of floats or None (reset).
+    N bodies (the vector env): ``t``, ``scalars`` (4, N), ``p_theta``, ``ended``, ``nfev`` arrays,
+    ``failure``/``left`` object arrays of str ("" for none), ``terms`` a dict of (N,) arrays.
+    ``scalars``: distance, energy, |s|², (domain code) from :func:`flatbody_env.env.kernels.post_step`.
+    """
+    batched = np.ndim(scalars) == 2
+    if batched:
+        distance = scalars[0].copy()
+        info: dict[str, Any] = {
+            "t": np.asarray(t, dtype=np.float64).copy(),
             "distance": distance,
-            "is_success": bool(distance <= self.task.success_tolerance and not failure and not left),
-            "energy": float(sc[1]),
-            "casimir": float(sc[2]),
-            "p_theta": float(self._y[3]),
-            "integrator": {"method": self.integrator, "nfev": int(nfev)},
+            "is_success": (distance <= success_tolerance) & ~np.asarray(ended, dtype=bool),
+            "energy": scalars[1].copy(),
+            "casimir": scalars[2].copy(),
+            "p_theta": np.asarray(p_theta, dtype=np.float64).copy(),
+            "integrator": {"method": method, "nfev": np.asarray(nfev, dtype=np.int64).copy()},
             "integrator_failure": failure,
             "left_domain": left,
-            "reward_terms": terms,
         }
-
-    def _reset_info(self) -> dict[str, Any]:
-        y = self._y
-        distance = float(self.task.distance(y, self.body, self._tvec))
-        return {
-            "t": self.time,
+    else:
+        distance = float(scalars[0])
+        info = {
+            "t": float(t),
             "distance": distance,
-            "is_success": bool(distance <= self.task.success_tolerance),
-            "energy": float(hamiltonian(y, self.body)),
-            "casimir": float(y[0] ** 2 + y[1] ** 2 + y[2] ** 2),
-            "p_theta": float(y[3]),
-            "integrator": {"method": self.integrator, "nfev": 0},
-            "integrator_failure": None,
-            "left_domain": None,
+            "is_success": bool(distance <= success_tolerance and not ended),
+            "energy": float(scalars[1]),
+            "casimir": float(scalars[2]),
+            "p_theta": float(p_theta),
+            "integrator": {"method": method, "nfev": int(nfev)},
+            "integrator_failure": failure,
+            "left_domain": left,
         }
-
-
-class _FastPath:
-    """The compiled environment stepper of a method plus the compiled bookkeeping (picklable)."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self._load()
-
-    def _load(self) -> None:
-        from flatbody_env.env import compiled as env_compiled
-        from flatbody_env.integrators.compiled_methods import env_stepper
-        from flatbody_env.integrators.failure import KINDS, failure_reason
-
-        self.stepper = env_stepper(self.name)
-        self.kernels = env_compiled
-        self.kinds = KINDS
-        self.reason = failure_reason
-
-    def __getstate__(self):
-        return {"name": self.name}
-
-    def __setstate__(self, state):
-        self.name = state["name"]
-        self._load()
-
-
-def _fast_stepper(name: str) -> _FastPath | None:
-    """The compiled fast path for ``name`` if it has a paper-state environment stepper, else None."""
-    from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper
-
-    if name not in ENV_METHODS or env_stepper(name).state != "paper":
-        return None
-    return _FastPath(name)
+    if terms is not None:
+        info["reward_terms"] = terms
+    return info
 
 
 def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
@@ -467,4 +459,32 @@ def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
     raise ValueError(f"body: expected a Body or a dict with params/potential/thickness, got {type(body).__name__}")
 
 
-__all__ = ["FlatBodyEnv", "DEFAULT_INTEGRATOR", "OBSERVATION_NAMES", "CONTROLS", "REWARD_TERMS", "TARGET_NAMES"]
+__all__ = ["FlatBodyEnv", "DEFAULT_INTEGRATOR", "OBSERVATION_NAMES", "CONTROLS", "REWARD_TERMS", "TARGET_NAMES", "build_info"]
+
+
+
+def _checked_options(options: Any) -> dict[str, Any]:
+    """``reset(options=...)`` validated before use: types, finite numbers within the documented
+    ranges (:mod:`flatbody_env.physics.validation`); ``ValueError`` naming ``options.…``."""
+    from flatbody_env.physics import validation as v
+
+    if options is None:
+        return {}
+    options = dict(v.mapping("options", options))
+    v.keys("options", options, ("target", "state"))
+    target = options.get("target")
+    if target is not None and not isinstance(target, StationaryEllipse):
+        target = v.mapping("options.target", target)
+        v.keys("options.target", target, ("lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"), ("lambda", "mu"))
+        checked = {k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1]) for k in ("lambda", "mu")}
+        if "branch" in target:
+            checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
+        if "sign" in target:
+            checked["sign"] = v.number("options.target.sign", target["sign"], low=-1.0, high=1.0)
+            if checked["sign"] not in (-1.0, 1.0):
+                raise ValueError(f"options.target.sign: must be +1 or -1, got {checked['sign']!r}")
+        options["target"] = checked
+    if "state" in options:
+        options["state"] = v.mapping("options.state", options["state"])
+    return options
+

@@ -7,7 +7,7 @@ integrator.
 Targets
 -------
 A target is a spectrally stable stationary ellipse of branch N (eqs. (50)–(54) of [1]) of the
-"circulation" family |s3| < |p_θ| (NOTES §7: q < 0 there), built from a shape (λ*, μ*) sampled
+"circulation" family |s3| < |p_θ| ([2] §7: q < 0 there), built from a shape (λ*, μ*) sampled
 in :attr:`ReachStationaryEllipse.target_lambda` × aspect ratio :attr:`target_aspect` by the
 inverse problem (:func:`flatbody_env.physics.equilibria.stationary_from_shape`); unstable,
 non-existent and unreachable shapes (below) are re-drawn.
@@ -56,10 +56,38 @@ name          value                                                  weight (def
 Success: the distance d = ‖(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ)‖ to the target is at most
 ``success_tolerance`` (0.05).
 
+Observation, scoring and termination as kernels
+-----------------------------------------------
+Each formula is written once, as a plain-float function of this module that numba compiles
+unchanged (:func:`flatbody_env.integrators.jit.jit_copy`, see :mod:`flatbody_env.env.compiled`):
+:func:`omega12_kernel` (ω1, ω2), :func:`score_kernel` (reward terms and distance),
+:func:`observe_kernel` (the observation) and :func:`domain_code` (termination by leaving the
+domain). ``omega12_kernel`` and ``score_kernel`` use arithmetic and numpy ufuncs only, so the same
+function also scores N bodies at once on arrays in structure-of-arrays layout (``y`` of shape
+(11, N)); :class:`ReachStationaryEllipse`'s vectorised methods call them that way.
+
+Kernel configuration vector ``cfg`` (float64, :data:`CFG_SIZE`; built by
+:meth:`ReachStationaryEllipse.kernel_config`)
+
+=====  ==================  =================================================
+index  name                meaning
+=====  ==================  =================================================
+0–5    weights             w_shape, w_spin, w_tumble, w_rest, w_action, failure_penalty
+6      success_tolerance   distance at or below which ``is_success``
+7–8    stretch_bounds      domain of λ and μ
+9–10   rho_bounds          domain of ϱ
+11     momentum_bound      domain of s and p (absolute value)
+12     gap_min             smallest |λ − μ|/(λ + μ) (two-polar integrators only)
+13     check_gap           1 for a two-polar integrator, else 0
+=====  ==================  =================================================
+
+Domain codes (:data:`DOMAIN_CODES`): 0 inside, 1 non-finite, 2 λ, 3 μ, 4 ϱ, 5 momentum, 6 gap.
+
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension
+   (equation numbers as in the paper).
+.. [2] ``docs/physics.md``: the corrected equations and the paper's errata (E1–E10, §1–§8).
 """
 
 from __future__ import annotations
@@ -78,6 +106,21 @@ from flatbody_env.physics.state import STATE_SIZE
 CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
 REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
 TARGET_NAMES = ("lambda", "mu", "rho", "s3")
+OBSERVATION_NAMES: tuple[str, ...] = (
+    "s1", "s2", "s3", "p_theta", "p_lambda", "p_mu", "p_rho", "lambda", "mu", "rho", "sin_theta", "cos_theta",
+    "target_lambda", "target_mu", "target_rho", "target_s3",
+)
+"""The observation layout: entries 0–9 are the state entries 0–9 (:data:`flatbody_env.physics.state.STATE_NAMES`),
+10–11 (sin θ, cos θ), 12–15 the target (:data:`TARGET_NAMES`)."""
+OBSERVATION_SIZE = len(OBSERVATION_NAMES)
+OBS_STATE = slice(0, 10)
+"""Observation entries that copy the state entries 0–9 (s1 … ϱ)."""
+OBS_SIN_THETA = 10
+OBS_COS_THETA = 11
+OBS_TARGET = slice(12, 16)
+"""Observation entries of the target (λ*, μ*, ϱ*, s3*)."""
+CFG_SIZE = 14
+DOMAIN_CODES = ("inside", "non-finite state", "lambda", "mu", "rho", "momentum", "gap")
 DEFAULT_LIMITS = (0.5, 0.5, 0.5, 1.0)
 """(τ1, τ2, τ3, f_ϱ) limits of :class:`~flatbody_env.env.env.FlatBodyEnv`'s defaults (torque_limit, force_limit)."""
 
@@ -189,44 +232,139 @@ class ReachStationaryEllipse:
         y[10] = rng.uniform(-math.pi, math.pi)
         return y
 
-    # --- scoring (vectorised: y of shape (11,) or (11, N)) ---------------------------------------------
+    # --- kernel configuration ---------------------------------------------------------------------
+    def kernel_config(self, *, stretch_bounds: tuple[float, float], rho_bounds: tuple[float, float],
+                      momentum_bound: float, gap_min: float, check_gap: bool) -> np.ndarray:
+        """The configuration vector ``cfg`` (:data:`CFG_SIZE`) of the kernels (module docstring)."""
+        cfg = np.array(
+            [self.w_shape, self.w_spin, self.w_tumble, self.w_rest, self.w_action, self.failure_penalty, self.success_tolerance,
+             *stretch_bounds, *rho_bounds, momentum_bound, gap_min, 1.0 if check_gap else 0.0],
+            dtype=np.float64,
+        )
+        assert cfg.size == CFG_SIZE
+        return cfg
+
+    def _weights(self) -> np.ndarray:
+        return np.array([self.w_shape, self.w_spin, self.w_tumble, self.w_rest, self.w_action, self.failure_penalty])
+
+    # --- scoring (vectorised: y of shape (11,) or (11, N)); the formulas are the kernels below -------
     @staticmethod
     def omega12(y: np.ndarray, body: Body) -> tuple[np.ndarray, np.ndarray]:
-        """(ω1, ω2) = (s1/(Jμ² + J3ϱ²), s2/(Jλ² + J3ϱ²)) (inverse Legendre map after eq. (31) of [1])."""
-        J, J3 = body.inertia.J1, body.inertia.J3
-        j3r2 = J3 * y[9] * y[9]
-        return y[0] / (J * y[8] * y[8] + j3r2), y[1] / (J * y[7] * y[7] + j3r2)
-
-    @staticmethod
-    def errors(y: np.ndarray, body: Body, target: np.ndarray) -> np.ndarray:
-        """(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ), shape (9,) or (9, N); ``target`` = (λ*, μ*, ϱ*, s3*)."""
-        w1, w2 = ReachStationaryEllipse.omega12(y, body)
-        return np.stack([y[7] - target[0], y[8] - target[1], y[9] - target[2], y[2] - target[3], w1, w2, y[4], y[5], y[6]])
+        """(ω1, ω2) of state(s) ``y`` (11,) or (11, N): :func:`omega12_kernel`."""
+        return omega12_kernel(y, body.inertia.J1, body.inertia.J3)
 
     def distance(self, y: np.ndarray, body: Body, target: np.ndarray):
-        """‖errors‖ (float, or shape (N,))."""
-        return np.linalg.norm(self.errors(y, body, target), axis=0)
+        """The task distance d = ‖(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ)‖ (float, or shape (N,));
+        ``target`` = (λ*, μ*, ϱ*, s3*), shape (4,) or (4, N)."""
+        return self.reward_terms(y, body, target, np.zeros(1), False, _with_distance=True)[1]
 
-    def reward_terms(self, y: np.ndarray, body: Body, target: np.ndarray, action: np.ndarray, failed) -> dict:
-        """The named terms (module docstring); floats for one body, arrays of shape (N,) for N.
+    def reward_terms(self, y: np.ndarray, body: Body, target: np.ndarray, action: np.ndarray, failed, *, _with_distance: bool = False):
+        """The named terms (module docstring) by :func:`score_kernel`; floats for one body, arrays (N,) for N.
 
         ``action`` has shape (n,) or (N, n); ``failed`` is a bool or a bool array (N,).
         """
-        e = self.errors(y, body, target)
+        y = np.asarray(y, dtype=np.float64)
         action = np.asarray(action, dtype=np.float64)
-        terms = {
-            "shape": -self.w_shape * np.linalg.norm(e[0:3], axis=0),
-            "spin": -self.w_spin * np.abs(e[3]),
-            "tumble": -self.w_tumble * np.hypot(e[4], e[5]),
-            "rest": -self.w_rest * np.linalg.norm(e[6:9], axis=0),
-            "action": -self.w_action * np.sum(action * action, axis=-1),
-            "failure": np.where(failed, -self.failure_penalty, 0.0),
-        }
-        if np.ndim(y) == 1:
-            return {k: float(v) for k, v in terms.items()}
-        return terms
+        act2 = np.sum(action * action, axis=-1)
+        one = y.ndim == 1
+        terms = np.empty(6) if one else np.empty((6, y.shape[1]))
+        P = np.array([body.inertia.J1, 0.0, body.inertia.J3])
+        d = score_kernel(y, np.asarray(target, dtype=np.float64), act2, np.asarray(failed), self._weights(), P, terms)
+        out = dict(zip(REWARD_TERMS, terms.tolist() if one else terms))
+        if _with_distance:
+            return out, (float(d) if one else d)
+        return out
+
+
+def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The state y and the target (λ*, μ*, ϱ*, s3*) from observation(s): the inverse of
+    :func:`observe_kernel` (θ = atan2(sin θ, cos θ), in (−π, π]).
+
+    ``obs`` (16,) gives y (11,) and target (4,); ``obs`` (N, 16) gives y (11, N) and target (4, N).
+    """
+    obs = np.asarray(obs, dtype=np.float64)
+    o = obs.T
+    y = np.empty((11,) + o.shape[1:])
+    y[0:10] = o[OBS_STATE]
+    y[10] = np.arctan2(o[OBS_SIN_THETA], o[OBS_COS_THETA])
+    return y, o[OBS_TARGET].copy()
 
 
 def target_vector(target: StationaryEllipse) -> np.ndarray:
     """(λ*, μ*, ϱ*, s3*) — the target entries of the observation (:data:`TARGET_NAMES`)."""
     return np.array([target.lam, target.mu, target.rho, target.s3])
+
+
+# --------------------------------------------------------------------------------------------- kernels
+def omega12_kernel(y, J, J3):
+    """(ω1, ω2) = (s1/(Jμ² + J3ϱ²), s2/(Jλ² + J3ϱ²)): the inverse Legendre map after eq. (31) of [1]
+    for J1 = J2 = J. Scalars (``y`` (11,)) or arrays (``y`` (11, N))."""
+    j3r2 = J3 * y[9] * y[9]
+    return y[0] / (J * y[8] * y[8] + j3r2), y[1] / (J * y[7] * y[7] + j3r2)
+
+
+def score_kernel(y, tgt, act2, ended, cfg, P, terms):
+    """Reward terms into ``terms`` (6,) and the task distance (returned) of state ``y``.
+
+    Parameters
+    ----------
+    y : (11,) or (11, N)
+        State(s).
+    tgt : (4,) or (4, N)
+        Target (λ*, μ*, ϱ*, s3*).
+    act2 : float or (N,)
+        ‖a‖² of the clipped action.
+    ended : int/bool or (N,)
+        1 when the step ends the episode by failure or by leaving the domain.
+    cfg : (≥ 6,)
+        Weights w_shape, w_spin, w_tumble, w_rest, w_action, failure_penalty (module docstring).
+    P : (≥ 3,)
+        J = P[0], J3 = P[2] (:meth:`flatbody_env.physics.body.Body.kernel_params`).
+    terms : (6,) or (6, N), output
+        shape, spin, tumble, rest, action, failure (:data:`REWARD_TERMS`).
+    """
+    w1, w2 = omega12_kernel(y, P[0], P[2])
+    dl = y[7] - tgt[0]
+    dm = y[8] - tgt[1]
+    dr = y[9] - tgt[2]
+    ds = y[2] - tgt[3]
+    shape = np.sqrt(dl * dl + dm * dm + dr * dr)
+    tumble = np.sqrt(w1 * w1 + w2 * w2)
+    rest = np.sqrt(y[4] * y[4] + y[5] * y[5] + y[6] * y[6])
+    terms[0] = -cfg[0] * shape
+    terms[1] = -cfg[1] * np.abs(ds)
+    terms[2] = -cfg[2] * tumble
+    terms[3] = -cfg[3] * rest
+    terms[4] = -cfg[4] * act2
+    terms[5] = -cfg[5] * ended
+    return np.sqrt(shape * shape + ds * ds + tumble * tumble + rest * rest)
+
+
+def observe_kernel(y, tgt, obs):
+    """The observation (:data:`OBSERVATION_NAMES`) of state ``y`` (11,) and target ``tgt`` (4,) into ``obs`` (16,)."""
+    for i in range(10):
+        obs[i] = y[i]
+    obs[10] = math.sin(y[10])
+    obs[11] = math.cos(y[10])
+    for i in range(4):
+        obs[12 + i] = tgt[i]
+
+
+def domain_code(y, cfg):
+    """Termination by leaving the domain: 0 if ``y`` (11,) lies in it, else the code of the first
+    violation (:data:`DOMAIN_CODES`; bounds in ``cfg``, module docstring)."""
+    for i in range(11):
+        if not math.isfinite(y[i]):
+            return 1
+    if y[7] < cfg[7] or y[7] > cfg[8]:
+        return 2
+    if y[8] < cfg[7] or y[8] > cfg[8]:
+        return 3
+    if y[9] < cfg[9] or y[9] > cfg[10]:
+        return 4
+    for i in range(7):
+        if abs(y[i]) > cfg[11]:
+            return 5
+    if cfg[13] != 0.0 and abs(y[7] - y[8]) < cfg[12] * (y[7] + y[8]):
+        return 6
+    return 0

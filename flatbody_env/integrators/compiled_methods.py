@@ -24,7 +24,7 @@ ValueError (use the scipy methods). They do not integrate R in the two-polar cha
 
 Failures raise :class:`~flatbody_env.integrators.base.IntegrationError` with ``kind`` from
 :mod:`.failure` (non-finite, step-collapse, chart-singularity, domain, energy, constraint,
-under-resolved, max-steps, unsupported).
+under-resolved, budget, unsupported).
 
 Environment API
 ---------------
@@ -67,7 +67,7 @@ from flatbody_env.physics.potentials import V2
 from flatbody_env.physics.regular import paper_from_regular, regular_from_paper
 from flatbody_env.integrators import rattle_kernels as _rk
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error, check_step, register_method
 from flatbody_env.integrators.failure import KINDS, failure_reason, raise_for
 
 
@@ -93,16 +93,14 @@ def _check_compiled_body(body: Body, name: str) -> None:
         )
 
 
-def _check_step(name: str, tol: Tolerances, fixed: bool) -> float:
-    if fixed:
-        if tol.step is None:
-            raise ValueError(f"step: {name} is a fixed-step method; give step= (CLI: --step H), e.g. 0.01")
-        if not (np.isfinite(tol.step) and tol.step > 0):
-            raise ValueError(f"step: must be a finite number > 0 (allowed range (0, inf)), got {tol.step!r}")
-        return float(tol.step)
-    if tol.step is not None:
-        raise ValueError(f"step: {name} is adaptive; step= applies to fixed-step methods only")
-    return 0.0
+def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol: Tolerances) -> None:
+    """Fixed-step work is known before the run: ⌈Δt/h⌉ steps per output interval × ``stages`` RHS
+    evaluations; beyond ``tol.max_nfev`` it is refused up front (``kind="budget"``)."""
+    spans = np.diff(times)
+    steps = float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
+    if steps * stages > tol.max_nfev:
+        raise budget_error(t=float(times[0]), method=name, tol=tol,
+                           used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]")
 
 
 def _times(times) -> np.ndarray:
@@ -129,7 +127,7 @@ class CompiledTwoPolar:
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
         _check_compiled_body(body, name)
-        h = _check_step(name, tol, not self.info.adaptive)
+        h = check_step(self.info, tol)
         if with_rotation:
             raise ValueError(
                 f"with_rotation: {name} integrates the two-polar state only; use a regular-chart method "
@@ -142,13 +140,17 @@ class CompiledTwoPolar:
         uu = _controls(u)
         P = kernel_params(body)
         Y = np.empty((11, times.size))
-        counters = np.zeros(3, np.int64)
+        counters = np.array([0, 0, 0, tol.max_nfev], np.int64)
         fail = np.zeros(2)
         energy_tol = float(tol.energy_tol)
+        if self.kind != "dop853":
+            _check_fixed_budget(name, times, h, 4 if self.kind == "rk4" else self.coeffs.size, tol)
         if self.kind == "dop853":
             st = _tk.dop853_solve(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Y, counters, fail)
         else:
             st = _tk.fixed_solve(0 if self.kind == "rk4" else 1, self.coeffs, y0, times, uu, P, h, energy_tol, Y, counters, fail)
+        if KINDS[st] == "budget":
+            raise budget_error(t=float(fail[0]), method=name, tol=tol, used=f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps")
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":
@@ -159,7 +161,7 @@ class CompiledTwoPolar:
     def _check_env(self, body: Body, tol: Tolerances) -> None:
         name = self.info.name
         _check_compiled_body(body, name)
-        _check_step(name, tol, not self.info.adaptive)
+        check_step(self.info, tol)
         if self.kind == "split" and not body.inertia.is_isotropic:
             raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
 
@@ -189,7 +191,7 @@ class CompiledRattle:
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
         _check_compiled_body(body, name)
-        h = _check_step(name, tol, True)
+        h = check_step(self.info, tol)
         if body.spin_convention != "corrected":
             raise ValueError("spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method")
         if isinstance(body.potential, V2) and body.potential.c != body.potential.d:
@@ -205,6 +207,7 @@ class CompiledRattle:
             )
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
+        _check_fixed_budget(name, times, h, self.coeffs.size, tol)
         R0 = np.eye(3) if R0 is None else np.asarray(R0, dtype=np.float64)
         z0 = regular_from_paper(y0, body, R0)
         dec0 = np.concatenate([R0.ravel(), [y0[7], y0[8], y0[9], y0[10]]])
@@ -386,6 +389,10 @@ class EnvStepper:
     state: str
     """``"paper"`` (11 entries) or ``"regular"`` (18 entries)."""
     fixed_step: bool
+    step_counted: object = None
+    """``step`` with a trailing ``counters`` (3,) int64 argument (accumulates [nfev, steps, rejected])."""
+    batch_counted: object = None
+    """``batch`` with a trailing ``NFEV`` (N,) int64 output (each body's function evaluations)."""
 
     @property
     def size(self) -> int:
@@ -393,12 +400,16 @@ class EnvStepper:
 
 
 _ENV = {
-    "DOP853-numba": (_tk.dop853_env_step, _tk.batch_dop853_env_step, "paper", False),
-    "RK4": (_tk.rk4_env_step, _tk.batch_rk4_env_step, "paper", True),
-    "splitting-strang": (_tk.strang_env_step, _tk.batch_strang_env_step, "paper", True),
-    "splitting-suzuki4": (_tk.suzuki4_env_step, _tk.batch_suzuki4_env_step, "paper", True),
-    "splitting-yoshida4": (_tk.yoshida4_env_step, _tk.batch_yoshida4_env_step, "paper", True),
-    "RATTLE-suzuki4": (_rk.rattle_env_step, _rk.batch_rattle_env_step, "regular", True),
+    "DOP853-numba": (_tk.dop853_env_step, _tk.batch_dop853_env_step, "paper", False,
+                     _tk.dop853_env_step_counted, _tk.batch_dop853_env_step_counted),
+    "RK4": (_tk.rk4_env_step, _tk.batch_rk4_env_step, "paper", True, _tk.rk4_env_step_counted, _tk.batch_rk4_env_step_counted),
+    "splitting-strang": (_tk.strang_env_step, _tk.batch_strang_env_step, "paper", True,
+                         _tk.strang_env_step_counted, _tk.batch_strang_env_step_counted),
+    "splitting-suzuki4": (_tk.suzuki4_env_step, _tk.batch_suzuki4_env_step, "paper", True,
+                          _tk.suzuki4_env_step_counted, _tk.batch_suzuki4_env_step_counted),
+    "splitting-yoshida4": (_tk.yoshida4_env_step, _tk.batch_yoshida4_env_step, "paper", True,
+                           _tk.yoshida4_env_step_counted, _tk.batch_yoshida4_env_step_counted),
+    "RATTLE-suzuki4": (_rk.rattle_env_step, _rk.batch_rattle_env_step, "regular", True, None, None),
 }
 ENV_METHODS = tuple(_ENV)
 """Methods with an environment stepper."""
@@ -408,8 +419,9 @@ def env_stepper(name: str) -> EnvStepper:
     """The compiled per-step functions of method ``name`` (one of :data:`ENV_METHODS`)."""
     if name not in _ENV:
         raise ValueError(f"method: no environment stepper for {name!r} (allowed: {', '.join(ENV_METHODS)})")
-    step, batch, state, fixed = _ENV[name]
-    return EnvStepper(name=name, step=step, batch=batch, state=state, fixed_step=fixed)
+    step, batch, state, fixed, step_counted, batch_counted = _ENV[name]
+    return EnvStepper(name=name, step=step, batch=batch, state=state, fixed_step=fixed, step_counted=step_counted,
+                      batch_counted=batch_counted)
 
 
 def warm_up(names=None) -> None:

@@ -34,9 +34,13 @@ writable float64 array (9,); arrays C-contiguous float64)::
 
     status = <method>_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out)
     batch_<method>_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)
+    status = <method>_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters)
+    batch_<method>_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV)
 
 with y, out (11,); u (4,); Y, OUT (11, N) and U (4, N) structure-of-arrays (row k = state entry k
-of every body); STATUS (N,) int64. ``h`` is the largest sub-step of fixed-step methods and the
+of every body); STATUS (N,) int64; the ``_counted`` variants also report the work: ``counters`` (3,) int64
+accumulates [nfev, steps, rejected steps], NFEV (N,) int64 receives each body's function
+evaluations. ``h`` is the largest sub-step of fixed-step methods and the
 initial step guess of DOP853 (0: automatic); rtol/atol are read by DOP853 only; energy_tol = inf
 switches the energy check off. Method names: ``dop853``, ``rk4``, ``strang``, ``suzuki4``,
 ``yoshida4``.
@@ -207,7 +211,9 @@ def _dop853_error(y, ynew, K, h, rtol, atol):
 def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters):
     """Advance ``y`` (and its derivative ``f``) in place from t to exactly t_bound.
 
-    counters: [nfev, accepted, rejected]. Returns (status, t reached, next |h|).
+    counters: [nfev, accepted, rejected(, budget of nfev)]; past the budget (or
+    :data:`DOP853_MAX_STEPS` steps) the status is ``MAX_STEPS`` (kind ``"budget"``).
+    Returns (status, t reached, next |h|).
     """
     while t < t_bound:
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -217,7 +223,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
         while True:
             if h_abs < min_step:
                 return STEP_COLLAPSE, t, h_abs
-            if counters[1] + counters[2] > DOP853_MAX_STEPS:
+            if counters[1] + counters[2] > DOP853_MAX_STEPS or (counters.size > 3 and counters[0] > counters[3]):
                 return MAX_STEPS, t, h_abs
             t_new = t + h_abs
             if t_new > t_bound:
@@ -257,7 +263,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
 def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
     """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
 
-    counters (3,) int64: [nfev, accepted, rejected]; fail (2,): [t of failure, |H − H₀| at the
+    counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
     last check]. Returns the status.
     """
     vel = np.empty(7)
@@ -312,16 +318,22 @@ def _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel,
 
 
 @njit
-def dop853_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of DOP853 from t = 0 to exactly dt (module docstring)."""
-    counters = np.zeros(3, np.int64)
+def dop853_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step of DOP853 from t = 0 to exactly dt (module docstring); ``counters`` (3,)
+    int64 accumulates [nfev, accepted, rejected]."""
     return _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, np.empty((13, N)), np.empty(N), np.empty(N),
                        np.empty(7), np.empty(4), np.empty(N), counters)
 
 
 @njit
-def batch_dop853_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,)."""
+def dop853_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
+    """One environment step of DOP853 from t = 0 to exactly dt (module docstring)."""
+    return dop853_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
+
+
+@njit
+def batch_dop853_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,), NFEV (N,) int64 (output)."""
     K = np.empty((13, N))
     ynew = np.empty(N)
     ytmp = np.empty(N)
@@ -337,9 +349,17 @@ def batch_dop853_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
             y[i] = Y[i, b]
         for i in range(4):
             u[i] = U[i, b]
+        counters[0] = 0
         STATUS[b] = _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+        NFEV[b] = counters[0]
         for i in range(N):
             OUT[i, b] = out[i]
+
+
+@njit
+def batch_dop853_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,)."""
+    batch_dop853_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
 
 
 # --------------------------------------------------------------------------------------------- RK4
@@ -558,7 +578,7 @@ def _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, 
 
 
 @njit
-def _fixed_batch(kind, coeffs, Y, U, P, dt, h, energy_tol, OUT, STATUS):
+def _fixed_batch(kind, coeffs, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV):
     work = np.empty((5, N))
     vel = np.empty(7)
     force = np.empty(4)
@@ -571,53 +591,99 @@ def _fixed_batch(kind, coeffs, Y, U, P, dt, h, energy_tol, OUT, STATUS):
             y[i] = Y[i, b]
         for i in range(4):
             u[i] = U[i, b]
+        counters[0] = 0
         STATUS[b] = _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, counters)
+        NFEV[b] = counters[0]
         for i in range(N):
             OUT[i, b] = out[i]
 
 
 @njit
+def rk4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step of RK4 (⌈dt/h⌉ equal sub-steps); returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
+    return _fixed_env(0, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
+
+
+@njit
 def rk4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
     """One environment step of RK4 (⌈dt/h⌉ equal sub-steps); returns the status."""
-    return _fixed_env(0, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+    return rk4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
+
+
+@njit
+def batch_rk4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
+
+
+@njit
+def batch_rk4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
+
+
+@njit
+def strang_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step of the Strang splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
+    return _fixed_env(1, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
 
 
 @njit
 def strang_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
     """One environment step of the Strang splitting; returns the status."""
-    return _fixed_env(1, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+    return strang_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
+
+
+@njit
+def batch_strang_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
+
+
+@njit
+def batch_strang_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
+
+
+@njit
+def suzuki4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step of the Suzuki-4 splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
+    return _fixed_env(1, SUZUKI4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
 
 
 @njit
 def suzuki4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
     """One environment step of the Suzuki-4 splitting; returns the status."""
-    return _fixed_env(1, SUZUKI4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+    return suzuki4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
+
+
+@njit
+def batch_suzuki4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
+
+
+@njit
+def batch_suzuki4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
+    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
+
+
+@njit
+def yoshida4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step of the Yoshida-4 splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
+    return _fixed_env(1, YOSHIDA4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
 
 
 @njit
 def yoshida4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
     """One environment step of the Yoshida-4 splitting; returns the status."""
-    return _fixed_env(1, YOSHIDA4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+    return yoshida4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
 
 
 @njit
-def batch_rk4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS)
-
-
-@njit
-def batch_strang_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS)
-
-
-@njit
-def batch_suzuki4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+def batch_yoshida4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
 
 
 @njit
 def batch_yoshida4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS)
+    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
 
 
 @njit

@@ -41,11 +41,11 @@ KIND_V3 = 3
 
 
 def _check_positive(owner: str, **values: float) -> None:
+    """Each value a finite number in :data:`~flatbody_env.physics.validation.PARAM_RANGE` (``ValueError`` naming ``owner.name``)."""
+    from flatbody_env.physics.validation import PARAM_RANGE, number
+
     for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            raise ValueError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
-        if not math.isfinite(float(value)) or float(value) <= 0.0:
-            raise ValueError(f"{owner}.{name}: must be a finite number > 0 (allowed range (0, inf)), got {value!r}")
+        number(f"{owner}.{name}", value, low=PARAM_RANGE[0], high=PARAM_RANGE[1])
 
 
 def potential_kernel(kind, c1, c2, a, b, lam, mu, rho):

@@ -72,7 +72,7 @@ def _action_names(u) -> tuple[str, ...] | None:
         return tuple(str(n) for n in names)
     control = getattr(u, "control", None)
     if isinstance(control, str):
-        from flatbody_env.recording.writer import ACTION_NAMES
+        from flatbody_env.recording.layout import ACTION_NAMES
         from flatbody_env.env.task import CONTROLS, control_mask
 
         if control in CONTROLS:

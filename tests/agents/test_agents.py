@@ -78,10 +78,10 @@ def test_passivity_controller_decreases_its_lyapunov_function():
     # the target's omega3 is what the controller regulates to
     y_star = _target_state(env)
     assert velocities_from_momenta(y_star, u.body)["omega3"] == pytest.approx(tg["omega3"], rel=1e-9)
-    values = [lyap(u._y)]
+    values = [lyap(u.physics_state)]
     for _ in range(40):
         obs, *_ = env.step(ctl.action(obs))
-        values.append(lyap(u._y))
+        values.append(lyap(u.physics_state))
     assert np.all(np.diff(values) <= 1e-9)
     assert values[-1] < values[0] - 1e-3
 
@@ -109,7 +109,7 @@ def test_residual_actions_keep_the_target_an_equilibrium():
     np.testing.assert_allclose(add[0], 0.3 * policy[0], rtol=1e-6)  # an ungated residual biases the target
     gated = ResidualAction(scale=0.3, gate=0.1)(obs, policy)
     np.testing.assert_allclose(gated[0], 0.0, atol=1e-6)
-    d_off = u.task.distance(u._y, u.body, np.array([tg[k] for k in ("lambda", "mu", "rho", "s3")]))
+    d_off = u.task.distance(u.physics_state, u.body, np.array([tg[k] for k in ("lambda", "mu", "rho", "s3")]))
     assert d_off > 0.1  # far from the target the gated residual acts in full
     np.testing.assert_allclose(gated[1], np.clip(lqr[1] + 0.3 * policy[1], -1, 1), rtol=1e-6)
     with pytest.raises(ValueError, match="residual_mode"):
@@ -120,7 +120,7 @@ def test_state_from_observation_roundtrip():
     env = gym.make("FlatBody-v0")
     obs, _ = env.reset(seed=4)
     y, target = state_from_observation(obs)
-    np.testing.assert_allclose(y, env.unwrapped._y, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(y, env.unwrapped.physics_state, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(target, [env.unwrapped.target[k] for k in ("lambda", "mu", "rho", "s3")], rtol=1e-6)
 
 
@@ -256,7 +256,7 @@ def test_shipped_agent_acceptance():
 def test_record_agent_episode(tmp_path, capsys):
     """``flatbody record --agent``: the shipped agent's episode, read back with rerun's reader."""
     from flatbody_env.cli.main import main
-    from flatbody_env.recording.writer import read_recording
+    from flatbody_env.recording.reader import read_recording
 
     out = tmp_path / "agent.rrd"
     assert main(["record", "--agent", "--seed", "3", "--out", str(out)]) == 0

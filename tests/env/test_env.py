@@ -12,7 +12,6 @@ from gymnasium.utils.env_checker import check_env
 
 import flatbody_env  # noqa: F401  (registers FlatBody-v0)
 from flatbody_env.env.env import FlatBodyEnv
-from flatbody_env.integrators import StepResult
 from flatbody_env.env.task import CONTROLS
 
 
@@ -135,10 +134,17 @@ def test_integrator_failure_is_flagged_not_returned():
     env = FlatBodyEnv(integrator="DOP853")  # the generic (seam) path
     obs0, _ = env.reset(seed=0)
 
-    def failing(y, R, u, dt):
-        return StepResult(y=y, R=R, ok=False, reason="step size collapsed", kind="step-collapse")
+    class Failing:  # a stepper through the seam's interface that always reports a step-size collapse
+        method, compiled, carries_rotation = "failing", False, False
 
-    env._stepper = failing
+        def advance(self, y, u, dt, out, counters, R=None, R_out=None):
+            out[:] = np.nan
+            return 2
+
+        def describe(self, status, lane=None):
+            return "step-collapse: step size collapsed"
+
+    env.stepper = Failing()
     obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
     assert term and info["integrator_failure"].startswith("step-collapse")
     np.testing.assert_array_equal(obs, obs0)
@@ -229,10 +235,13 @@ def test_fixed_step_failure_near_lambda_equals_mu_terminates_cleanly():
         assert not term, info
 
 
-def test_fast_path_equals_generic_path():
+def test_generic_stepper_agrees_with_the_compiled_one_for_the_same_method():
+    from flatbody_env.integrators.steppers import GenericEnvStep
+
     fast = FlatBodyEnv()
     slow = FlatBodyEnv()
-    slow._fast = None  # force the seam's generic stepper for the same compiled method
+    slow.stepper = GenericEnvStep(slow.integrator, slow.body, slow.tolerances)  # the seam's generic stepper, same method
+    assert fast.stepper.compiled and not slow.stepper.compiled
     o1, _ = fast.reset(seed=4)
     o2, _ = slow.reset(seed=4)
     rng = np.random.default_rng(1)
@@ -243,3 +252,4 @@ def test_fast_path_equals_generic_path():
         np.testing.assert_allclose(r1[0], r2[0], rtol=0, atol=1e-6)
         assert r1[1] == pytest.approx(r2[1], abs=1e-9)
         assert r1[4]["reward_terms"] == pytest.approx(r2[4]["reward_terms"], abs=1e-9)
+        assert r1[4]["integrator"]["method"] == r2[4]["integrator"]["method"] == "DOP853-numba"

@@ -1,0 +1,159 @@
+"""The environment-facing step API: one integrator step from a raw status, for one body or N.
+
+:func:`make_env_step` is the seam an environment steps through. It returns
+
+* a :class:`CompiledEnvStep` when the method has a compiled environment stepper for the paper
+  state (:data:`flatbody_env.integrators.compiled_methods.ENV_METHODS`, two-polar chart): one
+  compiled call per env step (and one per batch of N), no Python per sub-step;
+* a :class:`GenericEnvStep` otherwise: one :meth:`Method.integrate` call over [0, dt] with the
+  controls held constant (a fresh solver per step, so an adaptive method never carries its step
+  history across an action change), for any registered method, with R when asked.
+
+Both have the same interface, so the environment has one step path::
+
+    status = step.advance(y, u, dt, out, counters, R, R_out)   # 0 = success
+    step.advance_batch(Y, U, dt, OUT, STATUS, NFEV)             # structure-of-arrays, in place
+    step.describe(status)                                       # "kind: reason" of a failure
+
+* ``y``, ``out`` (11,) paper states (:mod:`flatbody_env.physics.state`); ``u`` (4,) the controls
+  (τ1, τ2, τ3, f_ϱ); ``counters`` (3,) int64 accumulates [nfev, steps, rejected steps];
+  ``R`` / ``R_out`` (3, 3) the orientation before / after (only when :attr:`carries_rotation`).
+* ``Y``, ``OUT`` (11, N), ``U`` (4, N), ``STATUS`` and ``NFEV`` (N,) int64.
+* ``status``: :data:`flatbody_env.integrators.failure.KINDS` index (0 = success). On failure
+  ``out`` holds no physics; the caller keeps the old state.
+
+:attr:`method` names the method that really runs and :attr:`compiled` whether it runs compiled
+(the environment then uses its compiled bookkeeping too).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flatbody_env.integrators.base import IntegrationError, Tolerances, get_method
+from flatbody_env.integrators.failure import KINDS, failure_reason
+from flatbody_env.physics.body import Body
+
+_OTHER_FAILURE = len(KINDS)
+"""Status of a failure whose kind is not one of :data:`KINDS` (e.g. a scipy solver's own message)."""
+
+
+class CompiledEnvStep:
+    """A method's compiled environment stepper behind the seam (module docstring); picklable."""
+
+    compiled = True
+    carries_rotation = False
+
+    def __init__(self, name: str, body: Body, tol: Tolerances, *, first_step: float = 0.0) -> None:
+        from flatbody_env.integrators.compiled_methods import kernel_params
+
+        self.method = name
+        self.P = kernel_params(body)
+        meth = get_method(name)
+        fixed = not meth.info.adaptive
+        # fixed-step methods: the largest sub-step; DOP853: the first step guess (0 = automatic)
+        self.h = float(tol.step) if fixed else float(first_step)
+        self.rtol = float(tol.rtol)
+        self.atol = float(tol.atol)
+        self.energy_tol = float(tol.energy_tol)
+        self._load()
+
+    def _load(self) -> None:
+        from flatbody_env.integrators.compiled_methods import env_stepper
+
+        st = env_stepper(self.method)
+        self._step = st.step_counted
+        self._batch = st.batch_counted
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        del state["_step"], state["_batch"]
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._load()
+
+    def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
+        return self._step(y, u, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, out, counters)
+
+    def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV) -> None:
+        self._batch(Y, U, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV)
+
+    def describe(self, status: int, lane: int | None = None) -> str:
+        return f"{KINDS[status]}: {failure_reason(status)}"
+
+
+class GenericEnvStep:
+    """One :meth:`Method.integrate` call per env step (module docstring); picklable."""
+
+    compiled = False
+
+    def __init__(self, name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> None:
+        self.method = name
+        self.body = body
+        self.tol = tol
+        self.carries_rotation = bool(with_rotation)
+        self._last = ""
+        self._lane_reasons: dict[int, str] = {}
+
+    def _run(self, y, u, dt, R):
+        try:
+            sol = get_method(self.method).integrate(self.body, y, np.array([0.0, dt]), tol=self.tol, u=u, R0=R,
+                                                    with_rotation=self.carries_rotation)
+        except IntegrationError as exc:
+            status = KINDS.index(exc.kind) if exc.kind in KINDS and exc.kind != "ok" else _OTHER_FAILURE
+            return status, f"{exc.kind}: {exc.reason}", None
+        return 0, "", sol
+
+    def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
+        status, message, sol = self._run(y, u, dt, R)
+        if status:
+            self._last = message
+            out[:] = y
+            return status
+        out[:] = sol.Y[:, -1]
+        counters[0] += sol.nfev
+        counters[1] += int(sol.stats.get("steps", 0))
+        if R_out is not None and sol.rotation is not None:
+            R_out[:] = sol.rotation[-1]
+        return 0
+
+    def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV) -> None:
+        self._lane_reasons = {}
+        counters = np.zeros(3, np.int64)
+        out = np.empty(Y.shape[0])
+        for k in range(Y.shape[1]):
+            counters[:] = 0
+            STATUS[k] = self.advance(Y[:, k].copy(), U[:, k].copy(), dt, out, counters)
+            OUT[:, k] = out
+            NFEV[k] = counters[0]
+            if STATUS[k]:
+                self._lane_reasons[k] = self._last
+
+    def describe(self, status: int, lane: int | None = None) -> str:
+        if lane is not None:
+            return self._lane_reasons.get(lane, f"{KINDS[status] if status < len(KINDS) else 'failure'}: {failure_reason(status)}")
+        return self._last
+
+
+def make_env_step(name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False,
+                  first_step: float = 0.0) -> CompiledEnvStep | GenericEnvStep:
+    """The environment step of method ``name`` (module docstring).
+
+    Raises ValueError for an unknown name, a step setting the method refuses, or
+    ``with_rotation=True`` for a method that cannot carry R (the compiled two-polar methods).
+    ``first_step`` is DOP853's first step guess (0 = automatic).
+    """
+    from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper
+
+    meth = get_method(name)  # ValueError for an unknown name
+    checker = getattr(meth, "make_stepper", None)
+    if checker is not None:
+        checker(body, tol, with_rotation=with_rotation)  # the method's own refusals (step, body, R)
+    if not with_rotation and body.compiled and name in ENV_METHODS and env_stepper(name).state == "paper":
+        return CompiledEnvStep(name, body, tol, first_step=first_step)
+    return GenericEnvStep(name, body, tol, with_rotation=with_rotation)
+
+
+__all__ = ["CompiledEnvStep", "GenericEnvStep", "make_env_step"]

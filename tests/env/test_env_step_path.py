@@ -1,0 +1,149 @@
+"""The env's one step path: identical to the compiled composition it replaced, real work counts in
+``info``, one info builder, one formula per score, and the vector env equal to N single envs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from flatbody_env.env import compiled
+from flatbody_env.env.env import FlatBodyEnv
+from flatbody_env.env.task import REWARD_TERMS, ReachStationaryEllipse, state_from_observation
+from flatbody_env.env.vector_env import FlatBodyVectorEnv
+from flatbody_env.integrators.compiled_methods import env_stepper
+from flatbody_env.physics.equations import rhs
+
+
+def test_one_step_path_is_bitwise_the_compiled_composition_for_the_default_integrator():
+    """Oracle: the raw compiled DOP853 env kernel (first step guess = dt) followed by the compiled
+    bookkeeping, called directly — the composition the previous fast path ran."""
+    env = FlatBodyEnv()
+    obs, _ = env.reset(seed=3)
+    y = env.physics_state
+    tgt = env.target_vector
+    P, cfg = env.kernel_params.copy(), env.kernel_config.copy()
+    raw = env_stepper("DOP853-numba")
+    tol = env.tolerances
+    rng = np.random.default_rng(7)
+    for _ in range(80):
+        a = rng.uniform(-1.3, 1.3, 4)  # some entries beyond the box: clipped
+        a_clip = np.clip(a, -1, 1)
+        u = a_clip * env.limits
+        ynew = np.empty(11)
+        st = raw.step(y, u, P, env.dt, env.dt, tol.rtol, tol.atol, np.inf, ynew)
+        y_out, o_ref, terms, sc = np.empty(11), np.empty(16, np.float32), np.empty(6), np.empty(4)
+        ended = compiled.post_step(y, ynew, st, a_clip, 4, tgt, cfg, P, y_out, o_ref, terms, sc, np.empty(7), np.empty(4))
+        o, r, term, trunc, info = env.step(a.astype(np.float64))
+        np.testing.assert_array_equal(o, o_ref)
+        assert r == sum(terms.tolist())
+        assert list(info["reward_terms"].values()) == terms.tolist()
+        assert info["distance"] == sc[0] and info["energy"] == sc[1] and term == bool(ended)
+        y = y_out
+        np.testing.assert_array_equal(env.physics_state, y)
+        if term:
+            break
+
+
+def test_info_names_the_integrator_that_ran_and_its_real_nfev():
+    env = FlatBodyEnv()
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert info["integrator"]["method"] == "DOP853-numba"
+    # DOP853: one derivative at the start plus 12 stages per attempted step
+    assert info["integrator"]["nfev"] >= 13 and (info["integrator"]["nfev"] - 1) % 12 == 0
+
+    rk4 = FlatBodyEnv(integrator="RK4", step=0.0125)  # 4 sub-steps × 4 stages
+    rk4.reset(seed=0)
+    assert rk4.step(np.zeros(4, dtype=np.float32))[4]["integrator"] == {"method": "RK4", "nfev": 16}
+
+    ref = FlatBodyEnv(integrator="DOP853", rtol=1e-9, atol=1e-9)  # the generic stepper (scipy)
+    ref.reset(seed=0)
+    y0, u = ref.physics_state, ref.controls(np.full(4, 0.2))[1]
+    info = ref.step(np.full(4, 0.2, dtype=np.float32))[4]
+    # scipy with the domain events the method watches: DOP853 then also evaluates its dense output (3 per step)
+    sol = solve_ivp(lambda t, y: rhs(t, y, u, ref.body), (0.0, ref.dt), y0, method="DOP853", rtol=1e-9, atol=1e-9, dense_output=True)
+    assert info["integrator"] == {"method": "DOP853", "nfev": sol.nfev}
+
+    drawn = FlatBodyEnv(render_mode="rgb_array")  # the compiled two-polar method cannot carry R
+    _, reset_info = drawn.reset(seed=0)
+    assert reset_info["integrator"] == {"method": drawn.stepping_integrator, "nfev": 0}
+    assert drawn.step(np.zeros(4, dtype=np.float32))[4]["integrator"]["method"] == drawn.stepping_integrator
+
+
+def test_reset_and_step_infos_have_the_same_keys_and_values_from_the_same_formulas():
+    env = FlatBodyEnv()
+    obs, info0 = env.reset(seed=5)
+    _, _, _, _, info1 = env.step(np.zeros(4, dtype=np.float32))
+    assert set(info1) - set(info0) == {"reward_terms"}
+    y, tgt = state_from_observation(obs)
+    assert info0["distance"] == pytest.approx(env.task.distance(y, env.body, tgt), abs=1e-6)
+    # independent: the distance from its definition (task docstring)
+    s = env.physics_state
+    J, J3 = env.body.inertia.J1, env.body.inertia.J3
+    w1, w2 = s[0] / (J * s[8] ** 2 + J3 * s[9] ** 2), s[1] / (J * s[7] ** 2 + J3 * s[9] ** 2)
+    t = env.target_vector
+    d = np.linalg.norm([s[7] - t[0], s[8] - t[1], s[9] - t[2], s[2] - t[3], w1, w2, s[4], s[5], s[6]])
+    assert info1["distance"] == pytest.approx(d, rel=1e-12)
+
+
+def test_vectorised_task_scores_equal_the_compiled_kernel_per_body():
+    task = ReachStationaryEllipse()
+    venv = FlatBodyVectorEnv(num_envs=6)
+    venv.reset(seed=1)
+    rng = np.random.default_rng(0)
+    A = rng.uniform(-1, 1, (6, 4))
+    _, _, _, _, info = venv.step(A)
+    Y, T = venv.states.T, venv.target_vectors.T
+    terms = task.reward_terms(Y, venv.body, T, A, np.zeros(6, dtype=bool))
+    for name in REWARD_TERMS:
+        np.testing.assert_allclose(terms[name], info["reward_terms"][name], rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(task.distance(Y, venv.body, T), info["distance"], rtol=1e-14)
+
+
+@pytest.mark.parametrize("integrator", ["DOP853-numba", "RK4"])
+def test_vector_env_equals_single_envs_including_info(integrator):
+    n = 3
+    venv = FlatBodyVectorEnv(num_envs=n, max_episode_steps=10, integrator=integrator)
+    singles = [FlatBodyEnv(integrator=integrator) for _ in range(n)]
+    obs, info = venv.reset(seed=20)
+    for i, e in enumerate(singles):
+        o, inf = e.reset(seed=20 + i)
+        np.testing.assert_array_equal(obs[i], o)
+        assert info["energy"][i] == inf["energy"] and info["distance"][i] == inf["distance"]
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
+        obs, rew, term, trunc, info = venv.step(A)
+        assert info["integrator"]["method"] == integrator
+        for i, e in enumerate(singles):
+            o, r, te, _, inf = e.step(A[i])
+            np.testing.assert_array_equal(obs[i], o)
+            assert rew[i] == r and te == term[i]
+            assert info["integrator"]["nfev"][i] == inf["integrator"]["nfev"] > 0
+            assert info["t"][i] == pytest.approx(inf["t"])
+    assert trunc.all()
+
+
+def test_same_step_autoreset_keeps_the_final_observation():
+    from gymnasium.vector import AutoresetMode
+
+    venv = FlatBodyVectorEnv(num_envs=2, max_episode_steps=3, autoreset_mode=AutoresetMode.SAME_STEP)
+    venv.reset(seed=0)
+    single = FlatBodyEnv()
+    single.reset(seed=0)
+    for k in range(3):
+        obs, _, _, trunc, info = venv.step(np.zeros((2, 4)))
+        o = single.step(np.zeros(4))[0]
+    assert trunc.all() and info["_final_obs"].all()
+    np.testing.assert_array_equal(info["final_obs"][0], o)
+    np.testing.assert_array_equal(obs[0], single.reset()[0])  # the next episode's first observation, drawn as a single env would
+
+
+def test_bad_vector_actions_and_mode():
+    venv = FlatBodyVectorEnv(num_envs=2)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match="actions"):
+        venv.step(np.full((2, 4), np.nan))
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        FlatBodyVectorEnv(num_envs=2, autoreset_mode="Disabled")
