@@ -97,6 +97,7 @@ def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None
         step=p.get("step"),
         model=p["model"],
         with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
+        max_wall_time=limits.job_seconds if in_job else limits.request_seconds,
     )
 
 
@@ -173,8 +174,9 @@ def error_data(exc: BaseException) -> dict[str, Any]:
     from flatbody_env.integrators import IntegrationError
 
     if isinstance(exc, IntegrationError):
-        return {"kind": "integration", "detail": str(exc), "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason,
-                "method": exc.method or None}
+        # a used-up work budget is a request over the limits (413); any other failure is the integration's (422)
+        return {"kind": "too-large" if exc.kind == "budget" else "integration", "detail": str(exc),
+                "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason, "method": exc.method or None}
     if isinstance(exc, LimitExceeded):
         return {"kind": "too-large", "detail": str(exc), "field": exc.field}
     if isinstance(exc, ValueError):

@@ -35,7 +35,10 @@ class Limits:
     trajectory_samples : int
         Most samples of a trajectory sent to ``POST /invariants``.
     request_seconds : float
-        Longest a request-path computation may run before it is answered with 413 (use a job).
+        Longest a request-path computation may run before it is answered with 413 (use a job);
+        also the wall-clock budget of a request's integration.
+    job_seconds : float
+        Wall-clock budget of a job's integration.
     """
 
     max_body_bytes: int = 16 * 1024 * 1024
@@ -51,6 +54,7 @@ class Limits:
     job_episodes: int = 1000
     trajectory_samples: int = 20001
     request_seconds: float = 60.0
+    job_seconds: float = 3600.0
 
     def as_dict(self) -> dict[str, float]:
         """The limits as JSON (``GET /limits``)."""

@@ -112,13 +112,14 @@ class TrajectoryRequest(_Strict):
     casimir: Union[list[Finite], None] = None
     p_theta: Union[list[Finite], None] = None
     rotation: Union[list[list[list[Finite]]], None] = None
+    initial_state: Union[dict[str, Finite], None] = None
     meta: Union[dict[str, Any], None] = None
     body: Union[BodySpec, None] = Field(None, description="the body (default: the built-in scene named in meta.scene)")
 
     def trajectory(self) -> dict[str, Any]:
         """The trajectory dict ``invariants_along`` reads."""
         out: dict[str, Any] = {"t": self.t, "state": self.state}
-        for key in ("energy", "casimir", "p_theta", "rotation", "meta"):
+        for key in ("energy", "casimir", "p_theta", "rotation", "initial_state", "meta"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = value
@@ -268,6 +269,7 @@ class TrajectoryAnswer(BaseModel):
     casimir: list[float]
     p_theta: list[float]
     rotation: Union[list[list[list[float]]], None] = None
+    initial_state: Union[dict[str, float], None] = None
     meta: dict[str, Any]
 
 
