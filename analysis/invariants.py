@@ -9,7 +9,7 @@ name                   definition                                               
 ``energy``             H (eq. (41) of [1])                                                   yes
 ``casimir``            |s|² (eq. (43) of [1])                                                yes
 ``p_theta``            p_θ (eq. (46) of [1], J1 = J2)                                        yes
-``lab_spin``           R s (NOTES §4; needs R)                                               yes
+``lab_spin``           R s (docs/physics.md §6; needs R)                                               yes
 ``K1, K2, K3``         deformation invariants: eigenvalues of G = ΦᵀΦ, ascending             at stationary
                        (eqs. (34)–(35) of [1]: {λ², μ², ϱ²})                                 ellipses only
 ``trace_G, det_G``     tr G = λ²+μ²+ϱ², det G = (λμϱ)²                                       idem
@@ -18,7 +18,7 @@ name                   definition                                               
 =====================  ====================================================================  ===========
 
 At a stationary ellipse Ġ and Ċ are non-zero (G and C rotate rigidly) while every invariant is
-constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (E7 of NOTES.md).
+constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (erratum E7, docs/physics.md).
 
 References
 ----------
@@ -44,7 +44,7 @@ from flatbody_env.simulation import Trajectory, read_trajectory
 from flatbody_env.physics.state import STATE_NAMES
 
 CONSERVED = ("energy", "casimir", "p_theta", "lab_spin")
-"""Quantities conserved along every uncontrolled isotropic motion (NOTES §4)."""
+"""Quantities conserved along every uncontrolled isotropic motion (docs/physics.md §6)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -140,7 +140,7 @@ def _ellipses(args) -> int:
     sols = _solutions(args, body, s3, pt)
     print(_header(body, s3, pt))
     if not sols:
-        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/README-analysis.md)")
+        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/analysis.md)")
         return 0
     print(f"{'#':>2} {'branch':<6} {'lambda':>12} {'mu':>12} {'rho':>10} {'omega3':>11} {'theta_dot':>11} {'energy':>13} {'residual':>9}  kind")
     for i, e in enumerate(sols):

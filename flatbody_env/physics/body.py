@@ -250,7 +250,7 @@ def _potential_from(where: str, pot: Mapping[str, Any]):
 
 
 def default_body() -> Body:
-    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (NOTES E10)."""
+    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (erratum E10)."""
     return Body(
         inertia=Inertia.isotropic(1.0, 1.0),
         potential=V3(kappa=1.0),

@@ -87,7 +87,7 @@ def description_markdown(title: str, body, extra: str) -> str:
         desc = repr(body)
     text = f"""# {title}
 
-A flat affinely-rigid body with thickness (paper [1], sections 3–3.4; corrections in NOTES.md [2]).
+A flat affinely-rigid body with thickness (paper [1], sections 3–3.4; corrections in [2]).
 Body: {desc}.
 
 **Configuration** Φ = R · diag(λ, μ, ϱ) · U(θ)⁻¹ (eqs. (23)–(24) of [1]).

@@ -41,8 +41,8 @@ Data are sent column-wise (``send_columns``) in blocks: a whole trajectory at on
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
