@@ -22,8 +22,8 @@ constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (erratum E7
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness), eqs. (33)–(35), (41), (51).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §4, E7.
 """
 

@@ -36,8 +36,8 @@ both orders are distinct ellipses (the c-axis long or short, docs/physics.md §8
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness), section 3.4, eqs. (50)–(54).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §6 (and errata E7, E8).
 """
 

@@ -28,9 +28,9 @@ times; the initial state is :attr:`Trajectory.initial_state`. Every run has a wo
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness).
-.. [2] ``docs/physics.md``: the verified formulas and the errata of [1] (docs/physics.md § numbers).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the corrected equations and the errata of [1].
 """
 
 from __future__ import annotations

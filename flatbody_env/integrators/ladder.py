@@ -65,8 +65,8 @@ c₀ + c₁ cos 2ωt + c₂ sin 2ωt: the collapse μ → 0 of V1 (no barrier) i
 
 References
 ----------
-.. [1] A. Kovalchuk, E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension: eqs. (23)–(28), (31), (36)–(40), (44)–(49), (52)–(54).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md``: the corrected bracket (ṡ = ω × s), the sign of eqs. (44)–(46), and
    the closest-approach bound of the λ = μ barrier.
 """

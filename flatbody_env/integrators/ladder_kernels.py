@@ -22,8 +22,8 @@ each system runs with its own steps.
 
 References
 ----------
-.. [1] A. Kovalchuk, E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (eqs. (25), (31), (40), (44)–(49)).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (the corrected equations and the errata).
 """
 

@@ -26,8 +26,8 @@ laboratory spin R s is conserved. ``"paper"`` reproduces the printed eqs. (43)�
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md``: the verified formulas and the errata of [1].
 """
 
