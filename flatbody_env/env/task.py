@@ -87,8 +87,7 @@ References
 ----------
 .. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
    degenerate dimension", arXiv:0902.3573 (2009).
-   (equation numbers as in the paper).
-.. [2] ``docs/physics.md``: the corrected equations and the paper's errata (E1–E10, §1–§8).
+.. [2] ``docs/physics.md``: the corrected equations and the paper's errata (E1–E10).
 """
 
 from __future__ import annotations
