@@ -21,6 +21,11 @@ A method name that belongs to one chart (``"DOP853"`` two-polar, ``"DOP853-regul
 mapped to its twin in the chosen chart when one exists; a method without a twin (the compiled
 ones, e.g. ``"RK4"``) runs in its own chart, and a failure near λ = μ is reported
 (:class:`IntegrationError`), not hidden. Fixed-step methods need ``step=``.
+
+References
+----------
+.. [1] A. Kovalchuk, E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
+   dimension; its corrected equations and errata: ``docs/physics.md``.
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ DEFAULT_SAMPLES = 101
 def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
     """A rigorous lower bound of |λ − μ| along the uncontrolled isotropic motion (0 if none).
 
-    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], NOTES §3) non-negative,
+    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1]; docs/physics.md) non-negative,
     σ₋²/(4J(λ−μ)²) ≤ H − inf V, so |λ − μ| ≥ |σ₋| / √(4J(H − inf V)).
     """
     y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
@@ -131,7 +136,7 @@ class Trajectory:
 
     @property
     def lab_spin(self) -> np.ndarray | None:
-        """R s, shape (n, 3) (conserved with the corrected bracket, NOTES §4), or None without R."""
+        """R s, shape (n, 3) (conserved with the corrected bracket; docs/physics.md), or None without R."""
         if self.rotation is None:
             return None
         s = np.stack([self.state["s1"], self.state["s2"], self.state["s3"]], axis=-1)
