@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
-from flatbody_env.integrators.ladder import LADDER_RUNGS, RUNGS, check_rung, rung_model
+from flatbody_env.integrators.ladder import LADDER_RUNGS, check_rung, rung_model
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import Scene, builtin_scenes
 from flatbody_env.simulation import explain_model

@@ -429,7 +429,7 @@ class PlanarV1Model:
         times = _times(times)
         J = body.inertia.J1
         w = math.sqrt(body.potential.k / J)
-        lam0, mu0, rho0, th0 = y0[7], y0[8], y0[9], y0[10]
+        lam0, mu0, th0 = y0[7], y0[8], y0[10]
         vel = velocities_from_momenta(y0, body)
         # z± and their rates at t = 0 (module docstring; α(0) = 0, α̇ = ω3, eq. (25)):
         # z₊ = (λ+μ)/2·e^{−i(α+θ)}, z₋ = (λ−μ)/2·e^{i(θ−α)}
