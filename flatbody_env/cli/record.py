@@ -1,4 +1,5 @@
-"""Sub-commands for rerun recordings: ``record``, ``record-env``, ``record-info``, ``bench recording``.
+"""Sub-commands for rerun recordings: ``record`` (scenes, ``--agent`` episodes), ``record-env``, ``record-info``,
+``record-shots``, ``bench recording``.
 
 Heavy imports (rerun through :mod:`flatbody_env.recording.writer`, gymnasium, matplotlib) happen in
 the handlers only.
@@ -140,6 +141,38 @@ def _record_info(args) -> int:
         out = verify_recording(path)
         print(f"rerun rrd verify: {out.splitlines()[-1] if out else 'ok'}")
     return 0
+
+
+def _record_shots(args) -> int:
+    from flatbody_env.recording.viewer import screenshots
+
+    shots = screenshots(args.file, args.times, args.out, size=args.size, views=args.views, prefix=args.prefix, colors=args.colors)
+    for shot in shots:
+        print(f"wrote {shot.path}" + (f"  ({shot.view_class} '{shot.view}')" if shot.view else ""))
+    reports = sorted({r for shot in shots for r in shot.reports})
+    for r in reports:
+        print(f"viewer report: {r}", file=sys.stderr)
+    return 0
+
+
+def _float_list(text: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"times: expected comma-separated seconds, got {text!r}") from None
+    if not values or any(not (v >= 0.0) for v in values):
+        raise argparse.ArgumentTypeError("times: every time must be a number ≥ 0")
+    return values
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size: expected WIDTHxHEIGHT, got {text!r}") from None
+    if not (320 <= w <= 4096 and 320 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f"size: width and height must be in [320, 4096], got {text!r}")
+    return w, h
 
 
 def _record_bench(args) -> int:
@@ -295,6 +328,16 @@ def register(sub) -> None:
     p.add_argument("--rows", type=int_at_least("rows"), default=3, help="values shown per series (default 3)")
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
+
+    p = sub.add_parser("record-shots", help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times")
+    p.add_argument("file", metavar="RUN.rrd")
+    p.add_argument("--times", type=_float_list, default=[0.0, 5.0, 10.0], metavar="T1,T2,...", help="sim_time values in seconds (default 0,5,10)")
+    p.add_argument("--out", default="shots", metavar="DIR", help="folder of the PNGs (default shots)")
+    p.add_argument("--size", type=_size, default=(1600, 1000), metavar="WxH", help="window size (default 1600x1000)")
+    p.add_argument("--views", action="store_true", help="also save each visible view on its own")
+    p.add_argument("--prefix", default=None, help="file-name prefix (default: the recording's stem)")
+    p.add_argument("--colors", type=int_at_least("colors", 0), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
+    p.set_defaults(handler=_record_shots)
 
 
 
