@@ -126,10 +126,20 @@ def _camera(view: str, extent: float):
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[1.4 * d, -1.9 * d, 1.6 * d], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0])
 
 
-def _series_view(name: str, paths: list[str], *, origin: str = "/series"):
+def _series_view(name: str, paths: list[str], *, origin: str = "/series", y_range: float | None = None):
     import rerun.blueprint as rrb
 
-    return rrb.TimeSeriesView(name=name, origin=origin, contents=paths, plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True))
+    axis = rrb.ScalarAxis(range=(-y_range, y_range)) if y_range else None
+    return rrb.TimeSeriesView(name=name, origin=origin, contents=paths, plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True), axis_y=axis)
+
+
+DRIFT_FLOOR = 1e-6
+"""Smallest half-range of the drift plot's fixed axis: round-off (1e-12 … 1e-9) reads as a flat line at 0."""
+
+
+def drift_axis(max_abs_drift: float) -> float:
+    """Half-range of the relative-drift axis of a free scene: nice ≥ 1.2 × the largest drift, at least :data:`DRIFT_FLOOR`."""
+    return max(DRIFT_FLOOR, nice_range(1.2 * float(max_abs_drift))) if max_abs_drift > 0 else DRIFT_FLOOR
 
 
 def view_specs(*, episode: bool) -> list[tuple[str, str, tuple[str, ...]]]:
@@ -168,7 +178,7 @@ def view_specs(*, episode: bool) -> list[tuple[str, str, tuple[str, ...]]]:
     return specs
 
 
-def blueprint(*, episode: bool, extent: float = 2.0):
+def blueprint(*, episode: bool, extent: float = 2.0, drift_range: float | None = None):
     """The default blueprint of a recording.
 
     Parameters
@@ -177,6 +187,10 @@ def blueprint(*, episode: bool, extent: float = 2.0):
         An env episode (adds the target, reward, distance and action views).
     extent : float
         The body's size (largest semi-axis expected); sets the cameras' distance.
+    drift_range : float, optional
+        A fixed axis ±``drift_range`` for the relative-drift plot (free scenes, where the drift
+        is known before the file is written: :func:`drift_axis`); None lets the axis follow the
+        data (episodes, where control changes H, |s|² and p_θ on purpose).
     """
     import rerun.blueprint as rrb
 
@@ -197,7 +211,7 @@ def blueprint(*, episode: bool, extent: float = 2.0):
         if cls == "TextDocument":
             return rrb.TextDocumentView(name=name, origin=paths[0])
         if len(paths) == 1:
-            return _series_view(name, [paths[0], paths[0] + "/**"])
+            return _series_view(name, [paths[0], paths[0] + "/**"], y_range=drift_range if paths[0] == "/series/drift" else None)
         return _series_view(name, list(paths))
 
     names = [n for _, n, _ in view_specs(episode=episode)]

@@ -279,7 +279,7 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
         lines.append(f"{ent:<26} {'static':>6}  " + ", ".join(sorted(data.static[ent])))
     lines.append("")
     lines.append(f"first and last {rows} rows read back:")
-    for name in ("lambda", "mu", "rho", "theta", "energy", "casimir", "p_theta"):
+    for name in ("lambda", "mu", "rho", "theta", "s3", "p_theta", "energy", "casimir", "drift/energy", "distance"):
         ent = f"/series/{name}"
         if ent in data.entities:
             v = np.asarray(data.entities[ent].components["Scalars:scalars"])[:, 0]

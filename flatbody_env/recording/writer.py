@@ -75,6 +75,7 @@ from flatbody_env.recording.layout import (
     axis_labels,
     blueprint,
     description_markdown,
+    drift_axis,
     material_line_colors,
     nice_range,
     rgba,
@@ -206,6 +207,8 @@ class Recorder:
         An env episode: the layout adds the target, reward, distance and action views.
     extent : float
         The body's expected size (largest semi-axis), which places the cameras (> 0).
+    drift_range : float, optional
+        A fixed axis ±``drift_range`` for the relative-drift plot (default: it follows the data).
 
     Use as a context manager or call :meth:`close`; the file is complete only after that.
     """
@@ -224,6 +227,7 @@ class Recorder:
         spokes: int = 12,
         episode: bool = False,
         extent: float = 2.0,
+        drift_range: float | None = None,
     ) -> None:
         import rerun as rr
 
@@ -253,7 +257,7 @@ class Recorder:
         if not self.rec.is_enabled():
             raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec.save(str(self.path), default_blueprint=blueprint(episode=self.episode, extent=float(extent)))
+        self.rec.save(str(self.path), default_blueprint=blueprint(episode=self.episode, extent=float(extent), drift_range=drift_range))
         self.rec.send_recording_name(title)
         self._log_static(title, description, int(spokes))
 
@@ -609,7 +613,9 @@ def record_arrays(
         energy = hamiltonian_series(Y, body)
     block = _as_block(t, Y, rotations, energy=energy, step=step)
     extent = float(max(Y[_IDX["lambda"]].max(), Y[_IDX["mu"]].max(), Y[_IDX["rho"]].max()))
-    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent) as rec:
+    casimir = Y[_IDX["s1"]] ** 2 + Y[_IDX["s2"]] ** 2 + Y[_IDX["s3"]] ** 2
+    drift = max(float(np.abs(relative_drift(q, float(q[0]))).max()) for q in (block.energy, casimir, Y[_IDX["p_theta"]]))
+    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent, drift_range=drift_axis(drift)) as rec:
         rec._send_block(block)
     return Path(path)
 

@@ -132,3 +132,13 @@ def test_one_colour_per_variable_shared_with_its_target_and_greek_names(episode)
     for sym in ("G", "C"):
         c = np.asarray(data.static[f"/series/{sym}"]["SeriesLines:colors"]).ravel()
         assert len(set(c.tolist())) == 6  # six entries, six colours
+
+
+def test_drift_axis_is_fixed_for_free_scenes_and_follows_episodes(recorded, episode):
+    path, data = recorded
+    view = read_blueprint(path).view("conserved: relative drift")
+    lo, hi = np.asarray(view.properties["ScalarAxis:range"], dtype=float).ravel()
+    drift = max(np.abs(np.asarray(data[f"/series/drift/{n}"].components["Scalars:scalars"])).max() for n in ("energy", "casimir", "p_theta"))
+    assert lo == -hi and hi >= max(1e-6, drift)  # round-off shows as a flat line, on a labelled axis
+    assert drift < 1e-6 and hi == pytest.approx(1e-6)  # this scene is integrated to round-off
+    assert "ScalarAxis:range" not in read_blueprint(episode).view("conserved: relative drift").properties
