@@ -285,7 +285,7 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
             v = np.asarray(data.entities[ent].components["Scalars:scalars"])[:, 0]
             head = "  ".join(f"{x:.6f}" for x in v[:rows])
             tail = "  ".join(f"{x:.6f}" for x in v[-rows:])
-            lines.append(f"  {ent:<16} {head}  …  {tail}")
+            lines.append(f"  {ent:<22} {head}  …  {tail}")
     for ent in ("/tensors/G", "/tensors/C"):
         if ent in data.entities:
             e = data.entities[ent]
