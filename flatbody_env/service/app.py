@@ -31,7 +31,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from flatbody_env.service import models
-from flatbody_env.service.jobs import JobRunner, die_with_parent, process_context
+from flatbody_env.service.jobs import JobRunner, die_with_service, process_context
 from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
 from flatbody_env.service.store import JobStore
 
@@ -121,7 +121,7 @@ class BodyLimit:
         await self.app(scope, replay, send)
 
     async def _refuse(self, scope, receive, send) -> None:
-        response = error(413, "too-large", f"request body: at most {self.max_bytes} bytes", field="body")
+        response = error(413, "too-large", f"body: the request body may hold at most {self.max_bytes} bytes", field="body")
         await response(scope, receive, send)
 
 
@@ -144,14 +144,15 @@ class Service:
     def _new_pool(self) -> None:
         from flatbody_env.service.answers import warm_up
 
-        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(), initializer=die_with_parent)
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(),
+                                        initializer=die_with_service, initargs=(os.getpid(),))
         for _ in range(self.workers):
             self.pool.submit(warm_up)
 
     def stop(self) -> None:
         self.runner.stop()
         if self.pool is not None:
-            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool.shutdown(wait=True, cancel_futures=True)  # waits for a running request (bounded by the limits)
         self.store.unlock()
 
     async def answer(self, name: str, payload: dict[str, Any]) -> AnswerResponse:
@@ -219,6 +220,8 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         errs = exc.errors()
         first = errs[0] if errs else {"loc": (), "msg": "invalid request"}
         loc = [str(x) for x in first.get("loc", ()) if x not in ("body", "query", "path")]
+        if str(first.get("type", "")).startswith("union_tag"):
+            loc.append(str((first.get("ctx") or {}).get("discriminator", "kind")).strip("'"))
         field = ".".join(loc) or "body"
         msg = str(first.get("msg", "invalid")).replace("\n", " ")
         ctx = first.get("ctx") or {}
@@ -229,6 +232,8 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 400:  # a body that cannot be decoded (FastAPI says 400): bad input, as every other
+            return error(422, "validation", f"body: not valid JSON ({exc.detail})", field="body")
         kind = {404: "not-found", 409: "conflict", 413: "too-large"}.get(exc.status_code, "validation")
         return error(exc.status_code, kind, str(exc.detail))
 
@@ -289,10 +294,10 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         checked = await service.answer("check-job", job)
         if checked.status_code != 200:
             return checked
-        job_id = service.runner.submit(job["kind"], job["params"])
+        job_id = await asyncio.to_thread(service.runner.submit, job["kind"], job["params"])
         return AnswerResponse({"id": job_id}, status_code=202)
 
-    @app.get("/jobs", tags=["jobs"], response_model=models.JobList)
+    @app.get("/jobs", tags=["jobs"], response_model=models.JobList, responses={422: _ERRORS[422]})
     async def list_jobs(limit: int = Query(100, ge=1, le=1000)):
         """The newest jobs first (without their results)."""
         jobs = await asyncio.to_thread(service.store.list, limit)
@@ -303,7 +308,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """A job's status, progress, result (when done) or error (when failed)."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         return AnswerResponse(_public(job))
 
     @app.get("/jobs/{job_id}/artifact", tags=["jobs"], response_class=FileResponse,
@@ -314,9 +319,9 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json)."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         if job["status"] != "done":
-            return error(409, "conflict", f"job: {job_id} is {job['status']}; its files come when it is done", field="job_id")
+            return error(409, "conflict", f"job_id: job {job_id} is {job['status']}; its files come when it is done", field="job_id")
         names = job["artifacts"]
         chosen = names[0] if name is None and names else name
         if chosen not in names:
@@ -332,7 +337,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """Cancel a queued or running job (its process is stopped) and delete the job and its files."""
         job = await asyncio.to_thread(service.store.get, job_id)
         if job is None:
-            return error(404, "not-found", f"job: no job {job_id!r}", field="job_id")
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         cancelled = await asyncio.to_thread(service.runner.cancel, job_id)
         deleted = await asyncio.to_thread(service.store.delete, job_id)
         return AnswerResponse({"id": job_id, "cancelled": cancelled, "deleted": deleted})

@@ -20,7 +20,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,7 @@ class LoadRow:
     requests_per_s: float
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class ServiceBenchmark:
     """All rows, the state of the long job during the run, and where the files went."""
 
@@ -170,8 +170,7 @@ def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32),
     result = ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
                               long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
                                         "status_at_end": status_at_end})
-    result.paths = _write(result, out)
-    return result
+    return replace(result, paths=_write(result, out))
 
 
 def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:

@@ -6,7 +6,7 @@ job's work is :data:`WORK` [kind]; it calls the same functions as the ``flatbody
 (``family``, ``stability-map``, ``record``, ``evaluate``, ``simulate``) and writes its files to
 ``DATA_DIR/jobs/ID/``.
 
-A worker process dies with the service (``PR_SET_PDEATHSIG`` on Linux); a job found ``running``
+A worker process dies with the service (:func:`die_with_service`); a job found ``running``
 when the service starts is marked failed with :data:`~flatbody_env.service.store.RESTART_REASON`
 and is never re-run silently.
 """
@@ -16,9 +16,9 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
-import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -106,20 +106,43 @@ WORK: dict[str, Callable[[Mapping[str, Any], Path, Progress], tuple[Any, list[st
 """The work of each job kind: ``(params, folder, progress) → (result, artifact names)``."""
 
 
-def die_with_parent() -> None:
-    """Ask Linux to kill this process when its parent dies (no-op elsewhere)."""
-    if sys.platform.startswith("linux"):
+def die_with_service(service_pid: int) -> None:
+    """End this worker process as soon as the service process ``service_pid`` has ended.
+
+    Worker processes are forked by a forkserver, so they are not the service's children and
+    ``PR_SET_PDEATHSIG`` cannot tie them to it; a daemon thread waits on a pidfd of the service
+    (Linux ≥ 5.3; elsewhere it polls the pid twice a second) and exits the process. So a killed
+    service leaves no job running behind it.
+    """
+
+    def watch() -> None:
         try:
-            import ctypes
+            fd = os.pidfd_open(service_pid)
+        except (AttributeError, OSError):
+            fd = None
+        if fd is not None:
+            import select
 
-            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        except OSError:
-            pass
+            select.select([fd], [], [])
+        else:
+            while True:
+                try:
+                    os.kill(service_pid, 0)
+                except ProcessLookupError:
+                    break
+                except PermissionError:
+                    pass
+                time.sleep(0.5)
+        os._exit(70)
+
+    if service_pid == os.getpid():
+        return
+    threading.Thread(target=watch, name="flatbody-service-watch", daemon=True).start()
 
 
-def run_job(data_dir: str, job_id: str, kind: str, params: dict[str, Any]) -> None:
+def run_job(data_dir: str, job_id: str, kind: str, params: dict[str, Any], service_pid: int) -> None:
     """The worker process's entry point: do the job and write its outcome to the store."""
-    die_with_parent()
+    die_with_service(service_pid)
     os.environ.setdefault("MPLBACKEND", "Agg")
     store = JobStore(data_dir)
     pid = os.getpid()
@@ -242,7 +265,7 @@ class JobRunner:
             job = self.store.claim_next()
             if job is None:
                 return
-            proc = self._ctx.Process(target=run_job, args=(str(self.store.data_dir), job["id"], job["kind"], job["params"]),
+            proc = self._ctx.Process(target=run_job, args=(str(self.store.data_dir), job["id"], job["kind"], job["params"], os.getpid()),
                                      name=f"flatbody-job-{job['id'][:8]}", daemon=True)
             proc.start()
             self.store.set_pid(job["id"], proc.pid)
@@ -258,4 +281,4 @@ def _stop_process(proc) -> None:
         proc.join(timeout=3)
 
 
-__all__ = ["JobRunner", "WORK", "die_with_parent", "process_context", "run_job"]
+__all__ = ["JobRunner", "WORK", "die_with_service", "process_context", "run_job"]
