@@ -28,6 +28,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import socket
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -241,6 +242,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     from agents.train import train
 
     params = sample(trial, space)
+    trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
     every = max(1, cfg.n_timesteps // cfg.evaluations)
     callback = _pruning_callback(trial, out, every, cfg.eval_episodes)
