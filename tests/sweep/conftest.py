@@ -81,7 +81,7 @@ def postgres_url():
     """``postgresql://postgres@127.0.0.1:PORT/postgres``: a throw-away server (initdb + pg_ctl of
     Debian's postgresql package) on loopback, run as the ``postgres`` user when the tests run as
     root; skipped with the reason when PostgreSQL or the driver is absent."""
-    pytest.importorskip("psycopg2", reason="psycopg2 (pip install psycopg2-binary) is needed for the PostgreSQL storage")
+    pytest.importorskip("psycopg", reason="psycopg 3 (pip install 'psycopg[binary]') drives the PostgreSQL storage")
     if not PG_BIN:
         pytest.skip("PostgreSQL is not installed (apt-get install -y postgresql: /usr/lib/postgresql/*/bin/initdb)")
     bindir = PG_BIN[-1].parent
