@@ -263,7 +263,7 @@ def register(sub) -> None:
     p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30; any size)")
     p.add_argument("--chunk", type=int_at_least("chunk", 1), default=None, metavar="ROWS",
-                   help="lambda rows per task (default: the grid in at most 32 tasks)")
+                   help="lambda rows per task (default: about 512 grid points per task, at least one row)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
     _engine_arguments(p)
     p.set_defaults(handler=_stability_map)

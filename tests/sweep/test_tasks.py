@@ -26,9 +26,13 @@ def test_stability_map_plan_covers_every_row_once_in_key_order(grid, chunk):
     assert len({t.key for t in tasks}) == len(tasks) == math.ceil(grid / chunk)
 
 
-def test_default_chunk_gives_at_most_32_tasks():
-    for grid in (4, 31, 32, 33, 400, 20_000):
-        assert 1 <= math.ceil(grid / default_chunk(grid)) <= 32
+def test_default_chunk_holds_about_512_points_and_at_least_one_row():
+    for grid in (4, 22, 23, 30, 100, 512, 20_000):
+        chunk = default_chunk(grid)
+        assert 1 <= chunk <= grid
+        points = chunk * grid
+        assert points >= 512 or chunk == grid  # enough work per task, or the whole grid in one task
+        assert chunk == 1 or (chunk - 1) * grid < 512  # no more rows than needed
 
 
 def test_task_is_a_pure_function_of_its_key():
