@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from flatbody_env.answers import failure_rows
 from flatbody_env.cli.args import int_at_least, positive_float
 
 DEFAULT_OUT = "runs/integrators"
@@ -89,13 +90,6 @@ def _chart(args) -> int:
     plot_work_precision(csv_path, png_path, ref_path)
     print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {ref_path}, {png_path}")
     return 0
-
-
-def failure_rows(points) -> list[dict]:
-    """The ``failure-study --json`` rows: one plain dict per :class:`analysis.failure_study.FailurePoint`."""
-    import dataclasses
-
-    return [dataclasses.asdict(p) for p in points]
 
 
 def _failure(args) -> int:
@@ -200,7 +194,6 @@ def register(sub) -> None:
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
     p.add_argument("--json", action="store_true", help="also print the rows as JSON (by study, then method)")
     p.set_defaults(handler=_failure, repeats=1)
-
 
 
 def register_bench(bsub) -> None:

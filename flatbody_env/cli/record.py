@@ -51,7 +51,7 @@ def _record(args) -> int:
         max_nfev=args.max_nfev,
         max_wall_time=args.max_seconds,
     )
-    from flatbody_env.cli.output import atomic_path
+    from flatbody_env.output import atomic_path
 
     start = time.perf_counter()
     with atomic_path(args.out) as tmp:  # a killed run never leaves a half-written RUN.rrd

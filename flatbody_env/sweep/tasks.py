@@ -92,7 +92,7 @@ def stability_map_chunk(task: Task) -> list[dict[str, Any]]:
 def failure_case(task: Task) -> list[dict[str, Any]]:
     """One method along one axis of the failure study: the rows the serial study gives for it."""
     from analysis.failure_study import failure_study
-    from flatbody_env.cli.integrators import failure_rows
+    from flatbody_env.answers import failure_rows
 
     p = task.params
     points = failure_study((p["study"],), (p["method"],), quick=p["quick"], repeats=p["repeats"], max_run_s=p["max_run_s"],
@@ -105,7 +105,7 @@ def family_case(task: Task) -> dict[str, Any]:
     table written to ``params["csv"]``, plus the body it belongs to."""
     from analysis.families import follow_family, write_family_csv
     from analysis.stationary import SearchBox
-    from flatbody_env.cli.analysis import family_summary
+    from flatbody_env.answers import family_summary
     from flatbody_env.physics.body import Body
 
     p = task.params
