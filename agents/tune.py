@@ -25,9 +25,9 @@ as ``key=value`` overrides for ``flatbody train --study NAME --trial-id K``.
 
 from __future__ import annotations
 
-import json
 import math
 import os
+import socket
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -151,8 +151,11 @@ def sample(trial, space: dict[str, dict[str, Any]]) -> dict[str, Any]:
 
 
 def as_overrides(params: dict[str, Any]) -> list[str]:
-    """``key=value`` overrides for :func:`agents.train.apply_overrides` (values as JSON, a YAML subset)."""
-    return [f"{k}={json.dumps(v)}" for k, v in params.items()]
+    """``key=value`` overrides for :func:`agents.train.apply_overrides`, each value written as YAML
+    that reads back to the same value (``3e-05`` would read back as a string: YAML 1.1 floats need
+    a dot, so the YAML writer's ``3.0e-05`` is used)."""
+    return [f"{k}={yaml.safe_dump(v, default_flow_style=True).removesuffix(chr(10) + '...' + chr(10)).strip()}"
+            for k, v in params.items()]
 
 
 def open_storage(url: str):
@@ -175,6 +178,12 @@ def open_storage(url: str):
     path = Path(url)
     path.parent.mkdir(parents=True, exist_ok=True)
     return JournalStorage(JournalFileBackend(str(path)))
+
+
+def prepare(cfg: TuneConfig) -> None:
+    """Create the study (and a new database's tables) once, before workers start: two workers
+    creating the schema of an empty database at the same instant collide."""
+    _study(cfg, 0)
 
 
 def _study(cfg: TuneConfig, worker: int = 0):
@@ -241,6 +250,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     from agents.train import train
 
     params = sample(trial, space)
+    trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
     every = max(1, cfg.n_timesteps // cfg.evaluations)
     callback = _pruning_callback(trial, out, every, cfg.eval_episodes)
@@ -316,4 +326,4 @@ def trial_overrides(study_name: str, storage: str, trial_id: int) -> tuple[str, 
 
 
 __all__ = ["DEFAULT_STORAGE", "TUNE_EVAL_SEED", "TuneConfig", "as_overrides", "load_search_space", "objective", "open_storage",
-           "sample", "summary", "trial_overrides", "tune_worker"]
+           "prepare", "sample", "summary", "trial_overrides", "tune_worker"]

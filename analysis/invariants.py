@@ -9,7 +9,7 @@ name                   definition                                               
 ``energy``             H (eq. (41) of [1])                                                   yes
 ``casimir``            |s|² (eq. (43) of [1])                                                yes
 ``p_theta``            p_θ (eq. (46) of [1], J1 = J2)                                        yes
-``lab_spin``           R s (NOTES §4; needs R)                                               yes
+``lab_spin``           R s (docs/physics.md §6; needs R)                                               yes
 ``K1, K2, K3``         deformation invariants: eigenvalues of G = ΦᵀΦ, ascending             at stationary
                        (eqs. (34)–(35) of [1]: {λ², μ², ϱ²})                                 ellipses only
 ``trace_G, det_G``     tr G = λ²+μ²+ϱ², det G = (λμϱ)²                                       idem
@@ -18,12 +18,12 @@ name                   definition                                               
 =====================  ====================================================================  ===========
 
 At a stationary ellipse Ġ and Ċ are non-zero (G and C rotate rigidly) while every invariant is
-constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (E7 of NOTES.md).
+constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (erratum E7, docs/physics.md).
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness), eqs. (33)–(35), (41), (51).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §4, E7.
 """
 
@@ -44,7 +44,7 @@ from flatbody_env.simulation import Trajectory, read_trajectory
 from flatbody_env.physics.state import STATE_NAMES
 
 CONSERVED = ("energy", "casimir", "p_theta", "lab_spin")
-"""Quantities conserved along every uncontrolled isotropic motion (NOTES §4)."""
+"""Quantities conserved along every uncontrolled isotropic motion (docs/physics.md §6)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -28,9 +28,9 @@ times; the initial state is :attr:`Trajectory.initial_state`. Every run has a wo
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness).
-.. [2] ``docs/physics.md``: the verified formulas and the errata of [1] (NOTES § numbers).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the corrected equations and the errata of [1].
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ DEFAULT_SAMPLES = 101
 def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
     """A rigorous lower bound of |λ − μ| along the uncontrolled isotropic motion (0 if none).
 
-    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], NOTES §3) non-negative,
+    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], docs/physics.md §4) non-negative,
     σ₋²/(4J(λ−μ)²) ≤ H − inf V, so |λ − μ| ≥ |σ₋| / √(4J(H − inf V)).
     """
     y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
@@ -151,7 +151,7 @@ class Trajectory:
 
     @property
     def lab_spin(self) -> np.ndarray | None:
-        """R s, shape (n, 3) (conserved with the corrected bracket, NOTES §4), or None without R."""
+        """R s, shape (n, 3) (conserved with the corrected bracket, docs/physics.md §6), or None without R."""
         if self.rotation is None:
             return None
         s = np.stack([self.state["s1"], self.state["s2"], self.state["s3"]], axis=-1)

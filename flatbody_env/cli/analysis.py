@@ -14,8 +14,8 @@ import json
 import sys
 from pathlib import Path
 
+from flatbody_env.answers import ellipses_answer, family_run, invariants_run, solutions, stability_answer, stability_map_answer
 from flatbody_env.cli.args import body_constant, check_output_path, float_range, int_at_least, momentum, number, output_file, positive_float
-from flatbody_env.cli.output import atomic_write
 
 _CONSTANTS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
 _FOR_POTENTIAL = {"k": "V1", "c": "V2", "d": "V2", "kappa": "V3"}
@@ -98,36 +98,6 @@ def _solutions(args, body, s3, pt):
     return solutions(body, s3, pt, box=_box(args), branch=args.branch, spin=args.spin)
 
 
-def solutions(body, s3: float, pt: float, *, box=None, branch: str = "N", spin: float | None = None) -> list:
-    """The stationary ellipses of branch N (s3, p_θ given), A (``spin`` about an in-plane axis) or all."""
-    from analysis.stationary import SearchBox, stationary_ellipses, steady_rotations
-
-    box = box or SearchBox()
-    out = []
-    if branch in ("N", "all"):
-        out += stationary_ellipses(body, s3, pt, box=box)
-    if branch in ("A", "all"):
-        if spin is None:
-            if branch == "A":
-                raise ValueError("--spin: required with --branch A (the spin s about the in-plane axis, finite and non-zero)")
-        else:
-            out += steady_rotations(body, spin, box=box)
-    return out
-
-
-def ellipses_answer(body, s3: float, p_theta: float, *, box=None, branch: str = "N", spin: float | None = None) -> dict:
-    """What ``flatbody ellipses --json`` prints: ``{"solutions": [StationaryEllipse.to_dict(), ...]}`` (the service's answer too)."""
-    return {"solutions": [e.to_dict() for e in solutions(body, s3, p_theta, box=box, branch=branch, spin=spin)]}
-
-
-def stability_answer(body, s3: float, p_theta: float, *, box=None, branch: str = "N", spin: float | None = None) -> dict:
-    """What ``flatbody stability --json`` prints: ``{"solutions": [StabilityResult.to_dict(), ...]}`` (the service's answer too)."""
-    from analysis.stability import analyse_stability
-
-    sols = solutions(body, s3, p_theta, box=box, branch=branch, spin=spin)
-    return {"solutions": [analyse_stability(body, e).to_dict() for e in sols]}
-
-
 def _header(body, s3, pt) -> str:
     return f"body: {body.describe()};  s3 = {s3:g}, p_theta = {pt:g}"
 
@@ -140,7 +110,7 @@ def _ellipses(args) -> int:
     sols = _solutions(args, body, s3, pt)
     print(_header(body, s3, pt))
     if not sols:
-        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/README-analysis.md)")
+        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/analysis.md)")
         return 0
     print(f"{'#':>2} {'branch':<6} {'lambda':>12} {'mu':>12} {'rho':>10} {'omega3':>11} {'theta_dot':>11} {'energy':>13} {'residual':>9}  kind")
     for i, e in enumerate(sols):
@@ -175,34 +145,9 @@ def _stability(args) -> int:
     return 0
 
 
-def _family_run(body, vary, start, stop, *, s3=None, p_theta=None, seeds=5, box=None, step=None, out=None, plot=None,
-                progress=False):
-    from analysis.families import PARAMETERS, follow_family, write_family_csv
-
-    if vary not in PARAMETERS:
-        raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {vary!r}")
-    s3 = 2.0 if s3 is None else float(s3)
-    pt = 0.5 if p_theta is None else float(p_theta)
-    fam = follow_family(body, vary, start, stop, s3=s3, p_theta=pt, seeds=seeds, box=box, step=step, progress=progress)
-    if out is None and plot is not None:
-        out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
-    if out is not None:
-        atomic_write(out, lambda tmp: write_family_csv(fam, tmp))
-    if plot is not None:
-        from analysis.plots import plot_family
-
-        atomic_write(plot, lambda tmp: plot_family(out, tmp))
-    return fam, family_summary(fam, csv=out, plot=plot)
-
-
-def family_answer(body, vary: str, start: float, stop: float, **options) -> dict:
-    """What ``flatbody family --json`` prints (options: s3, p_theta, seeds, box, step, out, plot, progress)."""
-    return _family_run(body, vary, start, stop, **options)[1]
-
-
 def _family(args) -> int:
     body, s3, pt = resolve_body(args, need_spins=False)
-    fam, answer = _family_run(body, args.vary, args.start, args.stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args),
+    fam, answer = family_run(body, args.vary, args.start, args.stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args),
                               step=args.step, out=args.out, plot=args.plot, progress=sys.stderr.isatty())
     start, stop, s3, pt, out, npts = answer["range"][0], answer["range"][1], answer["s3"], answer["p_theta"], answer["csv"], answer["points"]
     if args.json:
@@ -224,36 +169,6 @@ def _family(args) -> int:
     if out is not None:
         print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))
     return 0
-
-
-def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> dict:
-    """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row)."""
-    return {
-        "param": fam.param_name, "range": list(fam.param_range), "s3": fam.s3, "p_theta": fam.p_theta,
-        "branches": len(fam.branches), "points": sum(len(b) for b in fam.branches),
-        "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
-                   for e in fam.events],
-        "csv": csv, "plot": plot,
-    }
-
-
-def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot=None) -> dict:
-    """What ``flatbody stability-map --json`` prints: ``{"rows": [...]}`` (files written when asked)."""
-    import numpy as np
-
-    from analysis.families import shape_stability_grid, write_table_csv
-
-    (lo_l, hi_l), (lo_m, hi_m) = lam_range, mu_range
-    rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, grid), np.linspace(lo_m, hi_m, grid))
-    if out is None and plot is not None:
-        out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
-    if out is not None:
-        atomic_write(out, lambda tmp: write_table_csv(rows, tmp))
-    if plot is not None:
-        from analysis.plots import plot_shape_map
-
-        atomic_write(plot, lambda tmp: plot_shape_map(out, tmp, title=f"Stationary ellipses by shape, {body.describe()}"))
-    return {"rows": rows}
 
 
 def _stability_map(args) -> int:
@@ -278,26 +193,6 @@ def _stability_map(args) -> int:
     return 0
 
 
-def _invariants_run(data, body):
-    from analysis.invariants import invariants_along
-    from flatbody_env.simulation import Trajectory
-
-    traj = data if isinstance(data, Trajectory) else Trajectory.from_dict(data)
-    if body is None:
-        from flatbody_env.scene import builtin_scenes
-
-        scenes = builtin_scenes()
-        if traj.scene in scenes:
-            body = scenes[traj.scene].body
-    return invariants_along(traj, body), body
-
-
-def invariants_answer(data, body=None) -> dict:
-    """What ``flatbody invariants --json`` prints for a trajectory (its dict form or a ``Trajectory``); without
-    ``body``, the body of the built-in scene named in ``meta.scene`` is used when there is one."""
-    return _invariants_run(data, body)[0].to_dict()
-
-
 def _invariants(args) -> int:
     from analysis.invariants import format_drift_table
     from flatbody_env.simulation import read_trajectory
@@ -307,7 +202,7 @@ def _invariants(args) -> int:
     given = [c for c in _CONSTANTS if getattr(args, c) is not None]
     if args.scene is not None or given or args.potential is not None:
         body, _, _ = resolve_body(args, need_spins=False)
-    report, body = _invariants_run(data, body)
+    report, body = invariants_run(data, body)
     if args.json:
         print(json.dumps(report.to_dict()))
         return 0

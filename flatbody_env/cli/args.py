@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import stat
 from pathlib import Path
 
+from flatbody_env.output import check_output_path
 from flatbody_env.physics import validation
 
 
@@ -112,7 +112,7 @@ def times_list(text: str) -> list[float]:
 def output_file(name: str, suffixes: tuple[str, ...] = ()):
     """argparse type: a path a command may write (its folder exists and is writable; it is not a
     directory or a special file; it ends with one of ``suffixes`` when given). Files are then
-    written atomically (:func:`flatbody_env.cli.output.atomic_write`)."""
+    written atomically (:func:`flatbody_env.output.atomic_write`)."""
 
     def parse(text: str) -> str:
         try:
@@ -122,32 +122,6 @@ def output_file(name: str, suffixes: tuple[str, ...] = ()):
         return text
 
     return parse
-
-
-def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, ...] = ()) -> Path:
-    """The checks of :func:`output_file` (``ValueError`` naming ``name``), for paths built by a command."""
-    p = Path(text)
-    if not str(text) or "\0" in str(text):
-        raise ValueError(f"{name}: expected a file path, got {str(text)[:60]!r}")
-    if suffixes and p.suffix.lower() not in suffixes:
-        raise ValueError(f"{name}: expected a file ending in {' or '.join(suffixes)}, got {str(text)[:60]!r}")
-    try:
-        info = p.stat()
-    except FileNotFoundError:
-        info = None
-    except OSError as exc:
-        raise ValueError(f"{name}: cannot use {str(text)[:60]!r} ({exc.strerror or exc})") from None
-    if info is not None:
-        if stat.S_ISDIR(info.st_mode):
-            raise ValueError(f"{name}: {str(text)[:60]!r} is a directory; give a file name")
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"{name}: {str(text)[:60]!r} is not a regular file")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} is not writable")
-    return p
 
 
 def output_dir(name: str):

@@ -6,34 +6,13 @@ import json
 import math
 import sys
 
+from flatbody_env.answers import methods_answer, scenes_answer, simulate_trajectory
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
 from flatbody_env.physics.validation import MAX_SAMPLES
 
 
-def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="DOP853", rtol=1e-10, atol=1e-10,
-                        step=None, model="auto", with_rotation=False, max_nfev=None, max_wall_time=None):
-    """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
-
-    ``scene`` is a :class:`~flatbody_env.scene.Scene`; ``t_end`` defaults to the scene's; ``times``
-    (explicit output times, returned exactly) or ``samples`` (an even grid of that many points), not both;
-    ``max_nfev`` / ``max_wall_time`` bound the work (None: the defaults of :func:`flatbody_env.simulate`).
-    """
-    from flatbody_env.simulation import simulate
-
-    if times is not None and samples is not None:
-        raise ValueError("times: give times (--times) or samples (--samples), not both")
-    t_end = t_end if t_end is not None else scene.t_end
-    if times is None and samples is not None:
-        import numpy as np
-
-        times = np.linspace(0.0, t_end, samples)
-    budget = {k: v for k, v in (("max_nfev", max_nfev), ("max_wall_time", max_wall_time)) if v is not None}
-    return simulate(scene, t_end=t_end, times=times, method=method, rtol=rtol, atol=atol, step=step, model=model,
-                    with_rotation=with_rotation, **budget)
-
-
 def _simulate(args) -> int:
-    from flatbody_env.cli.output import atomic_write
+    from flatbody_env.output import atomic_write
 
     scene = load_scene_arg(args)
     traj = simulate_trajectory(
@@ -101,20 +80,6 @@ def _rung_lines(traj) -> list[str]:
         return []
     measured = ", ".join(f"{k} = {v:.3g}" for k, v in traj.extra.get("rung_measured", {}).items())
     return [f"rung: {rung} -- {traj.extra.get('rung_invariant', '')}" + (f" [{measured}]" if measured else "")]
-
-
-def scenes_answer() -> dict:
-    """What ``flatbody scenes --json`` prints: ``{name: scene JSON}`` of the built-in scenes."""
-    from flatbody_env.scene import builtin_scenes
-
-    return {name: sc.to_dict() for name, sc in builtin_scenes().items()}
-
-
-def methods_answer() -> list:
-    """What ``flatbody methods --json`` prints: one ``MethodInfo.as_dict()`` per integrator."""
-    from flatbody_env.integrators import available_methods
-
-    return [m.as_dict() for m in available_methods()]
 
 
 def _scenes(args) -> int:

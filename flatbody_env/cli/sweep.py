@@ -155,7 +155,7 @@ def _family(args) -> int:
 
 def _seeds(args) -> int:
     from agents.train import load_hyperparams
-    from flatbody_env.sweep.tasks import EVAL_SEED, parse_seeds
+    from flatbody_env.sweep.tasks import parse_seeds
 
     load_hyperparams(args.algo, path=args.hyperparams_file)  # ValueError naming the file
     spec = {"kind": "seeds", "algo": args.algo, "seeds": parse_seeds(args.seeds), "n_timesteps": args.n_timesteps,
@@ -183,21 +183,23 @@ def _serial_only(args) -> int:
 
 # ---------------------------------------------------------------------------------------------
 def _tune(args) -> int:
-    from agents.tune import DEFAULT_STORAGE, TuneConfig, summary, tune_worker
+    from agents.tune import DEFAULT_STORAGE, TuneConfig, load_search_space, prepare, summary, tune_worker
 
     cfg = TuneConfig(algo=args.algo, study=args.study or f"{args.algo}-FlatBody-v0", storage=args.storage or DEFAULT_STORAGE,
                      trials=args.trials, n_timesteps=args.n_timesteps, evaluations=args.evaluations,
                      eval_episodes=args.eval_episodes, n_envs=args.n_envs, seed=args.seed,
                      overrides=tuple(args.hyperparams or ()), search_file=args.search_file, out=args.out,
                      hyperparams_file=None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()))
+    load_search_space(cfg.algo, path=cfg.search_file)  # bad files fail here, in one line
+    prepare(cfg)
     if args.workers <= 1 and args.scheduler is None:
         tune_worker(cfg)
     else:
         from flatbody_env.sweep.cluster import dask_client
 
-        n = args.workers
-        share = math.ceil(cfg.trials / n)
-        with dask_client(workers=n, scheduler=args.scheduler) as client:
+        with dask_client(workers=args.workers, scheduler=args.scheduler) as client:
+            n = args.workers if args.scheduler is None else max(1, len(client.scheduler_info()["workers"]))
+            share = math.ceil(cfg.trials / n)
             futures = [client.submit(tune_worker, cfg, i, share, pure=False) for i in range(n)]
             client.gather(futures)
     rep = summary(cfg.study, cfg.storage)
@@ -261,7 +263,7 @@ def register(sub) -> None:
     p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30; any size)")
     p.add_argument("--chunk", type=int_at_least("chunk", 1), default=None, metavar="ROWS",
-                   help="lambda rows per task (default: the grid in at most 32 tasks)")
+                   help="lambda rows per task (default: about 512 grid points per task, at least one row)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
     _engine_arguments(p)
     p.set_defaults(handler=_stability_map)
@@ -322,7 +324,7 @@ def register(sub) -> None:
     p.add_argument("--study", metavar="NAME", help="study name (default ALGO-FlatBody-v0); workers of one study share it")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--workers", type=int_at_least("workers", 1), default=1, metavar="N", help="local worker processes sharing the study (default 1)")
-    g.add_argument("--scheduler", metavar="ADDRESS", help="run the workers on a running Dask scheduler (the storage must be a database URL or a shared file)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="one search worker per worker of a running Dask scheduler (the storage: a database URL, or a journal file all of them see)")
     p.add_argument("--out", default="runs/tune", metavar="DIR", help="folder of the trials' runs (default runs/tune)")
     p.add_argument("--json", action="store_true", help="print the study's trials as JSON")
     p.set_defaults(handler=_tune)

@@ -202,7 +202,7 @@ def make_stepper(name: str, body: Body, tol: Tolerances, *, with_rotation: bool 
 
     Methods may offer a fast path (a ``make_stepper(body, tol, with_rotation)`` method, e.g. a
     compiled single-step kernel); otherwise each step is one :meth:`Method.integrate` call over
-    [0, dt] with the action held constant (a fresh solver per step: NOTES §8 warns against
+    [0, dt] with the action held constant (a fresh solver per step: docs/physics.md §10 warns against
     carrying an adaptive solver across action changes). Failures come back as flags.
     """
     method = get_method(name)

@@ -7,10 +7,10 @@ name                   adaptive  order  chart      algorithm
 =====================  ========  =====  =========  =================================================
 ``DOP853-numba``       yes       8      two-polar  port of scipy's DOP853 (same steps, ~100× faster)
 ``RK4``                no        4      two-polar  classical Runge–Kutta
-``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (NOTES §8), J1 = J2
+``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (docs/physics.md §10), J1 = J2
 ``splitting-suzuki4``  no        4      two-polar  Suzuki 5-stage composition of Strang
 ``splitting-yoshida4`` no        4      two-polar  Yoshida triple-jump composition of Strang
-``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (NOTES §5)
+``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (docs/physics.md §7)
 ``RATTLE-suzuki4``     no        4      regular    Suzuki 5-stage composition of RATTLE
 ``RATTLE-kahanli6``    no        6      regular    Kahan–Li 9-stage composition of RATTLE
 =====================  ========  =====  =========  =================================================
@@ -134,7 +134,7 @@ class CompiledTwoPolar:
                 "(RATTLE-suzuki4 returns R) or scipy DOP853"
             )
         if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
+            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
         uu = _controls(u)
@@ -163,7 +163,7 @@ class CompiledTwoPolar:
         _check_compiled_body(body, name)
         check_step(self.info, tol)
         if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
+            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
 
     def make_stepper(self, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> "CompiledStepper":
         """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step)."""
@@ -274,7 +274,7 @@ _SPLIT_PRESERVES = ("casimir", "p_theta", "symplectic")
 SPLITTING_STRANG = register_method(
     CompiledTwoPolar(
         MethodInfo(name="splitting-strang", adaptive=False, order=2, chart=_TWO_POLAR, compiled=True, preserves=_SPLIT_PRESERVES,
-                   description="Poisson splitting with exact flows (NOTES 8), Strang, J1 = J2 only"),
+                   description="Poisson splitting with exact flows (docs/physics.md 8), Strang, J1 = J2 only"),
         "split", _tk.STRANG,
     )
 )
@@ -296,7 +296,7 @@ _RATTLE_PRESERVES = ("constraints", "casimir", "lab_spin", "p_theta", "symplecti
 RATTLE = register_method(
     CompiledRattle(
         MethodInfo(name="RATTLE", adaptive=False, order=2, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
-                   description="RATTLE on the regular phi-psi formulation (NOTES 5), passes through lambda = mu; "
+                   description="RATTLE on the regular phi-psi formulation (docs/physics.md 5), passes through lambda = mu; "
                    "p_theta only for J1 = J2"),
         _tk.STRANG,
     )

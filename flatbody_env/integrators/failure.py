@@ -11,7 +11,7 @@ code   kind                   meaning
 0      ``"ok"``               success
 1      ``"non-finite"``       a NaN or inf appeared in the state
 2      ``"step-collapse"``    the adaptive step fell below 10 ulp of t (scipy's criterion)
-3      ``"chart-singularity"``  λ − μ changed sign while σ₋ = s3 − p_θ ≠ 0 (two-polar chart, NOTES §5)
+3      ``"chart-singularity"``  λ − μ changed sign while σ₋ = s3 − p_θ ≠ 0 (two-polar chart, docs/physics.md §7)
 4      ``"domain"``           λ, μ or ϱ ≤ 0 (two-polar) or det φᵀφ ≤ 0 (regular)
 5      ``"energy"``           |H − H₀| beyond the energy tolerance (only without controls)
 6      ``"constraint"``       RATTLE's Newton iteration for the Kirchhoff–Love constraints failed

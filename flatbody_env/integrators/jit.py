@@ -29,8 +29,8 @@ Public names: :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_core`
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 """
 
 from __future__ import annotations

@@ -65,8 +65,8 @@ c₀ + c₁ cos 2ωt + c₂ sin 2ωt: the collapse μ → 0 of V1 (no barrier) i
 
 References
 ----------
-.. [1] A. Kovalchuk, E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension: eqs. (23)–(28), (31), (36)–(40), (44)–(49), (52)–(54).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md``: the corrected bracket (ṡ = ω × s), the sign of eqs. (44)–(46), and
    the closest-approach bound of the λ = μ barrier.
 """
@@ -80,8 +80,8 @@ import numpy as np
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs
-from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series, kinetic_kernel, velocities_from_momenta
-from flatbody_env.physics.kinematics import configuration, configuration_rate, material_rotation
+from flatbody_env.physics.hamiltonian import hamiltonian, kinetic_kernel, velocities_from_momenta
+from flatbody_env.physics.kinematics import material_rotation
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, potential_kernel
 from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances
 
@@ -257,8 +257,11 @@ def rotation_about_normal(R0: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     return np.asarray(R0, float) @ material_rotation(-np.asarray(alpha, float))
 
 
-def _energy(Y: np.ndarray, body: Body, times: np.ndarray, tol: Tolerances, name: str, u: np.ndarray) -> np.ndarray:
-    H = hamiltonian_series(Y, body)
+def _energy(Y: np.ndarray, P: np.ndarray, times: np.ndarray, tol: Tolerances, name: str, u: np.ndarray) -> np.ndarray:
+    from flatbody_env.integrators import ladder_kernels as _lk
+
+    H = np.empty(Y.shape[1])
+    _lk.energy_series(np.ascontiguousarray(Y), P, H)
     if not np.any(u):
         err = np.abs(H - H[0])
         bad = err > tol.energy_tol
@@ -358,7 +361,7 @@ class PlanarModel:
         Y[7], Y[8], Y[4], Y[5], Y[10] = Xp[0], Xp[1], Xp[2], Xp[3], Xp[4]
         Y[9], Y[6] = Xr[0], Xr[1]
         rotation = rotation_about_normal(np.eye(3) if R0 is None else R0, Xp[5]) if with_rotation else None
-        H = _energy(Y, body, times, tol, name, uu)
+        H = _energy(Y, P, times, tol, name, uu)
         stats = {"energy": H, "inplane_steps": int(cp[1]), "thickness_steps": int(cr[1]),
                  "inplane_nfev": int(cp[0]), "thickness_nfev": int(cr[0])}
         return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(cp[0] + cr[0]), stats=stats)
@@ -426,15 +429,17 @@ class PlanarV1Model:
         times = _times(times)
         J = body.inertia.J1
         w = math.sqrt(body.potential.k / J)
-        lam0, mu0, rho0, th0 = y0[7], y0[8], y0[9], y0[10]
+        lam0, mu0, th0 = y0[7], y0[8], y0[10]
         vel = velocities_from_momenta(y0, body)
-        M = configuration(lam0, mu0, rho0, th0)[:2, :2]
-        Md = configuration_rate(lam0, mu0, rho0, th0, vel)[:2, :2]
-        # conformal / anti-conformal parts as complex numbers (module docstring)
-        zp0 = complex(0.5 * (M[0, 0] + M[1, 1]), 0.5 * (M[1, 0] - M[0, 1]))
-        zm0 = complex(0.5 * (M[0, 0] - M[1, 1]), 0.5 * (M[0, 1] + M[1, 0]))
-        zpd0 = complex(0.5 * (Md[0, 0] + Md[1, 1]), 0.5 * (Md[1, 0] - Md[0, 1]))
-        zmd0 = complex(0.5 * (Md[0, 0] - Md[1, 1]), 0.5 * (Md[0, 1] + Md[1, 0]))
+        # z± and their rates at t = 0 (module docstring; α(0) = 0, α̇ = ω3, eq. (25)):
+        # z₊ = (λ+μ)/2·e^{−i(α+θ)}, z₋ = (λ−μ)/2·e^{i(θ−α)}
+        u0, v0 = lam0 + mu0, lam0 - mu0
+        ud0, vd0 = vel["lambda_dot"] + vel["mu_dot"], vel["lambda_dot"] - vel["mu_dot"]
+        ep, em = complex(math.cos(th0), -math.sin(th0)), complex(math.cos(th0), math.sin(th0))
+        zp0 = 0.5 * u0 * ep
+        zm0 = 0.5 * v0 * em
+        zpd0 = complex(0.5 * ud0, -0.5 * u0 * (vel["omega3"] + vel["theta_dot"])) * ep
+        zmd0 = complex(0.5 * vd0, 0.5 * v0 * (vel["theta_dot"] - vel["omega3"])) * em
         dt = times - times[0]
         t_hit = first_collapse_time(zp0, zpd0, zm0, zmd0, w)
         if t_hit <= dt[-1]:
@@ -477,7 +482,7 @@ class PlanarV1Model:
         Y[9], Y[6] = Xr[0], Xr[1]
         alpha = 0.5 * (bplus - bminus)
         rotation = rotation_about_normal(np.eye(3) if R0 is None else R0, alpha) if with_rotation else None
-        H = _energy(Y, body, times, tol, name, uu)
+        H = _energy(Y, P, times, tol, name, uu)
         return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(cr[0]),
                         stats={"energy": H, "thickness_steps": int(cr[1]), "omega": w})
 

@@ -22,8 +22,8 @@ each system runs with its own steps.
 
 References
 ----------
-.. [1] A. Kovalchuk, E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (eqs. (25), (31), (40), (44)–(49)).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (the corrected equations and the errata).
 """
 
@@ -36,7 +36,7 @@ import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop
 
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, MAX_STEPS, NON_FINITE, OK, STEP_COLLAPSE
-from flatbody_env.integrators.jit import JIT_OPTIONS, rhs_kernel
+from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
 
 njit = numba.njit(**JIT_OPTIONS)
 
@@ -260,4 +260,16 @@ def dop853_small(x0, times, template, state_idx, rate_idx, u, P, rtol, atol, pos
     return OK
 
 
-__all__ = ["INPLANE_RATE", "INPLANE_STATE", "RATE_OMEGA3", "THICKNESS_RATE", "THICKNESS_STATE", "dop853_small", "sub_rhs"]
+@njit
+def energy_series(Y, P, out):
+    """H (eq. (41) of [1]) of every column of the packed states ``Y`` (11, m) into ``out`` (m,)."""
+    vel = np.empty(7)
+    force = np.empty(4)
+    y = np.empty(11)
+    for k in range(Y.shape[1]):
+        for i in range(11):
+            y[i] = Y[i, k]
+        out[k] = energy_kernel(y, P, vel, force)
+
+
+__all__ = ["energy_series", "INPLANE_RATE", "INPLANE_STATE", "RATE_OMEGA3", "THICKNESS_RATE", "THICKNESS_STATE", "dop853_small", "sub_rhs"]

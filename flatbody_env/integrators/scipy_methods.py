@@ -1,7 +1,7 @@
 """The reference family: scipy ``solve_ivp`` (RK23, RK45, DOP853, Radau, BDF, LSODA) in both charts.
 
 ``NAME`` integrates the two-polar equations (eqs. (44)–(49) of [1], :mod:`flatbody_env.physics.equations`);
-``NAME-regular`` integrates the regular matrix formulation (NOTES §5, :mod:`flatbody_env.physics.regular`)
+``NAME-regular`` integrates the regular matrix formulation (docs/physics.md §7, :mod:`flatbody_env.physics.regular`)
 and converts back to the paper's state at the output times, following the chart's discrete
 branch by continuity.
 
@@ -11,7 +11,7 @@ Failure detection
   numbers") → :class:`IntegrationError` of kind ``"step-collapse"``;
 * non-finite values → ``"non-finite"``;
 * two-polar chart: λ − μ changing sign while σ₋ = s3 − p_θ ≠ 0 (the centrifugal barrier of
-  NOTES §5 forbids it, so it is numerical) → ``"chart-singularity"``; λ, μ or ϱ reaching 0 →
+  docs/physics.md §7 forbids it, so it is numerical) → ``"chart-singularity"``; λ, μ or ϱ reaching 0 →
   ``"domain"``;
 * regular chart: the Kirchhoff–Love constraints violated beyond tolerance → ``"constraint"``;
 * |H(t) − H(0)| beyond ``tol.energy_tol`` (no controls) → ``"energy"``;
@@ -184,7 +184,7 @@ class ScipyTwoPolar:
 
 
 class ScipyRegular:
-    """``solve_ivp`` on the regular matrix formulation (NOTES §5), output in the paper's state."""
+    """``solve_ivp`` on the regular matrix formulation (docs/physics.md §7), output in the paper's state."""
 
     def __init__(self, algorithm: str) -> None:
         self.algorithm = algorithm

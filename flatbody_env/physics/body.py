@@ -26,8 +26,8 @@ laboratory spin R s is conserved. ``"paper"`` reproduces the printed eqs. (43)�
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md``: the verified formulas and the errata of [1].
 """
 
@@ -250,7 +250,7 @@ def _potential_from(where: str, pot: Mapping[str, Any]):
 
 
 def default_body() -> Body:
-    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (NOTES E10)."""
+    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (erratum E10)."""
     return Body(
         inertia=Inertia.isotropic(1.0, 1.0),
         potential=V3(kappa=1.0),

@@ -3,7 +3,7 @@ spectral stability — what the environment's task needs to pick reachable, stab
 
 Branch N of [1] (s1 = s2 = 0, ω1 = ω2 = 0, p_λ = p_μ = p_ϱ = 0, J1 = J2 = J): with u = λ + μ,
 v = λ − μ and σ± = s3 ± p_θ, eqs. (52)–(53) are the stationarity of the effective potential
-(NOTES §6 of [2])
+(docs/physics.md §8 of [2])
 
 .. math:: W(\\lambda, \\mu, \\varrho) = \\frac{\\sigma_+^2}{4Ju^2} + \\frac{\\sigma_-^2}{4Jv^2} + V(\\lambda, \\mu, \\varrho),
 
@@ -11,15 +11,15 @@ so a shape (λ, μ) is stationary for σ₊² = 2Ju³ ∂V/∂u and σ₋² = 2J
 and eq. (54) fixes ϱ* by ∂V/∂ϱ = 0. Then ω3 = σ₊/(2Ju²) + σ₋/(2Jv²) and
 θ̇ = σ₊/(2Ju²) − σ₋/(2Jv²) (the inverse Legendre transform after eq. (31) of [1]).
 
-Spectral stability (NOTES §7): the linearisation splits into an out-of-plane block, unstable iff
+Spectral stability (docs/physics.md §9): the linearisation splits into an out-of-plane block, unstable iff
 q = (s3/I2 − ω3)(ω3 − s3/I1) > 0, and a shape block (λ, μ, ϱ with their momenta; s3 and p_θ are
 constants of the planar motion) whose frequencies are those of the Hessian of W: stable iff it is
 positive definite. The complete Jacobian analysis lives in :mod:`analysis`.
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, the paper on affinely-rigid bodies with thickness in degenerate
-   dimension (a flat body with thickness), section 3.4.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md`` (the verified formulas and the errata of [1]), §6–§7.
 """
 
@@ -137,7 +137,7 @@ def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
 
 
 def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float, float]:
-    """The inverse problem of eqs. (52)–(53) of [1] (NOTES §6 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
+    """The inverse problem of eqs. (52)–(53) of [1] (docs/physics.md §8 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
 
     .. math:: \\sigma_+^2 = 2Ju^3\\,\\partial V/\\partial u, \\qquad \\sigma_-^2 = 2Jv^3\\,\\partial V/\\partial v,
 
@@ -171,7 +171,7 @@ def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm:
 
 
 def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
-    """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, NOTES §6).
+    """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, docs/physics.md §8).
 
     Parameters
     ----------

@@ -8,11 +8,30 @@ from __future__ import annotations
 
 import numpy as np
 
-ARROW_SCALE = 1.25
-"""Principal-axis arrows are this many times the semi-axes, so that they stick out of the body."""
-
 TENSOR_ENTRIES = ("11", "22", "33", "12", "13", "23")
 """Order of the six independent entries of the symmetric G and C in ``/series/G``, ``/series/C``."""
+
+
+def relative_drift(q: np.ndarray, q0: float) -> np.ndarray:
+    """(q − q₀)/|q₀|, or q − q₀ where q₀ = 0: the drift of a conserved quantity, shape of ``q``."""
+    q = np.asarray(q, dtype=np.float64)
+    return (q - q0) / abs(q0) if q0 != 0.0 else q - q0
+
+
+def principal_axes(frames: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Arrow vectors (n, 3, 3) — row i: column i of ``frames`` (n, 3, 3) times the semi-axis ``half[:, i]``.
+
+    With ``frames`` = R these are the principal axes of C = R D⁻² Rᵀ in the laboratory; with U(θ)
+    those of G = U D² Uᵀ in the material frame (eqs. (23), (33) of the paper). Length = λ, μ, ϱ.
+    """
+    return np.swapaxes(np.asarray(frames) * np.asarray(half)[:, None, :], 1, 2)
+
+
+def unit_circle(segments: int = 96) -> np.ndarray:
+    """Closed unit circle in the x–y plane, shape (segments + 1, 3)."""
+    a = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    return np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+
 
 def quaternions_xyzw(R: np.ndarray) -> np.ndarray:
     """Unit quaternions (x, y, z, w) of rotation matrices ``R`` of shape (n, 3, 3) → (n, 4).

@@ -138,6 +138,102 @@ def read_recording(path: str | Path) -> RecordingData:
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class ViewInfo:
+    """One view of a recording's default blueprint, as stored in the file."""
+
+    view_class: str
+    """``"3D"``, ``"TimeSeries"``, ``"Tensor"``, ``"TextDocument"``, …"""
+    name: str
+    origin: str
+    contents: tuple[str, ...]
+    """The view's entity-path query (``$origin`` expanded)."""
+    properties: dict[str, Any]
+    """The view's own settings (``"EyeControls3D:position"`` → value, …)."""
+
+    def shows(self, entity: str) -> bool:
+        """Whether the contents query includes ``entity`` (exact paths and ``PATH/**`` subtrees)."""
+        hit = False
+        for rule in self.contents:
+            exclude = rule.startswith("- ")
+            rule = rule[2:] if rule[:2] in ("- ", "+ ") else rule
+            if rule.endswith("/**"):
+                base = rule[:-3].rstrip("/") or "/"
+                match = entity == base or entity.startswith(base.rstrip("/") + "/")
+            else:
+                match = entity == rule
+            if match:
+                hit = not exclude
+        return hit
+
+
+@dataclass(frozen=True, kw_only=True)
+class BlueprintInfo:
+    """What :func:`read_blueprint` returns: the default blueprint's views and panel states."""
+
+    views: tuple[ViewInfo, ...]
+    panels: dict[str, str]
+    """``"time_panel"``, ``"blueprint_panel"``, ``"selection_panel"`` → ``"hidden"``, ``"collapsed"`` or ``"expanded"``."""
+    timeline: str | None
+
+    def view(self, name: str) -> ViewInfo:
+        """The view called ``name`` (ValueError naming the views there are, if none)."""
+        for v in self.views:
+            if v.name == name:
+                return v
+        raise ValueError(f"name: no view {name!r} (views: {', '.join(v.name for v in self.views)})")
+
+
+_PANEL_STATES = {1: "hidden", 2: "collapsed", 3: "expanded"}
+
+
+def read_blueprint(path: str | Path) -> BlueprintInfo:
+    """Read the default blueprint stored in a recording: views (class, name, origin, contents,
+    properties) and the state of the time, blueprint and selection panels."""
+    import rerun.chunk as rrc
+
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"path: no file {str(path)!r}")
+    reader = rrc.RrdReader(path)
+    props: dict[str, dict[str, Any]] = {}
+    for bp in reader.blueprints():
+        for chunk in reader.stream(store=bp):
+            rb = chunk.to_record_batch()
+            for i, f in enumerate(rb.schema):
+                md = f.metadata or {}
+                if md.get(b"rerun:kind") != b"data":
+                    continue
+                values = rb.column(i).to_pylist()
+                last = next((v for v in reversed(values) if v is not None), None)
+                if last is not None:
+                    props.setdefault(chunk.entity_path, {})[f.name] = last[0] if isinstance(last, list) and len(last) == 1 else last
+    views = []
+    for ent, comp in props.items():
+        if "ViewBlueprint:class_identifier" not in comp:
+            continue
+        origin = str(comp.get("ViewBlueprint:space_origin", "/"))
+        query = props.get(ent + "/ViewContents", {}).get("ViewContents:query", ["$origin/**"])
+        query = [query] if isinstance(query, str) else list(query)
+        settings = {k: v for sub, c in props.items() if sub.startswith(ent + "/") and not sub.endswith("/ViewContents") for k, v in c.items()}
+        views.append(
+            ViewInfo(
+                view_class=str(comp["ViewBlueprint:class_identifier"]),
+                name=str(comp.get("ViewBlueprint:display_name", "")),
+                origin=origin,
+                contents=tuple(q.replace("$origin", origin.rstrip("/")) for q in query),
+                properties=settings,
+            )
+        )
+    panels = {}
+    for name, key in (("time_panel", "TimePanelBlueprint:state"), ("blueprint_panel", "PanelBlueprint:state"), ("selection_panel", "PanelBlueprint:state")):
+        state = props.get(f"/{name}", {}).get(key)
+        if state is not None:
+            panels[name] = _PANEL_STATES.get(int(state), str(state))
+    timeline = props.get("/time_panel", {}).get("TimePanelBlueprint:timeline")
+    return BlueprintInfo(views=tuple(sorted(views, key=lambda v: (v.view_class, v.name))), panels=panels, timeline=timeline)
+
+
 def verify_recording(path: str | Path) -> str:
     """Run ``rerun rrd verify PATH`` (the SDK's own checker) and return its output.
 
@@ -183,13 +279,13 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
         lines.append(f"{ent:<26} {'static':>6}  " + ", ".join(sorted(data.static[ent])))
     lines.append("")
     lines.append(f"first and last {rows} rows read back:")
-    for name in ("lambda", "mu", "rho", "theta", "energy", "casimir", "p_theta"):
+    for name in ("lambda", "mu", "rho", "theta", "s3", "p_theta", "energy", "casimir", "drift/energy", "distance"):
         ent = f"/series/{name}"
         if ent in data.entities:
             v = np.asarray(data.entities[ent].components["Scalars:scalars"])[:, 0]
             head = "  ".join(f"{x:.6f}" for x in v[:rows])
             tail = "  ".join(f"{x:.6f}" for x in v[-rows:])
-            lines.append(f"  {ent:<16} {head}  …  {tail}")
+            lines.append(f"  {ent:<22} {head}  …  {tail}")
     for ent in ("/tensors/G", "/tensors/C"):
         if ent in data.entities:
             e = data.entities[ent]

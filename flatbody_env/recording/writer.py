@@ -1,64 +1,87 @@
-"""rerun recordings (``.rrd``) of the flat body for offline playback — the project's only rerun module.
+"""The live writer of rerun recordings (``.rrd``): :class:`Recorder`, and the one-call
+:func:`record_trajectory` / :func:`record_arrays` for a whole trajectory of a free scene.
 
-rerun is imported lazily, inside functions: nothing else in the project needs it, and importing
-this module costs nothing. Every recording goes to an explicit :class:`rerun.RecordingStream`
-saved to a file (no viewer, no network); the file is complete — footer written — when
-:func:`record_arrays` / :func:`record_trajectory` return or :meth:`Recorder.close` does.
+rerun is imported lazily, inside functions. Every recording goes to an explicit
+:class:`rerun.RecordingStream` saved to a file (no viewer, no network); the file is complete —
+footer written — when :func:`record_arrays` / :func:`record_trajectory` return or
+:meth:`Recorder.close` does. Env episodes (the demo, ``record --agent``, ``record-env``) are
+recorded by :class:`flatbody_env.recording.wrapper.RerunRecorder`, which feeds a :class:`Recorder`.
 
 What is logged (entity paths; ``step`` and ``sim_time`` timelines on everything temporal)
 -----------------------------------------------------------------------------------------
 =====================================  =====================================================
 entity                                 content
 =====================================  =====================================================
-``/description``                       markdown: the model, the scene, what each panel shows
+``/description``                       markdown: the model, the body, what each view shows
 ``/world/body``                        ``Ellipsoids3D``: half-sizes (λ, μ, ϱ), orientation R
                                        — the body R·D·(unit ball), eqs. (23)–(24) of [1]
 ``/world/material``                    ``Transform3D(mat3x3=Φ)``, Φ = R D U(θ)⁻¹ (eq. (23))
-``/world/material/lines``              static material lines (unit circle, spokes, normal)
-                                       drawn under Φ: the spokes turn inside the ellipse with
-                                       U(θ), which the ellipsoid alone (R only) cannot show
-``/world/axes_C``                      ``Arrows3D``: principal axes of C = R D⁻² Rᵀ (spatial
-                                       frame, columns of R), length 1.25 × (λ, μ, ϱ)
+``/world/material/lines``              static material lines (rim, spokes, normal) drawn under
+                                       Φ: the spokes turn inside the ellipse with U(θ)
+``/world/axes_C``                      ``Arrows3D``: principal axes of C = R D⁻² Rᵀ (columns of
+                                       R), length (λ, μ, ϱ), labelled with those lengths
 ``/material/reference``                static undeformed material lines (reference frame)
 ``/material/G_ellipsoid``              ``Ellipsoids3D``: U D (unit ball) = G^{1/2}(unit ball)
-``/material/axes_G``                   ``Arrows3D``: principal axes of G = U D² Uᵀ (material
-                                       frame, columns of U(θ)), length 1.25 × (λ, μ, ϱ)
-``/tensors/G``, ``/tensors/C``         ``Tensor`` 3×3 (float64), every ``tensor_every`` steps
-``/series/G``, ``/series/C``           ``Scalars``: the 6 independent entries
-                                       (11, 22, 33, 12, 13, 23) at every step
-``/series/{lambda,mu,rho,theta}``      the shape and material angle
-``/series/{energy,casimir,p_theta}``   H (eq. (41)), |s|², p_θ — conserved quantities
-``/series/action/NAME``                env episodes: the actions (u = τ1, τ2, τ3, f_ϱ)
+``/material/axes_G``                   ``Arrows3D``: principal axes of G = U D² Uᵀ (columns of
+                                       U(θ)), length (λ, μ, ϱ), labelled with those lengths
+``/tensors/G``, ``/tensors/C``         ``Tensor`` 3×3 (float64), every ``tensor_every`` steps,
+                                       with a fixed symmetric ``value_range`` ±r (static)
+``/tensors/numbers``                   markdown: G and C as numbers with their eigenvalues
+``/series/G``, ``/series/C``           the 6 independent entries (11, 22, 33, 12, 13, 23)
+``/series/{lambda,mu,rho,theta}``      the shape and the material angle
+``/series/{s3,p_theta}``               the body's s₃ and p_θ
+``/series/{energy,casimir}``           H (eq. (41)) and the Casimir |s|²
+``/series/drift/{energy,casimir,       relative drift (Q − Q₀)/|Q₀| of the conserved
+p_theta}``                             quantities
+``/series/action/NAME``                env episodes: the actions (u = τ₁, τ₂, τ₃, f_ϱ)
 ``/series/reward/NAME``                env episodes: the reward terms (and ``total``)
-``/series/target/NAME``                env episodes: the target shape
+``/series/target/NAME``                env episodes: λ*, μ*, ϱ*, s₃*, p_θ*, H* of the target
+``/series/distance``                   env episodes: the distance to the target (``info``)
+``/world/target``, ``…/outline``       env episodes: the target ellipse R·diag(λ*, μ*, ϱ*)·circle
+``/events``                            env episodes: integrator failures, leaving the domain
 =====================================  =====================================================
 
-G = ΦᵀΦ = U D² U⁻¹ (eq. (33) of [1]); C = Φ⁻ᵀΦ⁻¹ = R D⁻² R⁻¹ (eq. (51)'s remark with
-erratum E7 of [2]); both come from :mod:`flatbody_env.physics.kinematics`.
+G = ΦᵀΦ = U D² U⁻¹ (eq. (33) of [1]); C = Φ⁻ᵀΦ⁻¹ = R D⁻² R⁻¹ (the corrected remark after eq. (51),
+see ``docs/physics.md``); both come from :mod:`flatbody_env.physics.kinematics`. Names, colours and
+views: :mod:`flatbody_env.recording.layout`.
 
 Data are sent column-wise (``send_columns``) in blocks: a whole trajectory at once from
 :func:`record_arrays`, blocks of ``block`` steps from a live :class:`Recorder`.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
 
 import uuid
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from flatbody_env.physics.kinematics import cauchy_tensor, configuration, green_tensor, material_rotation
 from flatbody_env.physics.state import STATE_NAMES
-from flatbody_env.recording.geometry import ARROW_SCALE, TENSOR_ENTRIES, material_lines, quaternions_xyzw, symmetric_entries
-from flatbody_env.recording.layout import ACTION_NAMES, COLOR_AXES, SCALAR_SERIES, blueprint, description_markdown, material_line_colors
+from flatbody_env.recording.geometry import material_lines, principal_axes, quaternions_xyzw, relative_drift, symmetric_entries, unit_circle
+from flatbody_env.recording.layout import (
+    ACTION_NAMES,
+    AXIS_COLORS,
+    DRIFT_SERIES,
+    TARGET_SERIES,
+    TENSOR_ENTRY_COLORS,
+    axis_labels,
+    blueprint,
+    description_markdown,
+    drift_axis,
+    material_line_colors,
+    nice_range,
+    rgba,
+    series_style,
+    tensor_text,
+)
 
 APP_ID = "flatbody"
 """rerun application id of every flatbody recording."""
@@ -66,7 +89,8 @@ APP_ID = "flatbody"
 TIMELINES = ("step", "sim_time")
 """The two timelines: ``step`` (sequence) and ``sim_time`` (duration, integer nanoseconds)."""
 
-
+BODY_SERIES = ("lambda", "mu", "rho", "theta", "s3", "p_theta", "energy", "casimir")
+"""One-scalar series logged at every step of every recording (``/series/NAME``)."""
 
 BODY_ENTITIES = (
     "/description",
@@ -79,32 +103,29 @@ BODY_ENTITIES = (
     "/material/axes_G",
     "/tensors/G",
     "/tensors/C",
+    "/tensors/numbers",
     "/series/G",
     "/series/C",
-    "/series/lambda",
-    "/series/mu",
-    "/series/rho",
-    "/series/theta",
-    "/series/energy",
-    "/series/casimir",
-    "/series/p_theta",
+    *(f"/series/{name}" for name in BODY_SERIES),
+    *(f"/series/drift/{name}" for name, _ in DRIFT_SERIES),
 )
-"""Entity paths present in every recording (env episodes add ``/series/{action,reward,target}/…``)."""
+"""Entity paths present in every recording."""
+
+EPISODE_ENTITIES = ("/series/distance", "/world/target", "/world/target/outline", *(f"/series/target/{n}" for n in TARGET_SERIES))
+"""Entity paths an env episode adds (besides ``/series/action/…``, ``/series/reward/…`` and ``/events``)."""
 
 _IDX = {name: i for i, name in enumerate(STATE_NAMES)}
 
-@dataclass
+
+@dataclass(frozen=True, kw_only=True)
 class _Block:
-    """Arrays for one ``send_columns`` block (n steps)."""
+    """Validated arrays for one ``send_columns`` block of n steps."""
 
     step: np.ndarray
     t: np.ndarray
     states: np.ndarray
     rotations: np.ndarray
     energy: np.ndarray
-    actions: np.ndarray | None = None
-    reward_terms: dict[str, np.ndarray] = field(default_factory=dict)
-    target: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _check_finite(name: str, a: np.ndarray) -> None:
@@ -113,17 +134,7 @@ def _check_finite(name: str, a: np.ndarray) -> None:
         raise ValueError(f"{name}: must be finite (first non-finite entry at step index {bad})")
 
 
-def _as_block(
-    t,
-    states,
-    rotations,
-    *,
-    energy,
-    step,
-    actions,
-    reward_terms,
-    target,
-) -> _Block:
+def _as_block(t, states, rotations, *, energy, step) -> _Block:
     t = np.asarray(t, dtype=np.float64).ravel()
     n = t.size
     if n == 0:
@@ -155,30 +166,8 @@ def _as_block(
     energy = np.asarray(energy, dtype=np.float64).ravel()
     if energy.shape != (n,):
         raise ValueError(f"energy: expected shape ({n},), got {energy.shape}")
-    act = None
-    if actions is not None:
-        act = np.asarray(actions, dtype=np.float64)
-        if act.ndim == 1:
-            act = act[:, None]
-        if act.ndim != 2 or act.shape[0] != n:
-            raise ValueError(f"actions: expected shape ({n}, k), got {np.shape(actions)}")
-        _check_finite("actions", act)
-    terms = {}
-    for name, values in (reward_terms or {}).items():
-        v = np.asarray(values, dtype=np.float64).ravel()
-        if v.shape != (n,):
-            raise ValueError(f"reward_terms[{name!r}]: expected shape ({n},), got {v.shape}")
-        _check_finite(f"reward_terms[{name!r}]", v)
-        terms[str(name)] = v
-    tgt = {}
-    for name, values in (target or {}).items():
-        try:
-            v = np.broadcast_to(np.asarray(values, dtype=np.float64), (n,)).copy()
-        except ValueError:
-            raise ValueError(f"target[{name!r}]: expected a number or shape ({n},), got shape {np.shape(values)}") from None
-        _check_finite(f"target[{name!r}]", v)
-        tgt[str(name)] = v
-    return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy, actions=act, reward_terms=terms, target=tgt)
+    _check_finite("energy", energy)
+    return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy)
 
 
 def _safe_name(name: str) -> str:
@@ -186,9 +175,8 @@ def _safe_name(name: str) -> str:
     return out or "_"
 
 
-# --------------------------------------------------------------------------------------------------
-# the recorder (the only rerun user)
-# --------------------------------------------------------------------------------------------------
+def _ns(t) -> np.ndarray:
+    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
 
 
 class Recorder:
@@ -199,7 +187,7 @@ class Recorder:
     path : str or Path
         The ``.rrd`` file (parent folders are created).
     body : flatbody_env.physics.body.Body
-        The body (named in the description; its parameters go into the markdown).
+        The body (its parameters go into the description).
     title : str
         Recording name shown in the viewer.
     description : str, optional
@@ -207,16 +195,20 @@ class Recorder:
     block : int
         Steps buffered by :meth:`append` before a ``send_columns`` block is flushed (≥ 1).
     tensor_every : int
-        Log the ``Tensor`` views of G and C every k-th step (k ≥ 1; the 6-scalar series are
-        logged at every step regardless).
+        Log the ``Tensor`` views of G and C and their numbers every k-th step (k ≥ 1; the
+        6-entry series are logged at every step regardless).
     action_names : sequence of str, optional
-        Names of the action components (default ``tau1, tau2, tau3, f_rho`` for four).
+        Entity names of the action components (default ``tau1, tau2, tau3, f_rho`` for four).
     recording_id : str, optional
         rerun recording id (default: a fresh UUID).
     spokes : int
         Material spokes drawn under Φ.
     episode : bool
-        An env episode: the default blueprint opens on the reward-term and action plots.
+        An env episode: the layout adds the target, reward, distance and action views.
+    extent : float
+        The body's expected size (largest semi-axis), which places the cameras (> 0).
+    drift_range : float, optional
+        A fixed axis ±``drift_range`` for the relative-drift plot (default: it follows the data).
 
     Use as a context manager or call :meth:`close`; the file is complete only after that.
     """
@@ -234,60 +226,78 @@ class Recorder:
         recording_id: str | None = None,
         spokes: int = 12,
         episode: bool = False,
+        extent: float = 2.0,
+        drift_range: float | None = None,
     ) -> None:
         import rerun as rr
 
         for name, value in (("block", block), ("tensor_every", tensor_every), ("spokes", spokes)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name}: must be an integer ≥ 1, got {value!r}")
+        if not (isinstance(extent, (int, float, np.floating)) and np.isfinite(extent) and extent > 0):
+            raise ValueError(f"extent: must be a finite number > 0, got {extent!r}")
         self.path = Path(path)
         if self.path.suffix != ".rrd":
             raise ValueError(f"path: a rerun recording file must end in .rrd, got {str(path)!r}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         self.body = body
         self.block = int(block)
         self.tensor_every = int(tensor_every)
         self.action_names = tuple(action_names) if action_names is not None else None
-        self._buf: list[dict[str, Any]] = []
+        self.episode = bool(episode)
+        self._buf: list[dict] = []
         self._closed = False
         self._steps = 0
-        self._static_env: set[str] = set()
+        self._styled: dict[str, int] = {}
+        self._members: dict[str, list[str]] = {"action": [], "reward": []}
+        self._q0: dict[str, float] | None = None
+        self._range = 0.0
         self._tensor_batch_type = None
         self._rr = rr
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id or str(uuid.uuid4()), send_properties=True)
         if not self.rec.is_enabled():
             raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
-        self.rec.save(str(self.path), default_blueprint=blueprint(rr, env=episode))
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.rec.save(str(self.path), default_blueprint=blueprint(episode=self.episode, extent=float(extent), drift_range=drift_range))
         self.rec.send_recording_name(title)
-        self._log_static(title, description, spokes)
+        self._log_static(title, description, int(spokes))
 
     # -- static parts ------------------------------------------------------------------------------
     def _log_static(self, title: str, description: str, spokes: int) -> None:
         rr = self._rr
         rec = self.rec
-        rec.log("/description", rr.TextDocument(description_markdown(title, self.body, description), media_type=rr.MediaType.MARKDOWN), static=True)
+        text = description_markdown(title, self.body, description, episode=self.episode)
+        rec.log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
+        rec.log("/tensors/numbers", rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         rec.log("/material", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         lines = material_lines(spokes)
         colors = material_line_colors(spokes)
         rec.log("/world/material/lines", rr.LineStrips3D(lines, colors=colors, radii=0.008), static=True)
         rec.log("/material/reference", rr.LineStrips3D(lines, colors=colors, radii=0.008), static=True)
-        rec.log(
-            "/world/body",
-            rr.Ellipsoids3D.from_fields(colors=[[90, 140, 255, 255]], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
-            static=True,
-        )
-        rec.log(
-            "/material/G_ellipsoid",
-            rr.Ellipsoids3D.from_fields(colors=[[255, 160, 60, 255]], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
-            static=True,
-        )
-        rec.log("/world/axes_C", rr.Arrows3D.from_fields(colors=COLOR_AXES, labels=["C: 1/λ²", "C: 1/μ²", "C: 1/ϱ²"]), static=True)
-        rec.log("/material/axes_G", rr.Arrows3D.from_fields(colors=COLOR_AXES, labels=["G: λ²", "G: μ²", "G: ϱ²"]), static=True)
-        for name, label in SCALAR_SERIES:
-            rec.log(f"/series/{name}", rr.SeriesLines(names=label), static=True)
-        rec.log("/series/G", rr.SeriesLines(names=[f"G{ij}" for ij in TENSOR_ENTRIES]), static=True)
-        rec.log("/series/C", rr.SeriesLines(names=[f"C{ij}" for ij in TENSOR_ENTRIES]), static=True)
+        body_color = [rgba((90, 140, 255))]
+        rec.log("/world/body", rr.Ellipsoids3D.from_fields(colors=body_color, fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006), static=True)
+        rec.log("/material/G_ellipsoid", rr.Ellipsoids3D.from_fields(colors=body_color, fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006), static=True)
+        for ent in ("/world/axes_C", "/material/axes_G"):
+            rec.log(ent, rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=True), static=True)
+        for name in BODY_SERIES:
+            self._style(f"/series/{name}")
+        for name, _ in DRIFT_SERIES:
+            self._style(f"/series/drift/{name}")
+        for sym in ("G", "C"):
+            rec.log(f"/series/{sym}", rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS), static=True)
+        if self.episode:
+            from flatbody_env.env.rendering import COLORS
+
+            rec.log("/world/target/outline", rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012), static=True)
+            self._style("/series/distance")
+            for name in TARGET_SERIES:
+                self._style(f"/series/target/{name}")
+
+    def _style(self, path: str, index: int = 0) -> None:
+        if path not in self._styled:
+            name, color, width = series_style(path, index)
+            self.rec.log(path, self._rr.SeriesLines(names=name, colors=[color], widths=width), static=True)
+            self._styled[path] = index
 
     # -- appending ---------------------------------------------------------------------------------
     def append(
@@ -301,11 +311,14 @@ class Recorder:
         action: np.ndarray | Sequence[float] | None = None,
         reward_terms: Mapping[str, float] | None = None,
         target: Mapping[str, float] | None = None,
+        distance: float | None = None,
     ) -> None:
         """Buffer one step; a full buffer is flushed as one ``send_columns`` block.
 
         ``state`` is a dict of the eleven names or an array in :data:`STATE_NAMES` order;
         ``energy`` defaults to H(state) (eq. (41) of [1]); ``step`` to the running count.
+        ``action``, ``reward_terms``, ``target`` (its :data:`~flatbody_env.recording.layout.TARGET_SERIES`
+        entries) and ``distance`` are an env episode's (``episode=True``).
         """
         if self._closed:
             raise ValueError("recorder: already closed")
@@ -318,6 +331,8 @@ class Recorder:
             y = np.asarray(state, dtype=np.float64).ravel()
             if y.shape != (len(STATE_NAMES),):
                 raise ValueError(f"state: expected {len(STATE_NAMES)} entries, got shape {y.shape}")
+        if (action is not None or reward_terms or target or distance is not None) and not self.episode:
+            raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
         if energy is None:
             from flatbody_env.physics.hamiltonian import hamiltonian
 
@@ -330,8 +345,9 @@ class Recorder:
                 "energy": float(energy),
                 "step": self._steps if step is None else int(step),
                 "action": None if action is None else np.asarray(action, dtype=np.float64).ravel(),
-                "reward_terms": dict(reward_terms) if reward_terms else None,
-                "target": dict(target) if target else None,
+                "reward_terms": {str(k): float(v) for k, v in reward_terms.items()} if reward_terms else None,
+                "target": {k: float(target[k]) for k in TARGET_SERIES if k in target} if target else None,
+                "distance": None if distance is None else float(distance),
             }
         )
         self._steps += 1
@@ -342,7 +358,7 @@ class Recorder:
         """Send the buffered steps as one block (no-op when empty).
 
         The body, tensors and state series go out for every buffered step; actions, reward
-        terms and targets for the steps that carry them (a reset has no action or reward).
+        terms, target and distance for the steps that carry them (a reset has no action or reward).
         """
         if not self._buf:
             return
@@ -353,34 +369,10 @@ class Recorder:
             np.stack([b["R"] for b in buf]),
             energy=[b["energy"] for b in buf],
             step=np.array([b["step"] for b in buf], dtype=np.int64),
-            actions=None,
-            reward_terms=None,
-            target=None,
         )
         self._send_block(block)
-        with_action = [b for b in buf if b["action"] is not None]
-        if with_action:
-            sizes = {b["action"].size for b in with_action}
-            if len(sizes) != 1:
-                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
-            self._send_actions(
-                np.array([b["step"] for b in with_action], dtype=np.int64),
-                np.array([b["t"] for b in with_action]),
-                np.stack([b["action"] for b in with_action]),
-            )
-        for key, prefix, label in (("reward_terms", "/series/reward/", "{}"), ("target", "/series/target/", "target {}")):
-            names = sorted({k for b in buf if b[key] for k in b[key]})
-            for name in names:
-                rows = [b for b in buf if b[key] and name in b[key]]
-                values = np.array([float(b[key][name]) for b in rows])
-                _check_finite(f"{key}[{name!r}]", values)
-                self._env_series(
-                    prefix + _safe_name(name),
-                    label.format(name),
-                    np.array([b["step"] for b in rows], dtype=np.int64),
-                    np.array([b["t"] for b in rows]),
-                    values,
-                )
+        if self.episode:
+            self._send_episode(buf)
 
     def note(self, text: str, *, step: int, t: float, level: str = "WARN") -> None:
         """Log one event (e.g. an integrator failure) as a ``TextLog`` on ``/events``."""
@@ -402,60 +394,93 @@ class Recorder:
         G = green_tensor(lam, mu, rho, theta)
         C = cauchy_tensor(lam, mu, rho, R)
         Phi = configuration(lam, mu, rho, theta, R)
-        ns = np.round(block.t * 1e9).astype(np.int64)
-        idx = [
-            rr.TimeColumn("step", sequence=block.step),
-            rr.TimeColumn("sim_time", duration=ns.astype("timedelta64[ns]")),
-        ]
+        idx = [rr.TimeColumn("step", sequence=block.step), rr.TimeColumn("sim_time", duration=_ns(block.t))]
         rec.send_columns("/world/body", indexes=idx, columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(R)))
         rec.send_columns("/material/G_ellipsoid", indexes=idx, columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(U)))
         rec.send_columns("/world/material", indexes=idx, columns=rr.Transform3D.columns(mat3x3=Phi))
-        scaled = ARROW_SCALE * half[:, None, :]
-        vec_C = np.swapaxes(R * scaled, 1, 2).reshape(3 * n, 3)  # rows: columns of R × semi-axis
-        vec_G = np.swapaxes(U * scaled, 1, 2).reshape(3 * n, 3)
+        labels = axis_labels(half)
         three = np.full(n, 3, dtype=np.int32)
-        rec.send_columns("/world/axes_C", indexes=idx, columns=rr.Arrows3D.columns(vectors=vec_C).partition(three))
-        rec.send_columns("/material/axes_G", indexes=idx, columns=rr.Arrows3D.columns(vectors=vec_G).partition(three))
+        for ent, frames in (("/world/axes_C", R), ("/material/axes_G", U)):
+            vec = principal_axes(frames, half).reshape(3 * n, 3)
+            rec.send_columns(ent, indexes=idx, columns=rr.Arrows3D.columns(vectors=vec, labels=labels).partition(three))
         six = np.full(n, 6, dtype=np.int32)
         rec.send_columns("/series/G", indexes=idx, columns=rr.Scalars.columns(scalars=symmetric_entries(G).ravel()).partition(six))
         rec.send_columns("/series/C", indexes=idx, columns=rr.Scalars.columns(scalars=symmetric_entries(C).ravel()).partition(six))
         casimir = y[_IDX["s1"]] ** 2 + y[_IDX["s2"]] ** 2 + y[_IDX["s3"]] ** 2
-        series = {"lambda": lam, "mu": mu, "rho": rho, "theta": theta, "energy": block.energy, "casimir": casimir, "p_theta": y[_IDX["p_theta"]]}
+        series = {"lambda": lam, "mu": mu, "rho": rho, "theta": theta, "s3": y[_IDX["s3"]], "p_theta": y[_IDX["p_theta"]], "energy": block.energy, "casimir": casimir}
+        if self._q0 is None:
+            self._q0 = {name: float(series[name][0]) for name, _ in DRIFT_SERIES}
         for name, values in series.items():
             rec.send_columns(f"/series/{name}", indexes=idx, columns=rr.Scalars.columns(scalars=values))
+        for name, _ in DRIFT_SERIES:
+            rec.send_columns(f"/series/drift/{name}", indexes=idx, columns=rr.Scalars.columns(scalars=relative_drift(series[name], self._q0[name])))
         sel = np.flatnonzero(block.step % self.tensor_every == 0)
         if sel.size:
-            tidx = [
-                rr.TimeColumn("step", sequence=block.step[sel]),
-                rr.TimeColumn("sim_time", duration=ns[sel].astype("timedelta64[ns]")),
-            ]
+            m = float(max(np.abs(G[sel]).max(), np.abs(C[sel]).max()))
+            if m > self._range:  # a fixed, symmetric colour range ±r for both views (widened, never narrowed)
+                self._range = nice_range(1.05 * m)
+                for ent in ("/tensors/G", "/tensors/C"):
+                    rec.log(ent, rr.Tensor.from_fields(value_range=[-self._range, self._range]), static=True)
+            tidx = [rr.TimeColumn("step", sequence=block.step[sel]), rr.TimeColumn("sim_time", duration=_ns(block.t[sel]))]
             rec.send_columns("/tensors/G", indexes=tidx, columns=[self._tensor_column(G[sel])])
             rec.send_columns("/tensors/C", indexes=tidx, columns=[self._tensor_column(C[sel])])
-        if block.actions is not None:
-            self._send_actions(block.step, block.t, block.actions)
-        for name, values in block.reward_terms.items():
-            self._env_series(f"/series/reward/{_safe_name(name)}", name, block.step, block.t, values)
-        for name, values in block.target.items():
-            self._env_series(f"/series/target/{_safe_name(name)}", f"target {name}", block.step, block.t, values)
+            text = tensor_text(block.t[sel], G[sel], C[sel], half[sel], self._range)
+            rec.send_columns("/tensors/numbers", indexes=tidx, columns=rr.TextDocument.columns(text=text))
 
-    def _send_actions(self, step: np.ndarray, t: np.ndarray, actions: np.ndarray) -> None:
-        k = actions.shape[1]
-        names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
-        if len(names) != k:
-            raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
-        _check_finite("actions", actions)
-        for i, name in enumerate(names):
-            self._env_series(f"/series/action/{_safe_name(name)}", name, step, t, actions[:, i])
-
-    def _env_series(self, path: str, label: str, step: np.ndarray, t: np.ndarray, values: np.ndarray) -> None:
+    def _send_episode(self, buf: list[dict]) -> None:
+        """Actions, reward terms, target (series and outline) and distance of the buffered steps."""
         rr = self._rr
-        if path not in self._static_env:
-            self.rec.log(path, rr.SeriesLines(names=str(label)), static=True)
-            self._static_env.add(path)
-        idx = [
-            rr.TimeColumn("step", sequence=step),
-            rr.TimeColumn("sim_time", duration=np.round(np.asarray(t) * 1e9).astype(np.int64).astype("timedelta64[ns]")),
-        ]
+        with_action = [b for b in buf if b["action"] is not None]
+        if with_action:
+            sizes = {b["action"].size for b in with_action}
+            if len(sizes) != 1:
+                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
+            actions = np.stack([b["action"] for b in with_action])
+            _check_finite("actions", actions)
+            k = actions.shape[1]
+            names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
+            if len(names) != k:
+                raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
+            step = np.array([b["step"] for b in with_action], dtype=np.int64)
+            t = np.array([b["t"] for b in with_action])
+            for i, name in enumerate(names):
+                self._series(f"/series/action/{_safe_name(name)}", step, t, actions[:, i], group="action")
+        names = sorted({k for b in buf if b["reward_terms"] for k in b["reward_terms"]}, key=lambda n: (n == "total", n))
+        for name in names:
+            rows = [b for b in buf if b["reward_terms"] and name in b["reward_terms"]]
+            values = np.array([b["reward_terms"][name] for b in rows])
+            _check_finite(f"reward_terms[{name!r}]", values)
+            self._series(f"/series/reward/{_safe_name(name)}", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values, group="reward")
+        for name in TARGET_SERIES:
+            rows = [b for b in buf if b["target"] and name in b["target"]]
+            if rows:
+                values = np.array([b["target"][name] for b in rows])
+                _check_finite(f"target[{name!r}]", values)
+                self._series(f"/series/target/{name}", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values)
+        rows = [b for b in buf if b["target"] and all(k in b["target"] for k in ("lambda", "mu", "rho"))]
+        if rows:
+            D = np.zeros((len(rows), 3, 3))
+            for i, b in enumerate(rows):
+                D[i] = np.diag([b["target"]["lambda"], b["target"]["mu"], b["target"]["rho"]])
+            M = np.stack([b["R"] for b in rows]) @ D  # R·diag(λ*, μ*, ϱ*): the target ellipse along the body's axes
+            idx = [rr.TimeColumn("step", sequence=np.array([b["step"] for b in rows], dtype=np.int64)), rr.TimeColumn("sim_time", duration=_ns([b["t"] for b in rows]))]
+            self.rec.send_columns("/world/target", indexes=idx, columns=rr.Transform3D.columns(mat3x3=M))
+        rows = [b for b in buf if b["distance"] is not None]
+        if rows:
+            values = np.array([b["distance"] for b in rows])
+            _check_finite("distance", values)
+            self._series("/series/distance", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values)
+
+    def _series(self, path: str, step: np.ndarray, t: np.ndarray, values: np.ndarray, *, group: str | None = None) -> None:
+        rr = self._rr
+        if path not in self._styled:
+            index = 0
+            if group is not None:
+                members = self._members[group]
+                members.append(path)
+                index = len(members) - 1
+            self._style(path, index)
+        idx = [rr.TimeColumn("step", sequence=step), rr.TimeColumn("sim_time", duration=_ns(t))]
         self.rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
 
     def _tensor_column(self, M: np.ndarray):
@@ -529,13 +554,6 @@ class Recorder:
         self.close()
 
 
-
-
-# --------------------------------------------------------------------------------------------------
-# one-call recording of a whole trajectory
-# --------------------------------------------------------------------------------------------------
-
-
 def record_arrays(
     t,
     states,
@@ -550,7 +568,7 @@ def record_arrays(
     tensor_every: int = 1,
     recording_id: str | None = None,
 ) -> Path:
-    """Record a whole trajectory given as arrays to ``path`` (``.rrd``), column-wise.
+    """Record a whole trajectory of a free scene given as arrays to ``path`` (``.rrd``), column-wise.
 
     Env episodes (actions, reward terms, target) are recorded through
     :class:`flatbody_env.recording.wrapper.RerunRecorder` only.
@@ -573,7 +591,7 @@ def record_arrays(
     title, description : str
         Recording name and extra markdown.
     tensor_every : int
-        Log the ``Tensor`` views every k-th step.
+        Log the ``Tensor`` views and numbers every k-th step.
     recording_id : str, optional
 
     Returns
@@ -586,15 +604,18 @@ def record_arrays(
     ValueError
         Shapes, non-finite values, non-positive λ, μ, ϱ or non-rotations, naming the field.
     """
+    Y = np.asarray(states, dtype=np.float64)
+    if Y.ndim != 2 or Y.shape[0] != len(STATE_NAMES):
+        raise ValueError(f"states: expected shape ({len(STATE_NAMES)}, n), got {Y.shape}")
     if energy is None:
         from flatbody_env.physics.hamiltonian import hamiltonian_series
 
-        Y = np.asarray(states, dtype=np.float64)
-        if Y.ndim != 2 or Y.shape[0] != len(STATE_NAMES):
-            raise ValueError(f"states: expected shape ({len(STATE_NAMES)}, n), got {Y.shape}")
         energy = hamiltonian_series(Y, body)
-    block = _as_block(t, states, rotations, energy=energy, step=step, actions=None, reward_terms=None, target=None)
-    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id) as rec:
+    block = _as_block(t, Y, rotations, energy=energy, step=step)
+    extent = float(max(Y[_IDX["lambda"]].max(), Y[_IDX["mu"]].max(), Y[_IDX["rho"]].max()))
+    casimir = Y[_IDX["s1"]] ** 2 + Y[_IDX["s2"]] ** 2 + Y[_IDX["s3"]] ** 2
+    drift = max(float(np.abs(relative_drift(q, float(q[0]))).max()) for q in (block.energy, casimir, Y[_IDX["p_theta"]]))
+    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent, drift_range=drift_axis(drift)) as rec:
         rec._send_block(block)
     return Path(path)
 

@@ -62,7 +62,7 @@ def _box(p: Mapping[str, Any]):
 
 def ellipses(p: Mapping[str, Any]) -> dict[str, Any]:
     """``POST /ellipses``: the ``flatbody ellipses --json`` answer."""
-    from flatbody_env.cli.analysis import ellipses_answer
+    from flatbody_env.answers import ellipses_answer
 
     body = build_body(p["body"])
     return ellipses_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
@@ -70,7 +70,7 @@ def ellipses(p: Mapping[str, Any]) -> dict[str, Any]:
 
 def stability(p: Mapping[str, Any]) -> dict[str, Any]:
     """``POST /stability``: the ``flatbody stability --json`` answer."""
-    from flatbody_env.cli.analysis import stability_answer
+    from flatbody_env.answers import stability_answer
 
     body = build_body(p["body"])
     return stability_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
@@ -79,7 +79,7 @@ def stability(p: Mapping[str, Any]) -> dict[str, Any]:
 def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None = None, limits: Limits = DEFAULT_LIMITS):
     """The :class:`~flatbody_env.simulation.Trajectory` of ``flatbody simulate`` for request ``p``,
     after checking its cost against ``limits`` (request or job limits)."""
-    from flatbody_env.cli.simulate import simulate_trajectory
+    from flatbody_env.answers import simulate_trajectory
 
     scene = build_scene(p["scene"])
     t_end = p.get("t_end") or scene.t_end
@@ -108,7 +108,7 @@ def simulate(p: Mapping[str, Any]) -> dict[str, Any]:
 
 def invariants(p: Mapping[str, Any]) -> dict[str, Any]:
     """``POST /invariants``: the ``flatbody invariants --json`` answer for a trajectory dict."""
-    from flatbody_env.cli.analysis import invariants_answer
+    from flatbody_env.answers import invariants_answer
 
     body = build_body(p["body"]) if p.get("body") is not None else None
     data = {k: v for k, v in p.items() if k != "body" and v is not None}
@@ -117,14 +117,14 @@ def invariants(p: Mapping[str, Any]) -> dict[str, Any]:
 
 def scenes(_: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """``GET /scenes``: the ``flatbody scenes --json`` answer."""
-    from flatbody_env.cli.simulate import scenes_answer
+    from flatbody_env.answers import scenes_answer
 
     return scenes_answer()
 
 
 def methods(_: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     """``GET /methods``: the ``flatbody methods --json`` answer."""
-    from flatbody_env.cli.simulate import methods_answer
+    from flatbody_env.answers import methods_answer
 
     return methods_answer()
 

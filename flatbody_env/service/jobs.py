@@ -64,7 +64,7 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
 def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
     from analysis.stationary import SearchBox
 
-    from flatbody_env.cli.analysis import family_answer
+    from flatbody_env.answers import family_answer
     from flatbody_env.service.answers import build_body
 
     body = build_body(p["body"])
@@ -77,7 +77,7 @@ def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
 
 
 def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
-    from flatbody_env.cli.analysis import stability_map_answer
+    from flatbody_env.answers import stability_map_answer
     from flatbody_env.service.answers import build_body
 
     body = build_body(p["body"])

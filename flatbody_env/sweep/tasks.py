@@ -92,7 +92,7 @@ def stability_map_chunk(task: Task) -> list[dict[str, Any]]:
 def failure_case(task: Task) -> list[dict[str, Any]]:
     """One method along one axis of the failure study: the rows the serial study gives for it."""
     from analysis.failure_study import failure_study
-    from flatbody_env.cli.integrators import failure_rows
+    from flatbody_env.answers import failure_rows
 
     p = task.params
     points = failure_study((p["study"],), (p["method"],), quick=p["quick"], repeats=p["repeats"], max_run_s=p["max_run_s"],
@@ -105,7 +105,7 @@ def family_case(task: Task) -> dict[str, Any]:
     table written to ``params["csv"]``, plus the body it belongs to."""
     from analysis.families import follow_family, write_family_csv
     from analysis.stationary import SearchBox
-    from flatbody_env.cli.analysis import family_summary
+    from flatbody_env.answers import family_summary
     from flatbody_env.physics.body import Body
 
     p = task.params
@@ -175,9 +175,15 @@ def execute(task: Task) -> Outcome:
 
 # ---------------------------------------------------------------------------------------------
 # plans: specification → tasks
+TASK_POINTS = 512
+"""Grid points a stability-map task holds by default: ~2.5 s at the ~5 ms per point measured by
+``flatbody bench sweep``, against a scheduler overhead of a few ms per task."""
+
+
 def default_chunk(grid: int) -> int:
-    """λ rows per stability-map task: at most 32 tasks, at least one row each."""
-    return max(1, math.ceil(grid / 32))
+    """λ rows per stability-map task: about :data:`TASK_POINTS` grid points, at least one row (so
+    a large grid gives one task per row: enough tasks for any cluster)."""
+    return max(1, min(grid, math.ceil(TASK_POINTS / grid)))
 
 
 def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
@@ -187,7 +193,7 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
         raise ValueError(serial_only_message(kind))
     if kind not in KINDS:
         raise ValueError(f"kind: must be one of {', '.join(KINDS)}, got {kind!r}")
-    out = Path(out)
+    out = Path(out).resolve()  # workers elsewhere write files (family tables, models) at this absolute path
     tasks: list[Task] = []
     if kind == "stability-map":
         grid, chunk = spec["grid"], spec["chunk"]
@@ -245,5 +251,5 @@ def parse_seeds(text: str) -> list[int]:
     return sorted(seeds)
 
 
-__all__ = ["EVAL_SEED", "KINDS", "MAX_GRID", "Outcome", "RUNNERS", "SERIAL_ONLY", "Task", "default_chunk", "execute",
+__all__ = ["EVAL_SEED", "KINDS", "MAX_GRID", "Outcome", "RUNNERS", "SERIAL_ONLY", "TASK_POINTS", "Task", "default_chunk", "execute",
            "parse_seeds", "plan", "seed_of", "serial_only_message"]

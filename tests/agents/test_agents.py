@@ -244,7 +244,7 @@ def test_shipped_evaluation_reproduces():
 
 @pytest.mark.slow
 def test_shipped_agent_acceptance():
-    """Issue 7 acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
+    """Acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
     from agents.evaluate import evaluate_all
 
     report = evaluate_all(episodes=100, seed=10_000)

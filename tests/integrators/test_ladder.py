@@ -142,7 +142,7 @@ def test_stationary_rung_is_exact_at_t_1e6():
     R = a.rotation
     assert np.max(np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3))) < 1e-15
     np.testing.assert_array_equal(R[:, :, 2], np.broadcast_to([0.0, 0.0, 1.0], (4, 3)))
-    # the laboratory spin R s is conserved (NOTES §4) and the angle is ω3 t exactly
+    # the laboratory spin R s is conserved and the angle is ω3 t exactly
     ang = np.arctan2(R[-1, 0, 1], R[-1, 0, 0])
     assert math.remainder(ang - vel["omega3"] * 1e6, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
     assert np.all(a.stats["energy"] == a.stats["energy"][0])

@@ -67,10 +67,23 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     import json
 
     out = tmp_path / "bench"
-    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--out-dir", str(out)]) == 0
+    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--frames", "30", "--out-dir", str(out)]) == 0
     result = json.loads((out / "recording.json").read_text())
     assert [r["steps"] for r in result["sizes"]] == [20, 40]
     assert all(r["min_s"] <= r["median_s"] <= r["max_s"] and r["file_bytes"] > 0 for r in result["sizes"])
     assert result["live"]["steps"] == 40 and result["cpus"] >= 1
+    assert result["frame"]["frames"] == 30 and 0 < result["frame"]["median_ms"] <= result["frame"]["p90_ms"]
     assert (out / "recording.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "wrote" in capsys.readouterr().out
+
+
+def test_record_shots_bad_input_is_one_line(tmp_path, capsys):
+    assert main(["record-shots", str(tmp_path / "missing.rrd"), "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["record-shots", str(tmp_path / "x.rrd"), "--times", "0,-1"])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["record-shots", str(tmp_path / "x.rrd"), "--size", "10x10"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "file:" in err and "times:" in err and "size:" in err

@@ -55,7 +55,9 @@ def test_wrapper_records_episodes_in_blocks(tmp_path):
     assert set(e for e in data.entities if e.startswith("/series/target/")) == {f"/series/target/{k}" for k in ("lambda", "mu", "rho", "s3")}
     np.testing.assert_array_equal(data["/series/target/s3"].step, np.arange(24))
     assert "/events" not in data.entities
-    assert ("TimeSeries", "reward terms") in data.views and ("TimeSeries", "actions") in data.views
+    assert ("TimeSeries", "reward terms") in data.views and ("TimeSeries", "actions u = (τ₁, τ₂, τ₃, f_ϱ)") in data.views
+    # the distance comes from info (the fake env has none): no distance series, nothing invented
+    assert "/series/distance" not in data.entities
     second = read_recording(tmp_path / "ep-1.rrd")
     np.testing.assert_array_equal(second["/world/body"].step, np.arange(6))
 

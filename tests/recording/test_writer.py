@@ -32,8 +32,8 @@ def test_entities_timelines_and_counts(recorded, traj):
     assert data.application_id == "flatbody"
     assert data.blueprints == 1
     kinds = [c for c, _ in data.views]
-    assert kinds.count("3D") == 2 and kinds.count("Tensor") == 2 and kinds.count("TextDocument") == 1
-    assert kinds.count("TimeSeries") == 6 and ("TimeSeries", "reward terms") not in data.views
+    assert kinds.count("3D") == 3 and kinds.count("Tensor") == 2 and kinds.count("TextDocument") == 2
+    assert ("TimeSeries", "reward terms") not in data.views and ("TimeSeries", "conserved: relative drift") in data.views
     temporal = [e for e in BODY_ENTITIES if e in data.entities]
     assert "/world/body" in temporal and "/series/G" in temporal
     for ent in temporal:
@@ -44,10 +44,11 @@ def test_entities_timelines_and_counts(recorded, traj):
     # static parts: description, material lines
     text = data.static["/description"]["TextDocument:text"][0][0]
     assert "Φ = R · diag(λ, μ, ϱ) · U(θ)⁻¹" in text and "Scene `default`" in text
+    assert "shared/" not in text and "NOTES.md" not in text
     strips = data.static["/world/material/lines"]["LineStrips3D:strips"]
     assert len(strips[0]) == 12 + 2  # rim circle, 12 spokes, normal
     # env-only entities are absent from a scene recording
-    assert not any(e.startswith(("/series/action", "/series/reward", "/series/target")) for e in present)
+    assert not any(e.startswith(("/series/action", "/series/reward", "/series/target", "/series/distance", "/world/target")) for e in present)
 
 
 def test_logged_series_equal_the_trajectory(recorded, traj):
@@ -98,13 +99,17 @@ def test_transform_and_principal_axes(recorded):
     # Transform3D(mat3x3=Φ) is stored column-major float32
     Phi = data["/world/material"].components["Transform3D:mat3x3"][:, 0, :].reshape(-1, 3, 3).transpose(0, 2, 1).astype(np.float64)
     np.testing.assert_allclose(symmetric_entries(np.swapaxes(Phi, 1, 2) @ Phi), G, atol=2e-5, rtol=2e-5)
-    # arrows: eigenvectors of C (spatial) and G (material) with length 1.25 × semi-axis
+    # arrows: eigenvectors of C (spatial) and G (material) whose length is the semi-axis, and whose
+    # label prints that same length ("λ = 1.203")
     for ent, six, power in (("/world/axes_C", C, -2), ("/material/axes_G", G, 2)):
         v = data[ent].components["Arrows3D:vectors"].astype(np.float64)  # (N, 3, 3): row i = axis i
         assert v.shape == (N, 3, 3)
-        np.testing.assert_allclose(np.linalg.norm(v, axis=2), 1.25 * half, rtol=1e-6)
-        pass
-
+        length = np.linalg.norm(v, axis=2)
+        np.testing.assert_allclose(length, half, rtol=1e-6)
+        labels = data[ent].components["Arrows3D:labels"]
+        assert len(labels) == N and [lab.split(" = ")[0] for lab in labels[0]] == ["λ", "μ", "ϱ"]
+        printed = np.array([[float(lab.split(" = ")[1]) for lab in row] for row in labels])
+        np.testing.assert_allclose(printed, length, atol=5e-4 + 1e-6)
         M = symmetric_from_entries(six)
         Mv = np.einsum("nij,nkj->nki", M, v)
         np.testing.assert_allclose(Mv, v * (half**power)[:, :, None], atol=1e-5)
@@ -165,3 +170,41 @@ def test_importing_the_env_layer_and_cli_does_not_import_rerun():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
+
+
+def test_s3_and_relative_drift_of_the_conserved_quantities(recorded, traj):
+    _, data = recorded
+    np.testing.assert_array_equal(series(data, "s3"), traj.state["s3"])  # the body's own s₃
+    casimir = traj.state["s1"] ** 2 + traj.state["s2"] ** 2 + traj.state["s3"] ** 2
+    for name, q in (("energy", traj.energy), ("casimir", casimir), ("p_theta", traj.state["p_theta"])):
+        ref = (q - q[0]) / abs(q[0]) if q[0] != 0 else q - q[0]
+        np.testing.assert_allclose(series(data, f"drift/{name}"), ref, rtol=1e-12, atol=1e-15, err_msg=name)
+    # an uncontrolled DOP853 run conserves them: the drift plot shows round-off as what it is
+    assert np.abs(series(data, "drift/energy")).max() < 1e-6
+
+
+def test_tensor_colour_range_is_fixed_symmetric_and_holds_every_entry(recorded):
+    _, data = recorded
+    G = data["/tensors/G"].components["Tensor:data"]
+    C = data["/tensors/C"].components["Tensor:data"]
+    for ent in ("/tensors/G", "/tensors/C"):
+        lo, hi = np.asarray(data.static[ent]["Tensor:value_range"]).ravel()
+        assert lo == -hi and hi > 0  # one static range: the colour of a value never changes
+        assert max(np.abs(G).max(), np.abs(C).max()) <= hi < 2.5 * max(np.abs(G).max(), np.abs(C).max())
+
+
+def test_tensor_numbers_carry_the_entries_and_eigenvalues(recorded):
+    _, data = recorded
+    e = data["/tensors/numbers"]
+    G = data["/tensors/G"]
+    np.testing.assert_array_equal(e.step, G.step)
+    for k in (0, len(e.step) // 2, len(e.step) - 1):
+        text = e.components["TextDocument:text"][k][0]
+        M = G.components["Tensor:data"][k]
+        rows = [ln for ln in text.splitlines() if "λ²" in ln or "μ²" in ln or "ϱ²" in ln]
+        assert len(rows) == 3
+        entries = np.array([[float(x) for x in ln.split()[:3]] for ln in rows])
+        np.testing.assert_allclose(entries, M, atol=5e-4 + 1e-9)
+        eig = sorted(float(ln.split()[-1]) for ln in rows)
+        np.testing.assert_allclose(eig, np.linalg.eigvalsh(M), atol=5e-4 + 1e-9)  # eq. (35): λ², μ², ϱ²
+        assert f"t = {G.sim_time[k]:.3f}" in text

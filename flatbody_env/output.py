@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -75,3 +76,29 @@ def atomic_write(path: str | os.PathLike, data: str | bytes | Callable[[Path], N
 
 
 __all__ = ["OutputError", "atomic_path", "atomic_write"]
+
+
+def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, ...] = ()) -> Path:
+    """The checks of :func:`output_file` (``ValueError`` naming ``name``), for paths built by a command."""
+    p = Path(text)
+    if not str(text) or "\0" in str(text):
+        raise ValueError(f"{name}: expected a file path, got {str(text)[:60]!r}")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise ValueError(f"{name}: expected a file ending in {' or '.join(suffixes)}, got {str(text)[:60]!r}")
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        info = None
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot use {str(text)[:60]!r} ({exc.strerror or exc})") from None
+    if info is not None:
+        if stat.S_ISDIR(info.st_mode):
+            raise ValueError(f"{name}: {str(text)[:60]!r} is a directory; give a file name")
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"{name}: {str(text)[:60]!r} is not a regular file")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} is not writable")
+    return p
