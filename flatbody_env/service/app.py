@@ -177,7 +177,7 @@ class Service:
         return _error_from(data)
 
 
-def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limits: Limits = DEFAULT_LIMITS) -> FastAPI:
+def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2) -> FastAPI:
     """The analysis service.
 
     Parameters
@@ -186,13 +186,14 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         Where the job database (``jobs.sqlite3``) and the jobs' files live.
     workers : int
         Worker processes for requests, and jobs run at once.
-    limits : Limits
-        Bounds on bodies and work (:mod:`flatbody_env.service.limits`).
+
+    The bounds on bodies and work are :data:`~flatbody_env.service.limits.DEFAULT_LIMITS`.
     """
     from flatbody_env import __version__
 
     if not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
+    limits = DEFAULT_LIMITS
     service = Service(data_dir, workers, limits)
 
     @asynccontextmanager

@@ -43,7 +43,7 @@ def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
 
 
 def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
-    from flatbody_env.recording.writer import record_trajectory
+    from flatbody_env.recording import record_trajectory
     from flatbody_env.service.answers import trajectory
 
     progress(0.05)

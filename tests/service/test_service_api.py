@@ -262,7 +262,7 @@ def test_family_and_stability_map_jobs_are_the_commands_answers(client, capsys):
 
 
 def test_record_job_writes_a_recording_that_reads_back(client, tmp_path):
-    from flatbody_env.recording.reader import read_recording
+    from flatbody_env.recording import read_recording
 
     r = client.post("/jobs", json={"kind": "record", "params": {"scene": "default", "t_end": 1.0, "samples": 11}})
     job = wait_job(client.get, r.json()["id"])
@@ -357,3 +357,13 @@ def test_oversized_chunked_body_is_413(client):
 
     r = client.post("/invariants", content=chunks(), headers={"content-type": "application/json"})
     assert_error(r, 413, "body")
+
+
+def test_a_used_up_integration_budget_is_413_with_when_and_why():
+    from flatbody_env.integrators import IntegrationError
+    from flatbody_env.service.answers import error_data
+
+    budget = error_data(IntegrationError("wall-clock budget of 60 s used up", t=12.5, method="DOP853", kind="budget"))
+    assert budget["kind"] == "too-large" and budget["when"] == 12.5 and "budget" in budget["why"]
+    other = error_data(IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"))
+    assert other["kind"] == "integration" and other["method"] == "RK4"
