@@ -37,8 +37,11 @@ def test_killed_service_reports_the_running_job_failed_and_keeps_finished_result
     while http.get(f"/jobs/{long_id}").json()["status"] != "running" and time.monotonic() < deadline:
         time.sleep(0.1)
     assert http.get(f"/jobs/{long_id}").json()["status"] == "running"
-    with sqlite3.connect(data_dir / "jobs.sqlite3") as db:
-        (worker_pid,) = db.execute("SELECT pid FROM jobs WHERE id = ?", (long_id,)).fetchone()
+    worker_pid = None
+    while worker_pid is None and time.monotonic() < deadline:  # the worker's pid is stored once its process started
+        with sqlite3.connect(data_dir / "jobs.sqlite3") as db:
+            (worker_pid,) = db.execute("SELECT pid FROM jobs WHERE id = ?", (long_id,)).fetchone()
+        time.sleep(0.05)
     assert worker_pid and _alive(worker_pid)
 
     proc.send_signal(signal.SIGKILL)  # the service dies without any chance to clean up
