@@ -16,10 +16,14 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from flatbody_env.service.limits import DEFAULT_LIMITS
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-"""A finite number (NaN and ±inf are refused)."""
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
+"""A finite number (NaN and ±inf are refused; so are strings and booleans)."""
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
 """A finite number > 0."""
+Count = Annotated[int, Field(strict=True)]
+"""An integer (not a float, string or boolean)."""
+Flag = Annotated[bool, Field(strict=True)]
+"""true or false (not 0/1 or a string)."""
 
 DEFAULT_BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}
 """The default body of ``flatbody ellipses`` (J = J3 = 1, V3 with κ = 1, V_ϱ with a = b = 1)."""
@@ -74,7 +78,7 @@ class SpinsRequest(_Strict):
     spin: Union[Finite, None] = Field(None, description="spin about the in-plane axis for branch A")
     lam_range: tuple[Positive, Positive] = Field((0.02, 50.0), description="search range of lambda [LO, HI], 0 < LO < HI")
     mu_range: tuple[Positive, Positive] = Field((0.02, 50.0), description="search range of mu [LO, HI], 0 < LO < HI")
-    grid: int = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid, description="grid points per axis of the root search")
+    grid: Count = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid, description="grid points per axis of the root search")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -91,13 +95,13 @@ class SimulateRequest(_Strict):
     t_end: Union[Positive, None] = Field(None, description="final time (default: the scene's t_end)")
     times: Union[list[Finite], None] = Field(None, min_length=1, max_length=DEFAULT_LIMITS.job_samples,
                                              description="output times in [0, t_end], increasing (default: an even grid)")
-    samples: Union[int, None] = Field(None, ge=2, le=DEFAULT_LIMITS.job_samples, description="number of evenly spaced output times (default 101)")
+    samples: Union[Count, None] = Field(None, ge=2, le=DEFAULT_LIMITS.job_samples, description="number of evenly spaced output times (default 101)")
     method: str = Field("DOP853", max_length=64, description="integrator (GET /methods)")
     rtol: Positive = Field(1e-10, description="relative tolerance (adaptive methods)")
     atol: Positive = Field(1e-10, description="absolute tolerance (adaptive methods)")
     step: Union[Positive, None] = Field(None, description="step size (fixed-step methods)")
     model: Literal["auto", "two-polar", "regular"] = "auto"
-    with_rotation: bool = Field(False, description="also integrate R and output 'rotation'")
+    with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
 
 
 class TrajectoryRequest(_Strict):
@@ -143,9 +147,9 @@ class SimulateJobParams(SimulateRequest):
 class RecordJobParams(_IntegrationParams):
     """A ``record`` job (``flatbody record``): simulate with R(t) and write a rerun recording ``recording.rrd``."""
 
-    samples: int = Field(401, ge=2, le=DEFAULT_LIMITS.job_samples, description="recorded time steps")
+    samples: Count = Field(401, ge=2, le=DEFAULT_LIMITS.job_samples, description="recorded time steps")
     title: Union[str, None] = Field(None, max_length=200, description="recording title")
-    tensor_every: int = Field(1, ge=1, le=10_000, description="log the tensors every N-th step")
+    tensor_every: Count = Field(1, ge=1, le=10_000, description="log the tensors every N-th step")
 
 
 class FamilyJobParams(_Strict):
@@ -157,11 +161,11 @@ class FamilyJobParams(_Strict):
     stop: Finite = Field(4.0, alias="to", description="end of the range")
     s3: Union[Finite, None] = Field(None, description="s3 held fixed (default 2)")
     p_theta: Union[Finite, None] = Field(None, description="p_theta held fixed (default 0.5)")
-    seeds: int = Field(5, ge=2, le=DEFAULT_LIMITS.job_family_seeds, description="parameter values at which all solutions are sought")
+    seeds: Count = Field(5, ge=2, le=DEFAULT_LIMITS.job_family_seeds, description="parameter values at which all solutions are sought")
     step: Union[Positive, None] = Field(None, description="largest continuation step (default range/60)")
     lam_range: tuple[Positive, Positive] = (0.02, 50.0)
     mu_range: tuple[Positive, Positive] = (0.02, 50.0)
-    grid: int = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid)
+    grid: Count = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid)
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -175,7 +179,7 @@ class StabilityMapJobParams(_Strict):
     body: BodySpec = Field(default_factory=lambda: BodySpec(**DEFAULT_BODY))
     lam_range: tuple[Positive, Positive] = (1.02, 3.0)
     mu_range: tuple[Positive, Positive] = (0.3, 3.0)
-    grid: int = Field(30, ge=4, le=DEFAULT_LIMITS.job_map_grid, description="grid points per axis")
+    grid: Count = Field(30, ge=4, le=DEFAULT_LIMITS.job_map_grid, description="grid points per axis")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -189,9 +193,9 @@ class EvaluateJobParams(_Strict):
     Only the agent shipped with the package is evaluated: models are never loaded from request data.
     """
 
-    episodes: int = Field(20, ge=1, le=DEFAULT_LIMITS.job_episodes)
-    seed: int = Field(10_000, ge=0, le=2**31 - 1)
-    baselines: bool = Field(True, description="also evaluate the zero, random and heuristic baselines")
+    episodes: Count = Field(20, ge=1, le=DEFAULT_LIMITS.job_episodes)
+    seed: Count = Field(10_000, ge=0, le=2**31 - 1)
+    baselines: Flag = Field(True, description="also evaluate the zero, random and heuristic baselines")
 
 
 class SimulateJob(_Strict):

@@ -1,8 +1,9 @@
 """Schemathesis against the service's own OpenAPI document (the real service on loopback).
 
-Every operation is called with generated requests: no answer is a 500, every status code and
-content type is one the document declares, and every answer matches its declared schema. Jobs that
-a generated request queues are cancelled at once (the job endpoints are exercised, not the work).
+Every operation is called with generated requests, valid and invalid: no answer is a 500, every
+status code and content type is one the document declares, every answer matches its declared
+schema, and requests that break the schema are refused. Jobs that a generated request queues are
+cancelled at once (the job endpoints are exercised, not the work).
 """
 
 from __future__ import annotations
@@ -13,12 +14,13 @@ from hypothesis import HealthCheck, settings
 schemathesis = pytest.importorskip("schemathesis", reason="needs schemathesis (pip install schemathesis)")
 from schemathesis.checks import (  # noqa: E402
     content_type_conformance,
+    negative_data_rejection,
     not_a_server_error,
     response_schema_conformance,
     status_code_conformance,
 )
 
-CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance]
+CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance, negative_data_rejection]
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +29,9 @@ def api_schema(tmp_path_factory):
 
     proc, url = start_service(tmp_path_factory.mktemp("schema-data"), workers=2)
     try:
-        yield schemathesis.openapi.from_url(url + "/openapi.json")
+        schema = schemathesis.openapi.from_url(url + "/openapi.json")
+        schema.config.generation.update(modes=[schemathesis.GenerationMode.POSITIVE, schemathesis.GenerationMode.NEGATIVE])
+        yield schema
     finally:
         proc.terminate()
         proc.wait(timeout=30)
