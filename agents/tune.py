@@ -180,10 +180,23 @@ def open_storage(url: str):
     return JournalStorage(JournalFileBackend(str(path)))
 
 
-def prepare(cfg: TuneConfig) -> None:
+def prepare(cfg: TuneConfig) -> int:
     """Create the study (and a new database's tables) once, before workers start: two workers
-    creating the schema of an empty database at the same instant collide."""
-    _study(cfg, 0)
+    creating the schema of an empty database at the same instant collide. Returns the number of
+    trials still to run (``cfg.trials`` less the finished ones), to be shared out exactly."""
+    import optuna
+
+    study = _study(cfg, 0)
+    finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED, optuna.trial.TrialState.FAIL)
+    return max(0, cfg.trials - len(study.get_trials(deepcopy=False, states=finished)))
+
+
+def shares(left: int, workers: int) -> list[int]:
+    """Trials per worker: ``left`` split as evenly as possible, summing exactly to ``left`` (workers
+    given no trial are left out), so a study of N trials never overshoots when workers finish together."""
+    if left < 0 or workers < 1:
+        raise ValueError(f"workers: need left >= 0 and workers >= 1, got {left}, {workers}")
+    return [n for n in (left // workers + (i < left % workers) for i in range(workers)) if n > 0]
 
 
 def _study(cfg: TuneConfig, worker: int = 0):

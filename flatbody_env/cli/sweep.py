@@ -18,13 +18,7 @@ import math
 import sys
 from pathlib import Path
 
-from flatbody_env.cli.args import int_at_least, positive_float
-
-
-def _range(flag: str, text: str) -> list[float]:
-    from flatbody_env.cli.analysis import _range as analysis_range
-
-    return list(analysis_range(flag, text))
+from flatbody_env.cli.args import float_range, int_at_least, positive_float
 
 
 def _run(args, spec) -> int:
@@ -76,8 +70,8 @@ def _stability_map(args) -> int:
     chunk = args.chunk or default_chunk(args.grid)
     if chunk > args.grid:
         raise ValueError(f"--chunk: must be an integer in [1, {args.grid}] (the grid), got {chunk}")
-    spec = {"kind": "stability-map", "body": body.to_dict(), "lam_range": _range("--lam-range", args.lam_range),
-            "mu_range": _range("--mu-range", args.mu_range), "grid": args.grid, "chunk": chunk}
+    spec = {"kind": "stability-map", "body": body.to_dict(), "lam_range": list(args.lam_range),
+            "mu_range": list(args.mu_range), "grid": args.grid, "chunk": chunk}
     return _run(args, spec)
 
 
@@ -140,7 +134,7 @@ def _family(args) -> int:
     for v in args.vary:
         if v not in PARAMETERS:
             raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {v!r}")
-    ranges = [_range("--ranges", r) for r in args.ranges]
+    ranges = [list(r) for r in args.ranges]
     if not 2 <= args.seeds <= 200:
         raise ValueError(f"--seeds: must be an integer in [2, 200], got {args.seeds}")
     box = _box(args)
@@ -183,7 +177,7 @@ def _serial_only(args) -> int:
 
 # ---------------------------------------------------------------------------------------------
 def _tune(args) -> int:
-    from agents.tune import DEFAULT_STORAGE, TuneConfig, load_search_space, prepare, summary, tune_worker
+    from agents.tune import DEFAULT_STORAGE, TuneConfig, load_search_space, prepare, shares, summary, tune_worker
 
     cfg = TuneConfig(algo=args.algo, study=args.study or f"{args.algo}-FlatBody-v0", storage=args.storage or DEFAULT_STORAGE,
                      trials=args.trials, n_timesteps=args.n_timesteps, evaluations=args.evaluations,
@@ -191,16 +185,15 @@ def _tune(args) -> int:
                      overrides=tuple(args.hyperparams or ()), search_file=args.search_file, out=args.out,
                      hyperparams_file=None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()))
     load_search_space(cfg.algo, path=cfg.search_file)  # bad files fail here, in one line
-    prepare(cfg)
+    left = prepare(cfg)
     if args.workers <= 1 and args.scheduler is None:
         tune_worker(cfg)
-    else:
+    elif left > 0:
         from flatbody_env.sweep.cluster import dask_client
 
         with dask_client(workers=args.workers, scheduler=args.scheduler) as client:
             n = args.workers if args.scheduler is None else max(1, len(client.scheduler_info()["workers"]))
-            share = math.ceil(cfg.trials / n)
-            futures = [client.submit(tune_worker, cfg, i, share, pure=False) for i in range(n)]
+            futures = [client.submit(tune_worker, cfg, i, k, pure=False) for i, k in enumerate(shares(left, n))]
             client.gather(futures)
     rep = summary(cfg.study, cfg.storage)
     if args.json:
@@ -259,8 +252,8 @@ def register(sub) -> None:
 
     p = kinds.add_parser("stability-map", help="the shape stability map (flatbody stability-map), the grid split into chunks")
     add_body_arguments(p)
-    p.add_argument("--lam-range", default="1.02,3", metavar="LO,HI", help="lambda range (default 1.02,3)")
-    p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
+    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(1.02, 3.0), metavar="LO,HI", help="lambda range (default 1.02,3)")
+    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.3, 3.0), metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
     p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30; any size)")
     p.add_argument("--chunk", type=int_at_least("chunk", 1), default=None, metavar="ROWS",
                    help="lambda rows per task (default: about 512 grid points per task, at least one row)")
@@ -283,7 +276,7 @@ def register(sub) -> None:
     add_box_arguments(p)
     p.add_argument("--bodies", nargs="+", metavar="BODY", help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags")
     p.add_argument("--vary", nargs="+", default=["s3"], metavar="PARAM", help="parameters to vary (s3, p_theta or a constant); default s3")
-    p.add_argument("--ranges", nargs="+", default=["0.05,4"], metavar="LO,HI", help="parameter ranges (default 0.05,4)")
+    p.add_argument("--ranges", nargs="+", type=float_range("--ranges", low=-1e6, high=1e6), default=[(0.05, 4.0)], metavar="LO,HI", help="parameter ranges (default 0.05,4)")
     p.add_argument("--seeds", type=int, default=5, help="parameter values at which all solutions are sought (default 5)")
     p.add_argument("--step", type=positive_float("step"), default=None, help="largest continuation step (default range/60)")
     _engine_arguments(p)

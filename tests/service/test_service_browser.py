@@ -66,8 +66,14 @@ def test_page_finds_ellipses_runs_a_recording_job_and_shows_a_chart(browser, liv
     assert float(cells[6]) == pytest.approx(3.5, abs=1e-6)
     assert cells[7] in ("elliptic", "hyperbolic", "degenerate")
 
-    # a small recording job of the default scene, watched to completion
+    assert "V1, s3 = 2, p_θ = 0.5" in browser.find_element(By.ID, "ellipses-status").text
+    assert "stale" not in browser.find_element(By.ID, "ellipses-table").get_attribute("class")
+
+    # a small recording job of the default scene, watched to completion; picking the scene changes
+    # the body, so the ellipse table no longer answers the form: greyed out and said so
     Select(browser.find_element(By.ID, "scene")).select_by_value("default")
+    assert "stale" in browser.find_element(By.ID, "ellipses-table").get_attribute("class")
+    assert "form has changed" in browser.find_element(By.ID, "ellipses-status").text
     for field, value in (("t_end", "1"), ("samples", "11")):
         el = browser.find_element(By.ID, field)
         el.clear()

@@ -114,3 +114,19 @@ def test_postgresql_study_shared_by_two_workers(cli, postgres_url, tmp_path):
 def test_unreachable_database_is_one_line(cli):
     r = cli("tune", "--algo", "ppo", "--trials", "1", "--storage", "postgresql://nobody@127.0.0.1:1/none")
     assert r.returncode == 2 and "storage: cannot open" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("left, workers", [(3, 2), (7, 3), (1, 4), (0, 2), (8, 8)])
+def test_trial_shares_sum_exactly_to_the_trials_left(left, workers):
+    from agents.tune import shares
+
+    got = shares(left, workers)
+    assert sum(got) == left and len(got) <= workers and all(n >= 1 for n in got)
+    assert not got or max(got) - min(got) <= 1
+
+
+def test_trial_shares_refuse_no_workers():
+    from agents.tune import shares
+
+    with pytest.raises(ValueError, match="workers"):
+        shares(3, 0)

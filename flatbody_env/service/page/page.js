@@ -58,6 +58,22 @@ function fillFromScene(name) {
   showPotentialFields();
 }
 
+// the request the ellipse table answers; when the body form no longer matches it, the table is
+// greyed out and the status says so (the numbers are never shown as if they were the form's)
+let ellipsesRequest = null;
+
+function markEllipsesStale() {
+  if (ellipsesRequest === null) return;
+  let now = null;
+  try { now = JSON.stringify({ body: bodySpec(), s3: num("s3"), p_theta: num("p_theta") }); } catch (e) { now = null; }
+  const stale = now !== ellipsesRequest;
+  $("ellipses-table").classList.toggle("stale", stale);
+  const status = $("ellipses-status");
+  const note = " (the form has changed since: press Find again)";
+  if (stale && !status.textContent.endsWith(note)) status.textContent += note;
+  if (!stale && status.textContent.endsWith(note)) status.textContent = status.textContent.slice(0, -note.length);
+}
+
 async function findEllipses() {
   showError("");
   const req = { body: bodySpec(), s3: num("s3"), p_theta: num("p_theta") };
@@ -76,7 +92,9 @@ async function findEllipses() {
       tbody.appendChild(tr);
     });
     $("ellipses-table").hidden = ell.solutions.length === 0;
-    $("ellipses-status").textContent = `${ell.solutions.length} stationary ellipse(s) for s3 = ${req.s3}, p_θ = ${req.p_theta}`;
+    $("ellipses-status").textContent = `${ell.solutions.length} stationary ellipse(s) for ${req.body.potential.name}, s3 = ${req.s3}, p_θ = ${req.p_theta}`;
+    ellipsesRequest = JSON.stringify(req);
+    $("ellipses-table").classList.remove("stale");
   } catch (err) {
     $("ellipses-status").textContent = "";
     showError(err.message);
@@ -157,7 +175,11 @@ async function init() {
   showPotentialFields();
   $("potential").addEventListener("change", showPotentialFields);
   $("find-ellipses").addEventListener("click", findEllipses);
-  $("scene").addEventListener("change", () => fillFromScene($("scene").value));
+  document.querySelectorAll("#body-panel input, #body-panel select").forEach(el => {
+    el.addEventListener("input", markEllipsesStale);
+    el.addEventListener("change", markEllipsesStale);
+  });
+  $("scene").addEventListener("change", () => { fillFromScene($("scene").value); markEllipsesStale(); });
   $("start-family").addEventListener("click", () => {
     const params = { body: bodySpec(), vary: $("vary").value, from: num("vary-from"), to: num("vary-to") };
     if ($("vary").value !== "s3") params.s3 = num("s3");
