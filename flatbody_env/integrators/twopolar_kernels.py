@@ -129,43 +129,65 @@ def no_control(u):
 
 # --------------------------------------------------------------------------------------------- DOP853
 @njit
-def _rms(x, scale):
+def _rms(x, y, rtol, atol):
+    """RMS of x / (atol + |y| rtol) (scipy's scaled norm; the scale is formed on the fly, no work array)."""
     acc = 0.0
     for i in range(x.size):
-        r = x[i] / scale[i]
+        r = x[i] / (atol + abs(y[i]) * rtol)
         acc += r * r
     return math.sqrt(acc / x.size)
 
 
 @njit
-def dop853_initial_step(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, counters):
-    """scipy's ``select_initial_step`` (Hairer–Nørsett–Wanner §II.4) with error order 7."""
+def dop853_initial_step_into(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, y1, counters):
+    """scipy's ``select_initial_step`` (Hairer–Nørsett–Wanner §II.4) with error order 7.
+
+    Allocates nothing (the CUDA target compiles it as a device function): ``work`` and ``y1``
+    (11,) are work space."""
     interval = abs(t_bound - t0)
     if interval == 0.0:
         return 0.0
-    scale = np.empty(N)
-    for i in range(N):
-        scale[i] = atol + abs(y[i]) * rtol
-    d0 = _rms(y, scale)
-    d1 = _rms(f, scale)
+    d0 = _rms(y, y, rtol, atol)
+    d1 = _rms(f, y, rtol, atol)
     if d0 < 1e-5 or d1 < 1e-5:
         h0 = 1e-6
     else:
         h0 = 0.01 * d0 / d1
     h0 = min(h0, interval)
-    y1 = np.empty(N)
     for i in range(N):
         y1[i] = y[i] + h0 * f[i]
     rhs_kernel(y1, u, P, work, vel, force)
     counters[0] += 1
     for i in range(N):
         y1[i] = work[i] - f[i]
-    d2 = _rms(y1, scale) / h0
+    d2 = _rms(y1, y, rtol, atol) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
         h1 = max(1e-6, h0 * 1e-3)
     else:
         h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
     return min(100.0 * h0, h1, interval)
+
+
+@njit
+def dop853_initial_step(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, counters):
+    """:func:`dop853_initial_step_into` with its second work array allocated (CPU callers)."""
+    return dop853_initial_step_into(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, np.empty(N), counters)
+
+
+@njit
+def next_up(t):
+    """``np.nextafter(t, inf)``, bit for bit, from ``math.frexp``/``math.ldexp`` only (both targets
+    compile these; numba's CUDA target has no ``nextafter``)."""
+    if t != t or t == math.inf:
+        return t
+    if t == -math.inf:
+        return -1.7976931348623157e308
+    if t == 0.0:
+        return 5e-324
+    m, e = math.frexp(t)  # t = m 2**e, 0.5 <= |m| < 1
+    ulp = math.ldexp(1.0, e - 54) if m == -0.5 else math.ldexp(1.0, e - 53)
+    up = t + max(ulp, 5e-324)  # subnormals: the spacing is 2**-1074
+    return -0.0 if up == 0.0 else up  # from -2**-1074 the next float up is -0.0
 
 
 @njit
@@ -216,7 +238,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
     Returns (status, t reached, next |h|).
     """
     while t < t_bound:
-        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        min_step = 10.0 * abs(next_up(t) - t)
         if h_abs < min_step:
             h_abs = min_step
         rejected = False
