@@ -22,6 +22,7 @@ from flatbody_env.physics.potentials import CustomPotential, ThicknessPotential,
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack
 from flatbody_env.scene import Scene, SceneError, builtin_scenes, load_scene
 from flatbody_env.simulation import Trajectory, simulate
+from flatbody_env.batch import BatchTrajectory, simulate_batch
 
 __version__ = "0.1.0"
 
@@ -69,6 +70,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "BatchTrajectory",
     "Body",
     "CustomPotential",
     "FlatBodyEnv",
@@ -90,5 +92,6 @@ __all__ = [
     "load_scene",
     "pack",
     "simulate",
+    "simulate_batch",
     "unpack",
 ]

@@ -12,9 +12,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from flatbody_env.cli import agents, analysis, bench, integrators, record, serve, simulate, sweep
+from flatbody_env.cli import agents, analysis, bench, gpu, integrators, record, serve, simulate, sweep
 
-COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve)
+COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve, gpu)
 """The declared command registry: modules that contribute sub-commands, in help order. Each has
 ``register(subparsers)`` and may have ``register_bench(bench_subparsers)``; they keep heavy imports
 inside their handlers so that ``flatbody --help`` stays fast."""

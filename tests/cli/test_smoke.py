@@ -101,6 +101,8 @@ CASES = {
                                _files("bi/bench_integrators.json", "bi/bench_integrators.png"), True),
     ("bench", "service"): (["--clients", "1", "--requests", "2", "--seconds", "2", "--workers", "1", "--out-dir", "{tmp}/bs"],
                            _files("bs/service_benchmark.json", "bs/service_benchmark.png"), True),
+    ("bench", "gpu"): (["--sizes", "8,40", "--steps", "1", "--repeats", "1", "--methods", "RK4,DOP853-numba", "--out", "{tmp}/bg.json"],
+                       _files("bg.json", "bg.png"), False),
     ("bench", "sweep"): (["--grid", "4", "--chunk", "2", "--workers", "1", "--sim-workers", "1", "--noop-tasks", "10", "--out", "{tmp}/bw"],
                          _files("bw/scaling.json", "bw/scaling.csv", "bw/scaling.png"), True),
     ("sweep", "stability-map"): (["--grid", "4", "--workers", "0", "--no-progress", "--out", "{tmp}/sm", "--json"],

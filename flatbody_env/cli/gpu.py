@@ -1,0 +1,62 @@
+"""``flatbody bench gpu``: body-steps/s of the batched dynamics against N on every backend here (the measurement
+lives in :mod:`flatbody_env.integrators.batch_bench`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from flatbody_env.cli.args import int_at_least, output_file
+
+_SIZE = int_at_least("sizes", 1, 1 << 24)
+
+
+def _sizes(text: str) -> list[int]:
+    import argparse
+
+    parts = [p for p in text.split(",") if p.strip()]
+    if not 1 <= len(parts) <= 32:
+        raise argparse.ArgumentTypeError(f"sizes: expected 1 to 32 comma-separated integers, got {text[:60]!r}")
+    return [_SIZE(p.strip()) for p in parts]
+
+
+def _methods(text: str) -> list[str]:
+    import argparse
+
+    allowed = ("RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4", "DOP853-numba")
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    bad = [m for m in names if m not in allowed]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"methods: expected names from {', '.join(allowed)}, got {text[:60]!r}")
+    return names
+
+
+def _cmd(args) -> int:
+    import json
+
+    from flatbody_env.integrators.batch_bench import plot, run
+    from flatbody_env.output import atomic_write
+
+    def show(row):
+        print(f"{row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  ({row['device_name']})",
+              flush=True)
+
+    result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, progress=show)
+    for note in result["left_out"]:
+        print(f"left out: {note}")
+    out = Path(args.out)
+    png = out.with_suffix(".png")
+    atomic_write(out, json.dumps(result, indent=2) + "\n")
+    atomic_write(png, lambda tmp: plot(result, tmp))
+    print(f"wrote {out} and {png}")
+    return 0
+
+
+def register_bench(bench_sub) -> None:
+    p = bench_sub.add_parser("gpu", help="batched dynamics: body-steps/s against N on the CPU (serial, parallel) and a CUDA GPU when present")
+    p.add_argument("--out", required=True, type=output_file("out", (".json",)), metavar="FILE.json",
+                   help="JSON of the rows; the chart goes beside it (FILE.png)")
+    p.add_argument("--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies")
+    p.add_argument("--methods", type=_methods, default=["RK4", "DOP853-numba"], metavar="NAME,...", help="batch methods to time")
+    p.add_argument("--steps", type=int_at_least("steps", 1, 100000), default=10, help="env steps per timed block")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, 100), default=3, help="timed blocks; the best is kept")
+    p.set_defaults(handler=_cmd)

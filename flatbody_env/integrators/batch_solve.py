@@ -1,0 +1,239 @@
+"""Per-body drivers that allocate nothing, and the compiled CPU batch kernels built on them.
+
+One kernel source, two targets: every function here is plain Python compiled by numba for the
+CPU (``@njit``, :mod:`.jit`'s options) and, through :mod:`.cuda`, re-compiled from the same
+``.py_func`` as a CUDA device function (with the functions it calls re-bound to their device
+twins). So nothing here allocates: work arrays come in as arguments, which the CPU kernels
+allocate with ``np.empty`` (once per chunk of bodies) and the CUDA kernels with
+``cuda.local.array`` (once per thread).
+
+Method kinds (:data:`KIND`): 0 RK4, 1 a splitting with coefficients ``coeffs``
+(:data:`~.twopolar_kernels.STRANG`, ``SUZUKI4``, ``YOSHIDA4``), 2 DOP853.
+
+* :func:`fixed_solve_into` / :func:`dop853_solve_into` are :func:`~.twopolar_kernels.fixed_solve` /
+  :func:`~.twopolar_kernels.dop853_solve` (the drivers behind ``simulate``) with their work arrays
+  passed in; they call the same per-interval kernels in the same order, so their states are the
+  same bit for bit (tested). ``fail`` (3,) gets a third entry: the index of the output row at which a
+  failure was detected.
+* :func:`solve_body`: one body's trajectory into ``Y`` (11, T); rows from the failing one on are NaN.
+* :func:`env_step_body`: one body's environment step (the kernels of ``env_stepper(NAME).batch``).
+* :func:`batch_solve` / :func:`batch_env_step`: the CPU batch kernels, parallel over chunks of bodies
+  (``numba.prange``).
+
+Layouts: the CPU trajectory kernel writes ``OUT`` (N, T, 11) (one body's rows contiguous); the
+environment step takes ``Y``, ``OUT`` (11, N) and ``U`` (4, N) structure-of-arrays, as the env's
+kernels do; ``STATUS`` (N,) int64 holds :mod:`.failure`'s codes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from flatbody_env.integrators.failure import ENERGY, OK
+from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
+from flatbody_env.integrators.twopolar_kernels import (
+    N,
+    STRANG,
+    SUZUKI4,
+    YOSHIDA4,
+    _dop853_env,
+    _fixed_advance,
+    _fixed_env,
+    dop853_advance,
+    dop853_initial_step_into,
+    may_cross,
+    no_control,
+)
+
+njit = numba.njit(**JIT_OPTIONS)
+
+RK4_KIND = 0
+SPLIT_KIND = 1
+DOP853_KIND = 2
+
+KIND = {
+    "RK4": (RK4_KIND, STRANG),
+    "splitting-strang": (SPLIT_KIND, STRANG),
+    "splitting-suzuki4": (SPLIT_KIND, SUZUKI4),
+    "splitting-yoshida4": (SPLIT_KIND, YOSHIDA4),
+    "DOP853-numba": (DOP853_KIND, STRANG),
+}
+"""Batch methods: name → (kind, composition coefficients)."""
+BATCH_METHODS = tuple(KIND)
+
+CHUNK = 32
+"""Bodies per task of the parallel CPU kernels (work arrays are allocated once per chunk)."""
+
+
+# --------------------------------------------------------------------------------------------- drivers
+@njit
+def fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, work, vel, force):
+    """:func:`~.twopolar_kernels.fixed_solve` with work arrays ``y`` (11,), ``work`` (≥5, 11), ``vel`` (7,),
+    ``force`` (4,) passed in; ``fail`` (3,) [t of failure, last |H − H₀|, failing row]."""
+    for i in range(N):
+        y[i] = y0[i]
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    check_gap = not may_cross(y, u, P)
+    check_energy = energy_tol < np.inf and no_control(u)
+    H0 = energy_kernel(y, P, vel, force)
+    for i in range(N):
+        Y[i, 0] = y[i]
+    fail[0] = times[0]
+    for k in range(1, times.size):
+        fail[2] = k
+        st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
+        fail[0] = times[k - 1] + dt_done
+        for i in range(N):
+            Y[i, k] = y[i]
+        if st != OK:
+            return st
+        if check_energy:
+            dH = abs(energy_kernel(y, P, vel, force) - H0)
+            fail[1] = dH
+            if dH > energy_tol:
+                return ENERGY
+    return OK
+
+
+@njit
+def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force):
+    """:func:`~.twopolar_kernels.dop853_solve` with work arrays ``y``, ``f``, ``ynew``, ``ytmp`` (11,),
+    ``K`` (13, 11), ``vel`` (7,), ``force`` (4,) passed in; ``counters`` (4,) [nfev, accepted, rejected,
+    budget of nfev]; ``fail`` (3,) [t of failure, last |H − H₀|, failing row]."""
+    for i in range(N):
+        y[i] = y0[i]
+    rhs_kernel(y, u, P, f, vel, force)
+    counters[0] += 1
+    gap_sign = 1.0 if y[7] > y[8] else -1.0
+    check_gap = not may_cross(y, u, P)
+    check_energy = energy_tol < np.inf and no_control(u)
+    H0 = energy_kernel(y, P, vel, force)
+    for i in range(N):
+        Y[i, 0] = y[i]
+    t = times[0]
+    fail[0] = t
+    h_abs = dop853_initial_step_into(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, ynew, counters)
+    for k in range(1, times.size):
+        fail[2] = k
+        st, t, h_abs = dop853_advance(y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters)
+        fail[0] = t
+        for i in range(N):
+            Y[i, k] = y[i]
+        if st != OK:
+            return st
+        if check_energy:
+            dH = abs(energy_kernel(y, P, vel, force) - H0)
+            fail[1] = dH
+            if dH > energy_tol:
+                return ENERGY
+    return OK
+
+
+@njit
+def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_nfev, Y, STATUS, NFEV, TFAIL,
+               y, f, K, ynew, ytmp, vel, force, counters, fail):
+    """Body ``b``'s trajectory from ``y0`` (11,) through ``times`` into ``Y`` (11, T) (a view of the batch
+    output); STATUS[b], NFEV[b], TFAIL[b] (t of the failure, NaN on success) receive its outcome.
+    Rows from the failing one on are NaN: a failed body's state is never returned as physics."""
+    counters[0] = 0
+    counters[1] = 0
+    counters[2] = 0
+    counters[3] = max_nfev
+    fail[0] = 0.0
+    fail[1] = 0.0
+    fail[2] = 0.0
+    if kind == DOP853_KIND:
+        st = dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force)
+    else:
+        st = fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, K, vel, force)
+    STATUS[b] = st
+    NFEV[b] = counters[0]
+    if st == OK:
+        TFAIL[b] = math.nan
+    else:
+        TFAIL[b] = fail[0]
+        for k in range(int(fail[2]), times.size):
+            for i in range(N):
+                Y[i, k] = math.nan
+
+
+@njit
+def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
+                  y, u, out, K, ynew, ytmp, vel, force, f, counters):
+    """Body ``b``'s environment step: column b of Y (11, N) and U (4, N) → column b of OUT, STATUS[b],
+    NFEV[b]; the same kernels as ``env_stepper(NAME).batch`` (:mod:`.compiled_methods`)."""
+    for i in range(N):
+        y[i] = Y[i, b]
+    for i in range(4):
+        u[i] = U[i, b]
+    counters[0] = 0
+    counters[1] = 0
+    counters[2] = 0
+    if kind == DOP853_KIND:
+        st = _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+    else:
+        st = _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, K, vel, force, counters)
+    STATUS[b] = st
+    NFEV[b] = counters[0]
+    for i in range(N):
+        OUT[i, b] = out[i]
+
+
+# --------------------------------------------------------------------------------------------- CPU batch kernels
+@numba.njit(parallel=True, **JIT_OPTIONS)
+def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
+    """Trajectories of N bodies: Y0 (N, 11) → OUT (N, T, 11), STATUS, NFEV (N,) int64, TFAIL (N,);
+    one energy tolerance per body (ENERGY_TOL (N,)); parallel over chunks of :data:`CHUNK` bodies."""
+    n = Y0.shape[0]
+    for c in numba.prange((n + CHUNK - 1) // CHUNK):
+        y = np.empty(N)
+        f = np.empty(N)
+        K = np.empty((13, N))
+        ynew = np.empty(N)
+        ytmp = np.empty(N)
+        vel = np.empty(7)
+        force = np.empty(4)
+        counters = np.zeros(4, np.int64)
+        fail = np.zeros(3)
+        for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            solve_body(b, kind, coeffs, Y0[b], times, u, P, h, rtol, atol, ENERGY_TOL[b], max_nfev, OUT[b].T, STATUS, NFEV, TFAIL,
+                       y, f, K, ynew, ytmp, vel, force, counters, fail)
+
+
+@numba.njit(parallel=True, **JIT_OPTIONS)
+def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    """One environment step of N bodies: Y, OUT (11, N), U (4, N), STATUS, NFEV (N,) int64; parallel
+    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to ``env_stepper(NAME).batch_counted``."""
+    n = Y.shape[1]
+    for c in numba.prange((n + CHUNK - 1) // CHUNK):
+        y = np.empty(N)
+        u = np.empty(4)
+        out = np.empty(N)
+        K = np.empty((13, N))
+        ynew = np.empty(N)
+        ytmp = np.empty(N)
+        vel = np.empty(7)
+        force = np.empty(4)
+        f = np.empty(N)
+        counters = np.zeros(3, np.int64)  # (3,): the env steps keep no nfev budget
+        for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
+                          y, u, out, K, ynew, ytmp, vel, force, f, counters)
+
+
+@numba.njit(parallel=True, **JIT_OPTIONS)
+def batch_energy(Y0, P, H):
+    """H (eq. (41)) of each row of Y0 (N, 11) into H (N,)."""
+    n = Y0.shape[0]
+    for c in numba.prange((n + CHUNK - 1) // CHUNK):
+        vel = np.empty(7)
+        force = np.empty(4)
+        for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            H[b] = energy_kernel(Y0[b], P, vel, force)
+
+
+__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "RK4_KIND", "SPLIT_KIND", "batch_energy", "batch_env_step", "batch_solve",
+           "dop853_solve_into", "env_step_body", "fixed_solve_into", "solve_body"]

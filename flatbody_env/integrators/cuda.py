@@ -1,0 +1,265 @@
+"""The CUDA target of the integrators: the same plain-Python kernels, compiled by numba's CUDA target.
+
+The twin of :mod:`.jit`. Every integrator function is a numba CPU dispatcher around plain Python
+(``.py_func``). :func:`device_twin` re-compiles that function with ``cuda.jit(device=True)`` after
+re-binding each dispatcher it calls to *its* device twin, recursively
+(``types.FunctionType(f.__code__, {**f.__globals__, **twins})``, as :func:`.jit.jit_copy` does for
+the CPU). No formula is restated: the physics kernels, the RK4/splitting/DOP853 steps and the
+per-body drivers of :mod:`.batch_solve` run on the GPU from the source the CPU runs.
+
+Only the target glue is written here: the two kernels (one thread per body) that take their work
+arrays from ``cuda.local.array`` and their body from ``cuda.grid(1)``, and the device side of
+:func:`~.twopolar_kernels.dop853_initial_step` (its CPU wrapper allocates one array with
+``np.empty``; on the device that array is a local one). Module-level coefficient arrays
+(``_A``, ``STRANG``, ``_KEEP_*``) become constant memory unchanged.
+
+* :func:`env_step` — one environment step of N bodies, **one launch per step**: ``Y``, ``OUT``
+  (11, N), ``U`` (4, N) structure-of-arrays (coalesced: thread b reads column b), ``STATUS`` (N,)
+  with :mod:`.failure`'s codes. Device arrays stay on the device (no copy); host arrays are copied.
+* :func:`solve` — N trajectories through the output times, ``OUT`` (11, T, N) on the device,
+  returned as (N, T, 11); the kernel behind ``simulate_batch(..., device="cuda")``.
+
+numba's CUDA target comes from the ``numba-cuda`` package (``pip install "flatbody[gpu]"``). It is
+imported only when a CUDA function is first used, never by importing this module, so a machine
+without it (or without a GPU) imports everything and gets one :class:`CudaUnavailableError` that
+names the fix. numba-cuda 0.30.4 fails to import on numpy ≥ 2.5 (it uses the removed
+``np.row_stack``): the ``gpu`` extra pins numpy below 2.5, and that import failure is reported by
+the same error.
+
+Testing without a GPU: numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, set before numba.cuda is
+imported) runs these kernels as Python on the CPU; ``tests/integrators/test_cuda_simulator.py``
+compares them with the CPU kernels in a subprocess.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import types
+
+import numba
+import numpy as np
+from numba import float64, int64
+
+from flatbody_env.integrators import batch_solve as _bs
+from flatbody_env.integrators import twopolar_kernels as _tk
+from flatbody_env.integrators.batch_solve import dop853_initial_step_into, env_step_body, solve_body
+
+INSTALL_HINT = 'pip install "flatbody[gpu]" on a machine with an NVIDIA driver'
+THREADS_PER_BLOCK = 128
+"""Threads per block of both kernels (the simulator runs each as a Python thread: keep N small there)."""
+
+cuda = None
+"""numba.cuda once :func:`require` has imported it (the kernels' ``cuda`` global)."""
+
+
+class CudaUnavailableError(RuntimeError):
+    """No usable CUDA target: numba-cuda missing or broken, or no GPU / driver."""
+
+
+def simulated() -> bool:
+    """True when numba's CUDA simulator is on (``NUMBA_ENABLE_CUDASIM=1``)."""
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+def _import_cuda():
+    try:
+        from numba import cuda as module
+    except Exception as exc:  # ImportError, or numba-cuda on numpy >= 2.5 (AttributeError: row_stack)
+        raise CudaUnavailableError(f"device: numba's CUDA target does not import ({type(exc).__name__}: {exc}); {INSTALL_HINT} "
+                                   "(numpy below 2.5 for numba-cuda 0.30)") from exc
+    return module
+
+
+@functools.lru_cache(maxsize=1)
+def _probe() -> tuple[bool, str]:
+    try:
+        module = _import_cuda()
+    except CudaUnavailableError as exc:
+        return False, str(exc)
+    try:
+        ok = bool(module.is_available())
+    except Exception as exc:  # a driver that fails to initialise
+        return False, f"device: CUDA driver error ({exc}); {INSTALL_HINT}"
+    return (True, "") if ok else (False, f"device: no CUDA GPU found ({INSTALL_HINT})")
+
+
+def is_available() -> bool:
+    """Whether ``device="cuda"`` can run here (a GPU, or the simulator). Never raises."""
+    return _probe()[0]
+
+
+def require():
+    """numba.cuda, or :class:`CudaUnavailableError` saying what is missing and how to fix it."""
+    ok, why = _probe()
+    if not ok:
+        raise CudaUnavailableError(why)
+    global cuda
+    cuda = _import_cuda()
+    return cuda
+
+
+def device_name() -> str:
+    """The GPU's name (``"simulator"`` under the simulator); :class:`CudaUnavailableError` without one."""
+    module = require()
+    if simulated():
+        return "simulator"
+    name = module.get_current_device().name
+    return name.decode() if isinstance(name, bytes) else str(name)
+
+
+# --------------------------------------------------------------------------------------------- device twins
+def _is_dispatcher(obj) -> bool:
+    return isinstance(obj, numba.core.dispatcher.Dispatcher)
+
+
+def _names(code: types.CodeType) -> set[str]:
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _names(const)
+    return names
+
+
+class _Twins:
+    """Device twins of CPU dispatchers, built once per process (memoised by dispatcher)."""
+
+    def __init__(self, module) -> None:
+        self.cuda = module
+        self.memo: dict[int, object] = {}
+
+    def rebound(self, func):
+        """A copy of the plain function ``func`` whose dispatcher globals are their device twins and whose
+        ``cuda`` global is numba.cuda."""
+        glob = dict(func.__globals__)
+        for name in _names(func.__code__):
+            value = glob.get(name)
+            if _is_dispatcher(value):
+                glob[name] = self.twin(value)
+        glob["cuda"] = self.cuda
+        clone = types.FunctionType(func.__code__, glob, func.__name__, func.__defaults__, func.__closure__)
+        clone.__module__ = func.__module__
+        clone.__qualname__ = func.__qualname__
+        clone.__doc__ = func.__doc__
+        return clone
+
+    def twin(self, dispatcher):
+        key = id(dispatcher)
+        if key not in self.memo:
+            self.memo[key] = self.cuda.jit(device=True)(self.rebound(dispatcher.py_func))
+        return self.memo[key]
+
+
+def device_twin(func):
+    """The CUDA device function compiled from ``func`` (a numba CPU dispatcher) with everything it calls
+    re-bound to device twins, recursively. :class:`CudaUnavailableError` without a CUDA target."""
+    return _kernels()[0].twin(func)
+
+
+def _dop853_initial_step_device(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, counters):
+    """Device side of :func:`~.twopolar_kernels.dop853_initial_step` (same arguments): its second work array
+    is a local one."""
+    y1 = cuda.local.array(11, float64)
+    return dop853_initial_step_into(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, y1, counters)
+
+
+def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    """One thread per body: :func:`~.batch_solve.env_step_body` with local work arrays."""
+    b = cuda.grid(1)
+    if b < Y.shape[1]:
+        y = cuda.local.array(11, float64)
+        u = cuda.local.array(4, float64)
+        out = cuda.local.array(11, float64)
+        K = cuda.local.array((13, 11), float64)
+        ynew = cuda.local.array(11, float64)
+        ytmp = cuda.local.array(11, float64)
+        vel = cuda.local.array(7, float64)
+        force = cuda.local.array(4, float64)
+        f = cuda.local.array(11, float64)
+        counters = cuda.local.array(3, int64)
+        env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
+                      y, u, out, K, ynew, ytmp, vel, force, f, counters)
+
+
+def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
+    """One thread per body: :func:`~.batch_solve.solve_body`; Y0 (11, N), OUT (11, T, N)."""
+    b = cuda.grid(1)
+    if b < Y0.shape[1]:
+        y = cuda.local.array(11, float64)
+        f = cuda.local.array(11, float64)
+        K = cuda.local.array((13, 11), float64)
+        ynew = cuda.local.array(11, float64)
+        ytmp = cuda.local.array(11, float64)
+        vel = cuda.local.array(7, float64)
+        force = cuda.local.array(4, float64)
+        counters = cuda.local.array(4, int64)
+        fail = cuda.local.array(3, float64)
+        solve_body(b, kind, coeffs, Y0[:, b], times, u, P, h, rtol, atol, ENERGY_TOL[b], max_nfev, OUT[:, :, b], STATUS, NFEV, TFAIL,
+                   y, f, K, ynew, ytmp, vel, force, counters, fail)
+
+
+@functools.lru_cache(maxsize=1)
+def _kernels():
+    module = require()
+    twins = _Twins(module)
+    # the CPU wrapper of the initial step allocates: every device twin that calls it gets the device side
+    twins.memo[id(_tk.dop853_initial_step)] = module.jit(device=True)(twins.rebound(_dop853_initial_step_device))
+    env_kernel = module.jit(twins.rebound(_env_step_kernel))
+    solve_kernel = module.jit(twins.rebound(_solve_kernel))
+    return twins, env_kernel, solve_kernel
+
+
+# --------------------------------------------------------------------------------------------- host API
+def _blocks(n: int, threads: int) -> tuple[int, int]:
+    threads = max(1, min(int(threads), n))
+    return (n + threads - 1) // threads, threads
+
+
+def _method(method: str) -> tuple[int, np.ndarray]:
+    if method not in _bs.KIND:
+        raise ValueError(f"method: no batch kernel for {method!r} (allowed: {', '.join(_bs.BATCH_METHODS)})")
+    return _bs.KIND[method]
+
+
+def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=np.inf, OUT=None, STATUS=None, NFEV=None,
+             threads_per_block=THREADS_PER_BLOCK):
+    """One environment step of N bodies on the GPU, one kernel launch.
+
+    ``Y`` (11, N), ``U`` (4, N), ``P`` (9,) host or device arrays; outputs ``OUT`` (11, N), ``STATUS``,
+    ``NFEV`` (N,) int64 are allocated on the device when not given. Returns (OUT, STATUS, NFEV) as
+    given/allocated (device arrays unless host arrays were passed in, which are then filled)."""
+    kind, coeffs = _method(method)
+    _, kernel, _ = _kernels()
+    n = Y.shape[1]
+    if OUT is None:
+        OUT = cuda.device_array((11, n), np.float64)
+    if STATUS is None:
+        STATUS = cuda.device_array(n, np.int64)
+    if NFEV is None:
+        NFEV = cuda.device_array(n, np.int64)
+    blocks, threads = _blocks(n, threads_per_block)
+    kernel[blocks, threads](kind, coeffs, Y, U, P, float(dt), float(h), float(rtol), float(atol), float(energy_tol), OUT, STATUS, NFEV)
+    return OUT, STATUS, NFEV
+
+
+def solve(method, Y0, times, u, P, *, h, rtol, atol, energy_tol, max_nfev, threads_per_block=THREADS_PER_BLOCK):
+    """N trajectories on the GPU: Y0 (N, 11) host → (OUT (N, T, 11), STATUS, NFEV, TFAIL) host arrays
+    (the batch analogue of :func:`~.batch_solve.batch_solve`; ``energy_tol`` (N,))."""
+    kind, coeffs = _method(method)
+    _, _, kernel = _kernels()
+    n = Y0.shape[0]
+    T = times.size
+    d_Y0 = cuda.to_device(np.ascontiguousarray(Y0.T))
+    d_OUT = cuda.device_array((11, T, n), np.float64)
+    d_STATUS = cuda.device_array(n, np.int64)
+    d_NFEV = cuda.device_array(n, np.int64)
+    d_TFAIL = cuda.device_array(n, np.float64)
+    blocks, threads = _blocks(n, threads_per_block)
+    kernel[blocks, threads](kind, cuda.to_device(coeffs), d_Y0, cuda.to_device(times), cuda.to_device(u), cuda.to_device(P), float(h),
+                            float(rtol), float(atol), cuda.to_device(energy_tol), int(max_nfev), d_OUT, d_STATUS, d_NFEV, d_TFAIL)
+    OUT = np.ascontiguousarray(d_OUT.copy_to_host().transpose(2, 1, 0))
+    return OUT, d_STATUS.copy_to_host(), d_NFEV.copy_to_host(), d_TFAIL.copy_to_host()
+
+
+__all__ = ["CudaUnavailableError", "INSTALL_HINT", "THREADS_PER_BLOCK", "device_name", "device_twin", "env_step", "is_available", "require",
+           "simulated", "solve"]

@@ -1,0 +1,102 @@
+"""The CUDA target without a GPU: numba's CUDA simulator runs the device kernels (compiled from the same
+plain-Python source as the CPU kernels) and must agree with the CPU kernels; real-GPU checks are marked ``gpu``."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXED = ("RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4")
+
+
+@pytest.fixture(scope="module")
+def report():
+    """The simulator run (a child process: NUMBA_ENABLE_CUDASIM must be set before numba.cuda is imported)."""
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, str(Path(__file__).with_name("cuda_sim_check.py"))], capture_output=True, text=True,
+                          cwd=ROOT, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_the_simulator_stands_in_for_a_gpu(report):
+    assert report["simulated"] and report["available"] and report["device"] == "simulator"
+
+
+@pytest.mark.parametrize("method", FIXED + ("DOP853-numba",))
+def test_cuda_trajectories_equal_the_cpu_kernels(report, method):
+    """N = 5 bodies, two output intervals: states to 1e-14 (bit-identical in practice), the same statuses, nfev and failure times."""
+    r = report["methods"][method]
+    assert r["solve_diff"] <= 1e-14
+    assert r["solve_status_cuda"] == r["solve_status_cpu"]
+    assert r["solve_nfev_equal"] and r["solve_tfail_diff"] <= 1e-14
+    if method in FIXED:  # the fast spinner fails: the failure path ran on both targets
+        assert r["solve_status_cpu"][4] != 0 and r["solve_status_cpu"][:4].count(0) >= 3
+
+
+@pytest.mark.parametrize("method", FIXED + ("DOP853-numba",))
+def test_cuda_env_step_equals_the_cpu_kernels(report, method):
+    """One launch per env step on device arrays (controls on two bodies): the states, statuses and nfev of the CPU batch step."""
+    r = report["methods"][method]
+    assert r["env_diff"] <= 1e-14
+    assert r["env_status_cuda"] == r["env_status_cpu"]
+    assert r["env_nfev_equal"]
+
+
+def test_dop853_budget_status_on_both_targets(report):
+    r = report["dop853_budget"]
+    assert set(r["status_cpu"]) == {8} and r["status_cuda"] == r["status_cpu"]  # 8 = "budget"
+    assert r["nfev_equal"] and r["diff"] == 0.0  # NaN rows in the same places on both
+
+
+def test_simulate_batch_on_cuda_equals_cpu(report):
+    r = report["simulate_batch"]
+    assert r["device"] == "cuda" and r["status_equal"] and r["diff"] <= 1e-14
+
+
+def _real_gpu() -> bool:
+    if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0"):
+        return False
+    from flatbody_env.integrators import cuda
+
+    return cuda.is_available()
+
+
+@pytest.mark.gpu
+def test_real_gpu_agrees_with_the_cpu_kernels():
+    """On a CUDA GPU: 4,096 bodies, 20 RK4 env steps and a DOP853 trajectory against the CPU kernels (FMA contraction on the
+    GPU allows round-off differences)."""
+    if not _real_gpu():
+        pytest.skip("no CUDA GPU here")
+    from flatbody_env import load_scene, simulate_batch
+    from flatbody_env.integrators import batch_solve as bs
+    from flatbody_env.integrators import cuda
+    from flatbody_env.integrators.compiled_methods import kernel_params
+    from flatbody_env.physics.state import pack
+
+    scene = load_scene("default")
+    rng = np.random.default_rng(0)
+    n = 4096
+    Y0 = np.tile(pack(scene.state), (n, 1))
+    Y0[:, :7] += 0.05 * rng.normal(size=(n, 7))
+    P = kernel_params(scene.body)
+    Ys, U = np.ascontiguousarray(Y0.T), np.zeros((4, n))
+    cpu = Ys.copy()
+    d_Y = cuda.cuda.to_device(Ys)
+    for _ in range(20):
+        out, st, nf = np.empty_like(cpu), np.zeros(n, np.int64), np.zeros(n, np.int64)
+        bs.batch_env_step(bs.RK4_KIND, bs.STRANG, cpu, U, P, 0.05, 0.0125, 1e-11, 1e-11, np.inf, out, st, nf)
+        cpu = out
+        d_Y, d_st, _ = cuda.env_step("RK4", d_Y, cuda.cuda.to_device(U), cuda.cuda.to_device(P), 0.05, h=0.0125)
+        assert (d_st.copy_to_host() == st).all()
+    assert np.max(np.abs(d_Y.copy_to_host() - cpu)) <= 1e-11
+    a = simulate_batch(scene.body, Y0[:256], times=[1.0, 2.0], method="DOP853-numba", device="cpu")
+    b = simulate_batch(scene.body, Y0[:256], times=[1.0, 2.0], method="DOP853-numba", device="cuda")
+    assert (a.status == b.status).all() and np.nanmax(np.abs(a.state - b.state)) <= 1e-9
