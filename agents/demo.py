@@ -3,7 +3,7 @@
 The shipped agent steers the body from a seeded off-equilibrium state onto a stable stationary
 ellipse (``FlatBody-v0``, default task) for one 400-step episode; the command prints the target,
 the distance over time and whether the episode ended on the target, and writes a rerun recording
-(through :func:`flatbody_env.recording.writer.record_arrays`, when that module is present).
+through :class:`flatbody_env.recording.wrapper.RerunRecorder` (the one way an env episode is recorded).
 """
 
 from __future__ import annotations
@@ -15,23 +15,40 @@ from typing import Any
 import numpy as np
 
 
-def rollout(agent, *, seed: int, env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+def rollout(
+    agent,
+    *,
+    seed: int,
+    env_kwargs: dict[str, Any] | None = None,
+    record_to: str | Path | None = None,
+    title: str | None = None,
+) -> dict[str, Any]:
     """One seeded episode of ``agent`` (a batch policy) with the rotation tracked.
 
-    Returns t (n,), states (11, n), rotations (n, 3, 3), actions (n, k) (row j: the action applied
-    on [t_j, t_{j+1}); the last row is zero), reward_terms (dict of (n,) arrays; entry j: the reward
-    received on arriving at t_j, zero at t = 0), distance (n,), energy (n,), target, success,
-    tolerance.
+    With ``record_to`` the episode is also written to that ``.rrd`` file through
+    :class:`flatbody_env.recording.wrapper.RerunRecorder` — the one way an env episode is recorded.
+
+    Returns t (n,), states (11, n), actions (n, k) (row j: the action applied on [t_j, t_{j+1});
+    the last row is zero), reward_terms (dict of (n,) arrays; entry j: the reward received on
+    arriving at t_j, zero at t = 0), distance (n,), energy (n,), target, success, tolerance,
+    body and ``path`` (the recording, or None). Only the env's public surface is read
+    (``state``, ``target``, ``info``).
     """
     import gymnasium as gym
 
     import flatbody_env  # noqa: F401  (registers FlatBody-v0)
 
     env = gym.make("FlatBody-v0", track_rotation=True, **(env_kwargs or {}))
+    recorder = None
+    if record_to is not None:
+        from flatbody_env.recording.wrapper import RerunRecorder
+
+        env = recorder = RerunRecorder(env, record_to, title=title)
     u = env.unwrapped
+
     obs, info = env.reset(seed=seed)
     k = env.action_space.shape[0]
-    t, states, rots, acts, dist, energy = [0.0], [u.physics_state], [u.rotation], [], [info["distance"]], [info["energy"]]
+    t, states, acts, dist, energy = [0.0], [u.physics_state], [], [info["distance"]], [info["energy"]]
     terms: dict[str, list[float]] = {}
     done = False
     while not done:
@@ -40,26 +57,26 @@ def rollout(agent, *, seed: int, env_kwargs: dict[str, Any] | None = None) -> di
         done = term or trunc
         t.append(info["t"])
         states.append(u.physics_state)
-        rots.append(u.rotation)
         acts.append(np.clip(a, -1, 1).astype(np.float64))
         dist.append(info["distance"])
         energy.append(info["energy"])
         for name, v in info["reward_terms"].items():
             terms.setdefault(name, [0.0]).append(v)
+    target = u.target
     env.close()
     return {
         "t": np.array(t),
         "states": np.array(states).T,
-        "rotations": np.array(rots),
         "actions": np.array(acts + [np.zeros(k)]),
         "reward_terms": {n: np.array(v) for n, v in terms.items()},
         "distance": np.array(dist),
         "energy": np.array(energy),
-        "target": u.target,
+        "target": target,
         "success": bool(info["is_success"]),
         "failure": info.get("integrator_failure") or info.get("left_domain"),
         "tolerance": u.task.success_tolerance,
         "body": u.body,
+        "path": recorder.recorded_paths[0] if recorder is not None and recorder.recorded_paths else None,
     }
 
 
@@ -93,31 +110,14 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
     return "\n".join(lines)
 
 
-def record_episode(ep: dict[str, Any], out: str | Path, *, title: str) -> Path:
-    """Write a :func:`rollout` episode to a rerun recording (``flatbody_env.recording.writer``)."""
-    from flatbody_env.recording import writer as recording
-
-    k = ep["actions"].shape[1]
-    return recording.record_arrays(
-        ep["t"], ep["states"], ep["rotations"], ep["body"], out,
-        energy=ep["energy"],
-        actions=ep["actions"],
-        action_names=("tau1", "tau2", "tau3", "f_rho") if k == 4 else None,
-        reward_terms=ep["reward_terms"],
-        target={name: ep["target"][name] for name in ("lambda", "mu", "rho", "s3", "p_theta", "energy")},
-        title=title,
-    )
-
-
 def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd") -> int:
     """Run the demo; returns the exit code (0 also when the agent misses: the summary says so)."""
     from agents.evaluate import Agent
 
     agent = Agent(model)
-    ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs)
+    ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs, record_to=out or None, title=f"flatbody demo (seed {seed})")
     label = "the shipped agent" if model is None else f"agent {agent.path}"
     print(format_demo(ep, seed=seed, label=label))
-    if out:
-        record_episode(ep, out, title=f"flatbody demo (seed {seed})")
-        print(f"wrote {out} (open with: rerun {out})")
+    if ep["path"] is not None:
+        print(f"wrote {ep['path']} (open with: rerun {ep['path']})")
     return 0

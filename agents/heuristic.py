@@ -67,7 +67,8 @@ makes L̇ ≤ 0). The velocities come from the inverse Legendre map
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 .. [2] ``docs/physics.md``: the corrected equations and the paper's errata.
 """
 

@@ -226,6 +226,7 @@ def train(
     threads: int = 1,
     progress: bool = True,
     command: list[str] | None = None,
+    extra_callbacks: list | None = None,
 ) -> TrainResult:
     """Train ``algo`` on ``env_id`` with the YAML hyperparameters and save everything in ``out``.
 
@@ -236,6 +237,8 @@ def train(
     resume : bool
         Continue from the newest checkpoint in ``out/checkpoints`` (same hyperparameters: the
         saved ``config.yml`` is used) up to the total ``n_timesteps``.
+    extra_callbacks : list, optional
+        SB3 callbacks added to the run (e.g. the intermediate evaluations of :mod:`agents.tune`).
     """
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
@@ -308,7 +311,7 @@ def train(
         (out / "config.yml").write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     model.set_logger(configure(str(out), ["csv"]) if not resume else configure(str(out / f"resumed-{start}"), ["csv"]))
 
-    callbacks = [_progress_callback(total, start, progress)]
+    callbacks = [_progress_callback(total, start, progress), *(extra_callbacks or [])]
     if checkpoint_freq and checkpoint_freq > 0:
         callbacks.append(
             CheckpointCallback(

@@ -1,10 +1,10 @@
 """Analysis of the flat body: stationary ellipses, stability, invariants (uses physics + integrators only)."""
 
-# Stationary ellipses, stability, families, invariants (issue 5): exported lazily (PEP 562) so that
+# Stationary ellipses, stability, families, invariants: exported lazily (PEP 562) so that
 # importing ``flatbody_env.cli.analysis`` for ``flatbody --help`` does not load scipy.optimize.
 _LAZY = {
     "families": ("Family", "FamilyEvent", "FamilyPoint", "follow_family", "shape_stability_grid", "stability_grid"),
-    "invariants": ("DriftRow", "InvariantReport", "invariants_along", "load_trajectory"),
+    "invariants": ("DriftRow", "InvariantReport", "invariants_along"),
     "stability": ("StabilityResult", "ZeroMode", "analyse_stability", "reduced_jacobian", "sample_stable_target",
                   "stability_of", "stability_of_shape", "steady_rotation_stability"),
     "stationary": ("SearchBox", "StationaryEllipse", "spins_for_shape", "stationary_ellipses", "steady_rotations",

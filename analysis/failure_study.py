@@ -1,4 +1,4 @@
-"""Where integrators fail (issue 3): error and cost as a scene gets harder along three axes.
+"""Where integrators fail: error and cost as a scene gets harder along three axes.
 
 * ``gap`` — closest approach to λ = μ: the close-approach scene with σ₋ = s3 − p_θ = δ
   (:func:`gap_scene`); the measured relative gap min (λ − μ)/λ shrinks with δ (about ∝ δ).

@@ -19,8 +19,8 @@ of classification are reported as stability changes.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, eqs. (52)–(54).
-.. [2] ``shared/physics/NOTES.md``, §6–§7.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009), eqs. (52)–(54).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]), §6–§7.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ BODY_PARAMETERS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
 PARAMETERS = SPIN_PARAMETERS + BODY_PARAMETERS
 GAP_MIN = 1e-3
 """A branch stops where (λ − μ)/(λ + μ) falls below this or changes sign (the circle λ = μ is
-outside the two-polar chart; for symmetric V the ellipses tend to it as s3 → p_θ, NOTES §5–§6)."""
+outside the two-polar chart; for symmetric V the ellipses tend to it as s3 → p_θ, docs/physics.md §7–§8)."""
 
 CSV_COLUMNS = (
     "branch", "event", "param_name", "param", "lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot",
@@ -509,7 +509,7 @@ SHAPE_COLUMNS = ("lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot", 
 
 def shape_stability_grid(body: Body, lam_values, mu_values) -> list[dict[str, Any]]:
     """For each shape (λ, μ) with λ > μ on the grid: the spins that make it stationary (inverse problem,
-    NOTES §6) — one rigid-like (|s3| > |p_θ|) and one circulating (|p_θ| > |s3|) solution with σ₊ ≥ 0 —
+    docs/physics.md §8) — one rigid-like (|s3| > |p_θ|) and one circulating (|p_θ| > |s3|) solution with σ₊ ≥ 0 —
     and their stability. Shapes that cannot be stationary give no row."""
     rows = []
     for lam in lam_values:

@@ -9,7 +9,7 @@ name                   definition                                               
 ``energy``             H (eq. (41) of [1])                                                   yes
 ``casimir``            |s|² (eq. (43) of [1])                                                yes
 ``p_theta``            p_θ (eq. (46) of [1], J1 = J2)                                        yes
-``lab_spin``           R s (NOTES §4; needs R)                                               yes
+``lab_spin``           R s (docs/physics.md §6; needs R)                                               yes
 ``K1, K2, K3``         deformation invariants: eigenvalues of G = ΦᵀΦ, ascending             at stationary
                        (eqs. (34)–(35) of [1]: {λ², μ², ϱ²})                                 ellipses only
 ``trace_G, det_G``     tr G = λ²+μ²+ϱ², det G = (λμϱ)²                                       idem
@@ -18,17 +18,17 @@ name                   definition                                               
 =====================  ====================================================================  ===========
 
 At a stationary ellipse Ġ and Ċ are non-zero (G and C rotate rigidly) while every invariant is
-constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (E7 of NOTES.md).
+constant — the remark at eq. (51) of [1], with C = R D⁻² R⁻¹ (erratum E7, docs/physics.md).
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, eqs. (33)–(35), (41), (51).
-.. [2] ``shared/physics/NOTES.md``, §4, E7.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §4, E7.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,11 +40,11 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.invariants import casimir, laboratory_spin
 from flatbody_env.physics.hamiltonian import hamiltonian_series, velocities_from_momenta
 from flatbody_env.physics.kinematics import cauchy_rate, cauchy_tensor, deformation_invariants, green_rate, green_tensor
-from flatbody_env.simulation import Trajectory
+from flatbody_env.simulation import Trajectory, read_trajectory
 from flatbody_env.physics.state import STATE_NAMES
 
 CONSERVED = ("energy", "casimir", "p_theta", "lab_spin")
-"""Quantities conserved along every uncontrolled isotropic motion (NOTES §4)."""
+"""Quantities conserved along every uncontrolled isotropic motion (docs/physics.md §6)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -105,48 +105,14 @@ class InvariantReport:
         }
 
 
-def load_trajectory(path: str | Path) -> dict[str, Any]:
-    """Read a trajectory saved by ``flatbody simulate --out FILE`` (JSON; ValueError naming the field if malformed)."""
-    p = Path(path)
-    if not p.exists():
-        raise ValueError(f"trajectory: no file {str(p)!r}")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"trajectory: {p} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    _check_dict(data)
-    return data
-
-
-def _check_dict(data: Any) -> None:
-    if not isinstance(data, Mapping):
-        raise ValueError("trajectory: expected a JSON object with 't' and 'state'")
-    for key in ("t", "state"):
-        if key not in data:
-            raise ValueError(f"trajectory.{key}: missing field (save with 'flatbody simulate --out FILE')")
-    n = len(data["t"])
-    if n < 1:
-        raise ValueError("trajectory.t: must hold at least one time")
-    for name in STATE_NAMES:
-        if name not in data["state"]:
-            raise ValueError(f"trajectory.state.{name}: missing field")
-        if len(data["state"][name]) != n:
-            raise ValueError(f"trajectory.state.{name}: expected {n} values (one per time)")
-    if "rotation" in data and np.asarray(data["rotation"], float).shape != (n, 3, 3):
-        raise ValueError(f"trajectory.rotation: expected shape ({n}, 3, 3)")
-
-
-def _arrays(source: Trajectory | Mapping[str, Any]):
-    if isinstance(source, Trajectory):
-        return source.t, source.y, source.rotation, source.energy
-    _check_dict(source)
-    t = np.asarray(source["t"], float)
-    Y = np.array([np.asarray(source["state"][n], float) for n in STATE_NAMES])
-    R = np.asarray(source["rotation"], float) if "rotation" in source else None
-    E = np.asarray(source["energy"], float) if "energy" in source else None
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(Y))):
-        raise ValueError("trajectory.state: must hold finite numbers")
-    return t, Y, R, E
+def _arrays(source: Trajectory | Mapping[str, Any] | str | Path):
+    """(t, Y, R, E) of a trajectory, its JSON form or a saved file (read and validated by
+    :func:`flatbody_env.simulation.read_trajectory` / :meth:`Trajectory.from_dict`)."""
+    if isinstance(source, (str, Path)):
+        source = read_trajectory(source)
+    elif not isinstance(source, Trajectory):
+        source = Trajectory.from_dict(source)
+    return source.t, source.y, source.rotation, (source.energy if source.has_energy else None)
 
 
 def _row(name: str, q: np.ndarray, conserved: bool) -> DriftRow:
@@ -177,8 +143,6 @@ def invariants_along(source: Trajectory | Mapping[str, Any] | str | Path, body: 
     -------
     InvariantReport
     """
-    if isinstance(source, (str, Path)):
-        source = load_trajectory(source)
     t, Y, R, E = _arrays(source)
     st = {n: Y[i] for i, n in enumerate(STATE_NAMES)}
     lam, mu, rho, theta = st["lambda"], st["mu"], st["rho"], st["theta"]
@@ -230,4 +194,4 @@ def format_drift_table(report: InvariantReport) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CONSERVED", "DriftRow", "InvariantReport", "format_drift_table", "invariants_along", "load_trajectory"]
+__all__ = ["CONSERVED", "DriftRow", "InvariantReport", "format_drift_table", "invariants_along"]

@@ -1,4 +1,4 @@
-"""Linear (spectral) and energy–Casimir stability of stationary ellipses (NOTES §7 of [2]).
+"""Linear (spectral) and energy–Casimir stability of stationary ellipses (docs/physics.md §9 of [2]).
 
 For J1 = J2 the angle θ is cyclic (ṗ_θ = 0, eq. (46) of [1]), so a stationary ellipse is an
 equilibrium of the *reduced* system x = (s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ, λ, μ, ϱ) — the
@@ -24,13 +24,13 @@ The energy–Casimir test (sufficient for nonlinear stability): at a relative eq
 ``nonlinear`` is then ``"stable"``; ``"unstable"`` for hyperbolic ones; ``"inconclusive"``
 otherwise.
 
-Cross-check (NOTES §7): on branch N the out-of-plane block decouples, s̈1 = q s1 with
+Cross-check (docs/physics.md §9): on branch N the out-of-plane block decouples, s̈1 = q s1 with
 q = (s3/I2 − ω3)(ω3 − s3/I1); its eigenvalues are ±√q (``out_of_plane_q``).
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, eqs. (44)–(54).
-.. [2] ``shared/physics/NOTES.md``, §6–§7.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009), eqs. (44)–(54).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]), §6–§7.
 """
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ class StabilityResult:
     energy_casimir_eigenvalues: tuple[float, ...]
     """Eigenvalues of the restricted Hessian of H − a|s|² − b p_θ."""
     out_of_plane_q: float | None
-    """q of NOTES §7 (branch N only): the out-of-plane block has eigenvalues ±√q."""
+    """q of docs/physics.md §9 (branch N only): the out-of-plane block has eigenvalues ±√q."""
     jacobian: np.ndarray = field(repr=False, compare=False)
     """The reduced Jacobian, shape (10, 10), order :data:`REDUCED_NAMES`."""
     notes: tuple[str, ...] = ()
@@ -169,7 +169,7 @@ def reduced_jacobian(body: Body, y: np.ndarray) -> np.ndarray:
     """∂ẋ/∂x of the reduced system (θ dropped) at the packed state ``y`` (11,), shape (10, 10).
 
     Order :data:`REDUCED_NAMES`. Differentiates :func:`flatbody_env.physics.equations.rhs` (eqs. (44)–(49)
-    of [1] with the corrected bracket, NOTES E3–E4).
+    of [1] with the corrected bracket, erratum E3–E4).
     """
     check_isotropic(body)
     y = np.asarray(y, float)
@@ -198,7 +198,7 @@ def hamiltonian_hessian(body: Body, x: np.ndarray) -> np.ndarray:
 
 
 def out_of_plane_q(body: Body, ell: StationaryEllipse) -> float | None:
-    """q = (s3/I2 − ω3)(ω3 − s3/I1) of NOTES §7 (branch N); the block (s1, s2) has eigenvalues ±√q."""
+    """q = (s3/I2 − ω3)(ω3 − s3/I1) of docs/physics.md §9 (branch N); the block (s1, s2) has eigenvalues ±√q."""
     if ell.branch != "N":
         return None
     J, J3 = body.inertia.J1, body.inertia.J3
@@ -340,7 +340,7 @@ def stability_of_shape(body: Body, lam: float, mu: float, *, include_reversed: b
 
 
 def steady_rotation_stability(body: Body, spin: float, *, box: SearchBox | None = None) -> list[StabilityResult]:
-    """Branch A (NOTES §6) steady rotations about in-plane axes with their stability."""
+    """Branch A (docs/physics.md §8) steady rotations about in-plane axes with their stability."""
     return [analyse_stability(body, e) for e in steady_rotations(body, spin, box=box)]
 
 

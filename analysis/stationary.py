@@ -2,7 +2,7 @@
 
 Branch N (the paper's, eqs. (52)–(54) of [1]): s1 = s2 = 0, all shape momenta zero, λ, μ, ϱ
 constant, ω3 and θ̇ constant. With u = λ + μ, v = λ − μ and σ± = s3 ± p_θ, eqs. (52)–(53) are
-equivalent to (NOTES §6 of [2])
+equivalent to (docs/physics.md §8 of [2])
 
 .. math::
     \\frac{\\partial V}{\\partial\\lambda} = \\frac{\\sigma_+^2}{2Ju^3} + \\frac{\\sigma_-^2}{2Jv^3},
@@ -15,7 +15,7 @@ i.e. stationarity of the amended potential W = σ₊²/(4Ju²) + σ₋²/(4Jv²)
 .. math:: \\omega_3 = \\frac{\\sigma_+}{2Ju^2} + \\frac{\\sigma_-}{2Jv^2}, \\qquad
    \\dot\\theta = \\frac{\\sigma_+}{2Ju^2} - \\frac{\\sigma_-}{2Jv^2}.
 
-V1 has the closed form (λ+μ)⁴ = σ₊²/(kJ), (λ−μ)⁴ = σ₋²/(kJ) (NOTES §6), used by
+V1 has the closed form (λ+μ)⁴ = σ₊²/(kJ), (λ−μ)⁴ = σ₋²/(kJ) (docs/physics.md §8), used by
 :func:`v1_closed_form`; every other potential (V2, V3, :class:`~flatbody_env.physics.potentials.CustomPotential`)
 is solved numerically by :func:`stationary_ellipses`: sign changes of the equations on a
 logarithmic grid over a search box seed a Newton (MINPACK ``hybr``) solve; each root is then
@@ -23,21 +23,22 @@ verified on the package's equations of motion (:func:`flatbody_env.physics.equat
 *residual* of a solution is max |dy/dt| over the ten reduced components (θ excluded, it is
 cyclic), and only roots with residual ≤ ``tol`` (default 1e-10) are returned.
 
-Branch A (beyond the paper, erratum E8 / NOTES §6): steady rotations about an in-plane axis,
+Branch A (beyond the paper, erratum E8 / docs/physics.md §8): steady rotations about an in-plane axis,
 s = (s1, 0, 0), p_θ = 0: ∂V/∂λ = 0, ∂V/∂μ = Jμ s1²/I1², V_ϱ′ = J3 ϱ s1²/I1² (I1 = Jμ² + J3ϱ²),
 and the analogue about axis 2 — :func:`steady_rotations`.
 
-The inverse problem (shape → spins): σ₊² = 2Ju³ ∂V/∂u, σ₋² = 2Jv³ ∂V/∂v (NOTES §6) —
+The inverse problem (shape → spins): σ₊² = 2Ju³ ∂V/∂u, σ₋² = 2Jv³ ∂V/∂v (docs/physics.md §8) —
 :func:`spins_for_shape`.
 
 Symmetric potentials (V1, V3, V2 with c = d, custom ones found symmetric) have the chart
-symmetry (λ, μ, θ) ~ (μ, λ, θ + π/2) (NOTES §5), so only λ > μ is searched; for V2 with c ≠ d
-both orders are distinct ellipses (the c-axis long or short, NOTES §6) and both are searched.
+symmetry (λ, μ, θ) ~ (μ, λ, θ + π/2) (docs/physics.md §7), so only λ > μ is searched; for V2 with c ≠ d
+both orders are distinct ellipses (the c-axis long or short, docs/physics.md §8) and both are searched.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, section 3.4, eqs. (50)–(54).
-.. [2] ``shared/physics/NOTES.md``, §6 (and errata E7, E8).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (verified formulas and errata of [1]), §6 (and errata E7, E8).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ import numpy as np
 from scipy.optimize import root
 
 from flatbody_env.physics.body import Body
-from flatbody_env.physics.equilibria import squared_sigmas
+from flatbody_env.physics.equilibria import StationaryEllipse, squared_sigmas
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, potential_kernel
@@ -96,70 +97,6 @@ class SearchBox:
             raise ValueError(f"box.n_rho: must be an integer in [4, 401], got {self.n_rho!r}")
 
 
-@dataclass(frozen=True, kw_only=True)
-class StationaryEllipse:
-    """One relative equilibrium: λ, μ, ϱ, ω, θ̇ constant (eq. (50) of [1])."""
-
-    branch: str
-    """``"N"`` (s1 = s2 = 0, eqs. (52)–(54)), ``"A1"`` / ``"A2"`` (rotation about material axis 1 / 2)."""
-    state: dict[str, float]
-    """The full state (the eleven :data:`~flatbody_env.physics.state.STATE_NAMES`), θ = 0."""
-    omega: tuple[float, float, float]
-    """Co-moving angular velocity (ω1, ω2, ω3)."""
-    theta_dot: float
-    """Material angular velocity θ̇."""
-    energy: float
-    """H (eq. (41) of [1])."""
-    residual: float
-    """max |dy/dt| over the ten reduced components (θ excluded), from :func:`flatbody_env.physics.equations.rhs`."""
-    method: str = "numeric"
-    """``"closed-form"`` (V1), ``"numeric"`` (root finding) or ``"inverse"`` (from a shape)."""
-
-    @property
-    def omega3(self) -> float:
-        return self.omega[2]
-
-    @property
-    def lam(self) -> float:
-        return self.state["lambda"]
-
-    @property
-    def mu(self) -> float:
-        return self.state["mu"]
-
-    @property
-    def rho(self) -> float:
-        return self.state["rho"]
-
-    @property
-    def s3(self) -> float:
-        return self.state["s3"]
-
-    @property
-    def p_theta(self) -> float:
-        return self.state["p_theta"]
-
-    @property
-    def y(self) -> np.ndarray:
-        """Packed state, shape (11,)."""
-        return np.array([self.state[name] for name in STATE_NAMES], dtype=float)
-
-    @property
-    def kind(self) -> str:
-        """``"rigid"`` when |ω3| > |θ̇| (the figure turns in space), ``"circulating"`` when |θ̇| > |ω3|."""
-        return "rigid" if abs(self.omega[2]) >= abs(self.theta_dot) else "circulating"
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"state", "omega3", "theta_dot", "energy", "residual"}`` (the ``flatbody ellipses --json`` row)."""
-        return {
-            "state": {name: float(self.state[name]) for name in STATE_NAMES},
-            "omega3": float(self.omega[2]),
-            "theta_dot": float(self.theta_dot),
-            "energy": float(self.energy),
-            "residual": float(self.residual),
-        }
-
-
 # --------------------------------------------------------------------------------------------
 # checks and helpers
 # --------------------------------------------------------------------------------------------
@@ -173,7 +110,7 @@ def check_isotropic(body: Body) -> float:
             f"got J1 = {body.inertia.J1:g}, J2 = {body.inertia.J2:g}"
         )
     if body.spin_convention != "corrected":
-        raise ValueError("spin_convention: the analysis uses the corrected bracket (NOTES E3); got 'paper'")
+        raise ValueError("spin_convention: the analysis uses the corrected bracket (erratum E3); got 'paper'")
     return float(body.inertia.J1)
 
 
@@ -237,8 +174,8 @@ def equilibrium_equations(body: Body, branch: str, params: tuple[float, float], 
     """The force balance of a branch, vectorised: (F_λ, F_μ, F_ϱ) = (ṗ_λ, ṗ_μ, ṗ_ϱ) at the candidate state.
 
     Branch N: F = (−V_λ + A + B, −V_μ + A − B, −V_ϱ), A = σ₊²/(2Ju³), B = σ₋²/(2Jv³) (eqs. (52)–(54)
-    of [1], NOTES §6), ``params = (s3, p_θ)``. Branch A1: F = (−V_λ, −V_μ + Jμc, −V_ϱ + J3ϱc),
-    c = s²/I1²; A2: (−V_λ + Jλc, −V_μ, −V_ϱ + J3ϱc), c = s²/I2² (NOTES §6), ``params = (s, 0)``.
+    of [1], docs/physics.md §8), ``params = (s3, p_θ)``. Branch A1: F = (−V_λ, −V_μ + Jμc, −V_ϱ + J3ϱc),
+    c = s²/I1²; A2: (−V_λ + Jλc, −V_μ, −V_ϱ + J3ϱc), c = s²/I2² (docs/physics.md §8), ``params = (s, 0)``.
     """
     J = body.inertia.J1
     J3 = body.inertia.J3
@@ -302,7 +239,7 @@ def build_ellipse(body: Body, branch: str, params, lam: float, mu: float, rho: f
 # V1 closed form
 # --------------------------------------------------------------------------------------------
 def v1_closed_form(body: Body, s3: float, p_theta: float, *, rho: float | None = None) -> list[StationaryEllipse]:
-    """Branch N for V1 in closed form (NOTES §6): (λ+μ)⁴ = σ₊²/(kJ), (λ−μ)⁴ = σ₋²/(kJ).
+    """Branch N for V1 in closed form (docs/physics.md §8): (λ+μ)⁴ = σ₊²/(kJ), (λ−μ)⁴ = σ₋²/(kJ).
 
     λ, μ > 0 needs |σ₊| > |σ₋| (s3·p_θ > 0); σ₋ = 0 gives the circle λ = μ (outside the chart).
     Returns a list with zero or one ellipse (λ > μ).
@@ -525,7 +462,7 @@ def stationary_ellipses(
     s3, p_theta : float
         The conserved spin component and material momentum.
     method : {"auto", "closed-form", "numeric"}
-        ``"auto"``: the closed form for V1 (NOTES §6), root finding otherwise.
+        ``"auto"``: the closed form for V1 (docs/physics.md §8), root finding otherwise.
     box : SearchBox, optional
         Search ranges of the numerical solver.
     tol : float
@@ -549,7 +486,7 @@ def stationary_ellipses(
 def steady_rotations(
     body: Body, spin: float, *, axes: tuple[int, ...] = (1, 2), box: SearchBox | None = None, tol: float = DEFAULT_TOL
 ) -> list[StationaryEllipse]:
-    """Branch A (NOTES §6, beyond the paper, erratum E8): steady rotations about material axis 1 or 2.
+    """Branch A (docs/physics.md §8, beyond the paper, erratum E8): steady rotations about material axis 1 or 2.
 
     s = (s, 0, 0) [axis 1] or (0, s, 0) [axis 2], p_θ = 0, θ̇ = 0; λ, μ, ϱ solve
     ∂V/∂λ = 0, ∂V/∂μ = Jμ s²/I1², V_ϱ′ = J3ϱ s²/I1² (axis 1; I1 = Jμ² + J3ϱ²) or the axis-2 analogue.
@@ -580,11 +517,11 @@ def steady_rotations(
 def spins_for_shape(
     body: Body, lam: float, mu: float, *, rho: float | None = None, include_reversed: bool = False, tol: float = DEFAULT_TOL
 ) -> list[StationaryEllipse]:
-    """The (s3, p_θ) that make the shape (λ, μ) a stationary ellipse (NOTES §6), as full solutions.
+    """The (s3, p_θ) that make the shape (λ, μ) a stationary ellipse (docs/physics.md §8), as full solutions.
 
     σ₊² = 2Ju³ ∂V/∂u and σ₋² = 2Jv³ ∂V/∂v with u = λ + μ, v = λ − μ, ∂V/∂u = (V_λ + V_μ)/2,
     ∂V/∂v = (V_λ − V_μ)/2. A shape is stationary iff both right-hand sides are ≥ 0 (for V3 and λ > μ:
-    iff λμ ≥ 1). The sign pairs (σ₊, σ₋) and (σ₊, −σ₋) are the dual pair (s3 ↔ p_θ, NOTES §6):
+    iff λμ ≥ 1). The sign pairs (σ₊, σ₋) and (σ₊, −σ₋) are the dual pair (s3 ↔ p_θ, docs/physics.md §8):
     one turns rigidly (|ω3| > |θ̇|), the other circulates (|θ̇| > |ω3|). With ``include_reversed``
     the time-reversed pair (−σ₊, ∓σ₋) is added.
 

@@ -1,6 +1,6 @@
-"""Work-precision study of the integrators (issue 3): error against cost, per method and scene.
+"""Work-precision study of the integrators: error against cost, per method and scene.
 
-Conventions (SciML's, NOTES §8): x = error of the final state (max over the 11 paper variables of
+Conventions (SciML's, docs/physics.md §10): x = error of the final state (max over the 11 paper variables of
 |y(T) − y_ref(T)|) against a tight reference that is cross-checked by an independent method (another
 chart and algorithm); its *agreement floor* (max |y_ref − y_cross|) is recorded and drawn — errors
 below it are not resolved. y = wall time, the minimum of repeats; a second measure is the number of

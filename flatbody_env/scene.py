@@ -15,7 +15,9 @@ A scene file is JSON::
     }
 
 Every error is a :class:`SceneError` (a ``ValueError``) whose message names the field
-(``params.J``, ``state.lambda``, …) and the allowed range.
+(``params.J``, ``state.lambda``, …) and the allowed range (the ranges are those of
+:mod:`flatbody_env.physics.validation`: constants in [1e-6, 1e6], λ, μ, ϱ in [1e-6, 1e6],
+momenta and θ within ±1e6, t_end in (0, 1e6]).
 
 Built-in scenes ship in ``flatbody_env/scenes/*.json`` (:func:`builtin_scenes`).
 """
@@ -78,6 +80,8 @@ def scene_from_dict(data: Mapping[str, Any], *, default_name: str = "scene") -> 
         state = validation.mapping("state", data["state"])
         validate_state(state)
         t_end = validation.number("t_end", data["t_end"], positive=True) if "t_end" in data else 20.0
+        if t_end > validation.T_END_MAX:
+            raise ValueError(f"t_end: must lie in (0, {validation.T_END_MAX:g}], got {t_end!r}")
         name = validation.string("name", data.get("name", default_name))
         description = validation.string("description", data.get("description", ""))
     except SceneError:
@@ -113,20 +117,24 @@ def load_scene(path_or_dict: str | Path | Mapping[str, Any]) -> Scene:
     SceneError
         (a ``ValueError``) naming the field and the allowed range.
     """
-    if isinstance(path_or_dict, Mapping):
-        return scene_from_dict(path_or_dict)
     if isinstance(path_or_dict, Scene):
         return path_or_dict
+    if isinstance(path_or_dict, Mapping):
+        return scene_from_dict(path_or_dict)
+    if not isinstance(path_or_dict, (str, Path)):
+        raise SceneError(f"scene: expected a scene dict, a JSON path or a built-in name, got {type(path_or_dict).__name__}")
     path = Path(path_or_dict)
-    if not path.exists():
+    try:
+        exists = path.exists()
+    except (OSError, ValueError) as exc:  # a name too long, a NUL byte
+        raise SceneError(f"scene: cannot use {str(path_or_dict)[:60]!r} as a path ({exc})") from None
+    if not exists:
         scenes = builtin_scenes()
         if str(path_or_dict) in scenes:
             return scenes[str(path_or_dict)]
         raise SceneError(f"scene: no file {str(path)!r} and no built-in scene of that name (built-in: {', '.join(scenes)})")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"scene: {path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    except OSError as exc:
-        raise SceneError(f"scene: cannot read {path} ({exc.strerror})") from None
+        data = validation.read_json("scene", path)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     return scene_from_dict(data, default_name=path.stem)

@@ -2,9 +2,15 @@
 
 Model selection ("model no more than a scene needs")
 -----------------------------------------------------
-``model="auto"`` integrates the two-polar equations (eqs. (44)–(49) of [1], 11 variables,
-cheapest) when the scene provably stays away from the chart's singular set λ = μ, and the
-regular matrix formulation (NOTES §5 of [2], 18 variables plus two constraints) otherwise:
+``model="auto"`` picks the lowest rung of the model ladder (:mod:`flatbody_env.integrators.ladder`)
+that the initial state, the body and the controls allow: a stationary ellipse (exact), planar
+motion with V1 (exact in-plane), planar motion (two small systems) — these three with an
+adaptive method only — then the two-polar equations (eqs. (44)–(49) of [1], 11 variables)
+when the scene provably stays away from the chart's singular set λ = μ, and the regular
+matrix formulation (18 variables plus two constraints) otherwise. ``model=`` names a rung to
+force it (a ``ValueError`` says which invariant the scene breaks); ``Trajectory.model`` and
+``meta["rung"]`` name the rung, ``meta["rung_invariant"]`` / ``meta["rung_measured"]`` why.
+Between the two full models:
 
 * J1 = J2 (p_θ and σ₋ = s3 − p_θ conserved) and the energy bound of the centrifugal barrier
   σ₋²/(4J(λ−μ)²) ≤ H − inf V gives |λ − μ| ≥ |σ₋| / √(4J (H − inf V)) ≥ :data:`GAP_MIN`
@@ -15,14 +21,26 @@ A method name that belongs to one chart (``"DOP853"`` two-polar, ``"DOP853-regul
 mapped to its twin in the chosen chart when one exists; a method without a twin (the compiled
 ones, e.g. ``"RK4"``) runs in its own chart, and a failure near λ = μ is reported
 (:class:`IntegrationError`), not hidden. Fixed-step methods need ``step=``.
+
+Output times follow scipy's ``t_eval`` convention: a trajectory holds exactly the requested
+times; the initial state is :attr:`Trajectory.initial_state`. Every run has a work budget
+(``max_nfev``, ``max_wall_time``; :class:`~flatbody_env.integrators.Tolerances`).
+
+References
+----------
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the corrected equations and the errata of [1].
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -30,24 +48,25 @@ import numpy as np
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.invariants import casimir, laboratory_spin
 from flatbody_env.physics.hamiltonian import hamiltonian
-from flatbody_env.integrators import IntegrationError, Tolerances, get_method
-from flatbody_env.scene import Scene, SceneError, load_scene
-from flatbody_env.physics.state import STATE_NAMES, pack, unpack
+from flatbody_env.integrators import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, IntegrationError, Tolerances, get_method
+from flatbody_env.integrators.base import Solution, check_step
+from flatbody_env.physics import validation
+from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
+from flatbody_env.scene import Scene, load_scene
 
-GAP_MIN = 1e-2
-"""Smallest guaranteed |λ − μ| for which ``model="auto"`` keeps the two-polar chart."""
+from flatbody_env.integrators.ladder import GAP_MIN, LADDER_RUNGS, RUNGS, RungChoice, check_rung, choose_rung, rung_model, rung_reasons
 
 FIXED_STEP_ENERGY_TOL = 1e-3
 """Default relative energy tolerance of fixed-step methods (a blow-up detector, not an accuracy target)."""
 
-MODELS = ("auto", "two-polar", "regular")
+MODELS = ("auto",) + RUNGS
 DEFAULT_SAMPLES = 101
 
 
 def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
     """A rigorous lower bound of |λ − μ| along the uncontrolled isotropic motion (0 if none).
 
-    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], NOTES §3) non-negative,
+    From H = 𝒯 + V with every term of 𝒯 (eq. (32) of [1], docs/physics.md §4) non-negative,
     σ₋²/(4J(λ−μ)²) ≤ H − inf V, so |λ − μ| ≥ |σ₋| / √(4J(H − inf V)).
     """
     y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
@@ -63,9 +82,26 @@ def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> floa
     return sigma_minus / math.sqrt(4.0 * body.inertia.J1 * avail)
 
 
-def choose_model(state: Mapping[str, float] | np.ndarray, body: Body) -> str:
-    """``"two-polar"`` or ``"regular"`` per the rule in the module docstring."""
-    return "two-polar" if gap_lower_bound(state, body) >= GAP_MIN else "regular"
+def choose_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> str:
+    """The rung ``model="auto"`` runs (:data:`MODELS`), per the rule in the module docstring."""
+    return explain_model(state, body, u, ladder=ladder).rung
+
+
+def explain_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> RungChoice:
+    """The rung ``model="auto"`` runs and why (:class:`~flatbody_env.integrators.ladder.RungChoice`);
+    ``ladder=False`` chooses between the two full models only."""
+    y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
+    if ladder:
+        low = choose_rung(y, body, u)
+        if low is not None:
+            return low
+    bound = gap_lower_bound(y, body) if u is None or not np.any(u) else 0.0
+    if bound >= GAP_MIN:
+        return RungChoice(rung="two-polar", invariant=f"J1 = J2 and the energy bound keeps |lambda - mu| >= {bound:.3g} >= {GAP_MIN:g}",
+                          measured={"gap_lower_bound": float(bound)})
+    why = "; ".join(f"{r}: {t}" for r, t in rung_reasons(y, body, u).items() if t)
+    return RungChoice(rung="regular", invariant=f"no lower rung holds (two-polar: |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} guaranteed"
+                      + (f"; {why})" if why else ")"), measured={"gap_lower_bound": float(bound)})
 
 
 @dataclass
@@ -92,6 +128,10 @@ class Trajectory:
         Right-hand-side evaluations.
     wall_time : float
         Seconds spent integrating.
+    initial_state : dict[str, float] or None
+        The state at t = 0 (the scene's), whether or not 0 is among the output times.
+    initial_energy : float or None
+        H at t = 0; with ``initial_state`` the reference of :meth:`drift`.
     """
 
     t: np.ndarray
@@ -106,10 +146,12 @@ class Trajectory:
     wall_time: float = 0.0
     scene: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    initial_state: dict[str, float] | None = None
+    initial_energy: float | None = None
 
     @property
     def lab_spin(self) -> np.ndarray | None:
-        """R s, shape (n, 3) (conserved with the corrected bracket, NOTES §4), or None without R."""
+        """R s, shape (n, 3) (conserved with the corrected bracket, docs/physics.md §6), or None without R."""
         if self.rotation is None:
             return None
         s = np.stack([self.state["s1"], self.state["s2"], self.state["s3"]], axis=-1)
@@ -121,11 +163,18 @@ class Trajectory:
         return np.stack([self.state[name] for name in STATE_NAMES])
 
     def drift(self) -> dict[str, float]:
-        """Max |q(t) − q(0)| of H, |s|², p_θ (and |R s − R₀ s₀| when R is known)."""
+        """Max |q(t) − q(0)| of H, |s|², p_θ (and |R s − R(t₀) s(t₀)| when R is known).
+
+        q(0) is the initial state's value when it is known (:attr:`initial_state`), else the first row's.
+        """
+        e0, c0, p0 = self.energy[0], self.casimir[0], self.p_theta[0]
+        if self.initial_state is not None and self.initial_energy is not None:
+            y0 = self.initial_state
+            e0, c0, p0 = self.initial_energy, float(casimir(y0["s1"], y0["s2"], y0["s3"])), y0["p_theta"]
         out = {
-            "energy": float(np.max(np.abs(self.energy - self.energy[0]))),
-            "casimir": float(np.max(np.abs(self.casimir - self.casimir[0]))),
-            "p_theta": float(np.max(np.abs(self.p_theta - self.p_theta[0]))),
+            "energy": float(np.max(np.abs(self.energy - e0))),
+            "casimir": float(np.max(np.abs(self.casimir - c0))),
+            "p_theta": float(np.max(np.abs(self.p_theta - p0))),
         }
         ls = self.lab_spin
         if ls is not None:
@@ -133,7 +182,8 @@ class Trajectory:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form: ``{"t", "state", "energy", "casimir", "p_theta", ["rotation"], "meta"}``."""
+        """JSON form: ``{"t", "state", "energy", "casimir", "p_theta", ["rotation"], ["initial_state"], "meta"}``
+        (read back by :meth:`from_dict` / :func:`read_trajectory`)."""
         out: dict[str, Any] = {
             "t": self.t.tolist(),
             "state": {name: self.state[name].tolist() for name in STATE_NAMES},
@@ -143,33 +193,112 @@ class Trajectory:
         }
         if self.rotation is not None:
             out["rotation"] = self.rotation.tolist()
-        out["meta"] = {"scene": self.scene, "method": self.method, "model": self.model, "nfev": self.nfev, "wall_time": self.wall_time, **self.extra}
+        if self.initial_state is not None:
+            out["initial_state"] = {name: float(self.initial_state[name]) for name in STATE_NAMES}
+        meta = {"scene": self.scene, "method": self.method, "model": self.model, "nfev": self.nfev, "wall_time": self.wall_time, **self.extra}
+        if self.initial_energy is not None:
+            meta["initial_energy"] = self.initial_energy
+        out["meta"] = meta
         return out
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "trajectory") -> "Trajectory":
+        """A trajectory from its JSON form (:meth:`to_dict`, ``flatbody simulate --out FILE``), validated.
 
-def _resolve_times(t_end: float, times: Sequence[float] | np.ndarray | None) -> np.ndarray:
-    if isinstance(t_end, bool) or not isinstance(t_end, (int, float, np.floating, np.integer)) or not math.isfinite(float(t_end)) or t_end <= 0:
-        raise ValueError(f"t_end: must be a finite number > 0 (allowed range (0, inf)), got {t_end!r}")
+        ``t`` (n,) strictly increasing finite times, ``state`` the eleven series of n finite numbers
+        (:data:`~flatbody_env.physics.state.STATE_NAMES`); optional ``energy``, ``casimir``,
+        ``p_theta`` (n,) (``casimir`` and ``p_theta`` are recomputed from the state when absent;
+        H needs the body, so an absent ``energy`` is marked unknown: :attr:`has_energy` is False),
+        ``rotation`` (n, 3, 3), ``initial_state`` and ``meta``. At most
+        :data:`~flatbody_env.physics.validation.MAX_SAMPLES` rows.
+
+        Raises
+        ------
+        ValueError
+            Naming the field (``trajectory.state.mu``, ``trajectory.rotation``, …).
+        """
+        data = validation.mapping(where, data)
+        validation.keys(where, data, _TRAJ_KEYS, ("t", "state"))
+        t = validation.float_array(f"{where}.t", data["t"], shape=(None,))
+        n = t.size
+        if not 1 <= n <= validation.MAX_SAMPLES:
+            raise ValueError(f"{where}.t: must hold 1 to {validation.MAX_SAMPLES} times, got {n}")
+        if np.any(np.diff(t) <= 0):
+            raise ValueError(f"{where}.t: must be strictly increasing")
+        st = validation.mapping(f"{where}.state", data["state"])
+        validation.keys(f"{where}.state", st, STATE_NAMES, STATE_NAMES)
+        state = {name: validation.float_array(f"{where}.state.{name}", st[name], shape=(n,)) for name in STATE_NAMES}
+        series = {}
+        for key in ("energy", "casimir", "p_theta"):
+            if key in data:
+                series[key] = validation.float_array(f"{where}.{key}", data[key], shape=(n,))
+        rotation = validation.float_array(f"{where}.rotation", data["rotation"], shape=(n, 3, 3)) if data.get("rotation") is not None else None
+        initial = None
+        if data.get("initial_state") is not None:
+            initial_map = validation.mapping(f"{where}.initial_state", data["initial_state"])
+            validate_state(initial_map, where=f"{where}.initial_state")
+            initial = {name: float(initial_map[name]) for name in STATE_NAMES}
+        meta = validation.mapping(f"{where}.meta", data.get("meta", {}))
+        text = {k: validation.string(f"{where}.meta.{k}", meta.get(k, "")) for k in ("scene", "method", "model")}
+        nfev = validation.integer(f"{where}.meta.nfev", meta.get("nfev", 0), low=0)
+        wall = validation.number(f"{where}.meta.wall_time", meta.get("wall_time", 0.0), low=0.0)
+        initial_energy = validation.number(f"{where}.meta.initial_energy", meta["initial_energy"]) if "initial_energy" in meta else None
+        extra = {k: v for k, v in meta.items() if k not in ("scene", "method", "model", "nfev", "wall_time", "initial_energy")}
+        return cls(
+            t=t,
+            state=state,
+            energy=series.get("energy", np.full(n, np.nan)),
+            casimir=series.get("casimir", casimir(state["s1"], state["s2"], state["s3"])),
+            p_theta=series.get("p_theta", state["p_theta"].copy()),
+            rotation=rotation,
+            method=text["method"],
+            model=text["model"],
+            nfev=nfev,
+            wall_time=wall,
+            scene=text["scene"],
+            extra=extra,
+            initial_state=initial,
+            initial_energy=initial_energy,
+        )
+
+    @property
+    def has_energy(self) -> bool:
+        """False when the trajectory was read from JSON without an ``energy`` series."""
+        return bool(np.all(np.isfinite(self.energy)))
+
+
+_TRAJ_KEYS = ("t", "state", "energy", "casimir", "p_theta", "rotation", "initial_state", "meta")
+
+
+def read_trajectory(path: str | Path) -> Trajectory:
+    """Read a trajectory saved by ``flatbody simulate --out FILE`` (or ``json.dump(traj.to_dict())``).
+
+    Raises
+    ------
+    ValueError
+        A missing, unreadable or non-regular file, malformed JSON, or a malformed trajectory
+        (naming the field).
+    """
+    return Trajectory.from_dict(validation.read_json("trajectory", path))
+
+
+def _resolve_times(t_end: Any, times: Sequence[float] | np.ndarray | None) -> tuple[float, np.ndarray]:
+    """Validated (t_end, output times): exactly the requested times (scipy's ``t_eval`` convention)."""
+    t_end = validation.number("t_end", t_end, positive=True)
+    if t_end > validation.T_END_MAX:
+        raise ValueError(f"t_end: must lie in (0, {validation.T_END_MAX:g}], got {t_end!r}")
     if times is None:
-        return np.linspace(0.0, float(t_end), DEFAULT_SAMPLES)
-    arr = np.asarray(times, dtype=float).ravel()
-    if arr.size == 0:
-        raise ValueError("times: must hold at least one time in [0, t_end]")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError("times: must be finite numbers")
+        return t_end, np.linspace(0.0, t_end, DEFAULT_SAMPLES)
+    if isinstance(times, (int, float, np.integer, np.floating)) and not isinstance(times, bool):
+        times = [times]
+    arr = validation.float_array("times", times, shape=(None,))
+    if arr.size == 0 or arr.size > validation.MAX_SAMPLES:
+        raise ValueError(f"times: must hold 1 to {validation.MAX_SAMPLES} times in [0, t_end], got {arr.size}")
     if np.any(arr < 0) or np.any(arr > t_end):
         raise ValueError(f"times: every time must lie in [0, t_end] = [0, {t_end:g}]")
     if np.any(np.diff(arr) <= 0):
         raise ValueError("times: must be strictly increasing")
-    if arr[0] != 0.0:
-        arr = np.concatenate([[0.0], arr])
-    return arr
-
-
-def _check_tol(name: str, value: float) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name}: must be a finite number > 0 (allowed range (0, inf)), got {value!r}")
-    return float(value)
+    return t_end, arr
 
 
 def simulate(
@@ -184,6 +313,8 @@ def simulate(
     step: float | None = None,
     model: str = "auto",
     energy_tol: float | None = None,
+    max_nfev: int = DEFAULT_MAX_NFEV,
+    max_wall_time: float = DEFAULT_MAX_WALL_TIME,
 ) -> Trajectory:
     """Integrate a scene from t = 0 to ``t_end``.
 
@@ -194,7 +325,10 @@ def simulate(
     t_end : float
         Final time, > 0.
     times : sequence of float, optional
-        Output times in [0, t_end] (0 is prepended if missing); default 101 even samples.
+        Output times in [0, t_end], strictly increasing: the trajectory holds exactly these rows
+        (scipy's ``t_eval`` convention; the state at t = 0 stays available as
+        :attr:`Trajectory.initial_state`, or ask for ``times=[0, ...]``); default 101 even
+        samples from 0 to t_end. At most 100 000 times.
     method : str
         Integrator name (``flatbody methods``); default scipy ``DOP853``.
     rtol, atol : float
@@ -203,12 +337,16 @@ def simulate(
         Also integrate R (Ṙ = R W(ω), eq. (25) of [1]) and return ``Trajectory.rotation``.
     step : float, optional
         Step size of fixed-step methods (required for them, refused by adaptive ones).
-    model : {"auto", "two-polar", "regular"}
-        The formulation (module docstring).
+    model : {"auto", "stationary", "planar-V1", "planar", "two-polar", "regular"}
+        The rung of the model ladder (module docstring).
     energy_tol : float, optional
         Allowed |H(t) − H(0)| before the run is declared failed; default
         ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H(0)|)`` for adaptive methods and
         ``FIXED_STEP_ENERGY_TOL · max(1, |H(0)|)`` for fixed-step ones; ``math.inf`` disables the check.
+    max_nfev, max_wall_time : int, float
+        The work budget (:class:`~flatbody_env.integrators.Tolerances`): right-hand-side
+        evaluations (default 2·10⁷) and wall-clock seconds (default 120, scipy methods); past it
+        the run stops with ``IntegrationError(kind="budget")``.
 
     Returns
     -------
@@ -221,25 +359,29 @@ def simulate(
     IntegrationError
         The integration failed; the message says when and why.
     """
-    try:
-        sc = scene if isinstance(scene, Scene) else load_scene(scene)
-    except SceneError:
-        raise
-    times_arr = _resolve_times(t_end, times)
-    rtol = _check_tol("rtol", rtol)
-    atol = _check_tol("atol", atol)
-    if step is not None:
-        step = _check_tol("step", step)
-    if model not in MODELS:
-        raise ValueError(f"model: must be one of {', '.join(MODELS)}, got {model!r}")
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    t_end, times_arr = _resolve_times(t_end, times)
+    model = validation.string("model", model, choices=MODELS)
+    method = validation.string("method", method)
+    if not isinstance(with_rotation, bool):
+        raise ValueError(f"with_rotation: must be true or false, got {with_rotation!r}")
     body = sc.body
     y0 = pack(sc.state)
     meth = get_method(method)
+    if model in LADDER_RUNGS or (model == "auto" and meth.info.adaptive and meth.info.chart != "regular" and step is None):
+        low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
+        if low is not None:
+            return _simulate_rung(sc, low, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time)
     chosen = model
     if model == "auto":
-        chosen = meth.info.chart if meth.info.chart == "regular" else choose_model(y0, body)
+        choice = explain_model(y0, body, ladder=False)
+        chosen = meth.info.chart if meth.info.chart == "regular" else choice.rung
         if body.spin_convention == "paper":
             chosen = "two-polar"
+        if chosen != choice.rung:
+            choice = RungChoice(rung=chosen, invariant=f"method {method!r} runs in the {chosen} chart", measured=choice.measured)
+    else:
+        choice = RungChoice(rung=chosen, invariant=f"model={model!r} was asked for")
     if chosen != meth.info.chart:
         twin = _twin(method, chosen)
         if twin is None and model != "auto":
@@ -248,37 +390,73 @@ def simulate(
             meth = get_method(twin)
         # model="auto" and no twin: the method asked for by name runs in its own chart; near
         # lambda = mu its failure is detected and reported (IntegrationError), never hidden.
-    if meth.info.adaptive and step is not None:
-        raise ValueError(f"step: {meth.info.name} is adaptive; step= (--step) applies to fixed-step methods only")
-    if not meth.info.adaptive and step is None:
-        raise ValueError(f"step: {meth.info.name} is a fixed-step method; give step= (CLI: --step H), e.g. step=0.01")
+        if twin is None:
+            choice = RungChoice(rung=meth.info.chart, invariant=f"method {method!r} has no twin in the {chosen} chart and runs in its own",
+                                measured=choice.measured)
+    # rtol, atol, step, energy_tol and the budget are validated by Tolerances (one home)
+    tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time)
+    check_step(meth.info, tol)
     H0 = hamiltonian(y0, body)
     if energy_tol is None:
         if meth.info.adaptive:
             energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
         else:
-            # fixed step: the tolerance only catches blow-ups (see docs/README-integrators.md)
+            # fixed step: the tolerance only catches blow-ups (see docs/integrators.md)
             energy_tol = FIXED_STEP_ENERGY_TOL * max(1.0, abs(H0))
-    tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol))
+    tol = dataclasses.replace(tol, energy_tol=energy_tol)
+    # methods integrate from grid[0] = 0; a grid without 0 gets it prepended and its row dropped
+    prepended = times_arr[0] != 0.0
+    grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
     start = time.perf_counter()
-    sol = meth.integrate(body, y0, times_arr, tol=tol, with_rotation=with_rotation)
+    if grid.size == 1:  # only t = 0 asked for: the initial state, nothing to integrate
+        sol = Solution(t=grid.copy(), Y=y0[:, None].copy(), rotation=np.eye(3)[None] if with_rotation else None, nfev=0)
+    else:
+        sol = meth.integrate(body, y0, grid, tol=tol, with_rotation=with_rotation)
     wall = time.perf_counter() - start
-    state = unpack(sol.Y)
+    keep = slice(1, None) if prepended else slice(None)
+    Y = sol.Y[:, keep]
+    state = unpack(Y)
     energy = sol.stats.get("energy")
-    if energy is None:
-        energy = np.array([hamiltonian(sol.Y[:, k], body) for k in range(sol.Y.shape[1])])
+    energy = np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])]) if energy is None else np.asarray(energy, float)[keep]
     return Trajectory(
-        t=np.asarray(sol.t, float),
+        t=np.asarray(sol.t, float)[keep],
         state=state,
-        energy=np.asarray(energy, float),
+        energy=energy,
         casimir=casimir(state["s1"], state["s2"], state["s3"]),
         p_theta=state["p_theta"].copy(),
-        rotation=sol.rotation,
+        rotation=None if sol.rotation is None else sol.rotation[keep],
         method=meth.info.name,
         model=meth.info.chart,
         nfev=sol.nfev,
         wall_time=wall,
         scene=sc.name,
+        initial_state=unpack(y0),
+        initial_energy=float(H0),
+        extra=choice.as_meta(),
+    )
+
+
+def _simulate_rung(sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
+    """Integrate on a rung below the full models (:mod:`flatbody_env.integrators.ladder`)."""
+    model = rung_model(choice.rung)
+    y0 = pack(sc.state)
+    H0 = hamiltonian(y0, sc.body)
+    if energy_tol is None:
+        energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+    tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol), max_nfev=max_nfev, max_wall_time=max_wall_time)
+    # rungs integrate from grid[0] = 0 as the full models do: a grid without 0 gets it prepended and its row dropped
+    prepended = times_arr[0] != 0.0
+    grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
+    keep = slice(1, None) if prepended else slice(None)
+    start = time.perf_counter()
+    sol = model.integrate(sc.body, y0, grid, tol=tol, with_rotation=with_rotation)
+    wall = time.perf_counter() - start
+    state = unpack(sol.Y[:, keep])
+    return Trajectory(
+        t=np.asarray(sol.t, float)[keep], state=state, energy=np.asarray(sol.stats["energy"], float)[keep],
+        casimir=casimir(state["s1"], state["s2"], state["s3"]), p_theta=state["p_theta"].copy(),
+        rotation=None if sol.rotation is None else sol.rotation[keep], method=model.info.name, model=choice.rung,
+        nfev=sol.nfev, wall_time=wall, scene=sc.name, extra=choice.as_meta(), initial_state=unpack(y0), initial_energy=float(H0),
     )
 
 
@@ -293,4 +471,4 @@ def _twin(method: str, chart: str) -> str | None:
     return None
 
 
-__all__ = ["GAP_MIN", "MODELS", "Trajectory", "simulate", "choose_model", "gap_lower_bound", "IntegrationError"]
+__all__ = ["GAP_MIN", "MODELS", "Trajectory", "read_trajectory", "simulate", "choose_model", "explain_model", "gap_lower_bound", "IntegrationError"]

@@ -6,8 +6,6 @@ import numpy as np
 import pytest
 
 from flatbody_env.physics.body import Body, Inertia
-from flatbody_env.physics.hamiltonian import VELOCITY_NAMES
-from flatbody_env.physics.kinematics import configuration_rate
 from flatbody_env.physics.potentials import CustomPotential, ThicknessPotential, V1, V2, V3
 
 
@@ -42,21 +40,3 @@ def random_state(rng: np.random.Generator) -> np.ndarray:
     if rng.random() < 0.5:
         lam, mu = mu, lam
     return np.concatenate([rng.normal(size=7), [lam, mu, rng.uniform(0.5, 1.5), rng.uniform(-np.pi, np.pi)]])
-
-
-def independent_mass_matrix(y: np.ndarray, body: Body) -> np.ndarray:
-    """M_ij = Tr(J A_iᵀ A_j) with A_i = ∂Φ̇/∂v_i from eq. (27) of the paper (matrices, not eq. (30))."""
-    lam, mu, rho, theta = y[7:11]
-    E = np.eye(7)
-    A = configuration_rate(lam, mu, rho, theta, {name: E[:, i] for i, name in enumerate(VELOCITY_NAMES)})
-    J = body.inertia.matrix
-    AtA = np.einsum("iba,jbc->ijac", A, A)  # (A_iᵀ A_j)_ac
-    M = np.einsum("ca,ijac->ij", J, AtA)  # Tr(J A_iᵀ A_j)
-    return 0.5 * (M + M.T)
-
-
-def independent_hamiltonian(y: np.ndarray, body: Body) -> float:
-    """H = ½ pᵀ M⁻¹ p + V with M built from matrices (independent of the closed forms)."""
-    M = independent_mass_matrix(y, body)
-    p = y[:7]
-    return 0.5 * p @ np.linalg.solve(M, p) + body.potential_terms(y[7], y[8], y[9])[0]

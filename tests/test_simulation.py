@@ -40,8 +40,16 @@ def test_v1_closed_form_stationary_ellipse_stays_stationary():
 
 def test_trajectory_shape_and_json():
     run = simulate("default", t_end=2.0, times=[0.5, 1.0, 2.0])
-    assert run.t.tolist() == [0.0, 0.5, 1.0, 2.0]
-    assert set(run.state) == set(STATE_NAMES) and all(v.shape == (4,) for v in run.state.values())
+    assert run.t.tolist() == [0.5, 1.0, 2.0]  # exactly the requested times (scipy's t_eval convention)
+    assert set(run.state) == set(STATE_NAMES) and all(v.shape == (3,) for v in run.state.values())
+    # the rows equal those of a run that also asks for t = 0; the initial state is metadata
+    with_zero = simulate("default", t_end=2.0, times=[0.0, 0.5, 1.0, 2.0])
+    assert with_zero.t.tolist() == [0.0, 0.5, 1.0, 2.0]
+    for name in STATE_NAMES:
+        np.testing.assert_allclose(run.state[name], with_zero.state[name][1:], rtol=0, atol=1e-12)
+        assert run.initial_state[name] == with_zero.state[name][0] == load_scene("default").state[name]
+    assert run.initial_energy == pytest.approx(with_zero.energy[0], abs=1e-14)
+    assert run.drift()["energy"] == pytest.approx(with_zero.drift()["energy"], abs=1e-14)
     d = run.to_dict()
     assert {"t", "state", "energy", "casimir", "p_theta", "meta"} <= set(d)
     json.dumps(d)
@@ -126,8 +134,9 @@ def test_chart_failure_detected_not_returned():
 def test_cli_simulate_json(tmp_path, capsys):
     assert main(["simulate", "--scene", "default", "--t-end", "1", "--times", "0.25,0.5,1"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["t"] == [0.0, 0.25, 0.5, 1.0]
-    assert set(out["state"]) == set(STATE_NAMES) and len(out["energy"]) == 4 and len(out["casimir"]) == 4
+    assert out["t"] == [0.25, 0.5, 1.0]  # exactly the requested times; t = 0 only via --times 0,...
+    assert set(out["state"]) == set(STATE_NAMES) and len(out["energy"]) == 3 and len(out["casimir"]) == 3
+    assert out["initial_state"] == load_scene("default").state
     scene_file = tmp_path / "s.json"
     scene_file.write_text(json.dumps(load_scene("default").to_dict()))
     target = tmp_path / "out.json"
@@ -159,7 +168,7 @@ def test_cli_bad_scene_file(tmp_path):
     path.write_text(json.dumps(data))
     proc = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "simulate", str(path), "--t-end", "1"], capture_output=True, text=True)
     assert proc.returncode == 2
-    assert proc.stderr.strip().count("\n") == 0 and "state.mu" in proc.stderr and "(0, inf)" in proc.stderr
+    assert proc.stderr.strip().count("\n") == 0 and "state.mu" in proc.stderr and "[1e-06, 1e+06]" in proc.stderr
 
 
 def test_cli_listings(capsys):

@@ -16,6 +16,19 @@ from flatbody_env.cli.args import int_at_least
 def _train(args) -> int:
     from agents.train import train
 
+    if args.study is not None:  # retrain a tuned trial: its hyperparameters become overrides
+        from agents.tune import DEFAULT_STORAGE, trial_overrides
+
+        if args.trial_id is None:
+            raise ValueError("--trial-id: required with --study (a trial number of the study)")
+        algo, tuned, hp_file, n_envs = trial_overrides(args.study, args.storage or DEFAULT_STORAGE, args.trial_id)
+        if args.algo not in (None, algo):
+            raise ValueError(f"--algo: study {args.study!r} tuned {algo}, not {args.algo}")
+        args.algo, args.hyperparams = algo, [*tuned, *(args.hyperparams or [])]
+        args.hyperparams_file = args.hyperparams_file or hp_file
+        args.n_envs = args.n_envs or n_envs
+    elif args.algo is None:
+        raise ValueError("--algo: required (ppo or sac), or give --study NAME --trial-id K")
     command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
     result = train(
         args.algo,
@@ -69,7 +82,7 @@ def register(sub) -> None:
     from agents.train import ALGOS, ENV_ID
 
     p = sub.add_parser("train", help="train an SB3 agent (PPO or SAC) on FlatBody-v0 with the YAML hyperparameters")
-    p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
+    p.add_argument("--algo", choices=ALGOS, help="algorithm (required unless --study)")
     p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
     p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="random seed (default 0)")
     p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
@@ -82,6 +95,9 @@ def register(sub) -> None:
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
     p.add_argument("--threads", type=int_at_least("threads", 1), default=1, help="torch threads (default 1)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--study", metavar="NAME", help="retrain a trial of this Optuna study ('flatbody tune') with its hyperparameters")
+    p.add_argument("--trial-id", type=int_at_least("trial_id", 0), default=None, metavar="K", help="with --study: the trial number")
+    p.add_argument("--storage", metavar="URL", help="with --study: journal file or database URL (default runs/tune/optuna-journal.log)")
     p.set_defaults(handler=_train)
 
     p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
@@ -98,40 +114,3 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.set_defaults(handler=_demo)
-
-    _extend_record(sub)
-
-
-def _extend_record(sub) -> None:
-    """Add ``--agent MODEL`` to ``flatbody record`` (the env layer's command; agents extend it so the
-    env layer never imports agents)."""
-    rec = sub.choices.get("record")
-    if rec is None:
-        return
-    rec.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
-                     help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
-    rec.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
-    scene_handler = rec.get_default("handler")
-
-    def handler(args) -> int:
-        if args.agent is None:
-            return scene_handler(args)
-        if args.scene_file or args.scene:
-            raise ValueError("agent: --agent records an environment episode; give no scene")
-        from agents.demo import format_demo, record_episode, rollout
-        from agents.evaluate import Agent
-
-        agent = Agent(args.agent or None)
-        ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs)
-        print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
-        path = record_episode(ep, args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
-        msg = f"wrote {path} ({ep['t'].size} steps)"
-        if args.verify:
-            from flatbody_env.recording.writer import verify_recording
-
-            verify_recording(path)  # raises ValueError with rerun's output on failure
-            msg += "; rerun rrd verify: ok"
-        print(msg)
-        return 0
-
-    rec.set_defaults(handler=handler)

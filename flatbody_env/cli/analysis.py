@@ -11,9 +11,11 @@ Bad input → exit code 2 with one line (a ``ValueError`` naming the flag and th
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
+
+from flatbody_env.answers import ellipses_answer, family_run, invariants_run, solutions, stability_answer, stability_map_answer
+from flatbody_env.cli.args import body_constant, check_output_path, float_range, int_at_least, momentum, number, output_file, positive_float
 
 _CONSTANTS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
 _FOR_POTENTIAL = {"k": "V1", "c": "V2", "d": "V2", "kappa": "V3"}
@@ -28,52 +30,28 @@ def add_body_arguments(p) -> None:
     g = p.add_argument_group("body (default: J = J3 = 1, V3 kappa = 1, V_rho a = b = 1)")
     g.add_argument("--scene", metavar="FILE", help="take the constants (and s3, p_theta) from a scene JSON or built-in scene")
     g.add_argument("--potential", choices=("V1", "V2", "V3"), default=None, help="in-plane potential (default V3)")
-    g.add_argument("--k", type=float, default=None, help="V1 stiffness k > 0")
-    g.add_argument("--c", type=float, default=None, help="V2 constant c > 0")
-    g.add_argument("--d", type=float, default=None, help="V2 constant d > 0")
-    g.add_argument("--kappa", type=float, default=None, help="V3 constant kappa > 0")
-    g.add_argument("--a", type=float, default=None, help="thickness potential a > 0")
-    g.add_argument("--b", type=float, default=None, help="thickness potential b > 0")
-    g.add_argument("--J", type=float, default=None, help="in-plane inertia J > 0")
-    g.add_argument("--J3", type=float, default=None, help="thickness inertia J3 > 0")
-    p.add_argument("--s3", type=float, default=None, help="spin component s3 (conserved with |s|)")
-    p.add_argument("--p-theta", dest="p_theta", type=float, default=None, help="material momentum p_theta")
+    g.add_argument("--k", type=body_constant("--k"), default=None, help="V1 stiffness k in [1e-6, 1e6]")
+    g.add_argument("--c", type=body_constant("--c"), default=None, help="V2 constant c in [1e-6, 1e6]")
+    g.add_argument("--d", type=body_constant("--d"), default=None, help="V2 constant d in [1e-6, 1e6]")
+    g.add_argument("--kappa", type=body_constant("--kappa"), default=None, help="V3 constant kappa in [1e-6, 1e6]")
+    g.add_argument("--a", type=body_constant("--a"), default=None, help="thickness potential a in [1e-6, 1e6]")
+    g.add_argument("--b", type=body_constant("--b"), default=None, help="thickness potential b in [1e-6, 1e6]")
+    g.add_argument("--J", type=body_constant("--J"), default=None, help="in-plane inertia J in [1e-6, 1e6]")
+    g.add_argument("--J3", type=body_constant("--J3"), default=None, help="thickness inertia J3 in [1e-6, 1e6]")
+    p.add_argument("--s3", type=momentum("--s3"), default=None, help="spin component s3 (conserved with |s|)")
+    p.add_argument("--p-theta", dest="p_theta", type=momentum("--p-theta"), default=None, help="material momentum p_theta")
 
 
 def add_box_arguments(p) -> None:
-    p.add_argument("--lam-range", default="0.02,50", metavar="LO,HI", help="search range of lambda (default 0.02,50)")
-    p.add_argument("--mu-range", default="0.02,50", metavar="LO,HI", help="search range of mu (default 0.02,50)")
-    p.add_argument("--grid", type=int, default=121, metavar="N", help="grid points per axis of the root search (default 121)")
-
-
-def _range(flag: str, text: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(x) for x in text.split(","))
-    except ValueError:
-        raise ValueError(f"{flag}: expected LO,HI (two numbers, 0 < LO < HI), got {text!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
-        raise ValueError(f"{flag}: need 0 < LO < HI (finite), got {text!r}")
-    return lo, hi
+    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(0.02, 50.0), metavar="LO,HI", help="search range of lambda (default 0.02,50)")
+    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.02, 50.0), metavar="LO,HI", help="search range of mu (default 0.02,50)")
+    p.add_argument("--grid", type=int_at_least("--grid", 8, 2001), default=121, metavar="N", help="grid points per axis of the root search, in [8, 2001] (default 121)")
 
 
 def _box(args):
     from analysis.stationary import SearchBox
 
-    if not 8 <= args.grid <= 2001:
-        raise ValueError(f"--grid: must be an integer in [8, 2001], got {args.grid}")
-    return SearchBox(lam=_range("--lam-range", args.lam_range), mu=_range("--mu-range", args.mu_range), n=args.grid)
-
-
-def _finite(flag: str, value: float) -> float:
-    if not math.isfinite(value):
-        raise ValueError(f"{flag}: must be a finite number, got {value!r}")
-    return value
-
-
-def _positive(flag: str, value: float) -> float:
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{flag}: must be a finite number > 0 (allowed range (0, inf)), got {value:g}")
-    return value
+    return SearchBox(lam=args.lam_range, mu=args.mu_range, n=args.grid)
 
 
 def resolve_body(args, *, need_spins: bool = True):
@@ -98,7 +76,7 @@ def resolve_body(args, *, need_spins: bool = True):
         for c in given:
             if c in _FOR_POTENTIAL and _FOR_POTENTIAL[c] != pot_name:
                 raise ValueError(f"{_flag(c)}: applies to {_FOR_POTENTIAL[c]} only (the potential is {pot_name})")
-        val = {c: (1.0 if getattr(args, c) is None else _positive(_flag(c), getattr(args, c))) for c in _CONSTANTS}
+        val = {c: (1.0 if getattr(args, c) is None else getattr(args, c)) for c in _CONSTANTS}  # ranges: cli.args
         fields = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}[pot_name]
         body = Body.from_dict({
             "params": {"J": val["J"], "J3": val["J3"]},
@@ -110,27 +88,14 @@ def resolve_body(args, *, need_spins: bool = True):
             raise ValueError("--s3: required (a finite number), or give --scene")
         if pt is None:
             raise ValueError("--p-theta: required (a finite number), or give --scene")
-        s3 = _finite("--s3", float(s3))
-        pt = _finite("--p-theta", float(pt))
+        s3, pt = float(s3), float(pt)
     if not body.inertia.is_isotropic:
         raise ValueError("--scene: the analysis needs an isotropic body (J1 = J2)")
     return body, s3, pt
 
 
 def _solutions(args, body, s3, pt):
-    from analysis.stationary import stationary_ellipses, steady_rotations
-
-    box = _box(args)
-    out = []
-    if args.branch in ("N", "all"):
-        out += stationary_ellipses(body, s3, pt, box=box)
-    if args.branch in ("A", "all"):
-        if args.spin is None:
-            if args.branch == "A":
-                raise ValueError("--spin: required with --branch A (the spin s about the in-plane axis, finite and non-zero)")
-        else:
-            out += steady_rotations(body, _finite("--spin", args.spin), box=box)
-    return out
+    return solutions(body, s3, pt, box=_box(args), branch=args.branch, spin=args.spin)
 
 
 def _header(body, s3, pt) -> str:
@@ -139,13 +104,13 @@ def _header(body, s3, pt) -> str:
 
 def _ellipses(args) -> int:
     body, s3, pt = resolve_body(args)
-    sols = _solutions(args, body, s3, pt)
     if args.json:
-        print(json.dumps({"solutions": [e.to_dict() for e in sols]}))
+        print(json.dumps(ellipses_answer(body, s3, pt, box=_box(args), branch=args.branch, spin=args.spin)))
         return 0
+    sols = _solutions(args, body, s3, pt)
     print(_header(body, s3, pt))
     if not sols:
-        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/README-analysis.md)")
+        print("no stationary ellipse in the search box (branch N needs s3 * p_theta > 0 for V1; see docs/analysis.md)")
         return 0
     print(f"{'#':>2} {'branch':<6} {'lambda':>12} {'mu':>12} {'rho':>10} {'omega3':>11} {'theta_dot':>11} {'energy':>13} {'residual':>9}  kind")
     for i, e in enumerate(sols):
@@ -158,10 +123,10 @@ def _stability(args) -> int:
     from analysis.stability import analyse_stability
 
     body, s3, pt = resolve_body(args)
-    results = [analyse_stability(body, e) for e in _solutions(args, body, s3, pt)]
     if args.json:
-        print(json.dumps({"solutions": [r.to_dict() for r in results]}))
+        print(json.dumps(stability_answer(body, s3, pt, box=_box(args), branch=args.branch, spin=args.spin)))
         return 0
+    results = [analyse_stability(body, e) for e in _solutions(args, body, s3, pt)]
     print(_header(body, s3, pt))
     if not results:
         print("no stationary ellipse in the search box")
@@ -181,36 +146,12 @@ def _stability(args) -> int:
 
 
 def _family(args) -> int:
-    from analysis.families import PARAMETERS, follow_family, write_family_csv
-
     body, s3, pt = resolve_body(args, need_spins=False)
-    if args.vary not in PARAMETERS:
-        raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {args.vary!r}")
-    start, stop = _finite("--from", args.start), _finite("--to", args.stop)
-    s3 = 2.0 if s3 is None else _finite("--s3", float(s3))
-    pt = 0.5 if pt is None else _finite("--p-theta", float(pt))
-    if args.seeds < 2 or args.seeds > 200:
-        raise ValueError(f"--seeds: must be an integer in [2, 200], got {args.seeds}")
-    step = None if args.step is None else _positive("--step", args.step)
-    fam = follow_family(body, args.vary, start, stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args), step=step,
-                        progress=sys.stderr.isatty())
-    out = args.out
-    if out is None and args.plot is not None:
-        out = str(Path(args.plot).with_suffix(".csv"))
-    if out is not None:
-        write_family_csv(fam, out)
-    if args.plot is not None:
-        from analysis.plots import plot_family
-
-        plot_family(out, args.plot)
-    npts = sum(len(b) for b in fam.branches)
+    fam, answer = family_run(body, args.vary, args.start, args.stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args),
+                              step=args.step, out=args.out, plot=args.plot, progress=sys.stderr.isatty())
+    start, stop, s3, pt, out, npts = answer["range"][0], answer["range"][1], answer["s3"], answer["p_theta"], answer["csv"], answer["points"]
     if args.json:
-        print(json.dumps({
-            "param": args.vary, "range": [start, stop], "s3": s3, "p_theta": pt, "branches": len(fam.branches), "points": npts,
-            "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
-                       for e in fam.events],
-            "csv": out, "plot": args.plot,
-        }))
+        print(json.dumps(answer))
         return 0
     fixed = {"s3": f"p_theta = {pt:g}", "p_theta": f"s3 = {s3:g}"}.get(args.vary, f"s3 = {s3:g}, p_theta = {pt:g}")
     print(f"body: {body.describe()}; {fixed}; {args.vary} in [{start:g}, {stop:g}]")
@@ -231,25 +172,11 @@ def _family(args) -> int:
 
 
 def _stability_map(args) -> int:
-    import numpy as np
-
-    from analysis.families import shape_stability_grid, write_table_csv
-
     body, _, _ = resolve_body(args, need_spins=False)
-    lo_l, hi_l = _range("--lam-range", args.lam_range)
-    lo_m, hi_m = _range("--mu-range", args.mu_range)
-    if not 4 <= args.grid <= 400:
-        raise ValueError(f"--grid: must be an integer in [4, 400], got {args.grid}")
-    rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, args.grid), np.linspace(lo_m, hi_m, args.grid))
     out = args.out
     if out is None and args.plot is not None:
-        out = str(Path(args.plot).with_suffix(".csv"))
-    if out is not None:
-        write_table_csv(rows, out)
-    if args.plot is not None:
-        from analysis.plots import plot_shape_map
-
-        plot_shape_map(out, args.plot, title=f"Stationary ellipses by shape, {body.describe()}")
+        out = str(check_output_path("--out", Path(args.plot).with_suffix(".csv"), (".csv",)))
+    rows = stability_map_answer(body, args.lam_range, args.mu_range, args.grid, out=out, plot=args.plot)["rows"]
     if args.json:
         print(json.dumps({"rows": rows}))
         return 0
@@ -267,21 +194,15 @@ def _stability_map(args) -> int:
 
 
 def _invariants(args) -> int:
-    from analysis.invariants import format_drift_table, invariants_along, load_trajectory
+    from analysis.invariants import format_drift_table
+    from flatbody_env.simulation import read_trajectory
 
-    data = load_trajectory(args.trajectory)
+    data = read_trajectory(args.trajectory)
     body = None
     given = [c for c in _CONSTANTS if getattr(args, c) is not None]
     if args.scene is not None or given or args.potential is not None:
         body, _, _ = resolve_body(args, need_spins=False)
-    else:
-        name = (data.get("meta") or {}).get("scene")
-        from flatbody_env.scene import builtin_scenes
-
-        scenes = builtin_scenes()
-        if name in scenes:
-            body = scenes[name].body
-    report = invariants_along(data, body)
+    report, body = invariants_run(data, body)
     if args.json:
         print(json.dumps(report.to_dict()))
         return 0
@@ -298,7 +219,7 @@ def register(sub) -> None:
     add_body_arguments(p)
     add_box_arguments(p)
     p.add_argument("--branch", choices=("N", "A", "all"), default="N", help="N: s1 = s2 = 0 (paper); A: in-plane axis (needs --spin)")
-    p.add_argument("--spin", type=float, default=None, help="spin about the in-plane axis for branch A")
+    p.add_argument("--spin", type=momentum("--spin"), default=None, help="spin about the in-plane axis for branch A")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=_ellipses)
 
@@ -306,7 +227,7 @@ def register(sub) -> None:
     add_body_arguments(p)
     add_box_arguments(p)
     p.add_argument("--branch", choices=("N", "A", "all"), default="N", help="N: s1 = s2 = 0 (paper); A: in-plane axis (needs --spin)")
-    p.add_argument("--spin", type=float, default=None, help="spin about the in-plane axis for branch A")
+    p.add_argument("--spin", type=momentum("--spin"), default=None, help="spin about the in-plane axis for branch A")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=_stability)
 
@@ -314,22 +235,22 @@ def register(sub) -> None:
     add_body_arguments(p)
     add_box_arguments(p)
     p.add_argument("--vary", default="s3", help="s3, p_theta or a constant (k, c, d, kappa, a, b, J, J3); default s3")
-    p.add_argument("--from", dest="start", type=float, default=0.05, help="start of the range (default 0.05)")
-    p.add_argument("--to", dest="stop", type=float, default=4.0, help="end of the range (default 4)")
-    p.add_argument("--seeds", type=int, default=5, help="parameter values at which all solutions are sought (default 5)")
-    p.add_argument("--step", type=float, default=None, help="largest continuation step (default range/60)")
-    p.add_argument("--out", metavar="FILE.csv", help="write the family table (CSV)")
-    p.add_argument("--plot", metavar="FILE.png", help="draw the family chart coloured by stability (PNG)")
+    p.add_argument("--from", dest="start", type=number("--from", low=-1e6, high=1e6), default=0.05, help="start of the range (default 0.05)")
+    p.add_argument("--to", dest="stop", type=number("--to", low=-1e6, high=1e6), default=4.0, help="end of the range (default 4)")
+    p.add_argument("--seeds", type=int_at_least("--seeds", 2, 200), default=5, help="parameter values at which all solutions are sought, in [2, 200] (default 5)")
+    p.add_argument("--step", type=positive_float("--step", 1e6), default=None, help="largest continuation step (default range/60)")
+    p.add_argument("--out", type=output_file("--out", (".csv",)), metavar="FILE.csv", help="write the family table (CSV)")
+    p.add_argument("--plot", type=output_file("--plot", (".png",)), metavar="FILE.png", help="draw the family chart coloured by stability (PNG)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(handler=_family)
 
     p = sub.add_parser("stability-map", help="stability of the stationary ellipses over a grid of shapes (lambda, mu)")
     add_body_arguments(p)
-    p.add_argument("--lam-range", default="1.02,3", metavar="LO,HI", help="lambda range (default 1.02,3)")
-    p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
-    p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30)")
-    p.add_argument("--out", metavar="FILE.csv", help="write the table (CSV)")
-    p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
+    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(1.02, 3.0), metavar="LO,HI", help="lambda range (default 1.02,3)")
+    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.3, 3.0), metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
+    p.add_argument("--grid", type=int_at_least("--grid", 4, 400), default=30, metavar="N", help="grid points per axis, in [4, 400] (default 30)")
+    p.add_argument("--out", type=output_file("--out", (".csv",)), metavar="FILE.csv", help="write the table (CSV)")
+    p.add_argument("--plot", type=output_file("--plot", (".png",)), metavar="FILE.png", help="draw the map (PNG)")
     p.add_argument("--json", action="store_true", help="print JSON rows")
     p.set_defaults(handler=_stability_map)
 

@@ -1,51 +1,142 @@
 """The one set of argparse types and shared arguments of the ``flatbody`` command.
 
-Each type raises ``argparse.ArgumentTypeError`` (exit 2, one line) naming the field and its range.
+Each type raises ``argparse.ArgumentTypeError`` (exit 2, one line) naming the field and its range;
+the ranges are those of :mod:`flatbody_env.physics.validation` (the same checks as JSON input).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 
+from flatbody_env.output import check_output_path
+from flatbody_env.physics import validation
 
-def float_list(text: str) -> list[float]:
+
+def _float(name: str, text: str) -> float:
     try:
-        values = [float(x) for x in text.split(",") if x.strip()]
+        return float(text)
     except ValueError:
-        raise ValueError(f"times: expected comma-separated numbers, got {text!r}") from None
-    if not all(math.isfinite(v) for v in values):
-        raise ValueError("times: must be finite numbers")
-    return values
+        raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text[:60]!r}") from None
 
 
-def positive_float(name: str):
-    """argparse type: a finite number > 0; the error names ``name`` and the allowed range."""
+def number(name: str, *, low: float | None = None, high: float | None = None, positive: bool = False):
+    """argparse type: a finite number (> 0 with ``positive``) within [low, high]."""
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected a number, got {text!r}") from None
-        if not math.isfinite(value) or value <= 0:
-            raise argparse.ArgumentTypeError(f"{name}: must be a finite number > 0 (allowed range (0, inf)), got {text}")
+            return validation.number(name, _float(name, text), low=low, high=high, positive=positive)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
+
+
+def positive_float(name: str, high: float | None = None):
+    """argparse type: a finite number > 0 (at most ``high``); the error names ``name`` and the range."""
+
+    def parse(text: str) -> float:
+        value = _float(name, text)
+        if not math.isfinite(value) or value <= 0 or (high is not None and value > high):
+            hi = "inf)" if high is None else f"{high:g}]"
+            raise argparse.ArgumentTypeError(f"{name}: must be a finite number > 0 (allowed range (0, {hi}), got {text[:60]}")
         return value
 
     return parse
 
 
-def int_at_least(name: str, low: int = 1):
-    """argparse type: an integer ≥ ``low``; the error names ``name`` and the allowed range."""
+def int_at_least(name: str, low: int = 1, high: int | None = None):
+    """argparse type: an integer in [``low``, ``high``]; the error names ``name`` and the allowed range."""
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{name}: must be an integer >= {low}, got {value}")
+            raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text[:60]!r}") from None
+        if value < low or (high is not None and value > high):
+            rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"{name}: must be an integer {rng}, got {text[:60]}")
         return value
+
+    return parse
+
+
+
+def body_constant(name: str):
+    """argparse type: a body constant (J, J3, k, c, d, κ, a, b) in :data:`~flatbody_env.physics.validation.PARAM_RANGE`."""
+    return number(name, low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1])
+
+
+def momentum(name: str):
+    """argparse type: a momentum or spin component within ± :data:`~flatbody_env.physics.validation.MOMENTUM_MAX`."""
+    return number(name, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
+
+
+def float_range(name: str, *, low: float = 0.0, high: float = validation.STRETCH_RANGE[1]):
+    """argparse type: ``LO,HI`` with low < LO < HI ≤ high (finite)."""
+
+    def parse(text: str) -> tuple[float, float]:
+        parts = text.split(",")
+        if len(parts) != 2:
+            raise argparse.ArgumentTypeError(f"{name}: expected LO,HI (two numbers, {low:g} < LO < HI <= {high:g}), got {text[:60]!r}")
+        lo, hi = (_float(name, x) for x in parts)
+        if not (math.isfinite(lo) and math.isfinite(hi) and low < lo < hi <= high):
+            raise argparse.ArgumentTypeError(f"{name}: need {low:g} < LO < HI <= {high:g} (finite), got {text[:60]!r}")
+        return lo, hi
+
+    return parse
+
+
+def times_list(text: str) -> list[float]:
+    """argparse type of ``--times``: comma-separated finite numbers, at most
+    :data:`~flatbody_env.physics.validation.MAX_SAMPLES` of them (range and order are checked by ``simulate``)."""
+    parts = [x for x in text.split(",") if x.strip()]
+    if not parts:
+        raise argparse.ArgumentTypeError("times: expected comma-separated numbers, got nothing")
+    if len(parts) > validation.MAX_SAMPLES:
+        raise argparse.ArgumentTypeError(f"times: at most {validation.MAX_SAMPLES} times, got {len(parts)}")
+    values = []
+    for x in parts:
+        try:
+            v = float(x)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"times: expected comma-separated numbers, got {x.strip()[:40]!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"times: must be finite numbers, got {x.strip()[:40]}")
+        values.append(v)
+    return values
+
+
+def output_file(name: str, suffixes: tuple[str, ...] = ()):
+    """argparse type: a path a command may write (its folder exists and is writable; it is not a
+    directory or a special file; it ends with one of ``suffixes`` when given). Files are then
+    written atomically (:func:`flatbody_env.output.atomic_write`)."""
+
+    def parse(text: str) -> str:
+        try:
+            check_output_path(name, text, suffixes)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    return parse
+
+
+def output_dir(name: str):
+    """argparse type: a folder a command writes into (created if missing; must not be a file)."""
+
+    def parse(text: str) -> str:
+        p = Path(text)
+        if p.exists() and not p.is_dir():
+            raise argparse.ArgumentTypeError(f"{name}: {text[:60]!r} exists and is not a directory")
+        anchor = p
+        while not anchor.exists():
+            anchor = anchor.parent
+        if not os.access(anchor, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"{name}: {str(anchor)[:60]!r} is not writable")
+        return text
 
     return parse
 
@@ -56,12 +147,7 @@ def load_scene_arg(args):
 
     if args.scene_file and args.scene:
         raise ValueError("scene: give a scene file or --scene NAME, not both")
-    if args.scene_file:
-        path = Path(args.scene_file)
-        if not path.exists():
-            raise ValueError(f"scene: no file {args.scene_file!r}")
-        return load_scene(path)
-    return load_scene(args.scene or "default")
+    return load_scene(args.scene_file or args.scene or "default")
 
 
 def add_scene_arguments(p) -> None:
@@ -71,10 +157,17 @@ def add_scene_arguments(p) -> None:
 
 
 def add_integration_arguments(p) -> None:
-    """Method and tolerance flags shared by commands that integrate."""
-    p.add_argument("--t-end", type=positive_float("t_end"), metavar="T", help="final time (default: the scene's t_end)")
+    """Method, tolerance and budget flags shared by commands that integrate."""
+    from flatbody_env.integrators.base import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME
+
+    p.add_argument("--t-end", type=positive_float("t_end", validation.T_END_MAX), metavar="T", help="final time in (0, 1e6] (default: the scene's t_end)")
     p.add_argument("--method", default="DOP853", help="integrator (see 'flatbody methods'); default DOP853")
-    p.add_argument("--rtol", type=positive_float("rtol"), default=1e-10, help="relative tolerance (adaptive methods)")
-    p.add_argument("--atol", type=positive_float("atol"), default=1e-10, help="absolute tolerance (adaptive methods)")
-    p.add_argument("--step", type=positive_float("step"), default=None, metavar="H", help="step size (fixed-step methods)")
-    p.add_argument("--model", default="auto", choices=("auto", "two-polar", "regular"), help="formulation (default auto)")
+    p.add_argument("--rtol", type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="relative tolerance (adaptive methods), in [1e-16, 1]")
+    p.add_argument("--atol", type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="absolute tolerance (adaptive methods), in [1e-16, 1]")
+    p.add_argument("--step", type=positive_float("step", validation.T_END_MAX), default=None, metavar="H", help="step size (fixed-step methods)")
+    p.add_argument("--model", default="auto", choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
+                   help="rung of the model ladder (default auto: the lowest the scene allows)")
+    p.add_argument("--max-nfev", type=int_at_least("max_nfev", 1, 10**12), default=DEFAULT_MAX_NFEV, metavar="N",
+                   help=f"work budget: right-hand-side evaluations (default {DEFAULT_MAX_NFEV:.0e})")
+    p.add_argument("--max-seconds", type=positive_float("max_seconds"), default=DEFAULT_MAX_WALL_TIME, metavar="S",
+                   help=f"work budget: wall-clock seconds of the integration (default {DEFAULT_MAX_WALL_TIME:g})")

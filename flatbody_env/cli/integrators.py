@@ -3,6 +3,9 @@
 * ``flatbody chart [--quick] [--scenes ...] [--methods ...] [--out DIR]`` — the work-precision
   study (:mod:`analysis.work_precision`) → ``DIR/work_precision.csv``, ``references.json``,
   ``work_precision.png``.
+* ``flatbody chart --ladder [--quick] [--scenes ...] [--out DIR]`` — the model ladder
+  (:mod:`analysis.ladder`): every built-in scene's rung and error against cost per rung →
+  ``DIR/ladder.csv``, ``ladder_scenes.csv``, ``ladder.png``.
 * ``flatbody failure-study [--quick] [--studies gap rho horizon] [--out DIR]`` —
   :mod:`analysis.failure_study` → ``DIR/failure_study.csv``, ``failure_study.png``.
 * ``flatbody bench integrators [--quick] [--no-compile] [--out DIR]`` —
@@ -14,8 +17,10 @@ Every command can redraw its PNG from the saved tables with ``--plot-only``.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+from flatbody_env.answers import failure_rows
 from flatbody_env.cli.args import int_at_least, positive_float
 
 DEFAULT_OUT = "runs/integrators"
@@ -35,7 +40,33 @@ def _budget(args) -> float:
     return 1.0 if args.quick else 5.0
 
 
+def _ladder(args) -> int:
+    from analysis.ladder import ladder_study, speedups, write_csv, write_scenes
+    from analysis.ladder_plots import plot_ladder
+
+    out = Path(args.out)
+    csv_path, scenes_path, png_path = out / "ladder.csv", out / "ladder_scenes.csv", out / "ladder.png"
+    if not args.plot_only:
+        points, records = ladder_study(args.scenes, quick=args.quick, repeats=1 if args.quick else args.repeats, max_run_s=_budget(args))
+        write_csv(points, csv_path)
+        write_scenes(records, scenes_path)
+        for r in records:
+            print(f"{r.scene:<20} auto -> {r.chosen:<10} (reference {r.reference}; floor {r.floor:.1e})")
+        for s in speedups(points):
+            txt = (f"x{s['speedup_vs_full']:.3g} vs the cheapest full model, x{s['speedup_vs_default']:.3g} vs scipy DOP853"
+                   if s["reached_target"] else "error target not reached")
+            print(f"  {s['scene']:<26} {s['rung']:<10} {s['method']:<17} {s['setting']:<11} error {s['error']:.1e} "
+                  f"in {s['wall_time'] * 1e3:.3f} ms: {txt}")
+    elif not csv_path.exists():
+        raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
+    plot_ladder(csv_path, scenes_path, png_path)
+    print(f"wrote {png_path}" if args.plot_only else f"wrote {csv_path}, {scenes_path}, {png_path}")
+    return 0
+
+
 def _chart(args) -> int:
+    if args.ladder:
+        return _ladder(args)
     from analysis.integrator_plots import plot_work_precision
     from analysis.work_precision import DEFAULT_METHODS, SCENES, work_precision, write_json, write_records
 
@@ -74,8 +105,13 @@ def _failure(args) -> int:
             if s not in STUDIES:
                 raise ValueError(f"studies: unknown study {s!r} (allowed: {', '.join(STUDIES)})")
         methods = _methods(args.methods) if args.methods else DEFAULT_METHODS
-        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args))
+        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args), progress=not args.json)
         write_records(points, csv_path)
+        if args.json:
+            order = {(s, m): (i, j) for i, s in enumerate(studies) for j, m in enumerate(methods)}
+            print(json.dumps({"rows": failure_rows(sorted(points, key=lambda p: order[p.study, p.method]))}))
+            plot_failure_study(csv_path, png_path)
+            return 0
         fails = [p for p in points if p.status != "ok"]
         print(f"{len(points)} runs, {len(fails)} detected failures:")
         seen = set()
@@ -148,14 +184,16 @@ def _common(p, what):
 def register(sub) -> None:
     p = sub.add_parser("chart", help="work-precision diagram of the integrators (CSV + PNG)")
     _common(p, "chart")
-    p.add_argument("--scenes", nargs="+", metavar="SCENE", help="regular close-approach small-rho-bounce long-horizon (default all)")
+    p.add_argument("--scenes", nargs="+", metavar="SCENE", help="regular close-approach small-rho-bounce long-horizon (default all; "
+                   "with --ladder: any built-in scene, default all)")
+    p.add_argument("--ladder", action="store_true", help="the model ladder: each scene's rung, error vs cost per rung (ladder.csv, ladder.png)")
     p.set_defaults(handler=_chart)
 
     p = sub.add_parser("failure-study", help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon")
     _common(p, "study")
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
+    p.add_argument("--json", action="store_true", help="also print the rows as JSON (by study, then method)")
     p.set_defaults(handler=_failure, repeats=1)
-
 
 
 def register_bench(bsub) -> None:

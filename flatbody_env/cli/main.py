@@ -3,8 +3,8 @@
 Sub-commands live in the modules of :data:`COMMAND_MODULES` (the app layer: the only place that
 imports :mod:`analysis` and :mod:`agents`).
 
-Exit codes: 0 success; 1 an integration or run failed (one line says when and why); 2 bad
-input (one line names the field and the allowed range).
+Exit codes: 0 success; 1 an integration or run failed, or an output file could not be written
+(one line says when and why); 2 bad input (one line names the field and the allowed range).
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from flatbody_env.cli import agents, analysis, bench, integrators, record, simulate
+from flatbody_env.cli import agents, analysis, bench, integrators, record, serve, simulate, sweep
 
-COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents)
+COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve)
 """The declared command registry: modules that contribute sub-commands, in help order. Each has
 ``register(subparsers)`` and may have ``register_bench(bench_subparsers)``; they keep heavy imports
 inside their handlers so that ``flatbody --help`` stays fast."""
@@ -58,16 +58,25 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.handler(args) or 0)
     except IntegrationError as exc:
-        sys.stderr.write(f"flatbody: {exc}\n")
+        sys.stderr.write(f"flatbody: {_one_line(exc)}\n")
         return 1
     except ValueError as exc:
-        sys.stderr.write(f"flatbody: error: {exc}\n")
+        sys.stderr.write(f"flatbody: error: {_one_line(exc)}\n")
         return 2
+    except BrokenPipeError:
+        return 0
+    except OSError as exc:  # I/O failures (disk full, permissions changed mid-run, output.OutputError)
+        where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        sys.stderr.write(f"flatbody: I/O error{where}: {_one_line(exc.strerror or exc)}\n")
+        return 1
     except KeyboardInterrupt:
         sys.stderr.write("flatbody: interrupted\n")
         return 130
-    except BrokenPipeError:
-        return 0
+
+
+def _one_line(exc) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 400 else text[:397] + "..."
 
 
 if __name__ == "__main__":  # pragma: no cover

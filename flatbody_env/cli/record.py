@@ -1,4 +1,5 @@
-"""Sub-commands for rerun recordings: ``record``, ``record-env``, ``record-info``, ``bench recording``.
+"""Sub-commands for rerun recordings: ``record`` (scenes, ``--agent`` episodes), ``record-env``, ``record-info``,
+``record-shots``, ``bench recording``.
 
 Heavy imports (rerun through :mod:`flatbody_env.recording.writer`, gymnasium, matplotlib) happen in
 the handlers only.
@@ -12,21 +13,27 @@ import sys
 import time
 from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 
 
 def _rrd_path(text: str) -> str:
-    if not text.endswith(".rrd"):
-        raise argparse.ArgumentTypeError(f"out: a rerun recording file must end in .rrd, got {text!r}")
+    try:
+        check_output_path("out", text.replace("{episode}", "0"), (".rrd",))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (a rerun recording file must end in .rrd)") from None
     return text
 
 
 def _record(args) -> int:
+    if args.agent is not None:
+        return _record_agent(args)
     import numpy as np
 
-    from flatbody_env.recording.writer import record_trajectory, verify_recording
+    from flatbody_env.recording.reader import verify_recording
+    from flatbody_env.recording.writer import record_trajectory
     from flatbody_env.simulation import simulate
 
     scene = load_scene_arg(args)
@@ -41,9 +48,15 @@ def _record(args) -> int:
         step=args.step,
         model=args.model,
         with_rotation=True,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
+    from flatbody_env.output import atomic_path
+
     start = time.perf_counter()
-    path = record_trajectory(traj, scene.body, args.out, title=args.title, tensor_every=args.tensor_every)
+    with atomic_path(args.out) as tmp:  # a killed run never leaves a half-written RUN.rrd
+        record_trajectory(traj, scene.body, tmp, title=args.title, tensor_every=args.tensor_every)
+    path = Path(args.out)
     elapsed = time.perf_counter() - start
     msg = f"wrote {path} ({traj.t.size} steps of scene {scene.name}, t = 0…{t_end:g}, {traj.method} {traj.model}; logged in {elapsed * 1e3:.0f} ms, importing rerun included)"
     if args.verify:
@@ -51,6 +64,27 @@ def _record(args) -> int:
         msg += "; rerun rrd verify: ok"
     print(msg)
     print(f"play back with: rerun {path}   (viewer 0.41, the SDK's version)", file=sys.stderr)
+    return 0
+
+
+def _record_agent(args) -> int:
+    """``flatbody record --agent [MODEL]``: one seeded episode of a trained agent, recorded through
+    the env recorder (the same path as ``flatbody demo`` and ``flatbody record-env``)."""
+    if args.scene_file or args.scene:
+        raise ValueError("agent: --agent records an environment episode; give no scene")
+    from agents.demo import format_demo, rollout
+    from agents.evaluate import Agent
+
+    agent = Agent(args.agent or None)
+    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+    print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+    msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
+    if args.verify:
+        from flatbody_env.recording.reader import verify_recording
+
+        verify_recording(ep["path"])  # raises ValueError with rerun's output on failure
+        msg += "; rerun rrd verify: ok"
+    print(msg)
     return 0
 
 
@@ -74,7 +108,7 @@ def _record_env(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from flatbody_env.recording.writer import verify_recording
+    from flatbody_env.recording.reader import verify_recording
     from flatbody_env.recording.wrapper import RerunRecorder
 
     env = RerunRecorder(_make_env(args.env_id, args.max_steps), args.out, tensor_every=args.tensor_every)
@@ -106,16 +140,55 @@ def _record_env(args) -> int:
 
 
 def _record_info(args) -> int:
-    from flatbody_env.recording.writer import summarize_recording, verify_recording
+    from flatbody_env.recording.reader import summarize_recording, verify_recording
 
     path = Path(args.file)
-    if not path.exists():
-        raise ValueError(f"file: no file {args.file!r}")
-    print(summarize_recording(path, rows=args.rows))
+    if path.suffix != ".rrd":
+        raise ValueError(f"file: expected a rerun recording ending in .rrd, got {args.file[:60]!r}")
+    if not path.is_file():
+        raise ValueError(f"file: no regular file {args.file[:60]!r}")
+    try:
+        summary = summarize_recording(path, rows=args.rows)
+    except (RuntimeError, OSError, ValueError) as exc:  # rerun refuses a file that is no recording
+        first = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"file: {args.file[:60]!r} is not a readable rerun recording ({first})") from None
+    print(summary)
     if not args.no_verify:
         out = verify_recording(path)
         print(f"rerun rrd verify: {out.splitlines()[-1] if out else 'ok'}")
     return 0
+
+
+def _record_shots(args) -> int:
+    from flatbody_env.recording.viewer import screenshots
+
+    shots = screenshots(args.file, args.times, args.out, size=args.size, views=args.views, prefix=args.prefix, colors=args.colors)
+    for shot in shots:
+        print(f"wrote {shot.path}" + (f"  ({shot.view_class} '{shot.view}')" if shot.view else ""))
+    reports = sorted({r for shot in shots for r in shot.reports})
+    for r in reports:
+        print(f"viewer report: {r}", file=sys.stderr)
+    return 0
+
+
+def _float_list(text: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"times: expected comma-separated seconds, got {text!r}") from None
+    if not values or any(not (v >= 0.0) for v in values):
+        raise argparse.ArgumentTypeError("times: every time must be a number ≥ 0")
+    return values
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size: expected WIDTHxHEIGHT, got {text!r}") from None
+    if not (320 <= w <= 4096 and 320 <= h <= 4096):
+        raise argparse.ArgumentTypeError(f"size: width and height must be in [320, 4096], got {text!r}")
+    return w, h
 
 
 def _record_bench(args) -> int:
@@ -124,7 +197,8 @@ def _record_bench(args) -> int:
 
     import numpy as np
 
-    from flatbody_env.recording.writer import Recorder, record_trajectory, sdk_version
+    from flatbody_env.recording.reader import sdk_version
+    from flatbody_env.recording.writer import Recorder, record_trajectory
     from flatbody_env.scene import load_scene
     from flatbody_env.simulation import simulate
 
@@ -173,6 +247,9 @@ def _record_bench(args) -> int:
                 live_s = time.perf_counter() - start
                 live = {"steps": n, "block": args.block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
                 print(f"live Recorder.append, {n} steps in blocks of {args.block}: {live_s:.3f} s ({live_s / n * 1e6:.1f} µs/step)")
+    frame = _frame_bench(scene, args.frames)
+    print(f"rgb_array frame ({frame['frames']} frames of scene {scene.name}): median {frame['median_ms']:.3f} ms, mean {frame['mean_ms']:.3f} ms — "
+          + ("within" if frame["within_budget"] else "OVER") + " the 1 ms budget")
     target = next(r for r in rows if r["steps"] == args.steps)
     result = {
         "benchmark": "recording",
@@ -185,6 +262,7 @@ def _record_bench(args) -> int:
         "repeats": args.repeats,
         "sizes": rows,
         "live": live,
+        "frame": frame,
         "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
         "rerun_sdk": sdk_version(),
         "python": platform.python_version(),
@@ -200,6 +278,34 @@ def _record_bench(args) -> int:
     print(f"logging a {args.steps}-step trajectory: {target['median_s']:.3f} s (median of {args.repeats}) — {verdict} the 1 s budget")
     print(f"wrote {json_path} and {png_path}")
     return 0
+
+
+def _frame_bench(scene, frames: int) -> dict:
+    """Time ``render_frame`` (the env's ``rgb_array`` frame) on the states of a simulated trajectory."""
+    import numpy as np
+
+    from flatbody_env.env.rendering import render_frame
+    from flatbody_env.simulation import simulate
+
+    traj = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, frames), with_rotation=True)
+    target = {"lambda": float(traj.state["lambda"][0]), "mu": float(traj.state["mu"][0])}
+    Y, R, t = traj.y, traj.rotation, traj.t
+    for k in range(min(20, frames)):  # warm-up (font and legend caches)
+        render_frame(Y[:, k], R[k], target, t[k])
+    times = np.empty(frames)
+    for k in range(frames):
+        start = time.perf_counter()
+        render_frame(Y[:, k], R[k], target, t[k])
+        times[k] = time.perf_counter() - start
+    median_ms = float(np.median(times)) * 1e3
+    return {
+        "frames": frames,
+        "median_ms": median_ms,
+        "mean_ms": float(times.mean()) * 1e3,
+        "p90_ms": float(np.percentile(times, 90)) * 1e3,
+        "budget_ms": 1.0,
+        "within_budget": median_ms <= 1.0,
+    }
 
 
 def _bench_chart(result: dict, path: Path) -> None:
@@ -245,10 +351,13 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
     p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
+    p.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
+                   help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
@@ -268,14 +377,25 @@ def register(sub) -> None:
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
+    p = sub.add_parser("record-shots", help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times")
+    p.add_argument("file", metavar="RUN.rrd")
+    p.add_argument("--times", type=_float_list, default=[0.0, 5.0, 10.0], metavar="T1,T2,...", help="sim_time values in seconds (default 0,5,10)")
+    p.add_argument("--out", default="shots", metavar="DIR", help="folder of the PNGs (default shots)")
+    p.add_argument("--size", type=_size, default=(1600, 1000), metavar="WxH", help="window size (default 1600x1000)")
+    p.add_argument("--views", action="store_true", help="also save each visible view on its own")
+    p.add_argument("--prefix", default=None, help="file-name prefix (default: the recording's stem)")
+    p.add_argument("--colors", type=int_at_least("colors", 0), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
+    p.set_defaults(handler=_record_shots)
+
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000)")
+    p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000) and to draw an rgb_array frame (budget 1 ms)")
     p.add_argument("--steps", type=int_at_least("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
     p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
     p.add_argument("--repeats", type=int_at_least("repeats"), default=5, help="runs per size (median reported; default 5)")
     p.add_argument("--block", type=int_at_least("block"), default=256, help="block size of the live-recorder measurement")
+    p.add_argument("--frames", type=int_at_least("frames", 2), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
     p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
     p.set_defaults(handler=_record_bench)

@@ -5,33 +5,29 @@ from __future__ import annotations
 import json
 import math
 import sys
-from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, float_list, int_at_least, load_scene_arg
+from flatbody_env.answers import methods_answer, scenes_answer, simulate_trajectory
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
+from flatbody_env.physics.validation import MAX_SAMPLES
 
 
 def _simulate(args) -> int:
-    from flatbody_env.simulation import simulate
+    from flatbody_env.output import atomic_write
 
     scene = load_scene_arg(args)
-    t_end = args.t_end if args.t_end is not None else scene.t_end
-    times = None
-    if args.times:
-        times = float_list(args.times)
-    elif args.samples is not None:
-        import numpy as np
-
-        times = np.linspace(0.0, t_end, args.samples)
-    traj = simulate(
+    traj = simulate_trajectory(
         scene,
-        t_end=t_end,
-        times=times,
+        t_end=args.t_end,
+        times=args.times,
+        samples=args.samples,
         method=args.method,
         rtol=args.rtol,
         atol=args.atol,
         step=args.step,
         model=args.model,
         with_rotation=args.with_rotation,
+        max_nfev=args.max_nfev,
+        max_wall_time=args.max_seconds,
     )
     if args.summary:
         print(format_summary(scene, traj))
@@ -39,9 +35,11 @@ def _simulate(args) -> int:
             return 0
     text = json.dumps(traj.to_dict())
     if args.out:
-        Path(args.out).write_text(text + "\n", encoding="utf-8")
+        atomic_write(args.out, text + "\n")
         if not args.summary:
             print(f"wrote {args.out} ({traj.t.size} samples, {traj.method}, {traj.model} model)", file=sys.stderr)
+            for line in _rung_lines(traj):
+                print(line, file=sys.stderr)
     else:
         sys.stdout.write(text + "\n")
     return 0
@@ -55,6 +53,7 @@ def format_summary(scene, traj, rows: int = 6) -> str:
         f"scene {scene.name}: {scene.body.describe()}",
         f"integrated to t = {traj.t[-1]:g} with {traj.method} ({traj.model} model): "
         f"{traj.nfev} RHS evaluations, {traj.wall_time * 1e3:.1f} ms",
+        *_rung_lines(traj),
         "",
         f"{'t':>9} {'lambda':>10} {'mu':>10} {'rho':>10} {'theta':>10} {'|s|':>10} {'energy':>14}",
     ]
@@ -74,12 +73,21 @@ def format_summary(scene, traj, rows: int = 6) -> str:
     return "\n".join(lines)
 
 
+def _rung_lines(traj) -> list[str]:
+    """The rung of the model ladder and why it was chosen (the invariant and its measured size)."""
+    rung = traj.extra.get("rung")
+    if rung is None:
+        return []
+    measured = ", ".join(f"{k} = {v:.3g}" for k, v in traj.extra.get("rung_measured", {}).items())
+    return [f"rung: {rung} -- {traj.extra.get('rung_invariant', '')}" + (f" [{measured}]" if measured else "")]
+
+
 def _scenes(args) -> int:
     from flatbody_env.scene import builtin_scenes
 
     scenes = builtin_scenes()
     if args.json:
-        print(json.dumps({name: sc.to_dict() for name, sc in scenes.items()}, indent=2))
+        print(json.dumps(scenes_answer(), indent=2))
         return 0
     width = max(len(n) for n in scenes)
     for name, sc in scenes.items():
@@ -93,7 +101,7 @@ def _methods(args) -> int:
 
     infos = available_methods()
     if args.json:
-        print(json.dumps([m.as_dict() for m in infos], indent=2))
+        print(json.dumps(methods_answer(), indent=2))
         return 0
     header = f"{'name':<22} {'adaptive':<8} {'order':>5} {'chart':<10} {'compiled':<8} preserves"
     print(header)
@@ -110,10 +118,13 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
     add_scene_arguments(p)
     add_integration_arguments(p)
-    p.add_argument("--times", metavar="t1,t2,...", help="output times (default: an even grid)")
-    p.add_argument("--samples", type=int_at_least("samples", 2), default=None, metavar="N", help="number of evenly spaced output times (default 101)")
+    p.add_argument("--times", type=times_list, metavar="t1,t2,...",
+                   help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
+                   "it is also in the JSON's 'initial_state'); default: an even grid")
+    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=None, metavar="N",
+                   help=f"number of evenly spaced output times in [0, t_end] (default 101, at most {MAX_SAMPLES})")
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
-    p.add_argument("--out", metavar="FILE", help="write the JSON here instead of stdout")
+    p.add_argument("--out", type=output_file("--out"), metavar="FILE", help="write the JSON here instead of stdout (replaced atomically)")
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")
     p.set_defaults(handler=_simulate)
 

@@ -154,7 +154,8 @@ class FlatBodyEnv(gym.Env):
 
     References
     ----------
-    .. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension.
+    .. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+       degenerate dimension", arXiv:0902.3573 (2009).
     .. [2] ``docs/physics.md``: the corrected equations and the paper's errata.
     """
 
@@ -305,10 +306,7 @@ class FlatBodyEnv(gym.Env):
     def sample_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None = None) -> tuple[np.ndarray, StationaryEllipse]:
         """The initial state y (11,) and the target that :meth:`reset` draws from ``rng`` with ``options``
         (the env itself is not changed; ``rng`` advances exactly as in ``reset``)."""
-        options = dict(options or {})
-        unknown = set(options) - {"target", "state"}
-        if unknown:
-            raise ValueError(f"options.{sorted(unknown)[0]}: unknown option (allowed: target, state)")
+        options = _checked_options(options)
         if "target" in options:
             target = self.task.target_from(options["target"], self.body)
         else:
@@ -463,3 +461,31 @@ def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
 
 
 __all__ = ["FlatBodyEnv", "DEFAULT_INTEGRATOR", "OBSERVATION_NAMES", "CONTROLS", "REWARD_TERMS", "TARGET_NAMES", "build_info"]
+
+
+
+def _checked_options(options: Any) -> dict[str, Any]:
+    """``reset(options=...)`` validated before use: types, finite numbers within the documented
+    ranges (:mod:`flatbody_env.physics.validation`); ``ValueError`` naming ``options.…``."""
+    from flatbody_env.physics import validation as v
+
+    if options is None:
+        return {}
+    options = dict(v.mapping("options", options))
+    v.keys("options", options, ("target", "state"))
+    target = options.get("target")
+    if target is not None and not isinstance(target, StationaryEllipse):
+        target = v.mapping("options.target", target)
+        v.keys("options.target", target, ("lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"), ("lambda", "mu"))
+        checked = {k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1]) for k in ("lambda", "mu")}
+        if "branch" in target:
+            checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
+        if "sign" in target:
+            checked["sign"] = v.number("options.target.sign", target["sign"], low=-1.0, high=1.0)
+            if checked["sign"] not in (-1.0, 1.0):
+                raise ValueError(f"options.target.sign: must be +1 or -1, got {checked['sign']!r}")
+        options["target"] = checked
+    if "state" in options:
+        options["state"] = v.mapping("options.state", options["state"])
+    return options
+

@@ -85,9 +85,9 @@ Domain codes (:data:`DOMAIN_CODES`): 0 inside, 1 non-finite, 2 λ, 3 μ, 4 ϱ, 5
 
 References
 ----------
-.. [1] A. Kovalchuk and E. Rożko, on affinely-rigid bodies with thickness in degenerate dimension
-   (equation numbers as in the paper).
-.. [2] ``docs/physics.md``: the corrected equations and the paper's errata (E1–E10, §1–§8).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the corrected equations and the paper's errata (E1–E10).
 """
 
 from __future__ import annotations

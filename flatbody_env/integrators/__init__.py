@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from flatbody_env.integrators.base import BatchStepResult, CHARTS, IntegrationError, Method, MethodInfo, Solution, Stepper, StepResult, Tolerances, available_methods, get_method, make_batch_stepper, make_stepper, register_method
+from flatbody_env.integrators.base import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, BatchStepResult, CHARTS, IntegrationError, Method, MethodInfo, Solution, Stepper, StepResult, Tolerances, available_methods, get_method, make_batch_stepper, make_stepper, register_method
 
 _LOADED = False
 
@@ -22,6 +22,8 @@ def _load_all() -> None:
 
 
 __all__ = [
+    "DEFAULT_MAX_NFEV",
+    "DEFAULT_MAX_WALL_TIME",
     "BatchStepResult",
     "CHARTS",
     "IntegrationError",

@@ -12,6 +12,7 @@ tolerance); the environment turns it into ``info`` flags, the analysis layer let
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -69,15 +70,70 @@ class Solution:
     stats: dict = field(default_factory=dict)
 
 
+DEFAULT_MAX_NFEV = 20_000_000
+"""Default budget of right-hand-side evaluations of one integration (compiled: a few seconds)."""
+DEFAULT_MAX_WALL_TIME = 120.0
+"""Default wall-clock budget (s) of one integration, checked by the Python (scipy) methods."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class Tolerances:
-    """Accuracy settings passed to every method (adaptive ones read rtol/atol, fixed-step ones step)."""
+    """Accuracy settings and the work budget passed to every method (adaptive ones read rtol/atol,
+    fixed-step ones step). Validated on construction (``ValueError`` naming the field and range).
+
+    Budget: an integration that would need more than ``max_nfev`` right-hand-side evaluations
+    (fixed-step methods: known before the run, ⌈Δt/h⌉ steps × stages; adaptive methods: counted as
+    they go) or more than ``max_wall_time`` seconds (checked by the scipy methods; compiled ones
+    are bounded by ``max_nfev``) stops with :class:`IntegrationError` of ``kind="budget"``.
+    """
 
     rtol: float = 1e-10
     atol: float = 1e-10
     step: float | None = None
     energy_tol: float = np.inf
-    """Allowed |H(t) − H(0)| (absolute) before the run is declared failed."""
+    """Allowed |H(t) − H(0)| (absolute) before the run is declared failed (``inf``: no check)."""
+    max_nfev: int = DEFAULT_MAX_NFEV
+    """Budget of right-hand-side evaluations."""
+    max_wall_time: float = DEFAULT_MAX_WALL_TIME
+    """Budget of wall-clock seconds (scipy methods)."""
+
+    def __post_init__(self) -> None:
+        from flatbody_env.physics import validation as v
+
+        object.__setattr__(self, "rtol", v.number("rtol", self.rtol, low=v.TOL_RANGE[0], high=v.TOL_RANGE[1]))
+        object.__setattr__(self, "atol", v.number("atol", self.atol, low=v.TOL_RANGE[0], high=v.TOL_RANGE[1]))
+        if self.step is not None:
+            step = v.number("step", self.step, positive=True)
+            if step > v.T_END_MAX:
+                raise ValueError(f"step: must lie in (0, {v.T_END_MAX:g}], got {step!r}")
+            object.__setattr__(self, "step", step)
+        if not (isinstance(self.energy_tol, (int, float, np.integer, np.floating)) and not isinstance(self.energy_tol, bool)
+                and (self.energy_tol == np.inf or (math.isfinite(float(self.energy_tol)) and self.energy_tol > 0))):
+            raise ValueError(f"energy_tol: must be a number > 0 or inf (allowed range (0, inf]), got {self.energy_tol!r}")
+        object.__setattr__(self, "energy_tol", float(self.energy_tol))
+        object.__setattr__(self, "max_nfev", v.integer("max_nfev", self.max_nfev, low=1, high=10**12))
+        object.__setattr__(self, "max_wall_time", v.number("max_wall_time", self.max_wall_time, positive=True))
+
+
+def check_step(info: "MethodInfo", tol: Tolerances) -> float:
+    """The fixed step ``h`` of a fixed-step method (0.0 for adaptive ones): the one home of the rule
+    "fixed-step methods need ``step=``, adaptive methods refuse it" (``ValueError`` naming ``step``)."""
+    if info.adaptive:
+        if tol.step is not None:
+            raise ValueError(f"step: {info.name} is adaptive; step= (CLI: --step) applies to fixed-step methods only")
+        return 0.0
+    if tol.step is None:
+        raise ValueError(f"step: {info.name} is a fixed-step method; give step= (CLI: --step H), e.g. step=0.01")
+    return float(tol.step)
+
+
+def budget_error(*, t: float, method: str, used: str, tol: Tolerances) -> IntegrationError:
+    """The :class:`IntegrationError` (``kind="budget"``) for a run that ran out of its budget."""
+    return IntegrationError(
+        f"work budget exhausted ({used}; budget max_nfev = {tol.max_nfev}, max_wall_time = {tol.max_wall_time:g} s — "
+        "raise them (max_nfev=, max_wall_time=; CLI --max-nfev, --max-seconds) or shorten t_end)",
+        t=t, method=method, kind="budget",
+    )
 
 
 class Method(Protocol):
@@ -146,7 +202,7 @@ def make_stepper(name: str, body: Body, tol: Tolerances, *, with_rotation: bool 
 
     Methods may offer a fast path (a ``make_stepper(body, tol, with_rotation)`` method, e.g. a
     compiled single-step kernel); otherwise each step is one :meth:`Method.integrate` call over
-    [0, dt] with the action held constant (a fresh solver per step: NOTES §8 warns against
+    [0, dt] with the action held constant (a fresh solver per step: docs/physics.md §10 warns against
     carrying an adaptive solver across action changes). Failures come back as flags.
     """
     method = get_method(name)

@@ -7,10 +7,10 @@ name                   adaptive  order  chart      algorithm
 =====================  ========  =====  =========  =================================================
 ``DOP853-numba``       yes       8      two-polar  port of scipy's DOP853 (same steps, ~100× faster)
 ``RK4``                no        4      two-polar  classical Runge–Kutta
-``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (NOTES §8), J1 = J2
+``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (docs/physics.md §10), J1 = J2
 ``splitting-suzuki4``  no        4      two-polar  Suzuki 5-stage composition of Strang
 ``splitting-yoshida4`` no        4      two-polar  Yoshida triple-jump composition of Strang
-``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (NOTES §5)
+``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (docs/physics.md §7)
 ``RATTLE-suzuki4``     no        4      regular    Suzuki 5-stage composition of RATTLE
 ``RATTLE-kahanli6``    no        6      regular    Kahan–Li 9-stage composition of RATTLE
 =====================  ========  =====  =========  =================================================
@@ -24,7 +24,7 @@ ValueError (use the scipy methods). They do not integrate R in the two-polar cha
 
 Failures raise :class:`~flatbody_env.integrators.base.IntegrationError` with ``kind`` from
 :mod:`.failure` (non-finite, step-collapse, chart-singularity, domain, energy, constraint,
-under-resolved, max-steps, unsupported).
+under-resolved, budget, unsupported).
 
 Environment API
 ---------------
@@ -67,7 +67,7 @@ from flatbody_env.physics.potentials import V2
 from flatbody_env.physics.regular import paper_from_regular, regular_from_paper
 from flatbody_env.integrators import rattle_kernels as _rk
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error, check_step, register_method
 from flatbody_env.integrators.failure import KINDS, failure_reason, raise_for
 
 
@@ -93,16 +93,14 @@ def _check_compiled_body(body: Body, name: str) -> None:
         )
 
 
-def _check_step(name: str, tol: Tolerances, fixed: bool) -> float:
-    if fixed:
-        if tol.step is None:
-            raise ValueError(f"step: {name} is a fixed-step method; give step= (CLI: --step H), e.g. 0.01")
-        if not (np.isfinite(tol.step) and tol.step > 0):
-            raise ValueError(f"step: must be a finite number > 0 (allowed range (0, inf)), got {tol.step!r}")
-        return float(tol.step)
-    if tol.step is not None:
-        raise ValueError(f"step: {name} is adaptive; step= applies to fixed-step methods only")
-    return 0.0
+def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol: Tolerances) -> None:
+    """Fixed-step work is known before the run: ⌈Δt/h⌉ steps per output interval × ``stages`` RHS
+    evaluations; beyond ``tol.max_nfev`` it is refused up front (``kind="budget"``)."""
+    spans = np.diff(times)
+    steps = float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
+    if steps * stages > tol.max_nfev:
+        raise budget_error(t=float(times[0]), method=name, tol=tol,
+                           used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]")
 
 
 def _times(times) -> np.ndarray:
@@ -129,26 +127,30 @@ class CompiledTwoPolar:
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
         _check_compiled_body(body, name)
-        h = _check_step(name, tol, not self.info.adaptive)
+        h = check_step(self.info, tol)
         if with_rotation:
             raise ValueError(
                 f"with_rotation: {name} integrates the two-polar state only; use a regular-chart method "
                 "(RATTLE-suzuki4 returns R) or scipy DOP853"
             )
         if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
+            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
         uu = _controls(u)
         P = kernel_params(body)
         Y = np.empty((11, times.size))
-        counters = np.zeros(3, np.int64)
+        counters = np.array([0, 0, 0, tol.max_nfev], np.int64)
         fail = np.zeros(2)
         energy_tol = float(tol.energy_tol)
+        if self.kind != "dop853":
+            _check_fixed_budget(name, times, h, 4 if self.kind == "rk4" else self.coeffs.size, tol)
         if self.kind == "dop853":
             st = _tk.dop853_solve(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Y, counters, fail)
         else:
             st = _tk.fixed_solve(0 if self.kind == "rk4" else 1, self.coeffs, y0, times, uu, P, h, energy_tol, Y, counters, fail)
+        if KINDS[st] == "budget":
+            raise budget_error(t=float(fail[0]), method=name, tol=tol, used=f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps")
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":
@@ -159,9 +161,9 @@ class CompiledTwoPolar:
     def _check_env(self, body: Body, tol: Tolerances) -> None:
         name = self.info.name
         _check_compiled_body(body, name)
-        _check_step(name, tol, not self.info.adaptive)
+        check_step(self.info, tol)
         if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, NOTES §8) needs J1 = J2; use RK4 or DOP853-numba")
+            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
 
     def make_stepper(self, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> "CompiledStepper":
         """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step)."""
@@ -189,7 +191,7 @@ class CompiledRattle:
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
         _check_compiled_body(body, name)
-        h = _check_step(name, tol, True)
+        h = check_step(self.info, tol)
         if body.spin_convention != "corrected":
             raise ValueError("spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method")
         if isinstance(body.potential, V2) and body.potential.c != body.potential.d:
@@ -205,6 +207,7 @@ class CompiledRattle:
             )
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
+        _check_fixed_budget(name, times, h, self.coeffs.size, tol)
         R0 = np.eye(3) if R0 is None else np.asarray(R0, dtype=np.float64)
         z0 = regular_from_paper(y0, body, R0)
         dec0 = np.concatenate([R0.ravel(), [y0[7], y0[8], y0[9], y0[10]]])
@@ -271,7 +274,7 @@ _SPLIT_PRESERVES = ("casimir", "p_theta", "symplectic")
 SPLITTING_STRANG = register_method(
     CompiledTwoPolar(
         MethodInfo(name="splitting-strang", adaptive=False, order=2, chart=_TWO_POLAR, compiled=True, preserves=_SPLIT_PRESERVES,
-                   description="Poisson splitting with exact flows (NOTES 8), Strang, J1 = J2 only"),
+                   description="Poisson splitting with exact flows (docs/physics.md 8), Strang, J1 = J2 only"),
         "split", _tk.STRANG,
     )
 )
@@ -293,7 +296,7 @@ _RATTLE_PRESERVES = ("constraints", "casimir", "lab_spin", "p_theta", "symplecti
 RATTLE = register_method(
     CompiledRattle(
         MethodInfo(name="RATTLE", adaptive=False, order=2, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
-                   description="RATTLE on the regular phi-psi formulation (NOTES 5), passes through lambda = mu; "
+                   description="RATTLE on the regular phi-psi formulation (docs/physics.md 5), passes through lambda = mu; "
                    "p_theta only for J1 = J2"),
         _tk.STRANG,
     )

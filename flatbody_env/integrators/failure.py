@@ -11,13 +11,13 @@ code   kind                   meaning
 0      ``"ok"``               success
 1      ``"non-finite"``       a NaN or inf appeared in the state
 2      ``"step-collapse"``    the adaptive step fell below 10 ulp of t (scipy's criterion)
-3      ``"chart-singularity"``  λ − μ changed sign while σ₋ = s3 − p_θ ≠ 0 (two-polar chart, NOTES §5)
+3      ``"chart-singularity"``  λ − μ changed sign while σ₋ = s3 − p_θ ≠ 0 (two-polar chart, docs/physics.md §7)
 4      ``"domain"``           λ, μ or ϱ ≤ 0 (two-polar) or det φᵀφ ≤ 0 (regular)
 5      ``"energy"``           |H − H₀| beyond the energy tolerance (only without controls)
 6      ``"constraint"``       RATTLE's Newton iteration for the Kirchhoff–Love constraints failed
 7      ``"under-resolved"``   a fixed step turns the chart's frame by more than 1 rad (h·max(|ω3|,|θ̇|) > 1):
                               the two-polar chart near λ = μ, where every fixed-step method blows up
-8      ``"max-steps"``        the step budget was used up
+8      ``"budget"``           the work budget (RHS evaluations, steps or wall-clock, :class:`Tolerances`) was used up
 9      ``"unsupported"``      a control the method cannot apply (torques in the compiled regular chart)
 =====  =====================  =====================================================================
 """
@@ -34,7 +34,8 @@ DOMAIN = 4
 ENERGY = 5
 CONSTRAINT = 6
 UNDER_RESOLVED = 7
-MAX_STEPS = 8
+BUDGET = 8
+MAX_STEPS = BUDGET  # the kernels' name of the same code
 UNSUPPORTED = 9
 
 KINDS = (
@@ -46,7 +47,7 @@ KINDS = (
     "energy",
     "constraint",
     "under-resolved",
-    "max-steps",
+    "budget",
     "unsupported",
 )
 
@@ -60,7 +61,7 @@ _REASONS = {
     CONSTRAINT: "RATTLE could not satisfy the Kirchhoff-Love constraints (Newton did not converge)",
     UNDER_RESOLVED: "a fixed step turns the chart's frame by more than 1 rad (lambda ~ mu: the two-polar chart "
     "is under-resolved; use a smaller step or a regular-chart method)",
-    MAX_STEPS: "step budget exhausted",
+    BUDGET: "work budget exhausted (RHS evaluations or steps)",
     UNSUPPORTED: "control not supported by this method",
 }
 
@@ -85,4 +86,4 @@ def raise_for(status: int, *, t: float, method: str, detail: str = "") -> None:
 
 
 __all__ = ["KINDS", "MAX_TURN", "failure_reason", "raise_for", "OK", "NON_FINITE", "STEP_COLLAPSE", "CHART_SINGULARITY", "DOMAIN",
-           "ENERGY", "CONSTRAINT", "UNDER_RESOLVED", "MAX_STEPS", "UNSUPPORTED"]
+           "ENERGY", "CONSTRAINT", "UNDER_RESOLVED", "BUDGET", "MAX_STEPS", "UNSUPPORTED"]

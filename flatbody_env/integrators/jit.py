@@ -1,4 +1,4 @@
-"""Compiled copies of the physics layer's scalar kernels (numba, on-disk cache).
+"""Compiled copies of the physics layer's scalar kernels (numba, on-disk cache where one can be written).
 
 The physics layer stays free of numba: :func:`flatbody_env.physics.hamiltonian.kinetic_kernel`,
 :func:`flatbody_env.physics.potentials.potential_kernel`, :func:`flatbody_env.physics.equations.rhs_core` and
@@ -16,18 +16,29 @@ numba's cache keys on the code object's file and line, so the compiled machine c
 ``flatbody_env/__pycache__`` (or ``$NUMBA_CACHE_DIR``) and is re-used by later processes;
 editing a physics module invalidates it (numba compares the source file's time stamp).
 
+Read-only installs: :data:`CACHE` (``cache=`` of every compiled function) is decided once at
+import by :func:`cache_location`: ``$NUMBA_CACHE_DIR`` when set and writable, else the package's
+``__pycache__`` folders when writable, else numba's user-wide cache folder (e.g.
+``~/.cache/numba``) when writable; when none can be written (a read-only image without a
+writable home) the kernels are compiled in memory on first use (``cache=False``) instead of
+failing with numba's "no locator available".
+
 Public names: :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_core`,
 :data:`rhs_kernel` (jitted twins of the physics kernels, same signatures) and
 :func:`energy_kernel` (H = 𝒯 + V, eq. (41) of [1]).
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
 import types
+from pathlib import Path
 
 import numba
 
@@ -35,7 +46,52 @@ from flatbody_env.physics import equations as _equations
 from flatbody_env.physics import hamiltonian as _hamiltonian
 from flatbody_env.physics import potentials as _potentials
 
-JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+_PACKAGE = Path(__file__).resolve().parents[1]
+_KERNEL_SOURCE_DIRS = ("physics", "integrators", "env")
+"""Folders (under the package) whose modules hold compiled functions: their ``__pycache__`` is numba's in-tree cache."""
+
+
+def _writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder`` (or, when it does not exist yet, in its nearest existing parent)."""
+    probe = folder
+    while not probe.exists():
+        if probe.parent == probe:
+            return False
+        probe = probe.parent
+    try:
+        tempfile.TemporaryFile(dir=probe).close()
+    except OSError:
+        return False
+    return True
+
+
+def cache_location() -> str | None:
+    """Where numba can keep compiled kernels: a folder path, or None (compile in memory).
+
+    Probes, in numba's own order: ``$NUMBA_CACHE_DIR``; the package's ``__pycache__`` folders;
+    numba's user-wide cache folder.
+    """
+    env_dir = os.environ.get("NUMBA_CACHE_DIR")
+    if env_dir and _writable(Path(env_dir)):
+        return env_dir
+    in_tree = [_PACKAGE / sub / "__pycache__" for sub in _KERNEL_SOURCE_DIRS]
+    if all(_writable(d) for d in in_tree):
+        return str(_PACKAGE)
+    try:
+        from numba.misc.appdirs import AppDirs
+
+        user_dir = Path(AppDirs(appname="numba", appauthor=False).user_cache_dir)
+    except Exception:  # pragma: no cover - numba moved its helper; treat as no user cache
+        return None
+    return str(user_dir) if _writable(user_dir) else None
+
+
+CACHE_DIR = cache_location()
+"""The folder numba caches compiled kernels under, or None when they are compiled in memory."""
+CACHE = CACHE_DIR is not None
+"""``cache=`` of every compiled function (False on read-only installs without a writable cache folder)."""
+
+JIT_OPTIONS = {"cache": CACHE, "nogil": True, "error_model": "numpy"}
 """Options of every compiled function of the integrators (``error_model="numpy"``: x/0 gives
 inf/nan instead of raising, so failures surface as status flags)."""
 
@@ -66,4 +122,4 @@ def energy_kernel(y, P, vel, force):
     return kinetic_kernel(y, P, vel, force) + v
 
 
-__all__ = ["JIT_OPTIONS", "jit_copy", "kinetic_kernel", "potential_kernel", "rhs_core", "rhs_kernel", "energy_kernel"]
+__all__ = ["CACHE", "CACHE_DIR", "JIT_OPTIONS", "cache_location", "jit_copy", "kinetic_kernel", "potential_kernel", "rhs_core", "rhs_kernel", "energy_kernel"]

@@ -1,4 +1,4 @@
-"""Compiled RATTLE on the regular φψ formulation (NOTES §5 of [2], :mod:`flatbody_env.physics.regular`).
+"""Compiled RATTLE on the regular φψ formulation (docs/physics.md §7 of [2], :mod:`flatbody_env.physics.regular`).
 
 Configuration q = (φ1, φ2, ψ) ∈ ℝ⁹ (columns of Φ), velocity v = q̇, constant mass
 diag(J1, J1, J1, J2, J2, J2, J3, J3, J3), holonomic Kirchhoff–Love constraints (eq. (21) of [1])
@@ -17,7 +17,7 @@ conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage compos
 (:data:`~.twopolar_kernels.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
 (:data:`~.twopolar_kernels.KAHAN_LI6`) to order 6; forces are re-used across stages.
 
-Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (NOTES §5):
+Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (docs/physics.md §7):
 F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
 V_ϱ′ comes from :func:`flatbody_env.physics.potentials.potential_kernel` (in-plane kind 0); the invariant
 gradient (V_tr, V_det) from :func:`invariant_gradient_kernel`, the compiled twin of the potentials'
@@ -25,7 +25,7 @@ gradient (V_tr, V_det) from :func:`invariant_gradient_kernel`, the compiled twin
 is no function of the invariants (erratum E9) and is refused by the method layer.
 
 Chart following. The paper's state needs the two-polar decomposition Φ = R D U(θ)⁻¹ chosen by
-continuity (NOTES §5). :func:`decompose_kernel` is a compiled twin of
+continuity (docs/physics.md §7). :func:`decompose_kernel` is a compiled twin of
 :func:`flatbody_env.physics.kinematics.decompose` for the Kirchhoff–Love Φ (closed-form 2×2 eigen-
 decomposition of φᵀφ; the four discrete candidates; ``keep_order``). After every step the
 decomposition is continued from the previous one; when the chart frame jumps by more than
@@ -44,8 +44,8 @@ Only the dilatation force f_ϱ = u[3] is applied; non-zero torques return status
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 .. [3] H. C. Andersen, RATTLE, J. Comput. Phys. 52 (1983); E. Hairer, C. Lubich, G. Wanner,
    *Geometric Numerical Integration*, §VII.1; M. Suzuki, Phys. Lett. A 146 (1990).
 """
@@ -71,7 +71,7 @@ NEWTON_MAX = 30
 
 @njit
 def invariant_gradient_kernel(kind, c1, tr, det):
-    """(∂V/∂tr, ∂V/∂det) of the in-plane potential (NOTES §5): V1 = k/2·tr, V2 (c = d) = c·tr(1 + 1/det),
+    """(∂V/∂tr, ∂V/∂det) of the in-plane potential (docs/physics.md §7): V1 = k/2·tr, V2 (c = d) = c·tr(1 + 1/det),
     V3 = κ(det^{−1/2} + tr/2)."""
     if kind == KIND_V1:
         return 0.5 * c1, 0.0
@@ -121,7 +121,7 @@ def stretches(z):
 
 @njit
 def regular_energy_kernel(z, P):
-    """H = ½ Σ J_A |Φ̇_A|² + V (NOTES §5) of z (18,)."""
+    """H = ½ Σ J_A |Φ̇_A|² + V (docs/physics.md §7) of z (18,)."""
     T = 0.5 * (P[0] * _dot3(z, 9, 9) + P[1] * _dot3(z, 12, 12) + P[2] * _dot3(z, 15, 15))
     lam, mu, rho = stretches(z)
     v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], lam, mu, rho)

@@ -1,7 +1,7 @@
 """The reference family: scipy ``solve_ivp`` (RK23, RK45, DOP853, Radau, BDF, LSODA) in both charts.
 
 ``NAME`` integrates the two-polar equations (eqs. (44)–(49) of [1], :mod:`flatbody_env.physics.equations`);
-``NAME-regular`` integrates the regular matrix formulation (NOTES §5, :mod:`flatbody_env.physics.regular`)
+``NAME-regular`` integrates the regular matrix formulation (docs/physics.md §7, :mod:`flatbody_env.physics.regular`)
 and converts back to the paper's state at the output times, following the chart's discrete
 branch by continuity.
 
@@ -11,13 +11,17 @@ Failure detection
   numbers") → :class:`IntegrationError` of kind ``"step-collapse"``;
 * non-finite values → ``"non-finite"``;
 * two-polar chart: λ − μ changing sign while σ₋ = s3 − p_θ ≠ 0 (the centrifugal barrier of
-  NOTES §5 forbids it, so it is numerical) → ``"chart-singularity"``; λ, μ or ϱ reaching 0 →
+  docs/physics.md §7 forbids it, so it is numerical) → ``"chart-singularity"``; λ, μ or ϱ reaching 0 →
   ``"domain"``;
 * regular chart: the Kirchhoff–Love constraints violated beyond tolerance → ``"constraint"``;
-* |H(t) − H(0)| beyond ``tol.energy_tol`` (no controls) → ``"energy"``.
+* |H(t) − H(0)| beyond ``tol.energy_tol`` (no controls) → ``"energy"``;
+* more than ``tol.max_nfev`` right-hand-side evaluations or ``tol.max_wall_time`` seconds →
+  ``"budget"`` (checked inside the right-hand side, so no run outlives its budget).
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -27,7 +31,7 @@ from flatbody_env.physics.equations import rhs, rhs_with_rotation
 from flatbody_env.physics.hamiltonian import hamiltonian
 from flatbody_env.physics.kinematics import Decomposition
 from flatbody_env.physics.regular import FrameTracker, constraint_residual, follow_chart, paper_from_regular, regular_energy, regular_from_paper, regular_rhs
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, register_method
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error, check_step, register_method
 
 _ORDERS = {"RK23": 3, "RK45": 5, "DOP853": 8, "Radau": 5, "BDF": 5, "LSODA": 12}
 _DESCRIPTIONS = {
@@ -62,6 +66,46 @@ def _check_energy(body: Body, Y: np.ndarray, t: np.ndarray, H0: float, tol: Tole
     return H
 
 
+class _OutOfBudget(Exception):
+    """Raised inside the right-hand side when the work budget is used up (caught around solve_ivp)."""
+
+    def __init__(self, t: float, used: str) -> None:
+        super().__init__(used)
+        self.t = t
+        self.used = used
+
+
+class _Budget:
+    """Wraps a right-hand side ``fun(t, z)``: counts evaluations against ``tol.max_nfev`` and checks
+    the wall clock against ``tol.max_wall_time`` every 64 evaluations."""
+
+    def __init__(self, fun, tol: Tolerances) -> None:
+        self.fun = fun
+        self.max_nfev = tol.max_nfev
+        self.max_wall = tol.max_wall_time
+        self.start = time.perf_counter()
+        self.nfev = 0
+
+    def __call__(self, t, z):
+        self.nfev += 1
+        if self.nfev > self.max_nfev:
+            raise _OutOfBudget(float(t), f"{self.nfev - 1} RHS evaluations")
+        if self.nfev % 64 == 0:
+            elapsed = time.perf_counter() - self.start
+            if elapsed > self.max_wall:
+                raise _OutOfBudget(float(t), f"{elapsed:.1f} s wall-clock after {self.nfev} RHS evaluations")
+        return self.fun(t, z)
+
+
+def _solve(fun, span, z0, *, tol: Tolerances, name: str, **kwargs):
+    """``solve_ivp`` under the work budget of ``tol`` (``IntegrationError(kind="budget")`` past it)."""
+    wrapped = _Budget(fun, tol)
+    try:
+        return solve_ivp(wrapped, span, z0, rtol=tol.rtol, atol=tol.atol, **kwargs)
+    except _OutOfBudget as exc:
+        raise budget_error(t=exc.t, method=name, used=exc.used, tol=tol) from None
+
+
 class ScipyTwoPolar:
     """``solve_ivp`` on the two-polar equations (eqs. (44)–(49) of [1])."""
 
@@ -79,8 +123,7 @@ class ScipyTwoPolar:
 
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        if tol.step is not None:
-            raise ValueError(f"step: {name} is adaptive; step= applies to fixed-step methods only")
+        check_step(self.info, tol)
         y0 = np.asarray(y0, float)
         times = np.asarray(times, float)
         if with_rotation:
@@ -114,16 +157,7 @@ class ScipyTwoPolar:
         for ev in (lam_zero, mu_zero, rho_zero):
             ev.terminal = True
         events = [lam_zero, mu_zero, rho_zero] + ([] if may_cross else [gap])
-        sol = solve_ivp(
-            fun,
-            (times[0], times[-1]),
-            z0,
-            method=self.algorithm,
-            t_eval=times,
-            rtol=tol.rtol,
-            atol=tol.atol,
-            events=events,
-        )
+        sol = _solve(fun, (times[0], times[-1]), z0, tol=tol, name=name, method=self.algorithm, t_eval=times, events=events)
         if sol.status == -1:
             raise IntegrationError(sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse")
         if sol.status == 1:
@@ -150,7 +184,7 @@ class ScipyTwoPolar:
 
 
 class ScipyRegular:
-    """``solve_ivp`` on the regular matrix formulation (NOTES §5), output in the paper's state."""
+    """``solve_ivp`` on the regular matrix formulation (docs/physics.md §7), output in the paper's state."""
 
     def __init__(self, algorithm: str) -> None:
         self.algorithm = algorithm
@@ -166,8 +200,7 @@ class ScipyRegular:
 
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        if tol.step is not None:
-            raise ValueError(f"step: {name} is adaptive; step= applies to fixed-step methods only")
+        check_step(self.info, tol)
         if body.spin_convention != "corrected":
             raise ValueError("spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method")
         y0 = np.asarray(y0, float)
@@ -181,7 +214,7 @@ class ScipyRegular:
         def fun(t, z):
             return regular_rhs(t, z, u, body, lambda_is_larger, frame)
 
-        sol = solve_ivp(fun, (times[0], times[-1]), z0, method=self.algorithm, rtol=tol.rtol, atol=tol.atol, dense_output=True)
+        sol = _solve(fun, (times[0], times[-1]), z0, tol=tol, name=name, method=self.algorithm, dense_output=True)
         if sol.status == -1:
             raise IntegrationError(sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse")
         _check_finite(sol.y, sol.t, name)

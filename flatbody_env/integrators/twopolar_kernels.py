@@ -1,4 +1,4 @@
-"""Compiled (numba) integrators of the two-polar equations (eqs. (44)–(49) of [1], NOTES §3 of [2]).
+"""Compiled (numba) integrators of the two-polar equations (eqs. (44)–(49) of [1], docs/physics.md §4 of [2]).
 
 Three families, all built on the physics kernels (jitted copies, :mod:`.jit`):
 
@@ -8,12 +8,12 @@ Three families, all built on the physics kernels (jitted copies, :mod:`.jit`):
   It steps exactly onto every output time instead of using dense output.
 * ``rk4_*`` — the classical fixed-step Runge–Kutta method of order 4; each output interval is
   divided into ⌈Δt/h⌉ equal steps.
-* ``split_*`` — the Poisson splitting of NOTES §8 (isotropic J1 = J2), every piece an exact flow.
+* ``split_*`` — the Poisson splitting of docs/physics.md §10 (isotropic J1 = J2), every piece an exact flow.
   With ℋ = T_q + V + H1 + H2 + H3,
 
   - T_q = (p_λ² + p_μ²)/(2J) + p_ϱ²/(2J3): drift of (λ, μ, ϱ);
   - V (+ the force f_ϱ): kick of (p_λ, p_μ, p_ϱ); it commutes with H1, H2, H3 and the torque;
-  - H1 = s1²/(2I1): rotation of (s2, s3) by ω1 h, kicks of p_μ, p_ϱ (NOTES §8);
+  - H1 = s1²/(2I1): rotation of (s2, s3) by ω1 h, kicks of p_μ, p_ϱ (docs/physics.md §10);
   - H2 = s2²/(2I2): rotation of (s1, s3) by ω2 h, kicks of p_λ, p_ϱ;
   - H3 = σ₊²/(4J(λ+μ)²) + σ₋²/(4J(λ−μ)²): rotation of (s1, s2) by ω3 h, θ += θ̇ h, kicks of p_λ, p_μ;
   - the torque τ: s += h τ.
@@ -47,8 +47,8 @@ switches the energy check off. Method names: ``dop853``, ``rk4``, ``strang``, ``
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 .. [3] E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*, §II.4, II.10.
 """
 
@@ -115,7 +115,7 @@ def _state_status(y, gap_sign, check_gap):
 
 @njit
 def may_cross(y, u, P):
-    """True when λ = μ is passable in the chart: J1 = J2, σ₋ = s3 − p_θ = 0 and τ3 = 0 (NOTES §5)."""
+    """True when λ = μ is passable in the chart: J1 = J2, σ₋ = s3 − p_θ = 0 and τ3 = 0 (docs/physics.md §7)."""
     return P[0] == P[1] and y[2] == y[3] and u[2] == 0.0
 
 
@@ -211,7 +211,9 @@ def _dop853_error(y, ynew, K, h, rtol, atol):
 def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters):
     """Advance ``y`` (and its derivative ``f``) in place from t to exactly t_bound.
 
-    counters: [nfev, accepted, rejected]. Returns (status, t reached, next |h|).
+    counters: [nfev, accepted, rejected(, budget of nfev)]; past the budget (or
+    :data:`DOP853_MAX_STEPS` steps) the status is ``MAX_STEPS`` (kind ``"budget"``).
+    Returns (status, t reached, next |h|).
     """
     while t < t_bound:
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -221,7 +223,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
         while True:
             if h_abs < min_step:
                 return STEP_COLLAPSE, t, h_abs
-            if counters[1] + counters[2] > DOP853_MAX_STEPS:
+            if counters[1] + counters[2] > DOP853_MAX_STEPS or (counters.size > 3 and counters[0] > counters[3]):
                 return MAX_STEPS, t, h_abs
             t_new = t + h_abs
             if t_new > t_bound:
@@ -261,7 +263,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
 def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
     """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
 
-    counters (3,) int64: [nfev, accepted, rejected]; fail (2,): [t of failure, |H − H₀| at the
+    counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
     last check]. Returns the status.
     """
     vel = np.empty(7)

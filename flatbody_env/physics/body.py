@@ -26,8 +26,9 @@ laboratory spin R s is conserved. ``"paper"`` reproduces the printed eqs. (43)�
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the verified formulas and the errata of [1].
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ class Body:
     thickness: ThicknessPotential | None = None
     """Thickness potential V_ϱ (eq. (40) of [1]); None for none (a custom V may carry it)."""
     spin_convention: str = "corrected"
-    """``"corrected"`` (default, erratum E3 of NOTES.md) or ``"paper"`` (printed eqs. (43)–(46))."""
+    """``"corrected"`` (default, erratum E3 of docs/physics.md) or ``"paper"`` (printed eqs. (43)–(46))."""
     _params: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -176,8 +177,8 @@ class Body:
             thick = validation.mapping(pre + "thickness", thick)
             validation.keys(pre + "thickness", thick, ("a", "b"), ("a", "b"))
             thickness = ThicknessPotential(
-                a=validation.number(pre + "thickness.a", thick["a"], positive=True),
-                b=validation.number(pre + "thickness.b", thick["b"], positive=True),
+                a=validation.number(pre + "thickness.a", thick["a"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]),
+                b=validation.number(pre + "thickness.b", thick["b"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]),
             )
         convention = validation.string(pre + "spin_convention", data.get("spin_convention", "corrected"), choices=SPIN_CONVENTIONS)
         return cls(inertia=inertia, potential=potential, thickness=thickness, spin_convention=convention)
@@ -227,13 +228,13 @@ _POTENTIAL_FIELDS = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}
 def _inertia_from(where: str, params: Mapping[str, Any]) -> Inertia:
     if "J" in params:
         validation.keys(where, params, ("J", "J3"), ("J", "J3"))
-        J = validation.number(f"{where}.J", params["J"], positive=True)
-        return Inertia(J1=J, J2=J, J3=validation.number(f"{where}.J3", params["J3"], positive=True))
+        J = validation.number(f"{where}.J", params["J"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1])
+        return Inertia(J1=J, J2=J, J3=validation.number(f"{where}.J3", params["J3"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]))
     if "J1" in params or "J2" in params:
         validation.keys(where, params, ("J1", "J2", "J3"), ("J1", "J2", "J3"))
-        return Inertia(**{k: validation.number(f"{where}.{k}", params[k], positive=True) for k in ("J1", "J2", "J3")})
+        return Inertia(**{k: validation.number(f"{where}.{k}", params[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]) for k in ("J1", "J2", "J3")})
     validation.keys(where, params, ("J", "J1", "J2", "J3"))
-    raise ValueError(f"{where}.J: missing field (give J and J3, or J1, J2 and J3; each > 0)")
+    raise ValueError(f"{where}.J: missing field (give J and J3, or J1, J2 and J3; each in [1e-06, 1e+06])")
 
 
 def _potential_from(where: str, pot: Mapping[str, Any]):
@@ -244,12 +245,12 @@ def _potential_from(where: str, pot: Mapping[str, Any]):
         raise ValueError(f"{where}.name: unknown potential {name!r} (allowed: V1, V2, V3)")
     fields = _POTENTIAL_FIELDS[name]
     validation.keys(where, pot, ("name", *fields), fields)
-    values = {k: validation.number(f"{where}.{k}", pot[k], positive=True) for k in fields}
+    values = {k: validation.number(f"{where}.{k}", pot[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]) for k in fields}
     return {"V1": V1, "V2": V2, "V3": V3}[name](**values)
 
 
 def default_body() -> Body:
-    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (NOTES E10)."""
+    """J = J3 = 1, V3 with κ = 1 and V_ϱ with a = b = 1: barriers on every collapse (erratum E10)."""
     return Body(
         inertia=Inertia.isotropic(1.0, 1.0),
         potential=V3(kappa=1.0),

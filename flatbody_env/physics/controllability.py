@@ -8,7 +8,7 @@ Linearisation
 θ is cyclic for J1 = J2 and p_θ is conserved by every control (eq. (46) of [1]), so the
 controlled state is x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) ∈ ℝ⁹ (:data:`REDUCED_STATE`). A
 stationary ellipse of branch N (eqs. (50)–(54), s1 = s2 = 0, p = 0) is an equilibrium of
-eqs. (44)–(49) (spin bracket per NOTES E3/E4 of [2]); linearising there (central differences of
+eqs. (44)–(49) (spin bracket per erratum E3/E4 of [2]); linearising there (central differences of
 :func:`flatbody_env.physics.equations.rhs`) gives ẋ ≈ A δx + B a, a = u / limits the normalised action.
 At linear order the thickness force moves only (ϱ, p_ϱ), τ1, τ2 only (s1, s2), and the in-plane
 shape (λ, μ, p_λ, p_μ) — two undamped oscillation modes — is reached *only through s3* (τ3 changes
@@ -38,8 +38,8 @@ shape and its momenta (λ, μ, s3, p_λ, p_μ), the slow mode.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations

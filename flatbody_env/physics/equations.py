@@ -16,12 +16,12 @@ Controls enter as a co-moving torque τ = (τ1, τ2, τ3) on the spin and a gene
 f on ϱ ("dilatation"), ``u = (τ1, τ2, τ3, f)``, held constant by the caller over a step.
 
 Orientation (only when a scene needs it): Ṙ = R W(ω) with W(ω) of eq. (25) of [1], the
-*negative* of the usual hat map (NOTES §1).
+*negative* of the usual hat map (docs/physics.md §1).
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
@@ -64,11 +64,11 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     w1 = vel[0]
     w2 = vel[1]
     w3 = vel[2]
-    # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of NOTES.md)
+    # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of docs/physics.md)
     out[0] = conv * (w2 * s3 - w3 * s2) + u[0]
     out[1] = conv * (w3 * s1 - w1 * s3) + u[1]
     if P[0] == P[1]:
-        # ds3/dt = J(λ² − μ²) s1 s2 / (I1 I2), cancellation-free (NOTES §3)
+        # ds3/dt = J(λ² − μ²) s1 s2 / (I1 I2), cancellation-free (docs/physics.md §4)
         lam = y[7]
         mu = y[8]
         j3r2 = P[2] * y[9] * y[9]

@@ -3,7 +3,7 @@ spectral stability — what the environment's task needs to pick reachable, stab
 
 Branch N of [1] (s1 = s2 = 0, ω1 = ω2 = 0, p_λ = p_μ = p_ϱ = 0, J1 = J2 = J): with u = λ + μ,
 v = λ − μ and σ± = s3 ± p_θ, eqs. (52)–(53) are the stationarity of the effective potential
-(NOTES §6 of [2])
+(docs/physics.md §8 of [2])
 
 .. math:: W(\\lambda, \\mu, \\varrho) = \\frac{\\sigma_+^2}{4Ju^2} + \\frac{\\sigma_-^2}{4Jv^2} + V(\\lambda, \\mu, \\varrho),
 
@@ -11,27 +11,31 @@ so a shape (λ, μ) is stationary for σ₊² = 2Ju³ ∂V/∂u and σ₋² = 2J
 and eq. (54) fixes ϱ* by ∂V/∂ϱ = 0. Then ω3 = σ₊/(2Ju²) + σ₋/(2Jv²) and
 θ̇ = σ₊/(2Ju²) − σ₋/(2Jv²) (the inverse Legendre transform after eq. (31) of [1]).
 
-Spectral stability (NOTES §7): the linearisation splits into an out-of-plane block, unstable iff
+Spectral stability (docs/physics.md §9): the linearisation splits into an out-of-plane block, unstable iff
 q = (s3/I2 − ω3)(ω3 − s3/I1) > 0, and a shape block (λ, μ, ϱ with their momenta; s3 and p_θ are
 constants of the planar motion) whose frequencies are those of the Hessian of W: stable iff it is
 positive definite. The complete Jacobian analysis lives in :mod:`analysis`.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, section 3.4.
-.. [2] ``shared/physics/NOTES.md``, §6–§7.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the verified formulas and the errata of [1]), §6–§7.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
 
 from flatbody_env.physics.body import Body
+from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian
+from flatbody_env.physics.state import STATE_NAMES, unpack
 
 BRANCHES = ("rotation", "circulation")
 """``rotation``: |s3| > |p_θ| (σ₊σ₋ > 0, ω3 dominant); ``circulation``: |s3| < |p_θ| (θ̇ dominant)."""
@@ -39,41 +43,82 @@ BRANCHES = ("rotation", "circulation")
 
 @dataclass(frozen=True, kw_only=True)
 class StationaryEllipse:
-    """A relative equilibrium of branch N (eqs. (50)–(54) of [1])."""
+    """One relative equilibrium: λ, μ, ϱ, ω, θ̇ constant (eq. (50) of [1]) — the one record of the package.
 
-    lam: float
-    mu: float
-    rho: float
-    s3: float
-    p_theta: float
-    omega3: float
+    Built by :func:`stationary_from_shape` (the inverse problem, with the cheap spectral test
+    ``q``/``shape_hessian_min``) and by :mod:`analysis.stationary` (root finding; branches N, A1,
+    A2; full stability lives in :mod:`analysis.stability`).
+    """
+
+    branch: str = "N"
+    """``"N"`` (s1 = s2 = 0, eqs. (52)–(54) of [1]), ``"A1"`` / ``"A2"`` (steady rotation about material axis 1 / 2)."""
+    state: dict[str, float]
+    """The full paper state (the eleven :data:`~flatbody_env.physics.state.STATE_NAMES`) at θ = 0."""
+    omega: tuple[float, float, float]
+    """Co-moving angular velocity (ω1, ω2, ω3)."""
     theta_dot: float
+    """Material angular velocity θ̇."""
     energy: float
-    q: float
-    """Out-of-plane coefficient q of NOTES §7: s̈1 = q s1; unstable iff q > 0."""
-    shape_hessian_min: float
-    """Smallest eigenvalue of the Hessian of W in (λ, μ, ϱ); the shape block is stable iff > 0."""
+    """H (eq. (41) of [1])."""
+    residual: float
+    """max |dy/dt| over the ten reduced components (θ excluded, it is cyclic) of eqs. (43)–(49) of [1]."""
+    method: str = "inverse"
+    """``"inverse"`` (from a shape), ``"closed-form"`` (V1) or ``"numeric"`` (root finding)."""
+    q: float | None = None
+    """Out-of-plane coefficient q of the linearisation (s̈1 = q s1; unstable iff q > 0); None when not computed."""
+    shape_hessian_min: float | None = None
+    """Smallest eigenvalue of the Hessian of W in (λ, μ, ϱ) (shape block stable iff > 0); None when not computed."""
 
     @property
-    def stable(self) -> bool:
-        """Spectrally stable: q < 0 and the shape Hessian positive definite."""
+    def lam(self) -> float:
+        return self.state["lambda"]
+
+    @property
+    def mu(self) -> float:
+        return self.state["mu"]
+
+    @property
+    def rho(self) -> float:
+        return self.state["rho"]
+
+    @property
+    def s3(self) -> float:
+        return self.state["s3"]
+
+    @property
+    def p_theta(self) -> float:
+        return self.state["p_theta"]
+
+    @property
+    def omega3(self) -> float:
+        return self.omega[2]
+
+    @property
+    def y(self) -> np.ndarray:
+        """Packed state, shape (11,)."""
+        return np.array([self.state[name] for name in STATE_NAMES], dtype=float)
+
+    @property
+    def kind(self) -> str:
+        """``"rigid"`` when |ω3| ≥ |θ̇| (σ₊σ₋ ≥ 0: the ``"rotation"`` branch of :func:`stationary_from_shape`),
+        ``"circulating"`` otherwise (the ``"circulation"`` branch)."""
+        return "rigid" if abs(self.omega[2]) >= abs(self.theta_dot) else "circulating"
+
+    @property
+    def stable(self) -> bool | None:
+        """Spectrally stable (q < 0 and the shape Hessian positive definite); None when not computed."""
+        if self.q is None or self.shape_hessian_min is None:
+            return None
         return self.q < 0.0 and self.shape_hessian_min > 0.0
 
-    @property
-    def state(self) -> dict[str, float]:
-        """The full paper state at θ = 0."""
+    def to_dict(self) -> dict[str, Any]:
+        """``{"state", "omega3", "theta_dot", "energy", "residual"}`` (the ``flatbody ellipses --json`` row)."""
         return {
-            "s1": 0.0,
-            "s2": 0.0,
-            "s3": self.s3,
-            "p_theta": self.p_theta,
-            "p_lambda": 0.0,
-            "p_mu": 0.0,
-            "p_rho": 0.0,
-            "lambda": self.lam,
-            "mu": self.mu,
-            "rho": self.rho,
-            "theta": 0.0,
+            "state": {name: float(self.state[name]) for name in STATE_NAMES},
+            "omega3": float(self.omega[2]),
+            "theta_dot": float(self.theta_dot),
+            "energy": float(self.energy),
+            "residual": float(self.residual),
         }
 
 
@@ -92,7 +137,7 @@ def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
 
 
 def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float, float]:
-    """The inverse problem of eqs. (52)–(53) of [1] (NOTES §6 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
+    """The inverse problem of eqs. (52)–(53) of [1] (docs/physics.md §8 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
 
     .. math:: \\sigma_+^2 = 2Ju^3\\,\\partial V/\\partial u, \\qquad \\sigma_-^2 = 2Jv^3\\,\\partial V/\\partial v,
 
@@ -126,7 +171,7 @@ def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm:
 
 
 def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
-    """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, NOTES §6).
+    """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, docs/physics.md §8).
 
     Parameters
     ----------
@@ -168,8 +213,8 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
     I1, I2 = J * mu * mu + J3 * rho * rho, J * lam * lam + J3 * rho * rho
     q = (s3 / I2 - omega3) * (omega3 - s3 / I1)
     hmin = float(np.linalg.eigvalsh(_shape_hessian(body, lam, mu, rho, sp, sm))[0])
-    state = np.array([0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0])
+    y = np.array([0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0])
     return StationaryEllipse(
-        lam=lam, mu=mu, rho=rho, s3=s3, p_theta=pt, omega3=omega3, theta_dot=theta_dot,
-        energy=hamiltonian(state, body), q=q, shape_hessian_min=hmin,
+        branch="N", state=unpack(y), omega=(0.0, 0.0, omega3), theta_dot=theta_dot, energy=hamiltonian(y, body),
+        residual=float(np.max(np.abs(rhs(0.0, y, None, body)[:10]))), method="inverse", q=q, shape_hessian_min=hmin,
     )

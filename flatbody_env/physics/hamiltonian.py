@@ -10,12 +10,12 @@ with the mass matrix :func:`mass_matrix` read off eq. (30) of [1] corrected by e
 ``(J1 − J2) sin θ cos θ``. For J1 = J2 = J it reduces to eq. (31).
 
 In momenta, the isotropic kinetic energy is eq. (32) of [1], written cancellation-free
-(NOTES §3) with σ± = s3 ± p_θ, u = λ + μ, v = λ − μ, I1 = Jμ² + J3ϱ², I2 = Jλ² + J3ϱ²:
+(docs/physics.md §4) with σ± = s3 ± p_θ, u = λ + μ, v = λ − μ, I1 = Jμ² + J3ϱ², I2 = Jλ² + J3ϱ²:
 
 .. math:: \\mathcal T = \\frac{s_1^2}{2I_1} + \\frac{s_2^2}{2I_2} + \\frac{\\sigma_+^2}{4Ju^2}
    + \\frac{\\sigma_-^2}{4Jv^2} + \\frac{p_\\lambda^2+p_\\mu^2}{2J} + \\frac{p_\\varrho^2}{2J_3}.
 
-For J1 ≠ J2 the closed form of NOTES §3 is used: with
+For J1 ≠ J2 the closed form of docs/physics.md §4 is used: with
 K = [[J1c²+J2s², (J2−J1)sc], [(J2−J1)sc, J1s²+J2c²]],
 N = [[K22μ²+J3ϱ², −K12λμ], [−K12λμ, K11λ²+J3ϱ²]], P_a = ½(σ₊/u + σ₋/v), P_b = ½(σ₊/u − σ₋/v),
 
@@ -27,8 +27,8 @@ pass of plain float arithmetic (no numpy), so compiled integrators can use it as
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def kinetic_kernel(y, P, vel, force):
     Returns
     -------
     float
-        𝒯 (eq. (32) of [1]; for J1 ≠ J2 the closed form of NOTES §3).
+        𝒯 (eq. (32) of [1]; for J1 ≠ J2 the closed form of docs/physics.md §4).
     """
     J1 = P[0]
     J2 = P[1]
@@ -94,7 +94,7 @@ def kinetic_kernel(y, P, vel, force):
         B = 0.5 * sm * iv * iv / J
         vel[0] = w1
         vel[1] = w2
-        vel[2] = A + B  # ω3, eq. after (31) of [1] / NOTES §3
+        vel[2] = A + B  # ω3, eq. after (31) of [1] / docs/physics.md §4
         vel[3] = A - B  # θ̇
         vel[4] = pl / J
         vel[5] = pm / J
@@ -102,7 +102,7 @@ def kinetic_kernel(y, P, vel, force):
         cp = 0.5 * sp * sp * iu * iu * iu / J
         cm = 0.5 * sm * sm * iv * iv * iv / J
         force[0] = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
-        force[1] = J * lam * w2 * w2 + cp + cm  # eq. (47) of [1], cancellation-free (NOTES §3)
+        force[1] = J * lam * w2 * w2 + cp + cm  # eq. (47) of [1], cancellation-free (docs/physics.md §4)
         force[2] = J * mu * w1 * w1 + cp - cm  # eq. (48)
         force[3] = J3 * rho * (w1 * w1 + w2 * w2)  # eq. (49)
         return (
@@ -227,7 +227,7 @@ def momenta_from_velocities(
 
 
 def velocities_from_momenta(state: Mapping[str, float] | np.ndarray, body: Body) -> dict[str, float]:
-    """Inverse Legendre transform p → v = ∂𝒯/∂p (inverse of eq. (31) of [1]; NOTES §3 for J1 ≠ J2)."""
+    """Inverse Legendre transform p → v = ∂𝒯/∂p (inverse of eq. (31) of [1]; docs/physics.md §4 for J1 ≠ J2)."""
     y = _as_array(state)
     vel = np.empty(7)
     force = np.empty(4)

@@ -1,4 +1,4 @@
-"""Conserved quantities of the flat body (NOTES §4 of [2]).
+"""Conserved quantities of the flat body (docs/physics.md §6 of [2]).
 
 ==================  =====================================  ================================
 quantity            formula                                conserved when
@@ -10,12 +10,12 @@ laboratory spin     R s                                    corrected bracket onl
 ==================  =====================================  ================================
 
 The physical angular momentum Σ_A J_A Φ_A × Φ̇_A equals −R s (the sign comes from eq. (25)
-of [1]; NOTES §4); :func:`angular_momentum` computes it from matrices as an independent check.
+of [1]; docs/physics.md §6); :func:`angular_momentum` computes it from matrices as an independent check.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def casimir(s1, s2, s3):
 
 
 def laboratory_spin(R, s) -> np.ndarray:
-    """R s, shape (..., 3): the co-moving spin carried to the laboratory frame (NOTES §4)."""
+    """R s, shape (..., 3): the co-moving spin carried to the laboratory frame (docs/physics.md §6)."""
     return np.einsum("...ij,...j->...i", np.asarray(R, float), np.asarray(s, float))
 
 

@@ -4,7 +4,7 @@ All functions broadcast over leading dimensions: scalars give (3, 3) matrices, a
 shape (n,) give (n, 3, 3).
 
 ============================  ==========================================================
-function                      formula (equation of [1]; correction in NOTES.md [2])
+function                      formula (equation of [1]; correction in [2])
 ============================  ==========================================================
 :func:`material_rotation`     U(θ) with U(θ)⁻¹ = [[c, s, 0], [−s, c, 0], [0, 0, 1]], eq. (24)
 :func:`configuration`         Φ = R D U⁻¹, D = diag(λ, μ, ϱ), eqs. (23)–(24)
@@ -15,7 +15,7 @@ function                      formula (equation of [1]; correction in NOTES.md [
 :func:`deformation_invariants`  eigenvalues λ², μ², ϱ² of G, eqs. (34)–(35)
 :func:`green_rate`            Ġ = U (ϑD² − D²ϑ + 2DḊ) U⁻¹, eq. (51) (+ the Ḋ term)
 :func:`cauchy_rate`           Ċ = R (W D⁻² − D⁻² W − 2D⁻³Ḋ) R⁻¹, eq. (51) with E7
-:func:`decompose`             Φ → (R, λ, μ, ϱ, θ), inverse of eq. (23) (NOTES §5)
+:func:`decompose`             Φ → (R, λ, μ, ϱ, θ), inverse of eq. (23) (docs/physics.md §7)
 ============================  ==========================================================
 
 W(ω) is eq. (25) of [1], [[0, ω3, −ω2], [−ω3, 0, ω1], [ω2, −ω1, 0]] = −hat(ω), and
@@ -23,8 +23,8 @@ W(ω) is eq. (25) of [1], [[0, ω3, −ω2], [−ω3, 0, ω1], [ω2, −ω1, 0]]
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]).
 """
 
 from __future__ import annotations
@@ -180,7 +180,7 @@ class Decomposition:
 def decompose(
     Phi: np.ndarray, reference: Decomposition | None = None, *, kl_tol: float = 1e-9, keep_order: bool = False
 ) -> Decomposition:
-    """Inverse of eq. (23) of [1]: a Kirchhoff–Love Φ → (R, λ, μ, ϱ, θ) (NOTES §5).
+    """Inverse of eq. (23) of [1]: a Kirchhoff–Love Φ → (R, λ, μ, ϱ, θ) (docs/physics.md §7).
 
     The thin SVD of the in-plane columns φ = [Φ₁, Φ₂] = W Σ V₂ᵀ gives λ, μ (singular values),
     U₂(θ) = V₂ ∈ SO(2), R = [w₁, w₂, w₁ × w₂] and ϱ = Φ₃ · R e₃.
@@ -189,7 +189,7 @@ def decompose(
     e₃, (R·diag(−1, −1, 1), λ, μ, θ + π), and θ + 2π. With ``reference`` the candidate nearest
     to it is returned (continuity along a trajectory); with ``keep_order`` also the sign of
     λ − μ is kept — the chart cannot cross λ = μ while σ₋ = s3 − p_θ ≠ 0 (the centrifugal
-    barrier of NOTES §5), it turns θ by ±π/2 instead; without ``reference``, λ ≥ μ, θ ∈ (−π, π] and of the
+    barrier of docs/physics.md §7), it turns θ by ±π/2 instead; without ``reference``, λ ≥ μ, θ ∈ (−π, π] and of the
     two half-turn related candidates the one with R nearer the identity.
 
     ``kl_tol`` is the allowed violation of the Kirchhoff–Love condition relative to max|Φ|

@@ -21,8 +21,8 @@ by the initial state.
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``, eqs. (36)–(40).
-.. [2] ``shared/physics/NOTES.md``, §2 (E9, E10) and §5 (potentials in invariants).
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009), eqs. (36)–(40).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]), §2 (E9, E10) and §5 (potentials in invariants).
 """
 
 from __future__ import annotations
@@ -41,11 +41,11 @@ KIND_V3 = 3
 
 
 def _check_positive(owner: str, **values: float) -> None:
+    """Each value a finite number in :data:`~flatbody_env.physics.validation.PARAM_RANGE` (``ValueError`` naming ``owner.name``)."""
+    from flatbody_env.physics.validation import PARAM_RANGE, number
+
     for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            raise ValueError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
-        if not math.isfinite(float(value)) or float(value) <= 0.0:
-            raise ValueError(f"{owner}.{name}: must be a finite number > 0 (allowed range (0, inf)), got {value!r}")
+        number(f"{owner}.{name}", value, low=PARAM_RANGE[0], high=PARAM_RANGE[1])
 
 
 def potential_kernel(kind, c1, c2, a, b, lam, mu, rho):
@@ -118,7 +118,7 @@ class V1:
         return np.array([[self.k, 0.0], [0.0, self.k]])
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """(∂V/∂tr, ∂V/∂det) with tr = λ²+μ², det = λ²μ² (NOTES §5): V1 = k/2·tr."""
+        """(∂V/∂tr, ∂V/∂det) with tr = λ²+μ², det = λ²μ² (docs/physics.md §7): V1 = k/2·tr."""
         return (0.5 * self.k, 0.0)
 
     lower_bound = 0.0
@@ -150,7 +150,7 @@ class V2:
         return np.array([[self.c * (2.0 + 6.0 / lam**4), 0.0], [0.0, self.d * (2.0 + 6.0 / mu**4)]])
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """V2 with c = d is c·tr·(1 + 1/det) (NOTES §5); with c ≠ d it is no function of invariants."""
+        """V2 with c = d is c·tr·(1 + 1/det) (docs/physics.md §7); with c ≠ d it is no function of invariants."""
         if self.c != self.d:
             return None
         return (self.c * (1.0 + 1.0 / det), -self.c * tr / (det * det))
@@ -187,7 +187,7 @@ class V3:
         )
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """V3 = κ(det^{-1/2} + tr/2) (NOTES §5)."""
+        """V3 = κ(det^{-1/2} + tr/2) (docs/physics.md §7)."""
         return (0.5 * self.kappa, -0.5 * self.kappa * det**-1.5)
 
     @property

@@ -1,4 +1,4 @@
-"""The regular (matrix) formulation of the same body: chart-free, valid through λ = μ (NOTES §5).
+"""The regular (matrix) formulation of the same body: chart-free, valid through λ = μ (docs/physics.md §7).
 
 The configuration is Φ = [φ1, φ2, ψ] (columns) with the two Kirchhoff–Love constraints
 (eqs. (20)–(22) of [1]) written exactly as
@@ -11,7 +11,7 @@ The Lagrangian has a constant mass matrix (eq. (28) of [1] with J = diag(J1, J2,
    + \\tfrac12 J_3|\\dot\\psi|^2 - V,
 
 and V is a function of the invariants tr = |φ1|² + |φ2|² = λ² + μ², det = |φ1 × φ2|² = λ²μ²,
-ϱ = |ψ| (NOTES §5). The equations of motion are
+ϱ = |ψ| (docs/physics.md §7). The equations of motion are
 
 .. math:: J_1\\ddot\\varphi_1 = F_1 + \\Lambda_1\\psi, \\quad J_2\\ddot\\varphi_2 = F_2 + \\Lambda_2\\psi,
    \\quad J_3\\ddot\\psi = F_\\psi + \\Lambda_1\\varphi_1 + \\Lambda_2\\varphi_2,
@@ -34,7 +34,7 @@ indices    name         meaning
 
 Conversions to and from the paper's state are exact (round trip ~1e-15): Φ = R D U⁻¹ and
 Φ̇ = R(Ḋ + W D − D ϑ)U⁻¹ (eqs. (23), (27) of [1]); back by the thin SVD of [φ1, φ2]
-(:func:`flatbody_env.physics.kinematics.decompose`) and M = RᵀΦ̇U (NOTES §5). Only the way back is
+(:func:`flatbody_env.physics.kinematics.decompose`) and M = RᵀΦ̇U (docs/physics.md §7). Only the way back is
 singular at λ = μ, where the paper's chart itself is.
 
 Controls. The paper's co-moving torque τ on s and force f on ϱ are generalised forces of the
@@ -44,8 +44,8 @@ singular for τ₃ at λ = μ, where a rotation about e₃ and a change of θ co
 
 References
 ----------
-.. [1] ``shared/paper/000_b5acfe912a09eb12.txt``.
-.. [2] ``shared/physics/NOTES.md``, §5.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md`` (the corrected equations and the errata of [1]), §5.
 """
 
 from __future__ import annotations
@@ -88,7 +88,7 @@ def paper_from_regular(
     """Regular state (18,) → (paper state (11,), decomposition with R).
 
     ``reference`` (the previous decomposition along a trajectory) fixes the discrete
-    ambiguities of the two-polar chart by continuity (NOTES §5); ``kl_tol`` and
+    ambiguities of the two-polar chart by continuity (docs/physics.md §7); ``kl_tol`` and
     ``keep_order`` are passed to :func:`~flatbody_env.physics.kinematics.decompose`. A ready
     ``decomposition`` of Φ (e.g. from :func:`follow_chart`) skips that step.
 
@@ -133,7 +133,7 @@ def follow_chart(
     """Decomposition at ``tb`` that continues ``ref`` (at ``ta``) along a smooth Φ(t).
 
     Near λ = μ the chart's R and θ turn by about ±π/2 within a very short time while Φ(t)
-    stays smooth (NOTES §5), so one sample per step of a regular-chart integrator can leave
+    stays smooth (docs/physics.md §7), so one sample per step of a regular-chart integrator can leave
     the branch ambiguous. This bisects [ta, tb] (``sample(t)`` returns the regular state,
     e.g. a dense output) until consecutive decompositions differ by less than
     :data:`MAX_CHART_JUMP`.
@@ -274,7 +274,7 @@ def regular_rhs(
 
 
 def regular_energy(z: np.ndarray, body: Body, lambda_is_larger: bool = True) -> float:
-    """H = ½ Σ J_A |Φ̇_A|² + V (NOTES §5)."""
+    """H = ½ Σ J_A |Φ̇_A|² + V (docs/physics.md §7)."""
     J = (body.inertia.J1, body.inertia.J2, body.inertia.J3)
     T = 0.5 * sum(J[a] * float(z[9 + 3 * a : 12 + 3 * a] @ z[9 + 3 * a : 12 + 3 * a]) for a in range(3))
     psi = z[6:9]

@@ -30,14 +30,13 @@ mass and the stretches are dimensionless ratios of lengths.
 
 References
 ----------
-.. [1] The paper, ``shared/paper/000_b5acfe912a09eb12.txt`` ("flat affinely-rigid body with
-   thickness"), sections 3–3.4.
-.. [2] ``shared/physics/NOTES.md``, verified formulas and errata.
+.. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+   degenerate dimension", arXiv:0902.3573 (2009).
+.. [2] ``docs/physics.md``: the verified formulas and the errata of [1].
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -66,7 +65,9 @@ _POSITIVE = ("lambda", "mu", "rho")
 
 
 def validate_state(state: Mapping[str, Any], *, where: str = "state") -> None:
-    """Check a named state: exactly the eleven names, finite numbers, λ, μ, ϱ > 0, λ ≠ μ.
+    """Check a named state: exactly the eleven names, finite numbers, λ, μ, ϱ in
+    :data:`~flatbody_env.physics.validation.STRETCH_RANGE`, every other entry within ±
+    :data:`~flatbody_env.physics.validation.MOMENTUM_MAX`, λ ≠ μ.
 
     Raises
     ------
@@ -80,17 +81,15 @@ def validate_state(state: Mapping[str, Any], *, where: str = "state") -> None:
         raise ValueError(
             f"{where}.{unknown[0]}: unknown field (allowed: {', '.join(STATE_NAMES)})"
         )
+    from flatbody_env.physics.validation import MOMENTUM_MAX, STRETCH_RANGE, number
+
     for name in STATE_NAMES:
         if name not in state:
             raise ValueError(f"{where}.{name}: missing field (a finite number is required)")
-        value = state[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-            raise ValueError(f"{where}.{name}: must be a finite number, got {value!r}")
-        if not math.isfinite(float(value)):
-            raise ValueError(f"{where}.{name}: must be a finite number, got {value!r}")
-    for name in _POSITIVE:
-        if float(state[name]) <= 0.0:
-            raise ValueError(f"{where}.{name}: must be > 0 (allowed range (0, inf)), got {state[name]!r}")
+        if name in _POSITIVE:
+            number(f"{where}.{name}", state[name], low=STRETCH_RANGE[0], high=STRETCH_RANGE[1])
+        else:
+            number(f"{where}.{name}", state[name], low=-MOMENTUM_MAX, high=MOMENTUM_MAX)
     if float(state["lambda"]) == float(state["mu"]):
         raise ValueError(
             f"{where}.lambda: must differ from {where}.mu (λ = μ is the singular set of the "

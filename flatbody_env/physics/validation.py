@@ -1,10 +1,28 @@
-"""The one set of field validators for data that enters the package (JSON, dicts, keywords).
+"""The one set of field validators for data that enters the package (JSON, dicts, keywords, files).
 
 Every check raises ``ValueError`` whose message starts with the field's dotted name
 (``params.J``, ``state.lambda``, ``target.mu``) and states the allowed range, so a CLI prints it
 as one line (exit 2) and an HTTP service returns it as a 422 naming the field. Numbers are checked
 for type before use: ``bool`` is not a number, integers too large for a float are refused, and
 NaN/inf are refused.
+
+Documented ranges
+-----------------
+The model is integrated in double precision; magnitudes outside these ranges make it stiff
+beyond any step budget or overflow the kinetic energy (ω ~ s/(Jλ²) squared), so they are refused
+up front with the range in the message:
+
+==========================================  ==========================================
+field                                       allowed
+==========================================  ==========================================
+J, J1, J2, J3, k, c, d, κ, a, b             :data:`PARAM_RANGE` = [1e-6, 1e6]
+λ, μ, ϱ                                     :data:`STRETCH_RANGE` = [1e-6, 1e6]
+s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ, θ            within ± :data:`MOMENTUM_MAX` = ±1e6
+t_end                                       (0, :data:`T_END_MAX`] = (0, 1e6]
+output times (``times=``, ``--samples``)     at most :data:`MAX_SAMPLES` = 100 000
+rtol, atol                                  :data:`TOL_RANGE` = [1e-16, 1]
+fixed step h                                (0, :data:`T_END_MAX`]
+==========================================  ==========================================
 """
 
 from __future__ import annotations
@@ -16,6 +34,21 @@ from typing import Any
 import numpy as np
 
 _NUMBER_TYPES = (int, float, np.integer, np.floating)
+
+PARAM_RANGE = (1e-6, 1e6)
+"""Allowed range of the body's constants J1, J2, J3 (eq. (29)), k, c, d, κ (eqs. (37)–(39)), a, b (eq. (40))."""
+STRETCH_RANGE = (1e-6, 1e6)
+"""Allowed range of the stretches λ, μ and the thickness ϱ."""
+MOMENTUM_MAX = 1e6
+"""Largest |s_i|, |p_θ|, |p_λ|, |p_μ|, |p_ϱ| (and |θ|) accepted in a state."""
+T_END_MAX = 1e6
+"""Largest final time t_end (and fixed step h)."""
+MAX_SAMPLES = 100_000
+"""Most output times one integration may return (``times=``, ``--samples``, grids)."""
+TOL_RANGE = (1e-16, 1.0)
+"""Allowed range of rtol and atol."""
+MAX_JSON_BYTES = 256 * 1024 * 1024
+"""Largest JSON file :func:`read_json` reads (a trajectory of :data:`MAX_SAMPLES` rows is ~40 MB)."""
 
 
 def number(where: str, value: Any, *, positive: bool = False, low: float | None = None, high: float | None = None) -> float:
@@ -71,6 +104,99 @@ def keys(where: str, obj: Mapping[str, Any], allowed: Iterable[str], required: I
             raise ValueError(f"{where}.{key}: missing field")
 
 
+def integer(where: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
+    """``value`` as an ``int`` (not a bool, not a float) within [low, high]."""
+    rng = _range_text(False, low, high)
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{where}: must be an integer{rng}, got {_short(value)}")
+    x = int(value)
+    if (low is not None and x < low) or (high is not None and x > high):
+        raise ValueError(f"{where}: must be an integer{rng}, got {_short(x)}")
+    return x
+
+
+def float_array(where: str, value: Any, *, shape: tuple[int | None, ...], finite: bool = True) -> np.ndarray:
+    """``value`` (nested JSON lists or an array) as a float64 array of ``shape`` (None: any length).
+
+    Elements must be numbers (no bools, strings or nulls; integers too large for a float are
+    refused); with ``finite`` NaN/inf are refused.
+    """
+    dims = "x".join("n" if d is None else str(d) for d in shape)
+    if isinstance(value, (str, bytes, Mapping)) or value is None or isinstance(value, (bool, int, float)):
+        raise ValueError(f"{where}: expected an array of shape ({dims}), got {_short(value)}")
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        raise ValueError(f"{where}: expected an array of shape ({dims}) of numbers") from None
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{where}: expected an array of shape ({dims}) of numbers, got elements of type {arr.dtype.kind!r}"
+                         if arr.dtype.kind != "O" else f"{where}: expected an array of shape ({dims}) of numbers (ragged, nested "
+                         "too deep, or holding non-numbers / integers too large for a float)")
+    if arr.ndim != len(shape) or any(d is not None and d != n for d, n in zip(shape, arr.shape)):
+        raise ValueError(f"{where}: expected an array of shape ({dims}), got shape {arr.shape}")
+    if isinstance(value, (list, tuple)) and _has_bool(value, len(shape)):
+        raise ValueError(f"{where}: expected numbers, got true/false")
+    try:
+        arr = arr.astype(np.float64)
+    except OverflowError:
+        raise ValueError(f"{where}: holds an integer too large for a float") from None
+    if finite and not np.all(np.isfinite(arr)):
+        raise ValueError(f"{where}: must hold finite numbers")
+    return arr
+
+
+def _has_bool(value: Any, depth: int) -> bool:
+    if depth == 0:
+        return isinstance(value, (bool, np.bool_))
+    return isinstance(value, (list, tuple)) and any(_has_bool(x, depth - 1) for x in value)
+
+
+def parse_json(where: str, text: str | bytes) -> Any:
+    """JSON text → Python value; malformed, too deeply nested or oversized-integer JSON → ``ValueError`` naming ``where``."""
+    import json
+
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:
+        raise ValueError(f"{where}: not valid JSON (nested too deeply)") from None
+    except (ValueError, UnicodeDecodeError) as exc:  # e.g. integers beyond Python's digit limit
+        raise ValueError(f"{where}: not valid JSON ({_short(str(exc))})") from None
+
+
+def read_json(where: str, path: Any) -> Any:
+    """Read and parse a JSON file: a regular, readable file of at most :data:`MAX_JSON_BYTES`.
+
+    Missing files, directories, special files (FIFOs, devices), unreadable or oversized files and
+    malformed JSON all raise ``ValueError`` naming ``where`` and the path.
+    """
+    import os
+    import stat
+    from pathlib import Path
+
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"{where}: expected a file path, got {_short(path)}")
+    p = Path(path)
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        raise ValueError(f"{where}: no file {str(p)!r}") from None
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise ValueError(f"{where}: {str(p)!r} is a directory, not a JSON file")
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{where}: {str(p)!r} is not a regular file")
+    if info.st_size > MAX_JSON_BYTES:
+        raise ValueError(f"{where}: {str(p)!r} is larger than {MAX_JSON_BYTES // (1024 * 1024)} MiB")
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
+    return parse_json(f"{where} ({p})", data)
+
+
 def _range_text(positive: bool, low: float | None, high: float | None) -> str:
     if low is not None or high is not None:
         lo = "-inf" if low is None else f"{low:g}"
@@ -80,8 +206,12 @@ def _range_text(positive: bool, low: float | None, high: float | None) -> str:
 
 
 def _short(value: Any) -> str:
-    text = repr(value)
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # integers beyond the digit limit, self-referencing containers
+        return f"a {type(value).__name__} too large to print"
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["keys", "mapping", "number", "string"]
+__all__ = ["MAX_JSON_BYTES", "MAX_SAMPLES", "MOMENTUM_MAX", "PARAM_RANGE", "STRETCH_RANGE", "TOL_RANGE", "T_END_MAX", "float_array",
+           "integer", "keys", "mapping", "number", "parse_json", "read_json", "string"]

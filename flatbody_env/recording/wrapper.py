@@ -11,12 +11,14 @@ The contract the wrapped environment meets (``env.unwrapped``)
   ``track_rotation=True`` (``gym.make("FlatBody-v0", track_rotation=True)``), else it is None and
   the wrapper stops with a ``ValueError`` saying so;
 * ``time`` — the simulated time (float);
-* ``target`` — a dict with at least ``lambda``, ``mu``, ``rho``, ``s3`` (numeric entries are
-  plotted on ``/series/target/NAME``);
+* ``target`` — a dict with at least ``lambda``, ``mu``, ``rho``, ``s3``: λ*, μ*, ϱ*, s₃*, p_θ*, H*
+  are plotted beside their variables (``/series/target/NAME``), every numeric entry is printed in
+  the description, and the target ellipse is outlined in the top view;
 * optional ``action_names`` — names of the action components; else derived from ``control``
   (:data:`flatbody_env.env.task.CONTROLS`: the driven ones of τ1, τ2, τ3, f_ϱ);
 * ``step`` returns ``info["reward_terms"]`` — a dict name → float (plotted on
-  ``/series/reward/NAME``, with the step's reward as ``total``); a truthy
+  ``/series/reward/NAME``, with the step's reward as ``total``); an optional ``info["distance"]``
+  (from ``reset`` and ``step``) is plotted on ``/series/distance``; a truthy
   ``info["integrator_failure"]`` or ``info["left_domain"]`` is logged as a ``TextLog`` on ``/events``.
 """
 
@@ -72,7 +74,7 @@ def _action_names(u) -> tuple[str, ...] | None:
         return tuple(str(n) for n in names)
     control = getattr(u, "control", None)
     if isinstance(control, str):
-        from flatbody_env.recording.writer import ACTION_NAMES
+        from flatbody_env.recording.layout import ACTION_NAMES
         from flatbody_env.env.task import CONTROLS, control_mask
 
         if control in CONTROLS:
@@ -161,7 +163,7 @@ class RerunRecorder(gym.Wrapper):
             rec, self._rec = self._rec, None
             self.recorded_paths.append(rec.close())
 
-    def _append(self, *, action=None, reward: float | None = None, info: dict | None = None) -> None:
+    def _append(self, *, action=None, reward: float | None = None, info: dict | None = None, reset_info: dict | None = None) -> None:
         u = self.env.unwrapped
         state = {k: float(v) for k, v in u.state.items()}
         R = np.asarray(u.rotation, dtype=np.float64)
@@ -184,6 +186,11 @@ class RerunRecorder(gym.Wrapper):
             for key in ("integrator_failure", "left_domain"):
                 if info.get(key):
                     self._rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=self._step, t=t)
+        distance = None
+        src = info if info is not None else reset_info
+        if isinstance(src, dict) and "distance" in src:
+            d = _numeric({"distance": src["distance"]}).get("distance")
+            distance = d if d is not None and math.isfinite(d) else None
         self._rec.append(
             t,
             state,
@@ -192,6 +199,7 @@ class RerunRecorder(gym.Wrapper):
             action=act,
             reward_terms=terms or None,
             target=_numeric(getattr(u, "target", None)) or None,
+            distance=distance,
         )
 
     # ------------------------------------------------------------------------------------------
@@ -201,23 +209,29 @@ class RerunRecorder(gym.Wrapper):
         self._episode += 1
         self._step = 0
         if self._trigger(self._episode):
+            from flatbody_env.recording.layout import display_name
             from flatbody_env.recording.writer import Recorder
 
             u = self.env.unwrapped
             _check_contract(u)
+            target = _numeric(getattr(u, "target", None))
+            state = u.state
+            extent = max([float(state[k]) for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho") if k in target])
             self._rec = Recorder(
                 self.episode_path(self._episode),
                 u.body,
                 title=self._title or f"flatbody episode {self._episode}",
                 description=f"Environment `{getattr(getattr(u, 'spec', None), 'id', None) or type(u).__name__}`, episode {self._episode}"
                 + (f", seed {seed}" if seed is not None else "")
-                + ". Actions and rewards are drawn at the step they lead to.",
+                + ". Actions and rewards are drawn at the step they lead to."
+                + (("\n\n**Target**: " + ", ".join(f"{display_name(k)}* = {v:.4g}" for k, v in target.items())) if target else ""),
                 block=self._block,
                 tensor_every=self._tensor_every,
                 action_names=_action_names(u),
                 episode=True,
+                extent=extent if math.isfinite(extent) and extent > 0 else 2.0,
             )
-            self._append()
+            self._append(info=None, reset_info=info)
         return obs, info
 
     def step(self, action):

@@ -244,7 +244,7 @@ def test_shipped_evaluation_reproduces():
 
 @pytest.mark.slow
 def test_shipped_agent_acceptance():
-    """Issue 7 acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
+    """Acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
     from agents.evaluate import evaluate_all
 
     report = evaluate_all(episodes=100, seed=10_000)
@@ -256,7 +256,7 @@ def test_shipped_agent_acceptance():
 def test_record_agent_episode(tmp_path, capsys):
     """``flatbody record --agent``: the shipped agent's episode, read back with rerun's reader."""
     from flatbody_env.cli.main import main
-    from flatbody_env.recording.writer import read_recording
+    from flatbody_env.recording.reader import read_recording
 
     out = tmp_path / "agent.rrd"
     assert main(["record", "--agent", "--seed", "3", "--out", str(out)]) == 0

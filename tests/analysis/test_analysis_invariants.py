@@ -10,7 +10,9 @@ import pytest
 from flatbody_env import default_body, load_scene, simulate
 from flatbody_env.physics.kinematics import material_rotation
 from flatbody_env.scene import Scene
-from analysis.invariants import invariants_along, load_trajectory
+from analysis.invariants import invariants_along
+from flatbody_env.simulation import Trajectory, read_trajectory
+from flatbody_env.physics.state import STATE_NAMES
 from analysis.stationary import stationary_ellipses
 
 
@@ -68,17 +70,49 @@ def test_saved_json_gives_the_same_table(tmp_path):
     assert a.keys() == b.keys()
     for k in a:
         assert a[k] == pytest.approx(b[k], abs=1e-15)
-    no_body = invariants_along(load_trajectory(path))
+    no_body = invariants_along(read_trajectory(path))
     assert no_body.G_rate is None and "energy" in no_body.series
 
 
 def test_bad_trajectory_files(tmp_path):
     with pytest.raises(ValueError, match="no file"):
-        load_trajectory(tmp_path / "missing.json")
+        read_trajectory(tmp_path / "missing.json")
     p = tmp_path / "bad.json"
     p.write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
-        load_trajectory(p)
+        read_trajectory(p)
     p.write_text(json.dumps({"t": [0, 1], "state": {"s1": [0, 0]}}))
     with pytest.raises(ValueError, match="trajectory.state.s2"):
-        load_trajectory(p)
+        read_trajectory(p)
+
+
+def test_trajectory_json_round_trip(tmp_path):
+    """Trajectory.to_dict → JSON → read_trajectory gives back the same arrays and metadata."""
+    body, e, traj = stationary_run(t_end=2.0, samples=11)
+    path = tmp_path / "traj.json"
+    path.write_text(json.dumps(traj.to_dict()))
+    back = read_trajectory(path)
+    assert isinstance(back, Trajectory)
+    np.testing.assert_array_equal(back.t, traj.t)
+    np.testing.assert_array_equal(back.y, traj.y)
+    np.testing.assert_array_equal(back.rotation, traj.rotation)
+    np.testing.assert_array_equal(back.energy, traj.energy)
+    assert (back.method, back.model, back.nfev, back.scene) == (traj.method, traj.model, traj.nfev, traj.scene)
+    assert back.initial_state == traj.initial_state and back.initial_energy == traj.initial_energy
+    assert back.drift() == traj.drift()
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"t": 3.0}, "trajectory.t"),
+    ({"state": None}, "trajectory.state"),
+    ({"meta": []}, "trajectory.meta"),
+    ({"t": [[[[0.0]]]]}, "trajectory.t"),
+    ({"t": [0.0, 0.0]}, "trajectory.t"),
+    ({"rotation": [[1.0]]}, "trajectory.rotation"),
+    ({"energy": [True, 1.0]}, "trajectory.energy"),
+    ({"extra": 1}, "trajectory.extra"),
+])
+def test_malformed_trajectory_names_the_field(change, field):
+    good = {"t": [0.0, 1.0], "state": {n: [1.0, 1.1] for n in STATE_NAMES}}
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        Trajectory.from_dict({**good, **change})

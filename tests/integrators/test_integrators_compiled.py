@@ -1,4 +1,4 @@
-"""The compiled kernels equal the Python physics (issue 3): RHS, potential invariants,
+"""The compiled kernels equal the Python physics: RHS, potential invariants,
 decomposition, environment steppers, caching, argument errors."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Convergence and accuracy of the compiled integrators (issue 3, items 5 and 7).
+"""Convergence and accuracy of the compiled integrators.
 
 Orders are measured on a smooth short problem (the default scene, t = 2) against a DOP853
 reference at rtol = atol = 1e-14 that is cross-checked by scipy's DOP853 (independent code).

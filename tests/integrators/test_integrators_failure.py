@@ -1,4 +1,4 @@
-"""Where methods fail (issue 3, item 3): near λ = μ the regular chart keeps its accuracy, and the
+"""Where methods fail: near λ = μ the regular chart keeps its accuracy, and the
 fixed-step two-polar methods fail *visibly* (IntegrationError / status flag)."""
 
 from __future__ import annotations

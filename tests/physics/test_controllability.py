@@ -6,13 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from scipy.linalg import expm, solve_continuous_are
+from scipy.linalg import expm
 
 from flatbody_env.physics.body import default_body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize, settling_rate, settling_rate_map, target_state
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.equilibria import stationary_from_shape
 from flatbody_env.env.task import DEFAULT_LIMITS, ReachStationaryEllipse
+from oracles import lqr_rate
 
 LIMITS = np.array(DEFAULT_LIMITS)
 
@@ -22,10 +23,7 @@ def _y(body, lam, aspect, sign=1.0):
     return target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta)
 
 
-def _lqr_rate(A, B, Q, R):
-    P = solve_continuous_are(A, B, Q, R)
-    K = np.linalg.solve(R, B.T @ P)
-    return -np.max(np.linalg.eigvals(A - B @ K).real), K
+
 
 
 def test_linearization_is_the_small_signal_model():
@@ -47,8 +45,8 @@ def test_settling_rate_is_the_cheap_control_limit(lam, aspect):
     y = _y(body, lam, aspect)
     A, B = linearize(body, y, LIMITS)
     r = settling_rate(body, y, LIMITS)
-    moderate, _ = _lqr_rate(A, B, np.diag([1.0] * 3 + [10.0] * 6), 0.1 * np.eye(4))  # the agents' LQR weights
-    cheap, K = _lqr_rate(A, B, np.eye(9), 1e-8 * np.eye(4))
+    moderate, _ = lqr_rate(A, B, np.diag([1.0] * 3 + [10.0] * 6), 0.1 * np.eye(4))  # the agents' LQR weights
+    cheap, K = lqr_rate(A, B, np.eye(9), 1e-8 * np.eye(4))
     assert 0 < r and cheap == pytest.approx(r, rel=2e-3)
     # the agents' LQR (other state weights, 1000× dearer control) settles at least about as fast
     assert moderate >= 0.99 * r

@@ -12,25 +12,13 @@ import zlib
 import numpy as np
 import pytest
 
-from conftest import BODIES, independent_hamiltonian, random_state
+from conftest import BODIES, random_state
+from oracles import hamilton_rhs, printed_eqs_44_46, printed_eqs_47_49
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.potentials import ThicknessPotential, V3
 
 N_STATES = 100
-
-
-def hamilton_rhs(y: np.ndarray, body: Body, h: float = 1e-4) -> np.ndarray:
-    """Hamilton's equations with ∂H by the five-point central difference (error O(h⁴))."""
-    g = np.empty(11)
-    H = independent_hamiltonian
-    for i in range(11):
-        e = np.zeros(11)
-        e[i] = h
-        g[i] = (8 * (H(y + e, body) - H(y - e, body)) - (H(y + 2 * e, body) - H(y - 2 * e, body))) / (12 * h)
-    omega, s = g[:3], y[:3]
-    # order: s (3), p_θ, p_λ, p_μ, p_ϱ, λ, μ, ϱ, θ
-    return np.concatenate([np.cross(omega, s), -g[[10, 7, 8, 9]], g[[4, 5, 6, 3]]])
 
 
 @pytest.mark.parametrize("name", sorted(BODIES))
@@ -64,30 +52,6 @@ def test_theta_cyclic_only_when_isotropic():
     aniso = Body(inertia=Inertia(J1=1.3, J2=0.7, J3=1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1, b=1))
     assert rhs(0.0, y, None, iso)[3] == 0.0
     assert abs(rhs(0.0, y, None, aniso)[3]) > 1e-3
-
-
-def printed_eqs_44_46(y: np.ndarray, J: float, J3: float) -> np.ndarray:
-    """ds/dt exactly as printed in eqs. (44)–(46) of the paper (with ρ read as ϱ)."""
-    s1, s2, s3, pt = y[0], y[1], y[2], y[3]
-    lam, mu, rho = y[7], y[8], y[9]
-    D2 = J * (lam**2 - mu**2) ** 2
-    ds1 = s2 / D2 * ((J * mu**2 * (3 * lam**2 - mu**2) + J3 * rho**2 * (lam**2 + mu**2)) / (J * lam**2 + J3 * rho**2) * s3 - 2 * lam * mu * pt)
-    ds2 = s1 / D2 * ((J * lam**2 * (lam**2 - 3 * mu**2) - J3 * rho**2 * (lam**2 + mu**2)) / (J * mu**2 + J3 * rho**2) * s3 + 2 * lam * mu * pt)
-    ds3 = J * (mu**2 - lam**2) * s1 * s2 / ((J * lam**2 + J3 * rho**2) * (J * mu**2 + J3 * rho**2))
-    return np.array([ds1, ds2, ds3])
-
-
-def printed_eqs_47_49(y: np.ndarray, J: float, J3: float, body: Body) -> np.ndarray:
-    """dp/dt exactly as printed in eqs. (47)–(49) (correct as printed, NOTES §2)."""
-    s1, s2, s3, pt = y[0], y[1], y[2], y[3]
-    lam, mu, rho = y[7], y[8], y[9]
-    _, gl, gm, gr = body.potential_terms(lam, mu, rho)
-    D3 = J * (lam**2 - mu**2) ** 3
-    q = s3**2 + pt**2
-    dpl = -gl + J * lam * s2**2 / (J * lam**2 + J3 * rho**2) ** 2 + (lam * (lam**2 + 3 * mu**2) * q - 2 * mu * (mu**2 + 3 * lam**2) * s3 * pt) / D3
-    dpm = -gm + J * mu * s1**2 / (J * mu**2 + J3 * rho**2) ** 2 - (mu * (mu**2 + 3 * lam**2) * q - 2 * lam * (lam**2 + 3 * mu**2) * s3 * pt) / D3
-    dpr = -gr + J3 * rho * s1**2 / (J * mu**2 + J3 * rho**2) ** 2 + J3 * rho * s2**2 / (J * lam**2 + J3 * rho**2) ** 2
-    return np.array([dpl, dpm, dpr])
 
 
 @pytest.mark.parametrize("name", ["V1", "V2", "V3"])

@@ -6,7 +6,8 @@ import math
 
 import numpy as np
 
-from conftest import BODIES, independent_mass_matrix, random_state
+from conftest import BODIES, random_state
+from oracles import independent_mass_matrix
 from flatbody_env.physics.hamiltonian import VELOCITY_NAMES, kinetic_energy, mass_matrix, momenta_from_velocities, velocities_from_momenta
 from flatbody_env.physics.kinematics import configuration_rate
 

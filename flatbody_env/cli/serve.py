@@ -1,0 +1,85 @@
+"""``flatbody serve`` (the analysis service over HTTP) and ``flatbody bench service`` (its load figures).
+
+The app lives in :mod:`flatbody_env.service`; uvicorn, FastAPI and httpx are imported in the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from flatbody_env.cli.args import int_at_least
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"port: expected an integer, got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"port: must be an integer in [0, 65535], got {value}")
+    return value
+
+
+def default_workers() -> int:
+    """Worker processes by default: the CPU count, at most 4."""
+    return max(1, min(4, os.cpu_count() or 1))
+
+
+def _serve(args) -> int:
+    import uvicorn
+
+    from flatbody_env.service.app import create_app
+
+    app = create_app(args.data_dir, workers=args.workers)
+    where = f"http://{'[' + args.host + ']' if ':' in args.host else args.host}:{args.port}/"
+    if args.host not in LOOPBACK:
+        print(f"flatbody serve: listening on {args.host}:{args.port}, reachable from other machines as you asked; "
+              "there is no authentication built in (put it behind a reverse proxy to share it)", file=sys.stderr)
+    print(f"flatbody serve: {where} (page), {where}docs (API); data in {args.data_dir}; {args.workers} worker process(es)",
+          file=sys.stderr)
+    uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+    return 0
+
+
+def _bench(args) -> int:
+    from flatbody_env.service.benchmark import run
+
+    result = run(out_dir=args.out_dir, clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
+    print(result.table())
+    print(f"wrote {result.paths['json']}, {result.paths['csv']}, {result.paths['png']}")
+    return 0 if result.errors == 0 else 1
+
+
+def _clients(text: str) -> list[int]:
+    try:
+        values = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"clients: expected comma-separated integers, got {text!r}") from None
+    if not values or any(not 1 <= v <= 256 for v in values):
+        raise argparse.ArgumentTypeError(f"clients: each must be an integer in [1, 256], got {text!r}")
+    return values
+
+
+def register(sub) -> None:
+    p = sub.add_parser("serve", help="the analysis service: HTTP API (/docs) and a web page on loopback")
+    p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1, loopback only)")
+    p.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
+    p.add_argument("--workers", type=int_at_least("workers", 1), default=default_workers(),
+                   help="worker processes for requests, and jobs run at once (default: CPUs, at most 4)")
+    p.add_argument("--data-dir", default="flatbody-data", metavar="DIR", help="job database and files (default ./flatbody-data)")
+    p.add_argument("--log-level", default="info", choices=("critical", "error", "warning", "info", "debug"), help="uvicorn log level")
+    p.set_defaults(handler=_serve)
+
+
+def register_bench(bench_sub) -> None:
+    p = bench_sub.add_parser("service", help="latency and requests/s of the HTTP service at 1, 8, 32 clients while a long job runs")
+    p.add_argument("--clients", type=_clients, default=[1, 8, 32], metavar="N,N,...", help="concurrent clients (default 1,8,32)")
+    p.add_argument("--requests", type=int_at_least("requests", 1), default=200, help="requests per endpoint and client count, at most (default 200)")
+    p.add_argument("--seconds", type=float, default=20.0, help="time per endpoint and client count, at most (default 20)")
+    p.add_argument("--workers", type=int_at_least("workers", 1), default=default_workers(), help="the service's worker processes")
+    p.add_argument("--out-dir", default="bench", help="where to write service_benchmark.json/.csv/.png")
+    p.set_defaults(handler=_bench)

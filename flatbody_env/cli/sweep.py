@@ -1,0 +1,343 @@
+"""Sub-commands ``sweep``, ``tune`` and ``bench sweep``: the same studies on many cores or machines.
+
+* ``flatbody sweep KIND ... --out DIR [--workers N | --scheduler tcp://HOST:8786] [--resume] [--json]``
+  with KIND ``stability-map``, ``failure-study``, ``family`` or ``seeds`` (:mod:`flatbody_env.sweep`):
+  tasks on an embedded Dask cluster (``--workers N``: N local processes; 1: in this process; 0: no
+  Dask) or a running one (``--scheduler``); results by key in ``DIR/results.sqlite``; ``--resume``
+  continues a killed sweep. ``sweep work-precision`` says why timing studies stay serial.
+* ``flatbody tune --algo ppo|sac --trials N ...`` — Optuna search (:mod:`agents.tune`).
+* ``flatbody bench sweep`` — speed-up over workers, scheduler overhead per task, extrapolation
+  (:mod:`flatbody_env.sweep.scaling`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from flatbody_env.cli.args import int_at_least, positive_float
+
+
+def _range(flag: str, text: str) -> list[float]:
+    from flatbody_env.cli.analysis import _range as analysis_range
+
+    return list(analysis_range(flag, text))
+
+
+def _run(args, spec) -> int:
+    from flatbody_env.sweep.report import as_json, format_report
+    from flatbody_env.sweep.runner import run_sweep
+
+    report = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                       progress=not args.no_progress and sys.stderr.isatty())
+    _write_table(spec, report, Path(args.out), getattr(args, "plot", None))
+    if args.json:
+        print(json.dumps(as_json(report)))
+    else:
+        print(format_report(report))
+    if report.failed:
+        sys.stderr.write(f"flatbody: {len(report.failed)} of {report.total} tasks failed (recorded in {Path(args.out) / 'results.sqlite'};"
+                         " --resume retries them)\n")
+        return 1
+    return 0
+
+
+def _write_table(spec, report, out: Path, plot: str | None) -> None:
+    from flatbody_env.sweep.report import rows_of
+
+    rows = rows_of(report)
+    kind = spec["kind"]
+    if kind == "stability-map":
+        from analysis.families import write_table_csv
+
+        csv = write_table_csv(rows, out / "stability_map.csv")
+        if plot is not None:
+            from analysis.plots import plot_shape_map
+            from flatbody_env.physics.body import Body
+
+            plot_shape_map(csv, plot, title=f"Stationary ellipses by shape, {Body.from_dict(spec['body']).describe()}")
+    elif kind in ("failure-study", "seeds") and rows:
+        from analysis.families import write_table_csv
+
+        write_table_csv(rows, out / f"{kind.replace('-', '_')}.csv", columns=tuple(rows[0]))
+
+
+# ---------------------------------------------------------------------------------------------
+def _stability_map(args) -> int:
+    from flatbody_env.cli.analysis import resolve_body
+    from flatbody_env.sweep.tasks import MAX_GRID, default_chunk
+
+    body, _, _ = resolve_body(args, need_spins=False)
+    if not 4 <= args.grid <= MAX_GRID:
+        raise ValueError(f"--grid: must be an integer in [4, {MAX_GRID}], got {args.grid}")
+    chunk = args.chunk or default_chunk(args.grid)
+    if chunk > args.grid:
+        raise ValueError(f"--chunk: must be an integer in [1, {args.grid}] (the grid), got {chunk}")
+    spec = {"kind": "stability-map", "body": body.to_dict(), "lam_range": _range("--lam-range", args.lam_range),
+            "mu_range": _range("--mu-range", args.mu_range), "grid": args.grid, "chunk": chunk}
+    return _run(args, spec)
+
+
+def _failure_study(args) -> int:
+    from analysis.failure_study import DEFAULT_METHODS, STUDIES
+    from flatbody_env.integrators import get_method
+
+    studies = list(args.studies or STUDIES)
+    for s in studies:
+        if s not in STUDIES:
+            raise ValueError(f"studies: unknown study {s!r} (allowed: {', '.join(STUDIES)})")
+    methods = list(args.methods or DEFAULT_METHODS)
+    for m in methods:
+        get_method(m)  # ValueError naming the allowed methods
+    max_run_s = args.max_run_s if args.max_run_s is not None else (1.0 if args.quick else 5.0)
+    spec = {"kind": "failure-study", "studies": studies, "methods": methods, "quick": bool(args.quick), "repeats": args.repeats,
+            "max_run_s": max_run_s}
+    return _run(args, spec)
+
+
+_BODY_FIELDS = {"V1": ("k",), "V2": ("c", "d"), "V3": ("kappa",)}
+
+
+def parse_body(text: str) -> tuple[str, dict]:
+    """A body for ``sweep family --bodies``: ``V3:kappa=2,a=1`` (unset constants 1) or a scene
+    (built-in name or JSON file). Returns (label, the body's JSON form)."""
+    from flatbody_env.physics.body import Body
+
+    if ":" not in text and not text.startswith(("V1", "V2", "V3")):
+        from flatbody_env.scene import load_scene
+
+        return text, load_scene(text).body.to_dict()
+    pot, _, rest = text.partition(":")
+    if pot not in _BODY_FIELDS:
+        raise ValueError(f"bodies: expected V1|V2|V3[:NAME=VALUE,...] or a scene, got {text!r}")
+    allowed = (*_BODY_FIELDS[pot], "a", "b", "J", "J3")
+    val = dict.fromkeys(allowed, 1.0)
+    for item in filter(None, (x.strip() for x in rest.split(","))):
+        name, eq, number = item.partition("=")
+        if not eq or name not in allowed:
+            raise ValueError(f"bodies: {text!r}: expected NAME=VALUE with NAME one of {', '.join(allowed)}, got {item!r}")
+        try:
+            val[name] = float(number)
+        except ValueError:
+            raise ValueError(f"bodies: {text!r}: {name} must be a number, got {number!r}") from None
+    body = Body.from_dict({"params": {"J": val["J"], "J3": val["J3"]}, "potential": {"name": pot, **{c: val[c] for c in _BODY_FIELDS[pot]}},
+                           "thickness": {"a": val["a"], "b": val["b"]}}, where="bodies")
+    return text, body.to_dict()
+
+
+def _family(args) -> int:
+    from analysis.families import PARAMETERS
+    from flatbody_env.cli.analysis import _box, resolve_body
+
+    if args.bodies:
+        bodies = [parse_body(b) for b in args.bodies]
+    else:
+        body, _, _ = resolve_body(args, need_spins=False)
+        bodies = [(body.describe(), body.to_dict())]
+    for v in args.vary:
+        if v not in PARAMETERS:
+            raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {v!r}")
+    ranges = [_range("--ranges", r) for r in args.ranges]
+    if not 2 <= args.seeds <= 200:
+        raise ValueError(f"--seeds: must be an integer in [2, 200], got {args.seeds}")
+    box = _box(args)
+    spec = {"kind": "family", "bodies": [list(b) for b in bodies], "vary": list(args.vary), "ranges": ranges,
+            "s3": 2.0 if args.s3 is None else args.s3, "p_theta": 0.5 if args.p_theta is None else args.p_theta,
+            "seeds": args.seeds, "step": args.step, "box": {"lam": list(box.lam), "mu": list(box.mu), "n": box.n}}
+    for name in ("s3", "p_theta"):
+        if not math.isfinite(spec[name]):
+            raise ValueError(f"--{name.replace('_', '-')}: must be a finite number, got {spec[name]!r}")
+    return _run(args, spec)
+
+
+def _seeds(args) -> int:
+    from agents.train import load_hyperparams
+    from flatbody_env.sweep.tasks import parse_seeds
+
+    load_hyperparams(args.algo, path=args.hyperparams_file)  # ValueError naming the file
+    spec = {"kind": "seeds", "algo": args.algo, "seeds": parse_seeds(args.seeds), "n_timesteps": args.n_timesteps,
+            "n_envs": args.n_envs, "overrides": list(args.hyperparams or []),
+            "hyperparams_file": None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()),
+            "episodes": args.episodes, "eval_seed": args.eval_seed}
+    return _run(args, spec)
+
+
+class _SerialOnly(argparse.ArgumentParser):
+    """Accepts any arguments: its handler only says why the timing study stays serial."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        ns = namespace or argparse.Namespace()
+        ns.handler = _serial_only
+        ns.sweep_kind = self.prog.split()[-1]
+        return ns, []
+
+
+def _serial_only(args) -> int:
+    from flatbody_env.sweep.tasks import serial_only_message
+
+    raise ValueError(serial_only_message(args.sweep_kind))
+
+
+# ---------------------------------------------------------------------------------------------
+def _tune(args) -> int:
+    from agents.tune import DEFAULT_STORAGE, TuneConfig, load_search_space, prepare, summary, tune_worker
+
+    cfg = TuneConfig(algo=args.algo, study=args.study or f"{args.algo}-FlatBody-v0", storage=args.storage or DEFAULT_STORAGE,
+                     trials=args.trials, n_timesteps=args.n_timesteps, evaluations=args.evaluations,
+                     eval_episodes=args.eval_episodes, n_envs=args.n_envs, seed=args.seed,
+                     overrides=tuple(args.hyperparams or ()), search_file=args.search_file, out=args.out,
+                     hyperparams_file=None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()))
+    load_search_space(cfg.algo, path=cfg.search_file)  # bad files fail here, in one line
+    prepare(cfg)
+    if args.workers <= 1 and args.scheduler is None:
+        tune_worker(cfg)
+    else:
+        from flatbody_env.sweep.cluster import dask_client
+
+        with dask_client(workers=args.workers, scheduler=args.scheduler) as client:
+            n = args.workers if args.scheduler is None else max(1, len(client.scheduler_info()["workers"]))
+            share = math.ceil(cfg.trials / n)
+            futures = [client.submit(tune_worker, cfg, i, share, pure=False) for i in range(n)]
+            client.gather(futures)
+    rep = summary(cfg.study, cfg.storage)
+    if args.json:
+        print(json.dumps(rep))
+        return 0
+    states: dict[str, int] = {}
+    for t in rep["trials"]:
+        states[t["state"]] = states.get(t["state"], 0) + 1
+    print(f"study {rep['study']} ({rep['algo']}) in {cfg.storage}: {len(rep['trials'])} trials ("
+          + ", ".join(f"{v} {k.lower()}" for k, v in sorted(states.items())) + ")")
+    best = rep["best"]
+    if best is not None:
+        print(f"best: trial {best['number']}, final distance {best['value']:.4f}"
+              + (f", success rate {best['success_rate']:.0%}" if best["success_rate"] is not None else ""))
+        for k, v in best["params"].items():
+            print(f"  {k} = {v}")
+        print(f"retrain: flatbody train --study {rep['study']} --trial-id {best['number']} --storage {cfg.storage}")
+    return 0
+
+
+def _bench_sweep(args) -> int:
+    from flatbody_env.sweep.scaling import format_scaling, plot_scaling, scaling_benchmark, write_scaling
+
+    out = Path(args.out)
+    json_path = out / "scaling.json"
+    if not args.plot_only:
+        rep = scaling_benchmark(grid=args.grid, workers=tuple(args.workers), sim_workers=args.sim_workers,
+                                chunk=args.chunk, noop_tasks=args.noop_tasks, extrapolate=(8, 32, 128))
+        print(format_scaling(rep))
+        write_scaling(rep, out)
+    elif not json_path.exists():
+        raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
+    png = plot_scaling(json_path, out / "scaling.png")
+    print(f"wrote {png}" if args.plot_only else f"wrote {json_path}, {out / 'scaling.csv'}, {png}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+def _engine_arguments(p) -> None:
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (results.sqlite, tables, models)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int_at_least("workers", 0), default=1, metavar="N",
+                   help="embedded Dask cluster: N local worker processes (1: in this process; 0: no Dask); default 1")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://HOST:8786")
+    p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: run only the tasks without a result")
+    p.add_argument("--json", action="store_true", help="print all rows sorted by key (the serial command's --json form)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def register(sub) -> None:
+    from flatbody_env.cli.analysis import add_body_arguments, add_box_arguments
+
+    sweep = sub.add_parser("sweep", help="run a study as many tasks on Dask (local processes or a cluster), resumable")
+    kinds = sweep.add_subparsers(dest="sweep_kind", metavar="KIND", parser_class=sub._parser_class)
+    sweep.set_defaults(handler=lambda args: (sweep.print_help(), 2)[1])
+
+    p = kinds.add_parser("stability-map", help="the shape stability map (flatbody stability-map), the grid split into chunks")
+    add_body_arguments(p)
+    p.add_argument("--lam-range", default="1.02,3", metavar="LO,HI", help="lambda range (default 1.02,3)")
+    p.add_argument("--mu-range", default="0.3,3", metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
+    p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30; any size)")
+    p.add_argument("--chunk", type=int_at_least("chunk", 1), default=None, metavar="ROWS",
+                   help="lambda rows per task (default: about 512 grid points per task, at least one row)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
+    _engine_arguments(p)
+    p.set_defaults(handler=_stability_map)
+
+    p = kinds.add_parser("failure-study", help="the integrator failure study (flatbody failure-study), one task per study axis and method")
+    p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
+    p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (default: the study's set)")
+    p.add_argument("--quick", action="store_true", help="fewer cases per axis")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=1, help="timing repeats (default 1)")
+    p.add_argument("--max-run-s", type=positive_float("max_run_s"), default=None, metavar="S",
+                   help="stop a method's axis once one run takes longer (default 5; 1 with --quick)")
+    _engine_arguments(p)
+    p.set_defaults(handler=_failure_study)
+
+    p = kinds.add_parser("family", help="families of stationary ellipses for several bodies, parameters and ranges")
+    add_body_arguments(p)
+    add_box_arguments(p)
+    p.add_argument("--bodies", nargs="+", metavar="BODY", help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags")
+    p.add_argument("--vary", nargs="+", default=["s3"], metavar="PARAM", help="parameters to vary (s3, p_theta or a constant); default s3")
+    p.add_argument("--ranges", nargs="+", default=["0.05,4"], metavar="LO,HI", help="parameter ranges (default 0.05,4)")
+    p.add_argument("--seeds", type=int, default=5, help="parameter values at which all solutions are sought (default 5)")
+    p.add_argument("--step", type=positive_float("step"), default=None, help="largest continuation step (default range/60)")
+    _engine_arguments(p)
+    p.set_defaults(handler=_family)
+
+    from agents.train import ALGOS
+
+    p = kinds.add_parser("seeds", help="train and evaluate one configuration over many seeds (one task per seed)")
+    p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
+    p.add_argument("--seeds", default="0-7", metavar="RANGE", help="seeds, e.g. 0-7 or 0,3,5 (default 0-7)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="steps per seed (default: the YAML's)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
+    p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1), default=100, metavar="N", help="evaluation episodes per seed (default 100)")
+    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0), default=10_000, metavar="S",
+                   help="evaluation episode i is reset with seed S + i (default 10000, held apart from training)")
+    _engine_arguments(p)
+    p.set_defaults(handler=_seeds)
+
+    for name in ("work-precision", "chart"):
+        p = kinds.add_parser(name, help="timing study: stays serial (run 'flatbody chart')")
+        # whatever flags follow (--workers N, the chart's own), the answer is the one line of _serial_only
+        kinds._name_parser_map[name] = _SerialOnly(prog=p.prog)
+
+    p = sub.add_parser("tune", help="Optuna hyperparameter search (TPE sampler, median pruner) over the YAML hyperparameters")
+    p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
+    p.add_argument("--trials", type=int_at_least("trials", 1), default=20, metavar="N", help="trials in the study, over all workers (default 20)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=20_000, metavar="N", help="training steps per trial (default 20000)")
+    p.add_argument("--evaluations", type=int_at_least("evaluations", 1), default=4, metavar="N", help="intermediate evaluations per trial (pruning points; default 4)")
+    p.add_argument("--eval-episodes", type=int_at_least("eval_episodes", 1), default=20, metavar="N", help="episodes per evaluation (default 20)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies while training (default: the YAML's)")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="training seed of every trial (default 0)")
+    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="fixed overrides of YAML entries")
+    p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
+    p.add_argument("--search-file", metavar="FILE", help="search space (default: agents/hyperparams/ALGO_search.yml)")
+    p.add_argument("--storage", metavar="URL", help="journal file or database URL, e.g. postgresql://USER@HOST/DB (default runs/tune/optuna-journal.log)")
+    p.add_argument("--study", metavar="NAME", help="study name (default ALGO-FlatBody-v0); workers of one study share it")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int_at_least("workers", 1), default=1, metavar="N", help="local worker processes sharing the study (default 1)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="one search worker per worker of a running Dask scheduler (the storage: a database URL, or a journal file all of them see)")
+    p.add_argument("--out", default="runs/tune", metavar="DIR", help="folder of the trials' runs (default runs/tune)")
+    p.add_argument("--json", action="store_true", help="print the study's trials as JSON")
+    p.set_defaults(handler=_tune)
+
+
+def register_bench(bsub) -> None:
+    b = bsub.add_parser("sweep", help="sweep scaling: speed-up over workers, scheduler overhead per task, extrapolation to 8/32/128 workers")
+    b.add_argument("--grid", type=int_at_least("grid", 4), default=48, metavar="N", help="stability-map grid per axis (default 48)")
+    b.add_argument("--chunk", type=int_at_least("chunk", 1), default=2, metavar="ROWS", help="lambda rows per task (default 2)")
+    b.add_argument("--workers", type=int_at_least("workers", 1), nargs="+", default=[1, 2], metavar="N", help="local worker counts (default 1 2)")
+    b.add_argument("--sim-workers", type=int_at_least("sim_workers", 1), default=4, metavar="N",
+                   help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)")
+    b.add_argument("--noop-tasks", type=int_at_least("noop_tasks", 10), default=400, metavar="N", help="empty tasks timing the scheduler overhead (default 400)")
+    b.add_argument("--out", default="runs/sweep-bench", metavar="DIR", help="output folder (default runs/sweep-bench)")
+    b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
+    b.set_defaults(handler=_bench_sweep)

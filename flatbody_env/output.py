@@ -1,0 +1,104 @@
+"""Writing a command's output files: atomically, with one-line errors.
+
+:func:`atomic_write` writes to a temporary file in the target's folder and renames it over the
+target (``os.replace``), so a killed or failing run never leaves a half-written file under the
+requested name and an existing file is replaced in one step. I/O failures become
+:class:`OutputError` (an ``OSError`` subclass the CLI prints as one line, exit code 1).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+
+class OutputError(OSError):
+    """An output file could not be written; the message names the file and the reason (one line)."""
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """A temporary path next to ``path``; on normal exit it is renamed to ``path``, on error removed.
+
+    For writers that want a file name (matplotlib's ``savefig``, rerun's ``save``)::
+
+        with atomic_path("chart.png") as tmp:
+            fig.savefig(tmp, format="png")
+    """
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + target.suffix, dir=folder)
+    except OSError as exc:
+        raise OutputError(f"cannot write {str(target)!r}: {exc.strerror or exc}") from None
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(exc, OutputError):
+            raise
+        raise OutputError(f"cannot write {str(target)!r}: {exc.strerror or exc}") from None
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def atomic_write(path: str | os.PathLike, data: str | bytes | Callable[[Path], None], *, encoding: str = "utf-8") -> Path:
+    """Write ``data`` (text, bytes, or a function that writes a given temporary path) to ``path`` atomically.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OutputError
+        The folder is missing or not writable, the disk is full, … (one line naming the file).
+    """
+    with atomic_path(path) as tmp:
+        if callable(data):
+            data(tmp)
+        elif isinstance(data, bytes):
+            tmp.write_bytes(data)
+        else:
+            tmp.write_text(data, encoding=encoding)
+    return Path(path)
+
+
+__all__ = ["OutputError", "atomic_path", "atomic_write"]
+
+
+def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, ...] = ()) -> Path:
+    """The checks of :func:`output_file` (``ValueError`` naming ``name``), for paths built by a command."""
+    p = Path(text)
+    if not str(text) or "\0" in str(text):
+        raise ValueError(f"{name}: expected a file path, got {str(text)[:60]!r}")
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise ValueError(f"{name}: expected a file ending in {' or '.join(suffixes)}, got {str(text)[:60]!r}")
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        info = None
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot use {str(text)[:60]!r} ({exc.strerror or exc})") from None
+    if info is not None:
+        if stat.S_ISDIR(info.st_mode):
+            raise ValueError(f"{name}: {str(text)[:60]!r} is a directory; give a file name")
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"{name}: {str(text)[:60]!r} is not a regular file")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{name}: the directory {str(parent)[:60]!r} is not writable")
+    return p

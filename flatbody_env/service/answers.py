@@ -1,0 +1,206 @@
+"""What the service computes: validated request data in, the ``flatbody`` command's JSON answer out.
+
+Every function here calls the very function the command's handler prints
+(:mod:`flatbody_env.cli.simulate`, :mod:`flatbody_env.cli.analysis`), so an endpoint answers with
+the command's keys and numbers. The functions run in worker processes (never in the event loop);
+:func:`outcome` wraps one call so that its result or its error crosses the process boundary as
+plain data.
+
+Scenes given by name are looked up among the built-in scenes only: a request never names a file
+on the server.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from flatbody_env.service.limits import DEFAULT_LIMITS, LimitExceeded, Limits, check_integration_cost
+
+
+def _prefixed(where: str, exc: ValueError) -> ValueError:
+    return ValueError(f"{where}.{exc}" if not str(exc).startswith(where) else str(exc))
+
+
+def build_body(data: Mapping[str, Any], *, where: str = "body"):
+    """A :class:`~flatbody_env.physics.body.Body` for the analysis (J1 = J2) from its JSON form.
+
+    Raises
+    ------
+    ValueError
+        Naming the field (``body.params.J``, …) and the allowed range.
+    """
+    from flatbody_env.physics.body import Body
+
+    body = Body.from_dict(data, where=where)
+    if not body.inertia.is_isotropic:
+        raise ValueError(f"{where}.params: the analysis needs an isotropic body (J1 = J2)")
+    return body
+
+
+def build_scene(scene: str | Mapping[str, Any]):
+    """A scene from its JSON object or the name of a built-in scene (never a path on the server)."""
+    from flatbody_env.scene import builtin_scenes, scene_from_dict
+
+    if isinstance(scene, str):
+        scenes = builtin_scenes()
+        if scene not in scenes:
+            raise ValueError(f"scene: no built-in scene named {scene[:60]!r} (built-in: {', '.join(scenes)})")
+        return scenes[scene]
+    try:
+        return scene_from_dict(scene)
+    except ValueError as exc:
+        raise _prefixed("scene", exc) from None
+
+
+def _box(p: Mapping[str, Any]):
+    from analysis.stationary import SearchBox
+
+    return SearchBox(lam=tuple(p["lam_range"]), mu=tuple(p["mu_range"]), n=int(p["grid"]))
+
+
+def ellipses(p: Mapping[str, Any]) -> dict[str, Any]:
+    """``POST /ellipses``: the ``flatbody ellipses --json`` answer."""
+    from flatbody_env.answers import ellipses_answer
+
+    body = build_body(p["body"])
+    return ellipses_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
+
+
+def stability(p: Mapping[str, Any]) -> dict[str, Any]:
+    """``POST /stability``: the ``flatbody stability --json`` answer."""
+    from flatbody_env.answers import stability_answer
+
+    body = build_body(p["body"])
+    return stability_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
+
+
+def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None = None, limits: Limits = DEFAULT_LIMITS):
+    """The :class:`~flatbody_env.simulation.Trajectory` of ``flatbody simulate`` for request ``p``,
+    after checking its cost against ``limits`` (request or job limits)."""
+    from flatbody_env.answers import simulate_trajectory
+
+    scene = build_scene(p["scene"])
+    t_end = p.get("t_end") or scene.t_end
+    times = p.get("times")
+    samples = len(times) if times else (p.get("samples") or 101)
+    check_integration_cost(t_end=t_end, samples=samples, step=p.get("step"), in_job=in_job, limits=limits)
+    return scene, simulate_trajectory(
+        scene,
+        t_end=p.get("t_end"),
+        times=times,
+        samples=p.get("samples"),
+        method=p["method"],
+        rtol=p["rtol"],
+        atol=p["atol"],
+        step=p.get("step"),
+        model=p["model"],
+        with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
+    )
+
+
+def simulate(p: Mapping[str, Any]) -> dict[str, Any]:
+    """``POST /simulate``: the ``flatbody simulate`` JSON (``Trajectory.to_dict()``)."""
+    return trajectory(p, in_job=False)[1].to_dict()
+
+
+def invariants(p: Mapping[str, Any]) -> dict[str, Any]:
+    """``POST /invariants``: the ``flatbody invariants --json`` answer for a trajectory dict."""
+    from flatbody_env.answers import invariants_answer
+
+    body = build_body(p["body"]) if p.get("body") is not None else None
+    data = {k: v for k, v in p.items() if k != "body" and v is not None}
+    return invariants_answer(data, body)
+
+
+def scenes(_: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """``GET /scenes``: the ``flatbody scenes --json`` answer."""
+    from flatbody_env.answers import scenes_answer
+
+    return scenes_answer()
+
+
+def methods(_: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+    """``GET /methods``: the ``flatbody methods --json`` answer."""
+    from flatbody_env.answers import methods_answer
+
+    return methods_answer()
+
+
+def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
+    """Check a job's body or scene and its cost before it is queued (``{"kind", "params"}``); ``{}`` if fine.
+
+    Raises
+    ------
+    ValueError, LimitExceeded
+        Naming the field under ``params.``.
+    """
+    params = p["params"]
+    try:
+        if "body" in params:
+            build_body(params["body"])
+        if "scene" in params:
+            scene = build_scene(params["scene"])
+            t_end = params.get("t_end") or scene.t_end
+            times = params.get("times")
+            samples = len(times) if times else (params.get("samples") or 101)
+            check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True)
+            from flatbody_env.integrators import get_method
+
+            get_method(params["method"])
+    except LimitExceeded as exc:
+        raise LimitExceeded(f"params.{exc.field}", str(exc).split(": ", 1)[1]) from None
+    except ValueError as exc:
+        raise ValueError(f"params.{exc}") from None
+    return {}
+
+
+ANSWERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
+    "scenes": scenes,
+    "methods": methods,
+    "check-job": check_job,
+    "ellipses": ellipses,
+    "stability": stability,
+    "simulate": simulate,
+    "invariants": invariants,
+}
+"""Request-path computations by endpoint name."""
+
+
+def error_data(exc: BaseException) -> dict[str, Any]:
+    """An exception as the service's error answer (:class:`~flatbody_env.service.models.ErrorAnswer`)."""
+    from flatbody_env.integrators import IntegrationError
+
+    if isinstance(exc, IntegrationError):
+        return {"kind": "integration", "detail": str(exc), "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason,
+                "method": exc.method or None}
+    if isinstance(exc, LimitExceeded):
+        return {"kind": "too-large", "detail": str(exc), "field": exc.field}
+    if isinstance(exc, ValueError):
+        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        field = text.split(":", 1)[0] if ":" in text and " " not in text.split(":", 1)[0] else None
+        return {"kind": "validation", "detail": text, "field": field.lstrip("-").replace("-", "_") if field else None}
+    # Anything else is a computation that cannot be done for these inputs (a singular matrix, an
+    # overflow, ...): the caller gets one line, never a traceback.
+    return {"kind": "validation", "detail": f"the computation failed for these inputs ({type(exc).__name__}: {str(exc)[:200]})"}
+
+
+def outcome(name: str, payload: Mapping[str, Any]) -> tuple[bool, Any]:
+    """Run ``ANSWERS[name](payload)``: ``(True, answer)`` or ``(False, error_data)`` (picklable either way)."""
+    try:
+        return True, ANSWERS[name](payload)
+    except Exception as exc:  # noqa: BLE001 - every failure becomes one line for the caller
+        return False, error_data(exc)
+
+
+def warm_up() -> bool:
+    """Import the analysis stack in a fresh worker process (so that the first request is not slow)."""
+    import analysis.stability  # noqa: F401
+    import flatbody_env.simulation  # noqa: F401
+
+    return True
+
+
+__all__ = ["ANSWERS", "build_body", "build_scene", "ellipses", "error_data", "invariants", "methods", "outcome", "scenes", "simulate",
+           "stability", "trajectory", "warm_up"]

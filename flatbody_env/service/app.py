@@ -1,0 +1,364 @@
+"""The ASGI application of the analysis service (FastAPI): endpoints, errors, limits, the page.
+
+:func:`create_app` builds the app; ``flatbody serve`` runs it with uvicorn. The request-path
+computations (``/ellipses``, ``/stability``, ``/simulate``, ``/invariants``, ``/scenes``,
+``/methods``) run in a pool of worker processes, so the event loop only waits: a slow request never
+blocks ``/health``. Long work goes through ``/jobs`` (:mod:`flatbody_env.service.jobs`).
+
+Errors are :class:`~flatbody_env.service.models.ErrorAnswer` objects, one line naming the field
+and the allowed range or the limit: 422 for bad input and failed integrations (with the
+``IntegrationError``'s time and reason), 413 for bodies or work over the limits, 404 for unknown
+jobs, 409 for an artifact of an unfinished job, 503 while the service restarts its workers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, Path as PathParam, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from flatbody_env.service import models
+from flatbody_env.service.jobs import JobRunner, die_with_service, process_context
+from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
+from flatbody_env.service.store import JobStore
+
+PAGE_DIR = Path(__file__).with_name("page")
+
+_ERRORS = {
+    413: {"model": models.ErrorAnswer, "description": "the body or the work is over a limit (the detail names it)"},
+    422: {"model": models.ErrorAnswer, "description": "bad input (the field and its allowed range) or a failed integration"},
+    503: {"model": models.ErrorAnswer, "description": "the worker processes are restarting; try again"},
+}
+_JOB_ERRORS = {404: {"model": models.ErrorAnswer, "description": "no such job"}, 422: _ERRORS[422]}
+
+
+def _finite_json(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_json(v) for v in value]
+    return value
+
+
+class AnswerResponse(JSONResponse):
+    """JSON as the ``flatbody`` command prints it (``json.dumps``), with NaN/inf (never valid JSON) as null."""
+
+    def render(self, content: Any) -> bytes:
+        try:
+            text = json.dumps(content, allow_nan=False)
+        except ValueError:
+            text = json.dumps(_finite_json(content), allow_nan=False)
+        return text.encode("utf-8")
+
+
+def error(status: int, kind: str, detail: str, **extra: Any) -> AnswerResponse:
+    """An :class:`~flatbody_env.service.models.ErrorAnswer` response."""
+    body = {"detail": detail, "kind": kind, **{k: v for k, v in extra.items() if v is not None}}
+    return AnswerResponse(body, status_code=status)
+
+
+def _error_from(data: dict[str, Any]) -> AnswerResponse:
+    status = 413 if data["kind"] == "too-large" else 422
+    return error(status, data.pop("kind"), data.pop("detail"), **data)
+
+
+class BodyLimit:
+    """ASGI middleware: request bodies over ``max_bytes`` get 413 before the app reads them."""
+
+    def __init__(self, app, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length":
+                try:
+                    size = int(value)
+                except ValueError:
+                    size = -1
+                if size > self.max_bytes or size < 0:
+                    return await self._refuse(scope, receive, send)
+        chunks: list[bytes] = []
+        total = 0
+        more = True
+        while more:
+            message = await receive()
+            if message["type"] == "http.disconnect":
+                return
+            chunk = message.get("body", b"")
+            total += len(chunk)
+            if total > self.max_bytes:
+                return await self._refuse(scope, receive, send)
+            chunks.append(chunk)
+            more = message.get("more_body", False)
+        body = b"".join(chunks)
+        sent = False
+
+        async def replay():
+            nonlocal sent
+            if not sent:
+                sent = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+    async def _refuse(self, scope, receive, send) -> None:
+        response = error(413, "too-large", f"body: the request body may hold at most {self.max_bytes} bytes", field="body")
+        await response(scope, receive, send)
+
+
+class Service:
+    """The app's state: the job store and runner, and the pool of request workers."""
+
+    def __init__(self, data_dir: str | Path, workers: int, limits: Limits) -> None:
+        self.store = JobStore(data_dir)
+        self.store.lock()
+        self.runner = JobRunner(self.store, workers)
+        self.workers = workers
+        self.limits = limits
+        self.pool: ProcessPoolExecutor | None = None
+        self.interrupted = 0
+
+    def start(self) -> None:
+        self.interrupted = self.runner.start()
+        self._new_pool()
+
+    def _new_pool(self) -> None:
+        from flatbody_env.service.answers import warm_up
+
+        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(),
+                                        initializer=die_with_service, initargs=(os.getpid(),))
+        for _ in range(self.workers):
+            self.pool.submit(warm_up)
+
+    def stop(self) -> None:
+        self.runner.stop()
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)  # waits for a running request (bounded by the limits)
+        self.store.unlock()
+
+    async def answer(self, name: str, payload: dict[str, Any]) -> AnswerResponse:
+        """Compute ``answers.ANSWERS[name](payload)`` in a worker process; the answer or the error response."""
+        from flatbody_env.service.answers import outcome
+
+        try:
+            future = self.pool.submit(outcome, name, payload)
+        except BrokenProcessPool:
+            self._new_pool()
+            return error(503, "unavailable", "the worker processes are restarting; try again")
+        try:
+            ok, data = await asyncio.wait_for(asyncio.wrap_future(future), timeout=self.limits.request_seconds)
+        except asyncio.TimeoutError:
+            return error(413, "too-large", f"request: took longer than {self.limits.request_seconds:g} s; send it as a job (POST /jobs)",
+                         field="request")
+        except BrokenProcessPool:
+            self._new_pool()
+            return error(503, "unavailable", "a worker process died while answering (out of memory?); try again")
+        if ok:
+            return AnswerResponse(data)
+        return _error_from(data)
+
+
+def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limits: Limits = DEFAULT_LIMITS) -> FastAPI:
+    """The analysis service.
+
+    Parameters
+    ----------
+    data_dir : str or Path
+        Where the job database (``jobs.sqlite3``) and the jobs' files live.
+    workers : int
+        Worker processes for requests, and jobs run at once.
+    limits : Limits
+        Bounds on bodies and work (:mod:`flatbody_env.service.limits`).
+    """
+    from flatbody_env import __version__
+
+    if not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
+    service = Service(data_dir, workers, limits)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        service.start()
+        if service.interrupted:
+            sys.stderr.write(f"flatbody serve: {service.interrupted} job(s) were running when the service stopped; marked failed\n")
+        try:
+            yield
+        finally:
+            service.stop()
+
+    app = FastAPI(
+        title="flatbody analysis service",
+        version=__version__,
+        description="Stationary ellipses, stability, families, simulations and rerun recordings of a flat affinely-rigid body "
+                    "with thickness. Answers are the `flatbody` command's JSON answers.",
+        lifespan=lifespan,
+    )
+    app.state.service = service
+    app.add_middleware(BodyLimit, max_bytes=limits.max_body_bytes)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError):
+        errs = exc.errors()
+        first = errs[0] if errs else {"loc": (), "msg": "invalid request"}
+        loc = [str(x) for x in first.get("loc", ()) if x not in ("body", "query", "path")]
+        if str(first.get("type", "")).startswith("union_tag"):
+            loc.append(str((first.get("ctx") or {}).get("discriminator", "kind")).strip("'"))
+        field = ".".join(loc) or "body"
+        msg = str(first.get("msg", "invalid")).replace("\n", " ")
+        ctx = first.get("ctx") or {}
+        if first.get("type") == "json_invalid":
+            msg = f"not valid JSON ({ctx.get('error', 'parse error')})"
+        more = f" (+{len(errs) - 1} more)" if len(errs) > 1 else ""
+        return error(422, "validation", f"{field}: {msg}{more}", field=field)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 400:  # a body that cannot be decoded (FastAPI says 400): bad input, as every other
+            return error(422, "validation", f"body: not valid JSON ({exc.detail})", field="body")
+        kind = {404: "not-found", 409: "conflict", 413: "too-large"}.get(exc.status_code, "validation")
+        return error(exc.status_code, kind, str(exc.detail))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception):  # pragma: no cover - a last line, never a traceback
+        from flatbody_env.service.answers import error_data
+
+        return _error_from(error_data(exc))
+
+    # -- plain answers ---------------------------------------------------------------------------
+    @app.get("/health", response_model=models.Health, tags=["service"])
+    async def health() -> dict[str, str]:
+        """Liveness: always answered by the event loop, never behind a computation."""
+        return {"status": "ok", "version": __version__}
+
+    @app.get("/limits", tags=["service"], response_model=dict[str, float])
+    async def get_limits() -> dict[str, float]:
+        """The bounds this service runs with (requests over them get 413)."""
+        return limits.as_dict()
+
+    @app.get("/scenes", tags=["physics"], response_model=dict[str, dict[str, Any]], responses=_ERRORS)
+    async def scenes():
+        """The built-in scenes: the ``flatbody scenes --json`` answer."""
+        return await service.answer("scenes", {})
+
+    @app.get("/methods", tags=["physics"], response_model=list[models.MethodAnswer], responses=_ERRORS)
+    async def methods():
+        """The integrators: the ``flatbody methods --json`` answer."""
+        return await service.answer("methods", {})
+
+    @app.post("/ellipses", tags=["analysis"], response_model=models.EllipsesAnswer, responses=_ERRORS)
+    async def ellipses(request: models.SpinsRequest):
+        """Stationary ellipses for given s3, p_theta (eqs. 52-54 of the paper): ``flatbody ellipses --json``."""
+        return await service.answer("ellipses", request.model_dump())
+
+    @app.post("/stability", tags=["analysis"], response_model=models.StabilityAnswer, responses=_ERRORS)
+    async def stability(request: models.SpinsRequest):
+        """Eigenvalues and classification of each stationary ellipse: ``flatbody stability --json``."""
+        return await service.answer("stability", request.model_dump())
+
+    @app.post("/simulate", tags=["physics"], response_model=models.TrajectoryAnswer, responses=_ERRORS)
+    async def simulate(request: models.SimulateRequest):
+        """Integrate a scene: the ``flatbody simulate`` JSON. Integration failures are 422 with ``when`` and ``why``."""
+        return await service.answer("simulate", request.model_dump())
+
+    @app.post("/invariants", tags=["analysis"], response_model=models.InvariantsAnswer, responses=_ERRORS)
+    async def invariants(request: models.TrajectoryRequest):
+        """Invariants and drift table along a trajectory (the ``flatbody simulate`` JSON): ``flatbody invariants --json``."""
+        payload = request.trajectory()
+        payload["body"] = request.body.as_data() if request.body is not None else None
+        return await service.answer("invariants", payload)
+
+    # -- jobs --------------------------------------------------------------------------------------
+    @app.post("/jobs", tags=["jobs"], status_code=202, response_model=models.JobCreated, responses=_ERRORS)
+    async def create_job(request: models.JobRequest):
+        """Queue a job (simulate, family, stability-map, record, evaluate); it runs in a worker process."""
+        job = {"kind": request.kind, "params": request.params.model_dump(by_alias=True)}
+        checked = await service.answer("check-job", job)
+        if checked.status_code != 200:
+            return checked
+        job_id = await asyncio.to_thread(service.runner.submit, job["kind"], job["params"])
+        return AnswerResponse({"id": job_id}, status_code=202)
+
+    @app.get("/jobs", tags=["jobs"], response_model=models.JobList, responses={422: _ERRORS[422]})
+    async def list_jobs(limit: int = Query(100, ge=1, le=1000)):
+        """The newest jobs first (without their results)."""
+        jobs = await asyncio.to_thread(service.store.list, limit)
+        return AnswerResponse({"jobs": [_public(j) for j in jobs]})
+
+    @app.get("/jobs/{job_id}", tags=["jobs"], response_model=models.JobStatus, responses=_JOB_ERRORS)
+    async def get_job(job_id: str = PathParam(max_length=64)):
+        """A job's status, progress, result (when done) or error (when failed)."""
+        job = await asyncio.to_thread(service.store.get, job_id)
+        if job is None:
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
+        return AnswerResponse(_public(job))
+
+    @app.get("/jobs/{job_id}/artifact", tags=["jobs"], response_class=FileResponse,
+             responses={**_JOB_ERRORS, 409: {"model": models.ErrorAnswer, "description": "the job has not finished"},
+                        200: {"description": "the file (.rrd, .png, .csv, .json)",
+                              "content": {"application/octet-stream": {}, "image/png": {}, "text/csv": {}, "application/json": {}}}})
+    async def get_artifact(job_id: str = PathParam(max_length=64), name: str | None = Query(None, max_length=64)):
+        """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json)."""
+        job = await asyncio.to_thread(service.store.get, job_id)
+        if job is None:
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
+        if job["status"] != "done":
+            return error(409, "conflict", f"job_id: job {job_id} is {job['status']}; its files come when it is done", field="job_id")
+        names = job["artifacts"]
+        chosen = names[0] if name is None and names else name
+        if chosen not in names:
+            return error(404, "not-found", f"name: must be one of {', '.join(names) or '(none)'}, got {name!r}", field="name")
+        path = service.store.job_dir(job_id) / chosen
+        if not path.is_file():
+            return error(404, "not-found", f"name: {chosen} is gone from the data dir", field="name")
+        media = {".png": "image/png", ".csv": "text/csv", ".json": "application/json"}.get(path.suffix, "application/octet-stream")
+        return FileResponse(path, media_type=media, filename=chosen)
+
+    @app.delete("/jobs/{job_id}", tags=["jobs"], response_model=models.JobDeleted, responses=_JOB_ERRORS)
+    async def delete_job(job_id: str = PathParam(max_length=64)):
+        """Cancel a queued or running job (its process is stopped) and delete the job and its files."""
+        job = await asyncio.to_thread(service.store.get, job_id)
+        if job is None:
+            return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
+        cancelled = await asyncio.to_thread(service.runner.cancel, job_id)
+        deleted = await asyncio.to_thread(service.store.delete, job_id)
+        return AnswerResponse({"id": job_id, "cancelled": cancelled, "deleted": deleted})
+
+    # -- the page ----------------------------------------------------------------------------------
+    @app.get("/", include_in_schema=False)
+    async def page() -> Response:
+        return HTMLResponse((PAGE_DIR / "index.html").read_text(encoding="utf-8"))
+
+    app.mount("/page", StaticFiles(directory=PAGE_DIR), name="page")
+    return app
+
+
+def _public(job: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in job.items() if k != "pid"}
+
+
+def app_from_environment() -> FastAPI:
+    """The app for ``uvicorn --factory flatbody_env.service.app:app_from_environment`` (``FLATBODY_DATA_DIR``,
+    ``FLATBODY_WORKERS``)."""
+    return create_app(os.environ.get("FLATBODY_DATA_DIR", "flatbody-data"), workers=int(os.environ.get("FLATBODY_WORKERS", "2")))
+
+
+__all__ = ["AnswerResponse", "BodyLimit", "PAGE_DIR", "Service", "app_from_environment", "create_app"]

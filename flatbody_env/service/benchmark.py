@@ -1,0 +1,218 @@
+"""``flatbody bench service``: latency and throughput of the HTTP service under load (a benchmark, not a test).
+
+The service is started as ``flatbody serve`` in a subprocess on a free loopback port with a fresh
+data dir; a long job (a large ``stability-map``) is queued first so that the figures are taken while
+a worker process is busy with it. Then, for each endpoint (``GET /health``, ``POST /ellipses`` with
+the default body, a short ``POST /simulate``) and each number of concurrent clients, a real HTTP
+client (httpx, one connection per client) sends at most ``requests`` requests for at most
+``seconds`` seconds. Reported: p50 and p99 latency, requests/s and the number of errors (any answer
+other than 200 counts). Output: ``service_benchmark.json``, ``.csv`` and ``.png``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
+    "GET /health": ("GET", "/health", None),
+    "POST /ellipses": ("POST", "/ellipses", {"body": {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0},
+                                                      "thickness": {"a": 1.0, "b": 1.0}}, "s3": 2.0, "p_theta": 0.5}),
+    "POST /simulate": ("POST", "/simulate", {"scene": "default", "t_end": 1.0, "samples": 11}),
+}
+"""What is measured: name → (HTTP method, path, JSON body)."""
+
+LONG_JOB = {"kind": "stability-map", "params": {"grid": 200}}
+"""The job that keeps one worker busy during the measurement."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoadRow:
+    """One endpoint at one number of concurrent clients."""
+
+    endpoint: str
+    clients: int
+    requests: int
+    errors: int
+    seconds: float
+    p50_ms: float
+    p99_ms: float
+    requests_per_s: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class ServiceBenchmark:
+    """All rows, the state of the long job during the run, and where the files went."""
+
+    rows: list[LoadRow]
+    workers: int
+    cpus: int
+    long_job: dict[str, Any]
+    paths: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def errors(self) -> int:
+        return sum(r.errors for r in self.rows)
+
+    def table(self) -> str:
+        lines = [f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
+                 f"status at the end: {self.long_job['status_at_end']}",
+                 f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}"]
+        for r in self.rows:
+            lines.append(f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
+                         f"{r.requests_per_s:>9.1f}")
+        return "\n".join(lines)
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:
+    """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers."""
+    import httpx
+
+    port = port or _free_port()
+    cmd = [sys.executable, "-m", "flatbody_env.cli", "serve", "--host", "127.0.0.1", "--port", str(port), "--workers", str(workers),
+           "--data-dir", str(data_dir), "--log-level", "warning"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"flatbody serve exited with code {proc.returncode}: {proc.stderr.read()[-2000:]}")
+        try:
+            if httpx.get(url + "/health", timeout=1.0).status_code == 200:
+                return proc, url
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.1)
+    proc.kill()
+    raise RuntimeError(f"flatbody serve did not answer /health within {timeout:g} s")
+
+
+async def _load(url: str, name: str, clients: int, requests: int, seconds: float) -> LoadRow:
+    import httpx
+
+    method, path, body = ENDPOINTS[name]
+    latencies: list[float] = []
+    errors = 0
+    issued = 0
+    start = time.perf_counter()
+    deadline = start + seconds
+
+    async def client() -> None:
+        nonlocal issued, errors
+        async with httpx.AsyncClient(base_url=url, timeout=120.0) as http:
+            while issued < requests and time.perf_counter() < deadline:
+                issued += 1
+                t0 = time.perf_counter()
+                try:
+                    r = await http.request(method, path, json=body)
+                    ok = r.status_code == 200
+                except httpx.HTTPError:
+                    ok = False
+                latencies.append(time.perf_counter() - t0)
+                errors += 0 if ok else 1
+
+    await asyncio.gather(*(client() for _ in range(clients)))
+    elapsed = time.perf_counter() - start
+    lat = np.array(latencies) * 1e3
+    return LoadRow(endpoint=name, clients=clients, requests=len(latencies), errors=errors, seconds=elapsed,
+                   p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)), requests_per_s=len(latencies) / elapsed)
+
+
+def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, seconds: float = 20.0,
+        workers: int = 2) -> ServiceBenchmark:
+    """Measure (module docstring) and write ``service_benchmark.json``/``.csv``/``.png`` in ``out_dir``."""
+    import httpx
+
+    if not (isinstance(seconds, (int, float)) and 0 < seconds <= 600):
+        raise ValueError(f"seconds: must be a number in (0, 600], got {seconds!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: list[LoadRow] = []
+    with tempfile.TemporaryDirectory(prefix="flatbody-bench-service-") as data_dir:
+        proc, url = start_service(data_dir, workers=workers)
+        try:
+            for name, (method, path, body) in ENDPOINTS.items():  # warm every worker process once
+                for _ in range(workers):
+                    httpx.request(method, url + path, json=body, timeout=120.0)
+            job_id = httpx.post(url + "/jobs", json=LONG_JOB, timeout=30.0).json()["id"]
+            time.sleep(0.5)
+            status_at_start = httpx.get(f"{url}/jobs/{job_id}", timeout=30.0).json()["status"]
+            for name in ENDPOINTS:
+                for c in clients:
+                    rows.append(asyncio.run(_load(url, name, c, requests, seconds)))
+            status_at_end = httpx.get(f"{url}/jobs/{job_id}", timeout=30.0).json()["status"]
+            httpx.delete(f"{url}/jobs/{job_id}", timeout=30.0)
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+    result = ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
+                              long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
+                                        "status_at_end": status_at_end})
+    return replace(result, paths=_write(result, out))
+
+
+def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:
+    paths = {"json": str(out / "service_benchmark.json"), "csv": str(out / "service_benchmark.csv"), "png": str(out / "service_benchmark.png")}
+    Path(paths["json"]).write_text(json.dumps({"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
+                                               "rows": [asdict(r) for r in result.rows]}, indent=2) + "\n", encoding="utf-8")
+    with open(paths["csv"], "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(LoadRow.__dataclass_fields__))
+        w.writeheader()
+        for r in result.rows:
+            w.writerow(asdict(r))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for name in ENDPOINTS:
+        sel = [r for r in result.rows if r.endpoint == name]
+        if not sel:
+            continue
+        x = [r.clients for r in sel]
+        line = ax1.plot(x, [r.p50_ms for r in sel], "o-", label=f"{name} p50")[0]
+        ax1.plot(x, [r.p99_ms for r in sel], "s--", color=line.get_color(), label=f"{name} p99")
+        ax2.plot(x, [r.requests_per_s for r in sel], "o-", color=line.get_color(), label=name)
+    for ax in (ax1, ax2):
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xlabel("concurrent clients")
+        ax.grid(True, which="both", alpha=0.3)
+    ax1.set_ylabel("latency (ms)")
+    ax1.set_title("latency (p50 solid, p99 dashed)")
+    ax2.set_ylabel("requests / s")
+    ax2.set_title("throughput")
+    ax1.legend(fontsize=7)
+    ax2.legend(fontsize=7)
+    fig.suptitle(f"flatbody serve, {result.workers} worker process(es), {result.cpus} CPU(s), while a {result.long_job['kind']} job runs",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(paths["png"], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+__all__ = ["ENDPOINTS", "LONG_JOB", "LoadRow", "ServiceBenchmark", "run", "start_service"]

@@ -1,0 +1,216 @@
+"""The job store: one embedded SQLite database (``DATA_DIR/jobs.sqlite3``) and a folder per job.
+
+=============  ========================================================================
+column         meaning
+=============  ========================================================================
+id             32 hex digits (random)
+kind           ``simulate``, ``family``, ``stability-map``, ``record``, ``evaluate``
+params         the validated parameters (JSON)
+status         ``queued`` → ``running`` → ``done`` | ``failed``
+progress       0 … 1
+result         the answer (JSON), when done
+error          one line, when failed
+artifacts      file names in ``DATA_DIR/jobs/ID/`` (JSON list), the first is the main one
+created, started, finished   Unix times
+pid            the worker process running the job
+=============  ========================================================================
+
+The service and its worker processes write to the same database (WAL mode, one connection per
+process and thread). A worker finishes a job only while the row still says ``running`` under its
+own pid, so a job that was marked failed (the service restarted) or deleted is never
+overwritten. Results are kept until the job is deleted.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import shutil
+import sqlite3
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+STATUSES = ("queued", "running", "done", "failed")
+
+RESTART_REASON = "the service stopped while this job was running; it was not re-run (submit it again)"
+"""The error of a job found ``running`` when the service starts."""
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    kind TEXT NOT NULL,
+    params TEXT NOT NULL,
+    status TEXT NOT NULL,
+    progress REAL NOT NULL DEFAULT 0,
+    result TEXT,
+    error TEXT,
+    artifacts TEXT NOT NULL DEFAULT '[]',
+    created REAL NOT NULL,
+    started REAL,
+    finished REAL,
+    pid INTEGER
+);
+CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, created);
+"""
+
+
+class JobStore:
+    """Jobs in SQLite under ``data_dir`` (see the module table).
+
+    Parameters
+    ----------
+    data_dir : str or Path
+        Created if missing; holds ``jobs.sqlite3`` and ``jobs/ID/`` folders.
+    """
+
+    def __init__(self, data_dir: str | Path) -> None:
+        self.data_dir = Path(data_dir)
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.db_path = self.data_dir / "jobs.sqlite3"
+        with self.connect() as db:
+            db.executescript(_SCHEMA)
+
+    @contextmanager
+    def connect(self) -> Iterator[sqlite3.Connection]:
+        """A short-lived connection (a transaction committed on exit)."""
+        db = sqlite3.connect(self.db_path, timeout=30.0, isolation_level=None)
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA busy_timeout=30000")
+            db.row_factory = sqlite3.Row
+            yield db
+        finally:
+            db.close()
+
+    def lock(self) -> None:
+        """Hold the data dir for this process (one service per data dir), until :meth:`unlock`.
+
+        Raises
+        ------
+        ValueError
+            ``data-dir: ... is in use by another flatbody serve``.
+        """
+        import fcntl
+
+        fh = open(self.data_dir / "service.lock", "a+", encoding="utf-8")  # noqa: SIM115 - held until unlock()
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            raise ValueError(f"data-dir: {self.data_dir} is in use by another flatbody serve (one service per data dir)") from None
+        self._lock_file = fh
+
+    def unlock(self) -> None:
+        fh = getattr(self, "_lock_file", None)
+        if fh is not None:
+            fh.close()
+            self._lock_file = None
+
+    def job_dir(self, job_id: str) -> Path:
+        """``DATA_DIR/jobs/ID`` (the job's artifacts)."""
+        return self.data_dir / "jobs" / job_id
+
+    # -- the service's side ------------------------------------------------------------------
+    def create(self, kind: str, params: dict[str, Any]) -> str:
+        """A new queued job; its id."""
+        job_id = secrets.token_hex(16)
+        with self.connect() as db:
+            db.execute("INSERT INTO jobs (id, kind, params, status, created) VALUES (?, ?, ?, 'queued', ?)",
+                       (job_id, kind, json.dumps(params), time.time()))
+        return job_id
+
+    def get(self, job_id: str) -> dict[str, Any] | None:
+        """The job as the API shows it, or None."""
+        with self.connect() as db:
+            row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return None if row is None else _as_dict(row)
+
+    def list(self, limit: int = 100) -> list[dict[str, Any]]:
+        """The newest jobs first, without their results."""
+        with self.connect() as db:
+            rows = db.execute("SELECT * FROM jobs ORDER BY created DESC LIMIT ?", (limit,)).fetchall()
+        return [_as_dict(r, with_result=False) for r in rows]
+
+    def fail_interrupted(self) -> int:
+        """Mark the jobs left ``running`` by a previous service process failed (:data:`RESTART_REASON`)."""
+        with self.connect() as db:
+            cur = db.execute("UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE status = 'running'",
+                             (RESTART_REASON, time.time()))
+            return cur.rowcount
+
+    def claim_next(self) -> dict[str, Any] | None:
+        """Move the oldest queued job to ``running`` and return it (None when the queue is empty)."""
+        with self.connect() as db:
+            db.execute("BEGIN IMMEDIATE")
+            row = db.execute("SELECT * FROM jobs WHERE status = 'queued' ORDER BY created LIMIT 1").fetchone()
+            if row is None:
+                db.execute("COMMIT")
+                return None
+            db.execute("UPDATE jobs SET status = 'running', started = ?, progress = 0 WHERE id = ?", (time.time(), row["id"]))
+            db.execute("COMMIT")
+        return _as_dict(row)
+
+    def set_pid(self, job_id: str, pid: int) -> None:
+        with self.connect() as db:
+            db.execute("UPDATE jobs SET pid = ? WHERE id = ? AND status = 'running'", (pid, job_id))
+
+    def fail(self, job_id: str, error: str, *, only_running: bool = True) -> bool:
+        """Mark a job failed with one line ``error``; False if it was not running (or not there)."""
+        cond = " AND status = 'running'" if only_running else " AND status IN ('queued', 'running')"
+        with self.connect() as db:
+            cur = db.execute(f"UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ?{cond}",
+                             (error, time.time(), job_id))
+            return cur.rowcount == 1
+
+    def delete(self, job_id: str) -> bool:
+        """Remove the job and its folder; False if there was no such job."""
+        with self.connect() as db:
+            cur = db.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+        shutil.rmtree(self.job_dir(job_id), ignore_errors=True)
+        return cur.rowcount == 1
+
+    # -- the worker's side -------------------------------------------------------------------
+    def progress(self, job_id: str, pid: int, fraction: float) -> bool:
+        """Record progress; False when the job is no longer this worker's (deleted or failed)."""
+        with self.connect() as db:
+            cur = db.execute("UPDATE jobs SET progress = ? WHERE id = ? AND status = 'running' AND pid = ?",
+                             (min(max(float(fraction), 0.0), 1.0), job_id, pid))
+            return cur.rowcount == 1
+
+    def finish(self, job_id: str, pid: int, *, result: Any = None, artifacts: list[str] | None = None, error: str | None = None) -> bool:
+        """Mark the job done (``result``) or failed (``error``) if it is still this worker's."""
+        now = time.time()
+        with self.connect() as db:
+            if error is None:
+                cur = db.execute(
+                    "UPDATE jobs SET status = 'done', progress = 1, result = ?, artifacts = ?, finished = ?, pid = NULL "
+                    "WHERE id = ? AND status = 'running' AND pid = ?",
+                    (json.dumps(result), json.dumps(artifacts or []), now, job_id, pid))
+            else:
+                cur = db.execute(
+                    "UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ? AND status = 'running' AND pid = ?",
+                    (error, now, job_id, pid))
+            return cur.rowcount == 1
+
+
+def _as_dict(row: sqlite3.Row, *, with_result: bool = True) -> dict[str, Any]:
+    return {
+        "id": row["id"],
+        "kind": row["kind"],
+        "status": row["status"],
+        "progress": float(row["progress"]),
+        "params": json.loads(row["params"]),
+        "result": json.loads(row["result"]) if with_result and row["result"] is not None else None,
+        "error": row["error"],
+        "artifacts": json.loads(row["artifacts"]),
+        "created": row["created"],
+        "started": row["started"],
+        "finished": row["finished"],
+        "pid": row["pid"],
+    }
+
+
+__all__ = ["JobStore", "RESTART_REASON", "STATUSES"]

@@ -1,0 +1,89 @@
+"""The recording commands: ``record``, ``record-env``, ``record-info``, ``bench recording``."""
+
+from __future__ import annotations
+
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from flatbody_env.cli.main import main
+from flatbody_env.recording.reader import read_recording
+from recording_oracles import FakeFlatBodyEnv, SCALARS
+import recording_oracles as oracles
+
+strict_rerun = oracles.strict_rerun
+scene = oracles.scene  # fixtures
+
+
+def test_record_command(tmp_path, capsys):
+    out = tmp_path / "run.rrd"
+    assert main(["record", "--scene", "default", "--t-end", "1", "--samples", "51", "--out", str(out), "--verify"]) == 0
+    assert "rerun rrd verify: ok" in capsys.readouterr().out
+    data = read_recording(out)
+    assert data["/series/lambda"].step.size == 51
+    assert data["/series/energy"].sim_time[-1] == pytest.approx(1.0)
+    assert main(["record-info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "/world/body" in text and "51" in text and "verified" in text
+
+
+def test_record_command_bad_input(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["record", "--scene", "default", "--out", str(tmp_path / "run.txt")])
+    assert exc.value.code == 2
+    assert main(["record", "--scene", "no-such-scene", "--out", str(tmp_path / "a.rrd")]) == 2
+    assert main(["record-info", str(tmp_path / "missing.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "out:" in err
+
+
+def test_record_env_command(tmp_path, capsys):
+    gym.register(id="FakeFlatBodyForRecording-v0", entry_point=FakeFlatBodyEnv, kwargs={"n_steps": 12})
+    try:
+        out = tmp_path / "env.rrd"
+        assert main(["record-env", "--env-id", "FakeFlatBodyForRecording-v0", "--episodes", "2", "--policy", "random", "--out", str(out), "--verify"]) == 0
+        printed = capsys.readouterr().out
+        assert str(out) in printed and str(tmp_path / "env-1.rrd") in printed
+        data = read_recording(tmp_path / "env-1.rrd")
+        assert data["/series/action/tau1"].step.size == 12
+        assert np.all(np.abs(data["/series/action/tau1"].components[SCALARS]) <= 1.0)
+        assert main(["record-env", "--env-id", "NoSuchEnv-v0", "--out", str(out)]) == 2
+        assert "env-id" in capsys.readouterr().err
+    finally:
+        gym.registry.pop("FakeFlatBodyForRecording-v0", None)
+
+
+def test_record_env_command_on_flatbody_v0(tmp_path, capsys):
+    out = tmp_path / "fb.rrd"
+    assert main(["record-env", "--episodes", "1", "--max-steps", "20", "--policy", "random", "--out", str(out), "--verify"]) == 0
+    data = read_recording(out)
+    assert data["/series/lambda"].step.size == 21
+    assert data["/series/reward/total"].step.size == 20
+
+
+def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
+    """``flatbody bench recording`` runs to the end (it once died after its timing runs) and writes its files."""
+    import json
+
+    out = tmp_path / "bench"
+    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--frames", "30", "--out-dir", str(out)]) == 0
+    result = json.loads((out / "recording.json").read_text())
+    assert [r["steps"] for r in result["sizes"]] == [20, 40]
+    assert all(r["min_s"] <= r["median_s"] <= r["max_s"] and r["file_bytes"] > 0 for r in result["sizes"])
+    assert result["live"]["steps"] == 40 and result["cpus"] >= 1
+    assert result["frame"]["frames"] == 30 and 0 < result["frame"]["median_ms"] <= result["frame"]["p90_ms"]
+    assert (out / "recording.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_record_shots_bad_input_is_one_line(tmp_path, capsys):
+    assert main(["record-shots", str(tmp_path / "missing.rrd"), "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["record-shots", str(tmp_path / "x.rrd"), "--times", "0,-1"])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["record-shots", str(tmp_path / "x.rrd"), "--size", "10x10"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "file:" in err and "times:" in err and "size:" in err

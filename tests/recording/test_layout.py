@@ -1,0 +1,144 @@
+"""The layout, read back from the files: one code path for a free scene, an env episode and the agent
+demo; every view the layout promises is there with its entities, everything logged is shown by
+some view, colours and names follow one convention."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import recording_oracles as oracles
+from flatbody_env.env.rendering import COLORS
+from flatbody_env.recording.layout import TARGET_SERIES, view_specs
+from flatbody_env.recording.reader import read_blueprint, read_recording
+from flatbody_env.recording.wrapper import RerunRecorder
+
+strict_rerun = oracles.strict_rerun
+scene = oracles.scene
+traj = oracles.traj
+recorded = oracles.recorded  # fixtures
+
+NOT_DRAWN = {"/__properties", "/world", "/material"}
+"""Entities that carry settings, not pictures (recording properties, view coordinates)."""
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ep") / "episode.rrd"
+    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=25), path, block=10)
+    env.reset(seed=5)
+    rng = np.random.default_rng(5)
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
+        done = term or trunc
+    env.close()
+    return path
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    """The demo's code path (agents.demo.rollout with a recording) with a cheap stand-in policy."""
+    from agents.demo import rollout
+
+    path = tmp_path_factory.mktemp("demo") / "demo.rrd"
+    ep = rollout(lambda obs: -0.3 * np.tanh(obs[:, :4]), seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path, title="demo test")
+    assert ep["path"] == path and ep["t"].size == 31
+    return path
+
+
+def _kinds(recorded, episode, demo):
+    return {"free scene": (recorded[0], False), "env episode": (episode, True), "agent demo": (demo, True)}
+
+
+@pytest.mark.parametrize("kind", ["free scene", "env episode", "agent demo"])
+def test_blueprint_names_each_expected_view_and_entity(kind, recorded, episode, demo):
+    path, is_episode = _kinds(recorded, episode, demo)[kind]
+    bp = read_blueprint(path)
+    data = read_recording(path)
+    logged = (set(data.entities) | set(data.static)) - NOT_DRAWN
+    # every view of the one layout code path, with its class and its entities
+    expected = view_specs(episode=is_episode)
+    assert sorted((c, n) for c, n, _ in expected) == sorted((v.view_class, v.name) for v in bp.views)
+    for cls, name, paths in expected:
+        view = bp.view(name)
+        for p in paths:
+            assert view.shows(p), (name, p)
+            assert any(e == p or e.startswith(p + "/") for e in logged), f"view {name!r} promises {p}, which is not logged"
+    # nothing logged is orphaned
+    orphans = [e for e in sorted(logged) if not any(v.shows(e) for v in bp.views)]
+    assert not orphans, orphans
+    # the body's own s₃ is logged and shown beside its target
+    assert "/series/s3" in data.entities
+    if is_episode:
+        for name in TARGET_SERIES:
+            assert f"/series/target/{name}" in data.entities
+        assert "/series/distance" in data.entities and "/world/target" in data.entities
+        assert any(e.startswith("/series/reward/") for e in data.entities) and any(e.startswith("/series/action/") for e in data.entities)
+    else:
+        assert not any(v.name.startswith(("reward", "actions", "distance")) for v in bp.views)
+    # the time panel collapsed, the side panels closed, sim_time first
+    assert bp.panels == {"time_panel": "collapsed", "blueprint_panel": "collapsed", "selection_panel": "collapsed"}
+    assert bp.timeline == "sim_time"
+
+
+def test_top_view_looks_down_the_lab_z_axis_and_tensors_have_a_diverging_map(episode):
+    bp = read_blueprint(episode)
+    top = bp.view("plate, top view (lab +z)")
+    pos = np.asarray(top.properties["EyeControls3D:position"], dtype=float).ravel()
+    look = np.asarray(top.properties["EyeControls3D:look_target"], dtype=float).ravel()
+    up = np.asarray(top.properties["EyeControls3D:eye_up"], dtype=float).ravel()
+    d = pos - look
+    assert d[2] > 0 and np.hypot(d[0], d[1]) < 1e-9 * d[2]  # straight down
+    assert abs(up @ d) < 1e-12  # "up" in the picture lies in the plate's plane
+    # the camera is placed for the body: a few body sizes away
+    data = read_recording(episode)
+    size = data["/world/body"].components["Ellipsoids3D:half_sizes"][0, 0].max()
+    assert 1.5 * size < d[2] < 10 * size
+    oblique = bp.view("3-D view")
+    dp = np.asarray(oblique.properties["EyeControls3D:position"], dtype=float).ravel()
+    assert dp[2] > 0.4 * np.linalg.norm(dp)  # above the plate, not grazing it
+    for name in ("G = ΦᵀΦ (fixed colour range)", "C = Φ⁻ᵀΦ⁻¹ (fixed colour range)"):
+        assert bp.view(name).properties.get("TensorScalarMapping:colormap") is not None
+
+
+def test_one_colour_per_variable_shared_with_its_target_and_greek_names(episode):
+    data = read_recording(episode)
+
+    def style(path):
+        st = data.static[path]
+        color = np.asarray(st["SeriesLines:colors"]).ravel()
+        return st["SeriesLines:names"][0][0], int(color[0])
+
+    def rgb(packed):
+        return ((packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255)
+
+    for name in TARGET_SERIES:
+        label, var = style(f"/series/{name}")
+        tlabel, tgt = style(f"/series/target/{name}")
+        assert rgb(var) == rgb(tgt) == COLORS[name], name  # the palette shared with the rgb_array frames
+        assert tlabel.startswith(label + "*"), (label, tlabel)
+    labels = {style(p)[0] for p in data.static if p.startswith("/series/") and "SeriesLines:names" in data.static[p] and p not in ("/series/G", "/series/C")}
+    assert {"λ", "μ", "ϱ", "θ", "s₃", "p_θ", "H", "|s|²", "τ₁", "τ₂", "τ₃", "f_ϱ"} <= labels
+    assert not any(w in lab for lab in labels for w in ("lambda", "rho", "theta", "tau"))
+    # within each plot every series has a colour of its own
+    groups: dict[str, list[int]] = {}
+    for p in data.static:
+        if p.startswith(("/series/reward/", "/series/action/", "/series/drift/")):
+            groups.setdefault(p.rsplit("/", 1)[0], []).append(rgb(style(p)[1]))
+    for g, colors in groups.items():
+        assert len(set(colors)) == len(colors), g
+    for sym in ("G", "C"):
+        c = np.asarray(data.static[f"/series/{sym}"]["SeriesLines:colors"]).ravel()
+        assert len(set(c.tolist())) == 6  # six entries, six colours
+
+
+def test_drift_axis_is_fixed_for_free_scenes_and_follows_episodes(recorded, episode):
+    path, data = recorded
+    view = read_blueprint(path).view("conserved: relative drift")
+    lo, hi = np.asarray(view.properties["ScalarAxis:range"], dtype=float).ravel()
+    drift = max(np.abs(np.asarray(data[f"/series/drift/{n}"].components["Scalars:scalars"])).max() for n in ("energy", "casimir", "p_theta"))
+    assert lo == -hi and hi >= max(1e-6, drift)  # round-off shows as a flat line, on a labelled axis
+    assert drift < 1e-6 and hi == pytest.approx(1e-6)  # this scene is integrated to round-off
+    assert "ScalarAxis:range" not in read_blueprint(episode).view("conserved: relative drift").properties
