@@ -4,6 +4,7 @@ including lanes it must hand back (rejected steps, chart failures)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from flatbody_env.integrators import batch_kernels
 from flatbody_env.integrators.batch_kernels import DOP853Batch
@@ -29,9 +30,10 @@ def _lanes(n, seed):
     return np.ascontiguousarray(Y), np.ascontiguousarray(U)
 
 
-def test_fused_batch_equals_scalar_kernel_bitwise():
+@pytest.mark.parametrize("n", [37, 2 * batch_kernels.BLOCK + 5])
+def test_fused_batch_equals_scalar_kernel_bitwise(n):
     P = kernel_params(default_body())
-    Y, U = _lanes(37, 0)
+    Y, U = _lanes(n, 0)
     n = Y.shape[1]
     OUT, S, NF = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)
     DOP853Batch(n)(Y, U, P, 0.05, 1e-11, 1e-11, np.inf, OUT, S, NF)
@@ -52,3 +54,19 @@ def test_fused_kernels_are_plain_python_over_arrays():
     """The source of the batch kernels stays plain Python (compiled by jit_copy, reusable for other targets)."""
     for name in ("rhs_lanes", "dop853_lanes", "lane_accepted", "dop853_batch_env_step"):
         assert not hasattr(getattr(batch_kernels, name), "py_func")
+
+
+def test_fused_step_refuses_an_anisotropic_body_and_energy_checks_go_scalar():
+    P = kernel_params(default_body()).copy()
+    Y, U = _lanes(8, 1)
+    OUT, S, NF = np.empty_like(Y), np.zeros(8, np.int64), np.zeros(8, np.int64)
+    bad = P.copy()
+    bad[1] = 2.0 * bad[0]
+    with pytest.raises(ValueError, match="P"):
+        DOP853Batch(8)(Y, U, bad, 0.05, 1e-11, 1e-11, np.inf, OUT, S, NF)
+    DOP853Batch(8)(Y, U, P, 0.05, 1e-11, 1e-11, 1e-3, OUT, S, NF)  # energy check: every lane through the scalar kernel
+    st = env_stepper("DOP853-numba")
+    for k in range(8):
+        out, counters = np.empty(11), np.zeros(3, np.int64)
+        assert S[k] == st.step_counted(Y[:, k].copy(), U[:, k].copy(), P, 0.05, 0.05, 1e-11, 1e-11, 1e-3, out, counters)
+        np.testing.assert_array_equal(OUT[:, k], out)
