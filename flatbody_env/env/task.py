@@ -98,11 +98,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flatbody_env.env import targets as _targets
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
 from flatbody_env.physics.state import STATE_SIZE
 
+_TABLE_FOR: dict = {}
+"""(id(body), limits, control, ranges) → (body, the settling-rate table or None): whether it applies, decided once."""
 CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
 REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
 TARGET_NAMES = ("lambda", "mu", "rho", "s3")
@@ -153,6 +156,9 @@ class ReachStationaryEllipse:
     """Relative size of the initial offset from the target."""
     min_settling_rate: float = 0.15
     """Reachability filter: least :func:`~flatbody_env.physics.controllability.settling_rate` (s⁻¹) of a sampled target."""
+    settling_table: bool = True
+    """Decide the filter from the shipped settling-rate table where it applies
+    (:mod:`flatbody_env.env.targets`: the same targets, without a Riccati solve per draw); False: always solve."""
 
     def __post_init__(self) -> None:
         for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise", "min_settling_rate"):
@@ -182,21 +188,51 @@ class ReachStationaryEllipse:
 
     def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
                       control: str = "torque+dilatation") -> StationaryEllipse:
-        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring)."""
+        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring).
+
+        The draws and the test are those of :meth:`reachable`; where the shipped settling-rate
+        table applies (:attr:`settling_table`, :mod:`flatbody_env.env.targets`) it answers the test
+        without a Riccati solve, and the exact test runs only where the table is unsure.
+        """
+        table = self._table(body, limits, control)
+        thr = self.min_settling_rate
         for _ in range(500):
             lam = rng.uniform(*self.target_lambda)
-            mu = lam / rng.uniform(*self.target_aspect)
+            aspect = rng.uniform(*self.target_aspect)
+            mu = lam / aspect
             sign = 1.0 if rng.random() < 0.5 else -1.0
+            code = _targets.UNSURE if table is None else table.decide(lam, aspect, thr)
+            if code == _targets.REJECT:
+                continue
             try:
                 target = stationary_from_shape(body, lam, mu, branch="circulation", sign=sign)
             except ValueError:
                 continue
-            if target.stable and self.reachable(target, body, limits, control):
-                return target
+            if not target.stable:
+                continue
+            if code == _targets.UNSURE and not self.reachable(target, body, limits, control):
+                continue
+            return target
         raise ValueError(
             "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
             "found for this body in the target ranges"
         )
+
+    def _table(self, body: Body, limits, control: str):
+        """The settling-rate table when it answers the filter here, else None (every draw solves)."""
+        if not self.settling_table or self.min_settling_rate == 0 or control != "torque+dilatation":
+            return None
+        key = (id(body), tuple(np.asarray(limits, dtype=float).tolist()), control, self.target_lambda, self.target_aspect)
+        hit = _TABLE_FOR.get(key)
+        if hit is not None and hit[0] is body:
+            return hit[1]
+        table = _targets.shipped_table()
+        if table is not None and not table.applies(body, limits, control, self.target_lambda, self.target_aspect):
+            table = None
+        if len(_TABLE_FOR) > 64:
+            _TABLE_FOR.clear()
+        _TABLE_FOR[key] = (body, table)
+        return table
 
     def target_from(self, spec: Mapping[str, float] | StationaryEllipse, body: Body) -> StationaryEllipse:
         """A target from ``{"lambda", "mu"[, "branch", "sign"]}`` or a ready StationaryEllipse."""
