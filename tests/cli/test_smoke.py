@@ -95,8 +95,12 @@ CASES = {
     ("demo",): (["--model", MODEL, "--out", "{tmp}/demo.rrd"], _files("demo.rrd"), False),
     ("bench", "recording"): (["--steps", "50", "--sizes", "20", "--repeats", "1", "--block", "16", "--out-dir", "{tmp}/br"],
                              _files("br/recording.json", "br/recording.png"), False),
-    ("bench", "env"): (["--steps", "20", "--batch", "4", "--batch-steps", "2", "--repeats", "1", "--out-dir", "{tmp}/be"],
+    ("bench", "env"): (["--steps", "20", "--batch", "4", "--batch-steps", "2", "--episode-steps", "3", "--repeats", "1", "--out-dir", "{tmp}/be"],
                        _files("be/env_benchmark.json", "be/env_benchmark.png"), True),
+    ("bench", "train"): (["--timesteps", "64", "--hyperparams", "n_envs=2", "n_steps=32", "batch_size=32", "--out-dir", "{tmp}/bt"],
+                         _files("bt/train_benchmark.json", "bt/train_benchmark.png"), False),
+    ("targets-table",): (["--n-lambda", "4", "--n-aspect", "4", "--workers", "1", "--no-progress", "--out", "{tmp}/t.npz"], _files("t.npz"), False),
+    ("lqr-table",): (["--n-lambda", "2", "--n-w", "2", "--workers", "1", "--out", "{tmp}/k.npz"], _files("k.npz"), False),
     ("bench", "integrators"): (["--quick", "--repeats", "1", "--max-run-s", "0.2", "--no-compile", "--out", "{tmp}/bi"],
                                _files("bi/bench_integrators.json", "bi/bench_integrators.png"), True),
 }
