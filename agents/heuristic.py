@@ -299,6 +299,7 @@ class HeuristicController:
         self._table = table
         self._keys = np.zeros((0, 5))
         self._K = np.zeros((0, int(self.mask.sum()), 9))
+        self._minus_K = self._K
 
     @classmethod
     def for_env(cls, env, weights: LQRWeights | None = None) -> "HeuristicController":
@@ -358,21 +359,18 @@ class HeuristicController:
         if self._keys.shape[0] != n:
             self._keys = np.full((n, 5), np.nan)
             self._K = np.empty((n, int(self.mask.sum()), 9))
-        changed = np.any(keys != self._keys, axis=1)
+            self._minus_K = np.empty_like(self._K)
+        changed = (keys != self._keys).any(axis=1)
         if changed.any():
             self._K[changed] = self.gains(keys[changed, :4], keys[changed, 4])
+            self._minus_K[changed] = -self._K[changed]
             self._keys[changed] = keys[changed]
-        dx = obs[:, _REDUCED_OBS] - self._xstar(obs)
-        a = -np.einsum("nkj,nj->nk", self._K, dx)
-        return np.clip(a, -1.0, 1.0).astype(np.float32)
-
-    @staticmethod
-    def _xstar(obs: np.ndarray) -> np.ndarray:
-        """x* = (0, 0, s3*, 0, 0, 0, λ*, μ*, ϱ*) per row, from the observation's target entries."""
-        x = np.zeros((obs.shape[0], 9))
-        x[:, 2] = obs[:, OBS_TARGET.start + 3]
-        x[:, 6:9] = obs[:, OBS_TARGET.start:OBS_TARGET.start + 3]
-        return x
+        dx = obs[:, _REDUCED_OBS]  # x − x*, x* = (0, 0, s3*, 0, 0, 0, λ*, μ*, ϱ*) from the target entries
+        dx[:, 2] -= obs[:, OBS_TARGET.start + 3]
+        dx[:, 6:9] -= obs[:, OBS_TARGET.start:OBS_TARGET.start + 3]
+        a = np.matmul(self._minus_K, dx[:, :, None])[:, :, 0]
+        np.clip(a, -1.0, 1.0, out=a)
+        return a.astype(np.float32)
 
     def action(self, obs: np.ndarray) -> np.ndarray:
         """Normalised action in [−1, 1]ⁿ for one observation (16,)."""
@@ -386,9 +384,9 @@ class HeuristicController:
         return self.act(obs), None
 
 
-_REDUCED_OBS = list(REDUCED_STATE)
+_REDUCED_OBS = np.array(REDUCED_STATE)
 """Observation columns of x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) (the observation copies state entries 0–9)."""
-_KEY_COLUMNS = [OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.start + 2, OBS_TARGET.start + 3, 3]
+_KEY_COLUMNS = np.array([OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.start + 2, OBS_TARGET.start + 3, 3])
 """Observation columns that fix a row's gain: the target (λ*, μ*, ϱ*, s3*) and p_θ."""
 
 

@@ -196,11 +196,15 @@ class ReachStationaryEllipse:
         """
         table = self._table(body, limits, control)
         thr = self.min_settling_rate
+        (l0, l1), (a0, a1) = self.target_lambda, self.target_aspect
         for _ in range(500):
-            lam = rng.uniform(*self.target_lambda)
-            aspect = rng.uniform(*self.target_aspect)
+            # one call for the three draws: the same stream and values as uniform, uniform, random
+            # (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
+            u_lam, u_aspect, u_sign = rng.random(3).tolist()
+            lam = l0 + (l1 - l0) * u_lam
+            aspect = a0 + (a1 - a0) * u_aspect
             mu = lam / aspect
-            sign = 1.0 if rng.random() < 0.5 else -1.0
+            sign = 1.0 if u_sign < 0.5 else -1.0
             code = _targets.UNSURE if table is None else table.decide(lam, aspect, thr)
             if code == _targets.REJECT:
                 continue
@@ -251,22 +255,25 @@ class ReachStationaryEllipse:
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""
         n = self.initial_noise
-        y = np.zeros(STATE_SIZE)
+        torque = "torque" in control
+        # one call for all draws, in the order below: the same stream and values as one uniform(−n, n)
+        # per draw (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
+        u = rng.random(10 if torque else 9).tolist()
+        w = n - -n
+        d = [-n + w * x for x in u]
         s3t = target.s3
         scale = max(abs(s3t), 0.1)
-        s1, s2 = rng.uniform(-n, n, size=2) * scale
-        if "torque" in control:
-            s3 = s3t * (1.0 + rng.uniform(-n, n))
+        s1, s2 = d[0] * scale, d[1] * scale
+        if torque:
+            s3 = s3t * (1.0 + d[2])
+            d = d[3:]
         else:  # |s|² conserved: stay on the target's sphere |s| = |s3*|
             s3 = math.copysign(math.sqrt(max(s3t * s3t - s1 * s1 - s2 * s2, 0.0)), s3t)
-        y[0:3] = (s1, s2, s3)
-        y[3] = target.p_theta
-        y[4:7] = rng.uniform(-n, n, size=3)
-        y[7] = target.lam * math.exp(rng.uniform(-n, n))
-        y[8] = min(target.mu * math.exp(rng.uniform(-n, n)), 0.95 * y[7])
-        y[9] = target.rho * math.exp(rng.uniform(-n, n))
-        y[10] = rng.uniform(-math.pi, math.pi)
-        return y
+            d = d[2:]
+        lam = target.lam * math.exp(d[3])
+        pi = math.pi
+        return np.array([s1, s2, s3, target.p_theta, d[0], d[1], d[2], lam, min(target.mu * math.exp(d[4]), 0.95 * lam),
+                         target.rho * math.exp(d[5]), -pi + (pi - -pi) * u[-1]])
 
     # --- kernel configuration ---------------------------------------------------------------------
     def kernel_config(self, *, stretch_bounds: tuple[float, float], rho_bounds: tuple[float, float],
