@@ -102,7 +102,8 @@ class FlatBodyVectorEnv(VectorEnv):
         self._TERMS = np.zeros((len(REWARD_TERMS), num_envs))
         self._SC = np.zeros((4, num_envs))
         self._ENDED = np.zeros(num_envs, dtype=np.int64)
-        self._work = (np.empty(7), np.empty(4))
+        self._work = (np.empty(7), np.empty(4), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(max(n_act, 1)),
+                      np.empty(4), np.empty(OBSERVATION_SIZE), np.empty(len(REWARD_TERMS)), np.empty(4))
         self._T = np.zeros((num_envs, 4))
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=bool)
