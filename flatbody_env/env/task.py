@@ -102,7 +102,6 @@ from flatbody_env.env import targets as _targets
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
-from flatbody_env.physics.state import STATE_SIZE
 
 _TABLE_FOR: dict = {}
 """(id(body), limits, control, ranges) → (body, the settling-rate table or None): whether it applies, decided once."""
