@@ -96,6 +96,19 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
     return kw
 
 
+def algo_kwargs_of(hp: dict[str, Any]) -> dict[str, Any]:
+    """The SB3 constructor keywords of a hyperparameter entry (its meta keys removed, types fixed)."""
+    algo_kwargs = {k: v for k, v in hp.items() if k not in _META_KEYS}
+    algo_kwargs["policy_kwargs"] = _policy_kwargs(algo_kwargs.get("policy_kwargs"))
+    for key in ("learning_rate", "buffer_size", "learning_starts", "batch_size"):
+        if isinstance(algo_kwargs.get(key), str):
+            algo_kwargs[key] = float(algo_kwargs[key])
+    for key in ("buffer_size", "learning_starts", "batch_size", "n_steps", "n_epochs", "train_freq", "gradient_steps"):
+        if key in algo_kwargs and not isinstance(algo_kwargs[key], (list, tuple)):
+            algo_kwargs[key] = int(algo_kwargs[key])
+    return algo_kwargs
+
+
 def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
                  success_bonus: float = 0.0, residual_scale: float = 1.0, residual_gate: float = 0.0,
                  precision_bonus: float = 0.0, residual_mode: str = "additive"):
@@ -277,14 +290,7 @@ def train(
     norm = hp.get("normalize") or None
     if norm is True:
         norm = {"norm_obs": True, "norm_reward": True}
-    algo_kwargs = {k: v for k, v in hp.items() if k not in _META_KEYS}
-    algo_kwargs["policy_kwargs"] = _policy_kwargs(algo_kwargs.get("policy_kwargs"))
-    for key in ("learning_rate", "buffer_size", "learning_starts", "batch_size"):
-        if isinstance(algo_kwargs.get(key), str):
-            algo_kwargs[key] = float(algo_kwargs[key])
-    for key in ("buffer_size", "learning_starts", "batch_size", "n_steps", "n_epochs", "train_freq", "gradient_steps"):
-        if key in algo_kwargs and not isinstance(algo_kwargs[key], (list, tuple)):
-            algo_kwargs[key] = int(algo_kwargs[key])
+    algo_kwargs = algo_kwargs_of(hp)
 
     out.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)),

@@ -102,3 +102,16 @@ def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, .
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{name}: the directory {str(parent)[:60]!r} is not writable")
     return p
+
+
+def replace_marked_section(path: str | os.PathLike, name: str, text: str) -> Path:
+    """Replace the text between ``<!-- name: begin -->`` and ``<!-- name: end -->`` in the file ``path``
+    (a generated table in a document); ValueError naming the marker when the file lacks it."""
+    path = Path(path)
+    begin, end = f"<!-- {name}: begin -->", f"<!-- {name}: end -->"
+    doc = path.read_text(encoding="utf-8")
+    i, j = doc.find(begin), doc.find(end)
+    if i < 0 or j < i:
+        raise ValueError(f"update_docs: {path} has no section marked {begin!r} … {end!r}")
+    new = doc[: i + len(begin)] + "\n" + text.rstrip("\n") + "\n" + doc[j:]
+    return atomic_write(path, new)

@@ -78,6 +78,18 @@ def _demo(args) -> int:
     return run_demo(model=args.model, seed=args.seed, out=args.out)
 
 
+def _lqr_table(args) -> int:
+    from agents.heuristic import GAIN_TABLE_PATH, build_gain_table, save_gain_table
+
+    from agents.heuristic import GAIN_GRID_LAMBDA, GAIN_GRID_W
+
+    table = build_gain_table(workers=args.workers, grid_lambda=(*GAIN_GRID_LAMBDA[:2], args.n_lambda), grid_w=(*GAIN_GRID_W[:2], args.n_w))
+    out = args.out or GAIN_TABLE_PATH
+    save_gain_table(table, out)
+    print(f"wrote {out}: LQR gains at {table['K'].shape[0] * table['K'].shape[1] * table['K'].shape[2]} target shapes")
+    return 0
+
+
 def register(sub) -> None:
     from agents.train import ALGOS, ENV_ID
 
@@ -114,3 +126,39 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.set_defaults(handler=_demo)
+    p = sub.add_parser("lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)")
+    p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
+    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2), default=36, help="grid nodes in lambda* (shipped: 36)")
+    p.add_argument("--n-w", type=int_at_least("n_w", 2), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)")
+    p.add_argument("--workers", type=int_at_least("workers", 1), default=2, help="processes")
+    p.set_defaults(handler=_lqr_table)
+
+
+def _bench_train(args) -> int:
+    from agents.benchmark import run
+
+    b = run(timesteps=args.timesteps, repeats=args.repeats, seed=args.seed, out_dir=args.out_dir, overrides=args.hyperparams or [])
+    for r in (b.flatbody, b.pendulum):
+        print(f"{r.env_id:<12} {r.timesteps} steps  wall {r.wall_s:7.1f} s  in env {r.env_s:6.1f} s ({r.env_share:.0%})")
+    print(f"PPO wall time FlatBody-v0 / Pendulum-v1: {b.ratio_wall:.2f} (target <= 1.0)")
+    print(f"FlatBody share in env + LQR:             {b.flatbody_env_share:.1%} (target <= 15 %)")
+    print(f"LQR action per body-step (batch, gains stored): {b.lqr_us_per_body_step:.3f} us (target <= 1)")
+    print(f"wrote {args.out_dir}/train_benchmark.json, .csv, .png")
+    if args.update_docs:
+        from agents.benchmark import markdown
+        from flatbody_env.output import replace_marked_section
+
+        replace_marked_section(args.update_docs, "flatbody bench train", markdown(b))
+        print(f"updated the table in {args.update_docs}")
+    return 0
+
+
+def register_bench(bench_sub) -> None:
+    p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1; share in env + LQR")
+    p.add_argument("--timesteps", type=int_at_least("timesteps", 1), default=64_000, help="environment steps per run")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=1, help="runs per environment; the fastest is kept")
+    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of both runs")
+    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
+    p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
+    p.add_argument("--update-docs", default="", metavar="FILE.md", help="rewrite the table marked 'flatbody bench train' in this document")
+    p.set_defaults(handler=_bench_train)

@@ -7,7 +7,10 @@ figure of merit is the ratio of ``env.step`` rates (resets are timed apart and r
 absolute µs vary up to 1.8× with load). Batched: ``FlatBodyVectorEnv`` against gymnasium's
 ``CartPoleVectorEnv`` at N = 1024 in env-steps per second, plus the batched env's episode error
 against a tight reference (scipy DOP853, rtol = atol = 1e-13, restarted every step with the same
-actions). Each rate is the best of ``repeats`` timed blocks. Writes JSON, CSV and a PNG chart.
+actions). Each rate is the best of ``repeats`` timed blocks. The batched FlatBody figure includes
+resets: a timed block is one whole episode of every body at the registered length plus the step that
+autoresets them (CartPole's random-action episodes end and autoreset within its blocks). Writes JSON,
+CSV and a PNG chart.
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ class EnvBenchmark:
     ratio_batched_vs_cartpole: float
     episode_error: float
     integrator: str
+    reset_ratio_vs_pendulum: float = float("nan")
+    """ms per ``FlatBody-v0`` reset / ms per ``Pendulum-v1`` reset (target ≤ 5)."""
 
 
 def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> tuple[float, float]:
@@ -87,7 +92,28 @@ def _time_batched(make, n: int, steps: int, repeats: int) -> float:
     return best
 
 
-def episode_error(num_envs: int = 8, steps: int = 400, seed: int = 0, **env_kwargs) -> float:
+def _time_episodes(make, n: int, repeats: int) -> float:
+    """Seconds per env-step of whole episode cycles: each timed block is one episode of every body
+    (``max_episode_steps`` steps from an autoreset) plus the step that autoresets them all, so resets
+    are included at the default episode length."""
+    env = make()
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, size=env.action_space.shape).astype(np.float32)
+    steps = env.max_episode_steps + 1
+    for _ in range(steps):  # warm up (compiles) and end at an autoreset
+        env.step(actions)
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(steps):
+            env.step(actions)
+        best = min(best, (time.perf_counter() - start) / (steps * n))
+    env.close()
+    return best
+
+
+def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwargs) -> float:
     """Max |y − y_ref| over an episode of the batched env with random actions (reference: tight scipy)."""
     from flatbody_env.physics.body import default_body
     from flatbody_env.integrators import Tolerances, make_stepper
@@ -114,8 +140,13 @@ def episode_error(num_envs: int = 8, steps: int = 400, seed: int = 0, **env_kwar
     return worst
 
 
-def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats: int = 5, out_dir: str | Path = ".", progress: bool = True) -> EnvBenchmark:
-    """Measure and write ``env_benchmark.json``, ``.csv`` and ``.png`` into ``out_dir``."""
+def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats: int = 5, out_dir: str | Path = ".", progress: bool = True,
+        episode_steps: int | None = None) -> EnvBenchmark:
+    """Measure and write ``env_benchmark.json``, ``.csv`` and ``.png`` into ``out_dir``; ``episode_steps``
+    (default: the registered 400) is the batched env's episode length."""
+    from flatbody_env.env.registration import MAX_EPISODE_STEPS
+
+    episode_steps = episode_steps or MAX_EPISODE_STEPS
     import gymnasium as gym
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
     from tqdm import tqdm
@@ -133,7 +164,7 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
             s, r = _time_single(task, steps, repeats)
             single.append(StepRate(task, 1, s * 1e6, 1.0 / s, r * 1e3))
         elif task == "batched FlatBody":
-            results["fb"] = _time_batched(lambda: FlatBodyVectorEnv(num_envs=batch), batch, batch_steps, repeats)
+            results["fb"] = _time_episodes(lambda: FlatBodyVectorEnv(num_envs=batch, max_episode_steps=episode_steps), batch, max(1, repeats // 2))
         elif task == "batched CartPole":
             results["cp"] = _time_batched(lambda: CartPoleVectorEnv(num_envs=batch), batch, batch_steps * 10, repeats)
         else:
@@ -151,6 +182,7 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
         ratio_batched_vs_cartpole=batched[0].env_steps_per_s / batched[1].env_steps_per_s,
         episode_error=results["err"],
         integrator=DEFAULT_INTEGRATOR,
+        reset_ratio_vs_pendulum=by["FlatBody-v0"].ms_per_reset / by["Pendulum-v1"].ms_per_reset,
     )
     write(bench, Path(out_dir))
     del gym
@@ -189,3 +221,22 @@ def plot(csv_path: Path, png_path: Path) -> None:
     fig.tight_layout()
     fig.savefig(png_path, dpi=120)
     plt.close(fig)
+
+
+def markdown(bench: EnvBenchmark) -> str:
+    """The docs' tables of this run (``flatbody bench env --update-docs docs/env.md`` writes them there)."""
+    rows = ["| what | µs per env step | env-steps/s | ms per reset |", "|---|---|---|---|"]
+    for r in bench.single:
+        rows.append(f"| {r.name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | {r.ms_per_reset:.3g} |")
+    for r in bench.batched:
+        note = " (resets included)" if r.name.startswith("FlatBody") else ""
+        rows.append(f"| {r.name}{note} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | — |")
+    ok = lambda x, bound, le=False: "met" if (x <= bound if le else x >= bound) else "missed"  # noqa: E731
+    rows += ["", "| ratio (same run) | measured | target |", "|---|---|---|",
+             f"| `FlatBody-v0` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
+             f"| `FlatBody-v0` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
+             f"| `FlatBody-v0` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
+             f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
+             f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
+             f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |"]
+    return "\n".join(rows) + "\n"

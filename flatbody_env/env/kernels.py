@@ -73,14 +73,31 @@ def post_step(y_old, y_new, status, a, n_act, tgt, cfg, P, y_out, obs, terms, sc
     return ended
 
 
-def post_step_batch(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, vel, force):
+def post_step_batch(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, vel, force, yo, yn, yk, ak, tk, ok, tmk, sck):
     """:func:`post_step` for N bodies in structure-of-arrays layout.
 
     ``Y_old``, ``Y_new``, ``Y_out``: (11, N); ``status``: (N,); ``A``: (N, n); ``T``: (N, 4);
-    ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output.
+    ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output. Work space, one body's
+    worth (each body is copied in and out, so that no array view is made per body): ``yo``, ``yn``,
+    ``yk`` (11,), ``ak`` (≥ n,), ``tk`` (4,), ``ok`` (16,) float64, ``tmk`` (6,), ``sck`` (4,).
     """
     for k in range(Y_old.shape[1]):
-        ENDED[k] = post_step(Y_old[:, k], Y_new[:, k], status[k], A[k], n_act, T[k], cfg, P, Y_out[:, k], OBS[k], TERMS[:, k], SC[:, k], vel, force)
+        for i in range(11):
+            yo[i] = Y_old[i, k]
+            yn[i] = Y_new[i, k]
+        for i in range(n_act):
+            ak[i] = A[k, i]
+        for i in range(4):
+            tk[i] = T[k, i]
+        ENDED[k] = post_step(yo, yn, status[k], ak, n_act, tk, cfg, P, yk, ok, tmk, sck, vel, force)
+        for i in range(11):
+            Y_out[i, k] = yk[i]
+        for i in range(16):
+            OBS[k, i] = ok[i]
+        for i in range(6):
+            TERMS[i, k] = tmk[i]
+        for i in range(4):
+            SC[i, k] = sck[i]
 
 
 def controls_kernel(action, mask, limits, a_out, u_out):

@@ -98,11 +98,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flatbody_env.env import targets as _targets
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
-from flatbody_env.physics.state import STATE_SIZE
 
+_TABLE_FOR: dict = {}
+"""(id(body), limits, control, ranges) → (body, the settling-rate table or None): whether it applies, decided once."""
 CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
 REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
 TARGET_NAMES = ("lambda", "mu", "rho", "s3")
@@ -153,6 +155,9 @@ class ReachStationaryEllipse:
     """Relative size of the initial offset from the target."""
     min_settling_rate: float = 0.15
     """Reachability filter: least :func:`~flatbody_env.physics.controllability.settling_rate` (s⁻¹) of a sampled target."""
+    settling_table: bool = True
+    """Decide the filter from the shipped settling-rate table where it applies
+    (:mod:`flatbody_env.env.targets`: the same targets, without a Riccati solve per draw); False: always solve."""
 
     def __post_init__(self) -> None:
         for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise", "min_settling_rate"):
@@ -182,21 +187,55 @@ class ReachStationaryEllipse:
 
     def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
                       control: str = "torque+dilatation") -> StationaryEllipse:
-        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring)."""
+        """A stable stationary ellipse of the circulation family that the controls can reach (module docstring).
+
+        The draws and the test are those of :meth:`reachable`; where the shipped settling-rate
+        table applies (:attr:`settling_table`, :mod:`flatbody_env.env.targets`) it answers the test
+        without a Riccati solve, and the exact test runs only where the table is unsure.
+        """
+        table = self._table(body, limits, control)
+        thr = self.min_settling_rate
+        (l0, l1), (a0, a1) = self.target_lambda, self.target_aspect
         for _ in range(500):
-            lam = rng.uniform(*self.target_lambda)
-            mu = lam / rng.uniform(*self.target_aspect)
-            sign = 1.0 if rng.random() < 0.5 else -1.0
+            # one call for the three draws: the same stream and values as uniform, uniform, random
+            # (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
+            u_lam, u_aspect, u_sign = rng.random(3).tolist()
+            lam = l0 + (l1 - l0) * u_lam
+            aspect = a0 + (a1 - a0) * u_aspect
+            mu = lam / aspect
+            sign = 1.0 if u_sign < 0.5 else -1.0
+            code = _targets.UNSURE if table is None else table.decide(lam, aspect, thr)
+            if code == _targets.REJECT:
+                continue
             try:
                 target = stationary_from_shape(body, lam, mu, branch="circulation", sign=sign)
             except ValueError:
                 continue
-            if target.stable and self.reachable(target, body, limits, control):
-                return target
+            if not target.stable:
+                continue
+            if code == _targets.UNSURE and not self.reachable(target, body, limits, control):
+                continue
+            return target
         raise ValueError(
             "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
             "found for this body in the target ranges"
         )
+
+    def _table(self, body: Body, limits, control: str):
+        """The settling-rate table when it answers the filter here, else None (every draw solves)."""
+        if not self.settling_table or self.min_settling_rate == 0 or control != "torque+dilatation":
+            return None
+        key = (id(body), tuple(np.asarray(limits, dtype=float).tolist()), control, self.target_lambda, self.target_aspect)
+        hit = _TABLE_FOR.get(key)
+        if hit is not None and hit[0] is body:
+            return hit[1]
+        table = _targets.shipped_table()
+        if table is not None and not table.applies(body, limits, control, self.target_lambda, self.target_aspect):
+            table = None
+        if len(_TABLE_FOR) > 64:
+            _TABLE_FOR.clear()
+        _TABLE_FOR[key] = (body, table)
+        return table
 
     def target_from(self, spec: Mapping[str, float] | StationaryEllipse, body: Body) -> StationaryEllipse:
         """A target from ``{"lambda", "mu"[, "branch", "sign"]}`` or a ready StationaryEllipse."""
@@ -215,22 +254,25 @@ class ReachStationaryEllipse:
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""
         n = self.initial_noise
-        y = np.zeros(STATE_SIZE)
+        torque = "torque" in control
+        # one call for all draws, in the order below: the same stream and values as one uniform(−n, n)
+        # per draw (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
+        u = rng.random(10 if torque else 9).tolist()
+        w = n - -n
+        d = [-n + w * x for x in u]
         s3t = target.s3
         scale = max(abs(s3t), 0.1)
-        s1, s2 = rng.uniform(-n, n, size=2) * scale
-        if "torque" in control:
-            s3 = s3t * (1.0 + rng.uniform(-n, n))
+        s1, s2 = d[0] * scale, d[1] * scale
+        if torque:
+            s3 = s3t * (1.0 + d[2])
+            d = d[3:]
         else:  # |s|² conserved: stay on the target's sphere |s| = |s3*|
             s3 = math.copysign(math.sqrt(max(s3t * s3t - s1 * s1 - s2 * s2, 0.0)), s3t)
-        y[0:3] = (s1, s2, s3)
-        y[3] = target.p_theta
-        y[4:7] = rng.uniform(-n, n, size=3)
-        y[7] = target.lam * math.exp(rng.uniform(-n, n))
-        y[8] = min(target.mu * math.exp(rng.uniform(-n, n)), 0.95 * y[7])
-        y[9] = target.rho * math.exp(rng.uniform(-n, n))
-        y[10] = rng.uniform(-math.pi, math.pi)
-        return y
+            d = d[2:]
+        lam = target.lam * math.exp(d[3])
+        pi = math.pi
+        return np.array([s1, s2, s3, target.p_theta, d[0], d[1], d[2], lam, min(target.mu * math.exp(d[4]), 0.95 * lam),
+                         target.rho * math.exp(d[5]), -pi + (pi - -pi) * u[-1]])
 
     # --- kernel configuration ---------------------------------------------------------------------
     def kernel_config(self, *, stretch_bounds: tuple[float, float], rho_bounds: tuple[float, float],

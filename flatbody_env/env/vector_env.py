@@ -102,11 +102,14 @@ class FlatBodyVectorEnv(VectorEnv):
         self._TERMS = np.zeros((len(REWARD_TERMS), num_envs))
         self._SC = np.zeros((4, num_envs))
         self._ENDED = np.zeros(num_envs, dtype=np.int64)
-        self._work = (np.empty(7), np.empty(4))
+        self._work = (np.empty(7), np.empty(4), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(max(n_act, 1)),
+                      np.empty(4), np.empty(OBSERVATION_SIZE), np.empty(len(REWARD_TERMS)), np.empty(4))
         self._T = np.zeros((num_envs, 4))
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
+        self._blank = np.full(num_envs, "", dtype=object)
+        self._mask_u8 = self.single_env.mask.astype(np.uint8)
 
     # --- public state ---------------------------------------------------------------------------------
     @property
@@ -161,7 +164,7 @@ class FlatBodyVectorEnv(VectorEnv):
         A = np.asarray(actions, dtype=np.float64).reshape((self.num_envs,) + self.single_action_space.shape)
         k = self._kernels
         p = self.single_env
-        if not k.controls_batch(A, p.mask.astype(np.uint8), self.limits, self._A, self._U):
+        if not k.controls_batch(A, self._mask_u8, self.limits, self._A, self._U):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
         resetting = self._autoreset.copy()
         self.stepper.advance_batch(self._Ys, self._U, self.dt, self._OUT, self._STATUS, self._NFEV)
@@ -169,15 +172,15 @@ class FlatBodyVectorEnv(VectorEnv):
         k.post_step_batch(self._Ys, self._OUT, status, self._A, self._A.shape[1], self._T, p.kernel_config, p.kernel_params,
                           self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED, *self._work)
         ended = self._ENDED.astype(bool) & ~resetting
-        failures = np.array([""] * self.num_envs, dtype=object)
-        lefts = failures.copy()
+        failures = self._blank.copy()
+        lefts = self._blank.copy()
         for i in np.flatnonzero(ended):
             if status[i] != 0:
                 failures[i] = self.stepper.describe(int(status[i]), lane=int(i))
             else:
                 lefts[i] = p.left_domain(self._OUT[:, i]) or ""
         keep = ~resetting
-        self._Ys[:, keep] = self._Ynext[:, keep]
+        np.copyto(self._Ys, self._Ynext, where=keep)
         self._steps[keep] += 1
         terminated = ended
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & keep

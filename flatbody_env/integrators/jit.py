@@ -23,7 +23,7 @@ import by :func:`cache_location`: ``$NUMBA_CACHE_DIR`` when set and writable, el
 writable home) the kernels are compiled in memory on first use (``cache=False``) instead of
 failing with numba's "no locator available".
 
-Public names: :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_core`,
+Public names: :data:`kinetic_iso`, :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_iso`, :data:`rhs_core`,
 :data:`rhs_kernel` (jitted twins of the physics kernels, same signatures) and
 :func:`energy_kernel` (H = 𝒯 + V, eq. (41) of [1]).
 
@@ -108,9 +108,11 @@ def jit_copy(func, **callees):
     return numba.njit(**JIT_OPTIONS)(clone)
 
 
-kinetic_kernel = jit_copy(_hamiltonian.kinetic_kernel)
+kinetic_iso = jit_copy(_hamiltonian.kinetic_iso)
+kinetic_kernel = jit_copy(_hamiltonian.kinetic_kernel, kinetic_iso=kinetic_iso)
 potential_kernel = jit_copy(_potentials.potential_kernel)
-rhs_core = jit_copy(_equations.rhs_core, kinetic_kernel=kinetic_kernel)
+rhs_iso = jit_copy(_equations.rhs_iso, kinetic_iso=kinetic_iso)
+rhs_core = jit_copy(_equations.rhs_core, kinetic_kernel=kinetic_kernel, rhs_iso=rhs_iso)
 rhs_kernel = jit_copy(_equations.rhs_kernel, potential_kernel=potential_kernel, rhs_core=rhs_core)
 
 
@@ -122,4 +124,5 @@ def energy_kernel(y, P, vel, force):
     return kinetic_kernel(y, P, vel, force) + v
 
 
-__all__ = ["CACHE", "CACHE_DIR", "JIT_OPTIONS", "cache_location", "jit_copy", "kinetic_kernel", "potential_kernel", "rhs_core", "rhs_kernel", "energy_kernel"]
+__all__ = ["CACHE", "CACHE_DIR", "JIT_OPTIONS", "cache_location", "jit_copy", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
+           "rhs_core", "rhs_kernel", "energy_kernel"]

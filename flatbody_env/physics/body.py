@@ -111,6 +111,8 @@ class Body:
         )
         params.setflags(write=False)
         object.__setattr__(self, "_params", params)
+        # the potential's kernel arguments as Python numbers (numpy scalars make the plain-float kernel slower)
+        object.__setattr__(self, "_potential_args", (int(params[3]), float(c1), float(c2), float(a), float(b)))
 
     # --- the integrator boundary -------------------------------------------------------------
     def kernel_params(self) -> np.ndarray:
@@ -125,8 +127,8 @@ class Body:
     # --- potential --------------------------------------------------------------------------------
     def potential_terms(self, lam: float, mu: float, rho: float) -> tuple[float, float, float, float]:
         """(V, ∂V/∂λ, ∂V/∂μ, ∂V/∂ϱ) of the total potential (eq. (36) of [1])."""
-        p = self._params
-        v, gl, gm, gr = potential_kernel(int(p[3]), p[4], p[5], p[6], p[7], lam, mu, rho)
+        kind, c1, c2, a, b = self._potential_args
+        v, gl, gm, gr = potential_kernel(kind, c1, c2, a, b, lam, mu, rho)
         if self.potential.kind == KIND_CUSTOM:
             v += float(self.potential.value(lam, mu, rho))
             g = self.potential.gradient(lam, mu, rho)

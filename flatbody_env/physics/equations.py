@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from flatbody_env.physics.body import Body
-from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
 from flatbody_env.physics.potentials import potential_kernel
 
 CONTROL_NAMES: tuple[str, ...] = ("tau1", "tau2", "tau3", "f_rho")
@@ -56,6 +56,32 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     vel, force : arrays (7,), (4,)
         Work space; on return the velocities and kinetic forces of :func:`kinetic_kernel`.
     """
+    if P[0] == P[1]:
+        (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, w1, w2, w3, thd, ld, md, rd, f1, f2, f3) = rhs_iso(
+            y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], u[0], u[1], u[2], u[3], P[0], P[2], P[8], gl, gm, gr)
+        out[0] = d0
+        out[1] = d1
+        out[2] = d2
+        out[3] = d3
+        out[4] = d4
+        out[5] = d5
+        out[6] = d6
+        out[7] = d7
+        out[8] = d8
+        out[9] = d9
+        out[10] = d10
+        vel[0] = w1
+        vel[1] = w2
+        vel[2] = w3
+        vel[3] = thd
+        vel[4] = ld
+        vel[5] = md
+        vel[6] = rd
+        force[0] = 0.0
+        force[1] = f1
+        force[2] = f2
+        force[3] = f3
+        return
     kinetic_kernel(y, P, vel, force)
     conv = P[8]
     s1 = y[0]
@@ -67,15 +93,8 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of docs/physics.md)
     out[0] = conv * (w2 * s3 - w3 * s2) + u[0]
     out[1] = conv * (w3 * s1 - w1 * s3) + u[1]
-    if P[0] == P[1]:
-        # ds3/dt = J(λ² − μ²) s1 s2 / (I1 I2), cancellation-free (docs/physics.md §4)
-        lam = y[7]
-        mu = y[8]
-        j3r2 = P[2] * y[9] * y[9]
-        out[2] = conv * P[0] * (lam - mu) * (lam + mu) * s1 * s2 / ((P[0] * mu * mu + j3r2) * (P[0] * lam * lam + j3r2)) + u[2]
-    else:
-        out[2] = conv * (w1 * s2 - w2 * s1) + u[2]
-    out[3] = force[0]  # ṗ_θ (= 0 for J1 = J2, eq. (46))
+    out[2] = conv * (w1 * s2 - w2 * s1) + u[2]
+    out[3] = force[0]  # ṗ_θ (eq. (46))
     out[4] = force[1] - gl  # eq. (47)
     out[5] = force[2] - gm  # eq. (48)
     out[6] = force[3] - gr + u[3]  # eq. (49) + dilatation force
@@ -83,6 +102,24 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     out[8] = vel[5]  # μ̇ = p_μ / J
     out[9] = vel[6]  # ϱ̇ = p_ϱ / J3
     out[10] = vel[3]  # θ̇
+
+
+def rhs_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, u0, u1, u2, u3, J, J3, conv, gl, gm, gr):
+    """dy/dt for J1 = J2 = J on scalars (eqs. (44)–(49) of [1], bracket per errata E3/E4), the form
+    a compiled loop over N bodies inlines and vectorises (:func:`rhs_core` calls it).
+
+    Returns the eleven components of dy/dt, then (ω1, ω2, ω3, θ̇, λ̇, μ̇, ϱ̇) and
+    (−∂𝒯/∂λ, −∂𝒯/∂μ, −∂𝒯/∂ϱ) of :func:`~flatbody_env.physics.hamiltonian.kinetic_iso`.
+    """
+    T, w1, w2, w3, thd, ld, md, rd, f1, f2, f3 = kinetic_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, J, J3)
+    j3r2 = J3 * rho * rho
+    # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of docs/physics.md);
+    # ds3/dt = J(λ² − μ²) s1 s2 / (I1 I2), cancellation-free (docs/physics.md §4)
+    d0 = conv * (w2 * s3 - w3 * s2) + u0
+    d1 = conv * (w3 * s1 - w1 * s3) + u1
+    d2 = conv * J * (lam - mu) * (lam + mu) * s1 * s2 / ((J * mu * mu + j3r2) * (J * lam * lam + j3r2)) + u2
+    return (d0, d1, d2, 0.0, f1 - gl, f2 - gm, f3 - gr + u3, ld, md, rd, thd,  # eqs. (46)–(49) + dilatation force; q̇ = ∂𝒯/∂p
+            w1, w2, w3, thd, ld, md, rd, f1, f2, f3)
 
 
 def rhs_kernel(y, u, P, out, vel, force):

@@ -33,8 +33,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from flatbody_env.physics.body import Body
-from flatbody_env.physics.equations import rhs
-from flatbody_env.physics.hamiltonian import hamiltonian
+from flatbody_env.physics.equations import rhs_iso
+from flatbody_env.physics.hamiltonian import kinetic_iso
 from flatbody_env.physics.state import STATE_NAMES, unpack
 
 BRANCHES = ("rotation", "circulation")
@@ -150,24 +150,44 @@ def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float
     return J * u**3 * (gl + gm), J * v**3 * (gl - gm)
 
 
-def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm: float) -> np.ndarray:
-    """Hessian of W in (λ, μ, ϱ), W of the module docstring."""
+def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm: float) -> list[list[float]]:
+    """Hessian of W in (λ, μ, ϱ), W of the module docstring (plain floats: it runs at every env reset)."""
     J = body.inertia.J1
     u, v = lam + mu, lam - mu
-    # kinetic part in (u, v): diag(3σ₊²/(2Ju⁴), 3σ₋²/(2Jv⁴)); λ = (u+v)/2, μ = (u−v)/2 ⇒ u = λ+μ, v = λ−μ
-    Kuv = np.diag([1.5 * sp * sp / (J * u**4), 1.5 * sm * sm / (J * v**4)])
-    T = np.array([[1.0, 1.0], [1.0, -1.0]])  # ∂(u, v)/∂(λ, μ)
-    H = np.zeros((3, 3))
-    H[:2, :2] = T.T @ Kuv @ T
+    # kinetic part in (u, v): diag(3σ₊²/(2Ju⁴), 3σ₋²/(2Jv⁴)); λ = (u+v)/2, μ = (u−v)/2 ⇒ u = λ+μ, v = λ−μ,
+    # so in (λ, μ): [[ku + kv, ku − kv], [ku − kv, ku + kv]]
+    ku = 1.5 * sp * sp / (J * u**4)
+    kv = 1.5 * sm * sm / (J * v**4)
+    H = [[ku + kv, ku - kv, 0.0], [ku - kv, ku + kv, 0.0], [0.0, 0.0, 0.0]]
     h = 1e-5 * max(1.0, lam, mu, rho)
-    x0 = np.array([lam, mu, rho])
+    x0 = (lam, mu, rho)
+    pot = body.potential_terms
     for i in range(3):
-        e = np.zeros(3)
-        e[i] = h
-        gp = np.array(body.potential_terms(*(x0 + e))[1:])
-        gm = np.array(body.potential_terms(*(x0 - e))[1:])
-        H[:, i] += (gp - gm) / (2 * h)
-    return 0.5 * (H + H.T)
+        xp = [x0[0], x0[1], x0[2]]
+        xm = [x0[0], x0[1], x0[2]]
+        xp[i] += h
+        xm[i] -= h
+        gp = pot(xp[0], xp[1], xp[2])
+        gm = pot(xm[0], xm[1], xm[2])
+        for r in range(3):
+            H[r][i] += (gp[r + 1] - gm[r + 1]) / (2 * h)
+    return [[0.5 * (H[r][c] + H[c][r]) for c in range(3)] for r in range(3)]
+
+
+def _smallest_eigenvalue(H: list[list[float]]) -> float:
+    """Smallest eigenvalue of a symmetric 3 × 3 matrix (closed form, trigonometric; O. K. Smith, 1961)."""
+    a, b, c = H[0][0], H[1][1], H[2][2]
+    p1 = H[0][1] ** 2 + H[0][2] ** 2 + H[1][2] ** 2
+    q = (a + b + c) / 3.0
+    p2 = (a - q) ** 2 + (b - q) ** 2 + (c - q) ** 2 + 2.0 * p1
+    if p2 == 0.0:
+        return q
+    p = math.sqrt(p2 / 6.0)
+    B = [[(H[r][k] - (q if r == k else 0.0)) / p for k in range(3)] for r in range(3)]
+    det = (B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0])
+           + B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0]))
+    r = min(1.0, max(-1.0, 0.5 * det))
+    return q + 2.0 * p * math.cos(math.acos(r) / 3.0 + 2.0 * math.pi / 3.0)
 
 
 def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
@@ -212,9 +232,14 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
     J3 = body.inertia.J3
     I1, I2 = J * mu * mu + J3 * rho * rho, J * lam * lam + J3 * rho * rho
     q = (s3 / I2 - omega3) * (omega3 - s3 / I1)
-    hmin = float(np.linalg.eigvalsh(_shape_hessian(body, lam, mu, rho, sp, sm))[0])
+    hmin = _smallest_eigenvalue(_shape_hessian(body, lam, mu, rho, sp, sm))
     y = np.array([0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0])
+    # H (eq. (41)) and the residual of eqs. (43)–(49) from the scalar kernels that hamiltonian() and rhs() run
+    v, gl, gm, gr = body.potential_terms(lam, mu, rho)
+    conv = float(body.kernel_params()[8])
+    dy = rhs_iso(0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0, 0.0, 0.0, 0.0, J, J3, conv, gl, gm, gr)
+    energy = kinetic_iso(0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, J, J3)[0] + v
     return StationaryEllipse(
-        branch="N", state=unpack(y), omega=(0.0, 0.0, omega3), theta_dot=theta_dot, energy=hamiltonian(y, body),
-        residual=float(np.max(np.abs(rhs(0.0, y, None, body)[:10]))), method="inverse", q=q, shape_hessian_min=hmin,
+        branch="N", state=unpack(y), omega=(0.0, 0.0, omega3), theta_dot=theta_dot, energy=energy,
+        residual=max(abs(d) for d in dy[:10]), method="inverse", q=q, shape_hessian_min=hmin,
     )

@@ -45,6 +45,54 @@ VELOCITY_NAMES: tuple[str, ...] = ("omega1", "omega2", "omega3", "theta_dot", "l
 """Generalised velocities, conjugate in order to (s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ)."""
 
 
+def kinetic_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, J, J3):
+    """:func:`kinetic_kernel` for J1 = J2 = J on scalars, returning a tuple (the form a compiled loop
+    over N bodies inlines and vectorises; :func:`kinetic_kernel` calls it).
+
+    Returns
+    -------
+    (𝒯, ω1, ω2, ω3, θ̇, λ̇, μ̇, ϱ̇, −∂𝒯/∂λ, −∂𝒯/∂μ, −∂𝒯/∂ϱ) — eq. (32) of [1], cancellation-free
+    (docs/physics.md §4); −∂𝒯/∂θ = 0 (θ is cyclic).
+    """
+    u = lam + mu
+    v = lam - mu
+    iu = 1.0 / u
+    iv = 1.0 / v
+    sp = s3 + pt
+    sm = s3 - pt
+    j3r2 = J3 * rho * rho
+    I1 = J * mu * mu + j3r2
+    I2 = J * lam * lam + j3r2
+    w1 = s1 / I1
+    w2 = s2 / I2
+    iJ = 1.0 / J  # body constants: a loop over bodies computes them once
+    iJ3 = 1.0 / J3
+    A = 0.5 * sp * iu * iu * iJ
+    B = 0.5 * sm * iv * iv * iJ
+    cp = 0.5 * sp * sp * iu * iu * iu * iJ
+    cm = 0.5 * sm * sm * iv * iv * iv * iJ
+    T = (
+        0.5 * (s1 * w1 + s2 * w2)
+        + 0.5 * sp * sp * iu * iu / (2.0 * J)
+        + 0.5 * sm * sm * iv * iv / (2.0 * J)
+        + 0.5 * (pl * pl + pm * pm) / J
+        + 0.5 * pr * pr / J3
+    )
+    return (
+        T,
+        w1,
+        w2,
+        A + B,  # ω3, eq. after (31) of [1] / docs/physics.md §4
+        A - B,  # θ̇
+        pl * iJ,
+        pm * iJ,
+        pr * iJ3,
+        J * lam * w2 * w2 + cp + cm,  # eq. (47) of [1], cancellation-free (docs/physics.md §4)
+        J * mu * w1 * w1 + cp - cm,  # eq. (48)
+        J3 * rho * (w1 * w1 + w2 * w2),  # eq. (49)
+    )
+
+
 def kinetic_kernel(y, P, vel, force):
     """Kinetic energy in momenta, its momentum gradient and its configuration gradient.
 
@@ -77,6 +125,20 @@ def kinetic_kernel(y, P, vel, force):
     lam = y[7]
     mu = y[8]
     rho = y[9]
+    if J1 == J2:
+        T, w1, w2, w3, thd, ld, md, rd, f1, f2, f3 = kinetic_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, J1, J3)
+        vel[0] = w1
+        vel[1] = w2
+        vel[2] = w3
+        vel[3] = thd
+        vel[4] = ld
+        vel[5] = md
+        vel[6] = rd
+        force[0] = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
+        force[1] = f1
+        force[2] = f2
+        force[3] = f3
+        return T
     u = lam + mu
     v = lam - mu
     iu = 1.0 / u
@@ -84,34 +146,6 @@ def kinetic_kernel(y, P, vel, force):
     sp = s3 + pt
     sm = s3 - pt
     j3r2 = J3 * rho * rho
-    if J1 == J2:
-        J = J1
-        I1 = J * mu * mu + j3r2
-        I2 = J * lam * lam + j3r2
-        w1 = s1 / I1
-        w2 = s2 / I2
-        A = 0.5 * sp * iu * iu / J
-        B = 0.5 * sm * iv * iv / J
-        vel[0] = w1
-        vel[1] = w2
-        vel[2] = A + B  # ω3, eq. after (31) of [1] / docs/physics.md §4
-        vel[3] = A - B  # θ̇
-        vel[4] = pl / J
-        vel[5] = pm / J
-        vel[6] = pr / J3
-        cp = 0.5 * sp * sp * iu * iu * iu / J
-        cm = 0.5 * sm * sm * iv * iv * iv / J
-        force[0] = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
-        force[1] = J * lam * w2 * w2 + cp + cm  # eq. (47) of [1], cancellation-free (docs/physics.md §4)
-        force[2] = J * mu * w1 * w1 + cp - cm  # eq. (48)
-        force[3] = J3 * rho * (w1 * w1 + w2 * w2)  # eq. (49)
-        return (
-            0.5 * (s1 * w1 + s2 * w2)
-            + 0.5 * sp * sp * iu * iu / (2.0 * J)
-            + 0.5 * sm * sm * iv * iv / (2.0 * J)
-            + 0.5 * (pl * pl + pm * pm) / J
-            + 0.5 * pr * pr / J3
-        )
     th = y[10]
     c = math.cos(th)
     s = math.sin(th)

@@ -64,6 +64,39 @@ def test_linearization_matches_a_small_step_and_lqr_stabilizes_it():
     assert np.max(np.linalg.eigvals(A).real) < 1e-6  # open loop: undamped oscillations (stable target)
 
 
+def test_lqr_batch_uses_stored_table_gains_close_to_the_exact_ones():
+    """One vectorised call acts for the whole batch with per-row gains (interpolated from the shipped
+    table of exact gains), equal to the row-by-row law; only rows whose target changed get new gains."""
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    venv = FlatBodyVectorEnv(num_envs=6)
+    obs, _ = venv.reset(seed=11)
+    ctl = HeuristicController(venv.body, venv.control, venv.limits)
+    exact = HeuristicController(venv.body, venv.control, venv.limits, exact=True)
+    assert ctl._table is not None and exact._table is None
+    a = ctl.act(obs)
+    y, target = state_from_observation(obs)
+    K_exact = exact.gains(target.T, y[3])
+    K_table = ctl._K.copy()
+    rel = np.max(np.abs(K_table - K_exact), axis=(1, 2)) / np.max(np.abs(K_exact), axis=(1, 2))
+    assert rel.max() < 0.03, rel  # bilinear in (lambda*, 1/(lambda* mu*)); median ~1e-4
+    for i in range(6):  # the same law, row by row
+        ystar = np.array([0.0, 0.0, target[3, i], y[3, i], 0.0, 0.0, 0.0, target[0, i], target[1, i], target[2, i], 0.0])
+        dx = (y[:, i] - ystar)[list(REDUCED_STATE)]
+        np.testing.assert_allclose(a[i], np.clip(-K_table[i] @ dx, -1, 1).astype(np.float32), rtol=1e-6, atol=1e-7)
+    obs2 = obs.copy()
+    obs2[2, 12] += 0.05  # a new target for row 2 only
+    ctl.act(obs2)
+    np.testing.assert_array_equal(np.delete(ctl._K, 2, axis=0), np.delete(K_table, 2, axis=0))
+    assert not np.array_equal(ctl._K[2], K_table[2])
+    # the closed loop with the table gain is stable, as with the exact one
+    A, B = linearize(venv.body, np.array([0.0, 0.0, target[3, 0], y[3, 0], 0.0, 0.0, 0.0, *target[:3, 0], 0.0]), venv.limits)
+    assert np.max(np.linalg.eigvals(A - B @ K_table[0]).real) < -1e-3
+    # another control mode: the table does not apply, exact gains
+    torque = HeuristicController(venv.body, "torque", venv.limits)
+    assert torque._table is None and torque.act(obs).shape == (6, 3)
+
+
 def test_passivity_controller_decreases_its_lyapunov_function():
     env = gym.make("FlatBody-v0", integrator="DOP853")
     obs, _ = env.reset(seed=11)

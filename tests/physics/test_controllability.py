@@ -89,3 +89,18 @@ def test_task_samples_only_targets_reachable_in_the_episode():
         ReachStationaryEllipse(min_settling_rate=-1.0)
     with pytest.raises(ValueError, match="min_settling_rate"):
         ReachStationaryEllipse(target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0).sample_target(rng, body)
+
+
+def test_smallest_eigenvalue_closed_form_matches_numpy():
+    """The shape block's stability test uses a closed-form smallest eigenvalue (it runs at every reset)."""
+    from flatbody_env.physics.equilibria import _smallest_eigenvalue
+
+    rng = np.random.default_rng(0)
+    for k in range(300):
+        M = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-3, 3)
+        H = 0.5 * (M + M.T)
+        if k % 3 == 0:
+            H[0, 2] = H[2, 0] = H[1, 2] = H[2, 1] = 0.0  # the shape block's usual (λ, μ) | ϱ split
+        expected = np.linalg.eigvalsh(H)[0]
+        assert abs(_smallest_eigenvalue(H.tolist()) - expected) <= 1e-12 * max(1.0, np.abs(H).max())
+    assert _smallest_eigenvalue([[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]) == 2.0

@@ -1,0 +1,211 @@
+"""``flatbody bench train``: PPO's wall time on ``FlatBody-v0`` against the same PPO on ``Pendulum-v1``.
+
+Both runs use the shipped PPO configuration (``agents/hyperparams/ppo.yml``: the same network,
+n_envs, n_steps, batch size, epochs, gSDE, VecNormalize, one torch thread) for the same number of
+environment steps, one after the other in the same process. ``FlatBody-v0`` runs exactly as
+training does (:func:`agents.train.make_vec_env`: the native batch, the residual on the LQR);
+``Pendulum-v1`` runs as SB3 builds it (``DummyVecEnv`` of ``gym.make`` envs) without the
+FlatBody-only keys (residual, env_kwargs). A timing wrapper directly around each environment
+stack (below ``VecMonitor``/``VecNormalize``) measures the share of the wall time spent in the
+environment and, for FlatBody, in the LQR the actions are built on. Each figure is the best of
+``repeats`` runs. Writes ``train_benchmark.json``, ``.csv`` and ``.png``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TrainTiming:
+    env_id: str
+    timesteps: int
+    wall_s: float
+    env_s: float
+    """Seconds inside the environment stack (for FlatBody: the env and the LQR of the residual)."""
+
+    @property
+    def env_share(self) -> float:
+        return self.env_s / self.wall_s
+
+
+@dataclass(frozen=True)
+class TrainBenchmark:
+    flatbody: TrainTiming
+    pendulum: TrainTiming
+    ratio_wall: float
+    """FlatBody wall time / Pendulum wall time (target ≤ 1.0)."""
+    flatbody_env_share: float
+    """Share of FlatBody's wall time in the environment + LQR (target ≤ 0.15)."""
+    pendulum_env_share: float
+    lqr_us_per_body_step: float
+    """The LQR's vectorised action (batch of n_envs, gains stored) per body-step."""
+    n_envs: int = 32
+
+
+def _timed(venv):
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    class Timed(VecEnvWrapper):
+        spent = 0.0
+
+        def reset(self):
+            t = time.perf_counter()
+            out = self.venv.reset()
+            Timed.spent += time.perf_counter() - t
+            return out
+
+        def step_async(self, actions):
+            t = time.perf_counter()
+            self.venv.step_async(actions)
+            Timed.spent += time.perf_counter() - t
+
+        def step_wait(self):
+            t = time.perf_counter()
+            out = self.venv.step_wait()
+            Timed.spent += time.perf_counter() - t
+            return out
+
+    Timed.spent = 0.0
+    return Timed(venv), Timed
+
+
+def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from agents.train import algo_kwargs_of
+
+    torch.set_num_threads(1)
+    n = int(hp.get("n_envs", 1))
+    if env_id == "FlatBody-v0":
+        from agents.vec_env import FlatBodySB3VecEnv
+
+        inner = FlatBodySB3VecEnv(n, seed=seed, **(hp.get("env_kwargs") or {}))
+        if hp.get("residual"):
+            from agents.heuristic import residual_vec_env
+
+            inner = residual_vec_env(inner, hp.get("env_kwargs"), float(hp.get("residual_scale", 1.0)), float(hp.get("residual_gate", 0.0)),
+                                     str(hp.get("residual_mode", "additive")))
+        venv, clock = _timed(inner)  # the stack of agents.train.make_vec_env, with the clock inside VecMonitor
+        venv = VecMonitor(venv)
+    else:
+        base = sb3_make_vec_env(env_id, n_envs=n, seed=seed)
+        venv, clock = _timed(base)
+        venv = VecMonitor(venv)
+    norm = hp.get("normalize") or None
+    if norm is True:
+        norm = {"norm_obs": True, "norm_reward": True}
+    if norm:
+        venv = VecNormalize(venv, gamma=float(hp.get("gamma", 0.99)), **norm)
+    model = PPO(hp.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=0, **algo_kwargs_of(hp))
+    t = time.perf_counter()
+    model.learn(total_timesteps=timesteps, progress_bar=False)
+    wall = time.perf_counter() - t
+    venv.close()
+    return TrainTiming(env_id, int(model.num_timesteps), wall, float(clock.spent))
+
+
+def lqr_us_per_body_step(n_envs: int = 32, steps: int = 400, seed: int = 0) -> float:
+    """µs per body-step of the LQR's vectorised action on observations of the batched env (gains stored)."""
+    from agents.heuristic import HeuristicController
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    env = FlatBodyVectorEnv(num_envs=n_envs)
+    obs, _ = env.reset(seed=seed)
+    ctl = HeuristicController(env.body, env.control, env.limits)
+    ctl.act(obs)
+    observations = []
+    for _ in range(steps):
+        a = ctl.act(obs)
+        obs, *_ = env.step(a)
+        observations.append(obs)
+    best = np.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        for o in observations:
+            ctl.act(o)
+        best = min(best, (time.perf_counter() - t) / (steps * n_envs))
+    return best * 1e6
+
+
+def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: str | Path = ".", overrides: list[str] | None = None) -> TrainBenchmark:
+    """Measure and write ``train_benchmark.json``, ``.csv``, ``.png`` into ``out_dir`` (module docstring);
+    ``overrides`` (``key=value``) change the PPO settings of both runs."""
+    from agents.train import apply_overrides, load_hyperparams
+
+    hp = apply_overrides(load_hyperparams("ppo"), overrides or [])
+    hp_pendulum = {k: v for k, v in hp.items() if k not in ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")}
+    best: dict[str, TrainTiming] = {}
+    for _ in range(repeats):
+        for env_id, h in (("FlatBody-v0", hp), ("Pendulum-v1", hp_pendulum)):
+            r = _run(env_id, h, timesteps, seed)
+            if env_id not in best or r.wall_s < best[env_id].wall_s:
+                best[env_id] = r
+    fb, pd = best["FlatBody-v0"], best["Pendulum-v1"]
+    bench = TrainBenchmark(flatbody=fb, pendulum=pd, ratio_wall=fb.wall_s / pd.wall_s, flatbody_env_share=fb.env_share,
+                           pendulum_env_share=pd.env_share, lqr_us_per_body_step=lqr_us_per_body_step(int(hp.get("n_envs", 32))),
+                           n_envs=int(hp.get("n_envs", 32)))
+    write(bench, Path(out_dir))
+    return bench
+
+
+def write(bench: TrainBenchmark, out_dir: Path) -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "train_benchmark.json").write_text(json.dumps(asdict(bench), indent=2) + "\n")
+    with open(out_dir / "train_benchmark.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["env_id", "timesteps", "wall_s", "env_s", "env_share"])
+        for r in (bench.flatbody, bench.pendulum):
+            w.writerow([r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"])
+    plot(out_dir / "train_benchmark.csv", out_dir / "train_benchmark.png")
+
+
+def plot(csv_path: Path, png_path: Path) -> None:
+    """Stacked bars (environment vs the rest of PPO) from the saved CSV."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = list(csv.DictReader(open(csv_path)))
+    names = [r["env_id"] for r in rows]
+    env = [float(r["env_s"]) for r in rows]
+    rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]
+    fig, ax = plt.subplots(figsize=(7, 2.6))
+    ax.barh(names, env, color="tab:blue", label="environment (+ LQR)")
+    ax.barh(names, rest, left=env, color="tab:gray", label="PPO (rollout policy, updates)")
+    for y, (e, r) in enumerate(zip(env, rest)):
+        ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
+    ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
+    ax.set_title("flatbody bench train (same run)")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png_path, dpi=120)
+    plt.close(fig)
+
+
+def markdown(bench: TrainBenchmark) -> str:
+    """The docs' table of this run (``flatbody bench train --update-docs docs/agents.md`` writes it there)."""
+    fb, pd = bench.flatbody, bench.pendulum
+    ok = lambda x, bound: "met" if x <= bound else "missed"  # noqa: E731
+    return "\n".join([
+        f"| same PPO settings, {fb.timesteps} env steps | wall time (s) | in the environment (+ LQR) |", "|---|---|---|",
+        f"| FlatBody-v0 (residual on the LQR) | {fb.wall_s:.1f} | {fb.env_s:.1f} s ({fb.env_share:.0%}) |",
+        f"| Pendulum-v1 | {pd.wall_s:.1f} | {pd.env_s:.1f} s ({pd.env_share:.0%}) |",
+        "", "| figure (same run) | measured | target |", "|---|---|---|",
+        f"| PPO wall time FlatBody-v0 / Pendulum-v1 | **{bench.ratio_wall:.2f}** | ≤ 1.0 ({ok(bench.ratio_wall, 1.0)}) |",
+        f"| share of FlatBody's wall time in env + LQR | **{bench.flatbody_env_share:.1%}** | ≤ 15 % ({ok(bench.flatbody_env_share, 0.15)}) |",
+        f"| LQR action per body-step (batch of {bench.n_envs}, gains stored) | {bench.lqr_us_per_body_step:.3f} µs | ≤ 1 µs ({ok(bench.lqr_us_per_body_step, 1.0)}) |",
+    ]) + "\n"
+
+
+__all__ = ["TrainBenchmark", "markdown", "TrainTiming", "lqr_us_per_body_step", "run"]

@@ -1,0 +1,237 @@
+"""One fused DOP853 environment step for N bodies in structure-of-arrays layout.
+
+Plain-Python kernels over arrays, compiled with :func:`flatbody_env.integrators.jit.jit_copy`
+(:data:`dop853_batch_env_step` is the compiled driver): no numpy allocation inside, no
+``np.nextafter``, no per-lane branch in the stage loops — the same source can later be given a GPU
+target. The physics is the physics layer's scalar right-hand side for J1 = J2,
+:func:`flatbody_env.physics.equations.rhs_iso` (eqs. (44)–(49) of the paper; :func:`rhs_core` calls
+it too), called per lane on scalars: with the body's parameters read once into scalars the lane loop
+has no memory dependence, and numba (LLVM) turns it into SIMD instructions (``error_model="numpy"``:
+no division checks; no fastmath, so each lane's arithmetic is the scalar kernel's, bit for bit).
+
+The step. Every lane takes one DOP853 step of size h = dt (Hairer's coefficients, the same
+arithmetic in the same order as :func:`flatbody_env.integrators.twopolar_kernels.dop853_env_step`
+with the first step guessed as dt): 13 right-hand sides, the stages combined lane by lane for each
+state component. Then each lane's embedded error estimate (scipy's 5th/3rd-order blend) and its
+state are checked; a lane whose step would be rejected (error ≥ 1), whose state is non-finite or
+out of the chart (λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) is redone from its start by the
+scalar kernel, which handles rejections, step-size control and failure codes. So every lane's
+result is bit for bit the scalar kernel's (compiled with the same options, :data:`JIT_OPTIONS`): the
+vector env equals N single envs step for step.
+
+Lanes are stepped in blocks of :data:`BLOCK` so that the stage array stays in the caches.
+
+Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``STATUS``, ``NFEV`` (N,) int64 (outputs); ``ERR`` (N,)
+the error norms; work: ``KS`` (13, 11, B), ``YT`` (11, B), ``E3S``, ``ACC`` (B,) for blocks of B lanes,
+and the scalar kernel's work arrays — allocated once by the caller (:class:`DOP853Batch`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _dop
+
+from flatbody_env.integrators import twopolar_kernels as _tk
+from flatbody_env.integrators import jit as _jit
+from flatbody_env.integrators.jit import jit_copy
+from flatbody_env.physics.equations import rhs_iso
+from flatbody_env.physics.potentials import potential_kernel
+
+N = 11
+BLOCK = 64
+"""Lanes per block of the fused step (a compile-time constant: the block arrays are addressed at
+constant offsets, and the stage array, 13 × 11 × BLOCK doubles, stays in the CPU caches)."""
+A = np.ascontiguousarray(_dop.A[: _dop.N_STAGES, : _dop.N_STAGES])
+B = np.ascontiguousarray(_dop.B)
+E3 = np.ascontiguousarray(_dop.E3)
+E5 = np.ascontiguousarray(_dop.E5)
+
+
+def rhs_lanes(X, U, P, F, fo):
+    """F[fo + i·BLOCK + k] = component i of dy/dt of lane k of the block X (component i of lane k at
+    X[i·BLOCK + k]) with controls U[j·BLOCK + k], for J1 = J2 (the caller checks).
+
+    The physics is :func:`flatbody_env.physics.equations.rhs_iso` and
+    :func:`flatbody_env.physics.potentials.potential_kernel` on scalars. The parameters are read once
+    into scalars and each array is addressed at constant offsets from one base, so the lane loop has
+    no memory dependence and numba (LLVM) compiles it to SIMD instructions.
+    """
+    J = P[0]
+    J3 = P[2]
+    kind = P[3]
+    c1 = P[4]
+    c2 = P[5]
+    a = P[6]
+    b = P[7]
+    conv = P[8]
+    for k in range(BLOCK):
+        lam = X[7 * BLOCK + k]
+        mu = X[8 * BLOCK + k]
+        rho = X[9 * BLOCK + k]
+        v, gl, gm, gr = potential_kernel(kind, c1, c2, a, b, lam, mu, rho)
+        (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, w1, w2, w3, thd, ld, md, rd, f1, f2, f3) = rhs_iso(
+            X[k], X[BLOCK + k], X[2 * BLOCK + k], X[3 * BLOCK + k], X[4 * BLOCK + k], X[5 * BLOCK + k], X[6 * BLOCK + k], lam, mu, rho,
+            U[k], U[BLOCK + k], U[2 * BLOCK + k], U[3 * BLOCK + k], J, J3, conv, gl, gm, gr)
+        F[fo + k] = d0
+        F[fo + BLOCK + k] = d1
+        F[fo + 2 * BLOCK + k] = d2
+        F[fo + 3 * BLOCK + k] = d3
+        F[fo + 4 * BLOCK + k] = d4
+        F[fo + 5 * BLOCK + k] = d5
+        F[fo + 6 * BLOCK + k] = d6
+        F[fo + 7 * BLOCK + k] = d7
+        F[fo + 8 * BLOCK + k] = d8
+        F[fo + 9 * BLOCK + k] = d9
+        F[fo + 10 * BLOCK + k] = d10
+
+
+def dop853_lanes(Y, U, P, h, rtol, atol, OUT, KS, YT, E5S, E3S, ACC):
+    """One DOP853 step of size ``h`` for the BLOCK lanes of a block; OUT receives y + h Σ b_j k_j,
+    E5S the error norm (scipy's ``_estimate_error_norm``) of each lane. Flat block arrays: component
+    i of lane k at [i·BLOCK + k], stage j's component i at KS[(j·11 + i)·BLOCK + k]. The lane index is
+    the innermost loop; each lane's sums keep the scalar kernel's order."""
+    rhs_lanes(Y, U, P, KS, 0)
+    for s in range(1, 12):
+        for i in range(11):
+            for k in range(BLOCK):
+                ACC[k] = 0.0
+            for j in range(s):
+                c = A[s, j]
+                o = (j * 11 + i) * BLOCK
+                for k in range(BLOCK):
+                    ACC[k] += KS[o + k] * c
+            for k in range(BLOCK):
+                YT[i * BLOCK + k] = Y[i * BLOCK + k] + h * ACC[k]
+        rhs_lanes(YT, U, P, KS, s * 11 * BLOCK)
+    for i in range(11):
+        for k in range(BLOCK):
+            ACC[k] = 0.0
+        for j in range(12):
+            c = B[j]
+            o = (j * 11 + i) * BLOCK
+            for k in range(BLOCK):
+                ACC[k] += KS[o + k] * c
+        for k in range(BLOCK):
+            OUT[i * BLOCK + k] = Y[i * BLOCK + k] + h * ACC[k]
+    rhs_lanes(OUT, U, P, KS, 12 * 11 * BLOCK)
+    for k in range(BLOCK):
+        E5S[k] = 0.0
+        E3S[k] = 0.0
+    for i in range(11):
+        for k in range(BLOCK):
+            ACC[k] = atol + max(abs(Y[i * BLOCK + k]), abs(OUT[i * BLOCK + k])) * rtol
+        for k in range(BLOCK):
+            a5 = 0.0
+            a3 = 0.0
+            for j in range(13):
+                kj = KS[(j * 11 + i) * BLOCK + k]
+                a5 += kj * E5[j]
+                a3 += kj * E3[j]
+            a5 /= ACC[k]
+            a3 /= ACC[k]
+            E5S[k] += a5 * a5
+            E3S[k] += a3 * a3
+    for k in range(BLOCK):
+        e5 = E5S[k]
+        e3 = E3S[k]
+        E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
+
+
+def lane_accepted(Y, U, P, OUT, err, k):
+    """Whether lane k's single step stands as the scalar kernel would take it: error < 1, finite
+    state, λ, μ, ϱ > 0 and no sign change of λ − μ unless the chart may cross (``may_cross``)."""
+    if not err < 1.0:
+        return False
+    for i in range(11):
+        if not math.isfinite(OUT[i, k]):
+            return False
+    if OUT[7, k] <= 0.0 or OUT[8, k] <= 0.0 or OUT[9, k] <= 0.0:
+        return False
+    crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
+    if not crossable:
+        gap_sign = 1.0 if Y[7, k] > Y[8, k] else -1.0
+        if (OUT[7, k] - OUT[8, k]) * gap_sign <= 0.0:
+            return False
+    return True
+
+
+def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, yl, ul,
+                          K1, ynew, ytmp, f, out1, vel, force, counters):
+    """One env step of DOP853 (first step guess dt) for N lanes: the fused step on blocks of
+    :data:`BLOCK` lanes copied into the flat block arrays ``YB``, ``UB``, ``OB`` (the last block
+    padded with its first lane), then the scalar kernel for the lanes it cannot accept (module
+    docstring). ``energy_tol`` < inf hands every lane to the scalar kernel."""
+    n = Y.shape[1]
+    check_energy = energy_tol < np.inf
+    if not check_energy:
+        for start in range(0, n, BLOCK):
+            for j in range(BLOCK):
+                k = start + j if start + j < n else start
+                for i in range(11):
+                    YB[i * BLOCK + j] = Y[i, k]
+                for i in range(4):
+                    UB[i * BLOCK + j] = U[i, k]
+            dop853_lanes(YB, UB, P, dt, rtol, atol, OB, KS, YT, EB, E3S, ACC)
+            for j in range(min(BLOCK, n - start)):
+                for i in range(11):
+                    OUT[i, start + j] = OB[i * BLOCK + j]
+                ERR[start + j] = EB[j]
+    for k in range(n):
+        if not check_energy and lane_accepted(Y, U, P, OUT, ERR[k], k):
+            STATUS[k] = 0
+            NFEV[k] = 13
+            continue
+        for i in range(11):
+            yl[i] = Y[i, k]
+        for i in range(4):
+            ul[i] = U[i, k]
+        counters[0] = 0
+        STATUS[k] = dop853_env(yl, ul, P, dt, dt, rtol, atol, energy_tol, out1, K1, ynew, ytmp, vel, force, f, counters)
+        NFEV[k] = counters[0]
+        for i in range(11):
+            OUT[i, k] = out1[i]
+
+
+dop853_env = _tk._dop853_env
+"""The scalar kernel the rejected lanes are redone with (compiled with the same options)."""
+
+
+_rhs_lanes_c = jit_copy(rhs_lanes, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso)
+_dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c)
+_lane_accepted_c = jit_copy(lane_accepted)
+dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, lane_accepted=_lane_accepted_c,
+                                   dop853_env=_tk._dop853_env)
+"""Compiled :func:`dop853_batch_env_step`."""
+
+
+class DOP853Batch:
+    """Work arrays for :func:`dop853_batch_env_step` at batch size N, and the call (picklable)."""
+
+    def __init__(self, n: int) -> None:
+        self.n = int(n)
+        self._alloc()
+
+    def _alloc(self) -> None:
+        self.work = (np.empty(self.n), np.empty(N * BLOCK), np.empty(4 * BLOCK), np.empty(N * BLOCK), np.empty(13 * N * BLOCK),
+                     np.empty(N * BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(N), np.empty(4),
+                     np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+
+    def __getstate__(self):
+        return {"n": self.n}
+
+    def __setstate__(self, state):
+        self.n = state["n"]
+        self._alloc()
+
+    def __call__(self, Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV) -> None:
+        if P[0] != P[1]:
+            raise ValueError("P: the fused batch step needs J1 = J2")
+        if Y.shape[1] != self.n:
+            self.n = Y.shape[1]
+            self._alloc()
+        dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
+
+
+__all__ = ["BLOCK", "DOP853Batch", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "lane_accepted", "rhs_lanes"]
