@@ -1,4 +1,5 @@
-"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job).
+"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job),
+``export-policy`` (the numpy policy that ``evaluate`` and ``demo`` run without torch).
 
 Heavy imports (torch, SB3) happen inside the handlers so that ``flatbody --help`` stays fast.
 """
@@ -60,6 +61,7 @@ def _evaluate(args) -> int:
         seed=args.seed,
         baselines=not args.no_baselines,
         progress=not args.json,
+        backend=args.backend,
     )
     if args.out:
         from pathlib import Path
@@ -75,7 +77,15 @@ def _evaluate(args) -> int:
 def _demo(args) -> int:
     from agents.demo import run_demo
 
-    return run_demo(model=args.model, seed=args.seed, out=args.out)
+    return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend)
+
+
+def _export_policy(args) -> int:
+    from agents.numpy_policy import export_policy
+
+    path = export_policy(args.model)
+    print(f"wrote {path}")
+    return 0
 
 
 def register(sub) -> None:
@@ -107,10 +117,18 @@ def register(sub) -> None:
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
+    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
+                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
     p.set_defaults(handler=_evaluate)
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
     p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
     p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
+    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
+                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
     p.set_defaults(handler=_demo)
+
+    p = sub.add_parser("export-policy", help="export a trained agent's policy to numpy (policy.npz beside model.zip) for torch-free evaluate/demo")
+    p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
+    p.set_defaults(handler=_export_policy)
