@@ -94,7 +94,7 @@ CASES = {
     ("evaluate",): ([MODEL, "--episodes", "1", "--no-baselines", "--json", "--out", "{tmp}/eval.json"], _files("eval.json"), False),
     ("demo",): (["--model", MODEL, "--out", "{tmp}/demo.rrd"], _files("demo.rrd"), False),
     ("export-policy",): (["{tmp}/model"], _files("model/policy.npz"), False),
-    ("bench", "recording"): (["--steps", "50", "--sizes", "20", "--repeats", "1", "--block", "16", "--out-dir", "{tmp}/br"],
+    ("bench", "recording"): (["--steps", "50", "--sizes", "20", "--repeats", "1", "--block", "16", "--episode-repeats", "1", "--out-dir", "{tmp}/br"],
                              _files("br/recording.json", "br/recording.png"), False),
     ("bench", "env"): (["--steps", "20", "--batch", "4", "--batch-steps", "2", "--repeats", "1", "--out-dir", "{tmp}/be"],
                        _files("be/env_benchmark.json", "be/env_benchmark.png"), True),
