@@ -194,7 +194,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
 
 def markdown(bench: TrainBenchmark) -> str:
-    """The docs' table of this run (``flatbody bench train --update-docs docs/agents.md`` writes it there)."""
+    """The docs' table of this run (``flatbody bench train --docs docs/agents.md`` writes it there)."""
     fb, pd = bench.flatbody, bench.pendulum
     ok = lambda x, bound: "met" if x <= bound else "missed"  # noqa: E731
     return "\n".join([

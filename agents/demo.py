@@ -110,11 +110,14 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
     return "\n".join(lines)
 
 
-def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd") -> int:
-    """Run the demo; returns the exit code (0 also when the agent misses: the summary says so)."""
+def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd", backend: str = "auto") -> int:
+    """Run the demo; returns the exit code (0 also when the agent misses: the summary says so).
+
+    The policy runs as exported numpy (``policy.npz``, :mod:`agents.numpy_policy`) when it is
+    current, so the demo imports neither torch nor SB3 (``backend``: :data:`agents.evaluate.POLICY_BACKENDS`)."""
     from agents.evaluate import Agent
 
-    agent = Agent(model)
+    agent = Agent(model, backend=backend)
     ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs, record_to=out or None, title=f"flatbody demo (seed {seed})")
     label = "the shipped agent" if model is None else f"agent {agent.path}"
     print(format_demo(ep, seed=seed, label=label))

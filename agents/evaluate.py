@@ -43,23 +43,31 @@ def shipped_model_dir() -> Path:
     return Path(__file__).resolve().parent / "models" / "ppo-FlatBody-v0"
 
 
+POLICY_BACKENDS = ("auto", "numpy", "sb3")
+"""How :class:`Agent` evaluates the policy: ``numpy`` the exported ``policy.npz``
+(:mod:`agents.numpy_policy`, no torch), ``sb3`` the SB3 model itself (imports torch), ``auto`` the
+exported policy when it is there and current, else SB3 (a stale export is reported on stderr)."""
+
+
 class Agent:
-    """A trained SB3 model plus its frozen VecNormalize statistics, as a batch policy.
+    """A trained agent as a batch policy: its deterministic policy with frozen VecNormalize statistics.
 
     Parameters
     ----------
     path : str or Path, optional
-        A run folder (with ``model.zip``, ``config.yml`` and optionally ``vecnormalize.pkl``) or a
-        ``model.zip`` (its folder is searched for the rest). Default: the shipped agent.
+        A run folder (with ``model.zip``, ``config.yml`` and optionally ``vecnormalize.pkl`` and
+        ``policy.npz``) or a ``model.zip`` (its folder is searched for the rest). Default: the
+        shipped agent.
+    backend : {"auto", "numpy", "sb3"}
+        :data:`POLICY_BACKENDS`. With ``auto`` and a current ``policy.npz`` (the shipped agent's
+        is), torch and SB3 are not imported.
     """
 
-    def __init__(self, path: str | Path | None = None) -> None:
-        import pickle
-
-        import torch
+    def __init__(self, path: str | Path | None = None, *, backend: str = "auto") -> None:
         import yaml
 
-        torch.set_num_threads(1)
+        if backend not in POLICY_BACKENDS:
+            raise ValueError(f"backend: must be one of {', '.join(POLICY_BACKENDS)}, got {backend!r}")
         p = Path(path) if path is not None else shipped_model_dir()
         folder = p if p.is_dir() else p.parent
         model_file = p if p.is_file() else folder / "model.zip"
@@ -68,18 +76,29 @@ class Agent:
         cfg_file = folder / "config.yml"
         self.config: dict[str, Any] = yaml.safe_load(cfg_file.read_text(encoding="utf-8")) if cfg_file.exists() else {}
         algo = self.config.get("algo") or ("sac" if "sac" in model_file.name.lower() else "ppo")
-        from stable_baselines3 import PPO, SAC
-
-        cls = {"ppo": PPO, "sac": SAC}[algo]
         self.algo = algo
-        self.model = cls.load(str(model_file), device="cpu")
-        self.vecnormalize = None
-        vn = folder / "vecnormalize.pkl"
-        if vn.exists():
-            with vn.open("rb") as fh:
-                self.vecnormalize = pickle.load(fh)
-            self.vecnormalize.training = False
         self.path = folder
+        self.policy = None
+        self.model = None
+        self.vecnormalize = None
+        if backend != "sb3":
+            from agents.numpy_policy import StalePolicyError, load_policy
+
+            try:
+                self.policy = load_policy(model_file)
+            except StalePolicyError as exc:
+                if backend == "numpy":
+                    raise
+                if (folder / "policy.npz").exists():  # present but stale: say so (a missing one is the SB3 default)
+                    import sys
+
+                    sys.stderr.write(f"flatbody: {exc}; evaluating with Stable-Baselines3 instead\n")
+            except ValueError:
+                if backend == "numpy":
+                    raise
+        if self.policy is None:
+            self._load_sb3(model_file, folder, algo)
+        self.backend = "numpy" if self.policy is not None else "sb3"
         hp = self.config.get("hyperparams") or {}
         self.env_kwargs: dict[str, Any] = dict(hp.get("env_kwargs") or {})
         self.residual = hp.get("residual") or None
@@ -92,9 +111,31 @@ class Agent:
             self._base = ResidualAction(self.env_kwargs, self.residual_scale, self.residual_gate,
                                         str(hp.get("residual_mode", "additive")))
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
+    def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
+        import pickle
+
+        import torch
+        from stable_baselines3 import PPO, SAC
+
+        torch.set_num_threads(1)
+        cls = {"ppo": PPO, "sac": SAC}[algo]
+        self.model = cls.load(str(model_file), device="cpu")
+        vn = folder / "vecnormalize.pkl"
+        if vn.exists():
+            with vn.open("rb") as fh:
+                self.vecnormalize = pickle.load(fh)
+            self.vecnormalize.training = False
+
+    def policy_actions(self, obs: np.ndarray) -> np.ndarray:
+        """The trained policy's deterministic actions (N, n) for raw observations (N, 16), before any residual."""
+        if self.policy is not None:
+            return self.policy(obs)
         o = self.vecnormalize.normalize_obs(obs) if self.vecnormalize is not None else obs
         actions, _ = self.model.predict(o, deterministic=True)
+        return actions
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        actions = self.policy_actions(obs)
         if self._base is not None:  # residual on the hand-designed controller
             actions = self._base(obs, actions)
         return actions
@@ -220,15 +261,17 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: int = 10_000, baselines: bool = True,
-                 progress: bool = False) -> dict[str, Any]:
-    """The evaluation report: ``{"agent": {...}, "baselines": {"zero", "random", "heuristic"}, ...}``."""
-    agent = Agent(model)
+                 progress: bool = False, backend: str = "auto") -> dict[str, Any]:
+    """The evaluation report: ``{"agent": {...}, "baselines": {"zero", "random", "heuristic"}, ...}``;
+    ``policy_backend`` says how the agent's policy ran (``numpy`` or ``sb3``, :class:`Agent`)."""
+    agent = Agent(model, backend=backend)
     env_kwargs = agent.env_kwargs
     report: dict[str, Any] = {
         "env_id": "FlatBody-v0",
         "episodes": episodes,
         "seed": seed,
         "model": str(agent.path),
+        "policy_backend": agent.backend,
         "agent": summarize(run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=env_kwargs, progress=progress, label="agent")),
     }
     if baselines:

@@ -366,6 +366,9 @@ def train(
         "cpu_count": os.cpu_count(),
     }
     (out / "run.json").write_text(json.dumps(run, indent=2) + "\n", encoding="utf-8")
+    from agents.numpy_policy import export_policy
+
+    export_policy(out)  # policy.npz beside the model: evaluate/demo run it without torch
     if ckpt_dir.exists() and not keep_checkpoints:
         shutil.rmtree(ckpt_dir)
     env.close()

@@ -67,6 +67,8 @@ class BenchReport:
     long_horizon: list
     short_step: list
     compile_times: list = field(default_factory=list)
+    auto: list = field(default_factory=list)
+    """Per built-in scene: simulate's default (method="auto") against scipy DOP853 (the former default), same run."""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -257,6 +259,34 @@ def compile_times(names=None) -> list[dict]:
     ]
 
 
+def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
+    """``simulate(scene)`` (method="auto": the rung, then the fastest method meeting rtol = atol = 1e-10)
+    against ``simulate(scene, method="DOP853")`` on every built-in scene, t = min(t_end, t_cap)."""
+    import numpy as np
+
+    from flatbody_env.integrators import IntegrationError
+    from flatbody_env.scene import builtin_scenes
+    from flatbody_env.simulation import simulate
+
+    rows = []
+    for name, sc in sorted(builtin_scenes().items()):
+        t_end = min(sc.t_end, t_cap)
+        simulate(sc, t_end=t_end)  # compiled kernels loaded
+        runs = [simulate(sc, t_end=t_end) for _ in range(repeats)]
+        auto = min(runs, key=lambda r: r.wall_time)
+        row = {"scene": name, "t_end": t_end, "method": auto.method, "model": auto.model, "auto_s": auto.wall_time,
+               "reason": auto.extra.get("method_reason", ""), "auto_step": auto.extra.get("auto_step")}
+        try:
+            ref = min((simulate(sc, t_end=t_end, method="DOP853") for _ in range(max(1, repeats - 1))), key=lambda r: r.wall_time)
+            row.update(scipy_method=ref.method, scipy_model=ref.model, scipy_s=ref.wall_time, speedup=ref.wall_time / max(auto.wall_time, 1e-9),
+                       max_difference=float(np.max(np.abs(auto.y - ref.y))))
+        except IntegrationError as exc:
+            row.update(scipy_method="DOP853", scipy_s=None, speedup=None, max_difference=None, scipy_failure=exc.kind)
+        rows.append(row)
+        bar.update(1)
+    return rows
+
+
 def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
                       with_compile: bool = True) -> BenchReport:
     from tqdm import tqdm
@@ -265,12 +295,15 @@ def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float
 
     warm_up()  # compile time is measured separately (in fresh processes)
     deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
-    total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS)
+    from flatbody_env.scene import builtin_scenes
+
+    total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS) + len(builtin_scenes())
     bar = tqdm(total=total, desc="bench integrators", unit="task", disable=not progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
     close = _close(1 if quick else repeats, max_run_s, bar, deltas)
     long_h = _long(bar, 1e3 if quick else 1e4)
     short = _short_step(bar)
+    auto = _auto(1 if quick else repeats, bar, 20.0 if quick else 100.0)
     bar.close()
     comp = compile_times() if with_compile else []
     import platform
@@ -279,7 +312,8 @@ def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float
 
     machine = {"python": platform.python_version(), "numba": numba.__version__, "cpu_count": os.cpu_count(), "platform": platform.platform(),
                "quick": quick}
-    return BenchReport(machine=machine, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp)
+    return BenchReport(machine=machine, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp,
+                       auto=auto)
 
 
 def format_report(rep: BenchReport) -> str:
@@ -312,6 +346,12 @@ def format_report(rep: BenchReport) -> str:
     for x in rep.short_step:
         extra = f"   batch of {x['batch_size']}: {x['batch_us_per_body_step']:.3f} us/body-step" if x["path"] == "env" else ""
         L.append(f"  {x['method']:<20} {x['path']:<10} {x['us_per_step']:10.2f}{extra}")
+    if rep.auto:
+        L.append("simulate's default (method auto) vs scipy DOP853, built-in scenes, rtol = atol = 1e-10 (same run)")
+        for x in rep.auto:
+            vs = f"{x['scipy_s'] * 1e3:9.2f} ms  {x['speedup']:6.1f}x  diff {x['max_difference']:.1e}" if x.get("scipy_s") else \
+                f"scipy DOP853 fails ({x.get('scipy_failure')})"
+            L.append(f"  {x['scene']:<20} {x['model']:<10} {x['method']:<18} {x['auto_s'] * 1e3:8.2f} ms | {vs}")
     if rep.compile_times:
         L.append("compile time (fresh processes): first call with empty numba cache / cached")
         for x in rep.compile_times:
@@ -319,4 +359,48 @@ def format_report(rep: BenchReport) -> str:
     return "\n".join(L)
 
 
-__all__ = ["BenchReport", "bench_integrators", "compile_times", "format_report", "wall_at"]
+def docs_tables(rep: dict) -> dict[str, str]:
+    """The Markdown tables of docs/integrators.md from a ``bench_integrators.json`` report, by block name
+    (``flatbody bench integrators --docs docs/integrators.md`` rewrites each ``<!-- bench:NAME -->`` block)."""
+    tables = {}
+    r = rep["regular"]
+    lines = [f"| method | wall time at error {r['target_error']:g} (regular scene, t = {r['t_end']:g}) | vs scipy DOP853 |", "|---|---|---|"]
+    for a in r["at_target"]:
+        w = f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "not bracketed"
+        lines.append(f"| {a['method']} | {w} | {a['speedup']:.1f}× |" if a.get("speedup") else f"| {a['method']} | {w} | – |")
+    tables["integrators-regular"] = "\n".join(lines)
+    lines = ["| s3 − p_θ | " + " | ".join(a["method"] for a in rep["close_approach"][0]["at_target"]) + " |",
+             "|---|" + "---|" * len(rep["close_approach"][0]["at_target"])]
+    for c in rep["close_approach"]:
+        cells = [f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "fails / not reached" for a in c["at_target"]]
+        lines.append(f"| {c['delta']:g} | " + " | ".join(cells) + " |")
+    tables["integrators-close"] = "\n".join(lines)
+    lines = ["| method and setting | energy error | wall time |", "|---|---|---|"]
+    for x in rep["long_horizon"]:
+        lines.append(f"| {x['method']}, {x['setting']} (t = {x['t_end']:g}) | {x['energy_error']:.1e} | {x['wall_time']:.2f} s |")
+    tables["integrators-long"] = "\n".join(lines)
+    lines = ["| method | path | µs per step | batched, µs per body-step |", "|---|---|---|---|"]
+    for x in rep["short_step"]:
+        b = f"{x['batch_us_per_body_step']:.2f}" if x["path"] == "env" else ""
+        lines.append(f"| {x['method']} | {x['path']} | {x['us_per_step']:.1f} | {b} |")
+    tables["integrators-short-step"] = "\n".join(lines)
+    if rep.get("auto"):
+        lines = ["| scene | model (rung) | method auto runs | auto | scipy DOP853 (former default) | speed-up | max difference |",
+                 "|---|---|---|---|---|---|---|"]
+        for x in rep["auto"]:
+            step = f", h = {x['auto_step']:g}" if x.get("auto_step") else ""
+            if x.get("scipy_s"):
+                vs = f"{x['scipy_s'] * 1e3:.1f} ms ({x['scipy_method']}) | **{x['speedup']:.0f}×** | {x['max_difference']:.0e}"
+            else:
+                vs = f"fails ({x.get('scipy_failure')}) | – | –"
+            lines.append(f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}{step} | {x['auto_s'] * 1e3:.2f} ms | {vs} |")
+        tables["integrators-auto"] = "\n".join(lines)
+    if rep.get("compile_times"):
+        lines = ["| method | first call, empty cache | cached |", "|---|---|---|"]
+        for x in rep["compile_times"]:
+            lines.append(f"| {x['method']} | {x['first_call_s']:.2f} s | {x['cached_s']:.3f} s |")
+        tables["integrators-compile"] = "\n".join(lines)
+    return tables
+
+
+__all__ = ["BenchReport", "bench_integrators", "compile_times", "docs_tables", "format_report", "wall_at"]

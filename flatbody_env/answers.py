@@ -14,7 +14,7 @@ from pathlib import Path
 from flatbody_env.output import atomic_write, check_output_path
 
 
-def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="DOP853", rtol=1e-10, atol=1e-10,
+def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="auto", rtol=1e-10, atol=1e-10,
                         step=None, model="auto", with_rotation=False, max_nfev=None, max_wall_time=None):
     """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
 

@@ -54,6 +54,7 @@ from flatbody_env.physics import validation
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
 from flatbody_env.scene import Scene, load_scene
 
+from flatbody_env.integrators.auto import AUTO, auto_method, integrate_auto
 from flatbody_env.integrators.ladder import GAP_MIN, LADDER_RUNGS, RUNGS, RungChoice, check_rung, choose_rung, rung_model, rung_reasons
 
 FIXED_STEP_ENERGY_TOL = 1e-3
@@ -306,7 +307,7 @@ def simulate(
     *,
     t_end: float,
     times: Sequence[float] | np.ndarray | None = None,
-    method: str = "DOP853",
+    method: str = "auto",
     rtol: float = 1e-10,
     atol: float = 1e-10,
     with_rotation: bool = False,
@@ -330,7 +331,12 @@ def simulate(
         :attr:`Trajectory.initial_state`, or ask for ``times=[0, ...]``); default 101 even
         samples from 0 to t_end. At most 100 000 times.
     method : str
-        Integrator name (``flatbody methods``); default scipy ``DOP853``.
+        Integrator name (``flatbody methods``) or ``"auto"`` (the default): the fastest registered
+        method that meets rtol/atol in the chosen model (:mod:`flatbody_env.integrators.auto`:
+        ``DOP853-numba`` in the two-polar chart, ``RATTLE-kahanli6`` with a step chosen to meet
+        the tolerance in the regular chart; scipy's methods where the compiled ones do not
+        apply). ``Trajectory.method`` names what ran, ``meta["method_requested"]`` and
+        ``meta["method_reason"]`` why. Before this default, it was scipy ``DOP853``.
     rtol, atol : float
         Tolerances of adaptive methods.
     with_rotation : bool
@@ -367,7 +373,15 @@ def simulate(
         raise ValueError(f"with_rotation: must be true or false, got {with_rotation!r}")
     body = sc.body
     y0 = pack(sc.state)
-    meth = get_method(method)
+    if method == AUTO:
+        if step is not None:
+            raise ValueError("step: method='auto' runs adaptive methods (or chooses RATTLE's step itself); "
+                             "give step= only with a fixed-step method named by method=")
+        return _simulate_auto(sc, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time)
+    try:
+        meth = get_method(method)
+    except ValueError as exc:
+        raise ValueError(str(exc).replace("(allowed: ", "(allowed: auto, ", 1)) from None
     if model in LADDER_RUNGS or (model == "auto" and meth.info.adaptive and meth.info.chart != "regular" and step is None):
         low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
         if low is not None:
@@ -433,6 +447,50 @@ def simulate(
         initial_state=unpack(y0),
         initial_energy=float(H0),
         extra=choice.as_meta(),
+    )
+
+
+def _adaptive_energy_tol(energy_tol, rtol, atol, H0) -> float:
+    return float(energy_tol) if energy_tol is not None else max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+
+
+def _simulate_auto(sc: Scene, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
+    """``method="auto"``: the rung (``model``) decides the model, :mod:`flatbody_env.integrators.auto` the method."""
+    body = sc.body
+    if model in LADDER_RUNGS or model == "auto":
+        low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
+        if low is not None:
+            traj = _simulate_rung(sc, low, times_arr, rtol, atol, None, energy_tol, with_rotation, max_nfev, max_wall_time)
+            traj.extra.update({"method_requested": AUTO, "method_reason": f"auto: the {low.rung} rung's own solver ({traj.method})"})
+            return traj
+    if model == "auto":
+        choice = explain_model(y0, body, ladder=False)
+        if body.spin_convention == "paper" and choice.rung != "two-polar":
+            choice = RungChoice(rung="two-polar", invariant="spin_convention 'paper' exists in the two-polar chart only", measured=choice.measured)
+    else:
+        choice = RungChoice(rung=model, invariant=f"model={model!r} was asked for")
+    H0 = hamiltonian(y0, body)
+    tol = Tolerances(rtol=rtol, atol=atol, energy_tol=_adaptive_energy_tol(energy_tol, rtol, atol, H0), max_nfev=max_nfev,
+                     max_wall_time=max_wall_time)
+    prepended = times_arr[0] != 0.0
+    grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
+    keep = slice(1, None) if prepended else slice(None)
+    start = time.perf_counter()
+    if grid.size == 1:
+        name, meta = auto_method(choice.rung, body).method, auto_method(choice.rung, body).as_meta()
+        sol = Solution(t=grid.copy(), Y=y0[:, None].copy(), rotation=np.eye(3)[None] if with_rotation else None, nfev=0)
+    else:
+        sol, name, meta = integrate_auto(choice.rung, body, y0, grid, tol, with_rotation=with_rotation)
+    wall = time.perf_counter() - start
+    Y = sol.Y[:, keep]
+    state = unpack(Y)
+    energy = sol.stats.get("energy")
+    energy = np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])]) if energy is None else np.asarray(energy, float)[keep]
+    return Trajectory(
+        t=np.asarray(sol.t, float)[keep], state=state, energy=energy, casimir=casimir(state["s1"], state["s2"], state["s3"]),
+        p_theta=state["p_theta"].copy(), rotation=None if sol.rotation is None else sol.rotation[keep], method=name,
+        model=choice.rung, nfev=sol.nfev, wall_time=wall, scene=sc.name, initial_state=unpack(y0), initial_energy=float(H0),
+        extra={**choice.as_meta(), **meta},
     )
 
 

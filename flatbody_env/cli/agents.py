@@ -1,4 +1,5 @@
-"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job).
+"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job),
+``export-policy`` (the numpy policy that ``evaluate`` and ``demo`` run without torch).
 
 Heavy imports (torch, SB3) happen inside the handlers so that ``flatbody --help`` stays fast.
 """
@@ -60,6 +61,7 @@ def _evaluate(args) -> int:
         seed=args.seed,
         baselines=not args.no_baselines,
         progress=not args.json,
+        backend=args.backend,
     )
     if args.out:
         from pathlib import Path
@@ -75,7 +77,15 @@ def _evaluate(args) -> int:
 def _demo(args) -> int:
     from agents.demo import run_demo
 
-    return run_demo(model=args.model, seed=args.seed, out=args.out)
+    return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend)
+
+
+def _export_policy(args) -> int:
+    from agents.numpy_policy import export_policy
+
+    path = export_policy(args.model)
+    print(f"wrote {path}")
+    return 0
 
 
 def _lqr_table(args) -> int:
@@ -119,12 +129,16 @@ def register(sub) -> None:
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
+    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
+                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
     p.set_defaults(handler=_evaluate)
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
     p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
     p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
+    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
+                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
     p.set_defaults(handler=_demo)
     p = sub.add_parser("lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)")
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
@@ -132,6 +146,10 @@ def register(sub) -> None:
     p.add_argument("--n-w", type=int_at_least("n_w", 2), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)")
     p.add_argument("--workers", type=int_at_least("workers", 1), default=2, help="processes")
     p.set_defaults(handler=_lqr_table)
+
+    p = sub.add_parser("export-policy", help="export a trained agent's policy to numpy (policy.npz beside model.zip) for torch-free evaluate/demo")
+    p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
+    p.set_defaults(handler=_export_policy)
 
 
 def _bench_train(args) -> int:
@@ -144,12 +162,12 @@ def _bench_train(args) -> int:
     print(f"FlatBody share in env + LQR:             {b.flatbody_env_share:.1%} (target <= 15 %)")
     print(f"LQR action per body-step (batch, gains stored): {b.lqr_us_per_body_step:.3f} us (target <= 1)")
     print(f"wrote {args.out_dir}/train_benchmark.json, .csv, .png")
-    if args.update_docs:
+    if args.docs:
         from agents.benchmark import markdown
-        from flatbody_env.output import replace_marked_section
+        from flatbody_env.output import replace_marked_block
 
-        replace_marked_section(args.update_docs, "flatbody bench train", markdown(b))
-        print(f"updated the table in {args.update_docs}")
+        replace_marked_block(args.docs, "train", markdown(b))
+        print(f"updated the table in {args.docs}")
     return 0
 
 
@@ -160,5 +178,5 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of both runs")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
     p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
-    p.add_argument("--update-docs", default="", metavar="FILE.md", help="rewrite the table marked 'flatbody bench train' in this document")
+    p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")
     p.set_defaults(handler=_bench_train)

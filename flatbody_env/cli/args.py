@@ -161,7 +161,7 @@ def add_integration_arguments(p) -> None:
     from flatbody_env.integrators.base import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME
 
     p.add_argument("--t-end", type=positive_float("t_end", validation.T_END_MAX), metavar="T", help="final time in (0, 1e6] (default: the scene's t_end)")
-    p.add_argument("--method", default="DOP853", help="integrator (see 'flatbody methods'); default DOP853")
+    p.add_argument("--method", default="auto", help="integrator (see 'flatbody methods') or auto (default): the fastest that meets --rtol/--atol in the chosen model")
     p.add_argument("--rtol", type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="relative tolerance (adaptive methods), in [1e-16, 1]")
     p.add_argument("--atol", type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="absolute tolerance (adaptive methods), in [1e-16, 1]")
     p.add_argument("--step", type=positive_float("step", validation.T_END_MAX), default=None, metavar="H", help="step size (fixed-step methods)")

@@ -24,12 +24,12 @@ def _cmd(args) -> int:
     print(f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included)")
     print(f"batched episode error vs tight reference:   {bench.episode_error:.2e} (target <= 1e-8)")
     print(f"wrote {Path(args.out_dir) / 'env_benchmark.json'}, .csv, .png")
-    if args.update_docs:
+    if args.docs:
         from flatbody_env.env.benchmark import markdown
-        from flatbody_env.output import replace_marked_section
+        from flatbody_env.output import replace_marked_block
 
-        replace_marked_section(args.update_docs, "flatbody bench env", markdown(bench))
-        print(f"updated the tables in {args.update_docs}")
+        replace_marked_block(args.docs, "env", markdown(bench))
+        print(f"updated the tables in {args.docs}")
     return 0
 
 
@@ -42,7 +42,7 @@ def register_bench(bench_sub) -> None:
                    help="episode length of the batched FlatBody timing (default: the registered 400)")
     p.add_argument("--repeats", type=int_at_least("repeats", 1), default=5, help="timed blocks; the best is kept")
     p.add_argument("--out-dir", default="bench", help="where to write env_benchmark.json/.csv/.png")
-    p.add_argument("--update-docs", default="", metavar="FILE.md", help="rewrite the tables marked 'flatbody bench env' in this document")
+    p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the tables between <!-- bench:env --> markers in FILE.md")
     p.set_defaults(handler=_cmd)
 
 

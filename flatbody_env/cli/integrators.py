@@ -161,6 +161,9 @@ def _bench(args) -> int:
                 w.writerow(["short-step", "dt=0.05", x["method"], x["path"], "us_per_step", x["us_per_step"]])
                 if x["path"] == "env":
                     w.writerow(["short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"]])
+            for x in rep.auto:
+                w.writerow(["auto", f"{x['scene']} t={x['t_end']:g}", x["method"], x["model"], "wall_time_s", x["auto_s"]])
+                w.writerow(["auto", f"{x['scene']} t={x['t_end']:g}", "DOP853", "scipy (former default)", "wall_time_s", x.get("scipy_s")])
             for x in rep.compile_times:
                 w.writerow(["compile", "", x["method"], "first call", "seconds", x["first_call_s"]])
                 w.writerow(["compile", "", x["method"], "cached", "seconds", x["cached_s"]])
@@ -168,6 +171,16 @@ def _bench(args) -> int:
         raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
     plot_bench(json_path, png_path)
     print(f"wrote {png_path}" if args.plot_only else f"wrote {json_path}, {csv_path}, {png_path}")
+    if args.docs:
+        from analysis.integrator_bench import docs_tables
+        from flatbody_env.output import replace_marked_block
+
+        for name, table in docs_tables(json.loads(json_path.read_text(encoding="utf-8"))).items():
+            try:
+                replace_marked_block(args.docs, name, table)
+            except ValueError:
+                continue  # the page does not show this table
+            print(f"regenerated the {name} table in {args.docs}")
     return 0
 
 
@@ -204,4 +217,5 @@ def register_bench(bsub) -> None:
     b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
     b.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
+    b.add_argument("--docs", metavar="FILE.md", help="also regenerate the tables between <!-- bench:integrators-* --> markers in FILE.md")
     b.set_defaults(handler=_bench)

@@ -247,6 +247,13 @@ def _record_bench(args) -> int:
                 live_s = time.perf_counter() - start
                 live = {"steps": n, "block": args.block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
                 print(f"live Recorder.append, {n} steps in blocks of {args.block}: {live_s:.3f} s ({live_s / n * 1e6:.1f} µs/step)")
+    episode = _episode_bench(args.episode_repeats)
+    print(f"recorded env episode (400 steps, random policy): {episode['compiled_method']} carrying R {episode['compiled_s']:.3f} s, "
+          f"the former path (scipy DOP853 stepping R) {episode['former_s']:.3f} s: {episode['speedup']:.1f}x faster (same run)")
+    print(f"  its stepping alone (nothing recorded): {episode['stepping_compiled_s']:.3f} s vs {episode['stepping_former_s']:.3f} s: "
+          f"{episode['stepping_speedup']:.1f}x; the rest of a recorded episode is the recorder")
+    print(f"free scene trajectory with R (scene {scene.name}, t = {scene.t_end:g}, 1001 samples): method auto ({episode['scene_auto_method']}) "
+          f"{episode['scene_auto_s'] * 1e3:.1f} ms, scipy DOP853 {episode['scene_scipy_s'] * 1e3:.1f} ms: {episode['scene_speedup']:.1f}x")
     frame = _frame_bench(scene, args.frames)
     print(f"rgb_array frame ({frame['frames']} frames of scene {scene.name}): median {frame['median_ms']:.3f} ms, mean {frame['mean_ms']:.3f} ms — "
           + ("within" if frame["within_budget"] else "OVER") + " the 1 ms budget")
@@ -263,6 +270,7 @@ def _record_bench(args) -> int:
         "sizes": rows,
         "live": live,
         "frame": frame,
+        "episode": episode,
         "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
         "rerun_sdk": sdk_version(),
         "python": platform.python_version(),
@@ -277,7 +285,97 @@ def _record_bench(args) -> int:
     verdict = "within" if result["within_budget"] else "OVER"
     print(f"logging a {args.steps}-step trajectory: {target['median_s']:.3f} s (median of {args.repeats}) — {verdict} the 1 s budget")
     print(f"wrote {json_path} and {png_path}")
+    if args.docs:
+        from flatbody_env.output import replace_marked_block
+
+        replace_marked_block(args.docs, "recording", recording_table(result))
+        print(f"regenerated the table in {args.docs}")
     return 0
+
+
+def recording_table(result: dict) -> str:
+    """The Markdown table of docs/recording.md, from a ``recording.json`` result."""
+    sizes = {r["steps"]: r for r in result["sizes"]}
+    target = sizes[result["steps"]]
+    others = [r for n, r in sorted(sizes.items()) if n != result["steps"]]
+    ep, fr, lv, fc = result["episode"], result["frame"], result["live"], result["first_call"]
+    lines = [
+        "| what | result |",
+        "|---|---|",
+        f"| recorded env episode, 400 steps ({ep['compiled_method']} carrying R, compiled) | **{ep['compiled_s']:.3f} s** "
+        f"(median of {ep['repeats']}) |",
+        f"| the same episode on the former path (scipy DOP853 integrating R) | {ep['former_s']:.3f} s: "
+        f"**{ep['speedup']:.1f}× slower** (same run) |",
+        f"| its stepping alone (the env carrying R, nothing recorded): compiled vs the former path | {ep['stepping_compiled_s'] * 1e3:.0f} ms vs "
+        f"{ep['stepping_former_s'] * 1e3:.0f} ms: **{ep['stepping_speedup']:.0f}×** |",
+        f"| free scene with R, {ep['scene_samples']} samples: `simulate` method auto ({ep['scene_auto_method']}) vs scipy DOP853 | "
+        f"{ep['scene_auto_s'] * 1e3:.1f} ms vs {ep['scene_scipy_s'] * 1e3:.0f} ms ({ep['scene_speedup']:.0f}×) |",
+        f"| `record_trajectory`, {result['steps']} steps (budget ≤ 1 s) | **{target['median_s']:.2f} s** (min {target['min_s']:.2f} s; "
+        f"{target['file_bytes'] / 1e6:.1f} MB) |",
+    ]
+    if others:
+        counts = " / ".join(str(r["steps"]) for r in others)
+        medians = " / ".join(f"{r['median_s']:.3f}" for r in others)
+        lines.append(f"| `record_trajectory`, {counts} steps | {medians} s |")
+    if lv:
+        lines.append(f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
+                     f"({lv['us_per_step']:.0f} µs per step) |")
+    lines.append(f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |")
+    lines.append(f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
+                 f"({fr['mean_ms']:.2f} ms mean) |")
+    return "\n".join(lines)
+
+
+def _episode_bench(repeats: int) -> dict:
+    """A recorded FlatBody-v0 episode on the compiled path that carries R against the former path
+    (the whole episode re-run on scipy's DOP853 at the env's tolerance), same run; and a free
+    scene's trajectory with R by ``simulate``'s default (auto) against scipy's DOP853."""
+    import tempfile
+
+    import gymnasium as gym
+    import numpy as np
+
+    import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+    from flatbody_env.recording.wrapper import RerunRecorder
+    from flatbody_env.scene import load_scene
+    from flatbody_env.simulation import simulate
+
+    def episode(path, **kwargs):
+        env = gym.make("FlatBody-v0", track_rotation=True, **kwargs)
+        env = RerunRecorder(env, str(path)) if path is not None else env
+        rng = np.random.default_rng(0)
+        start = time.perf_counter()
+        env.reset(seed=0)
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+            done = term or trunc
+        env.close()
+        return time.perf_counter() - start, info["integrator"]["method"]
+
+    fast, slow, fast_steps, slow_steps = [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        episode(Path(tmp) / "warm.rrd")  # compiled kernels loaded, rerun imported
+        for r in range(repeats):
+            s, method = episode(Path(tmp) / f"fast-{r}.rrd")
+            fast.append(s)
+            s, _ = episode(Path(tmp) / f"slow-{r}.rrd", integrator="DOP853")
+            slow.append(s)
+            fast_steps.append(episode(None)[0])  # the same episode carrying R, nothing recorded
+            slow_steps.append(episode(None, integrator="DOP853")[0])
+    scene = load_scene("default")
+    times = np.linspace(0.0, scene.t_end, 1001)
+    auto = simulate(scene, t_end=scene.t_end, times=times, with_rotation=True)
+    auto_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True).wall_time for _ in range(repeats))
+    scipy_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time for _ in range(max(1, repeats // 2)))
+    return {
+        "compiled_method": method, "compiled_s": float(np.median(fast)), "former_s": float(np.median(slow)),
+        "speedup": float(np.median(slow) / np.median(fast)), "repeats": repeats,
+        "stepping_compiled_s": float(np.median(fast_steps)), "stepping_former_s": float(np.median(slow_steps)),
+        "stepping_speedup": float(np.median(slow_steps) / np.median(fast_steps)),
+        "scene": scene.name, "scene_samples": int(times.size), "scene_auto_method": auto.method, "scene_auto_s": float(auto_s),
+        "scene_scipy_s": float(scipy_s), "scene_speedup": float(scipy_s / auto_s),
+    }
 
 
 def _frame_bench(scene, frames: int) -> dict:
@@ -398,4 +496,7 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--frames", type=int_at_least("frames", 2), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
     p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
+    p.add_argument("--episode-repeats", type=int_at_least("episode_repeats"), default=3,
+                   help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)")
+    p.add_argument("--docs", metavar="FILE.md", help="also regenerate the table between <!-- bench:recording --> markers in FILE.md")
     p.set_defaults(handler=_record_bench)

@@ -224,7 +224,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
 
 def markdown(bench: EnvBenchmark) -> str:
-    """The docs' tables of this run (``flatbody bench env --update-docs docs/env.md`` writes them there)."""
+    """The docs' tables of this run (``flatbody bench env --docs docs/env.md`` writes them there)."""
     rows = ["| what | µs per env step | env-steps/s | ms per reset |", "|---|---|---|---|"]
     for r in bench.single:
         rows.append(f"| {r.name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | {r.ms_per_reset:.3g} |")

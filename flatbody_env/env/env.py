@@ -44,8 +44,10 @@ DEFAULT_TOLERANCE = 1e-11
 """rtol = atol of the default integrator (see :data:`DEFAULT_INTEGRATOR`)."""
 
 ROTATION_INTEGRATOR = "DOP853"
-"""Integrator used when R must be carried (rendering, recording) and the chosen one cannot;
-``info["integrator"]["method"]`` then names it."""
+"""Integrator used when R must be carried (rendering, recording) and the chosen method refuses to
+step this body at all (e.g. a compiled method with a custom potential); ``info["integrator"]["method"]``
+then names it. The compiled two-polar methods carry R themselves
+(:mod:`flatbody_env.integrators.rotation_kernels`), so rendering and recording run the method asked for."""
 
 
 

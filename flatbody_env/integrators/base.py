@@ -172,10 +172,13 @@ def get_method(name: str) -> Method:
 
 
 def available_methods() -> list[MethodInfo]:
+    """The registered methods: the scipy reference family first, then the compiled ones, each group in
+    registration order — the same list whatever module a process happened to import first."""
     from flatbody_env.integrators import _load_all
 
     _load_all()
-    return [m.info for m in _REGISTRY.values()]
+    infos = [m.info for m in _REGISTRY.values()]
+    return sorted(infos, key=lambda info: info.compiled)  # stable: keeps the registration order within each group
 
 
 @dataclass

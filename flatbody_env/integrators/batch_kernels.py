@@ -31,10 +31,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dop
 
 from flatbody_env.integrators import twopolar_kernels as _tk
 from flatbody_env.integrators import jit as _jit
+from flatbody_env.integrators.dop853_tableau import dop as _dop
 from flatbody_env.integrators.jit import jit_copy
 from flatbody_env.physics.equations import rhs_iso
 from flatbody_env.physics.potentials import potential_kernel

@@ -19,8 +19,9 @@ Fixed-step methods need ``Tolerances(step=h)`` (``simulate(..., step=h)``, ``--s
 output interval is cut into ⌈Δt/h⌉ equal steps. Adaptive ``DOP853-numba`` reads rtol/atol and
 steps exactly onto every output time. Compiled methods need a built-in potential (V1, V2, V3):
 a :class:`~flatbody_env.physics.potentials.CustomPotential` runs Python code and is refused with a
-ValueError (use the scipy methods). They do not integrate R in the two-polar chart
-(``with_rotation=True`` → ValueError; the regular-chart methods return R from the decomposition).
+ValueError (use the scipy methods). With ``with_rotation=True`` the two-polar methods carry R on
+their own steps (:mod:`.rotation_kernels`; the paper state is bit for bit the one without R); the
+regular-chart methods return R from the decomposition.
 
 Failures raise :class:`~flatbody_env.integrators.base.IntegrationError` with ``kind`` from
 :mod:`.failure` (non-finite, step-collapse, chart-singularity, domain, energy, constraint,
@@ -128,11 +129,6 @@ class CompiledTwoPolar:
         name = self.info.name
         _check_compiled_body(body, name)
         h = check_step(self.info, tol)
-        if with_rotation:
-            raise ValueError(
-                f"with_rotation: {name} integrates the two-polar state only; use a regular-chart method "
-                "(RATTLE-suzuki4 returns R) or scipy DOP853"
-            )
         if self.kind == "split" and not body.inertia.is_isotropic:
             raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
         y0 = np.array(y0, dtype=np.float64)
@@ -145,7 +141,19 @@ class CompiledTwoPolar:
         energy_tol = float(tol.energy_tol)
         if self.kind != "dop853":
             _check_fixed_budget(name, times, h, 4 if self.kind == "rk4" else self.coeffs.size, tol)
-        if self.kind == "dop853":
+        if with_rotation:
+            # the same stepping code on z = (y, vec(R)) (rotation_kernels): y bit for bit as without R
+            from flatbody_env.integrators import rotation_kernels as _rot
+
+            R0 = np.eye(3) if R0 is None else np.asarray(R0, dtype=np.float64)
+            z0 = np.concatenate([y0, R0.ravel()])
+            Z = np.empty((z0.size, times.size))
+            if self.kind == "dop853":
+                st = _rot.dop853_solve_R(z0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+            else:
+                st = _rot.fixed_solve_R(0 if self.kind == "rk4" else 1, self.coeffs, z0, times, uu, P, h, energy_tol, Z, counters, fail)
+            Y = Z[:11]
+        elif self.kind == "dop853":
             st = _tk.dop853_solve(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Y, counters, fail)
         else:
             st = _tk.fixed_solve(0 if self.kind == "rk4" else 1, self.coeffs, y0, times, uu, P, h, energy_tol, Y, counters, fail)
@@ -155,7 +163,8 @@ class CompiledTwoPolar:
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
-        return Solution(t=times.copy(), Y=Y, rotation=None, nfev=int(counters[0]), stats=stats)
+        rotation = np.ascontiguousarray(Z[11:].T).reshape(times.size, 3, 3) if with_rotation else None
+        return Solution(t=times.copy(), Y=np.ascontiguousarray(Y), rotation=rotation, nfev=int(counters[0]), stats=stats)
 
     # -- the environment seam (flatbody_env.integrators.base.make_stepper / make_batch_stepper) --
     def _check_env(self, body: Body, tol: Tolerances) -> None:
@@ -166,11 +175,13 @@ class CompiledTwoPolar:
             raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
 
     def make_stepper(self, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> "CompiledStepper":
-        """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step)."""
+        """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step).
+        It passes R through unchanged; the environment carries R with
+        :func:`flatbody_env.integrators.steppers.make_env_step` (``with_rotation=True``) instead."""
         if with_rotation:
             raise ValueError(
-                f"with_rotation: {self.info.name} does not integrate R; track the rotation with a regular-chart "
-                "method (RATTLE-suzuki4) or scipy DOP853"
+                f"with_rotation: this stepper of {self.info.name} does not integrate R; use "
+                "flatbody_env.integrators.steppers.make_env_step(..., with_rotation=True), which carries R compiled"
             )
         self._check_env(body, tol)
         return CompiledStepper(self.info.name, body, tol)

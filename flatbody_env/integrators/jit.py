@@ -24,7 +24,8 @@ writable home) the kernels are compiled in memory on first use (``cache=False``)
 failing with numba's "no locator available".
 
 Public names: :data:`kinetic_iso`, :data:`kinetic_kernel`, :data:`potential_kernel`, :data:`rhs_iso`, :data:`rhs_core`,
-:data:`rhs_kernel` (jitted twins of the physics kernels, same signatures) and
+:data:`rhs_kernel`, :data:`rotation_rate_kernel`, :data:`rhs_rotation_kernel`,
+:data:`turn_rotation_kernel` (jitted twins of the physics kernels, same signatures) and
 :func:`energy_kernel` (H = 𝒯 + V, eq. (41) of [1]).
 
 References
@@ -96,14 +97,23 @@ JIT_OPTIONS = {"cache": CACHE, "nogil": True, "error_model": "numpy"}
 inf/nan instead of raising, so failures surface as status flags)."""
 
 
-def jit_copy(func, **callees):
-    """A numba-compiled copy of the plain-Python ``func`` whose called globals ``callees`` are
-    replaced by (jitted) substitutes. ``func`` itself is left untouched."""
+def jit_copy(func, *, variant: str = "", **callees):
+    """A numba-compiled copy of the plain-Python ``func`` (or of a numba dispatcher's Python
+    function) whose called globals ``callees`` are replaced by (jitted) substitutes. ``func``
+    itself is left untouched.
+
+    ``variant``: a name suffix for a second copy of the same code object with other callees (e.g.
+    the stepping loops re-bound to the 20-entry state that carries R). numba's on-disk cache keys a
+    function by its file, line, qualified name and argument types — not by its globals — so two
+    copies of one code object under one name would load each other's machine code; the suffix
+    gives each copy its own cache entry.
+    """
+    func = getattr(func, "py_func", func)
     glob = dict(func.__globals__)
     glob.update(callees)
     clone = types.FunctionType(func.__code__, glob, func.__name__, func.__defaults__, func.__closure__)
     clone.__module__ = func.__module__
-    clone.__qualname__ = func.__qualname__
+    clone.__qualname__ = func.__qualname__ + (f"__{variant}" if variant else "")
     clone.__doc__ = func.__doc__
     return numba.njit(**JIT_OPTIONS)(clone)
 
@@ -114,6 +124,9 @@ potential_kernel = jit_copy(_potentials.potential_kernel)
 rhs_iso = jit_copy(_equations.rhs_iso, kinetic_iso=kinetic_iso)
 rhs_core = jit_copy(_equations.rhs_core, kinetic_kernel=kinetic_kernel, rhs_iso=rhs_iso)
 rhs_kernel = jit_copy(_equations.rhs_kernel, potential_kernel=potential_kernel, rhs_core=rhs_core)
+rotation_rate_kernel = jit_copy(_equations.rotation_rate_kernel)
+rhs_rotation_kernel = jit_copy(_equations.rhs_rotation_kernel, rhs_kernel=rhs_kernel, rotation_rate_kernel=rotation_rate_kernel)
+turn_rotation_kernel = jit_copy(_equations.turn_rotation_kernel)
 
 
 @numba.njit(**JIT_OPTIONS)
@@ -125,4 +138,4 @@ def energy_kernel(y, P, vel, force):
 
 
 __all__ = ["CACHE", "CACHE_DIR", "JIT_OPTIONS", "cache_location", "jit_copy", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
-           "rhs_core", "rhs_kernel", "energy_kernel"]
+           "rhs_core", "rhs_kernel", "rotation_rate_kernel", "rhs_rotation_kernel", "turn_rotation_kernel", "energy_kernel"]

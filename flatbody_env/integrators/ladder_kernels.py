@@ -33,7 +33,7 @@ import math
 
 import numba
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dop
+from flatbody_env.integrators.dop853_tableau import dop as _dop
 
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, MAX_STEPS, NON_FINITE, OK, STEP_COLLAPSE
 from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel

@@ -24,7 +24,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs, rhs_with_rotation
@@ -99,6 +98,8 @@ class _Budget:
 
 def _solve(fun, span, z0, *, tol: Tolerances, name: str, **kwargs):
     """``solve_ivp`` under the work budget of ``tol`` (``IntegrationError(kind="budget")`` past it)."""
+    from scipy.integrate import solve_ivp  # here, not at import: scipy.integrate costs ~0.5 s to import
+
     wrapped = _Budget(fun, tol)
     try:
         return solve_ivp(wrapped, span, z0, rtol=tol.rtol, atol=tol.atol, **kwargs)

@@ -8,6 +8,9 @@
   ``DOP853-numba`` with the first step guessed as dt (the env's default) and J1 = J2 the batch runs
   the fused SIMD structure-of-arrays step of :mod:`.batch_kernels` (bit for bit the scalar kernel's
   result, ~4× faster per body);
+* a :class:`CompiledRotationEnvStep` for the same methods when R must be carried (rendering,
+  recording): the same compiled stepping code on z = (y, vec(R)) (:mod:`.rotation_kernels`), the
+  paper state bit for bit the one without R;
 * a :class:`GenericEnvStep` otherwise: one :meth:`Method.integrate` call over [0, dt] with the
   controls held constant (a fresh solver per step, so an adaptive method never carries its step
   history across an action change), for any registered method, with R when asked.
@@ -148,23 +151,64 @@ class GenericEnvStep:
         return self._last
 
 
+class CompiledRotationEnvStep(CompiledEnvStep):
+    """A compiled two-polar method that also carries R (:mod:`.rotation_kernels`): one compiled call per
+    env step on z = (y, vec(R)); the paper state is bit for bit the one :class:`CompiledEnvStep` computes.
+    ``advance_batch`` (no R) is :class:`CompiledEnvStep`'s."""
+
+    carries_rotation = True
+
+    def _load(self) -> None:
+        from flatbody_env.integrators.rotation_kernels import ENV_STEP_WITH_ROTATION
+
+        super()._load()
+        self._step_R = ENV_STEP_WITH_ROTATION[self.method]
+        self._z = np.empty(20)
+        self._zout = np.empty(20)
+
+    def __getstate__(self):
+        state = super().__getstate__()
+        for key in ("_step_R", "_z", "_zout"):
+            state.pop(key, None)
+        return state
+
+    def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
+        if R is None:
+            return super().advance(y, u, dt, out, counters)
+        z, zout = self._z, self._zout
+        z[:11] = y
+        z[11:] = np.ravel(R)
+        status = self._step_R(z, u, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, zout, counters)
+        out[:] = zout[:11]
+        if R_out is not None:
+            R_out[:] = zout[11:].reshape(3, 3)
+        return status
+
+
 def make_env_step(name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False,
                   first_step: float = 0.0) -> CompiledEnvStep | GenericEnvStep:
     """The environment step of method ``name`` (module docstring).
 
+    With ``with_rotation=True`` the compiled two-polar methods carry R in their own compiled step
+    (:class:`CompiledRotationEnvStep`); other methods return R through :meth:`Method.integrate`.
     Raises ValueError for an unknown name, a step setting the method refuses, or
-    ``with_rotation=True`` for a method that cannot carry R (the compiled two-polar methods).
+    ``with_rotation=True`` for a method that cannot carry R.
     ``first_step`` is DOP853's first step guess (0 = automatic).
     """
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper
 
     meth = get_method(name)  # ValueError for an unknown name
     checker = getattr(meth, "make_stepper", None)
+    compiled_paper = body.compiled and name in ENV_METHODS and env_stepper(name).state == "paper"
+    if with_rotation and compiled_paper:
+        if checker is not None:
+            checker(body, tol)  # the method's own refusals (step, body); R is carried by the rotation kernels
+        return CompiledRotationEnvStep(name, body, tol, first_step=first_step)
     if checker is not None:
         checker(body, tol, with_rotation=with_rotation)  # the method's own refusals (step, body, R)
-    if not with_rotation and body.compiled and name in ENV_METHODS and env_stepper(name).state == "paper":
+    if not with_rotation and compiled_paper:
         return CompiledEnvStep(name, body, tol, first_step=first_step)
     return GenericEnvStep(name, body, tol, with_rotation=with_rotation)
 
 
-__all__ = ["CompiledEnvStep", "GenericEnvStep", "make_env_step"]
+__all__ = ["CompiledEnvStep", "CompiledRotationEnvStep", "GenericEnvStep", "make_env_step"]

@@ -26,6 +26,8 @@ References
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flatbody_env.physics.body import Body
@@ -158,13 +160,55 @@ def hat_paper(omega: np.ndarray) -> np.ndarray:
     return np.array([[0.0, w3, -w2], [-w3, 0.0, w1], [w2, -w1, 0.0]])
 
 
+ROTATED_STATE_SIZE = 20
+"""Size of the state z = (y, vec(R)) that carries the orientation: the eleven paper entries, then R
+row by row (z[11 + 3i + j] = R[i, j])."""
+
+
+def rotation_rate_kernel(z, vel, out):
+    """Ṙ = R W(ω) (eq. (25) of [1]) of z = (y, vec(R)) (20,) into out[11:20]; ω = vel[0:3] (scalar kernel).
+
+    W(ω) = [[0, ω3, −ω2], [−ω3, 0, ω1], [ω2, −ω1, 0]], so row i of Ṙ is
+    (−ω3 R_i1 + ω2 R_i2, ω3 R_i0 − ω1 R_i2, −ω2 R_i0 + ω1 R_i1).
+    """
+    w1 = vel[0]
+    w2 = vel[1]
+    w3 = vel[2]
+    for i in range(3):
+        r0 = z[11 + 3 * i]
+        r1 = z[12 + 3 * i]
+        r2 = z[13 + 3 * i]
+        out[11 + 3 * i] = w2 * r2 - w3 * r1
+        out[12 + 3 * i] = w3 * r0 - w1 * r2
+        out[13 + 3 * i] = w1 * r1 - w2 * r0
+
+
+def rhs_rotation_kernel(z, u, P, out, vel, force):
+    """dz/dt of z = (y, vec(R)) (20,): :func:`rhs_kernel` on y and :func:`rotation_rate_kernel` (scalar kernel)."""
+    rhs_kernel(z, u, P, out, vel, force)
+    rotation_rate_kernel(z, vel, out)
+
+
+def turn_rotation_kernel(z, axis, angle):
+    """R ← R exp(angle · W(e_axis)) in z[11:20]: the exact flow of Ṙ = R W(ω) for ω = (angle/h) e_axis
+    held constant over h (a rotation of R's columns j, k about material axis ``axis``; scalar kernel)."""
+    j = (axis + 1) % 3
+    k = (axis + 2) % 3
+    c = math.cos(angle)
+    s = math.sin(angle)
+    for i in range(3):
+        a = z[11 + 3 * i + j]
+        b = z[11 + 3 * i + k]
+        z[11 + 3 * i + j] = c * a - s * b
+        z[11 + 3 * i + k] = s * a + c * b
+
+
 def rhs_with_rotation(t: float, z: np.ndarray, u: np.ndarray | None, params: Body) -> np.ndarray:
     """dz/dt for z = (y, vec(R)) of shape (20,): eqs. (44)–(49) plus Ṙ = R W(ω) (eq. (25) of [1])."""
     y = z[:11]
-    out = np.empty(20)
+    out = np.empty(ROTATED_STATE_SIZE)
     vel = np.empty(7)
     _, gl, gm, gr = params.potential_terms(y[7], y[8], y[9])
     rhs_core(y, NO_CONTROL if u is None else u, params.kernel_params(), gl, gm, gr, out, vel, np.empty(4))
-    R = z[11:].reshape(3, 3)
-    out[11:] = (R @ hat_paper(vel[:3])).ravel()
+    rotation_rate_kernel(z, vel, out)
     return out

@@ -149,7 +149,8 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
             check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True)
             from flatbody_env.integrators import get_method
 
-            get_method(params["method"])
+            if params["method"] != "auto":
+                get_method(params["method"])
     except LimitExceeded as exc:
         raise LimitExceeded(f"params.{exc.field}", str(exc).split(": ", 1)[1]) from None
     except ValueError as exc:

@@ -96,7 +96,7 @@ class SimulateRequest(_Strict):
     times: Union[list[Finite], None] = Field(None, min_length=1, max_length=DEFAULT_LIMITS.job_samples,
                                              description="output times in [0, t_end], increasing (default: an even grid)")
     samples: Union[Count, None] = Field(None, ge=2, le=DEFAULT_LIMITS.job_samples, description="number of evenly spaced output times (default 101)")
-    method: str = Field("DOP853", max_length=64, description="integrator (GET /methods)")
+    method: str = Field("auto", max_length=64, description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
     rtol: Positive = Field(1e-10, description="relative tolerance (adaptive methods)")
     atol: Positive = Field(1e-10, description="absolute tolerance (adaptive methods)")
     step: Union[Positive, None] = Field(None, description="step size (fixed-step methods)")
@@ -133,7 +133,7 @@ class TrajectoryRequest(_Strict):
 class _IntegrationParams(_Strict):
     scene: Union[str, dict[str, Any]] = Field("default", description="a scene object or a built-in scene name")
     t_end: Union[Positive, None] = Field(None, description="final time (default: the scene's t_end)")
-    method: str = Field("DOP853", max_length=64)
+    method: str = Field("auto", max_length=64)
     rtol: Positive = 1e-10
     atol: Positive = 1e-10
     step: Union[Positive, None] = None

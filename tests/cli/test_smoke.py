@@ -90,10 +90,11 @@ CASES = {
     ("failure-study",): (["--quick", "--max-run-s", "0.2", "--methods", "RK4", "--studies", "rho", "--out", "{tmp}/fs"],
                          _files("fs/failure_study.csv", "fs/failure_study.png"), True),
     ("train",): (["--algo", "ppo", "--n-timesteps", "64", "--n-envs", "1", "--hyperparams", "n_steps=32", "batch_size=32",
-                  "--checkpoint-freq", "0", "--no-progress", "--out", "{tmp}/train"], _files("train/model.zip"), True),
+                  "--checkpoint-freq", "0", "--no-progress", "--out", "{tmp}/train"], _files("train/model.zip", "train/policy.npz"), True),
     ("evaluate",): ([MODEL, "--episodes", "1", "--no-baselines", "--json", "--out", "{tmp}/eval.json"], _files("eval.json"), False),
     ("demo",): (["--model", MODEL, "--out", "{tmp}/demo.rrd"], _files("demo.rrd"), False),
-    ("bench", "recording"): (["--steps", "50", "--sizes", "20", "--repeats", "1", "--block", "16", "--out-dir", "{tmp}/br"],
+    ("export-policy",): (["{tmp}/model"], _files("model/policy.npz"), False),
+    ("bench", "recording"): (["--steps", "50", "--sizes", "20", "--repeats", "1", "--block", "16", "--episode-repeats", "1", "--out-dir", "{tmp}/br"],
                              _files("br/recording.json", "br/recording.png"), False),
     ("bench", "env"): (["--steps", "20", "--batch", "4", "--batch-steps", "2", "--episode-steps", "3", "--repeats", "1", "--out-dir", "{tmp}/be"],
                        _files("be/env_benchmark.json", "be/env_benchmark.png"), True),
@@ -164,6 +165,10 @@ def test_command_runs(command, tmp_path, given, capsys):
     argv, check, _ = CASES[command]
     for name in ("given.json", "given.rrd"):
         (tmp_path / name).write_bytes((given / name).read_bytes())
+    if "{tmp}/model" in argv:  # a copy of the shipped model (export-policy writes beside it)
+        import shutil
+
+        shutil.copytree(MODEL, tmp_path / "model", ignore=shutil.ignore_patterns("policy.npz"))
     capsys.readouterr()
     code = main([*command, *(a.replace("{tmp}", str(tmp_path)) for a in argv)])
     out, err = capsys.readouterr()

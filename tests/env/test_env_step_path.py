@@ -65,8 +65,9 @@ def test_info_names_the_integrator_that_ran_and_its_real_nfev():
     sol = solve_ivp(lambda t, y: rhs(t, y, u, ref.body), (0.0, ref.dt), y0, method="DOP853", rtol=1e-9, atol=1e-9, dense_output=True)
     assert info["integrator"] == {"method": "DOP853", "nfev": sol.nfev}
 
-    drawn = FlatBodyEnv(render_mode="rgb_array")  # the compiled two-polar method cannot carry R
+    drawn = FlatBodyEnv(render_mode="rgb_array")  # drawing carries R in the compiled method itself
     _, reset_info = drawn.reset(seed=0)
+    assert drawn.stepping_integrator == "DOP853-numba" and drawn.stepper.compiled
     assert reset_info["integrator"] == {"method": drawn.stepping_integrator, "nfev": 0}
     assert drawn.step(np.zeros(4, dtype=np.float32))[4]["integrator"]["method"] == drawn.stepping_integrator
 

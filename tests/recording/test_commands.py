@@ -67,14 +67,28 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     import json
 
     out = tmp_path / "bench"
-    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--frames", "30", "--out-dir", str(out)]) == 0
+    page = tmp_path / "page.md"
+    page.write_text("# page\n\n<!-- bench:recording -->\nold table\n<!-- /bench:recording -->\n\nafter\n")
+    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--frames", "30",
+                 "--episode-repeats", "1", "--out-dir", str(out), "--docs", str(page)]) == 0
     result = json.loads((out / "recording.json").read_text())
+    ep = result["episode"]
+    assert ep["compiled_method"] == "DOP853-numba" and ep["scene_auto_method"] == "DOP853-numba"
+    assert ep["speedup"] == pytest.approx(ep["former_s"] / ep["compiled_s"]) and ep["stepping_former_s"] > 0
+    text = page.read_text()
+    assert "old table" not in text and text.endswith("<!-- /bench:recording -->\n\nafter\n")
+    assert f"{result['frame']['median_ms']:.2f} ms" in text and "DOP853-numba carrying R" in text
     assert [r["steps"] for r in result["sizes"]] == [20, 40]
     assert all(r["min_s"] <= r["median_s"] <= r["max_s"] and r["file_bytes"] > 0 for r in result["sizes"])
     assert result["live"]["steps"] == 40 and result["cpus"] >= 1
     assert result["frame"]["frames"] == 30 and 0 < result["frame"]["median_ms"] <= result["frame"]["p90_ms"]
     assert (out / "recording.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "wrote" in capsys.readouterr().out
+    # a page without the markers: one line naming the field, exit 2
+    (tmp_path / "plain.md").write_text("no markers\n")
+    assert main(["bench", "recording", "--steps", "20", "--sizes", "20", "--repeats", "1", "--block", "8", "--frames", "4",
+                 "--episode-repeats", "1", "--out-dir", str(out), "--docs", str(tmp_path / "plain.md")]) == 2
+    assert "docs:" in capsys.readouterr().err
 
 
 def test_record_shots_bad_input_is_one_line(tmp_path, capsys):
