@@ -140,7 +140,12 @@ def export_policy(path: str | Path | None = None) -> Path:
         trunk, head = policy.mlp_extractor.policy_net, policy.action_net
     names = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
     layers, activations = [], set()
-    for module in list(trunk) + [head]:
+    def flat(module):  # nested Sequentials (SB3 builds some MLPs that way) in order
+        if isinstance(module, torch.nn.Sequential):
+            return [leaf for child in module for leaf in flat(child)]
+        return [module]
+
+    for module in flat(trunk) + flat(head):
         if isinstance(module, torch.nn.Linear):
             layers.append((module.weight.detach().double().numpy().copy(), module.bias.detach().double().numpy().copy()))
         elif type(module) in names:

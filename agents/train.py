@@ -368,7 +368,10 @@ def train(
     (out / "run.json").write_text(json.dumps(run, indent=2) + "\n", encoding="utf-8")
     from agents.numpy_policy import export_policy
 
-    export_policy(out)  # policy.npz beside the model: evaluate/demo run it without torch
+    try:
+        export_policy(out)  # policy.npz beside the model: evaluate/demo run it without torch
+    except ValueError as exc:  # a policy the numpy evaluator cannot run: evaluate/demo fall back to SB3
+        print(f"note: no numpy policy exported ({exc}); evaluate and demo will use SB3", file=sys.stderr)
     if ckpt_dir.exists() and not keep_checkpoints:
         shutil.rmtree(ckpt_dir)
     env.close()
