@@ -17,11 +17,12 @@ def _cmd(args) -> int:
     for r in bench.single:
         print(f"{r.name:<28} {r.us_per_env_step:10.2f} µs/step  {r.env_steps_per_s:14,.0f} steps/s  (reset {r.ms_per_reset:.3f} ms)")
     for r in bench.batched:
-        print(f"{r.name:<28} {r.us_per_env_step:10.4f} µs/env-step {r.env_steps_per_s:14,.0f} env-steps/s")
+        print(f"{r.name:<38} {r.us_per_env_step:10.4f} µs/env-step {r.env_steps_per_s:14,.0f} env-steps/s")
     print(f"ratio FlatBody-v0 vs Pendulum-v1 step rate: {bench.ratio_vs_pendulum:.2f} (target >= 1.0)")
     print(f"ratio FlatBody-v0 vs Acrobot-v1 step rate:  {bench.ratio_vs_acrobot:.2f}")
     print(f"ratio FlatBody-v0 vs Pendulum-v1 reset time: {bench.reset_ratio_vs_pendulum:.2f} (target <= 5)")
-    print(f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included)")
+    print(f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included; "
+          f"{bench.threads} thread{'s' if bench.threads > 1 else ''}; one thread: {bench.ratio_batched_one_thread_vs_cartpole:.2f})")
     print(f"batched episode error vs tight reference:   {bench.episode_error:.2e} (target <= 1e-8)")
     print(f"wrote {Path(args.out_dir) / 'env_benchmark.json'}, .csv, .png")
     if args.docs:

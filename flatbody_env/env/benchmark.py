@@ -5,7 +5,8 @@ TimeLimit wrappers): ``FlatBody-v0`` against gymnasium's ``Pendulum-v1`` and ``A
 figure of merit is the ratio of ``env.step`` rates (resets are timed apart and reported, since
 ``FlatBody-v0``'s reset samples a reachable target and costs milliseconds) measured in the same run (the machine is noisy;
 absolute µs vary up to 1.8× with load). Batched: ``FlatBodyVectorEnv`` against gymnasium's
-``CartPoleVectorEnv`` at N = 1024 in env-steps per second, plus the batched env's episode error
+``CartPoleVectorEnv`` at N = 1024 in env-steps per second (the vector env with its default threads and
+with one thread, timed in alternation with CartPole), plus the batched env's episode error
 against a tight reference (scipy DOP853, rtol = atol = 1e-13, restarted every step with the same
 actions). Each rate is the best of ``repeats`` timed blocks. The batched FlatBody figure includes
 resets: a timed block is one whole episode of every body at the registered length plus the step that
@@ -44,6 +45,10 @@ class EnvBenchmark:
     integrator: str
     reset_ratio_vs_pendulum: float = float("nan")
     """ms per ``FlatBody-v0`` reset / ms per ``Pendulum-v1`` reset (target ≤ 5)."""
+    ratio_batched_one_thread_vs_cartpole: float = float("nan")
+    """The batched ratio with ``num_threads=1``."""
+    threads: int = 1
+    """Threads of the batched env's default (one per available core, at most one per 256 bodies)."""
 
 
 def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> tuple[float, float]:
@@ -77,40 +82,52 @@ def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> tuple[float
     return best, float(np.median(resets))
 
 
-def _time_batched(make, n: int, steps: int, repeats: int) -> float:
-    env = make()
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    actions = env.action_space.sample() if not hasattr(env.single_action_space, "low") else rng.uniform(-1, 1, size=env.action_space.shape).astype(np.float32)
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
-            env.step(actions)
-        best = min(best, (time.perf_counter() - start) / (steps * n))
-    env.close()
-    return best
-
-
-def _time_episodes(make, n: int, repeats: int) -> float:
-    """Seconds per env-step of whole episode cycles: each timed block is one episode of every body
-    (``max_episode_steps`` steps from an autoreset) plus the step that autoresets them all, so resets
-    are included at the default episode length."""
-    env = make()
-    env.reset(seed=0)
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, size=env.action_space.shape).astype(np.float32)
+def _episode_block(env, actions) -> float:
+    """Seconds per env-step of one whole episode cycle: ``max_episode_steps`` steps from an autoreset
+    plus the step that autoresets every body (resets included at the default episode length)."""
     steps = env.max_episode_steps + 1
-    for _ in range(steps):  # warm up (compiles) and end at an autoreset
+    start = time.perf_counter()
+    for _ in range(steps):
         env.step(actions)
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(steps):
-            env.step(actions)
-        best = min(best, (time.perf_counter() - start) / (steps * n))
-    env.close()
-    return best
+    return (time.perf_counter() - start) / (steps * env.num_envs)
+
+
+def _cartpole_block(env, actions, steps: int) -> float:
+    start = time.perf_counter()
+    for _ in range(steps):
+        env.step(actions)
+    return (time.perf_counter() - start) / (steps * env.num_envs)
+
+
+def _time_batched_side_by_side(n: int, episode_steps: int, cartpole_steps: int, rounds: int, progress) -> tuple[float, float, float, int]:
+    """(s per env-step of FlatBodyVectorEnv with its default threads, with one thread, of CartPoleVectorEnv; the
+    default's thread count). The three are timed in alternation, ``rounds`` blocks each (best kept), so
+    that the machine's load falls on all of them alike."""
+    from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
+
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    rng = np.random.default_rng(0)
+    fb = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps)
+    fb1 = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps, num_threads=1)
+    cp = CartPoleVectorEnv(num_envs=n)
+    actions = rng.uniform(-1, 1, size=fb.action_space.shape).astype(np.float32)
+    cp_actions = cp.action_space.sample()
+    for env in (fb, fb1):
+        env.reset(seed=0)
+        _episode_block(env, actions)  # warm up (compiles) and end at an autoreset
+    cp.reset(seed=0)
+    _cartpole_block(cp, cp_actions, cartpole_steps)
+    best = [np.inf, np.inf, np.inf]
+    for _ in range(rounds):
+        best[0] = min(best[0], _episode_block(fb, actions))
+        best[1] = min(best[1], _episode_block(fb1, actions))
+        best[2] = min(best[2], _cartpole_block(cp, cp_actions, cartpole_steps))
+        progress()
+    threads = fb.num_threads
+    for env in (fb, fb1, cp):
+        env.close()
+    return best[0], best[1], best[2], threads
 
 
 def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwargs) -> float:
@@ -148,13 +165,11 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
 
     episode_steps = episode_steps or MAX_EPISODE_STEPS
     import gymnasium as gym
-    from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
     from tqdm import tqdm
 
     from flatbody_env.env.env import DEFAULT_INTEGRATOR
-    from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
-    tasks = ["FlatBody-v0", "Pendulum-v1", "Acrobot-v1", "batched FlatBody", "batched CartPole", "episode error"]
+    tasks = ["FlatBody-v0", "Pendulum-v1", "Acrobot-v1", "batched FlatBody vs CartPole", "episode error"]
     bar = tqdm(tasks, desc="bench env", disable=not progress)
     single: list[StepRate] = []
     results = {}
@@ -163,14 +178,16 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
         if task in ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1"):
             s, r = _time_single(task, steps, repeats)
             single.append(StepRate(task, 1, s * 1e6, 1.0 / s, r * 1e3))
-        elif task == "batched FlatBody":
-            results["fb"] = _time_episodes(lambda: FlatBodyVectorEnv(num_envs=batch, max_episode_steps=episode_steps), batch, max(1, repeats // 2))
-        elif task == "batched CartPole":
-            results["cp"] = _time_batched(lambda: CartPoleVectorEnv(num_envs=batch), batch, batch_steps * 10, repeats)
+        elif task == "batched FlatBody vs CartPole":
+            rounds = max(2, repeats // 2 + 1)
+            results["fb"], results["fb1"], results["cp"], results["threads"] = _time_batched_side_by_side(
+                batch, episode_steps, batch_steps * 10, rounds, lambda: bar.set_postfix_str(task))
         else:
             results["err"] = episode_error()
+    t = results["threads"]
     batched = [
-        StepRate(f"FlatBodyVectorEnv (N={batch})", batch, results["fb"] * 1e6, 1.0 / results["fb"]),
+        StepRate(f"FlatBodyVectorEnv (N={batch}, {t} thread{'s' if t > 1 else ''})", batch, results["fb"] * 1e6, 1.0 / results["fb"]),
+        StepRate(f"FlatBodyVectorEnv (N={batch}, 1 thread)", batch, results["fb1"] * 1e6, 1.0 / results["fb1"]),
         StepRate(f"CartPoleVectorEnv (N={batch})", batch, results["cp"] * 1e6, 1.0 / results["cp"]),
     ]
     by = {r.name: r for r in single}
@@ -179,7 +196,9 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
         batched=batched,
         ratio_vs_pendulum=by["Pendulum-v1"].us_per_env_step / by["FlatBody-v0"].us_per_env_step,
         ratio_vs_acrobot=by["Acrobot-v1"].us_per_env_step / by["FlatBody-v0"].us_per_env_step,
-        ratio_batched_vs_cartpole=batched[0].env_steps_per_s / batched[1].env_steps_per_s,
+        ratio_batched_vs_cartpole=batched[0].env_steps_per_s / batched[2].env_steps_per_s,
+        ratio_batched_one_thread_vs_cartpole=batched[1].env_steps_per_s / batched[2].env_steps_per_s,
+        threads=t,
         episode_error=results["err"],
         integrator=DEFAULT_INTEGRATOR,
         reset_ratio_vs_pendulum=by["FlatBody-v0"].ms_per_reset / by["Pendulum-v1"].ms_per_reset,
@@ -229,14 +248,16 @@ def markdown(bench: EnvBenchmark) -> str:
     for r in bench.single:
         rows.append(f"| {r.name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | {r.ms_per_reset:.3g} |")
     for r in bench.batched:
-        note = " (resets included)" if r.name.startswith("FlatBody") else ""
-        rows.append(f"| {r.name}{note} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | — |")
+        note = ", resets included" if r.name.startswith("FlatBody") else ""
+        name = r.name[:-1] + note + ")" if note else r.name
+        rows.append(f"| {name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | — |")
     ok = lambda x, bound, le=False: "met" if (x <= bound if le else x >= bound) else "missed"  # noqa: E731
     rows += ["", "| ratio (same run) | measured | target |", "|---|---|---|",
              f"| `FlatBody-v0` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
              f"| `FlatBody-v0` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
              f"| `FlatBody-v0` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
-             f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
-             f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
+             f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included, default: {bench.threads} "
+             f"thread{'s' if bench.threads > 1 else ''}) | **{bench.ratio_batched_vs_cartpole:.2f}** | ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
+             f"| the same with `num_threads=1` | {bench.ratio_batched_one_thread_vs_cartpole:.2f} | — |",
              f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |"]
     return "\n".join(rows) + "\n"

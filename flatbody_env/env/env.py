@@ -28,7 +28,7 @@ from flatbody_env.env.task import (
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.integrators.steppers import make_env_step
 from flatbody_env.physics.body import Body, default_body
-from flatbody_env.physics.equilibria import StationaryEllipse
+from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
 from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE, pack, unpack, validate_state
 
 DEFAULT_INTEGRATOR = "DOP853-numba"
@@ -246,6 +246,8 @@ class FlatBodyEnv(gym.Env):
         self._y = np.zeros(STATE_SIZE)
         self._R: np.ndarray | None = np.eye(3) if self.track_rotation else None
         self._target: StationaryEllipse | None = None
+        self._target_shape: tuple[float, float, float] | None = None  # (λ*, μ*, sign) of a target drawn by the sampler, built on demand
+        self._sampler = None
         self._tvec = np.zeros(4)
         self.time = 0.0
 
@@ -266,8 +268,22 @@ class FlatBodyEnv(gym.Env):
         return None if self._R is None else self._R.copy()
 
     @property
+    def sampler(self):
+        """The :class:`~flatbody_env.env.sampling.EpisodeSampler` of this configuration (compiled when the
+        stepper is), which draws a reset's target and initial state without Python per draw."""
+        if self._sampler is None:
+            from flatbody_env.env import sampling
+            from flatbody_env.env.sampling import EpisodeSampler
+
+            self._sampler = EpisodeSampler(self.task, self.body, self.limits, self.control, self.kernels if self.stepper.compiled else sampling)
+        return self._sampler
+
+    @property
     def target(self) -> dict[str, float]:
         """The target stationary ellipse: lambda, mu, rho, s3, p_theta, omega3, theta_dot, energy."""
+        if self._target is None and self._target_shape is not None:
+            lam, mu, sign = self._target_shape
+            self._target = stationary_from_shape(self.body, lam, mu, branch="circulation", sign=sign)
         t = self._target
         if t is None:
             return {}
@@ -336,8 +352,19 @@ class FlatBodyEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        self._y, self._target = self.sample_episode(self.np_random, options)
-        self._tvec = target_vector(self._target)
+        if not options and self.sampler.applies:  # the same draws as sample_episode, through the sampler's kernels
+            Y = np.empty((STATE_SIZE, 1))
+            tg = self.sampler.sample([self.np_random], Y, [0])[0]
+            y = Y[:, 0].copy()
+            left = self.left_domain(y)
+            if left:
+                raise ValueError(f"options.state: starts outside the domain ({left})")
+            self._y, self._target, self._target_shape = y, None, (float(tg[0]), float(tg[1]), float(tg[5]))
+            self._tvec = tg[:4].copy()
+        else:
+            self._y, self._target = self.sample_episode(self.np_random, options)
+            self._target_shape = None
+            self._tvec = target_vector(self._target)
         self._R = np.eye(3) if self.track_rotation else None
         self.time = 0.0
         return self.observe(self._y, self._tvec)
@@ -353,7 +380,7 @@ class FlatBodyEnv(gym.Env):
         return self._a.copy(), self._u.copy()
 
     def step(self, action):
-        if self._target is None:
+        if self._target is None and self._target_shape is None:
             raise RuntimeError("FlatBodyEnv: call reset() before step()")
         k = self.kernels
         a = np.asarray(action, dtype=np.float64)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 
 from flatbody_env.env.task import CFG_SIZE, DOMAIN_CODES, domain_code, observe_kernel, score_kernel
-from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
 from flatbody_env.physics.potentials import potential_kernel
 
 
@@ -100,6 +100,54 @@ def post_step_batch(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
             SC[i, k] = sck[i]
 
 
+def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, ACT2, Tt, vel, force, yk):
+    """:func:`post_step_batch`, bit for bit, in loops over the N bodies that numba vectorises.
+
+    The decision (domain, kept state) runs lane by lane as :func:`post_step` does; then the energy
+    (:func:`~flatbody_env.physics.hamiltonian.kinetic_iso` and the potential on scalars for J1 = J2,
+    :func:`~flatbody_env.physics.hamiltonian.kinetic_kernel` per body otherwise) and the Casimir in one
+    loop over lanes, the reward terms and the distance by the task's
+    :func:`~flatbody_env.env.task.score_kernel` on the whole (11, N) array (it is written for both),
+    and the observation by :func:`~flatbody_env.env.task.observe_kernel` per body. Same arrays as
+    :func:`post_step_batch`; work: ``ACT2`` (N,), ``Tt`` (4, N), ``vel`` (7,), ``force`` (4,), ``yk`` (11,).
+    """
+    n = Y_old.shape[1]
+    for k in range(n):
+        code = 0
+        if status[k] == 0:
+            code = domain_code(Y_new[:, k], cfg)
+        ended = 1 if (status[k] != 0 or code != 0) else 0
+        ENDED[k] = ended
+        SC[3, k] = float(code)
+        act = 0.0
+        for i in range(n_act):
+            act += A[k, i] * A[k, i]
+        ACT2[k] = act
+        for i in range(4):
+            Tt[i, k] = T[k, i]
+    for i in range(11):
+        for k in range(n):
+            Y_out[i, k] = Y_old[i, k] if ENDED[k] else Y_new[i, k]
+    SC[0] = score_kernel(Y_out, Tt, ACT2, ENDED, cfg, P, TERMS)
+    J = P[0]
+    J3 = P[2]
+    if P[0] == P[1]:
+        for k in range(n):
+            v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], Y_out[7, k], Y_out[8, k], Y_out[9, k])
+            kin = kinetic_iso(Y_out[0, k], Y_out[1, k], Y_out[2, k], Y_out[3, k], Y_out[4, k], Y_out[5, k], Y_out[6, k], Y_out[7, k],
+                              Y_out[8, k], Y_out[9, k], J, J3)
+            SC[1, k] = kin[0] + v
+    else:
+        for k in range(n):
+            for i in range(11):
+                yk[i] = Y_out[i, k]
+            v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], yk[7], yk[8], yk[9])
+            SC[1, k] = kinetic_kernel(yk, P, vel, force) + v
+    for k in range(n):
+        SC[2, k] = Y_out[0, k] * Y_out[0, k] + Y_out[1, k] * Y_out[1, k] + Y_out[2, k] * Y_out[2, k]
+        observe_kernel(Y_out[:, k], T[k], OBS[k])
+
+
 def controls_kernel(action, mask, limits, a_out, u_out):
     """Clip the action to [−1, 1] into ``a_out`` and scale the driven controls into ``u_out`` (4,).
 
@@ -126,11 +174,32 @@ def controls_kernel(action, mask, limits, a_out, u_out):
 
 
 def controls_batch(A, mask, limits, A_out, U_out):
-    """:func:`controls_kernel` for N actions: ``A``, ``A_out`` (N, n); ``U_out`` (4, N). Returns False if any is not finite."""
-    for k in range(A.shape[0]):
-        if not controls_kernel(A[k], mask, limits, A_out[k], U_out[:, k]):
-            return False
+    """:func:`controls_kernel` for N actions: ``A``, ``A_out`` (N, n); ``U_out`` (4, N). Returns False if any is not finite.
+
+    The same clipping and scaling, control by control over all bodies (loops numba vectorises)."""
+    n = A.shape[0]
+    m = A.shape[1]
+    for k in range(n):
+        for i in range(m):
+            if not math.isfinite(A[k, i]):
+                return False
+    driven = 0
+    for j in range(4):
+        if mask[j]:
+            driven += 1
+    for k in range(n):
+        for i in range(m):
+            A_out[k, i] = min(1.0, max(-1.0, A[k, i])) if driven > 0 else 0.0
+    c = 0
+    for j in range(4):
+        if mask[j]:
+            for k in range(n):
+                U_out[j, k] = A_out[k, c] * limits[j]
+            c += 1
+        else:
+            for k in range(n):
+                U_out[j, k] = 0.0
     return True
 
 
-__all__ = ["CFG_SIZE", "DOMAIN_CODES", "controls_batch", "controls_kernel", "domain_code", "post_step", "post_step_batch"]
+__all__ = ["CFG_SIZE", "DOMAIN_CODES", "controls_batch", "controls_kernel", "domain_code", "post_step", "post_step_batch", "post_step_lanes"]

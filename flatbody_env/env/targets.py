@@ -126,43 +126,20 @@ class SettlingRateTable:
 
     def decide(self, lam: float, aspect: float, threshold: float) -> int:
         """:data:`ACCEPT`, :data:`REJECT`, :data:`ACCEPT_IF_STABLE` (an edge cell: accept if a stable
-        ellipse exists at this shape) or :data:`UNSURE` (run the exact test) (module docstring)."""
-        l0, a0 = self._l0, self._a0
-        x = (lam - l0) / self._dl
-        y = (aspect - a0) / self._da
-        i = min(max(int(math.floor(x)), 0), self._nl - 2)
-        j = min(max(int(math.floor(y)), 0), self._na - 2)
-        if self._invalid[j][i]:
-            return REJECT
-        m = self._margin[j][i]
-        if m == math.inf:
-            lo, hi = self._edge_lo[j][i], self._edge_hi[j][i]
-            if lo != lo:  # no stable ellipse was sampled in this edge cell
-                return UNSURE
-            pad = EDGE_SAFETY * (hi - lo) + MARGIN_FLOOR
-            if lo - pad >= threshold:
-                return ACCEPT_IF_STABLE
-            if hi + pad < threshold:
-                return REJECT
-            return UNSURE
-        fx, fy = x - i, y - j
-        q = self._refined[j][i]
-        if q >= 0:  # a cell crossed by the default threshold: its sub-grid
-            x, y = fx * FINE, fy * FINE
-            i = min(int(x), FINE - 1)
-            j = min(int(y), FINE - 1)
-            fx, fy = x - i, y - j
-            r = self._fine_rate[q]
-            m = self._fine_margin[q][j][i]
-        else:
-            r = self._rate
-        r_hat = ((1 - fx) * (1 - fy) * r[j][i] + fx * (1 - fy) * r[j][i + 1]
-                 + (1 - fx) * fy * r[j + 1][i] + fx * fy * r[j + 1][i + 1])
-        if r_hat - m >= threshold:
-            return ACCEPT
-        if r_hat + m < threshold:
-            return REJECT
-        return UNSURE
+        ellipse exists at this shape) or :data:`UNSURE` (run the exact test) (module docstring;
+        :func:`decide_kernel` on plain-float copies of the arrays)."""
+        return decide_kernel(lam, aspect, threshold, self._grid, self._rate, self._margin, self._invalid, self._edge_lo, self._edge_hi,
+                             self._refined, self._fine_rate, self._fine_margin)
+
+    def kernel_arrays(self) -> tuple:
+        """The arrays :func:`decide_kernel` reads, as numpy arrays (for the compiled reset):
+        ``grid`` (l0, a0, dl, da, n_λ, n_a), ``rate``, ``margin``, ``invalid`` (uint8), ``edge_lo``,
+        ``edge_hi``, ``refined``, ``fine_rate``, ``fine_margin``."""
+        return (np.array(self._grid, dtype=np.float64), np.ascontiguousarray(self.rate, dtype=np.float64),
+                np.ascontiguousarray(self.margin, dtype=np.float64), np.ascontiguousarray(self.invalid, dtype=np.uint8),
+                np.ascontiguousarray(self.edge_lo, dtype=np.float64), np.ascontiguousarray(self.edge_hi, dtype=np.float64),
+                np.ascontiguousarray(self.refined, dtype=np.int64), np.ascontiguousarray(self.fine_rate, dtype=np.float64),
+                np.ascontiguousarray(self.fine_margin, dtype=np.float64))
 
     def __post_init__(self) -> None:
         # plain-float copies for the per-draw lookup (numpy scalar indexing costs more than the arithmetic)
@@ -174,12 +151,8 @@ class SettlingRateTable:
         object.__setattr__(self, "_refined", self.refined.tolist())
         object.__setattr__(self, "_fine_rate", self.fine_rate.tolist())
         object.__setattr__(self, "_fine_margin", self.fine_margin.tolist())
-        object.__setattr__(self, "_l0", float(self.lambdas[0]))
-        object.__setattr__(self, "_a0", float(self.aspects[0]))
-        object.__setattr__(self, "_dl", float(self.lambdas[1] - self.lambdas[0]))
-        object.__setattr__(self, "_da", float(self.aspects[1] - self.aspects[0]))
-        object.__setattr__(self, "_nl", len(self.lambdas))
-        object.__setattr__(self, "_na", len(self.aspects))
+        object.__setattr__(self, "_grid", [float(self.lambdas[0]), float(self.aspects[0]), float(self.lambdas[1] - self.lambdas[0]),
+                                           float(self.aspects[1] - self.aspects[0]), float(len(self.lambdas)), float(len(self.aspects))])
 
     # --- file -----------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
@@ -201,6 +174,55 @@ class SettlingRateTable:
             return cls(lambdas=f["lambdas"], aspects=f["aspects"], rate=f["rate"], margin=f["margin"], invalid=f["invalid"],
                        edge_lo=f["edge_lo"], edge_hi=f["edge_hi"], refined=f["refined"], fine_rate=f["fine_rate"],
                        fine_margin=f["fine_margin"], meta=meta)
+
+
+def decide_kernel(lam, aspect, threshold, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin):
+    """:meth:`SettlingRateTable.decide` on the table's arrays (plain floats: the same source runs on
+    nested lists in Python and compiled on numpy arrays at the environment's reset).
+
+    ``grid`` = (λ₀, a₀, Δλ, Δa, n_λ, n_a); the arrays are the table's fields of the same names
+    (indexed ``[j][i]``: aspect row j, λ column i). Returns :data:`ACCEPT`, :data:`REJECT`,
+    :data:`ACCEPT_IF_STABLE` or :data:`UNSURE`.
+    """
+    x = (lam - grid[0]) / grid[2]
+    y = (aspect - grid[1]) / grid[3]
+    i = min(max(int(math.floor(x)), 0), int(grid[4]) - 2)
+    j = min(max(int(math.floor(y)), 0), int(grid[5]) - 2)
+    if invalid[j][i]:
+        return REJECT
+    m = margin[j][i]
+    if m == math.inf:
+        lo = edge_lo[j][i]
+        hi = edge_hi[j][i]
+        if lo != lo:  # no stable ellipse was sampled in this edge cell
+            return UNSURE
+        pad = EDGE_SAFETY * (hi - lo) + MARGIN_FLOOR
+        if lo - pad >= threshold:
+            return ACCEPT_IF_STABLE
+        if hi + pad < threshold:
+            return REJECT
+        return UNSURE
+    fx = x - i
+    fy = y - j
+    q = refined[j][i]
+    if q >= 0:  # a cell crossed by the default threshold: its sub-grid
+        x = fx * FINE
+        y = fy * FINE
+        i = min(int(x), FINE - 1)
+        j = min(int(y), FINE - 1)
+        fx = x - i
+        fy = y - j
+        r = fine_rate[q]
+        m = fine_margin[q][j][i]
+    else:
+        r = rate
+    r_hat = ((1 - fx) * (1 - fy) * r[j][i] + fx * (1 - fy) * r[j][i + 1]
+             + (1 - fx) * fy * r[j + 1][i] + fx * fy * r[j + 1][i + 1])
+    if r_hat - m >= threshold:
+        return ACCEPT
+    if r_hat + m < threshold:
+        return REJECT
+    return UNSURE
 
 
 def _rates(args) -> list[float]:

@@ -99,6 +99,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flatbody_env.env import targets as _targets
+from flatbody_env.env.sampling import initial_state_kernel
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
@@ -179,11 +180,10 @@ class ReachStationaryEllipse:
         every target when the controls cannot stabilise any target at linear order (``control``
         without τ3 or without f_ϱ: the filter does not apply) or when the filter is off (0).
         """
-        mask = control_mask(control)
-        if self.min_settling_rate == 0 or not (mask[2] and mask[3]):
+        if not self.filter_applies(control):
             return True
         y = target_state(target.lam, target.mu, target.rho, target.s3, target.p_theta)
-        return settling_rate(body, y, limits, mask) >= self.min_settling_rate
+        return settling_rate(body, y, limits, control_mask(control)) >= self.min_settling_rate
 
     def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
                       control: str = "torque+dilatation") -> StationaryEllipse:
@@ -193,7 +193,7 @@ class ReachStationaryEllipse:
         table applies (:attr:`settling_table`, :mod:`flatbody_env.env.targets`) it answers the test
         without a Riccati solve, and the exact test runs only where the table is unsure.
         """
-        table = self._table(body, limits, control)
+        table = self.table_for(body, limits, control)
         thr = self.min_settling_rate
         (l0, l1), (a0, a1) = self.target_lambda, self.target_aspect
         for _ in range(500):
@@ -221,7 +221,12 @@ class ReachStationaryEllipse:
             "found for this body in the target ranges"
         )
 
-    def _table(self, body: Body, limits, control: str):
+    def filter_applies(self, control: str) -> bool:
+        """Whether the reachability filter applies (:meth:`reachable`): on, and both τ3 and f_ϱ driven."""
+        mask = control_mask(control)
+        return self.min_settling_rate != 0 and bool(mask[2] and mask[3])
+
+    def table_for(self, body: Body, limits, control: str):
         """The settling-rate table when it answers the filter here, else None (every draw solves)."""
         if not self.settling_table or self.min_settling_rate == 0 or control != "torque+dilatation":
             return None
@@ -253,26 +258,13 @@ class ReachStationaryEllipse:
 
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""
-        n = self.initial_noise
         torque = "torque" in control
-        # one call for all draws, in the order below: the same stream and values as one uniform(−n, n)
-        # per draw (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
-        u = rng.random(10 if torque else 9).tolist()
-        w = n - -n
-        d = [-n + w * x for x in u]
-        s3t = target.s3
-        scale = max(abs(s3t), 0.1)
-        s1, s2 = d[0] * scale, d[1] * scale
-        if torque:
-            s3 = s3t * (1.0 + d[2])
-            d = d[3:]
-        else:  # |s|² conserved: stay on the target's sphere |s| = |s3*|
-            s3 = math.copysign(math.sqrt(max(s3t * s3t - s1 * s1 - s2 * s2, 0.0)), s3t)
-            d = d[2:]
-        lam = target.lam * math.exp(d[3])
-        pi = math.pi
-        return np.array([s1, s2, s3, target.p_theta, d[0], d[1], d[2], lam, min(target.mu * math.exp(d[4]), 0.95 * lam),
-                         target.rho * math.exp(d[5]), -pi + (pi - -pi) * u[-1]])
+        # one call for all draws: the same stream and values as one uniform(−n, n) per draw
+        # (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
+        y = np.empty(11)
+        initial_state_kernel(rng.random(10 if torque else 9), self.initial_noise, torque, target.lam, target.mu, target.rho, target.s3,
+                             target.p_theta, y)
+        return y
 
     # --- kernel configuration ---------------------------------------------------------------------
     def kernel_config(self, *, stretch_bounds: tuple[float, float], rho_bounds: tuple[float, float],

@@ -4,11 +4,16 @@ A ``step`` is the single env's step path for N bodies at once: the actions are c
 by :func:`flatbody_env.env.kernels.controls_batch`, the seam's stepper
 (:func:`flatbody_env.integrators.steppers.make_env_step`) advances all N bodies in one call
 (structure-of-arrays; compiled where the method has a compiled environment stepper), the
-bookkeeping :func:`flatbody_env.env.kernels.post_step_batch` checks the domain, observes and scores
+bookkeeping :func:`flatbody_env.env.kernels.post_step_lanes` checks the domain, observes and scores
 all N, and :func:`flatbody_env.env.env.build_info` builds the infos. It uses the single env only
 through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.sample_episode`,
 :meth:`~flatbody_env.env.env.FlatBodyEnv.observe`, ``stepper``, ``kernels``, ``kernel_params``,
 ``kernel_config``, ``left_domain``).
+
+Large batches are split across threads (``num_threads``; by default one per available core, at
+least :data:`LANES_PER_THREAD` bodies each): the compiled stepper and bookkeeping release the GIL,
+each thread advances and scores its own contiguous slice of bodies with its own work arrays, and
+the result does not depend on the split (each body's arithmetic is its own; tested).
 
 It truncates by itself after ``max_episode_steps`` and autoresets in Gymnasium's default
 NEXT_STEP mode (the step after a body's episode ended resets that body: its action is ignored,
@@ -23,6 +28,9 @@ rollouts step for step (tested).
 
 from __future__ import annotations
 
+import copy
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -36,6 +44,20 @@ from flatbody_env.env.task import OBSERVATION_SIZE, REWARD_TERMS, target_vector
 from flatbody_env.physics.state import STATE_SIZE
 
 
+LANES_PER_THREAD = 256
+"""Fewest bodies per thread of the automatic split (below that a thread costs more than it saves)."""
+MAX_THREADS = 64
+"""Largest ``num_threads`` accepted."""
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 class FlatBodyVectorEnv(VectorEnv):
     """N copies of :class:`~flatbody_env.env.env.FlatBodyEnv` in one batched simulation.
 
@@ -47,6 +69,9 @@ class FlatBodyVectorEnv(VectorEnv):
         Truncation horizon (400 = t 20 at dt 0.05, as registered).
     autoreset_mode : AutoresetMode
         ``NEXT_STEP`` (default, Gymnasium's default) or ``SAME_STEP`` (module docstring).
+    num_threads : int or None
+        Threads that step the bodies (1 ... :data:`MAX_THREADS`); None: one per available core, at
+        most one per :data:`LANES_PER_THREAD` bodies, 1 when the integrator does not run compiled.
     **kwargs
         The keyword arguments of :class:`~flatbody_env.env.env.FlatBodyEnv` (``render_mode`` and
         ``track_rotation`` are not supported here).
@@ -60,7 +85,7 @@ class FlatBodyVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = None, **kwargs: Any) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs: must be an integer >= 1, got {num_envs!r}")
         if not isinstance(max_episode_steps, int) or max_episode_steps < 1:
@@ -71,6 +96,8 @@ class FlatBodyVectorEnv(VectorEnv):
             raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}") from None
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}")
+        if num_threads is not None and (not isinstance(num_threads, int) or isinstance(num_threads, bool) or not 1 <= num_threads <= MAX_THREADS):
+            raise ValueError(f"num_threads: must be an integer in [1, {MAX_THREADS}] or None, got {num_threads!r}")
         if kwargs.get("render_mode") is not None or kwargs.get("track_rotation"):
             raise ValueError("render_mode: FlatBodyVectorEnv does not render; use FlatBody-v0 for frames")
         self.metadata = {**self.metadata, "autoreset_mode": mode}
@@ -110,6 +137,21 @@ class FlatBodyVectorEnv(VectorEnv):
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._blank = np.full(num_envs, "", dtype=object)
         self._mask_u8 = self.single_env.mask.astype(np.uint8)
+        if not self.stepper.compiled:
+            threads = 1
+        elif num_threads is None:
+            threads = max(1, min(available_cores(), num_envs // LANES_PER_THREAD))
+        else:
+            threads = min(num_threads, num_envs)
+        self.num_threads = threads
+        """Threads that step the bodies (1: the calling thread alone)."""
+        edges = np.linspace(0, num_envs, threads + 1).round().astype(int)
+        self._slices = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+        self._steppers = [self.stepper] + [copy.deepcopy(self.stepper) for _ in range(threads - 1)]
+        self._lane_works = [(np.empty(sl.stop - sl.start), np.empty((4, sl.stop - sl.start)), np.empty(7), np.empty(4), np.empty(STATE_SIZE))
+                            for sl in self._slices]
+        self._pool: ThreadPoolExecutor | None = None
+        self._pool_pid = 0
 
     # --- public state ---------------------------------------------------------------------------------
     @property
@@ -142,6 +184,51 @@ class FlatBodyVectorEnv(VectorEnv):
         sc[0, i], sc[1, i], sc[2, i] = info["distance"], info["energy"], info["casimir"]
         return obs
 
+    def _reset_many(self, idx: np.ndarray, options: dict[str, Any] | None, sc: np.ndarray, obs: np.ndarray) -> None:
+        """Reset the bodies ``idx`` exactly as single envs would (their scalars into ``sc[:, idx]``, their
+        observations into ``obs[idx]``): through the episode sampler's kernels for all of them at once
+        where it applies (:class:`~flatbody_env.env.sampling.EpisodeSampler`), else one by one."""
+        if idx.size == 0:
+            return
+        sampler = self.single_env.sampler
+        if options or not sampler.applies:
+            for i in idx:
+                obs[i] = self._reset_one(int(i), options, sc)
+            return
+        TG = sampler.sample([self._rngs[i] for i in idx], self._Ys, idx)
+        self._T[idx] = TG[:, :4]
+        self._steps[idx] = 0
+        m = idx.size
+        Y = np.ascontiguousarray(self._Ys[:, idx])
+        p = self.single_env
+        OBS, SC, TERMS = np.empty((m, OBSERVATION_SIZE), dtype=np.float32), np.empty((4, m)), np.empty((len(REWARD_TERMS), m))
+        self._kernels.post_step_batch(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
+                                      p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), *self._work)
+        if np.any(SC[3] != 0):
+            raise ValueError(f"options.state: starts outside the domain ({p.left_domain(Y[:, int(np.flatnonzero(SC[3] != 0)[0])])})")
+        obs[idx] = OBS
+        sc[:3, idx] = SC[:3]
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_pool"] = None  # threads are not pickled: started again on the first step
+        return state
+
+    def _advance(self, c: int) -> None:
+        """Advance, check and score the bodies of slice ``c`` (thread-safe: disjoint slices, own work arrays)."""
+        sl = self._slices[c]
+        p = self.single_env
+        if self.num_threads == 1:
+            Ys, U, OUT, STATUS, NFEV, A, T = self._Ys, self._U, self._OUT, self._STATUS, self._NFEV, self._A, self._T
+            Ynext, OBS, TERMS, SC, ENDED = self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED
+        else:
+            Ys, U, OUT, STATUS, NFEV, A, T = (self._Ys[:, sl], self._U[:, sl], self._OUT[:, sl], self._STATUS[sl], self._NFEV[sl],
+                                              self._A[sl], self._T[sl])
+            Ynext, OBS, TERMS, SC, ENDED = self._Ynext[:, sl], self._OBS[sl], self._TERMS[:, sl], self._SC[:, sl], self._ENDED[sl]
+        self._steppers[c].advance_batch(Ys, U, self.dt, OUT, STATUS, NFEV)
+        self._kernels.post_step_lanes(Ys, OUT, STATUS, A, A.shape[1], T, p.kernel_config, p.kernel_params, Ynext, OBS, TERMS, SC, ENDED,
+                                      *self._lane_works[c])
+
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         if seed is not None:
@@ -151,8 +238,7 @@ class FlatBodyVectorEnv(VectorEnv):
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         obs = np.empty((self.num_envs, OBSERVATION_SIZE), dtype=np.float32)
         sc = np.zeros((4, self.num_envs))
-        for i in range(self.num_envs):
-            obs[i] = self._reset_one(i, options, sc)
+        self._reset_many(np.arange(self.num_envs), options, sc, obs)
         self._autoreset[:] = False
         n = self.num_envs
         blank = np.array([""] * n, dtype=object)
@@ -167,10 +253,17 @@ class FlatBodyVectorEnv(VectorEnv):
         if not k.controls_batch(A, self._mask_u8, self.limits, self._A, self._U):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
         resetting = self._autoreset.copy()
-        self.stepper.advance_batch(self._Ys, self._U, self.dt, self._OUT, self._STATUS, self._NFEV)
+        if self.num_threads == 1:
+            self._advance(0)
+        else:
+            if self._pool is None or self._pool_pid != os.getpid():  # (re)started lazily, also after a fork
+                self._pool = ThreadPoolExecutor(max_workers=self.num_threads - 1, thread_name_prefix="flatbody-vector")
+                self._pool_pid = os.getpid()
+            futures = [self._pool.submit(self._advance, c) for c in range(1, self.num_threads)]
+            self._advance(0)
+            for f in futures:
+                f.result()
         status = self._STATUS
-        k.post_step_batch(self._Ys, self._OUT, status, self._A, self._A.shape[1], self._T, p.kernel_config, p.kernel_params,
-                          self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED, *self._work)
         ended = self._ENDED.astype(bool) & ~resetting
         failures = self._blank.copy()
         lefts = self._blank.copy()
@@ -189,19 +282,19 @@ class FlatBodyVectorEnv(VectorEnv):
         terms = dict(zip(REWARD_TERMS, self._TERMS.copy()))
         sc = self._SC.copy()
         nfev = self._NFEV.copy()
-        for i in np.flatnonzero(resetting):
-            rewards[i] = 0.0
+        idx = np.flatnonzero(resetting)
+        if idx.size:
+            rewards[idx] = 0.0
             for v in terms.values():
-                v[i] = 0.0
-            nfev[i] = 0
-            obs[i] = self._reset_one(i, None, sc)
+                v[idx] = 0.0
+            nfev[idx] = 0
+            self._reset_many(idx, None, sc, obs)
         t = self._steps * self.dt
         done = terminated | truncated
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
         if same_step:
             final_obs = obs.copy()
-            for i in np.flatnonzero(done):
-                obs[i] = self._reset_one(i, None, np.zeros((4, self.num_envs)))
+            self._reset_many(np.flatnonzero(done), None, np.zeros((4, self.num_envs)), obs)
             self._autoreset[:] = False
         else:
             self._autoreset = done
@@ -213,6 +306,9 @@ class FlatBodyVectorEnv(VectorEnv):
         return obs, rewards, terminated, truncated, info
 
     def close_extras(self, **kwargs: Any) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
         self.single_env.close()
 
 

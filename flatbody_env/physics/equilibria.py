@@ -137,6 +137,14 @@ def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
     return float(brentq(g, lo, hi, xtol=1e-15, rtol=1e-15))
 
 
+def squared_sigmas_kernel(J, lam, mu, gl, gm):
+    """(σ₊², σ₋²) of the inverse problem (eqs. (52)–(53) of [1]) from ∂V/∂λ, ∂V/∂μ at (λ, μ); plain floats
+    (:func:`squared_sigmas`, whose docstring gives the formula; compiled by the environment's reset)."""
+    u = lam + mu
+    v = lam - mu
+    return J * (u * u * u) * (gl + gm), J * (v * v * v) * (gl - gm)
+
+
 def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float, float]:
     """The inverse problem of eqs. (52)–(53) of [1] (docs/physics.md §8 of [2]): (σ₊², σ₋²) that make (λ, μ) stationary.
 
@@ -145,50 +153,124 @@ def squared_sigmas(body: Body, lam: float, mu: float, rho: float) -> tuple[float
     with u = λ + μ, v = λ − μ, ∂V/∂u = (V_λ + V_μ)/2, ∂V/∂v = (V_λ − V_μ)/2 (J1 = J2 = J). A negative
     value means no stationary ellipse has this shape.
     """
-    J = body.inertia.J1
     _, gl, gm, _ = body.potential_terms(lam, mu, rho)
-    u, v = lam + mu, lam - mu
-    return J * u**3 * (gl + gm), J * v**3 * (gl - gm)
+    return squared_sigmas_kernel(body.inertia.J1, lam, mu, gl, gm)
 
 
-def _shape_hessian(body: Body, lam: float, mu: float, rho: float, sp: float, sm: float) -> list[list[float]]:
-    """Hessian of W in (λ, μ, ϱ), W of the module docstring (plain floats: it runs at every env reset)."""
-    J = body.inertia.J1
-    u, v = lam + mu, lam - mu
-    # kinetic part in (u, v): diag(3σ₊²/(2Ju⁴), 3σ₋²/(2Jv⁴)); λ = (u+v)/2, μ = (u−v)/2 ⇒ u = λ+μ, v = λ−μ,
-    # so in (λ, μ): [[ku + kv, ku − kv], [ku − kv, ku + kv]]
-    ku = 1.5 * sp * sp / (J * u**4)
-    kv = 1.5 * sm * sm / (J * v**4)
-    H = [[ku + kv, ku - kv, 0.0], [ku - kv, ku + kv, 0.0], [0.0, 0.0, 0.0]]
-    h = 1e-5 * max(1.0, lam, mu, rho)
+def stencil_step(lam, mu, rho):
+    """Step h of the central differences of :func:`shape_stability_kernel`'s potential stencil."""
+    return 1e-5 * max(1.0, lam, mu, rho)
+
+
+def potential_stencil(body: Body, lam: float, mu: float, rho: float) -> np.ndarray:
+    """The potential stencil (7, 4) of :func:`stationary_shape_kernel` for ``body`` (any potential,
+    custom ones included): row 0 (V, ∂V/∂λ, ∂V/∂μ, ∂V/∂ϱ) at (λ, μ, ϱ), rows 1 + 2i and 2 + 2i at
+    that point moved by +h and −h along coordinate i (h = :func:`stencil_step`)."""
+    h = stencil_step(lam, mu, rho)
     x0 = (lam, mu, rho)
-    pot = body.potential_terms
+    pot = np.empty((7, 4))
+    pot[0] = body.potential_terms(lam, mu, rho)
     for i in range(3):
-        xp = [x0[0], x0[1], x0[2]]
-        xm = [x0[0], x0[1], x0[2]]
+        xp, xm = list(x0), list(x0)
         xp[i] += h
         xm[i] -= h
-        gp = pot(xp[0], xp[1], xp[2])
-        gm = pot(xm[0], xm[1], xm[2])
-        for r in range(3):
-            H[r][i] += (gp[r + 1] - gm[r + 1]) / (2 * h)
-    return [[0.5 * (H[r][c] + H[c][r]) for c in range(3)] for r in range(3)]
+        pot[1 + 2 * i] = body.potential_terms(*xp)
+        pot[2 + 2 * i] = body.potential_terms(*xm)
+    return pot
 
 
-def _smallest_eigenvalue(H: list[list[float]]) -> float:
-    """Smallest eigenvalue of a symmetric 3 × 3 matrix (closed form, trigonometric; O. K. Smith, 1961)."""
-    a, b, c = H[0][0], H[1][1], H[2][2]
-    p1 = H[0][1] ** 2 + H[0][2] ** 2 + H[1][2] ** 2
-    q = (a + b + c) / 3.0
-    p2 = (a - q) ** 2 + (b - q) ** 2 + (c - q) ** 2 + 2.0 * p1
+def smallest_eigenvalue_sym3(a00, a01, a02, a11, a12, a22):
+    """Smallest eigenvalue of the symmetric 3 × 3 matrix with these entries (closed form,
+    trigonometric; O. K. Smith, "Eigenvalues of a symmetric 3 × 3 matrix", Commun. ACM 4, 168 (1961))."""
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    p2 = (a00 - q) * (a00 - q) + (a11 - q) * (a11 - q) + (a22 - q) * (a22 - q) + 2.0 * p1
     if p2 == 0.0:
         return q
     p = math.sqrt(p2 / 6.0)
-    B = [[(H[r][k] - (q if r == k else 0.0)) / p for k in range(3)] for r in range(3)]
-    det = (B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0])
-           + B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0]))
+    b00 = (a00 - q) / p
+    b11 = (a11 - q) / p
+    b22 = (a22 - q) / p
+    b01 = a01 / p
+    b02 = a02 / p
+    b12 = a12 / p
+    det = b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)
     r = min(1.0, max(-1.0, 0.5 * det))
     return q + 2.0 * p * math.cos(math.acos(r) / 3.0 + 2.0 * math.pi / 3.0)
+
+
+def stationary_shape_kernel(J, J3, lam, mu, rho, pot, rotation, sign, out):
+    """The stationary ellipse of shape (λ, μ) and thickness ϱ (branch N) and its cheap spectral test, on
+    plain floats — the one formula behind :func:`stationary_from_shape` and the environment's compiled
+    reset.
+
+    Parameters
+    ----------
+    J, J3 : float
+        J1 = J2 = J and J3.
+    lam, mu, rho : float
+        The shape (λ ≠ μ, both > 0) and ϱ* (eq. (54) of [1]).
+    pot : (7, 4)
+        The potential stencil (:func:`potential_stencil`) at (λ, μ, ϱ), step :func:`stencil_step`.
+    rotation : bool
+        The ``"rotation"`` branch (σ₊σ₋ > 0), else ``"circulation"``.
+    sign : float
+        ±1, the overall sign of (s3, p_θ).
+    out : (6,), output
+        s3, p_θ, ω3, θ̇, q and the smallest eigenvalue of the Hessian of W in (λ, μ, ϱ).
+
+    Returns
+    -------
+    bool
+        False when no stationary ellipse has this shape (σ₊² < 0 or σ₋² < 0); ``out`` is then unset.
+
+    Notes
+    -----
+    σ±² from :func:`squared_sigmas_kernel` (eqs. (52)–(53)); s3 = (σ₊ + σ₋)/2, p_θ = (σ₊ − σ₋)/2;
+    ω3 = σ₊/(2Ju²) + σ₋/(2Jv²), θ̇ = σ₊/(2Ju²) − σ₋/(2Jv²); q = (s3/I2 − ω3)(ω3 − s3/I1) with
+    I1 = Jμ² + J3ϱ², I2 = Jλ² + J3ϱ² (out-of-plane block, unstable iff q > 0); the Hessian of W
+    (module docstring): kinetic part diag(3σ₊²/(2Ju⁴), 3σ₋²/(2Jv⁴)) in (u, v), potential part by central
+    differences of ∇V over the stencil, symmetrised.
+    """
+    sp2, sm2 = squared_sigmas_kernel(J, lam, mu, pot[0, 1], pot[0, 2])
+    if sp2 < 0 or sm2 < 0:
+        return False
+    u = lam + mu
+    v = lam - mu
+    sp = math.copysign(math.sqrt(sp2), sign)
+    sm = math.sqrt(sm2) * (1.0 if rotation else -1.0) * math.copysign(1.0, sign)
+    s3 = 0.5 * (sp + sm)
+    out[0] = s3
+    out[1] = 0.5 * (sp - sm)
+    omega3 = sp / (2 * J * u * u) + sm / (2 * J * v * v)
+    out[2] = omega3
+    out[3] = sp / (2 * J * u * u) - sm / (2 * J * v * v)
+    I1 = J * mu * mu + J3 * rho * rho
+    I2 = J * lam * lam + J3 * rho * rho
+    out[4] = (s3 / I2 - omega3) * (omega3 - s3 / I1)
+    # Hessian of W: kinetic part in (u, v) is diag(ku, kv); with u = λ + μ, v = λ − μ it is
+    # [[ku + kv, ku − kv], [ku − kv, ku + kv]] in (λ, μ)
+    ku = 1.5 * sp * sp / (J * (u * u * u * u))
+    kv = 1.5 * sm * sm / (J * (v * v * v * v))
+    h2 = 2 * stencil_step(lam, mu, rho)
+    # potential part: d_rc = ∂²V/∂x_r∂x_c ≈ (∂V/∂x_r(x + h e_c) − ∂V/∂x_r(x − h e_c)) / 2h
+    d00 = (pot[1, 1] - pot[2, 1]) / h2
+    d01 = (pot[3, 1] - pot[4, 1]) / h2
+    d02 = (pot[5, 1] - pot[6, 1]) / h2
+    d10 = (pot[1, 2] - pot[2, 2]) / h2
+    d11 = (pot[3, 2] - pot[4, 2]) / h2
+    d12 = (pot[5, 2] - pot[6, 2]) / h2
+    d20 = (pot[1, 3] - pot[2, 3]) / h2
+    d21 = (pot[3, 3] - pot[4, 3]) / h2
+    d22 = (pot[5, 3] - pot[6, 3]) / h2
+    a00 = 0.5 * ((ku + kv + d00) + (ku + kv + d00))
+    a11 = 0.5 * ((ku + kv + d11) + (ku + kv + d11))
+    a22 = 0.5 * ((0.0 + d22) + (0.0 + d22))
+    a01 = 0.5 * ((ku - kv + d01) + (ku - kv + d10))
+    a02 = 0.5 * ((0.0 + d02) + (0.0 + d20))
+    a12 = 0.5 * ((0.0 + d12) + (0.0 + d21))
+    out[5] = smallest_eigenvalue_sym3(a00, a01, a02, a11, a12, a22)
+    return True
 
 
 def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
@@ -218,22 +300,15 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
         raise ValueError(f"lambda, mu: need λ, μ > 0 and λ ≠ μ, got {lam}, {mu}")
     J = body.inertia.J1
     rho = equilibrium_thickness(body, lam, mu)
-    u, v = lam + mu, lam - mu
-    sp2, sm2 = squared_sigmas(body, lam, mu, rho)
-    if sp2 < 0 or sm2 < 0:
+    out = np.empty(6)
+    if not stationary_shape_kernel(J, body.inertia.J3, lam, mu, rho, potential_stencil(body, lam, mu, rho), branch == "rotation",
+                                   float(sign), out):
         raise ValueError(
             f"lambda, mu: no stationary ellipse with shape ({lam:g}, {mu:g}) for this potential "
             f"(needs dV/du >= 0 and (lambda-mu) dV/dv >= 0)"
         )
-    sp = math.copysign(math.sqrt(sp2), sign)
-    sm = math.sqrt(sm2) * (1.0 if branch == "rotation" else -1.0) * math.copysign(1.0, sign)
-    s3, pt = 0.5 * (sp + sm), 0.5 * (sp - sm)
-    omega3 = sp / (2 * J * u * u) + sm / (2 * J * v * v)
-    theta_dot = sp / (2 * J * u * u) - sm / (2 * J * v * v)
+    s3, pt, omega3, theta_dot, q, hmin = out.tolist()
     J3 = body.inertia.J3
-    I1, I2 = J * mu * mu + J3 * rho * rho, J * lam * lam + J3 * rho * rho
-    q = (s3 / I2 - omega3) * (omega3 - s3 / I1)
-    hmin = _smallest_eigenvalue(_shape_hessian(body, lam, mu, rho, sp, sm))
     y = np.array([0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0])
     # H (eq. (41)) and the residual of eqs. (43)–(49) from the scalar kernels that hamiltonian() and rhs() run
     v, gl, gm, gr = body.potential_terms(lam, mu, rho)

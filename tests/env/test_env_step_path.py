@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from flatbody_env.env import compiled
 from flatbody_env.env.env import FlatBodyEnv
-from flatbody_env.env.task import REWARD_TERMS, ReachStationaryEllipse, state_from_observation
+from flatbody_env.env.task import OBSERVATION_SIZE, REWARD_TERMS, ReachStationaryEllipse, state_from_observation
 from flatbody_env.env.vector_env import FlatBodyVectorEnv
 from flatbody_env.integrators.compiled_methods import env_stepper
 from flatbody_env.physics.equations import rhs
@@ -148,3 +148,84 @@ def test_bad_vector_actions_and_mode():
         venv.step(np.full((2, 4), np.nan))
     with pytest.raises(ValueError, match="autoreset_mode"):
         FlatBodyVectorEnv(num_envs=2, autoreset_mode="Disabled")
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "python"])
+@pytest.mark.parametrize("J2", [1.0, 1.3])
+def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
+    """post_step_lanes (loops over bodies, vectorised) is post_step_batch (body by body) bit for bit,
+    with failed steps, non-finite states and states outside the domain among the lanes."""
+    from flatbody_env.env import kernels as python_kernels
+
+    k = compiled if kernels == "compiled" else python_kernels
+    n = 97
+    venv = FlatBodyVectorEnv(num_envs=n)
+    venv.reset(seed=1)
+    p = venv.single_env
+    P = p.kernel_params.copy()
+    P[1] = J2
+    rng = np.random.default_rng(2)
+    Y_old = venv.states.T.copy()
+    Y_new = Y_old + rng.normal(scale=0.02, size=Y_old.shape)
+    Y_new[7, :4] = -1.0  # λ out of the domain
+    Y_new[0, 4:7] = np.nan
+    Y_new[3, 7:9] = 1e9  # |p| over the momentum bound
+    status = np.zeros(n, np.int64)
+    status[9:13] = 2  # the integrator failed
+    A = rng.uniform(-1, 1, (n, 4))
+    T = venv.target_vectors
+
+    def outputs():
+        return [np.empty((11, n)), np.empty((n, OBSERVATION_SIZE), np.float32), np.empty((len(REWARD_TERMS), n)), np.empty((4, n)),
+                np.empty(n, np.int64)]
+
+    a, b = outputs(), outputs()
+    k.post_step_batch(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, *a, *venv._work)
+    k.post_step_lanes(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, *b, np.empty(n), np.empty((4, n)), np.empty(7), np.empty(4),
+                      np.empty(11))
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+    assert a[4][:13].all() and not a[4][13:].any()  # the planted failures end their episodes, nothing else does
+
+
+@pytest.mark.parametrize("control", ["torque+dilatation", "torque", "dilatation", "none"])
+def test_batched_controls_equal_the_per_body_kernel(control):
+    env = FlatBodyEnv(control=control)
+    n_act = env.action_space.shape[0]
+    rng = np.random.default_rng(0)
+    A = rng.uniform(-2, 2, (50, n_act))
+    A_out, U = np.empty_like(A), np.empty((4, 50))
+    assert compiled.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_out, U)
+    for i in range(50):
+        a, u = np.empty(n_act), np.empty(4)
+        assert compiled.controls_kernel(A[i], env.mask.astype(np.uint8), env.limits, a, u)
+        np.testing.assert_array_equal(A_out[i], a)
+        np.testing.assert_array_equal(U[:, i], u)
+    if n_act:
+        A[7, 0] = np.inf
+        assert not compiled.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_out, U)
+
+
+def test_threads_do_not_change_a_single_number():
+    """Bodies split across threads (num_threads) step, score and autoreset exactly as in one thread."""
+    n = 11
+    one = FlatBodyVectorEnv(num_envs=n, max_episode_steps=6, num_threads=1)
+    three = FlatBodyVectorEnv(num_envs=n, max_episode_steps=6, num_threads=3)
+    assert three.num_threads == 3 and [s.stop - s.start for s in three._slices] == [4, 3, 4]
+    a, b = one.reset(seed=4), three.reset(seed=4)
+    np.testing.assert_array_equal(a[0], b[0])
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
+        ra, rb = one.step(A), three.step(A)
+        for x, y in zip(ra[:4], rb[:4]):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(ra[4]["energy"], rb[4]["energy"])
+        np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
+    np.testing.assert_array_equal(one.states, three.states)
+    three.close()
+    assert FlatBodyVectorEnv(num_envs=4, integrator="RK45").num_threads == 1  # not compiled: one thread
+    with pytest.raises(ValueError, match="num_threads"):
+        FlatBodyVectorEnv(num_envs=4, num_threads=0)
+    with pytest.raises(ValueError, match="num_threads"):
+        FlatBodyVectorEnv(num_envs=4, num_threads=True)

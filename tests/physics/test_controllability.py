@@ -93,7 +93,7 @@ def test_task_samples_only_targets_reachable_in_the_episode():
 
 def test_smallest_eigenvalue_closed_form_matches_numpy():
     """The shape block's stability test uses a closed-form smallest eigenvalue (it runs at every reset)."""
-    from flatbody_env.physics.equilibria import _smallest_eigenvalue
+    from flatbody_env.physics.equilibria import smallest_eigenvalue_sym3
 
     rng = np.random.default_rng(0)
     for k in range(300):
@@ -102,5 +102,5 @@ def test_smallest_eigenvalue_closed_form_matches_numpy():
         if k % 3 == 0:
             H[0, 2] = H[2, 0] = H[1, 2] = H[2, 1] = 0.0  # the shape block's usual (λ, μ) | ϱ split
         expected = np.linalg.eigvalsh(H)[0]
-        assert abs(_smallest_eigenvalue(H.tolist()) - expected) <= 1e-12 * max(1.0, np.abs(H).max())
-    assert _smallest_eigenvalue([[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]) == 2.0
+        assert abs(smallest_eigenvalue_sym3(H[0, 0], H[0, 1], H[0, 2], H[1, 1], H[1, 2], H[2, 2]) - expected) <= 1e-12 * max(1.0, np.abs(H).max())
+    assert smallest_eigenvalue_sym3(2.0, 0.0, 0.0, 2.0, 0.0, 2.0) == 2.0
