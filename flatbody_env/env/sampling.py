@@ -3,13 +3,14 @@
 :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target` and
 :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_initial_state` draw from a numpy
 ``Generator``: three uniforms per candidate target shape, then ten (nine without torque) for the
-initial state. The decisions they take on those numbers live here, once, as plain-float kernels —
-:func:`candidate_kernel` (is this shape a target? the settling-rate table's
-:func:`~flatbody_env.env.targets.decide_kernel` and the inverse problem
-:func:`~flatbody_env.physics.equilibria.stationary_shape_kernel`) and :func:`initial_state_kernel` — so that
-the task's Python methods and the batched reset (:func:`sample_episodes`, compiled by
-:mod:`flatbody_env.env.compiled`) run the same arithmetic and draw the same episodes from the same
-stream, bit for bit (tested).
+initial state. The formulas they apply to those numbers live once, as plain-float kernels that both
+run — the settling-rate table's :func:`~flatbody_env.env.targets.decide_kernel`, the inverse problem
+and stability test :func:`~flatbody_env.physics.equilibria.stationary_shape_kernel`, and
+:func:`initial_state_kernel`. The candidate loop of ``sample_target`` (which also serves bodies these
+kernels do not: custom potentials, a thickness found by root finding) is mirrored here by
+:func:`candidate_kernel` and :func:`sample_episode_kernel`, so that the batched reset
+(:func:`sample_episodes`, compiled by :mod:`flatbody_env.env.compiled`) draws the same episodes from
+the same stream, bit for bit — the tests hold the two to that.
 
 The batched reset takes, per body, a block of uniforms drawn ahead from that body's generator; it
 returns how many of them the episode used (the caller puts the generator back where the Python
