@@ -13,17 +13,20 @@ The step. Every lane takes one DOP853 step of size h = dt (Hairer's coefficients
 arithmetic in the same order as :func:`flatbody_env.integrators.twopolar_kernels.dop853_env_step`
 with the first step guessed as dt): 13 right-hand sides, the stages combined lane by lane for each
 state component. Then each lane's embedded error estimate (scipy's 5th/3rd-order blend) and its
-state are checked; a lane whose step would be rejected (error ≥ 1), whose state is non-finite or
-out of the chart (λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) is redone from its start by the
-scalar kernel, which handles rejections, step-size control and failure codes. So every lane's
-result is bit for bit the scalar kernel's (compiled with the same options, :data:`JIT_OPTIONS`): the
-vector env equals N single envs step for step.
+state are checked. A lane whose step stands but whose state ends the episode (non-finite, out of the
+chart: λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) gets the scalar kernel's status at once. The
+lanes whose step is rejected (error ≥ 1) go on together (:func:`dop853_redo_lanes`): fused attempts
+with a step size per lane, decided lane by lane by the scalar kernel's step control, starting from the
+rejection; a lane whose step would collapse goes to the scalar kernel. So every lane's result,
+status and function count are bit for bit the scalar kernel's (compiled with the same options,
+:data:`JIT_OPTIONS`): the vector env equals N single envs step for step.
 
 Lanes are stepped in blocks of :data:`BLOCK` so that the stage array stays in the caches.
 
 Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``STATUS``, ``NFEV`` (N,) int64 (outputs); ``ERR`` (N,)
-the error norms; work: ``KS`` (13, 11, B), ``YT`` (11, B), ``E3S``, ``ACC``, ``A5``, ``A3`` (B,) for blocks of B lanes,
-and the scalar kernel's work arrays — allocated once by the caller (:class:`DOP853Batch`).
+the error norms; work: ``KS`` (13, 11, B), ``YT`` (11, B), ``E3S``, ``ACC``, ``A5``, ``A3``, ``HB`` (B,) for
+blocks of B lanes, ``LANES`` (N,) int64, ``W`` (9, B) and the scalar kernel's work arrays — allocated
+once by the caller (:class:`DOP853Batch`).
 """
 
 from __future__ import annotations
@@ -90,8 +93,8 @@ def rhs_lanes(X, U, P, F):
         F[10 * BLOCK + k] = d10
 
 
-def dop853_lanes(Y, U, P, h, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
-    """One DOP853 step of size ``h`` for the BLOCK lanes of a block; OUT receives y + h Σ b_j k_j,
+def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
+    """One DOP853 step of size ``H[k]`` for each lane k of a block; OUT receives y + h Σ b_j k_j,
     E5S the error norm (scipy's ``_estimate_error_norm``) of each lane. Flat block arrays: component
     i of lane k at [i·BLOCK + k], stage j's component i at KS[(j·11 + i)·BLOCK + k]. The lane index is
     the innermost loop; each lane's sums keep the scalar kernel's order. ``A5``, ``A3`` (BLOCK,): work."""
@@ -107,7 +110,7 @@ def dop853_lanes(Y, U, P, h, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
                 for k in range(BLOCK):
                     ACC[k] += KS[o + k] * c
             for k in range(BLOCK):
-                YT[i * BLOCK + k] = Y[i * BLOCK + k] + h * ACC[k]
+                YT[i * BLOCK + k] = Y[i * BLOCK + k] + H[k] * ACC[k]
         rhs_lanes(YT, U, P, KS[s * S:(s + 1) * S])
     for i in range(11):
         for k in range(BLOCK):
@@ -118,7 +121,7 @@ def dop853_lanes(Y, U, P, h, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
             for k in range(BLOCK):
                 ACC[k] += KS[o + k] * c
         for k in range(BLOCK):
-            OUT[i * BLOCK + k] = Y[i * BLOCK + k] + h * ACC[k]
+            OUT[i * BLOCK + k] = Y[i * BLOCK + k] + H[k] * ACC[k]
     rhs_lanes(OUT, U, P, KS[12 * S:13 * S])
     for k in range(BLOCK):
         E5S[k] = 0.0
@@ -144,7 +147,7 @@ def dop853_lanes(Y, U, P, h, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
     for k in range(BLOCK):
         e5 = E5S[k]
         e3 = E3S[k]
-        E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
+        E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(H[k]) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
 
 
 def lane_accepted(Y, U, P, OUT, err, k):
@@ -165,58 +168,205 @@ def lane_accepted(Y, U, P, OUT, err, k):
     return True
 
 
-def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, yl, ul,
-                          K1, ynew, ytmp, f, out1, vel, force, counters):
+def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB,
+                          LANES, W, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters):
     """One env step of DOP853 (first step guess dt) for N lanes: the fused step on blocks of
     :data:`BLOCK` lanes copied into the flat block arrays ``YB``, ``UB``, ``OB`` (the last block
-    padded with its first lane), then the scalar kernel for the lanes it cannot accept (module
-    docstring). ``energy_tol`` < inf hands every lane to the scalar kernel."""
+    padded with its first lane), then the lanes it cannot accept redone by :func:`dop853_redo_lanes`
+    (module docstring). ``energy_tol`` < inf hands every lane to the scalar kernel."""
     n = Y.shape[1]
     check_energy = energy_tol < np.inf
-    if not check_energy:
-        for start in range(0, n, BLOCK):
-            m = min(BLOCK, n - start)
-            for i in range(11):  # component by component: contiguous copies
-                for j in range(m):
-                    YB[i * BLOCK + j] = Y[i, start + j]
-                for j in range(m, BLOCK):
-                    YB[i * BLOCK + j] = Y[i, start]
-            for i in range(4):
-                for j in range(m):
-                    UB[i * BLOCK + j] = U[i, start + j]
-                for j in range(m, BLOCK):
-                    UB[i * BLOCK + j] = U[i, start]
-            dop853_lanes(YB, UB, P, dt, rtol, atol, OB, KS, YT, EB, E3S, ACC, A5, A3)
-            for i in range(11):
-                for j in range(m):
-                    OUT[i, start + j] = OB[i * BLOCK + j]
+    if check_energy:
+        for k in range(n):
+            scalar_lane(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+        return
+    for j in range(BLOCK):
+        HB[j] = dt
+    for start in range(0, n, BLOCK):
+        m = min(BLOCK, n - start)
+        for i in range(11):  # component by component: contiguous copies
             for j in range(m):
-                ERR[start + j] = EB[j]
+                YB[i * BLOCK + j] = Y[i, start + j]
+            for j in range(m, BLOCK):
+                YB[i * BLOCK + j] = Y[i, start]
+        for i in range(4):
+            for j in range(m):
+                UB[i * BLOCK + j] = U[i, start + j]
+            for j in range(m, BLOCK):
+                UB[i * BLOCK + j] = U[i, start]
+        dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, A5, A3)
+        for i in range(11):
+            for j in range(m):
+                OUT[i, start + j] = OB[i * BLOCK + j]
+        for j in range(m):
+            ERR[start + j] = EB[j]
+    nl = 0
     for k in range(n):
-        if not check_energy and lane_accepted(Y, U, P, OUT, ERR[k], k):
+        if lane_accepted(Y, U, P, OUT, ERR[k], k):
             STATUS[k] = 0
             NFEV[k] = 13
-            continue
-        for i in range(11):
-            yl[i] = Y[i, k]
-        for i in range(4):
-            ul[i] = U[i, k]
-        counters[0] = 0
-        STATUS[k] = dop853_env(yl, ul, P, dt, dt, rtol, atol, energy_tol, out1, K1, ynew, ytmp, vel, force, f, counters)
-        NFEV[k] = counters[0]
-        for i in range(11):
-            OUT[i, k] = out1[i]
+        elif ERR[k] < 1.0:  # the step stands, the state it reached ends the episode: the scalar kernel's answer too
+            for i in range(11):
+                yl[i] = OUT[i, k]
+            crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
+            STATUS[k] = state_status(yl, 1.0 if Y[7, k] > Y[8, k] else -1.0, not crossable)
+            NFEV[k] = 13
+        else:
+            LANES[nl] = k
+            nl += 1
+    if nl > 0:
+        dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB, W, yl,
+                          ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+
+
+def scalar_lane(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters):
+    """Lane k by the scalar kernel :data:`dop853_env` from its start (first step guess dt)."""
+    for i in range(11):
+        yl[i] = Y[i, k]
+    for i in range(4):
+        ul[i] = U[i, k]
+    counters[0] = 0
+    counters[1] = 0
+    counters[2] = 0
+    STATUS[k] = dop853_env(yl, ul, P, dt, dt, rtol, atol, energy_tol, out1, K1, ynew, ytmp, vel, force, f, counters)
+    NFEV[k] = counters[0]
+    for i in range(11):
+        OUT[i, k] = out1[i]
+
+
+MAX_ROUNDS = 64
+"""Fused attempts per block of redone lanes before the lanes still unfinished go to the scalar kernel."""
+
+
+def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB, W, yl,
+                      ul, K1, ynew, ytmp, f, out1, vel, force, counters):
+    """The lanes ``LANES[:nl]``, whose single step h = dt was rejected with the error norms ``ERR``,
+    over one env step with the scalar kernel's step control, fused.
+
+    The scalar kernel (:func:`flatbody_env.integrators.twopolar_kernels.dop853_advance`) takes each
+    lane from t = 0 to dt with steps it accepts or rejects by the error norm (factors
+    0.9·err^(−1/8) in [0.2, 10], no growth right after a rejection, the last step cut at dt) and checks
+    the state after every accepted step. Here up to :data:`BLOCK` lanes follow that same sequence
+    together: every round computes one attempt of every unfinished lane (its own step size, one
+    :func:`dop853_lanes` call; finished and padding lanes take a zero step that is thrown away), then
+    applies the scalar kernel's decisions lane by lane; the first attempt is the fused step's (the
+    same arithmetic), so the lanes start from its rejection. Every lane therefore ends with the scalar
+    kernel's state, status and function count (1 + 12 per attempt), bit for bit; a lane whose step
+    would collapse, or that is still unfinished after :data:`MAX_ROUNDS` rounds, is handed to the
+    scalar kernel from its start.
+
+    ``W`` (9, BLOCK) work: t, |h|, rejected, active, attempts, gap sign, check gap, new step, t_new;
+    ``yl`` (11,) receives a lane's state for the status check.
+    """
+    for start in range(0, nl, BLOCK):
+        m = min(BLOCK, nl - start)
+        for j in range(BLOCK):
+            k = LANES[start + j] if j < m else LANES[start]
+            for i in range(11):
+                YB[i * BLOCK + j] = Y[i, k]
+            for i in range(4):
+                UB[i * BLOCK + j] = U[i, k]
+            # the first attempt (h = dt) was the fused step's, rejected with the error ERR[k]: go on from there
+            factor = _SAFETY * ERR[k]**_ERROR_EXPONENT
+            if not factor > _MIN_FACTOR:
+                factor = _MIN_FACTOR
+            W[0, j] = 0.0
+            W[1, j] = dt * factor
+            W[2, j] = 1.0
+            W[3, j] = 1.0 if j < m else 0.0
+            W[4, j] = 1.0
+            W[5, j] = 1.0 if Y[7, k] > Y[8, k] else -1.0
+            crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
+            W[6, j] = 0.0 if crossable else 1.0
+            W[7, j] = 0.0
+            STATUS[k] = OK
+        for _ in range(MAX_ROUNDS):
+            active = 0
+            for j in range(BLOCK):
+                HB[j] = 0.0
+                if W[3, j] == 0.0:
+                    continue
+                t = W[0, j]
+                min_step = 10.0 * abs(next_up(t) - t)
+                if W[7, j] != 0.0:  # a new step starts at t
+                    if W[1, j] < min_step:
+                        W[1, j] = min_step
+                    W[2, j] = 0.0
+                    W[7, j] = 0.0
+                if W[1, j] < min_step:  # the step would collapse: the scalar kernel decides
+                    W[3, j] = -1.0
+                    continue
+                t_new = t + W[1, j]
+                if t_new > dt:
+                    t_new = dt
+                h = t_new - t
+                W[1, j] = abs(h)
+                W[8, j] = t_new
+                HB[j] = h
+                active += 1
+            if active == 0:
+                break
+            dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, A5, A3)
+            for j in range(BLOCK):
+                if W[3, j] != 1.0:
+                    continue
+                W[4, j] += 1.0
+                err = EB[j]
+                if err < 1.0:
+                    if err == 0.0:
+                        factor = _MAX_FACTOR
+                    else:
+                        factor = min(_MAX_FACTOR, _SAFETY * err**_ERROR_EXPONENT)
+                    if W[2, j] != 0.0:
+                        factor = min(1.0, factor)
+                    W[1, j] *= factor
+                    W[0, j] = W[8, j]
+                    for i in range(11):
+                        YB[i * BLOCK + j] = OB[i * BLOCK + j]
+                        yl[i] = OB[i * BLOCK + j]
+                    st = state_status(yl, W[5, j], W[6, j] != 0.0)
+                    if st != OK:
+                        STATUS[LANES[start + j]] = st
+                        W[3, j] = 0.0
+                    elif W[0, j] >= dt:
+                        W[3, j] = 0.0
+                    else:
+                        W[7, j] = 1.0
+                else:
+                    factor = _SAFETY * err**_ERROR_EXPONENT
+                    if not factor > _MIN_FACTOR:
+                        factor = _MIN_FACTOR
+                    W[1, j] *= factor
+                    W[2, j] = 1.0
+        for j in range(m):
+            k = LANES[start + j]
+            if W[3, j] != 0.0:  # collapsed or unfinished: the scalar kernel from the start
+                scalar_lane(Y, U, P, dt, rtol, atol, np.inf, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+                continue
+            for i in range(11):
+                OUT[i, k] = YB[i * BLOCK + j]
+            NFEV[k] = 1 + 12 * int(W[4, j])
 
 
 dop853_env = _tk._dop853_env
-"""The scalar kernel the rejected lanes are redone with (compiled with the same options)."""
+"""The scalar kernel a lane falls back to (compiled with the same options)."""
+state_status = _tk._state_status
+next_up = _tk.next_up
+OK = _tk.OK
+_SAFETY = _tk._SAFETY
+_MIN_FACTOR = _tk._MIN_FACTOR
+_MAX_FACTOR = _tk._MAX_FACTOR
+_ERROR_EXPONENT = _tk._ERROR_EXPONENT
 
 
 _rhs_lanes_c = jit_copy(rhs_lanes, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso)
 _dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c)
 _lane_accepted_c = jit_copy(lane_accepted)
+_scalar_lane_c = jit_copy(scalar_lane, dop853_env=_tk._dop853_env)
+_redo_lanes_c = jit_copy(dop853_redo_lanes, dop853_lanes=_dop853_lanes_c, scalar_lane=_scalar_lane_c, state_status=_tk._state_status,
+                         next_up=_tk.next_up)
 dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, lane_accepted=_lane_accepted_c,
-                                   dop853_env=_tk._dop853_env)
+                                   scalar_lane=_scalar_lane_c, dop853_redo_lanes=_redo_lanes_c)
 """Compiled :func:`dop853_batch_env_step`."""
 
 
@@ -229,7 +379,8 @@ class DOP853Batch:
 
     def _alloc(self) -> None:
         self.work = (np.empty(self.n), np.empty(N * BLOCK), np.empty(4 * BLOCK), np.empty(N * BLOCK), np.empty(13 * N * BLOCK),
-                     np.empty(N * BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(N), np.empty(4),
+                     np.empty(N * BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK),
+                     np.empty(self.n, np.int64), np.empty((9, BLOCK)), np.empty(N), np.empty(4),
                      np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4), np.zeros(3, np.int64))
 
     def __getstate__(self):
@@ -248,4 +399,5 @@ class DOP853Batch:
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "lane_accepted", "rhs_lanes"]
+__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "dop853_redo_lanes", "lane_accepted",
+           "rhs_lanes", "scalar_lane"]

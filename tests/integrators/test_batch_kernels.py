@@ -46,8 +46,40 @@ def test_fused_batch_equals_scalar_kernel_bitwise(n):
         assert S[k] == status and NF[k] == counters[0]
         np.testing.assert_array_equal(OUT[:, k], out)
         handed_back += counters[0] != 13
-    assert handed_back >= 1  # the hard lanes were redone by the scalar kernel
+    assert handed_back >= 1  # the hard lanes were redone with several steps
     assert NF.min() == 13
+
+
+def _check_lanes_against_scalar(Y, U, P, tol=1e-11):
+    n = Y.shape[1]
+    OUT, S, NF = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    DOP853Batch(n)(Y, U, P, 0.05, tol, tol, np.inf, OUT, S, NF)
+    st = env_stepper("DOP853-numba")
+    for k in range(n):
+        out = np.empty(11)
+        counters = np.zeros(3, np.int64)
+        status = st.step_counted(Y[:, k].copy(), U[:, k].copy(), P, 0.05, 0.05, tol, tol, np.inf, out, counters)
+        assert S[k] == status and NF[k] == counters[0], k
+        np.testing.assert_array_equal(OUT[:, k], out)
+    return S, NF
+
+
+def test_many_rejected_lanes_follow_the_scalar_step_control_bitwise():
+    """Lanes whose single step is rejected are redone together (fused, each with its own step sizes):
+    every lane's state, status and function count are the scalar kernel's — also for a lane whose
+    step collapses (non-finite state), and across more than one block."""
+    P = kernel_params(default_body())
+    n = 3 * batch_kernels.BLOCK + 9
+    Y, U = _lanes(n, 5)
+    rng = np.random.default_rng(6)
+    Y[4:7, 2:] *= rng.uniform(5, 40, (3, n - 2))  # fast shape motion: most single steps are rejected
+    Y[0:2, 2:] *= 20.0
+    Y[0, 7] = np.nan  # the step collapses: handed to the scalar kernel
+    Y[7, 9], Y[8, 9], Y[4, 9], Y[5, 9] = 1.01, 0.99, -30.0, 30.0  # thrown at λ = μ (the σ₋ barrier turns it back)
+    S, NF = _check_lanes_against_scalar(np.ascontiguousarray(Y), U, P)
+    assert (NF > 13).sum() > batch_kernels.BLOCK  # more than one block of lanes took several steps
+    assert S[7] != 0
+    assert np.unique(NF).size > 3  # lanes needed different numbers of attempts
 
 
 def test_fused_kernels_are_plain_python_over_arrays():
