@@ -282,8 +282,25 @@ def hamiltonian(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
 
 
 def hamiltonian_series(Y: np.ndarray, body: Body) -> np.ndarray:
-    """H along a packed trajectory ``Y`` of shape (11, n)."""
+    """H along a packed trajectory ``Y`` of shape (11, n).
+
+    An isotropic body (J1 = J2) with a built-in potential is evaluated on whole columns with
+    :func:`kinetic_iso` and :func:`~flatbody_env.physics.potentials.potential_kernel`, the same
+    float operations as :func:`hamiltonian` (so the same values, bit for bit); other bodies, and
+    columns where that gives a non-finite H, step by step.
+    """
+    Y = np.asarray(Y, dtype=np.float64)
     P = body.kernel_params()
+    if P[0] == P[1] and body.compiled and Y.ndim == 2 and Y.shape[0] == STATE_SIZE:
+        from flatbody_env.physics.potentials import potential_kernel
+
+        J, J3 = float(P[0]), float(P[2])
+        with np.errstate(all="ignore"):
+            T = kinetic_iso(*(Y[i] for i in range(10)), J, J3)[0]
+            V = potential_kernel(int(P[3]), float(P[4]), float(P[5]), float(P[6]), float(P[7]), Y[LAMBDA], Y[MU], Y[RHO])[0]
+            out = np.asarray(T + V, dtype=np.float64)
+        if out.shape == (Y.shape[1],) and np.all(np.isfinite(out)):
+            return out
     vel = np.empty(7)
     force = np.empty(4)
     out = np.empty(Y.shape[1])

@@ -117,7 +117,14 @@ def nice_range(m: float) -> float:
     return nice_half_width(max(float(m), 1e-12))
 
 
-def _camera(view: str, extent: float):
+def camera_kind(view_name: str) -> str:
+    """``"top"`` for the plate's top view, ``"oblique"`` for the other 3-D views (where :func:`camera` places the eye)."""
+    return "top" if view_name.startswith("plate") else "oblique"
+
+
+def camera(view: str, extent: float):
+    """The eye of a 3-D view: ``"top"`` straight down the laboratory's +z axis, ``"oblique"`` from
+    above the plate; its distance grows with ``extent`` (the body's largest expected semi-axis)."""
     import rerun.blueprint as rrb
 
     d = float(extent)
@@ -199,12 +206,12 @@ def blueprint(*, episode: bool, extent: float = 2.0, drift_range: float | None =
     def view(name: str):
         cls, paths = specs[name]
         if cls == "3D":
-            top = name.startswith("plate")
+            kind = camera_kind(name)
             return rrb.Spatial3DView(
                 name=name,
                 origin=paths[0],
-                eye_controls=_camera("top" if top else "oblique", extent),
-                line_grid=rrb.LineGrid3D(visible=not top, spacing=0.5),
+                eye_controls=camera(kind, extent),
+                line_grid=rrb.LineGrid3D(visible=kind != "top", spacing=0.5),
             )
         if cls == "Tensor":
             return rrb.TensorView(name=name, origin=paths[0], scalar_mapping=rrb.TensorScalarMapping(colormap="cyantoyellow"), view_fit="Fill")
@@ -239,41 +246,57 @@ def blueprint(*, episode: bool, extent: float = 2.0, drift_range: float | None =
     )
 
 
+_TENSOR_TEXT = (
+    "**t = %.3f**\n\n"
+    "```\n"
+    "G = ΦᵀΦ               eigenvalue\n"
+    "%+7.3f%+7.3f%+7.3f  λ² %.3f\n"
+    "%+7.3f%+7.3f%+7.3f  μ² %.3f\n"
+    "%+7.3f%+7.3f%+7.3f  ϱ² %.3f\n"
+    "\n"
+    "C = Φ⁻ᵀΦ⁻¹            eigenvalue\n"
+    "%+7.3f%+7.3f%+7.3f  λ⁻² %.3f\n"
+    "%+7.3f%+7.3f%+7.3f  μ⁻² %.3f\n"
+    "%+7.3f%+7.3f%+7.3f  ϱ⁻² %.3f\n"
+    "```\n\n"
+    "Heat maps: fixed range −%s (cyan) … 0 (grey) … +%s (yellow)."
+)
+"""One step of :func:`tensor_text`: 1 + 2 × 12 numbers and the colour range twice."""
+
+_SEP = "\x00"  # joins the steps' texts for one formatting call; no number or label contains it
+
+
 def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray, value_range: float) -> list[str]:
     """Markdown, one per step: G and C as numbers with their eigenvalues.
 
     The eigenvalues are λ², μ², ϱ² for G and 1/λ², 1/μ², 1/ϱ² for C (eq. (35) of the paper; C per
     the corrected eq. (51) remark in ``docs/physics.md``), computed from the semi-axes ``half``
-    (n, 3); ``value_range`` is the tensor views' colour range ±r.
+    (n, 3); ``value_range`` is the tensor views' colour range ±r. All steps are formatted in one
+    ``%`` call over a table of their numbers (the per-step text is the same as formatting each alone).
     """
-    out = []
-    for k in range(t.size):
-        lam, mu, rho = half[k]
-        g, c = G[k], C[k]
-        out.append(
-            f"**t = {t[k]:.3f}**\n\n"
-            "```\n"
-            "G = ΦᵀΦ               eigenvalue\n"
-            f"{g[0, 0]:+7.3f}{g[0, 1]:+7.3f}{g[0, 2]:+7.3f}  λ² {lam * lam:.3f}\n"
-            f"{g[1, 0]:+7.3f}{g[1, 1]:+7.3f}{g[1, 2]:+7.3f}  μ² {mu * mu:.3f}\n"
-            f"{g[2, 0]:+7.3f}{g[2, 1]:+7.3f}{g[2, 2]:+7.3f}  ϱ² {rho * rho:.3f}\n"
-            "\n"
-            "C = Φ⁻ᵀΦ⁻¹            eigenvalue\n"
-            f"{c[0, 0]:+7.3f}{c[0, 1]:+7.3f}{c[0, 2]:+7.3f}  λ⁻² {1 / (lam * lam):.3f}\n"
-            f"{c[1, 0]:+7.3f}{c[1, 1]:+7.3f}{c[1, 2]:+7.3f}  μ⁻² {1 / (mu * mu):.3f}\n"
-            f"{c[2, 0]:+7.3f}{c[2, 1]:+7.3f}{c[2, 2]:+7.3f}  ϱ⁻² {1 / (rho * rho):.3f}\n"
-            "```\n\n"
-            f"Heat maps: fixed range −{value_range:g} (cyan) … 0 (grey) … +{value_range:g} (yellow)."
-        )
-    return out
+    t = np.asarray(t, dtype=np.float64).ravel()
+    n = t.size
+    if n == 0:
+        return []
+    half = np.asarray(half, dtype=np.float64).reshape(n, 3)
+    sq = half * half
+    r = "%g" % value_range
+    cols = [t[:, None]]
+    for M, eig in ((np.asarray(G, dtype=np.float64).reshape(n, 3, 3), sq), (np.asarray(C, dtype=np.float64).reshape(n, 3, 3), 1 / sq)):
+        cols.append(np.concatenate([M, eig[:, :, None]], axis=2).reshape(n, 12))
+    table = np.concatenate(cols, axis=1).tolist()
+    for row in table:
+        row += (r, r)
+    return ((_TENSOR_TEXT + _SEP) * n % tuple(v for row in table for v in row)).split(_SEP)[:n]
 
 
 def axis_labels(half: np.ndarray) -> list[str]:
     """Labels of the principal-axis arrows, three per step: ``λ = 1.203`` … — the arrows' lengths."""
-    out: list[str] = []
-    for lam, mu, rho in half:
-        out += [f"λ = {lam:.3f}", f"μ = {mu:.3f}", f"ϱ = {rho:.3f}"]
-    return out
+    half = np.asarray(half, dtype=np.float64).reshape(-1, 3)
+    n = half.shape[0]
+    if n == 0:
+        return []
+    return (("λ = %.3f" + _SEP + "μ = %.3f" + _SEP + "ϱ = %.3f" + _SEP) * n % tuple(half.ravel().tolist())).split(_SEP)[: 3 * n]
 
 
 def description_markdown(title: str, body, extra: str, *, episode: bool) -> str:

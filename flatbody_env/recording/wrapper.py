@@ -34,9 +34,12 @@ import numpy as np
 
 
 def _numeric(d: Any) -> dict[str, float]:
+    """The entries of ``d`` that are numbers (bools left out), as floats."""
     out: dict[str, float] = {}
     if not isinstance(d, dict):
         return out
+    if all(type(v) is float for v in d.values()) and all(type(k) is str for k in d):
+        return dict(d)
     for k, v in d.items():
         if isinstance(v, bool):
             continue
@@ -46,6 +49,32 @@ def _numeric(d: Any) -> dict[str, float]:
             continue
         out[str(k)] = f
     return out
+
+
+def _columns(rows: list[dict[str, float] | None]) -> dict[str, np.ndarray]:
+    """name → float column over ``rows`` (dicts of floats, or None), NaN where a row lacks the name."""
+    names = list(dict.fromkeys(k for d in rows if d for k in d))
+    nan = math.nan
+    return {name: np.array([d.get(name, nan) if d else nan for d in rows]) for name in names}
+
+
+def _numeric_rows(rows: list) -> list[dict[str, float]]:
+    """:func:`_numeric` of each row; a row equal to the one before (an episode's target) is converted once."""
+    out: list[dict[str, float]] = []
+    prev = conv = None
+    for d in rows:
+        if conv is None or d != prev:
+            prev, conv = d, _numeric(d)
+        out.append(conv)
+    return out
+
+
+def _distance(info: dict | None) -> float:
+    """``info["distance"]`` as a float; NaN where absent or not finite (not drawn)."""
+    if not isinstance(info, dict) or "distance" not in info:
+        return math.nan
+    d = _numeric({"distance": info["distance"]}).get("distance")
+    return d if d is not None and math.isfinite(d) else math.nan
 
 
 def _check_contract(u) -> None:
@@ -88,8 +117,10 @@ class RerunRecorder(gym.Wrapper):
 
     Each recorded episode is one recording: the state after ``reset`` is step 0, and every
     ``step`` adds the new state with the action that led to it, the reward terms and the
-    target. Steps are buffered and sent in ``send_columns`` blocks of ``block`` steps; the file
-    is finished (footer written) when the episode terminates or is truncated, on the next
+    target. A step only keeps what it read from the env; the steps are converted together and
+    sent column-wise (:meth:`~flatbody_env.recording.writer.Recorder.extend`) when ``block`` of
+    them are buffered and when the episode ends — a registered 400-step episode in one block. The
+    file is finished (footer written) when the episode terminates or is truncated, on the next
     ``reset``, or on ``close``.
 
     Parameters
@@ -103,7 +134,7 @@ class RerunRecorder(gym.Wrapper):
     episode_trigger : callable(int) -> bool, optional
         Which episodes (0-based) to record; default all.
     block : int
-        Steps per ``send_columns`` block.
+        Steps buffered before they are sent as one block (and at the end of the episode).
     tensor_every : int
         ``Tensor`` views of G and C every k-th step.
     title : str, optional
@@ -121,7 +152,7 @@ class RerunRecorder(gym.Wrapper):
         path: str | Path,
         *,
         episode_trigger: Callable[[int], bool] | None = None,
-        block: int = 256,
+        block: int = 1024,
         tensor_every: int = 1,
         title: str | None = None,
     ) -> None:
@@ -141,6 +172,7 @@ class RerunRecorder(gym.Wrapper):
         self._episode = -1
         self._step = 0
         self._rec = None
+        self._buf: list[tuple] = []
         self.recorded_paths: list[Path] = []
 
     # ------------------------------------------------------------------------------------------
@@ -161,44 +193,93 @@ class RerunRecorder(gym.Wrapper):
     def _finish(self) -> None:
         if self._rec is not None:
             rec, self._rec = self._rec, None
-            self.recorded_paths.append(rec.close())
+            try:
+                self._flush(rec)
+            finally:
+                self.recorded_paths.append(rec.close())
 
-    def _append(self, *, action=None, reward: float | None = None, info: dict | None = None, reset_info: dict | None = None) -> None:
+    def _append(self, *, action=None, reward: float | None = None, info: dict | None = None) -> None:
+        """Keep what this step read from the env (copies); :meth:`_flush` converts the steps together."""
         u = self.env.unwrapped
-        state = {k: float(v) for k, v in u.state.items()}
-        R = np.asarray(u.rotation, dtype=np.float64)
-        t = float(u.time)
-        if not (all(math.isfinite(v) for v in state.values()) and np.all(np.isfinite(R))):
-            self._rec.note("non-finite state (integration failure): step not drawn", step=self._step, t=t if math.isfinite(t) else 0.0)
+        buf = self._buf
+        buf.append(
+            (
+                self._step,
+                u.time,
+                dict(u.state),
+                np.array(u.rotation, dtype=np.float64),
+                None if action is None else np.array(action, dtype=np.float64).ravel(),
+                reward,
+                dict(info) if isinstance(info, dict) else None,
+                getattr(u, "target", None),
+            )
+        )
+        if len(buf) >= self._block:
+            self._flush(self._rec)
+
+    def _flush(self, rec) -> None:
+        """Send the buffered steps: a step whose state or R is not finite is noted and not drawn;
+        integrator failures and leaving the domain are noted; the rest goes out column-wise."""
+        from flatbody_env.physics.state import STATE_NAMES
+        from flatbody_env.recording.layout import TARGET_SERIES
+
+        buf, self._buf = self._buf, []
+        if not buf:
             return
-        terms = None
-        if info is not None:
-            terms = _numeric(info.get("reward_terms", {}))
-            if reward is not None:
-                terms.setdefault("total", float(reward))
-            terms = {k: v for k, v in terms.items() if math.isfinite(v)}
+        steps, times, states, rotations, actions, rewards, infos, targets = zip(*buf)
+        n = len(buf)
+        t = np.array([float(x) for x in times])
+        Y = np.array([[st[k] for k in STATE_NAMES] for st in states], dtype=np.float64).T
+        R = np.stack(rotations)
+        ok = np.isfinite(Y).all(axis=0) & np.isfinite(R.reshape(n, 9)).all(axis=1)
+        for i in range(n):
+            if not ok[i]:
+                rec.note("non-finite state (integration failure): step not drawn", step=steps[i], t=t[i] if math.isfinite(t[i]) else 0.0)
+                continue
+            info = infos[i]
+            if info is not None and steps[i] > 0:
+                for key in ("integrator_failure", "left_domain"):
+                    if info.get(key):
+                        rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=steps[i], t=t[i])
+        keep = np.flatnonzero(ok)
+        if keep.size == 0:
+            return
+        pick = [int(i) for i in keep]
         act = None
-        if action is not None:
-            act = np.asarray(action, dtype=np.float64).ravel()
-            if not np.all(np.isfinite(act)):
-                act = None
-        if info is not None:
-            for key in ("integrator_failure", "left_domain"):
-                if info.get(key):
-                    self._rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=self._step, t=t)
-        distance = None
-        src = info if info is not None else reset_info
-        if isinstance(src, dict) and "distance" in src:
-            d = _numeric({"distance": src["distance"]}).get("distance")
-            distance = d if d is not None and math.isfinite(d) else None
-        self._rec.append(
-            t,
-            state,
-            R,
-            step=self._step,
-            action=act,
-            reward_terms=terms or None,
-            target=_numeric(getattr(u, "target", None)) or None,
+        given = [actions[i] for i in pick if actions[i] is not None]
+        if given:
+            sizes = {a.size for a in given}
+            if len(sizes) != 1:
+                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
+            act = np.full((len(pick), sizes.pop()), np.nan)
+            for row, i in enumerate(pick):
+                a = actions[i]
+                if a is not None and np.all(np.isfinite(a)):
+                    act[row] = a
+        terms = []
+        for i in pick:
+            info = infos[i]
+            if steps[i] == 0 or info is None:  # the reset: no reward
+                terms.append(None)
+                continue
+            d = _numeric(info.get("reward_terms", {}))
+            if rewards[i] is not None:
+                d.setdefault("total", float(rewards[i]))
+            terms.append(d)
+        reward_terms = {k: np.where(np.isfinite(v), v, np.nan) for k, v in _columns(terms).items()}
+        target = _columns(_numeric_rows([targets[i] for i in pick]))
+        for name, values in target.items():
+            if name in TARGET_SERIES and not np.all(np.isfinite(values[~np.isnan(values)])):
+                raise ValueError(f"target[{name!r}]: must be finite")
+        distance = np.array([_distance(infos[i]) for i in pick])
+        rec.extend(
+            t[keep],
+            Y[:, keep],
+            R[keep],
+            step=np.array(steps, dtype=np.int64)[keep],
+            actions=act,
+            reward_terms=reward_terms or None,
+            target={k: v for k, v in target.items() if k in TARGET_SERIES} or None,
             distance=distance,
         )
 
@@ -231,7 +312,7 @@ class RerunRecorder(gym.Wrapper):
                 episode=True,
                 extent=extent if math.isfinite(extent) and extent > 0 else 2.0,
             )
-            self._append(info=None, reset_info=info)
+            self._append(info=info)
         return obs, info
 
     def step(self, action):

@@ -45,8 +45,13 @@ G = ΦᵀΦ = U D² U⁻¹ (eq. (33) of [1]); C = Φ⁻ᵀΦ⁻¹ = R D⁻² R�
 see ``docs/physics.md``); both come from :mod:`flatbody_env.physics.kinematics`. Names, colours and
 views: :mod:`flatbody_env.recording.layout`.
 
-Data are sent column-wise (``send_columns``) in blocks: a whole trajectory at once from
-:func:`record_arrays`, blocks of ``block`` steps from a live :class:`Recorder`.
+Data are sent column-wise in blocks, one chunk per entity and block: a whole trajectory at once
+from :func:`record_arrays`, an env episode (up to ``block`` steps at a time) from
+:class:`~flatbody_env.recording.wrapper.RerunRecorder` through :meth:`Recorder.extend`, blocks of
+``block`` steps from :meth:`Recorder.append`. The columns are built in Arrow directly, and the
+blueprint and the static parts are converted to Arrow once per process and sent again to each file
+(rerun's archetype conversions cost more than the rest of a short recording); the Arrow arrays are
+the archetypes' own, so a file holds the same data either way.
 
 References
 ----------
@@ -56,6 +61,8 @@ References
 
 from __future__ import annotations
 
+import functools
+import math
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -74,6 +81,8 @@ from flatbody_env.recording.layout import (
     TENSOR_ENTRY_COLORS,
     axis_labels,
     blueprint,
+    camera,
+    camera_kind,
     description_markdown,
     drift_axis,
     material_line_colors,
@@ -119,7 +128,7 @@ _IDX = {name: i for i, name in enumerate(STATE_NAMES)}
 
 @dataclass(frozen=True, kw_only=True)
 class _Block:
-    """Validated arrays for one ``send_columns`` block of n steps."""
+    """Validated arrays for one block of n steps."""
 
     step: np.ndarray
     t: np.ndarray
@@ -170,6 +179,18 @@ def _as_block(t, states, rotations, *, energy, step) -> _Block:
     return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy)
 
 
+def _optional_column(name: str, values, n: int, width: int | None = None) -> np.ndarray:
+    """An optional per-step column of :meth:`Recorder.extend`: NaN marks a step without a value,
+    ±inf is refused (a value that cannot be drawn is not silently dropped)."""
+    a = np.asarray(values, dtype=np.float64)
+    shape = (n,) if width is None else (n, width)
+    if a.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
+    if np.any(np.isinf(a)):
+        raise ValueError(f"{name}: must be finite or NaN (NaN marks a step without a value)")
+    return a
+
+
 def _safe_name(name: str) -> str:
     out = "".join(c if (c.isalnum() or c in "_-") else "_" for c in str(name))
     return out or "_"
@@ -179,8 +200,154 @@ def _ns(t) -> np.ndarray:
     return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
 
 
+# -- Arrow, once per process ---------------------------------------------------------------------------
+def _components(*archetypes) -> dict:
+    """Component descriptor → Arrow array of rerun archetypes (what ``RecordingStream.log`` sends)."""
+    out = {}
+    for arch in archetypes:
+        batches = arch.as_component_batches() if hasattr(arch, "as_component_batches") else arch
+        for b in batches:
+            array = b.as_arrow_array()
+            if array is not None:
+                out.setdefault(b.component_descriptor(), array)
+    return out
+
+
+_STATIC: dict[tuple, dict] = {}
+
+
+def _static(key: tuple, build) -> dict:
+    """The components of a static archetype that does not change between files, converted once per process."""
+    comps = _STATIC.get(key)
+    if comps is None:
+        comps = _STATIC[key] = _components(build())
+    return comps
+
+
+class _Capture:
+    """Stands in for a blueprint stream: keeps what a blueprint logs, as (path, components, static)."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, dict, bool]] = []
+
+    def log(self, entity_path, entity, *extra, static: bool = False) -> None:
+        self.calls.append((str(entity_path), _components(entity, *extra), bool(static)))
+
+
+def _views(container):
+    import rerun.blueprint as rrb
+
+    if isinstance(container, rrb.View):
+        yield container
+        return
+    for item in container.contents:
+        yield from _views(item)
+
+
+@functools.lru_cache(maxsize=8)
+def _blueprint_template(episode: bool, drift_range: float | None) -> tuple[tuple[tuple[str, dict, bool], ...], dict[str, str]]:
+    """What :func:`~flatbody_env.recording.layout.blueprint` logs, converted once per (episode, drift
+    axis); and the camera property of each 3-D view (path → ``"top"``/``"oblique"``), the only part
+    that depends on the body's extent."""
+    import rerun.blueprint as rrb
+
+    bp = blueprint(episode=episode, extent=1.0, drift_range=drift_range)
+    cap = _Capture()
+    bp._log_to_stream(cap)
+    cameras = {f"{v.blueprint_path()}/EyeControls3D": camera_kind(v.name) for v in _views(bp.root_container) if isinstance(v, rrb.Spatial3DView)}
+    logged = {path for path, _, _ in cap.calls}
+    if not set(cameras) <= logged:  # pragma: no cover - a rerun version that logs view properties elsewhere
+        raise RuntimeError("rerun blueprint: the 3-D views' EyeControls3D were not logged where expected")
+    return tuple(cap.calls), cameras
+
+
+def _blueprint_storage(*, episode: bool, extent: float, drift_range: float | None):
+    """The default blueprint of one file as rerun's in-memory blueprint storage (what ``save`` takes):
+    the cached template with the cameras placed for ``extent``."""
+    import rerun_bindings as bindings
+
+    calls, cameras = _blueprint_template(bool(episode), drift_range)
+    eyes = {kind: _components(camera(kind, extent)) for kind in set(cameras.values())}
+    stream = bindings.new_blueprint(application_id=APP_ID, make_default=False, make_thread_default=False, default_enabled=True)
+    bindings.set_time_sequence("blueprint", 0, recording=stream)
+    for path, comps, static in calls:
+        kind = cameras.get(path)
+        bindings.log_arrow_msg(path, components=eyes[kind] if kind is not None else comps, static_=static, recording=stream)
+    return bindings.memory_recording(recording=stream)
+
+
+@functools.lru_cache(maxsize=1)
+def _column_types() -> dict[str, tuple]:
+    """(descriptor, Arrow list type) of every temporal component column, taken from rerun's own
+    ``columns()`` once; the columns are then built in Arrow directly."""
+    import rerun as rr
+
+    one = np.zeros((1, 3))
+    cols = [
+        *rr.Scalars.columns(scalars=[0.0]),
+        *rr.Ellipsoids3D.columns(half_sizes=one, quaternions=[[0.0, 0.0, 0.0, 1.0]]),
+        *rr.Transform3D.columns(mat3x3=np.eye(3)[None]),
+        *rr.Arrows3D.columns(vectors=one, labels=["x"]),
+        *rr.TextDocument.columns(text=["x"]),
+    ]
+    out = {}
+    for c in cols:
+        d = c.component_descriptor()
+        out[str(d.component)] = (d, c.as_arrow_array().type)
+    return out
+
+
+def _fixed(values: np.ndarray, n: int, per: int, key: str):
+    """A list column of n rows, ``per`` fixed-size float32 vectors each (``values`` (n·per, width))."""
+    import pyarrow as pa
+
+    descriptor, typ = _column_types()[key]
+    inner = typ.value_type
+    flat = pa.array(np.ascontiguousarray(values, dtype=np.float32).ravel())
+    vectors = pa.FixedSizeListArray.from_arrays(flat, type=inner)
+    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), vectors, type=typ)
+
+
+def _scalars(values: np.ndarray):
+    import pyarrow as pa
+
+    descriptor, typ = _column_types()["Scalars:scalars"]
+    values = np.ascontiguousarray(values, dtype=np.float64).ravel()
+    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(values.size + 1, dtype=np.int32)), pa.array(values), type=typ)
+
+
+def _scalar_rows(values: np.ndarray, per: int):
+    """A ``Scalars`` column of rows of ``per`` values each (``values`` (n, per))."""
+    import pyarrow as pa
+
+    descriptor, typ = _column_types()["Scalars:scalars"]
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    n = values.shape[0]
+    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), pa.array(values.ravel()), type=typ)
+
+
+def _strings(texts: list[str], per: int, key: str):
+    import pyarrow as pa
+
+    descriptor, typ = _column_types()[key]
+    n = len(texts) // per
+    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), pa.array(texts, type=typ.value_type), type=typ)
+
+
+def _mat3x3(M: np.ndarray):
+    """``Transform3D:mat3x3`` of n matrices (rerun stores them column-major, float32)."""
+    M = np.asarray(M, dtype=np.float64)
+    return _fixed(np.swapaxes(M, 1, 2).reshape(-1, 9), M.shape[0], 1, "Transform3D:mat3x3")
+
+
+def _timelines(step: np.ndarray, t: np.ndarray) -> dict:
+    import pyarrow as pa
+
+    return {"step": pa.array(np.asarray(step, dtype=np.int64), pa.int64()), "sim_time": pa.array(_ns(t), pa.duration("ns"))}
+
+
 class Recorder:
-    """A live recording to an ``.rrd`` file, sent in blocks with ``send_columns``.
+    """A live recording to an ``.rrd`` file, sent column-wise in blocks.
 
     Parameters
     ----------
@@ -193,7 +360,7 @@ class Recorder:
     description : str, optional
         Extra markdown appended to the standard description.
     block : int
-        Steps buffered by :meth:`append` before a ``send_columns`` block is flushed (≥ 1).
+        Steps buffered by :meth:`append` before they are sent as one block (≥ 1).
     tensor_every : int
         Log the ``Tensor`` views of G and C and their numbers every k-th step (k ≥ 1; the
         6-entry series are logged at every step regardless).
@@ -230,6 +397,7 @@ class Recorder:
         drift_range: float | None = None,
     ) -> None:
         import rerun as rr
+        import rerun_bindings as bindings
 
         for name, value in (("block", block), ("tensor_every", tensor_every), ("spokes", spokes)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -244,62 +412,84 @@ class Recorder:
         self.tensor_every = int(tensor_every)
         self.action_names = tuple(action_names) if action_names is not None else None
         self.episode = bool(episode)
-        self._buf: list[dict] = []
+        self._buf: dict[str, list] = self._empty_buffer()
         self._closed = False
         self._steps = 0
         self._styled: dict[str, int] = {}
         self._members: dict[str, list[str]] = {"action": [], "reward": []}
         self._q0: dict[str, float] | None = None
         self._range = 0.0
-        self._tensor_batch_type = None
         self._rr = rr
+        self._bindings = bindings
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id or str(uuid.uuid4()), send_properties=True)
         if not self.rec.is_enabled():
             raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
+        self._native = self.rec.to_native()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec.save(str(self.path), default_blueprint=blueprint(episode=self.episode, extent=float(extent), drift_range=drift_range))
+        storage = _blueprint_storage(episode=self.episode, extent=float(extent), drift_range=drift_range)
+        bindings.save(path=str(self.path), default_blueprint=storage, recording=self._native, write_footer=True)
         self.rec.send_recording_name(title)
         self._log_static(title, description, int(spokes))
 
     # -- static parts ------------------------------------------------------------------------------
+    def _static_log(self, path: str, comps: dict) -> None:
+        self._bindings.log_arrow_msg(path, components=comps, static_=True, recording=self._native)
+
     def _log_static(self, title: str, description: str, spokes: int) -> None:
         rr = self._rr
-        rec = self.rec
         text = description_markdown(title, self.body, description, episode=self.episode)
-        rec.log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN), static=True)
-        rec.log("/tensors/numbers", rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN), static=True)
-        rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("/material", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        lines = material_lines(spokes)
-        colors = material_line_colors(spokes)
-        rec.log("/world/material/lines", rr.LineStrips3D(lines, colors=colors, radii=0.008), static=True)
-        rec.log("/material/reference", rr.LineStrips3D(lines, colors=colors, radii=0.008), static=True)
-        body_color = [rgba((90, 140, 255))]
-        rec.log("/world/body", rr.Ellipsoids3D.from_fields(colors=body_color, fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006), static=True)
-        rec.log("/material/G_ellipsoid", rr.Ellipsoids3D.from_fields(colors=body_color, fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006), static=True)
+        self._static_log("/description", _components(rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN)))
+        self._static_log("/tensors/numbers", _static(("numbers",), lambda: rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN)))
+        coords = _static(("coords",), lambda: rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+        self._static_log("/world", coords)
+        self._static_log("/material", coords)
+        lines = _static(("lines", spokes), lambda: rr.LineStrips3D(material_lines(spokes), colors=material_line_colors(spokes), radii=0.008))
+        self._static_log("/world/material/lines", lines)
+        self._static_log("/material/reference", lines)
+        ellipsoid = _static(
+            ("ellipsoid",),
+            lambda: rr.Ellipsoids3D.from_fields(colors=[rgba((90, 140, 255))], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
+        )
+        self._static_log("/world/body", ellipsoid)
+        self._static_log("/material/G_ellipsoid", ellipsoid)
+        arrows = _static(("arrows",), lambda: rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=True))
         for ent in ("/world/axes_C", "/material/axes_G"):
-            rec.log(ent, rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=True), static=True)
+            self._static_log(ent, arrows)
         for name in BODY_SERIES:
             self._style(f"/series/{name}")
         for name, _ in DRIFT_SERIES:
             self._style(f"/series/drift/{name}")
         for sym in ("G", "C"):
-            rec.log(f"/series/{sym}", rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS), static=True)
+            self._static_log(
+                f"/series/{sym}",
+                _static(("entries", sym), lambda: rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS)),
+            )
         if self.episode:
             from flatbody_env.env.rendering import COLORS
 
-            rec.log("/world/target/outline", rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012), static=True)
+            self._static_log(
+                "/world/target/outline", _static(("outline",), lambda: rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012))
+            )
             self._style("/series/distance")
             for name in TARGET_SERIES:
                 self._style(f"/series/target/{name}")
 
     def _style(self, path: str, index: int = 0) -> None:
         if path not in self._styled:
-            name, color, width = series_style(path, index)
-            self.rec.log(path, self._rr.SeriesLines(names=name, colors=[color], widths=width), static=True)
+            rr = self._rr
+
+            def build():
+                name, color, width = series_style(path, index)
+                return rr.SeriesLines(names=name, colors=[color], widths=width)
+
+            self._static_log(path, _static(("style", path, index), build))
             self._styled[path] = index
 
     # -- appending ---------------------------------------------------------------------------------
+    @staticmethod
+    def _empty_buffer() -> dict[str, list]:
+        return {k: [] for k in ("t", "y", "R", "energy", "step", "action", "reward_terms", "target", "distance")}
+
     def append(
         self,
         t: float,
@@ -313,12 +503,12 @@ class Recorder:
         target: Mapping[str, float] | None = None,
         distance: float | None = None,
     ) -> None:
-        """Buffer one step; a full buffer is flushed as one ``send_columns`` block.
+        """Buffer one step; a full buffer (``block`` steps) is sent as one block.
 
         ``state`` is a dict of the eleven names or an array in :data:`STATE_NAMES` order;
         ``energy`` defaults to H(state) (eq. (41) of [1]); ``step`` to the running count.
         ``action``, ``reward_terms``, ``target`` (its :data:`~flatbody_env.recording.layout.TARGET_SERIES`
-        entries) and ``distance`` are an env episode's (``episode=True``).
+        entries) and ``distance`` are an env episode's (``episode=True``); they must be finite.
         """
         if self._closed:
             raise ValueError("recorder: already closed")
@@ -333,46 +523,140 @@ class Recorder:
                 raise ValueError(f"state: expected {len(STATE_NAMES)} entries, got shape {y.shape}")
         if (action is not None or reward_terms or target or distance is not None) and not self.episode:
             raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
-        if energy is None:
-            from flatbody_env.physics.hamiltonian import hamiltonian
-
-            energy = hamiltonian(y, self.body)
-        self._buf.append(
-            {
-                "t": float(t),
-                "y": y,
-                "R": np.asarray(rotation, dtype=np.float64),
-                "energy": float(energy),
-                "step": self._steps if step is None else int(step),
-                "action": None if action is None else np.asarray(action, dtype=np.float64).ravel(),
-                "reward_terms": {str(k): float(v) for k, v in reward_terms.items()} if reward_terms else None,
-                "target": {k: float(target[k]) for k in TARGET_SERIES if k in target} if target else None,
-                "distance": None if distance is None else float(distance),
-            }
-        )
+        act = None if action is None else np.array(action, dtype=np.float64).ravel()
+        terms = {str(k): float(v) for k, v in reward_terms.items()} if reward_terms else None
+        tgt = {k: float(target[k]) for k in TARGET_SERIES if k in target} if target else None
+        dist = None if distance is None else float(distance)
+        checks = (("action", [] if act is None else act.tolist()), ("reward_terms", list((terms or {}).values())),
+                  ("target", list((tgt or {}).values())), ("distance", [] if dist is None else [dist]))
+        for name, values in checks:
+            if not all(math.isfinite(v) for v in values):
+                raise ValueError(f"{name}: must be finite, got {values!r}")
+        buf = self._buf
+        buf["t"].append(float(t))
+        buf["y"].append(y)
+        buf["R"].append(np.array(rotation, dtype=np.float64))
+        buf["energy"].append(None if energy is None else float(energy))
+        buf["step"].append(self._steps if step is None else int(step))
+        buf["action"].append(act)
+        buf["reward_terms"].append(terms)
+        buf["target"].append(tgt)
+        buf["distance"].append(np.nan if dist is None else dist)
         self._steps += 1
-        if len(self._buf) >= self.block:
+        if len(buf["t"]) >= self.block:
             self.flush()
 
     def flush(self) -> None:
-        """Send the buffered steps as one block (no-op when empty).
-
-        The body, tensors and state series go out for every buffered step; actions, reward
-        terms, target and distance for the steps that carry them (a reset has no action or reward).
-        """
-        if not self._buf:
+        """Send the steps buffered by :meth:`append` as one block (no-op when empty)."""
+        buf = self._buf
+        if not buf["t"]:
             return
-        buf, self._buf = self._buf, []
-        block = _as_block(
-            [b["t"] for b in buf],
-            np.stack([b["y"] for b in buf], axis=1),
-            np.stack([b["R"] for b in buf]),
-            energy=[b["energy"] for b in buf],
-            step=np.array([b["step"] for b in buf], dtype=np.int64),
-        )
-        self._send_block(block)
+        self._buf = self._empty_buffer()
+        n = len(buf["t"])
+        Y = np.stack(buf["y"], axis=1)
+        missing = np.array([e is None for e in buf["energy"]])
+        energy = np.array([np.nan if e is None else e for e in buf["energy"]])
+        if missing.any():
+            from flatbody_env.physics.hamiltonian import hamiltonian_series
+
+            _check_finite("states", Y.T)
+            energy[missing] = hamiltonian_series(Y[:, missing], self.body)
+        actions = terms = target = None
+        with_action = [a for a in buf["action"] if a is not None]
+        if with_action:
+            sizes = {a.size for a in with_action}
+            if len(sizes) != 1:
+                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
+            actions = np.full((n, sizes.pop()), np.nan)
+            for i, a in enumerate(buf["action"]):
+                if a is not None:
+                    actions[i] = a
+        names = {k for d in buf["reward_terms"] if d for k in d}
+        if names:
+            terms = {name: np.array([d.get(name, np.nan) if d else np.nan for d in buf["reward_terms"]]) for name in names}
+        names = {k for d in buf["target"] if d for k in d}
+        if names:
+            target = {name: np.array([d.get(name, np.nan) if d else np.nan for d in buf["target"]]) for name in names}
+        self._extend(buf["t"], Y, np.stack(buf["R"]), step=np.array(buf["step"], dtype=np.int64), energy=energy, actions=actions,
+                     reward_terms=terms, target=target, distance=np.array(buf["distance"]) if self.episode else None)
+
+    def extend(
+        self,
+        t,
+        states,
+        rotations,
+        *,
+        step=None,
+        energy=None,
+        actions=None,
+        reward_terms: Mapping[str, np.ndarray] | None = None,
+        target: Mapping[str, np.ndarray] | None = None,
+        distance=None,
+    ) -> None:
+        """Send n steps at once, column-wise (what :meth:`append` buffers, given as columns).
+
+        Steps appended and not yet flushed are sent first, so the order of the steps is kept.
+
+        Parameters
+        ----------
+        t : array (n,)
+            Simulated times (non-decreasing).
+        states : array (11, n)
+            States in :data:`STATE_NAMES` order.
+        rotations : array (n, 3, 3)
+            R at each step.
+        step : int array (n,), optional
+            The ``step`` timeline (default: the running count).
+        energy : array (n,), optional
+            H at each step (default: H of the states, eq. (41) of [1]).
+        actions : array (n, k), optional
+            Episodes: the action that led to each step; a row of NaN for a step without one (the reset).
+        reward_terms, target : mapping name → array (n,), optional
+            Episodes: the reward terms (``total`` among them) and the target's
+            :data:`~flatbody_env.recording.layout.TARGET_SERIES` entries; NaN where a step has none.
+        distance : array (n,), optional
+            Episodes: the distance to the target; NaN where a step has none.
+
+        Raises
+        ------
+        ValueError
+            Shapes, non-finite states or rotations, ±inf in an optional column, episode columns
+            given to a recording that is not an episode.
+        """
+        if self._closed:
+            raise ValueError("recorder: already closed")
+        self.flush()
+        t = np.asarray(t, dtype=np.float64).ravel()
+        n = t.size
+        if step is None:
+            step = np.arange(self._steps, self._steps + n, dtype=np.int64)
+        self._steps += n
+        self._extend(t, states, rotations, step=step, energy=energy, actions=actions, reward_terms=reward_terms, target=target, distance=distance)
+
+    def _extend(self, t, states, rotations, *, step, energy, actions, reward_terms, target, distance) -> None:
+        if (actions is not None or reward_terms or target or distance is not None) and not self.episode:
+            raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
+        if energy is None:
+            from flatbody_env.physics.hamiltonian import hamiltonian_series
+
+            Y = np.asarray(states, dtype=np.float64)
+            if Y.ndim != 2 or Y.shape[0] != len(STATE_NAMES):
+                raise ValueError(f"states: expected shape ({len(STATE_NAMES)}, n), got {Y.shape}")
+            _check_finite("states", Y.T)
+            energy = hamiltonian_series(Y, self.body)
+        block = _as_block(t, states, rotations, energy=energy, step=step)
+        n = block.t.size
+        episode = None
         if self.episode:
-            self._send_episode(buf)
+            episode = {
+                "actions": None if actions is None else _optional_column("actions", actions, n, np.shape(actions)[-1]),
+                "reward_terms": {str(k): _optional_column(f"reward_terms[{k!r}]", v, n) for k, v in (reward_terms or {}).items()},
+                "target": {k: _optional_column(f"target[{k!r}]", target[k], n) for k in TARGET_SERIES if target and k in target},
+                "distance": None if distance is None else _optional_column("distance", distance, n),
+            }
+        self._send_block(block)
+        if episode is not None:
+            self._send_episode(block, **episode)
 
     def note(self, text: str, *, step: int, t: float, level: str = "WARN") -> None:
         """Log one event (e.g. an integrator failure) as a ``TextLog`` on ``/events``."""
@@ -381,10 +665,11 @@ class Recorder:
         self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9)), "ns"))
         self.rec.log("/events", rr.TextLog(str(text), level=level))
 
+    def _send(self, path: str, timelines: dict, *columns) -> None:
+        self._bindings.send_arrow_chunk(path, timelines=timelines, components=dict(columns), recording=self._native)
+
     def _send_block(self, block: _Block) -> None:
-        """Log a whole block of steps column-wise (one ``send_columns`` per entity)."""
-        rr = self._rr
-        rec = self.rec
+        """Log a whole block of steps column-wise (one chunk per entity)."""
         n = block.t.size
         y = block.states
         lam, mu, rho, theta = (y[_IDX[k]] for k in ("lambda", "mu", "rho", "theta"))
@@ -394,85 +679,75 @@ class Recorder:
         G = green_tensor(lam, mu, rho, theta)
         C = cauchy_tensor(lam, mu, rho, R)
         Phi = configuration(lam, mu, rho, theta, R)
-        idx = [rr.TimeColumn("step", sequence=block.step), rr.TimeColumn("sim_time", duration=_ns(block.t))]
-        rec.send_columns("/world/body", indexes=idx, columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(R)))
-        rec.send_columns("/material/G_ellipsoid", indexes=idx, columns=rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(U)))
-        rec.send_columns("/world/material", indexes=idx, columns=rr.Transform3D.columns(mat3x3=Phi))
-        labels = axis_labels(half)
-        three = np.full(n, 3, dtype=np.int32)
+        idx = _timelines(block.step, block.t)
+        self._send("/world/body", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(R), n, 1, "Ellipsoids3D:quaternions"))
+        self._send("/material/G_ellipsoid", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(U), n, 1, "Ellipsoids3D:quaternions"))
+        self._send("/world/material", idx, _mat3x3(Phi))
+        labels = _strings(axis_labels(half), 3, "Arrows3D:labels")
         for ent, frames in (("/world/axes_C", R), ("/material/axes_G", U)):
-            vec = principal_axes(frames, half).reshape(3 * n, 3)
-            rec.send_columns(ent, indexes=idx, columns=rr.Arrows3D.columns(vectors=vec, labels=labels).partition(three))
-        six = np.full(n, 6, dtype=np.int32)
-        rec.send_columns("/series/G", indexes=idx, columns=rr.Scalars.columns(scalars=symmetric_entries(G).ravel()).partition(six))
-        rec.send_columns("/series/C", indexes=idx, columns=rr.Scalars.columns(scalars=symmetric_entries(C).ravel()).partition(six))
+            self._send(ent, idx, _fixed(principal_axes(frames, half).reshape(3 * n, 3), n, 3, "Arrows3D:vectors"), labels)
+        self._send("/series/G", idx, _scalar_rows(symmetric_entries(G), 6))
+        self._send("/series/C", idx, _scalar_rows(symmetric_entries(C), 6))
         casimir = y[_IDX["s1"]] ** 2 + y[_IDX["s2"]] ** 2 + y[_IDX["s3"]] ** 2
         series = {"lambda": lam, "mu": mu, "rho": rho, "theta": theta, "s3": y[_IDX["s3"]], "p_theta": y[_IDX["p_theta"]], "energy": block.energy, "casimir": casimir}
         if self._q0 is None:
             self._q0 = {name: float(series[name][0]) for name, _ in DRIFT_SERIES}
         for name, values in series.items():
-            rec.send_columns(f"/series/{name}", indexes=idx, columns=rr.Scalars.columns(scalars=values))
+            self._send(f"/series/{name}", idx, _scalars(values))
         for name, _ in DRIFT_SERIES:
-            rec.send_columns(f"/series/drift/{name}", indexes=idx, columns=rr.Scalars.columns(scalars=relative_drift(series[name], self._q0[name])))
+            self._send(f"/series/drift/{name}", idx, _scalars(relative_drift(series[name], self._q0[name])))
         sel = np.flatnonzero(block.step % self.tensor_every == 0)
         if sel.size:
+            rr = self._rr
             m = float(max(np.abs(G[sel]).max(), np.abs(C[sel]).max()))
             if m > self._range:  # a fixed, symmetric colour range ±r for both views (widened, never narrowed)
                 self._range = nice_range(1.05 * m)
+                comps = _static(("range", self._range), lambda: rr.Tensor.from_fields(value_range=[-self._range, self._range]))
                 for ent in ("/tensors/G", "/tensors/C"):
-                    rec.log(ent, rr.Tensor.from_fields(value_range=[-self._range, self._range]), static=True)
-            tidx = [rr.TimeColumn("step", sequence=block.step[sel]), rr.TimeColumn("sim_time", duration=_ns(block.t[sel]))]
-            rec.send_columns("/tensors/G", indexes=tidx, columns=[self._tensor_column(G[sel])])
-            rec.send_columns("/tensors/C", indexes=tidx, columns=[self._tensor_column(C[sel])])
-            text = tensor_text(block.t[sel], G[sel], C[sel], half[sel], self._range)
-            rec.send_columns("/tensors/numbers", indexes=tidx, columns=rr.TextDocument.columns(text=text))
+                    self._static_log(ent, comps)
+            tidx = idx if sel.size == n else _timelines(block.step[sel], block.t[sel])
+            self._send("/tensors/G", tidx, self._tensor_column(G[sel]))
+            self._send("/tensors/C", tidx, self._tensor_column(C[sel]))
+            self._send("/tensors/numbers", tidx, _strings(tensor_text(block.t[sel], G[sel], C[sel], half[sel], self._range), 1, "TextDocument:text"))
 
-    def _send_episode(self, buf: list[dict]) -> None:
-        """Actions, reward terms, target (series and outline) and distance of the buffered steps."""
-        rr = self._rr
-        with_action = [b for b in buf if b["action"] is not None]
-        if with_action:
-            sizes = {b["action"].size for b in with_action}
-            if len(sizes) != 1:
-                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
-            actions = np.stack([b["action"] for b in with_action])
-            _check_finite("actions", actions)
-            k = actions.shape[1]
-            names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
-            if len(names) != k:
-                raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
-            step = np.array([b["step"] for b in with_action], dtype=np.int64)
-            t = np.array([b["t"] for b in with_action])
-            for i, name in enumerate(names):
-                self._series(f"/series/action/{_safe_name(name)}", step, t, actions[:, i], group="action")
-        names = sorted({k for b in buf if b["reward_terms"] for k in b["reward_terms"]}, key=lambda n: (n == "total", n))
-        for name in names:
-            rows = [b for b in buf if b["reward_terms"] and name in b["reward_terms"]]
-            values = np.array([b["reward_terms"][name] for b in rows])
-            _check_finite(f"reward_terms[{name!r}]", values)
-            self._series(f"/series/reward/{_safe_name(name)}", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values, group="reward")
+    def _send_episode(self, block: _Block, *, actions, reward_terms, target, distance) -> None:
+        """Actions, reward terms, target (series and outline) and distance of a block; a NaN is a step without that value."""
+        if actions is not None:
+            has = ~np.isnan(actions).any(axis=1)
+            if has.any():
+                k = actions.shape[1]
+                names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
+                if len(names) != k:
+                    raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
+                idx = self._rows(block, has)
+                for i, name in enumerate(names):
+                    self._series(f"/series/action/{_safe_name(name)}", idx, actions[has, i], group="action")
+        for name in sorted(reward_terms, key=lambda n: (n == "total", n)):
+            values = reward_terms[name]
+            has = ~np.isnan(values)
+            if has.any():
+                self._series(f"/series/reward/{_safe_name(name)}", self._rows(block, has), values[has], group="reward")
         for name in TARGET_SERIES:
-            rows = [b for b in buf if b["target"] and name in b["target"]]
-            if rows:
-                values = np.array([b["target"][name] for b in rows])
-                _check_finite(f"target[{name!r}]", values)
-                self._series(f"/series/target/{name}", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values)
-        rows = [b for b in buf if b["target"] and all(k in b["target"] for k in ("lambda", "mu", "rho"))]
-        if rows:
-            D = np.zeros((len(rows), 3, 3))
-            for i, b in enumerate(rows):
-                D[i] = np.diag([b["target"]["lambda"], b["target"]["mu"], b["target"]["rho"]])
-            M = np.stack([b["R"] for b in rows]) @ D  # R·diag(λ*, μ*, ϱ*): the target ellipse along the body's axes
-            idx = [rr.TimeColumn("step", sequence=np.array([b["step"] for b in rows], dtype=np.int64)), rr.TimeColumn("sim_time", duration=_ns([b["t"] for b in rows]))]
-            self.rec.send_columns("/world/target", indexes=idx, columns=rr.Transform3D.columns(mat3x3=M))
-        rows = [b for b in buf if b["distance"] is not None]
-        if rows:
-            values = np.array([b["distance"] for b in rows])
-            _check_finite("distance", values)
-            self._series("/series/distance", np.array([b["step"] for b in rows], dtype=np.int64), np.array([b["t"] for b in rows]), values)
+            values = target.get(name)
+            if values is not None:
+                has = ~np.isnan(values)
+                if has.any():
+                    self._series(f"/series/target/{name}", self._rows(block, has), values[has])
+        if all(k in target for k in ("lambda", "mu", "rho")):
+            d = np.stack([target["lambda"], target["mu"], target["rho"]], axis=1)
+            has = ~np.isnan(d).any(axis=1)
+            if has.any():  # R·diag(λ*, μ*, ϱ*): the target ellipse along the body's axes
+                self._send("/world/target", self._rows(block, has), _mat3x3(block.rotations[has] * d[has][:, None, :]))
+        if distance is not None:
+            has = ~np.isnan(distance)
+            if has.any():
+                self._series("/series/distance", self._rows(block, has), distance[has])
 
-    def _series(self, path: str, step: np.ndarray, t: np.ndarray, values: np.ndarray, *, group: str | None = None) -> None:
-        rr = self._rr
+    @staticmethod
+    def _rows(block: _Block, has: np.ndarray) -> dict:
+        return _timelines(block.step[has], block.t[has])
+
+    def _series(self, path: str, idx: dict, values: np.ndarray, *, group: str | None = None) -> None:
         if path not in self._styled:
             index = 0
             if group is not None:
@@ -480,8 +755,7 @@ class Recorder:
                 members.append(path)
                 index = len(members) - 1
             self._style(path, index)
-        idx = [rr.TimeColumn("step", sequence=step), rr.TimeColumn("sim_time", duration=_ns(t))]
-        self.rec.send_columns(path, indexes=idx, columns=rr.Scalars.columns(scalars=values))
+        self._send(path, idx, _scalars(values))
 
     def _tensor_column(self, M: np.ndarray):
         """A ``Tensor:data`` column of n 3×3 float64 tensors, built directly in Arrow.
@@ -493,10 +767,7 @@ class Recorder:
         import pyarrow as pa
 
         rr = self._rr
-        if self._tensor_batch_type is None:
-            template = rr.Tensor(np.eye(3), dim_names=["row", "col"]).as_component_batches()[0]
-            self._tensor_batch_type = (template.component_descriptor(), template.as_arrow_array().type)
-        descriptor, typ = self._tensor_batch_type
+        descriptor, typ = _tensor_type()
         n = M.shape[0]
         pair = np.arange(0, 2 * n + 1, 2, dtype=np.int32)
         shape = pa.ListArray.from_arrays(pa.array(pair), pa.array(np.full(2 * n, 3, dtype=np.uint64)), type=typ.field("shape").type)
@@ -528,7 +799,8 @@ class Recorder:
             def component_descriptor(self):
                 return descriptor
 
-        return rr.ComponentColumn(descriptor, _Batch())
+        column = rr.ComponentColumn(descriptor, _Batch())
+        return column.component_descriptor(), column.as_arrow_array()
 
     # -- finishing ---------------------------------------------------------------------------------
     @property
@@ -552,6 +824,16 @@ class Recorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+@functools.lru_cache(maxsize=1)
+def _tensor_type() -> tuple:
+    """(descriptor, Arrow type of one ``TensorData``) of rerun's ``Tensor:data`` (read from rerun's
+    own tables: building a template tensor would import ``pyarrow.compute``, 45 ms)."""
+    import rerun as rr
+    from rerun.encodings.tensor_data import TensorDataBatch
+
+    return rr.Tensor.descriptor_data(), TensorDataBatch._ARROW_DATATYPE
 
 
 def record_arrays(

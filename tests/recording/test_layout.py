@@ -142,3 +142,35 @@ def test_drift_axis_is_fixed_for_free_scenes_and_follows_episodes(recorded, epis
     assert lo == -hi and hi >= max(1e-6, drift)  # round-off shows as a flat line, on a labelled axis
     assert drift < 1e-6 and hi == pytest.approx(1e-6)  # this scene is integrated to round-off
     assert "ScalarAxis:range" not in read_blueprint(episode).view("conserved: relative drift").properties
+
+
+def test_numbers_and_labels_are_each_steps_own_formatting():
+    """The tensor numbers and arrow labels, formatted for all steps in one call, equal each step
+    formatted alone (the per-step f-strings below are the oracle), for awkward values too."""
+    from flatbody_env.recording.layout import axis_labels, tensor_text
+
+    rng = np.random.default_rng(1)
+    n = 40
+    t = np.cumsum(rng.random(n))
+    G, C = rng.normal(size=(n, 3, 3)) * 300, rng.normal(size=(n, 3, 3))
+    half = rng.random((n, 3)) + 0.2
+    G[0, 0, 0], C[1, 1, 1], G[2, 0, 1], C[3, 2, 2], half[4, 1] = np.nan, -np.inf, -0.0, 0.0625, 12345.6785
+    for r in (1.5, 8e-5, 3e6):
+        expected = []
+        for k in range(n):
+            lam, mu, rho = half[k]
+            g, c = G[k], C[k]
+            expected.append(
+                f"**t = {t[k]:.3f}**\n\n```\nG = ΦᵀΦ               eigenvalue\n"
+                f"{g[0, 0]:+7.3f}{g[0, 1]:+7.3f}{g[0, 2]:+7.3f}  λ² {lam * lam:.3f}\n"
+                f"{g[1, 0]:+7.3f}{g[1, 1]:+7.3f}{g[1, 2]:+7.3f}  μ² {mu * mu:.3f}\n"
+                f"{g[2, 0]:+7.3f}{g[2, 1]:+7.3f}{g[2, 2]:+7.3f}  ϱ² {rho * rho:.3f}\n\n"
+                "C = Φ⁻ᵀΦ⁻¹            eigenvalue\n"
+                f"{c[0, 0]:+7.3f}{c[0, 1]:+7.3f}{c[0, 2]:+7.3f}  λ⁻² {1 / (lam * lam):.3f}\n"
+                f"{c[1, 0]:+7.3f}{c[1, 1]:+7.3f}{c[1, 2]:+7.3f}  μ⁻² {1 / (mu * mu):.3f}\n"
+                f"{c[2, 0]:+7.3f}{c[2, 1]:+7.3f}{c[2, 2]:+7.3f}  ϱ⁻² {1 / (rho * rho):.3f}\n```\n\n"
+                f"Heat maps: fixed range −{r:g} (cyan) … 0 (grey) … +{r:g} (yellow)."
+            )
+        assert tensor_text(t, G, C, half, r) == expected
+    assert axis_labels(half) == [f"{s} = {v:.3f}" for row in half for s, v in zip("λμϱ", row)]
+    assert tensor_text(t[:0], G[:0], C[:0], half[:0], 1.0) == [] and axis_labels(half[:0]) == []

@@ -125,3 +125,43 @@ def test_flatbody_v0_without_rotation_tracking_is_named(tmp_path):
     env = RerunRecorder(gym.make("FlatBody-v0"), tmp_path / "x.rrd")
     with pytest.raises(ValueError, match="track_rotation=True"):
         env.reset(seed=0)
+
+
+def test_wrapper_columns_equal_step_by_step_appends(tmp_path):
+    """The wrapper keeps raw steps and converts them together; the same episode appended step by
+    step through ``Recorder.append`` (each step converted alone) gives the same file content."""
+    from flatbody_env.recording.writer import Recorder
+
+    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=60), tmp_path / "batched.rrd")
+    u = env.unwrapped
+    obs, info = env.reset(seed=4)
+    target = dict(u.target)
+    rec = Recorder(tmp_path / "stepwise.rrd", u.body, episode=True, block=1000, action_names=("tau1", "tau2", "tau3", "f_rho"),
+                   extent=max([u.state[k] for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho")]))
+    rec.append(u.time, u.state, u.rotation, step=0, target=u.target, distance=info["distance"])
+    rng = np.random.default_rng(4)
+    k, done = 0, False
+    while not done:
+        a = rng.uniform(-1, 1, 4).astype(np.float32)
+        _, reward, term, trunc, info = env.step(a)
+        k += 1
+        rec.append(u.time, u.state, u.rotation, step=k, action=a, reward_terms={**info["reward_terms"], "total": reward},
+                   target=u.target, distance=info["distance"])
+        done = term or trunc
+    env.close()
+    rec.close()
+    batched, stepwise = read_recording(tmp_path / "batched.rrd"), read_recording(tmp_path / "stepwise.rrd")
+    assert set(batched.entities) == set(stepwise.entities) and len(batched.entities) >= 40
+    for name, e in stepwise.entities.items():
+        b = batched.entities[name]
+        np.testing.assert_array_equal(b.step, e.step, err_msg=name)
+        np.testing.assert_array_equal(b.sim_time, e.sim_time, err_msg=name)
+        assert set(b.components) == set(e.components), name
+        for comp, values in e.components.items():
+            if isinstance(values, np.ndarray):
+                np.testing.assert_array_equal(b.components[comp], values, err_msg=f"{name} {comp}")
+            else:
+                assert b.components[comp] == values, f"{name} {comp}"
+    np.testing.assert_array_equal(series(batched, "action/tau2")[:3], series(stepwise, "action/tau2")[:3])
+    assert batched.entities["/series/lambda"].step.size == k + 1
+    assert set(batched.static) == set(stepwise.static)
