@@ -150,6 +150,9 @@ class FlatBodyVectorEnv(VectorEnv):
         self._steppers = [self.stepper] + [copy.deepcopy(self.stepper) for _ in range(threads - 1)]
         self._lane_works = [(np.empty(sl.stop - sl.start), np.empty((4, sl.stop - sl.start)), np.empty(7), np.empty(4), np.empty(STATE_SIZE))
                             for sl in self._slices]
+        # per thread, contiguous copies of its columns of the (k, N) arrays (the kernels run faster on them)
+        self._columns = [tuple(np.empty((k, sl.stop - sl.start)) for k in (STATE_SIZE, 4, STATE_SIZE, STATE_SIZE, len(REWARD_TERMS), 4))
+                         for sl in self._slices] if threads > 1 else []
         self._pool: ThreadPoolExecutor | None = None
         self._pool_pid = 0
 
@@ -221,13 +224,19 @@ class FlatBodyVectorEnv(VectorEnv):
         if self.num_threads == 1:
             Ys, U, OUT, STATUS, NFEV, A, T = self._Ys, self._U, self._OUT, self._STATUS, self._NFEV, self._A, self._T
             Ynext, OBS, TERMS, SC, ENDED = self._Ynext, self._OBS, self._TERMS, self._SC, self._ENDED
-        else:
-            Ys, U, OUT, STATUS, NFEV, A, T = (self._Ys[:, sl], self._U[:, sl], self._OUT[:, sl], self._STATUS[sl], self._NFEV[sl],
-                                              self._A[sl], self._T[sl])
-            Ynext, OBS, TERMS, SC, ENDED = self._Ynext[:, sl], self._OBS[sl], self._TERMS[:, sl], self._SC[:, sl], self._ENDED[sl]
+        else:  # this thread's columns, copied into contiguous arrays and back
+            Ys, U, OUT, Ynext, TERMS, SC = self._columns[c]
+            np.copyto(Ys, self._Ys[:, sl])
+            np.copyto(U, self._U[:, sl])
+            STATUS, NFEV, A, T, OBS, ENDED = self._STATUS[sl], self._NFEV[sl], self._A[sl], self._T[sl], self._OBS[sl], self._ENDED[sl]
         self._steppers[c].advance_batch(Ys, U, self.dt, OUT, STATUS, NFEV)
         self._kernels.post_step_lanes(Ys, OUT, STATUS, A, A.shape[1], T, p.kernel_config, p.kernel_params, Ynext, OBS, TERMS, SC, ENDED,
                                       *self._lane_works[c])
+        if self.num_threads > 1:
+            self._OUT[:, sl] = OUT
+            self._Ynext[:, sl] = Ynext
+            self._TERMS[:, sl] = TERMS
+            self._SC[:, sl] = SC
 
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
