@@ -22,7 +22,7 @@ def _cmd(args) -> int:
     print(f"ratio FlatBody-v0 vs Acrobot-v1 step rate:  {bench.ratio_vs_acrobot:.2f}")
     print(f"ratio FlatBody-v0 vs Pendulum-v1 reset time: {bench.reset_ratio_vs_pendulum:.2f} (target <= 5)")
     print(f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included; "
-          f"{bench.threads} thread{'s' if bench.threads > 1 else ''}; one thread: {bench.ratio_batched_one_thread_vs_cartpole:.2f})")
+          f"with num_threads=None, {bench.threads} thread{'s' if bench.threads > 1 else ''}: {bench.ratio_batched_threads_vs_cartpole:.2f})")
     print(f"batched episode error vs tight reference:   {bench.episode_error:.2e} (target <= 1e-8)")
     print(f"wrote {Path(args.out_dir) / 'env_benchmark.json'}, .csv, .png")
     if args.docs:

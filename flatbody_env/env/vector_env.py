@@ -10,10 +10,12 @@ through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.sample_episode`
 :meth:`~flatbody_env.env.env.FlatBodyEnv.observe`, ``stepper``, ``kernels``, ``kernel_params``,
 ``kernel_config``, ``left_domain``).
 
-Large batches are split across threads (``num_threads``; by default one per available core, at
-least :data:`LANES_PER_THREAD` bodies each): the compiled stepper and bookkeeping release the GIL,
-each thread advances and scores its own contiguous slice of bodies with its own work arrays, and
-the result does not depend on the split (each body's arithmetic is its own; tested).
+Batches can be split across threads (``num_threads``; None: one per available core, at least
+:data:`LANES_PER_THREAD` bodies each; default 1): the compiled stepper and bookkeeping release the
+GIL, each thread advances and scores its own slice of bodies with its own work arrays, and the result
+does not depend on the split (each body's arithmetic is its own; tested). On the 2-core machine the
+benchmarks run on, two threads gained 0–10 % at N = 1024 with both cores free and lost up to 35 %
+with another process busy on the second core, so one thread is the default.
 
 It truncates by itself after ``max_episode_steps`` and autoresets in Gymnasium's default
 NEXT_STEP mode (the step after a body's episode ended resets that body: its action is ignored,
@@ -70,8 +72,8 @@ class FlatBodyVectorEnv(VectorEnv):
     autoreset_mode : AutoresetMode
         ``NEXT_STEP`` (default, Gymnasium's default) or ``SAME_STEP`` (module docstring).
     num_threads : int or None
-        Threads that step the bodies (1 ... :data:`MAX_THREADS`); None: one per available core, at
-        most one per :data:`LANES_PER_THREAD` bodies, 1 when the integrator does not run compiled.
+        Threads that step the bodies (1 ... :data:`MAX_THREADS`; default 1); None: one per available
+        core, at most one per :data:`LANES_PER_THREAD` bodies. Always 1 when the integrator does not run compiled.
     **kwargs
         The keyword arguments of :class:`~flatbody_env.env.env.FlatBodyEnv` (``render_mode`` and
         ``track_rotation`` are not supported here).
@@ -85,7 +87,7 @@ class FlatBodyVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = None, **kwargs: Any) -> None:
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = 1, **kwargs: Any) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs: must be an integer >= 1, got {num_envs!r}")
         if not isinstance(max_episode_steps, int) or max_episode_steps < 1:

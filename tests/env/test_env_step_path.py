@@ -224,7 +224,8 @@ def test_threads_do_not_change_a_single_number():
         np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
     np.testing.assert_array_equal(one.states, three.states)
     three.close()
-    assert FlatBodyVectorEnv(num_envs=4, integrator="RK45").num_threads == 1  # not compiled: one thread
+    assert FlatBodyVectorEnv(num_envs=4, integrator="RK45", num_threads=2).num_threads == 1  # not compiled: one thread
+    assert FlatBodyVectorEnv(num_envs=4).num_threads == 1  # the default
     with pytest.raises(ValueError, match="num_threads"):
         FlatBodyVectorEnv(num_envs=4, num_threads=0)
     with pytest.raises(ValueError, match="num_threads"):
