@@ -38,4 +38,5 @@ _candidate_kernel = jit_copy(_sampling.candidate_kernel, decide_kernel=jit_copy(
 sample_episodes = jit_copy(_sampling.sample_episodes, sample_episode_kernel=jit_copy(
     _sampling.sample_episode_kernel, candidate_kernel=_candidate_kernel, initial_state_kernel=jit_copy(_sampling.initial_state_kernel)))
 
-__all__ = ["sample_episodes", "controls_batch", "controls_kernel", "domain_code", "observe_kernel", "omega12_kernel", "post_step", "post_step_batch", "post_step_lanes", "score_kernel"]
+__all__ = ["controls_batch", "controls_kernel", "domain_code", "observe_kernel", "omega12_kernel", "post_step", "post_step_batch", "post_step_lanes",
+           "sample_episodes", "score_kernel"]

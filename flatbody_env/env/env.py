@@ -340,7 +340,8 @@ class FlatBodyEnv(gym.Env):
             y = self.task.sample_initial_state(rng, target, self.control)
         left = self.left_domain(y)
         if left:
-            raise ValueError(f"options.state: starts outside the domain ({left})")
+            field = "options.state" if "state" in options else "initial_noise"
+            raise ValueError(f"{field}: the initial state starts outside the domain ({left})")
         return y, target
 
     def observe(self, y: np.ndarray, target_vector: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
@@ -358,7 +359,7 @@ class FlatBodyEnv(gym.Env):
             y = Y[:, 0].copy()
             left = self.left_domain(y)
             if left:
-                raise ValueError(f"options.state: starts outside the domain ({left})")
+                raise ValueError(f"initial_noise: the initial state starts outside the domain ({left})")
             self._y, self._target, self._target_shape = y, None, (float(tg[0]), float(tg[1]), float(tg[5]))
             self._tvec = tg[:4].copy()
         else:

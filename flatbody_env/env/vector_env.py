@@ -7,7 +7,7 @@ by :func:`flatbody_env.env.kernels.controls_batch`, the seam's stepper
 bookkeeping :func:`flatbody_env.env.kernels.post_step_lanes` checks the domain, observes and scores
 all N, and :func:`flatbody_env.env.env.build_info` builds the infos. It uses the single env only
 through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.sample_episode`,
-:meth:`~flatbody_env.env.env.FlatBodyEnv.observe`, ``stepper``, ``kernels``, ``kernel_params``,
+:meth:`~flatbody_env.env.env.FlatBodyEnv.observe`, ``sampler``, ``stepper``, ``kernels``, ``kernel_params``,
 ``kernel_config``, ``left_domain``).
 
 Batches can be split across threads (``num_threads``; None: one per available core, at least
@@ -210,7 +210,8 @@ class FlatBodyVectorEnv(VectorEnv):
         self._kernels.post_step_batch(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
                                       p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), *self._work)
         if np.any(SC[3] != 0):
-            raise ValueError(f"options.state: starts outside the domain ({p.left_domain(Y[:, int(np.flatnonzero(SC[3] != 0)[0])])})")
+            left = p.left_domain(Y[:, int(np.flatnonzero(SC[3] != 0)[0])])
+            raise ValueError(f"initial_noise: the initial state starts outside the domain ({left})")
         obs[idx] = OBS
         sc[:3, idx] = SC[:3]
 

@@ -95,3 +95,14 @@ def test_single_env_reset_uses_the_sampler_and_builds_the_same_target():
     assert env.target == {"lambda": t.lam, "mu": t.mu, "rho": t.rho, "s3": t.s3, "p_theta": t.p_theta, "omega3": t.omega3,
                           "theta_dot": t.theta_dot, "energy": t.energy}
     np.testing.assert_array_equal(env.target_vector, target_vector(target))
+
+
+def test_a_sampled_start_outside_the_domain_names_the_noise():
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    env = FlatBodyEnv(initial_noise=3.0)  # offsets of e^±3 in the stretches leave [0.2, 4]
+    with pytest.raises(ValueError, match="initial_noise: the initial state starts outside the domain"):
+        for seed in range(50):
+            env.reset(seed=seed)
+    with pytest.raises(ValueError, match="initial_noise: the initial state starts outside the domain"):
+        FlatBodyVectorEnv(num_envs=50, initial_noise=3.0).reset(seed=0)
