@@ -22,10 +22,8 @@ observe_kernel = jit_copy(_task.observe_kernel)
 domain_code = jit_copy(_task.domain_code)
 post_step = jit_copy(_ek.post_step, domain_code=domain_code, score_kernel=score_kernel, observe_kernel=observe_kernel,
                      kinetic_kernel=kinetic_kernel, potential_kernel=potential_kernel)
-post_step_batch = jit_copy(_ek.post_step_batch, post_step=post_step)
 post_step_lanes = jit_copy(_ek.post_step_lanes, domain_code=domain_code, score_kernel=score_kernel, observe_kernel=observe_kernel,
                            kinetic_kernel=kinetic_kernel, kinetic_iso=kinetic_iso, potential_kernel=potential_kernel)
-controls_kernel = jit_copy(_ek.controls_kernel)
 controls_batch = jit_copy(_ek.controls_batch)
 # the reset's draws (:mod:`flatbody_env.env.sampling`)
 _stencil_step = jit_copy(_eq.stencil_step)
@@ -38,5 +36,4 @@ _candidate_kernel = jit_copy(_sampling.candidate_kernel, decide_kernel=jit_copy(
 sample_episodes = jit_copy(_sampling.sample_episodes, sample_episode_kernel=jit_copy(
     _sampling.sample_episode_kernel, candidate_kernel=_candidate_kernel, initial_state_kernel=jit_copy(_sampling.initial_state_kernel)))
 
-__all__ = ["controls_batch", "controls_kernel", "domain_code", "observe_kernel", "omega12_kernel", "post_step", "post_step_batch", "post_step_lanes",
-           "sample_episodes", "score_kernel"]
+__all__ = ["controls_batch", "domain_code", "observe_kernel", "omega12_kernel", "post_step", "post_step_lanes", "sample_episodes", "score_kernel"]

@@ -234,6 +234,7 @@ class FlatBodyEnv(gym.Env):
         # work arrays of the one step path
         self._a = np.zeros(n_act)
         self._u = np.zeros(4)
+        self._views()
         self._ynew = np.empty(STATE_SIZE)
         self._yout = np.empty(STATE_SIZE)
         self._terms = np.empty(len(REWARD_TERMS))
@@ -338,11 +339,14 @@ class FlatBodyEnv(gym.Env):
             y = pack(state, validate=False)
         else:
             y = self.task.sample_initial_state(rng, target, self.control)
+        self.check_start(y, "options.state" if "state" in options else "initial_noise")
+        return y, target
+
+    def check_start(self, y: np.ndarray, field: str) -> None:
+        """ValueError naming ``field`` when the initial state ``y`` lies outside the domain."""
         left = self.left_domain(y)
         if left:
-            field = "options.state" if "state" in options else "initial_noise"
             raise ValueError(f"{field}: the initial state starts outside the domain ({left})")
-        return y, target
 
     def observe(self, y: np.ndarray, target_vector: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
         """The observation (16,) float32 and the reset ``info`` of state ``y`` with target (λ*, μ*, ϱ*, s3*)."""
@@ -357,9 +361,7 @@ class FlatBodyEnv(gym.Env):
             Y = np.empty((STATE_SIZE, 1))
             tg = self.sampler.sample([self.np_random], Y, [0])[0]
             y = Y[:, 0].copy()
-            left = self.left_domain(y)
-            if left:
-                raise ValueError(f"initial_noise: the initial state starts outside the domain ({left})")
+            self.check_start(y, "initial_noise")
             self._y, self._target, self._target_shape = y, None, (float(tg[0]), float(tg[1]), float(tg[5]))
             self._tvec = tg[:4].copy()
         else:
@@ -372,23 +374,29 @@ class FlatBodyEnv(gym.Env):
 
     def controls(self, action) -> tuple[np.ndarray, np.ndarray]:
         """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies
-        (:func:`flatbody_env.env.kernels.controls_kernel`). ValueError for a non-finite or wrong-sized action."""
-        a = np.asarray(action, dtype=np.float64)
-        if a.ndim != 1:
-            a = a.ravel()
-        if a.size != self._a.size or not self.kernels.controls_kernel(a, self._mask_u8, self.limits, self._a, self._u):
-            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
+        (:func:`flatbody_env.env.kernels.controls_batch`). ValueError for a non-finite or wrong-sized action."""
+        self._set_controls(action)
         return self._a.copy(), self._u.copy()
+
+    def _views(self) -> None:
+        """``self._a`` and ``self._u`` as one body's (1, n) and (4, 1) arrays for controls_batch (views: rebuilt after unpickling)."""
+        self._a_row, self._u_col = self._a.reshape(1, -1), self._u.reshape(4, 1)
+
+    def __setstate__(self, state) -> None:
+        self.__dict__.update(state)
+        self._views()
+
+    def _set_controls(self, action) -> None:
+        """Clip and scale ``action`` into ``self._a``, ``self._u`` (the step's controls)."""
+        a = np.asarray(action, dtype=np.float64)
+        if a.size != self._a.size or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row, self._u_col):
+            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
 
     def step(self, action):
         if self._target is None and self._target_shape is None:
             raise RuntimeError("FlatBodyEnv: call reset() before step()")
         k = self.kernels
-        a = np.asarray(action, dtype=np.float64)
-        if a.ndim != 1:
-            a = a.ravel()
-        if a.size != self._a.size or not k.controls_kernel(a, self._mask_u8, self.limits, self._a, self._u):
-            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
+        self._set_controls(action)
         y = self._y
         self._counters[:] = 0
         st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)

@@ -6,9 +6,10 @@ reward terms and the scalars of ``info`` — by calling the task's kernels
 (:func:`~flatbody_env.env.task.domain_code`, :func:`~flatbody_env.env.task.score_kernel`,
 :func:`~flatbody_env.env.task.observe_kernel`, where each formula lives) and the energy H of
 eq. (41) of the paper. No numpy allocation, so the same code runs in Python (generic integrators)
-and, through :func:`flatbody_env.integrators.jit.jit_copy`, compiled (single body, and
-:func:`post_step_batch` over N bodies in one call). :func:`controls_kernel` is the one place
-where an action is clipped and scaled into the controls u = (τ1, τ2, τ3, f_ϱ).
+and, through :func:`flatbody_env.integrators.jit.jit_copy`, compiled (single body; and
+:func:`post_step_lanes`, the same decisions and formulas over N bodies in loops numba vectorises).
+:func:`controls_batch` is the one place where actions (one or N) are clipped and scaled into the
+controls u = (τ1, τ2, τ3, f_ϱ).
 
 ``cfg`` is the task's configuration vector (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.kernel_config`);
 ``P`` the body's kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`).
@@ -73,43 +74,19 @@ def post_step(y_old, y_new, status, a, n_act, tgt, cfg, P, y_out, obs, terms, sc
     return ended
 
 
-def post_step_batch(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, vel, force, yo, yn, yk, ak, tk, ok, tmk, sck):
-    """:func:`post_step` for N bodies in structure-of-arrays layout.
-
-    ``Y_old``, ``Y_new``, ``Y_out``: (11, N); ``status``: (N,); ``A``: (N, n); ``T``: (N, 4);
-    ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output. Work space, one body's
-    worth (each body is copied in and out, so that no array view is made per body): ``yo``, ``yn``,
-    ``yk`` (11,), ``ak`` (≥ n,), ``tk`` (4,), ``ok`` (16,) float64, ``tmk`` (6,), ``sck`` (4,).
-    """
-    for k in range(Y_old.shape[1]):
-        for i in range(11):
-            yo[i] = Y_old[i, k]
-            yn[i] = Y_new[i, k]
-        for i in range(n_act):
-            ak[i] = A[k, i]
-        for i in range(4):
-            tk[i] = T[k, i]
-        ENDED[k] = post_step(yo, yn, status[k], ak, n_act, tk, cfg, P, yk, ok, tmk, sck, vel, force)
-        for i in range(11):
-            Y_out[i, k] = yk[i]
-        for i in range(16):
-            OBS[k, i] = ok[i]
-        for i in range(6):
-            TERMS[i, k] = tmk[i]
-        for i in range(4):
-            SC[i, k] = sck[i]
-
-
 def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, ACT2, Tt, vel, force, yk):
-    """:func:`post_step_batch`, bit for bit, in loops over the N bodies that numba vectorises.
+    """:func:`post_step` for N bodies, bit for bit, in loops over the bodies that numba vectorises.
 
     The decision (domain, kept state) runs lane by lane as :func:`post_step` does; then the energy
     (:func:`~flatbody_env.physics.hamiltonian.kinetic_iso` and the potential on scalars for J1 = J2,
     :func:`~flatbody_env.physics.hamiltonian.kinetic_kernel` per body otherwise) and the Casimir in one
     loop over lanes, the reward terms and the distance by the task's
     :func:`~flatbody_env.env.task.score_kernel` on the whole (11, N) array (it is written for both),
-    and the observation by :func:`~flatbody_env.env.task.observe_kernel` per body. Same arrays as
-    :func:`post_step_batch`; work: ``ACT2`` (N,), ``Tt`` (4, N), ``vel`` (7,), ``force`` (4,), ``yk`` (11,).
+    and the observation by :func:`~flatbody_env.env.task.observe_kernel` per body.
+
+    ``Y_old``, ``Y_new``, ``Y_out``: (11, N); ``status``: (N,); ``A``: (N, n) (``n_act`` columns used);
+    ``T``: (N, 4); ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output; work:
+    ``ACT2`` (N,), ``Tt`` (4, N), ``vel`` (7,), ``force`` (4,), ``yk`` (11,).
     """
     n = Y_old.shape[1]
     for k in range(n):
@@ -148,35 +125,13 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
         observe_kernel(Y_out[:, k], T[k], OBS[k])
 
 
-def controls_kernel(action, mask, limits, a_out, u_out):
-    """Clip the action to [−1, 1] into ``a_out`` and scale the driven controls into ``u_out`` (4,).
-
-    ``mask`` (4,) marks which of (τ1, τ2, τ3, f_ϱ) the action drives, in order; ``limits`` (4,)
-    holds torque_limit ×3 and force_limit. Returns False if the action is not finite. Without a
-    driven control (``control="none"``) ``a_out`` is zero.
-    """
-    driven = 0
-    for j in range(4):
-        if mask[j]:
-            driven += 1
-    for i in range(action.size):
-        if not math.isfinite(action[i]):
-            return False
-        a_out[i] = min(1.0, max(-1.0, action[i])) if driven > 0 else 0.0
-    k = 0
-    for j in range(4):
-        if mask[j]:
-            u_out[j] = a_out[k] * limits[j]
-            k += 1
-        else:
-            u_out[j] = 0.0
-    return True
-
-
 def controls_batch(A, mask, limits, A_out, U_out):
-    """:func:`controls_kernel` for N actions: ``A``, ``A_out`` (N, n); ``U_out`` (4, N). Returns False if any is not finite.
+    """Clip N actions ``A`` (N, n) to [−1, 1] into ``A_out`` (N, n) and scale the driven controls into
+    ``U_out`` (4, N) (one body: N = 1). Returns False if any action entry is not finite.
 
-    The same clipping and scaling, control by control over all bodies (loops numba vectorises)."""
+    ``mask`` (4,) marks which of (τ1, τ2, τ3, f_ϱ) the action drives, in order; ``limits`` (4,) holds
+    torque_limit ×3 and force_limit. Without a driven control (``control="none"``) ``A_out`` is zero.
+    Control by control over all bodies (loops numba vectorises)."""
     n = A.shape[0]
     m = A.shape[1]
     for k in range(n):
@@ -202,4 +157,4 @@ def controls_batch(A, mask, limits, A_out, U_out):
     return True
 
 
-__all__ = ["CFG_SIZE", "DOMAIN_CODES", "controls_batch", "controls_kernel", "domain_code", "post_step", "post_step_batch", "post_step_lanes"]
+__all__ = ["CFG_SIZE", "DOMAIN_CODES", "controls_batch", "domain_code", "post_step", "post_step_lanes"]

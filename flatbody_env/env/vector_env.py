@@ -131,8 +131,6 @@ class FlatBodyVectorEnv(VectorEnv):
         self._TERMS = np.zeros((len(REWARD_TERMS), num_envs))
         self._SC = np.zeros((4, num_envs))
         self._ENDED = np.zeros(num_envs, dtype=np.int64)
-        self._work = (np.empty(7), np.empty(4), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(STATE_SIZE), np.empty(max(n_act, 1)),
-                      np.empty(4), np.empty(OBSERVATION_SIZE), np.empty(len(REWARD_TERMS)), np.empty(4))
         self._T = np.zeros((num_envs, 4))
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=bool)
@@ -207,11 +205,11 @@ class FlatBodyVectorEnv(VectorEnv):
         Y = np.ascontiguousarray(self._Ys[:, idx])
         p = self.single_env
         OBS, SC, TERMS = np.empty((m, OBSERVATION_SIZE), dtype=np.float32), np.empty((4, m)), np.empty((len(REWARD_TERMS), m))
-        self._kernels.post_step_batch(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
-                                      p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), *self._work)
+        self._kernels.post_step_lanes(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
+                                      p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), np.empty(m), np.empty((4, m)),
+                                      np.empty(7), np.empty(4), np.empty(STATE_SIZE))
         if np.any(SC[3] != 0):
-            left = p.left_domain(Y[:, int(np.flatnonzero(SC[3] != 0)[0])])
-            raise ValueError(f"initial_noise: the initial state starts outside the domain ({left})")
+            p.check_start(Y[:, int(np.flatnonzero(SC[3] != 0)[0])], "initial_noise")
         obs[idx] = OBS
         sc[:3, idx] = SC[:3]
 

@@ -150,22 +150,13 @@ def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
         E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(H[k]) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
 
 
-def lane_accepted(Y, U, P, OUT, err, k):
-    """Whether lane k's single step stands as the scalar kernel would take it: error < 1, finite
-    state, λ, μ, ϱ > 0 and no sign change of λ − μ unless the chart may cross (``may_cross``)."""
-    if not err < 1.0:
-        return False
+def lane_status(Y, U, P, OUT, k, yl):
+    """The status the scalar kernel returns for lane k when it accepts the step to ``OUT[:, k]``: its
+    :func:`~flatbody_env.integrators.twopolar_kernels._state_status` (non-finite, λ, μ, ϱ ≤ 0, λ − μ
+    changing sign unless the chart may cross). ``yl`` (11,) receives the state."""
     for i in range(11):
-        if not math.isfinite(OUT[i, k]):
-            return False
-    if OUT[7, k] <= 0.0 or OUT[8, k] <= 0.0 or OUT[9, k] <= 0.0:
-        return False
-    crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
-    if not crossable:
-        gap_sign = 1.0 if Y[7, k] > Y[8, k] else -1.0
-        if (OUT[7, k] - OUT[8, k]) * gap_sign <= 0.0:
-            return False
-    return True
+        yl[i] = OUT[i, k]
+    return state_status(yl, 1.0 if Y[7, k] > Y[8, k] else -1.0, not may_cross(Y[:, k], U[:, k], P))
 
 
 def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB,
@@ -202,14 +193,8 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
             ERR[start + j] = EB[j]
     nl = 0
     for k in range(n):
-        if lane_accepted(Y, U, P, OUT, ERR[k], k):
-            STATUS[k] = 0
-            NFEV[k] = 13
-        elif ERR[k] < 1.0:  # the step stands, the state it reached ends the episode: the scalar kernel's answer too
-            for i in range(11):
-                yl[i] = OUT[i, k]
-            crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
-            STATUS[k] = state_status(yl, 1.0 if Y[7, k] > Y[8, k] else -1.0, not crossable)
+        if ERR[k] < 1.0:  # the step stands: the scalar kernel accepts it and reports the state it reached
+            STATUS[k] = lane_status(Y, U, P, OUT, k, yl)
             NFEV[k] = 13
         else:
             LANES[nl] = k
@@ -276,8 +261,7 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
             W[3, j] = 1.0 if j < m else 0.0
             W[4, j] = 1.0
             W[5, j] = 1.0 if Y[7, k] > Y[8, k] else -1.0
-            crossable = P[0] == P[1] and Y[2, k] == Y[3, k] and U[2, k] == 0.0
-            W[6, j] = 0.0 if crossable else 1.0
+            W[6, j] = 0.0 if may_cross(Y[:, k], U[:, k], P) else 1.0
             W[7, j] = 0.0
             STATUS[k] = OK
         for _ in range(MAX_ROUNDS):
@@ -351,6 +335,7 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
 dop853_env = _tk._dop853_env
 """The scalar kernel a lane falls back to (compiled with the same options)."""
 state_status = _tk._state_status
+may_cross = _tk.may_cross
 next_up = _tk.next_up
 OK = _tk.OK
 _SAFETY = _tk._SAFETY
@@ -361,11 +346,11 @@ _ERROR_EXPONENT = _tk._ERROR_EXPONENT
 
 _rhs_lanes_c = jit_copy(rhs_lanes, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso)
 _dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c)
-_lane_accepted_c = jit_copy(lane_accepted)
+_lane_status_c = jit_copy(lane_status, state_status=_tk._state_status, may_cross=_tk.may_cross)
 _scalar_lane_c = jit_copy(scalar_lane, dop853_env=_tk._dop853_env)
 _redo_lanes_c = jit_copy(dop853_redo_lanes, dop853_lanes=_dop853_lanes_c, scalar_lane=_scalar_lane_c, state_status=_tk._state_status,
-                         next_up=_tk.next_up)
-dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, lane_accepted=_lane_accepted_c,
+                         may_cross=_tk.may_cross, next_up=_tk.next_up)
+dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, lane_status=_lane_status_c,
                                    scalar_lane=_scalar_lane_c, dop853_redo_lanes=_redo_lanes_c)
 """Compiled :func:`dop853_batch_env_step`."""
 
@@ -399,5 +384,5 @@ class DOP853Batch:
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "dop853_redo_lanes", "lane_accepted",
+__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "dop853_redo_lanes", "lane_status",
            "rhs_lanes", "scalar_lane"]

@@ -153,8 +153,8 @@ def test_bad_vector_actions_and_mode():
 @pytest.mark.parametrize("kernels", ["compiled", "python"])
 @pytest.mark.parametrize("J2", [1.0, 1.3])
 def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
-    """post_step_lanes (loops over bodies, vectorised) is post_step_batch (body by body) bit for bit,
-    with failed steps, non-finite states and states outside the domain among the lanes."""
+    """post_step_lanes (loops over bodies, vectorised) is post_step body by body, bit for bit, with
+    failed steps, non-finite states and states outside the domain among the lanes."""
     from flatbody_env.env import kernels as python_kernels
 
     k = compiled if kernels == "compiled" else python_kernels
@@ -174,36 +174,46 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
     status[9:13] = 2  # the integrator failed
     A = rng.uniform(-1, 1, (n, 4))
     T = venv.target_vectors
-
-    def outputs():
-        return [np.empty((11, n)), np.empty((n, OBSERVATION_SIZE), np.float32), np.empty((len(REWARD_TERMS), n)), np.empty((4, n)),
-                np.empty(n, np.int64)]
-
-    a, b = outputs(), outputs()
-    k.post_step_batch(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, *a, *venv._work)
-    k.post_step_lanes(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, *b, np.empty(n), np.empty((4, n)), np.empty(7), np.empty(4),
-                      np.empty(11))
-    for x, y in zip(a, b):
-        np.testing.assert_array_equal(x, y)
-    assert a[4][:13].all() and not a[4][13:].any()  # the planted failures end their episodes, nothing else does
+    Y_out, OBS, TERMS, SC, ENDED = (np.empty((11, n)), np.empty((n, OBSERVATION_SIZE), np.float32), np.empty((len(REWARD_TERMS), n)),
+                                    np.empty((4, n)), np.empty(n, np.int64))
+    k.post_step_lanes(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, Y_out, OBS, TERMS, SC, ENDED, np.empty(n), np.empty((4, n)),
+                      np.empty(7), np.empty(4), np.empty(11))
+    for i in range(n):
+        y, obs, terms, sc = np.empty(11), np.empty(OBSERVATION_SIZE, np.float32), np.empty(len(REWARD_TERMS)), np.empty(4)
+        ended = k.post_step(Y_old[:, i].copy(), Y_new[:, i].copy(), status[i], A[i].copy(), 4, T[i].copy(), p.kernel_config, P, y, obs,
+                            terms, sc, np.empty(7), np.empty(4))
+        assert ENDED[i] == ended
+        np.testing.assert_array_equal(Y_out[:, i], y)
+        np.testing.assert_array_equal(OBS[i], obs)
+        np.testing.assert_array_equal(TERMS[:, i], terms)
+        np.testing.assert_array_equal(SC[:, i], sc)
+    assert ENDED[:13].all() and not ENDED[13:].any()  # the planted failures end their episodes, nothing else does
 
 
 @pytest.mark.parametrize("control", ["torque+dilatation", "torque", "dilatation", "none"])
-def test_batched_controls_equal_the_per_body_kernel(control):
+def test_controls_clip_and_scale_each_body_alike(control):
+    """controls_batch on N actions equals it on each action alone (the single env's call), and the
+    clipping and scaling are the documented ones."""
     env = FlatBodyEnv(control=control)
     n_act = env.action_space.shape[0]
+    mask = env.mask.astype(np.uint8)
     rng = np.random.default_rng(0)
     A = rng.uniform(-2, 2, (50, n_act))
     A_out, U = np.empty_like(A), np.empty((4, 50))
-    assert compiled.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_out, U)
+    assert compiled.controls_batch(A, mask, env.limits, A_out, U)
     for i in range(50):
-        a, u = np.empty(n_act), np.empty(4)
-        assert compiled.controls_kernel(A[i], env.mask.astype(np.uint8), env.limits, a, u)
+        a, u = env.controls(A[i])
         np.testing.assert_array_equal(A_out[i], a)
         np.testing.assert_array_equal(U[:, i], u)
+        clipped = np.clip(A[i], -1, 1) if mask.any() else np.zeros(n_act)
+        np.testing.assert_array_equal(a, clipped)
+        np.testing.assert_array_equal(u[mask.astype(bool)], clipped[: mask.sum()] * env.limits[mask.astype(bool)])
+        assert not u[~mask.astype(bool)].any()
     if n_act:
         A[7, 0] = np.inf
-        assert not compiled.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_out, U)
+        assert not compiled.controls_batch(A, mask, env.limits, A_out, U)
+        with pytest.raises(ValueError, match="action"):
+            env.controls(A[7])
 
 
 def test_threads_do_not_change_a_single_number():

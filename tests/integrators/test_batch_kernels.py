@@ -84,7 +84,7 @@ def test_many_rejected_lanes_follow_the_scalar_step_control_bitwise():
 
 def test_fused_kernels_are_plain_python_over_arrays():
     """The source of the batch kernels stays plain Python (compiled by jit_copy, reusable for other targets)."""
-    for name in ("rhs_lanes", "dop853_lanes", "lane_accepted", "dop853_batch_env_step"):
+    for name in ("rhs_lanes", "dop853_lanes", "lane_status", "dop853_batch_env_step"):
         assert not hasattr(getattr(batch_kernels, name), "py_func")
 
 
