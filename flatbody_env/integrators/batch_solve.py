@@ -10,11 +10,11 @@ allocate with ``np.empty`` (once per chunk of bodies) and the CUDA kernels with
 Method kinds (:data:`KIND`): 0 RK4, 1 a splitting with coefficients ``coeffs``
 (:data:`~.twopolar_kernels.STRANG`, ``SUZUKI4``, ``YOSHIDA4``), 2 DOP853.
 
-* :func:`fixed_solve_into` / :func:`dop853_solve_into` are :func:`~.twopolar_kernels.fixed_solve` /
-  :func:`~.twopolar_kernels.dop853_solve` (the drivers behind ``simulate``) with their work arrays
-  passed in; they call the same per-interval kernels in the same order, so their states are the
-  same bit for bit (tested). ``fail`` (3,) gets a third entry: the index of the output row at which a
-  failure was detected.
+* :func:`~.twopolar_kernels.fixed_solve_into` / :func:`~.twopolar_kernels.dop853_solve_into` (imported
+  from there): the drivers behind ``simulate`` with their work arrays passed in
+  (:func:`~.twopolar_kernels.fixed_solve` / :func:`~.twopolar_kernels.dop853_solve` allocate them and
+  call these). ``fail`` (3,) gets a third entry here: the index of the output row at which a failure
+  was detected.
 * :func:`solve_body`: one body's trajectory into ``Y`` (11, T); rows from the failing one on are NaN.
 * :func:`env_step_body`: one body's environment step (the kernels of ``env_stepper(NAME).batch``).
 * :func:`batch_solve` / :func:`batch_env_step`: the CPU batch kernels, parallel over chunks of bodies
@@ -32,20 +32,17 @@ import math
 import numba
 import numpy as np
 
-from flatbody_env.integrators.failure import ENERGY, OK
-from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
+from flatbody_env.integrators.failure import OK
+from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel
 from flatbody_env.integrators.twopolar_kernels import (
     N,
     STRANG,
     SUZUKI4,
     YOSHIDA4,
     _dop853_env,
-    _fixed_advance,
     _fixed_env,
-    dop853_advance,
-    dop853_initial_step_into,
-    may_cross,
-    no_control,
+    dop853_solve_into,
+    fixed_solve_into,
 )
 
 njit = numba.njit(**JIT_OPTIONS)
@@ -69,69 +66,6 @@ CHUNK = 32
 
 
 # --------------------------------------------------------------------------------------------- drivers
-@njit
-def fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, work, vel, force):
-    """:func:`~.twopolar_kernels.fixed_solve` with work arrays ``y`` (11,), ``work`` (≥5, 11), ``vel`` (7,),
-    ``force`` (4,) passed in; ``fail`` (3,) [t of failure, last |H − H₀|, failing row]."""
-    for i in range(N):
-        y[i] = y0[i]
-    gap_sign = 1.0 if y[7] > y[8] else -1.0
-    check_gap = not may_cross(y, u, P)
-    check_energy = energy_tol < np.inf and no_control(u)
-    H0 = energy_kernel(y, P, vel, force)
-    for i in range(N):
-        Y[i, 0] = y[i]
-    fail[0] = times[0]
-    for k in range(1, times.size):
-        fail[2] = k
-        st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
-        fail[0] = times[k - 1] + dt_done
-        for i in range(N):
-            Y[i, k] = y[i]
-        if st != OK:
-            return st
-        if check_energy:
-            dH = abs(energy_kernel(y, P, vel, force) - H0)
-            fail[1] = dH
-            if dH > energy_tol:
-                return ENERGY
-    return OK
-
-
-@njit
-def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force):
-    """:func:`~.twopolar_kernels.dop853_solve` with work arrays ``y``, ``f``, ``ynew``, ``ytmp`` (11,),
-    ``K`` (13, 11), ``vel`` (7,), ``force`` (4,) passed in; ``counters`` (4,) [nfev, accepted, rejected,
-    budget of nfev]; ``fail`` (3,) [t of failure, last |H − H₀|, failing row]."""
-    for i in range(N):
-        y[i] = y0[i]
-    rhs_kernel(y, u, P, f, vel, force)
-    counters[0] += 1
-    gap_sign = 1.0 if y[7] > y[8] else -1.0
-    check_gap = not may_cross(y, u, P)
-    check_energy = energy_tol < np.inf and no_control(u)
-    H0 = energy_kernel(y, P, vel, force)
-    for i in range(N):
-        Y[i, 0] = y[i]
-    t = times[0]
-    fail[0] = t
-    h_abs = dop853_initial_step_into(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, ynew, counters)
-    for k in range(1, times.size):
-        fail[2] = k
-        st, t, h_abs = dop853_advance(y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters)
-        fail[0] = t
-        for i in range(N):
-            Y[i, k] = y[i]
-        if st != OK:
-            return st
-        if check_energy:
-            dH = abs(energy_kernel(y, P, vel, force) - H0)
-            fail[1] = dH
-            if dH > energy_tol:
-                return ENERGY
-    return OK
-
-
 @njit
 def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_nfev, Y, STATUS, NFEV, TFAIL,
                y, f, K, ynew, ytmp, vel, force, counters, fail):
@@ -236,4 +170,4 @@ def batch_energy(Y0, P, H):
 
 
 __all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "RK4_KIND", "SPLIT_KIND", "batch_energy", "batch_env_step", "batch_solve",
-           "dop853_solve_into", "env_step_body", "fixed_solve_into", "solve_body"]
+           "env_step_body", "solve_body"]

@@ -43,7 +43,8 @@ from numba import float64, int64
 
 from flatbody_env.integrators import batch_solve as _bs
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.batch_solve import dop853_initial_step_into, env_step_body, solve_body
+from flatbody_env.integrators.batch_solve import env_step_body, solve_body
+from flatbody_env.integrators.twopolar_kernels import dop853_initial_step_into
 
 INSTALL_HINT = 'pip install "flatbody[gpu]" on a machine with an NVIDIA driver'
 THREADS_PER_BLOCK = 128

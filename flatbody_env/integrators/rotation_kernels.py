@@ -86,10 +86,16 @@ def dop853_initial_step_paper(y, f, t0, t_bound, u, P, rtol, atol, vel, force, w
     return dop853_initial_step(y[:11], f[:11], t0, t_bound, u, P, rtol, atol, vel, force, work, counters)
 
 
+def dop853_initial_step_paper_into(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, y1, counters):
+    """:func:`dop853_initial_step_paper` with its second work array passed in."""
+    return dop853_initial_step_into(y[:11], f[:11], t0, t_bound, u, P, rtol, atol, vel, force, work, y1[:11], counters)
+
+
 _flow_h1 = _tk._flow_h1
 _flow_h2 = _tk._flow_h2
 _flow_h3 = _tk._flow_h3
 dop853_initial_step = _tk.dop853_initial_step
+dop853_initial_step_into = _tk.dop853_initial_step_into
 
 # ---------------------------------------------------------------------------------- DOP853
 _dop853_stages_R = jit_copy(_tk._dop853_stages, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel)
@@ -98,8 +104,9 @@ _initial_step_R = jit_copy(dop853_initial_step_paper, variant=_V)
 _dop853_env_R = jit_copy(_tk._dop853_env, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel, dop853_advance=_dop853_advance_R,
                          dop853_initial_step=_initial_step_R)
 dop853_env_step_R = jit_copy(_tk.dop853_env_step_counted, variant=_V, N=_NZ, _dop853_env=_dop853_env_R)
-dop853_solve_R = jit_copy(_tk.dop853_solve, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel, dop853_advance=_dop853_advance_R,
-                          dop853_initial_step=_initial_step_R)
+_dop853_solve_into_R = jit_copy(_tk.dop853_solve_into, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel, dop853_advance=_dop853_advance_R,
+                                dop853_initial_step_into=jit_copy(dop853_initial_step_paper_into, variant=_V))
+dop853_solve_R = jit_copy(_tk.dop853_solve, variant=_V, N=_NZ, dop853_solve_into=_dop853_solve_into_R)
 
 # ---------------------------------------------------------------------------------- RK4 and the splittings
 _rk4_step_R = jit_copy(_tk._rk4_step, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel)
@@ -111,7 +118,8 @@ _strang_step_R = jit_copy(_tk.strang_step, variant=_V, _flow_h1=_flow_h1_R, _flo
 _split_advance_R = jit_copy(_tk._split_advance, variant=_V, strang_step=_strang_step_R)
 _fixed_advance_R = jit_copy(_tk._fixed_advance, variant=_V, _rk4_advance=_rk4_advance_R, _split_advance=_split_advance_R)
 _fixed_env_R = jit_copy(_tk._fixed_env, variant=_V, N=_NZ, _fixed_advance=_fixed_advance_R)
-fixed_solve_R = jit_copy(_tk.fixed_solve, variant=_V, N=_NZ, _fixed_advance=_fixed_advance_R)
+fixed_solve_R = jit_copy(_tk.fixed_solve, variant=_V, N=_NZ,
+                         fixed_solve_into=jit_copy(_tk.fixed_solve_into, variant=_V, N=_NZ, _fixed_advance=_fixed_advance_R))
 rk4_env_step_R = jit_copy(_tk.rk4_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
 strang_env_step_R = jit_copy(_tk.strang_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
 suzuki4_env_step_R = jit_copy(_tk.suzuki4_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)

@@ -282,19 +282,13 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
 
 
 @njit
-def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
-    """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
-
-    counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
-    last check]. Returns the status.
-    """
-    vel = np.empty(7)
-    force = np.empty(4)
-    K = np.empty((13, N))
-    ynew = np.empty(N)
-    ytmp = np.empty(N)
-    y = y0.copy()
-    f = np.empty(N)
+def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force):
+    """:func:`dop853_solve` with work arrays ``y``, ``f``, ``ynew``, ``ytmp`` (11,), ``K`` (13, 11), ``vel``
+    (7,), ``force`` (4,) passed in (allocates nothing: the CUDA target compiles it as a device
+    function); ``counters`` (3,) or (4,) [nfev, accepted, rejected(, budget of nfev)]; ``fail`` (2,) or
+    (3,): [t of failure, last |H − H₀|(, failing row)]."""
+    for i in range(N):
+        y[i] = y0[i]
     rhs_kernel(y, u, P, f, vel, force)
     counters[0] += 1
     gap_sign = 1.0 if y[7] > y[8] else -1.0
@@ -305,8 +299,10 @@ def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
         Y[i, 0] = y[i]
     t = times[0]
     fail[0] = t
-    h_abs = dop853_initial_step(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, counters)
+    h_abs = dop853_initial_step_into(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, ynew, counters)
     for k in range(1, times.size):
+        if fail.size > 2:
+            fail[2] = k
         st, t, h_abs = dop853_advance(y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters)
         fail[0] = t
         for i in range(N):
@@ -319,6 +315,17 @@ def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
             if dH > energy_tol:
                 return ENERGY
     return OK
+
+
+@njit
+def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
+    """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
+
+    counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
+    last check]. Returns the status. (:func:`dop853_solve_into` with its work arrays allocated.)
+    """
+    return dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, np.empty(N), np.empty(N), np.empty((13, N)),
+                             np.empty(N), np.empty(N), np.empty(7), np.empty(4))
 
 
 @njit
@@ -553,16 +560,12 @@ def _fixed_advance(kind, y, span, hmax, coeffs, u, P, gap_sign, check_gap, work,
 
 
 @njit
-def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail):
-    """Fixed-step integration through every output time (kind 0: RK4, 1: splitting with ``coeffs``).
-
-    Y (11, len(times)) receives the states; counters (3,) int64 [nfev, steps, 0]; fail (2,)
-    [t of failure, last |H − H₀|]. Returns the status.
-    """
-    vel = np.empty(7)
-    force = np.empty(4)
-    work = np.empty((5, N))
-    y = y0.copy()
+def fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, work, vel, force):
+    """:func:`fixed_solve` with work arrays ``y`` (11,), ``work`` (≥5, 11), ``vel`` (7,), ``force`` (4,)
+    passed in (allocates nothing: the CUDA target compiles it as a device function); ``fail`` (2,) or
+    (3,): [t of failure, last |H − H₀|(, failing row)]."""
+    for i in range(N):
+        y[i] = y0[i]
     gap_sign = 1.0 if y[7] > y[8] else -1.0
     check_gap = not may_cross(y, u, P)
     check_energy = energy_tol < np.inf and no_control(u)
@@ -571,6 +574,8 @@ def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail)
         Y[i, 0] = y[i]
     fail[0] = times[0]
     for k in range(1, times.size):
+        if fail.size > 2:
+            fail[2] = k
         st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
         fail[0] = times[k - 1] + dt_done
         for i in range(N):
@@ -583,6 +588,17 @@ def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail)
             if dH > energy_tol:
                 return ENERGY
     return OK
+
+
+@njit
+def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail):
+    """Fixed-step integration through every output time (kind 0: RK4, 1: splitting with ``coeffs``).
+
+    Y (11, len(times)) receives the states; counters (3,) int64 [nfev, steps, 0]; fail (2,)
+    [t of failure, last |H − H₀|]. Returns the status. (:func:`fixed_solve_into` with its work arrays allocated.)
+    """
+    return fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, np.empty(N), np.empty((5, N)), np.empty(7),
+                            np.empty(4))
 
 
 @njit
