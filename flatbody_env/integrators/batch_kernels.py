@@ -37,7 +37,7 @@ import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
 from flatbody_env.integrators import jit as _jit
-from flatbody_env.integrators.dop853_tableau import dop as _dop
+from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
 from flatbody_env.integrators.jit import jit_copy
 from flatbody_env.physics.equations import rhs_iso
 from flatbody_env.physics.potentials import potential_kernel
@@ -46,10 +46,11 @@ N = 11
 BLOCK = 64
 """Lanes per block of the fused step (a compile-time constant: the block arrays are addressed at
 constant offsets, and the stage array, 13 × 11 × BLOCK doubles, stays in the CPU caches)."""
-A = np.ascontiguousarray(_dop.A[: _dop.N_STAGES, : _dop.N_STAGES])
-B = np.ascontiguousarray(_dop.B)
-E3 = np.ascontiguousarray(_dop.E3)
-E5 = np.ascontiguousarray(_dop.E5)
+S = N * BLOCK
+"""Entries of one block array (component i of lane k at i·BLOCK + k)."""
+REDO_BLOCK = 8
+"""Lanes per block when rejected lanes go on (:func:`dop853_redo_lanes`): a few lanes per env step, so
+a small block wastes little work on padding lanes."""
 
 
 def rhs_lanes(X, U, P, F):
@@ -93,73 +94,114 @@ def rhs_lanes(X, U, P, F):
         F[10 * BLOCK + k] = d10
 
 
-def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, A5, A3):
+def combine_lanes(KS, Y, HH, row, OUT, ACC):
+    """OUT[x] = Y[x] + HH[x] · Σ_q KS[J_q·S + x] · C_q for all x < S = 11·BLOCK, over the nonzero terms
+    (J_q, C_q) of row ``row`` of :data:`~flatbody_env.integrators.dop853_tableau.STAGE_J` /
+    ``STAGE_C`` in increasing J_q — each lane's and component's sum in the scalar kernel's order.
+
+    Component i of lane k sits at x = i·BLOCK + k in every array, so one flat loop covers the whole
+    block. Up to four terms are added per pass over ``ACC`` (S,), so the sum is read and written once
+    per four stages rather than once per stage."""
+    n = STAGE_L[row]
+    for x in range(S):
+        ACC[x] = 0.0
+    q = 0
+    while q < n:
+        m = min(4, n - q)
+        j0 = STAGE_J[row, q]
+        j1 = STAGE_J[row, q + 1] if m > 1 else j0
+        j2 = STAGE_J[row, q + 2] if m > 2 else j0
+        j3 = STAGE_J[row, q + 3] if m > 3 else j0
+        c0 = STAGE_C[row, q]
+        c1 = STAGE_C[row, q + 1] if m > 1 else 0.0
+        c2 = STAGE_C[row, q + 2] if m > 2 else 0.0
+        c3 = STAGE_C[row, q + 3] if m > 3 else 0.0
+        K0 = KS[j0 * S:(j0 + 1) * S]
+        K1 = KS[j1 * S:(j1 + 1) * S]
+        K2 = KS[j2 * S:(j2 + 1) * S]
+        K3 = KS[j3 * S:(j3 + 1) * S]
+        if m == 4:
+            for x in range(S):
+                ACC[x] = ACC[x] + K0[x] * c0 + K1[x] * c1 + K2[x] * c2 + K3[x] * c3
+        elif m == 3:
+            for x in range(S):
+                ACC[x] = ACC[x] + K0[x] * c0 + K1[x] * c1 + K2[x] * c2
+        elif m == 2:
+            for x in range(S):
+                ACC[x] = ACC[x] + K0[x] * c0 + K1[x] * c1
+        else:
+            for x in range(S):
+                ACC[x] = ACC[x] + K0[x] * c0
+        q += m
+    for x in range(S):
+        OUT[x] = Y[x] + HH[x] * ACC[x]
+
+
+def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3):
     """One DOP853 step of size ``H[k]`` for each lane k of a block; OUT receives y + h Σ b_j k_j,
     E5S the error norm (scipy's ``_estimate_error_norm``) of each lane. Flat block arrays: component
-    i of lane k at [i·BLOCK + k], stage j's component i at KS[(j·11 + i)·BLOCK + k]. The lane index is
-    the innermost loop; each lane's sums keep the scalar kernel's order. ``A5``, ``A3`` (BLOCK,): work."""
-    S = 11 * BLOCK
-    rhs_lanes(Y, U, P, KS[0:S])
-    for s in range(1, 12):
-        for i in range(11):
-            for k in range(BLOCK):
-                ACC[k] = 0.0
-            for j in range(s):
-                c = A[s, j]
-                o = (j * 11 + i) * BLOCK
-                for k in range(BLOCK):
-                    ACC[k] += KS[o + k] * c
-            for k in range(BLOCK):
-                YT[i * BLOCK + k] = Y[i * BLOCK + k] + H[k] * ACC[k]
-        rhs_lanes(YT, U, P, KS[s * S:(s + 1) * S])
+    i of lane k at [i·BLOCK + k], stage j's component i at KS[(j·11 + i)·BLOCK + k] (KS: 12 stages).
+    The lane index is the innermost loop; each lane's sums keep the scalar kernel's order
+    (:func:`combine_lanes`). The scalar kernel's 13th evaluation, f at the new state, is its next
+    step's first stage and enters no error estimate: a fused step, whose next step starts with new
+    controls, skips it. Work: ``E3S`` (BLOCK,), ``ACC``, ``HH``, ``A5``, ``A3`` (11·BLOCK,)."""
     for i in range(11):
         for k in range(BLOCK):
-            ACC[k] = 0.0
-        for j in range(12):
-            c = B[j]
-            o = (j * 11 + i) * BLOCK
-            for k in range(BLOCK):
-                ACC[k] += KS[o + k] * c
-        for k in range(BLOCK):
-            OUT[i * BLOCK + k] = Y[i * BLOCK + k] + H[k] * ACC[k]
-    rhs_lanes(OUT, U, P, KS[12 * S:13 * S])
+            HH[i * BLOCK + k] = H[k]
+    rhs_lanes(Y, U, P, KS[0:S])
+    for s in range(1, 12):
+        combine_lanes(KS, Y, HH, s, YT, ACC)
+        rhs_lanes(YT, U, P, KS[s * S:(s + 1) * S])
+    combine_lanes(KS, Y, HH, 12, OUT, ACC)
+    for x in range(S):
+        A5[x] = 0.0
+        A3[x] = 0.0
+    n = ERROR_J.shape[0]
+    q = 0
+    while q < n:  # the error sums, four stages per pass (as in combine_lanes), both estimates at once
+        if n - q >= 4:
+            K0 = KS[ERROR_J[q] * S:(ERROR_J[q] + 1) * S]
+            K1 = KS[ERROR_J[q + 1] * S:(ERROR_J[q + 1] + 1) * S]
+            K2 = KS[ERROR_J[q + 2] * S:(ERROR_J[q + 2] + 1) * S]
+            K3 = KS[ERROR_J[q + 3] * S:(ERROR_J[q + 3] + 1) * S]
+            a0, a1, a2, a3 = ERROR_E5[q], ERROR_E5[q + 1], ERROR_E5[q + 2], ERROR_E5[q + 3]
+            b0, b1, b2, b3 = ERROR_E3[q], ERROR_E3[q + 1], ERROR_E3[q + 2], ERROR_E3[q + 3]
+            for x in range(S):
+                k0 = K0[x]
+                k1 = K1[x]
+                k2 = K2[x]
+                k3 = K3[x]
+                A5[x] = A5[x] + k0 * a0 + k1 * a1 + k2 * a2 + k3 * a3
+                A3[x] = A3[x] + k0 * b0 + k1 * b1 + k2 * b2 + k3 * b3
+            q += 4
+        else:
+            K0 = KS[ERROR_J[q] * S:(ERROR_J[q] + 1) * S]
+            a0 = ERROR_E5[q]
+            b0 = ERROR_E3[q]
+            for x in range(S):
+                A5[x] = A5[x] + K0[x] * a0
+                A3[x] = A3[x] + K0[x] * b0
+            q += 1
+    for x in range(S):
+        sc = atol + max(abs(Y[x]), abs(OUT[x])) * rtol
+        a5 = A5[x] / sc
+        a3 = A3[x] / sc
+        A5[x] = a5 * a5
+        A3[x] = a3 * a3
     for k in range(BLOCK):
         E5S[k] = 0.0
         E3S[k] = 0.0
-    for i in range(11):
+    for i in range(11):  # each lane's norm summed over the components in order, as the scalar kernel does
         for k in range(BLOCK):
-            A5[k] = 0.0
-            A3[k] = 0.0
-        for j in range(13):  # lanes innermost (vectorised); each lane's sum over j in the scalar kernel's order
-            c5 = E5[j]
-            c3 = E3[j]
-            o = (j * 11 + i) * BLOCK
-            for k in range(BLOCK):
-                kj = KS[o + k]
-                A5[k] += kj * c5
-                A3[k] += kj * c3
-        for k in range(BLOCK):
-            sc = atol + max(abs(Y[i * BLOCK + k]), abs(OUT[i * BLOCK + k])) * rtol
-            a5 = A5[k] / sc
-            a3 = A3[k] / sc
-            E5S[k] += a5 * a5
-            E3S[k] += a3 * a3
+            E5S[k] += A5[i * BLOCK + k]
+            E3S[k] += A3[i * BLOCK + k]
     for k in range(BLOCK):
         e5 = E5S[k]
         e3 = E3S[k]
         E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(H[k]) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
 
 
-def lane_status(Y, U, P, OUT, k, yl):
-    """The status the scalar kernel returns for lane k when it accepts the step to ``OUT[:, k]``: its
-    :func:`~flatbody_env.integrators.twopolar_kernels._state_status` (non-finite, λ, μ, ϱ ≤ 0, λ − μ
-    changing sign unless the chart may cross). ``yl`` (11,) receives the state."""
-    for i in range(11):
-        yl[i] = OUT[i, k]
-    return state_status(yl, 1.0 if Y[7, k] > Y[8, k] else -1.0, not may_cross(Y[:, k], U[:, k], P))
-
-
-def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB,
+def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB,
                           LANES, W, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters):
     """One env step of DOP853 (first step guess dt) for N lanes: the fused step on blocks of
     :data:`BLOCK` lanes copied into the flat block arrays ``YB``, ``UB``, ``OB`` (the last block
@@ -185,22 +227,28 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
                 UB[i * BLOCK + j] = U[i, start + j]
             for j in range(m, BLOCK):
                 UB[i * BLOCK + j] = U[i, start]
-        dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, A5, A3)
+        dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
         for i in range(11):
             for j in range(m):
                 OUT[i, start + j] = OB[i * BLOCK + j]
         for j in range(m):
             ERR[start + j] = EB[j]
+            if EB[j] < 1.0:  # the step stands: the scalar kernel accepts it and reports the state it reached
+                finite = True
+                for i in range(11):
+                    if not math.isfinite(OB[i * BLOCK + j]):
+                        finite = False
+                gap_sign = 1.0 if YB[7 * BLOCK + j] > YB[8 * BLOCK + j] else -1.0
+                STATUS[start + j] = state_code(finite, OB[7 * BLOCK + j], OB[8 * BLOCK + j], OB[9 * BLOCK + j], gap_sign,
+                                               not crossable(P[0], P[1], YB[2 * BLOCK + j], YB[3 * BLOCK + j], UB[2 * BLOCK + j]))
+                NFEV[start + j] = 13
     nl = 0
     for k in range(n):
-        if ERR[k] < 1.0:  # the step stands: the scalar kernel accepts it and reports the state it reached
-            STATUS[k] = lane_status(Y, U, P, OUT, k, yl)
-            NFEV[k] = 13
-        else:
+        if not ERR[k] < 1.0:
             LANES[nl] = k
             nl += 1
     if nl > 0:
-        dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB, W, yl,
+        dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
                           ul, K1, ynew, ytmp, f, out1, vel, force, counters)
 
 
@@ -223,7 +271,7 @@ MAX_ROUNDS = 64
 """Fused attempts per block of redone lanes before the lanes still unfinished go to the scalar kernel."""
 
 
-def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, A5, A3, HB, W, yl,
+def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
                       ul, K1, ynew, ytmp, f, out1, vel, force, counters):
     """The lanes ``LANES[:nl]``, whose single step h = dt was rejected with the error norms ``ERR``,
     over one env step with the scalar kernel's step control, fused.
@@ -290,7 +338,7 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
                 active += 1
             if active == 0:
                 break
-            dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, A5, A3)
+            dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
             for j in range(BLOCK):
                 if W[3, j] != 1.0:
                     continue
@@ -335,7 +383,9 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
 dop853_env = _tk._dop853_env
 """The scalar kernel a lane falls back to (compiled with the same options)."""
 state_status = _tk._state_status
+state_code = _tk.state_code
 may_cross = _tk.may_cross
+crossable = _tk.crossable
 next_up = _tk.next_up
 OK = _tk.OK
 _SAFETY = _tk._SAFETY
@@ -345,13 +395,16 @@ _ERROR_EXPONENT = _tk._ERROR_EXPONENT
 
 
 _rhs_lanes_c = jit_copy(rhs_lanes, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso)
-_dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c)
-_lane_status_c = jit_copy(lane_status, state_status=_tk._state_status, may_cross=_tk.may_cross)
+_dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c, combine_lanes=jit_copy(combine_lanes))
+# the rejected lanes go on in blocks of REDO_BLOCK lanes: the same code with BLOCK (and S) re-bound
+_R = {"BLOCK": REDO_BLOCK, "S": N * REDO_BLOCK}
+_dop853_lanes_redo = jit_copy(dop853_lanes, variant="redo", **_R,
+                              rhs_lanes=jit_copy(rhs_lanes, variant="redo", **_R, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso),
+                              combine_lanes=jit_copy(combine_lanes, variant="redo", **_R))
 _scalar_lane_c = jit_copy(scalar_lane, dop853_env=_tk._dop853_env)
-_redo_lanes_c = jit_copy(dop853_redo_lanes, dop853_lanes=_dop853_lanes_c, scalar_lane=_scalar_lane_c, state_status=_tk._state_status,
+_redo_lanes_c = jit_copy(dop853_redo_lanes, **_R, dop853_lanes=_dop853_lanes_redo, scalar_lane=_scalar_lane_c, state_status=_tk._state_status,
                          may_cross=_tk.may_cross, next_up=_tk.next_up)
-dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, lane_status=_lane_status_c,
-                                   scalar_lane=_scalar_lane_c, dop853_redo_lanes=_redo_lanes_c)
+dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, scalar_lane=_scalar_lane_c, dop853_redo_lanes=_redo_lanes_c)
 """Compiled :func:`dop853_batch_env_step`."""
 
 
@@ -363,10 +416,11 @@ class DOP853Batch:
         self._alloc()
 
     def _alloc(self) -> None:
-        self.work = (np.empty(self.n), np.empty(N * BLOCK), np.empty(4 * BLOCK), np.empty(N * BLOCK), np.empty(13 * N * BLOCK),
-                     np.empty(N * BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK), np.empty(BLOCK),
-                     np.empty(self.n, np.int64), np.empty((9, BLOCK)), np.empty(N), np.empty(4),
-                     np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4), np.zeros(3, np.int64))
+        B, Sz = BLOCK, S
+        self.work = (np.empty(self.n), np.empty(Sz), np.empty(4 * B), np.empty(Sz), np.empty(12 * Sz), np.empty(Sz), np.empty(B), np.empty(B),
+                     np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(B), np.empty(self.n, np.int64), np.empty((9, B)),
+                     np.empty(N), np.empty(4), np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4),
+                     np.zeros(3, np.int64))
 
     def __getstate__(self):
         return {"n": self.n}
@@ -384,5 +438,5 @@ class DOP853Batch:
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes", "dop853_redo_lanes", "lane_status",
-           "rhs_lanes", "scalar_lane"]
+__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes",
+           "dop853_redo_lanes", "rhs_lanes", "scalar_lane"]

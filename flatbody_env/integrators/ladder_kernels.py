@@ -33,17 +33,13 @@ import math
 
 import numba
 import numpy as np
-from flatbody_env.integrators.dop853_tableau import dop as _dop
+from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
 
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, MAX_STEPS, NON_FINITE, OK, STEP_COLLAPSE
 from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
 
 njit = numba.njit(**JIT_OPTIONS)
 
-_A = np.ascontiguousarray(_dop.A[: _dop.N_STAGES, : _dop.N_STAGES])
-_B = np.ascontiguousarray(_dop.B)
-_E3 = np.ascontiguousarray(_dop.E3)
-_E5 = np.ascontiguousarray(_dop.E5)
 _SAFETY = 0.9
 _MIN_FACTOR = 0.2
 _MAX_FACTOR = 10.0
@@ -208,14 +204,14 @@ def dop853_small(x0, times, template, state_idx, rate_idx, u, P, rtol, atol, pos
                 for s in range(1, 12):
                     for i in range(n):
                         acc = 0.0
-                        for j in range(s):
-                            acc += K[j, i] * _A[s, j]
+                        for q in range(STAGE_L[s]):  # the nonzero a_sj, in increasing j
+                            acc += K[STAGE_J[s, q], i] * STAGE_C[s, q]
                         xtmp[i] = x[i] + h * acc
                     sub_rhs(xtmp, template, state_idx, rate_idx, u, P, K[s], work, ext, vel, force)
                 for i in range(n):
                     acc = 0.0
-                    for j in range(12):
-                        acc += K[j, i] * _B[j]
+                    for q in range(STAGE_L[12]):  # the nonzero b_j
+                        acc += K[STAGE_J[12, q], i] * STAGE_C[12, q]
                     xnew[i] = x[i] + h * acc
                 sub_rhs(xnew, template, state_idx, rate_idx, u, P, K[12], work, ext, vel, force)
                 counters[0] += 12
@@ -225,9 +221,10 @@ def dop853_small(x0, times, template, state_idx, rate_idx, u, P, rtol, atol, pos
                     sc = atol + max(abs(x[i]), abs(xnew[i])) * rtol
                     a5 = 0.0
                     a3 = 0.0
-                    for j in range(13):
-                        a5 += K[j, i] * _E5[j]
-                        a3 += K[j, i] * _E3[j]
+                    for q in range(ERROR_J.shape[0]):
+                        kj = K[ERROR_J[q], i]
+                        a5 += kj * ERROR_E5[q]
+                        a3 += kj * ERROR_E3[q]
                     a5 /= sc
                     a3 /= sc
                     e5 += a5 * a5

@@ -58,7 +58,12 @@ import math
 
 import numba
 import numpy as np
-from flatbody_env.integrators.dop853_tableau import dop as _dop
+from flatbody_env.integrators.dop853_tableau import ERROR_E3 as _ERROR_E3
+from flatbody_env.integrators.dop853_tableau import ERROR_E5 as _ERROR_E5
+from flatbody_env.integrators.dop853_tableau import ERROR_J as _ERROR_J
+from flatbody_env.integrators.dop853_tableau import STAGE_C as _STAGE_C
+from flatbody_env.integrators.dop853_tableau import STAGE_J as _STAGE_J
+from flatbody_env.integrators.dop853_tableau import STAGE_L as _STAGE_L
 
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
 from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
@@ -66,10 +71,6 @@ from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, kinetic_ker
 njit = numba.njit(**JIT_OPTIONS)
 
 N = 11
-_A = np.ascontiguousarray(_dop.A[: _dop.N_STAGES, : _dop.N_STAGES])
-_B = np.ascontiguousarray(_dop.B)
-_E3 = np.ascontiguousarray(_dop.E3)
-_E5 = np.ascontiguousarray(_dop.E5)
 _SAFETY = 0.9
 _MIN_FACTOR = 0.2
 _MAX_FACTOR = 10.0
@@ -102,21 +103,35 @@ def _finite(y):
 
 
 @njit
-def _state_status(y, gap_sign, check_gap):
-    """Status of a state after a step: non-finite, domain, chart singularity."""
-    if not _finite(y):
+def state_code(finite, lam, mu, rho, gap_sign, check_gap):
+    """Status of a state after a step from its values (the one decision; scalars, so that a loop over
+    lanes calls it without array arguments): non-finite, domain (λ, μ, ϱ ≤ 0), chart singularity
+    (λ − μ changed sign: ``gap_sign`` is its sign at the start, ``check_gap`` False where the chart may cross)."""
+    if not finite:
         return NON_FINITE
-    if y[7] <= 0.0 or y[8] <= 0.0 or y[9] <= 0.0:
+    if lam <= 0.0 or mu <= 0.0 or rho <= 0.0:
         return DOMAIN
-    if check_gap and (y[7] - y[8]) * gap_sign <= 0.0:
+    if check_gap and (lam - mu) * gap_sign <= 0.0:
         return CHART_SINGULARITY
     return OK
 
 
 @njit
+def _state_status(y, gap_sign, check_gap):
+    """Status of a state ``y`` (11,) after a step (:func:`state_code`)."""
+    return state_code(_finite(y), y[7], y[8], y[9], gap_sign, check_gap)
+
+
+@njit
+def crossable(J1, J2, s3, p_theta, tau3):
+    """True when λ = μ is passable in the chart: J1 = J2, σ₋ = s3 − p_θ = 0 and τ3 = 0 (docs/physics.md §7); scalars."""
+    return J1 == J2 and s3 == p_theta and tau3 == 0.0
+
+
+@njit
 def may_cross(y, u, P):
-    """True when λ = μ is passable in the chart: J1 = J2, σ₋ = s3 − p_θ = 0 and τ3 = 0 (docs/physics.md §7)."""
-    return P[0] == P[1] and y[2] == y[3] and u[2] == 0.0
+    """:func:`crossable` of a state ``y`` (11,), controls ``u`` (4,) and kernel parameters ``P``."""
+    return crossable(P[0], P[1], y[2], y[3], u[2])
 
 
 @njit
@@ -197,14 +212,14 @@ def _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force):
     for s in range(1, 12):
         for i in range(N):
             acc = 0.0
-            for j in range(s):
-                acc += K[j, i] * _A[s, j]
+            for q in range(_STAGE_L[s]):  # the nonzero a_sj, in increasing j
+                acc += K[_STAGE_J[s, q], i] * _STAGE_C[s, q]
             ytmp[i] = y[i] + h * acc
         rhs_kernel(ytmp, u, P, K[s], vel, force)
     for i in range(N):
         acc = 0.0
-        for j in range(12):
-            acc += K[j, i] * _B[j]
+        for q in range(_STAGE_L[12]):  # the nonzero b_j
+            acc += K[_STAGE_J[12, q], i] * _STAGE_C[12, q]
         ynew[i] = y[i] + h * acc
     rhs_kernel(ynew, u, P, K[12], vel, force)
 
@@ -217,9 +232,10 @@ def _dop853_error(y, ynew, K, h, rtol, atol):
         sc = atol + max(abs(y[i]), abs(ynew[i])) * rtol
         a5 = 0.0
         a3 = 0.0
-        for j in range(13):
-            a5 += K[j, i] * _E5[j]
-            a3 += K[j, i] * _E3[j]
+        for q in range(_ERROR_J.shape[0]):
+            kj = K[_ERROR_J[q], i]
+            a5 += kj * _ERROR_E5[q]
+            a3 += kj * _ERROR_E3[q]
         a5 /= sc
         a3 /= sc
         e5 += a5 * a5

@@ -84,7 +84,7 @@ def test_many_rejected_lanes_follow_the_scalar_step_control_bitwise():
 
 def test_fused_kernels_are_plain_python_over_arrays():
     """The source of the batch kernels stays plain Python (compiled by jit_copy, reusable for other targets)."""
-    for name in ("rhs_lanes", "dop853_lanes", "lane_status", "dop853_batch_env_step"):
+    for name in ("rhs_lanes", "combine_lanes", "dop853_lanes", "dop853_batch_env_step", "dop853_redo_lanes"):
         assert not hasattr(getattr(batch_kernels, name), "py_func")
 
 
@@ -102,3 +102,34 @@ def test_fused_step_refuses_an_anisotropic_body_and_energy_checks_go_scalar():
         out, counters = np.empty(11), np.zeros(3, np.int64)
         assert S[k] == st.step_counted(Y[:, k].copy(), U[:, k].copy(), P, 0.05, 0.05, 1e-11, 1e-11, 1e-3, out, counters)
         np.testing.assert_array_equal(OUT[:, k], out)
+
+
+def test_stage_sums_over_the_nonzero_coefficients_equal_the_full_sums_bitwise():
+    """The kernels sum DOP853's stages over the nonzero coefficients only: for finite stage values
+    (signed zeros, tiny and huge ones included) every sum is bit for bit the sum over all coefficients."""
+    from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L, dop
+
+    rng = np.random.default_rng(3)
+    K = rng.standard_normal((2000, 13)) * 10.0 ** rng.integers(-150, 150, (2000, 13))
+    K[rng.random(K.shape) < 0.1] = 0.0
+    K[rng.random(K.shape) < 0.1] = -0.0
+    rows = [dop.A[s, :12] for s in range(12)] + [dop.B]
+    for r, row in enumerate(rows):
+        for k in K[:200]:
+            full = 0.0
+            for j, c in enumerate(row):
+                full += k[j] * c
+            part = 0.0
+            for q in range(STAGE_L[r]):
+                part += k[STAGE_J[r, q]] * STAGE_C[r, q]
+            assert np.float64(full).tobytes() == np.float64(part).tobytes()
+    assert STAGE_L.sum() < sum(len(r) for r in rows) * 0.8  # a quarter of the products are skipped
+    for k in K:
+        f5 = f3 = p5 = p3 = 0.0
+        for j in range(13):
+            f5 += k[j] * dop.E5[j]
+            f3 += k[j] * dop.E3[j]
+        for q, j in enumerate(ERROR_J):
+            p5 += k[j] * ERROR_E5[q]
+            p3 += k[j] * ERROR_E3[q]
+        assert (f5, f3) == (p5, p3) and np.signbit(f5) == np.signbit(p5)
