@@ -283,8 +283,11 @@ class FlatBodyVectorEnv(VectorEnv):
             else:
                 lefts[i] = p.left_domain(self._OUT[:, i]) or ""
         keep = ~resetting
-        np.copyto(self._Ys, self._Ynext, where=keep)
-        self._steps[keep] += 1
+        if resetting.any():
+            np.copyto(self._Ys, self._Ynext, where=keep)
+        else:  # no body resets in this step (most steps): a plain copy
+            np.copyto(self._Ys, self._Ynext)
+        self._steps += keep
         terminated = ended
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & keep
         obs = self._OBS.copy()
