@@ -11,21 +11,25 @@ no division checks; no fastmath, so each lane's arithmetic is the scalar kernel'
 
 The step. Every lane takes one DOP853 step of size h = dt (Hairer's coefficients, the same
 arithmetic in the same order as :func:`flatbody_env.integrators.twopolar_kernels.dop853_env_step`
-with the first step guessed as dt): 13 right-hand sides, the stages combined lane by lane for each
-state component. Then each lane's embedded error estimate (scipy's 5th/3rd-order blend) and its
-state are checked. A lane whose step stands but whose state ends the episode (non-finite, out of the
+with the first step guessed as dt): 12 right-hand sides (the scalar kernel's 13th, f at the new
+state, only starts its next step), the stages combined over their nonzero coefficients for the whole
+block at once, up to four stages per pass (:func:`combine_lanes`; the sums were the larger half of
+the step's time when each stage made its own pass over a sum kept in memory). Then each lane's
+embedded error estimate (scipy's 5th/3rd-order blend) and its state are checked. A lane whose step stands but whose state ends the episode (non-finite, out of the
 chart: λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) gets the scalar kernel's status at once. The
 lanes whose step is rejected (error ≥ 1) go on together (:func:`dop853_redo_lanes`): fused attempts
 with a step size per lane, decided lane by lane by the scalar kernel's step control, starting from the
-rejection; a lane whose step would collapse goes to the scalar kernel. So every lane's result,
+rejection, in blocks of :data:`REDO_BLOCK` lanes (the same code compiled for that block size); a
+lane whose step would collapse goes to the scalar kernel. So every lane's result,
 status and function count are bit for bit the scalar kernel's (compiled with the same options,
 :data:`JIT_OPTIONS`): the vector env equals N single envs step for step.
 
 Lanes are stepped in blocks of :data:`BLOCK` so that the stage array stays in the caches.
 
-Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``STATUS``, ``NFEV`` (N,) int64 (outputs); ``ERR`` (N,)
-the error norms; work: ``KS`` (13, 11, B), ``YT`` (11, B), ``E3S``, ``ACC``, ``A5``, ``A3``, ``HB`` (B,) for
-blocks of B lanes, ``LANES`` (N,) int64, ``W`` (9, B) and the scalar kernel's work arrays — allocated
+Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``STATUS``, ``NFEV`` (N,) int64 (outputs; ``NFEV`` counts
+the scalar kernel's evaluations, 13 per accepted single step); ``ERR`` (N,) the error norms; work:
+``KS`` (12, 11, B), ``YT``, ``ACC``, ``HH``, ``A5``, ``A3`` (11, B), ``E3S``, ``HB`` (B,) for blocks of B
+lanes (all flat), ``LANES`` (N,) int64, ``W`` (9, B) and the scalar kernel's work arrays — allocated
 once by the caller (:class:`DOP853Batch`).
 """
 
@@ -45,7 +49,7 @@ from flatbody_env.physics.potentials import potential_kernel
 N = 11
 BLOCK = 64
 """Lanes per block of the fused step (a compile-time constant: the block arrays are addressed at
-constant offsets, and the stage array, 13 × 11 × BLOCK doubles, stays in the CPU caches)."""
+constant offsets, and the stage array, 12 × 11 × BLOCK doubles, stays in the CPU caches)."""
 S = N * BLOCK
 """Entries of one block array (component i of lane k at i·BLOCK + k)."""
 REDO_BLOCK = 8
@@ -279,8 +283,8 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
     The scalar kernel (:func:`flatbody_env.integrators.twopolar_kernels.dop853_advance`) takes each
     lane from t = 0 to dt with steps it accepts or rejects by the error norm (factors
     0.9·err^(−1/8) in [0.2, 10], no growth right after a rejection, the last step cut at dt) and checks
-    the state after every accepted step. Here up to :data:`BLOCK` lanes follow that same sequence
-    together: every round computes one attempt of every unfinished lane (its own step size, one
+    the state after every accepted step. Here up to BLOCK lanes (:data:`REDO_BLOCK` in the compiled
+    driver) follow that same sequence together: every round computes one attempt of every unfinished lane (its own step size, one
     :func:`dop853_lanes` call; finished and padding lanes take a zero step that is thrown away), then
     applies the scalar kernel's decisions lane by lane; the first attempt is the fused step's (the
     same arithmetic), so the lanes start from its rejection. Every lane therefore ends with the scalar
