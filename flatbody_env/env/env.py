@@ -29,6 +29,7 @@ from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.integrators.steppers import make_env_step
 from flatbody_env.physics.body import Body, default_body
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
+from flatbody_env.physics.potentials import KIND_CUSTOM
 from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE, pack, unpack, validate_state
 
 DEFAULT_INTEGRATOR = "DOP853-numba"
@@ -342,6 +343,17 @@ class FlatBodyEnv(gym.Env):
         self.check_start(y, "options.state" if "state" in options else "initial_noise")
         return y, target
 
+    def energy_left_out(self, Y: np.ndarray) -> np.ndarray | float:
+        """The part of H (eq. (41)) that the bookkeeping kernels leave out of ``info["energy"]`` at the
+        states ``Y`` (11,) or (11, N): a custom in-plane potential's value (the kernels know the
+        built-in potentials only), 0 otherwise. The single and the batched env add it."""
+        pot = self.body.potential
+        if getattr(pot, "kind", None) != KIND_CUSTOM:
+            return 0.0
+        if np.ndim(Y) == 1:
+            return float(pot.value(float(Y[7]), float(Y[8]), float(Y[9])))
+        return np.array([float(pot.value(float(a), float(b), float(c))) for a, b, c in zip(Y[7], Y[8], Y[9])])
+
     def check_start(self, y: np.ndarray, field: str) -> None:
         """ValueError naming ``field`` when the initial state ``y`` lies outside the domain."""
         left = self.left_domain(y)
@@ -352,6 +364,9 @@ class FlatBodyEnv(gym.Env):
         """The observation (16,) float32 and the reset ``info`` of state ``y`` with target (λ*, μ*, ϱ*, s3*)."""
         obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
         self.kernels.post_step(y, y, 0, self._a, 0, target_vector, self._cfg, self._P, self._yout, obs, self._terms, self._sc, self._vel, self._force)
+        left = self.energy_left_out(self._yout)
+        if left:
+            self._sc[1] += left
         return obs, build_info(t=0.0, scalars=self._sc, p_theta=y[3], ended=False, failure=None, left=None, method=self.stepper.method,
                                nfev=0, terms=None, success_tolerance=self.task.success_tolerance)
 
@@ -404,6 +419,9 @@ class FlatBodyEnv(gym.Env):
         terms = self._terms
         ended = k.post_step(y, self._ynew, st, self._a, self._a.size, self._tvec, self._cfg, self._P, self._yout, obs, terms, self._sc,
                             self._vel, self._force)
+        left = self.energy_left_out(self._yout)
+        if left:
+            self._sc[1] += left
         failure = left = None
         if ended:
             if st != 0:

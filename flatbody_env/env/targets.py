@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from flatbody_env.physics.body import Body, default_body
+from flatbody_env.physics.potentials import KIND_CUSTOM
 from flatbody_env.physics.controllability import CHEAP_CONTROL_R, settling_rate, target_state
 from flatbody_env.physics.equilibria import stationary_from_shape
 
@@ -114,6 +115,8 @@ class SettlingRateTable:
     def applies(self, body: Body, limits, control: str, target_lambda, target_aspect) -> bool:
         """Whether the table answers for this body, these limits, controls and target ranges."""
         m = self.meta
+        if getattr(body.potential, "kind", None) == KIND_CUSTOM:  # Python callables: no JSON form, never the table's body
+            return False
         return (
             control == "torque+dilatation"
             and m.get("version") == TABLE_VERSION
