@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from flatbody_env.output import atomic_write, save_figure, write_csv
+
 
 @dataclass(frozen=True)
 class TrainTiming:
@@ -160,12 +162,9 @@ def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: st
 
 def write(bench: TrainBenchmark, out_dir: Path) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "train_benchmark.json").write_text(json.dumps(asdict(bench), indent=2) + "\n")
-    with open(out_dir / "train_benchmark.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["env_id", "timesteps", "wall_s", "env_s", "env_share"])
-        for r in (bench.flatbody, bench.pendulum):
-            w.writerow([r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"])
+    atomic_write(out_dir / "train_benchmark.json", json.dumps(asdict(bench), indent=2) + "\n")
+    write_csv(out_dir / "train_benchmark.csv", ["env_id", "timesteps", "wall_s", "env_s", "env_share"],
+              [[r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"] for r in (bench.flatbody, bench.pendulum)])
     plot(out_dir / "train_benchmark.csv", out_dir / "train_benchmark.png")
 
 
@@ -189,7 +188,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
     ax.set_title("flatbody bench train (same run)")
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
+    save_figure(fig, png_path, dpi=120)
     plt.close(fig)
 
 

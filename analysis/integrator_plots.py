@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 
 from analysis.work_precision import read_csv
+from flatbody_env.output import save_figure
 
 _STYLE = {
     "RK23": ("#bbbbbb", "v"), "RK45": ("#999999", "^"), "DOP853": ("#000000", "o"), "Radau": ("#8c564b", "s"),
@@ -43,7 +44,7 @@ def _save(plt, fig, png_path) -> Path:
     """Write the figure as PNG (creating the folder) and close it."""
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=110)
+    save_figure(fig, png_path, dpi=110)
     plt.close(fig)
     return png_path
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.families import read_family_csv
+from flatbody_env.output import save_figure
 
 COLOURS = {"elliptic": "#1f77b4", "hyperbolic": "#d62728", "degenerate": "#7f7f7f"}
 LABELS = {
@@ -84,7 +85,7 @@ def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     out = Path(png_path)
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     plt.close(fig)
     return out
 
@@ -133,7 +134,7 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
     fig.suptitle(title or "Stationary ellipses by shape: stability (inverse problem)", fontsize=11)
     fig.tight_layout(rect=(0, 0.08, 1, 1))
     out = Path(png_path)
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out, dpi=110)
     plt.close(fig)
     return out
 

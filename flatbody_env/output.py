@@ -4,16 +4,19 @@
 target (``os.replace``), so a killed or failing run never leaves a half-written file under the
 requested name and an existing file is replaced in one step. I/O failures become
 :class:`OutputError` (an ``OSError`` subclass the CLI prints as one line, exit code 1).
+:func:`atomic_open`, :func:`write_csv` and :func:`save_figure` do the same for text files, tables and charts.
 """
 
 from __future__ import annotations
 
 import contextlib
+import csv
 import os
 import stat
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any, TextIO
 
 
 class OutputError(OSError):
@@ -75,6 +78,33 @@ def atomic_write(path: str | os.PathLike, data: str | bytes | Callable[[Path], N
     return Path(path)
 
 
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike) -> Iterator[TextIO]:
+    """A text file (UTF-8, ``newline=""`` as the csv module wants) that becomes ``path`` when the
+    block ends without error (:func:`atomic_path`)::
+
+        with atomic_open("table.csv") as fh:
+            csv.writer(fh).writerow(["a", "b"])
+    """
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="", encoding="utf-8") as fh:
+            yield fh
+
+
+def write_csv(path: str | os.PathLike, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
+    """Write a CSV table (a header row, then ``rows``) to ``path`` atomically (:func:`atomic_open`)."""
+    with atomic_open(path) as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    return Path(path)
+
+
+def save_figure(fig, path: str | os.PathLike, *, dpi: int) -> Path:
+    """Save a matplotlib figure as PNG to ``path`` atomically (:func:`atomic_path`)."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi)
+    return Path(path)
 
 
 def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, ...] = ()) -> Path:
@@ -119,4 +149,4 @@ def replace_marked_block(path: str | os.PathLike, name: str, text: str) -> Path:
     return atomic_write(target, page[: i + len(begin)] + "\n" + text.rstrip("\n") + "\n" + page[j:])
 
 
-__all__ = ["OutputError", "atomic_path", "atomic_write", "replace_marked_block"]
+__all__ = ["OutputError", "atomic_open", "atomic_path", "atomic_write", "replace_marked_block", "save_figure", "write_csv"]

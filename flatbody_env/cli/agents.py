@@ -64,9 +64,9 @@ def _evaluate(args) -> int:
         backend=args.backend,
     )
     if args.out:
-        from pathlib import Path
+        from flatbody_env.output import atomic_write
 
-        Path(args.out).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        atomic_write(args.out, json.dumps(report, indent=2) + "\n")
     if args.json:
         print(json.dumps(report, indent=2))
     else:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from flatbody_env.answers import failure_rows
 from flatbody_env.cli.args import int_at_least, positive_float
+from flatbody_env.output import atomic_open, atomic_write
 
 DEFAULT_OUT = "runs/integrators"
 
@@ -142,8 +143,8 @@ def _bench(args) -> int:
         rep = bench_integrators(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
         print(format_report(rep))
         out.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(rep.as_dict(), indent=2) + "\n", encoding="utf-8")
-        with csv_path.open("w", newline="", encoding="utf-8") as fh:
+        atomic_write(json_path, json.dumps(rep.as_dict(), indent=2) + "\n")
+        with atomic_open(csv_path) as fh:
             w = csv.writer(fh)
             w.writerow(["section", "case", "method", "setting_or_path", "figure", "value"])
             for a in rep.regular["at_target"]:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
 from flatbody_env.physics.validation import MAX_SAMPLES
+from flatbody_env.output import atomic_write, save_figure
 
 
 
@@ -278,7 +279,7 @@ def _record_bench(args) -> int:
         "cpus": __import__("os").cpu_count(),
     }
     json_path = out_dir / "recording.json"
-    json_path.write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    atomic_write(json_path, json.dumps(result, indent=2) + "\n")
     png_path = out_dir / "recording.png"
     _bench_chart(result, png_path)
     print(f"first call of the process ({first_call['steps']} steps, includes importing rerun): {first_call['seconds']:.3f} s")
@@ -430,7 +431,7 @@ def _bench_chart(result: dict, path: Path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

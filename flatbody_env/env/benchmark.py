@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from flatbody_env.output import atomic_write, save_figure, write_csv
+
 
 @dataclass(frozen=True)
 class StepRate:
@@ -210,12 +212,9 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
 
 def write(bench: EnvBenchmark, out_dir: Path) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "env_benchmark.json").write_text(json.dumps(asdict(bench), indent=2) + "\n")
-    with open(out_dir / "env_benchmark.csv", "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["name", "batch", "us_per_env_step", "env_steps_per_s"])
-        for r in bench.single + bench.batched:
-            w.writerow([r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"])
+    atomic_write(out_dir / "env_benchmark.json", json.dumps(asdict(bench), indent=2) + "\n")
+    write_csv(out_dir / "env_benchmark.csv", ["name", "batch", "us_per_env_step", "env_steps_per_s"],
+              [[r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"] for r in bench.single + bench.batched])
     plot(out_dir / "env_benchmark.csv", out_dir / "env_benchmark.png")
 
 
@@ -238,7 +237,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
         ax.text(r, y, f" {r:,.0f}", va="center", fontsize=8)
     ax.set_title("flatbody bench env (same run)")
     fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
+    save_figure(fig, png_path, dpi=120)
     plt.close(fig)
 
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from flatbody_env.integrators import batch_solve as bs
 from flatbody_env.integrators.compiled_methods import env_stepper, kernel_params
+from flatbody_env.output import save_figure
 
 WHAT = "env step, dynamics only"
 DT = 0.05
@@ -187,7 +188,7 @@ def plot(result: dict, path: str | Path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -12,7 +12,6 @@ other than 200 counts). Output: ``service_benchmark.json``, ``.csv`` and ``.png`
 from __future__ import annotations
 
 import asyncio
-import csv
 import json
 import os
 import socket
@@ -25,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from flatbody_env.output import atomic_write, save_figure, write_csv
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
     "GET /health": ("GET", "/health", None),
@@ -175,13 +175,10 @@ def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32),
 
 def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:
     paths = {"json": str(out / "service_benchmark.json"), "csv": str(out / "service_benchmark.csv"), "png": str(out / "service_benchmark.png")}
-    Path(paths["json"]).write_text(json.dumps({"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
-                                               "rows": [asdict(r) for r in result.rows]}, indent=2) + "\n", encoding="utf-8")
-    with open(paths["csv"], "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(LoadRow.__dataclass_fields__))
-        w.writeheader()
-        for r in result.rows:
-            w.writerow(asdict(r))
+    atomic_write(paths["json"], json.dumps({"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
+                                            "rows": [asdict(r) for r in result.rows]}, indent=2) + "\n")
+    fields = list(LoadRow.__dataclass_fields__)
+    write_csv(paths["csv"], fields, [[asdict(r)[f] for f in fields] for r in result.rows])
     import matplotlib
 
     matplotlib.use("Agg")
@@ -210,7 +207,7 @@ def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:
     fig.suptitle(f"flatbody serve, {result.workers} worker process(es), {result.cpus} CPU(s), while a {result.long_job['kind']} job runs",
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(paths["png"], dpi=100)
+    save_figure(fig, paths["png"], dpi=100)
     plt.close(fig)
     return paths
 

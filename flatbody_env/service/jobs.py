@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.service.store import JobStore
+from flatbody_env.output import atomic_write
 
 Progress = Callable[[float], None]
 
@@ -38,7 +39,7 @@ def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
     _, traj = trajectory(p, in_job=True)
     progress(0.9)
     answer = traj.to_dict()
-    (out / "trajectory.json").write_text(json.dumps(answer) + "\n", encoding="utf-8")
+    atomic_write(out / "trajectory.json", json.dumps(answer) + "\n")
     return answer, ["trajectory.json"]
 
 
@@ -92,7 +93,7 @@ def _evaluate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
 
     progress(0.05)
     report = evaluate_all(None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"])  # the shipped agent only
-    (out / "evaluation.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    atomic_write(out / "evaluation.json", json.dumps(report, indent=2) + "\n")
     return report, ["evaluation.json"]
 
 

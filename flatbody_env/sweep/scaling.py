@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.sweep.tasks import Task, execute, plan
+from flatbody_env.output import atomic_open, atomic_write, save_figure
 
 
 def _noop(x: int) -> int:
@@ -211,8 +212,8 @@ def write_scaling(rep: dict[str, Any], out: str | Path) -> tuple[Path, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     jp, cp = out / "scaling.json", out / "scaling.csv"
-    jp.write_text(json.dumps(rep, indent=2) + "\n", encoding="utf-8")
-    with cp.open("w", newline="", encoding="utf-8") as fh:
+    atomic_write(jp, json.dumps(rep, indent=2) + "\n")
+    with atomic_open(cp) as fh:
         w = csv.writer(fh)
         w.writerow(["section", "workers", "figure", "value"])
         w.writerow(["serial", 0, "wall_s", rep["serial_s"]])
@@ -281,7 +282,7 @@ def plot_scaling(json_path: str | Path, png_path: str | Path) -> Path:
     fig.tight_layout()
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png_path, dpi=110)
+    save_figure(fig, png_path, dpi=110)
     plt.close(fig)
     return png_path
 
