@@ -9,20 +9,21 @@ it too), called per lane on scalars: with the body's parameters read once into s
 has no memory dependence, and numba (LLVM) turns it into SIMD instructions (``error_model="numpy"``:
 no division checks; no fastmath, so each lane's arithmetic is the scalar kernel's, bit for bit).
 
-The step. Every lane takes one DOP853 step of size h = dt (Hairer's coefficients, the same
-arithmetic in the same order as :func:`flatbody_env.integrators.twopolar_kernels.dop853_env_step`
-with the first step guessed as dt): 12 right-hand sides (the scalar kernel's 13th, f at the new
-state, only starts its next step), the stages combined over their nonzero coefficients for the whole
-block at once, up to four stages per pass (:func:`combine_lanes`; the sums were the larger half of
-the step's time when each stage made its own pass over a sum kept in memory). Then each lane's
-embedded error estimate (scipy's 5th/3rd-order blend) and its state are checked. A lane whose step stands but whose state ends the episode (non-finite, out of the
-chart: λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) gets the scalar kernel's status at once. The
-lanes whose step is rejected (error ≥ 1) go on together (:func:`dop853_redo_lanes`): fused attempts
-with a step size per lane, decided lane by lane by the scalar kernel's step control, starting from the
-rejection, in blocks of :data:`REDO_BLOCK` lanes (the same code compiled for that block size); a
-lane whose step would collapse goes to the scalar kernel. So every lane's result,
-status and function count are bit for bit the scalar kernel's (compiled with the same options,
-:data:`JIT_OPTIONS`): the vector env equals N single envs step for step.
+The step. Every lane takes one DOP853 step of size h = dt (Hairer's coefficients, the same arithmetic in
+the same order as :func:`flatbody_env.integrators.twopolar_kernels.dop853_env_step` with the first step
+guessed as dt): 12 right-hand sides (the scalar kernel's 13th, f at the new state, only starts its next
+step), the stages combined over their nonzero coefficients for the whole block at once, up to four
+stages per pass (:func:`combine_lanes`; the sums were the larger half of the step's time when each stage
+made its own pass over a sum kept in memory). Then each lane's embedded error estimate (scipy's
+5th/3rd-order blend) and its state are checked. A lane whose step stands but whose state ends the
+episode (non-finite, out of the chart: λ, μ, ϱ ≤ 0, λ − μ changing sign where it may not) gets the
+scalar kernel's status at once, from :func:`~flatbody_env.integrators.twopolar_kernels.state_code` on
+the lane's values. The lanes whose step is rejected (error ≥ 1) go on together
+(:func:`dop853_redo_lanes`): fused attempts with a step size per lane, decided lane by lane by the
+scalar kernel's step control, starting from the rejection, in blocks of :data:`REDO_BLOCK` lanes (the
+same code compiled for that block size); a lane whose step would collapse goes to the scalar kernel. So
+every lane's result, status and function count are bit for bit the scalar kernel's (compiled with the
+same options, :data:`JIT_OPTIONS`): the vector env equals N single envs step for step.
 
 Lanes are stepped in blocks of :data:`BLOCK` so that the stage array stays in the caches.
 
@@ -442,5 +443,5 @@ class DOP853Batch:
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c", "dop853_lanes",
-           "dop853_redo_lanes", "rhs_lanes", "scalar_lane"]
+__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c",
+           "dop853_lanes", "dop853_redo_lanes", "rhs_lanes", "scalar_lane"]
