@@ -9,6 +9,9 @@ Errors are :class:`~flatbody_env.service.models.ErrorAnswer` objects, one line n
 and the allowed range or the limit: 422 for bad input and failed integrations (with the
 ``IntegrationError``'s time and reason), 413 for bodies or work over the limits, 404 for unknown
 jobs, 409 for an artifact of an unfinished job, 503 while the service restarts its workers.
+
+``/docs`` (Swagger UI) and ``/redoc`` load their scripts from the service itself (:data:`DOCS_ASSETS`),
+so they work on a network without internet access, as the page does.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from fastapi import FastAPI, Path as PathParam, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from flatbody_env.service import models
@@ -36,6 +40,8 @@ from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
 from flatbody_env.service.store import JobStore
 
 PAGE_DIR = Path(__file__).with_name("page")
+DOCS_ASSETS = "/docs-assets"
+"""Where the service serves Swagger UI's and ReDoc's scripts for ``/docs`` and ``/redoc`` (fastapi-offline)."""
 
 _ERRORS = {
     413: {"model": models.ErrorAnswer, "description": "the body or the work is over a limit (the detail names it)"},
@@ -206,7 +212,8 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2) -> F
         finally:
             service.stop()
 
-    app = FastAPI(
+    app = FastAPIOffline(  # FastAPI with /docs (Swagger UI) and /redoc whose scripts the service serves itself
+        static_url=DOCS_ASSETS,
         title="flatbody analysis service",
         version=__version__,
         description="Stationary ellipses, stability, families, simulations and rerun recordings of a flat affinely-rigid body "

@@ -354,6 +354,23 @@ def test_the_page_and_its_files_are_served(client):
     assert client.get("/docs").status_code == 200
 
 
+def test_docs_pages_load_their_scripts_from_the_service(client):
+    """/docs (Swagger UI) and /redoc name no outside address: their scripts come from the service."""
+    import re
+
+    from flatbody_env.service.app import DOCS_ASSETS
+
+    for page, assets in (("/docs", ("swagger-ui-bundle.js", "swagger-ui.css")), ("/redoc", ("redoc.standalone.js",))):
+        html = client.get(page)
+        assert html.status_code == 200 and html.headers["content-type"].startswith("text/html")
+        assert not re.search(r"(src|href)=[\"']?(https?:)?//", html.text), page  # nothing fetched from elsewhere
+        for name in assets:
+            assert f"{DOCS_ASSETS}/{name}" in html.text
+            got = client.get(f"{DOCS_ASSETS}/{name}")
+            assert got.status_code == 200 and len(got.content) > 10_000
+    assert "/openapi.json" in client.get("/docs").text
+
+
 def test_oversized_chunked_body_is_413(client):
     chunk = b" " * (1 << 20)
 

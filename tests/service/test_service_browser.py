@@ -19,22 +19,54 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
                                 reason="needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)")
 
 
-@pytest.fixture
-def browser():
+def _chrome(*extra: str):
     webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install selenium)")
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
 
     opts = Options()
     opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1200,1700"):
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1200,1700", *extra):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     driver.set_page_load_timeout(60)
+    return driver
+
+
+@pytest.fixture
+def browser():
+    driver = _chrome()
     try:
         yield driver
     finally:
         driver.quit()
+
+
+@pytest.fixture
+def offline_browser():
+    """A browser that can reach this machine only (every other host name fails to resolve)."""
+    driver = _chrome("--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1")
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def test_api_docs_render_without_internet_access(offline_browser, live_service):
+    """/docs (Swagger UI) and /redoc draw the service's API from its own scripts: the browser reaches
+    nothing but the service."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    _, url, _ = live_service
+    wait = WebDriverWait(offline_browser, 60)
+    offline_browser.get(url + "/docs")
+    wait.until(lambda d: "flatbody analysis service" in " ".join(e.text for e in d.find_elements(By.CSS_SELECTOR, ".swagger-ui .info .title")))
+    paths = {e.text.replace("\u200b", "") for e in offline_browser.find_elements(By.CSS_SELECTOR, ".opblock-summary-path")}
+    assert {"/health", "/ellipses", "/jobs"} <= paths
+    offline_browser.get(url + "/redoc")
+    wait.until(lambda d: "flatbody analysis service" in d.find_element(By.TAG_NAME, "body").text)
+    assert "/ellipses" in offline_browser.find_element(By.TAG_NAME, "body").text
 
 
 def test_page_finds_ellipses_runs_a_recording_job_and_shows_a_chart(browser, live_service, tmp_path):
