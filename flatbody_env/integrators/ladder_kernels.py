@@ -37,6 +37,7 @@ from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J,
 
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, MAX_STEPS, NON_FINITE, OK, STEP_COLLAPSE
 from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
+from flatbody_env.integrators.twopolar_kernels import next_up
 
 njit = numba.njit(**JIT_OPTIONS)
 
@@ -185,7 +186,7 @@ def dop853_small(x0, times, template, state_idx, rate_idx, u, P, rtol, atol, pos
     for k in range(1, times.size):
         t_bound = times[k]
         while t < t_bound:
-            min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+            min_step = 10.0 * abs(next_up(t) - t)
             if h_abs < min_step:
                 h_abs = min_step
             rejected = False
