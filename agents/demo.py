@@ -26,7 +26,8 @@ def rollout(
     """One seeded episode of ``agent`` (a batch policy) with the rotation tracked.
 
     With ``record_to`` the episode is also written to that ``.rrd`` file through
-    :class:`flatbody_env.recording.wrapper.RerunRecorder` — the one way an env episode is recorded.
+    :class:`flatbody_env.recording.wrapper.RerunRecorder` — the one way an env episode is recorded —
+    atomically (:func:`flatbody_env.output.atomic_path`): a run that fails leaves no half-written file.
 
     Returns t (n,), states (11, n), actions (n, k) (row j: the action applied on [t_j, t_{j+1});
     the last row is zero), reward_terms (dict of (n,) arrays; entry j: the reward received on
@@ -34,6 +35,18 @@ def rollout(
     body and ``path`` (the recording, or None). Only the env's public surface is read
     (``state``, ``target``, ``info``).
     """
+    if record_to is not None:
+        from flatbody_env.output import atomic_path
+        from flatbody_env.recording.wrapper import episode_file
+
+        target = episode_file(record_to, 0)  # the one episode's file
+        with atomic_path(target) as tmp:
+            ep = _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=tmp, title=title)
+        return {**ep, "path": target}
+    return _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=None, title=title)
+
+
+def _rollout(agent, *, seed, env_kwargs, record_to, title) -> dict[str, Any]:
     import gymnasium as gym
 
     import flatbody_env  # noqa: F401  (registers FlatBody-v0)

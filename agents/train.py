@@ -36,6 +36,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from flatbody_env.output import atomic_path, atomic_write
+
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
@@ -314,7 +316,7 @@ def train(
             env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
         model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
         cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp}
-        (out / "config.yml").write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
+        atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
     model.set_logger(configure(str(out), ["csv"]) if not resume else configure(str(out / f"resumed-{start}"), ["csv"]))
 
     callbacks = [_progress_callback(total, start, progress), *(extra_callbacks or [])]
@@ -333,9 +335,11 @@ def train(
     model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False)
     wall = time.perf_counter() - t0
 
-    model.save(str(out / "model.zip"))
+    with atomic_path(out / "model.zip") as tmp:  # a killed run leaves the previous model, never half of one
+        model.save(str(tmp))
     if norm:
-        env.save(str(out / "vecnormalize.pkl"))
+        with atomic_path(out / "vecnormalize.pkl") as tmp:
+            env.save(str(tmp))
     previous = {}
     if resume and (out / "run.json").exists():
         previous = json.loads((out / "run.json").read_text(encoding="utf-8"))
@@ -365,7 +369,7 @@ def train(
         },
         "cpu_count": os.cpu_count(),
     }
-    (out / "run.json").write_text(json.dumps(run, indent=2) + "\n", encoding="utf-8")
+    atomic_write(out / "run.json", json.dumps(run, indent=2) + "\n")
     from agents.numpy_policy import export_policy
 
     try:

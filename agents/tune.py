@@ -36,6 +36,7 @@ from typing import Any
 import yaml
 
 from agents.train import ALGOS, ENV_ID, HYPERPARAMS_DIR
+from flatbody_env.output import atomic_path
 
 TUNE_EVAL_SEED = 50_000
 """First episode seed of the tuning evaluations (held apart from training and from ``evaluate``)."""
@@ -220,10 +221,12 @@ def _study(cfg: TuneConfig, worker: int = 0):
 def _evaluate(out: Path, model, episodes: int) -> dict[str, Any]:
     from agents.evaluate import Agent, run_episodes, summarize
 
-    model.save(str(out / "model.zip"))
+    with atomic_path(out / "model.zip") as tmp:
+        model.save(str(tmp))
     vn = model.get_vec_normalize_env()
     if vn is not None:
-        vn.save(str(out / "vecnormalize.pkl"))
+        with atomic_path(out / "vecnormalize.pkl") as tmp:
+            vn.save(str(tmp))
     agent = Agent(out)
     return summarize(run_episodes(agent, episodes=episodes, seed=TUNE_EVAL_SEED, env_kwargs=agent.env_kwargs))
 

@@ -20,6 +20,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from flatbody_env.output import atomic_path
+
 LAVAPIPE_ICDS = (
     "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
     "/usr/share/vulkan/icd.d/lvp_icd.aarch64.json",
@@ -110,7 +112,8 @@ def _compact_png(path: Path, colors: int) -> None:
 
     with Image.open(path) as img:
         small = img.convert("RGB").quantize(colors=colors, method=Image.Quantize.FASTOCTREE)
-    small.save(path, optimize=True)
+    with atomic_path(path) as tmp:
+        small.save(tmp, format="PNG", optimize=True)
 
 
 def screenshots(

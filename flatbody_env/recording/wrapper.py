@@ -112,6 +112,19 @@ def _action_names(u) -> tuple[str, ...] | None:
     return None
 
 
+def episode_file(path: str | Path, episode: int) -> Path:
+    """The file :class:`RerunRecorder` writes episode ``episode`` to when given ``path``: ``path``
+    formatted with ``episode`` if it holds ``{episode}``, else ``path`` itself for the first episode and
+    ``STEM-K.rrd`` for episode K."""
+    path = str(path)
+    if "{episode" in path:
+        return Path(path.format(episode=episode))
+    if episode == 0:
+        return Path(path)
+    p = Path(path)
+    return p.with_name(f"{p.stem}-{episode}{p.suffix}")
+
+
 class RerunRecorder(gym.Wrapper):
     """Record episodes of a flat-body environment to rerun ``.rrd`` files.
 
@@ -177,13 +190,8 @@ class RerunRecorder(gym.Wrapper):
 
     # ------------------------------------------------------------------------------------------
     def episode_path(self, episode: int) -> Path:
-        """The file episode ``episode`` is written to."""
-        if "{episode" in self._path:
-            return Path(self._path.format(episode=episode))
-        if episode == 0:
-            return Path(self._path)
-        p = Path(self._path)
-        return p.with_name(f"{p.stem}-{episode}{p.suffix}")
+        """The file episode ``episode`` is written to (:func:`episode_file`)."""
+        return episode_file(self._path, episode)
 
     @property
     def recording(self) -> bool:
@@ -331,4 +339,4 @@ class RerunRecorder(gym.Wrapper):
             super().close()
 
 
-__all__ = ["RerunRecorder"]
+__all__ = ["RerunRecorder", "episode_file"]

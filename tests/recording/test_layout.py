@@ -174,3 +174,27 @@ def test_numbers_and_labels_are_each_steps_own_formatting():
         assert tensor_text(t, G, C, half, r) == expected
     assert axis_labels(half) == [f"{s} = {v:.3f}" for row in half for s, v in zip("λμϱ", row)]
     assert tensor_text(t[:0], G[:0], C[:0], half[:0], 1.0) == [] and axis_labels(half[:0]) == []
+
+
+def test_a_demo_that_fails_midway_leaves_no_recording(tmp_path):
+    """The demo's recording is written atomically: a policy that fails half-way leaves neither the
+    file nor a temporary one; a previous recording under that name stays as it was."""
+    from agents.demo import rollout
+
+    calls = {"n": 0}
+
+    def failing(obs):
+        calls["n"] += 1
+        if calls["n"] > 10:
+            raise RuntimeError("policy failed")
+        return np.zeros((1, 4))
+
+    path = tmp_path / "demo.rrd"
+    with pytest.raises(RuntimeError, match="policy failed"):
+        rollout(failing, seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path)
+    assert list(tmp_path.iterdir()) == []
+    path.write_bytes(b"previous")
+    calls["n"] = 0
+    with pytest.raises(RuntimeError, match="policy failed"):
+        rollout(failing, seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path)
+    assert path.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["demo.rrd"]
