@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import root
 
+from flatbody_env.output import atomic_open
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
 
@@ -527,7 +528,7 @@ def shape_stability_grid(body: Body, lam_values, mu_values) -> list[dict[str, An
 def write_table_csv(rows: list[dict[str, Any]], path: str | Path, columns: tuple[str, ...] = SHAPE_COLUMNS) -> Path:
     """Write plain rows (e.g. of :func:`shape_stability_grid`) as CSV."""
     path = Path(path)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path) as fh:
         w = csv.DictWriter(fh, fieldnames=list(columns))
         w.writeheader()
         for row in rows:
@@ -556,7 +557,7 @@ def family_rows(family: Family) -> list[dict[str, Any]]:
 def write_family_csv(family: Family, path: str | Path) -> Path:
     """Save the family table (one row per point; events as rows with ``event`` set)."""
     path = Path(path)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path) as fh:
         w = csv.DictWriter(fh, fieldnames=list(CSV_COLUMNS))
         w.writeheader()
         for row in family_rows(family):

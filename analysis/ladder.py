@@ -45,6 +45,7 @@ import numpy as np
 
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.integrators.ladder import LADDER_RUNGS, check_rung, rung_model
+from flatbody_env.output import atomic_open
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import Scene, builtin_scenes
 from flatbody_env.simulation import explain_model
@@ -251,7 +252,7 @@ def write_csv(points, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = [f.name for f in fields(LadderPoint)]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path) as fh:
         w = csv.DictWriter(fh, fieldnames=names)
         w.writeheader()
         for p in points:
@@ -264,7 +265,7 @@ def write_scenes(records, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     names = [f.name for f in fields(LadderScene)]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path) as fh:
         w = csv.DictWriter(fh, fieldnames=names)
         w.writeheader()
         for r in records:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flatbody_env.output import atomic_open, atomic_write
 from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.scene import Scene, load_scene
@@ -271,7 +272,7 @@ def write_records(records, path: str | Path) -> Path:
     if not records:
         raise ValueError("records: nothing to write")
     names = [f.name for f in fields(records[0])]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path) as fh:
         w = csv.DictWriter(fh, fieldnames=names)
         w.writeheader()
         for r in records:
@@ -282,7 +283,7 @@ def write_records(records, path: str | Path) -> Path:
 def write_json(records, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps([asdict(r) for r in records], indent=2) + "\n", encoding="utf-8")
+    atomic_write(path, json.dumps([asdict(r) for r in records], indent=2) + "\n")
     return path
 
 
