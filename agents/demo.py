@@ -40,6 +40,7 @@ def rollout(
         from flatbody_env.recording.wrapper import episode_file
 
         target = episode_file(record_to, 0)  # the one episode's file
+        target.parent.mkdir(parents=True, exist_ok=True)  # as the recorder itself does
         with atomic_path(target) as tmp:
             ep = _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=tmp, title=title)
         return {**ep, "path": target}

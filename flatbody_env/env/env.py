@@ -186,6 +186,9 @@ class FlatBodyEnv(gym.Env):
         self.mask = control_mask(control)
         self.control = control
         self.body = _as_body(body)
+        self.custom_potential = self.body.potential if getattr(self.body.potential, "kind", None) == KIND_CUSTOM else None
+        """The body's custom (Python) potential, whose part of H the bookkeeping kernels leave out
+        (:meth:`energy_left_out`); None for a built-in potential."""
         if not self.body.inertia.is_isotropic:
             raise ValueError("body: the task's stationary ellipses need J1 = J2 (isotropic in the plane)")
         for name, value in (("dt", dt), ("torque_limit", torque_limit), ("force_limit", force_limit), ("momentum_bound", momentum_bound)):
@@ -347,8 +350,8 @@ class FlatBodyEnv(gym.Env):
         """The part of H (eq. (41)) that the bookkeeping kernels leave out of ``info["energy"]`` at the
         states ``Y`` (11,) or (11, N): a custom in-plane potential's value (the kernels know the
         built-in potentials only), 0 otherwise. The single and the batched env add it."""
-        pot = self.body.potential
-        if getattr(pot, "kind", None) != KIND_CUSTOM:
+        pot = self.custom_potential
+        if pot is None:
             return 0.0
         if np.ndim(Y) == 1:
             return float(pot.value(float(Y[7]), float(Y[8]), float(Y[9])))
@@ -364,9 +367,8 @@ class FlatBodyEnv(gym.Env):
         """The observation (16,) float32 and the reset ``info`` of state ``y`` with target (λ*, μ*, ϱ*, s3*)."""
         obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
         self.kernels.post_step(y, y, 0, self._a, 0, target_vector, self._cfg, self._P, self._yout, obs, self._terms, self._sc, self._vel, self._force)
-        left = self.energy_left_out(self._yout)
-        if left:
-            self._sc[1] += left
+        if self.custom_potential is not None:
+            self._sc[1] += self.energy_left_out(self._yout)
         return obs, build_info(t=0.0, scalars=self._sc, p_theta=y[3], ended=False, failure=None, left=None, method=self.stepper.method,
                                nfev=0, terms=None, success_tolerance=self.task.success_tolerance)
 
@@ -419,9 +421,8 @@ class FlatBodyEnv(gym.Env):
         terms = self._terms
         ended = k.post_step(y, self._ynew, st, self._a, self._a.size, self._tvec, self._cfg, self._P, self._yout, obs, terms, self._sc,
                             self._vel, self._force)
-        left = self.energy_left_out(self._yout)
-        if left:
-            self._sc[1] += left
+        if self.custom_potential is not None:
+            self._sc[1] += self.energy_left_out(self._yout)
         failure = left = None
         if ended:
             if st != 0:

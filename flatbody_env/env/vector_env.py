@@ -210,9 +210,8 @@ class FlatBodyVectorEnv(VectorEnv):
                                       np.empty(7), np.empty(4), np.empty(STATE_SIZE))
         if np.any(SC[3] != 0):
             p.check_start(Y[:, int(np.flatnonzero(SC[3] != 0)[0])], "initial_noise")
-        left = p.energy_left_out(Y)
-        if np.ndim(left):
-            SC[1] += left
+        if p.custom_potential is not None:
+            SC[1] += p.energy_left_out(Y)
         obs[idx] = OBS
         sc[:3, idx] = SC[:3]
 
@@ -236,9 +235,8 @@ class FlatBodyVectorEnv(VectorEnv):
         self._steppers[c].advance_batch(Ys, U, self.dt, OUT, STATUS, NFEV)
         self._kernels.post_step_lanes(Ys, OUT, STATUS, A, A.shape[1], T, p.kernel_config, p.kernel_params, Ynext, OBS, TERMS, SC, ENDED,
                                       *self._lane_works[c])
-        left = p.energy_left_out(Ynext)
-        if np.ndim(left):  # a custom potential's part of H (0.0 for the built-in ones)
-            SC[1] += left
+        if p.custom_potential is not None:  # its part of H (the kernels know the built-in potentials only)
+            SC[1] += p.energy_left_out(Ynext)
         if self.num_threads > 1:
             self._OUT[:, sl] = OUT
             self._Ynext[:, sl] = Ynext

@@ -42,6 +42,7 @@ import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
 from flatbody_env.integrators import jit as _jit
+from flatbody_env.integrators.batch_solve import DOP853_KIND, env_step_body
 from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
 from flatbody_env.integrators.jit import jit_copy
 from flatbody_env.physics.equations import rhs_iso
@@ -216,7 +217,8 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
     check_energy = energy_tol < np.inf
     if check_energy:
         for k in range(n):
-            scalar_lane(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+            scalar_lane(k, DOP853_KIND, NO_COEFFS, Y, U, P, dt, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, yl, ul, out1, K1, ynew, ytmp,
+                        vel, force, f, counters)
         return
     for j in range(BLOCK):
         HB[j] = dt
@@ -255,21 +257,6 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
     if nl > 0:
         dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
                           ul, K1, ynew, ytmp, f, out1, vel, force, counters)
-
-
-def scalar_lane(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters):
-    """Lane k by the scalar kernel :data:`dop853_env` from its start (first step guess dt)."""
-    for i in range(11):
-        yl[i] = Y[i, k]
-    for i in range(4):
-        ul[i] = U[i, k]
-    counters[0] = 0
-    counters[1] = 0
-    counters[2] = 0
-    STATUS[k] = dop853_env(yl, ul, P, dt, dt, rtol, atol, energy_tol, out1, K1, ynew, ytmp, vel, force, f, counters)
-    NFEV[k] = counters[0]
-    for i in range(11):
-        OUT[i, k] = out1[i]
 
 
 MAX_ROUNDS = 64
@@ -378,15 +365,19 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
         for j in range(m):
             k = LANES[start + j]
             if W[3, j] != 0.0:  # collapsed or unfinished: the scalar kernel from the start
-                scalar_lane(Y, U, P, dt, rtol, atol, np.inf, OUT, STATUS, NFEV, k, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+                scalar_lane(k, DOP853_KIND, NO_COEFFS, Y, U, P, dt, dt, rtol, atol, np.inf, OUT, STATUS, NFEV, yl, ul, out1, K1, ynew, ytmp,
+                            vel, force, f, counters)
                 continue
             for i in range(11):
                 OUT[i, k] = YB[i * BLOCK + j]
             NFEV[k] = 1 + 12 * int(W[4, j])
 
 
-dop853_env = _tk._dop853_env
-"""The scalar kernel a lane falls back to (compiled with the same options)."""
+scalar_lane = env_step_body
+"""A lane by the scalar kernel from its start (first step guess dt): the per-body environment step of
+:mod:`~flatbody_env.integrators.batch_solve` (compiled with the same options)."""
+NO_COEFFS = _tk.STRANG
+"""(the fixed-step coefficients :func:`scalar_lane` takes; unused by DOP853)"""
 state_status = _tk._state_status
 state_code = _tk.state_code
 may_cross = _tk.may_cross
@@ -406,10 +397,9 @@ _R = {"BLOCK": REDO_BLOCK, "S": N * REDO_BLOCK}
 _dop853_lanes_redo = jit_copy(dop853_lanes, variant="redo", **_R,
                               rhs_lanes=jit_copy(rhs_lanes, variant="redo", **_R, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso),
                               combine_lanes=jit_copy(combine_lanes, variant="redo", **_R))
-_scalar_lane_c = jit_copy(scalar_lane, dop853_env=_tk._dop853_env)
-_redo_lanes_c = jit_copy(dop853_redo_lanes, **_R, dop853_lanes=_dop853_lanes_redo, scalar_lane=_scalar_lane_c, state_status=_tk._state_status,
+_redo_lanes_c = jit_copy(dop853_redo_lanes, **_R, dop853_lanes=_dop853_lanes_redo, state_status=_tk._state_status,
                          may_cross=_tk.may_cross, next_up=_tk.next_up)
-dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, scalar_lane=_scalar_lane_c, dop853_redo_lanes=_redo_lanes_c)
+dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, dop853_redo_lanes=_redo_lanes_c)
 """Compiled :func:`dop853_batch_env_step`."""
 
 
@@ -444,4 +434,4 @@ class DOP853Batch:
 
 
 __all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c",
-           "dop853_lanes", "dop853_redo_lanes", "rhs_lanes", "scalar_lane"]
+           "dop853_lanes", "dop853_redo_lanes", "rhs_lanes"]
