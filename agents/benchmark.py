@@ -4,8 +4,10 @@ Both runs use the shipped PPO configuration (``agents/hyperparams/ppo.yml``: the
 n_envs, n_steps, batch size, epochs, gSDE, VecNormalize, one torch thread) for the same number of
 environment steps, one after the other in the same process. ``FlatBody-v0`` runs exactly as
 training does (:func:`agents.train.make_vec_env`: the native batch, the residual on the LQR);
-``Pendulum-v1`` runs as SB3 builds it (``DummyVecEnv`` of ``gym.make`` envs) without the
-FlatBody-only keys (residual, env_kwargs). A timing wrapper directly around each environment
+``Pendulum-v1`` runs as a ``DummyVecEnv`` of ``gym.make`` envs (seeded as SB3's ``make_vec_env``
+seeds them) without the FlatBody-only keys (residual, env_kwargs), under the same single
+``VecMonitor`` as FlatBody's stack (``make_vec_env``'s per-env ``Monitor`` on top of it would count
+every step twice and charge Pendulum for it). A timing wrapper directly around each environment
 stack (below ``VecMonitor``/``VecNormalize``) measures the share of the wall time spent in the
 environment and, for FlatBody, in the LQR the actions are built on. Each figure is the best of
 ``repeats`` runs. Writes ``train_benchmark.json``, ``.csv`` and ``.png``.
@@ -81,8 +83,7 @@ def _timed(venv):
 def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize
 
     from agents.train import algo_kwargs_of
 
@@ -99,8 +100,11 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
                                      str(hp.get("residual_mode", "additive")))
         venv, clock = _timed(inner)  # the stack of agents.train.make_vec_env, with the clock inside VecMonitor
         venv = VecMonitor(venv)
-    else:
-        base = sb3_make_vec_env(env_id, n_envs=n, seed=seed)
+    else:  # gym.make envs in SB3's DummyVecEnv, seeded as make_vec_env seeds them, monitored as FlatBody's stack is
+        import gymnasium as gym
+
+        base = DummyVecEnv([lambda: gym.make(env_id) for _ in range(n)])
+        base.seed(seed)
         venv, clock = _timed(base)
         venv = VecMonitor(venv)
     norm = hp.get("normalize") or None

@@ -261,7 +261,7 @@ _TENSOR_TEXT = (
     "```\n\n"
     "Heat maps: fixed range −%s (cyan) … 0 (grey) … +%s (yellow)."
 )
-"""One step of :func:`tensor_text`: 1 + 2 × 12 numbers and the colour range twice."""
+"""One step of :func:`tensor_text`: 1 + 2 × 12 numbers and the colour range twice (its only ``%s``)."""
 
 _SEP = "\x00"  # joins the steps' texts for one formatting call; no number or label contains it
 
@@ -280,14 +280,12 @@ def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray, v
         return []
     half = np.asarray(half, dtype=np.float64).reshape(n, 3)
     sq = half * half
-    r = "%g" % value_range
+    r = "%g" % value_range  # the same in every step: written into the template, not formatted n times
+    step = _TENSOR_TEXT.replace("%s", r)  # its only %s are the range's two
     cols = [t[:, None]]
     for M, eig in ((np.asarray(G, dtype=np.float64).reshape(n, 3, 3), sq), (np.asarray(C, dtype=np.float64).reshape(n, 3, 3), 1 / sq)):
         cols.append(np.concatenate([M, eig[:, :, None]], axis=2).reshape(n, 12))
-    table = np.concatenate(cols, axis=1).tolist()
-    for row in table:
-        row += (r, r)
-    return ((_TENSOR_TEXT + _SEP) * n % tuple(v for row in table for v in row)).split(_SEP)[:n]
+    return ((step + _SEP) * n % tuple(np.concatenate(cols, axis=1).ravel().tolist())).split(_SEP)[:n]
 
 
 def axis_labels(half: np.ndarray) -> list[str]:

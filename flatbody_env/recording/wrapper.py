@@ -7,6 +7,8 @@ The contract the wrapped environment meets (``env.unwrapped``)
 --------------------------------------------------------------
 * ``body`` — a :class:`flatbody_env.physics.body.Body`;
 * ``state`` — a dict of the eleven :data:`flatbody_env.physics.state.STATE_NAMES`, floats;
+* optional ``physics_state`` — the same state packed as an array (11,) in ``STATE_NAMES`` order,
+  read instead of ``state`` at each step when present (``FlatBodyEnv`` has it);
 * ``rotation`` — R, a 3×3 float64 rotation: ``FlatBodyEnv`` integrates R only when made with
   ``track_rotation=True`` (``gym.make("FlatBody-v0", track_rotation=True)``), else it is None and
   the wrapper stops with a ``ValueError`` saying so;
@@ -32,6 +34,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from flatbody_env.physics.state import STATE_NAMES
+from flatbody_env.recording.layout import TARGET_SERIES
+
 
 def _numeric(d: Any) -> dict[str, float]:
     """The entries of ``d`` that are numbers (bools left out), as floats."""
@@ -51,42 +56,129 @@ def _numeric(d: Any) -> dict[str, float]:
     return out
 
 
-def _columns(rows: list[dict[str, float] | None]) -> dict[str, np.ndarray]:
-    """name → float column over ``rows`` (dicts of floats, or None), NaN where a row lacks the name."""
-    names = list(dict.fromkeys(k for d in rows if d for k in d))
-    nan = math.nan
-    return {name: np.array([d.get(name, nan) if d else nan for d in rows]) for name in names}
+class _Columns:
+    """Float columns by name, one row per step, NaN where a step lacks a name.
+
+    Only floats go into the columns (no per-step dict or tuple is kept), so buffering an episode
+    leaves nothing for the garbage collector to scan."""
+
+    __slots__ = ("cols", "rows", "_last")
+
+    def __init__(self) -> None:
+        self.cols: dict[str, list[float]] = {}
+        self.rows = 0
+        self._last: Any = None  # the row added last, when it was a dict (an episode's target repeats)
+
+    def add(self, d: Any, names: tuple[str, ...] | None = None, total: float | None = None) -> None:
+        """Add one row: the numeric entries of ``d`` (bools left out; only ``names`` when given),
+        and ``total`` under ``"total"`` unless ``d`` has that entry."""
+        r = self.rows
+        cols = self.cols
+        if total is None and r and d is not None and self._last is not None and _same(d, self._last):  # the same row again: repeat it
+            for col in cols.values():
+                col.append(col[-1])
+            self.rows = r + 1
+            return
+        self._last = dict(d) if isinstance(d, dict) and total is None else None  # a copy: an env may change its dict in place
+        added = 0
+        if isinstance(d, dict):
+            for k, v in d.items():
+                if type(k) is not str:
+                    k = str(k)
+                if names is not None and k not in names:
+                    continue
+                if type(v) is not float:
+                    if isinstance(v, bool):
+                        continue
+                    try:
+                        v = float(v)
+                    except (TypeError, ValueError):
+                        continue
+                col = cols.get(k)
+                if col is None:
+                    col = cols[k] = [math.nan] * r
+                if len(col) == r:  # the first of two keys that read the same wins
+                    col.append(v)
+                    added += 1
+        if total is not None:
+            col = cols.get("total")
+            if col is None:
+                col = cols["total"] = [math.nan] * r
+            if len(col) == r:
+                col.append(float(total))
+                added += 1
+        if added != len(cols):
+            for col in cols.values():
+                if len(col) == r:
+                    col.append(math.nan)
+        self.rows = r + 1
+
+    def arrays(self, keep: np.ndarray) -> dict[str, np.ndarray]:
+        """name → the rows ``keep`` as a float array."""
+        return {k: np.array(v, dtype=np.float64)[keep] for k, v in self.cols.items()}
 
 
-def _numeric_rows(rows: list) -> list[dict[str, float]]:
-    """:func:`_numeric` of each row; a row equal to the one before (an episode's target) is converted once."""
-    out: list[dict[str, float]] = []
-    prev = conv = None
-    for d in rows:
-        if conv is None or d != prev:
-            prev, conv = d, _numeric(d)
-        out.append(conv)
-    return out
+def _same(a: Any, b: dict) -> bool:
+    """``a == b``, False where the comparison has no single answer (e.g. array entries)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
+class _Steps:
+    """The steps of an episode not yet sent: what each read from the env, in columns."""
+
+    __slots__ = ("step", "t", "y", "R", "actions", "terms", "target", "distance", "events")
+
+    def __init__(self) -> None:
+        self.step: list[int] = []
+        self.t: list[float] = []
+        self.y: list[np.ndarray] = []
+        self.R: list[np.ndarray] = []
+        self.actions: list[np.ndarray | None] = []
+        self.terms = _Columns()
+        self.target = _Columns()
+        self.distance: list[float] = []
+        self.events: list[tuple[int, str, Any]] = []  # (row, info key, its value): failures and leaving the domain
+
+
+def _state_vector(u) -> np.ndarray:
+    """The unwrapped env's state (11,) in :data:`~flatbody_env.physics.state.STATE_NAMES` order: its
+    ``physics_state`` when it has one (``FlatBodyEnv``: the packed state, a copy), else from ``state``."""
+    y = getattr(u, "physics_state", None)
+    if y is not None:
+        return np.array(y, dtype=np.float64)
+    st = u.state
+    return np.array([float(st[k]) for k in STATE_NAMES])
 
 
 def _distance(info: dict | None) -> float:
     """``info["distance"]`` as a float; NaN where absent or not finite (not drawn)."""
-    if not isinstance(info, dict) or "distance" not in info:
+    v = info.get("distance") if isinstance(info, dict) else None
+    if v is None or isinstance(v, bool):
         return math.nan
-    d = _numeric({"distance": info["distance"]}).get("distance")
-    return d if d is not None and math.isfinite(d) else math.nan
+    try:
+        d = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return d if math.isfinite(d) else math.nan
 
 
 def _check_contract(u) -> None:
     """A clear error when the unwrapped env lacks what the recorder reads (module docstring)."""
-    from flatbody_env.physics.state import STATE_NAMES
-
     for name in ("body", "state", "rotation", "time"):
         if not hasattr(u, name):
             raise ValueError(f"env.unwrapped.{name}: missing — RerunRecorder needs body, state, rotation, time (see flatbody_env.recording.wrapper)")
     state = u.state
     if not isinstance(state, dict) or any(k not in state for k in STATE_NAMES):
         raise ValueError(f"env.unwrapped.state: expected a dict with the entries {', '.join(STATE_NAMES)}")
+    packed = getattr(u, "physics_state", None)
+    if packed is not None:
+        from flatbody_env.physics.state import pack
+
+        if np.shape(packed) != (len(STATE_NAMES),) or not np.array_equal(np.asarray(packed, dtype=np.float64), pack(state, validate=False), equal_nan=True):
+            raise ValueError(f"env.unwrapped.physics_state: expected the state packed in the order {', '.join(STATE_NAMES)}")
     R = u.rotation
     if R is None or np.shape(R) != (3, 3):
         raise ValueError(
@@ -185,7 +277,7 @@ class RerunRecorder(gym.Wrapper):
         self._episode = -1
         self._step = 0
         self._rec = None
-        self._buf: list[tuple] = []
+        self._buf = _Steps()
         self.recorded_paths: list[Path] = []
 
     # ------------------------------------------------------------------------------------------
@@ -207,88 +299,76 @@ class RerunRecorder(gym.Wrapper):
                 self.recorded_paths.append(rec.close())
 
     def _append(self, *, action=None, reward: float | None = None, info: dict | None = None) -> None:
-        """Keep what this step read from the env (copies); :meth:`_flush` converts the steps together."""
+        """Keep what this step read from the env (numbers and array copies, in columns); :meth:`_flush`
+        converts the steps together."""
         u = self.env.unwrapped
-        buf = self._buf
-        buf.append(
-            (
-                self._step,
-                u.time,
-                dict(u.state),
-                np.array(u.rotation, dtype=np.float64),
-                None if action is None else np.array(action, dtype=np.float64).ravel(),
-                reward,
-                dict(info) if isinstance(info, dict) else None,
-                getattr(u, "target", None),
-            )
-        )
-        if len(buf) >= self._block:
+        b = self._buf
+        row = len(b.t)
+        b.step.append(self._step)
+        b.t.append(float(u.time))
+        b.y.append(_state_vector(u))
+        b.R.append(np.array(u.rotation, dtype=np.float64))
+        b.actions.append(None if action is None else np.array(action, dtype=np.float64).ravel())
+        if self._step == 0 or not isinstance(info, dict):  # the reset: no reward
+            b.terms.add(None)
+        else:
+            b.terms.add(info.get("reward_terms"), total=reward)
+            for key in ("integrator_failure", "left_domain"):
+                if info.get(key):
+                    b.events.append((row, key, info[key]))
+        b.target.add(getattr(u, "target", None), names=TARGET_SERIES)
+        b.distance.append(_distance(info))
+        if row + 1 >= self._block:
             self._flush(self._rec)
 
     def _flush(self, rec) -> None:
         """Send the buffered steps: a step whose state or R is not finite is noted and not drawn;
         integrator failures and leaving the domain are noted; the rest goes out column-wise."""
-        from flatbody_env.physics.state import STATE_NAMES
-        from flatbody_env.recording.layout import TARGET_SERIES
-
-        buf, self._buf = self._buf, []
-        if not buf:
+        b, self._buf = self._buf, _Steps()
+        n = len(b.t)
+        if not n:
             return
-        steps, times, states, rotations, actions, rewards, infos, targets = zip(*buf)
-        n = len(buf)
-        t = np.array([float(x) for x in times])
-        Y = np.array([[st[k] for k in STATE_NAMES] for st in states], dtype=np.float64).T
-        R = np.stack(rotations)
+        t = np.array(b.t)
+        Y = np.stack(b.y, axis=1)
+        R = np.stack(b.R)
         ok = np.isfinite(Y).all(axis=0) & np.isfinite(R.reshape(n, 9)).all(axis=1)
+        events = iter(b.events)
+        event = next(events, None)
         for i in range(n):
             if not ok[i]:
-                rec.note("non-finite state (integration failure): step not drawn", step=steps[i], t=t[i] if math.isfinite(t[i]) else 0.0)
-                continue
-            info = infos[i]
-            if info is not None and steps[i] > 0:
-                for key in ("integrator_failure", "left_domain"):
-                    if info.get(key):
-                        rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=steps[i], t=t[i])
+                rec.note("non-finite state (integration failure): step not drawn", step=b.step[i], t=t[i] if math.isfinite(t[i]) else 0.0)
+            while event is not None and event[0] == i:
+                if ok[i]:
+                    rec.note(f"{event[1].replace('_', ' ')}: {event[2]} (the env keeps the last valid state)", step=b.step[i], t=t[i])
+                event = next(events, None)
         keep = np.flatnonzero(ok)
         if keep.size == 0:
             return
-        pick = [int(i) for i in keep]
         act = None
-        given = [actions[i] for i in pick if actions[i] is not None]
+        given = [b.actions[i] for i in keep if b.actions[i] is not None]
         if given:
             sizes = {a.size for a in given}
             if len(sizes) != 1:
                 raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
-            act = np.full((len(pick), sizes.pop()), np.nan)
-            for row, i in enumerate(pick):
-                a = actions[i]
+            act = np.full((keep.size, sizes.pop()), np.nan)
+            for row, i in enumerate(keep):
+                a = b.actions[i]
                 if a is not None and np.all(np.isfinite(a)):
                     act[row] = a
-        terms = []
-        for i in pick:
-            info = infos[i]
-            if steps[i] == 0 or info is None:  # the reset: no reward
-                terms.append(None)
-                continue
-            d = _numeric(info.get("reward_terms", {}))
-            if rewards[i] is not None:
-                d.setdefault("total", float(rewards[i]))
-            terms.append(d)
-        reward_terms = {k: np.where(np.isfinite(v), v, np.nan) for k, v in _columns(terms).items()}
-        target = _columns(_numeric_rows([targets[i] for i in pick]))
+        reward_terms = {k: np.where(np.isfinite(v), v, np.nan) for k, v in b.terms.arrays(keep).items()}
+        target = b.target.arrays(keep)
         for name, values in target.items():
-            if name in TARGET_SERIES and not np.all(np.isfinite(values[~np.isnan(values)])):
+            if not np.all(np.isfinite(values[~np.isnan(values)])):
                 raise ValueError(f"target[{name!r}]: must be finite")
-        distance = np.array([_distance(infos[i]) for i in pick])
         rec.extend(
             t[keep],
             Y[:, keep],
             R[keep],
-            step=np.array(steps, dtype=np.int64)[keep],
+            step=np.array(b.step, dtype=np.int64)[keep],
             actions=act,
             reward_terms=reward_terms or None,
-            target={k: v for k, v in target.items() if k in TARGET_SERIES} or None,
-            distance=distance,
+            target=target or None,
+            distance=np.array(b.distance)[keep],
         )
 
     # ------------------------------------------------------------------------------------------

@@ -135,6 +135,8 @@ class _Block:
     states: np.ndarray
     rotations: np.ndarray
     energy: np.ndarray
+    index: dict
+    """The block's timelines (``step``, ``sim_time``) as Arrow arrays, shared by its entities."""
 
 
 def _check_finite(name: str, a: np.ndarray) -> None:
@@ -176,7 +178,7 @@ def _as_block(t, states, rotations, *, energy, step) -> _Block:
     if energy.shape != (n,):
         raise ValueError(f"energy: expected shape ({n},), got {energy.shape}")
     _check_finite("energy", energy)
-    return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy)
+    return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy, index=_timelines(step_arr, t))
 
 
 def _optional_column(name: str, values, n: int, width: int | None = None) -> np.ndarray:
@@ -297,6 +299,14 @@ def _column_types() -> dict[str, tuple]:
     return out
 
 
+@functools.lru_cache(maxsize=32)
+def _offsets(n: int, per: int):
+    """Arrow offsets of n list rows of ``per`` entries each (immutable, so shared between columns)."""
+    import pyarrow as pa
+
+    return pa.array(np.arange(0, per * n + 1, per, dtype=np.int32))
+
+
 def _fixed(values: np.ndarray, n: int, per: int, key: str):
     """A list column of n rows, ``per`` fixed-size float32 vectors each (``values`` (n·per, width))."""
     import pyarrow as pa
@@ -305,7 +315,7 @@ def _fixed(values: np.ndarray, n: int, per: int, key: str):
     inner = typ.value_type
     flat = pa.array(np.ascontiguousarray(values, dtype=np.float32).ravel())
     vectors = pa.FixedSizeListArray.from_arrays(flat, type=inner)
-    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), vectors, type=typ)
+    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), vectors, type=typ)
 
 
 def _scalars(values: np.ndarray):
@@ -313,7 +323,7 @@ def _scalars(values: np.ndarray):
 
     descriptor, typ = _column_types()["Scalars:scalars"]
     values = np.ascontiguousarray(values, dtype=np.float64).ravel()
-    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(values.size + 1, dtype=np.int32)), pa.array(values), type=typ)
+    return descriptor, pa.ListArray.from_arrays(_offsets(values.size, 1), pa.array(values), type=typ)
 
 
 def _scalar_rows(values: np.ndarray, per: int):
@@ -323,7 +333,7 @@ def _scalar_rows(values: np.ndarray, per: int):
     descriptor, typ = _column_types()["Scalars:scalars"]
     values = np.ascontiguousarray(values, dtype=np.float64)
     n = values.shape[0]
-    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), pa.array(values.ravel()), type=typ)
+    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), pa.array(values.ravel()), type=typ)
 
 
 def _strings(texts: list[str], per: int, key: str):
@@ -331,7 +341,7 @@ def _strings(texts: list[str], per: int, key: str):
 
     descriptor, typ = _column_types()[key]
     n = len(texts) // per
-    return descriptor, pa.ListArray.from_arrays(pa.array(np.arange(0, per * n + 1, per, dtype=np.int32)), pa.array(texts, type=typ.value_type), type=typ)
+    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), pa.array(texts, type=typ.value_type), type=typ)
 
 
 def _mat3x3(M: np.ndarray):
@@ -679,7 +689,7 @@ class Recorder:
         G = green_tensor(lam, mu, rho, theta)
         C = cauchy_tensor(lam, mu, rho, R)
         Phi = configuration(lam, mu, rho, theta, R)
-        idx = _timelines(block.step, block.t)
+        idx = block.index
         self._send("/world/body", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(R), n, 1, "Ellipsoids3D:quaternions"))
         self._send("/material/G_ellipsoid", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(U), n, 1, "Ellipsoids3D:quaternions"))
         self._send("/world/material", idx, _mat3x3(Phi))
@@ -745,6 +755,9 @@ class Recorder:
 
     @staticmethod
     def _rows(block: _Block, has: np.ndarray) -> dict:
+        """The timelines of the steps ``has`` of ``block`` (the block's own when it is all of them)."""
+        if has.all():
+            return block.index
         return _timelines(block.step[has], block.t[has])
 
     def _series(self, path: str, idx: dict, values: np.ndarray, *, group: str | None = None) -> None:

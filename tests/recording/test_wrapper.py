@@ -165,3 +165,76 @@ def test_wrapper_columns_equal_step_by_step_appends(tmp_path):
     np.testing.assert_array_equal(series(batched, "action/tau2")[:3], series(stepwise, "action/tau2")[:3])
     assert batched.entities["/series/lambda"].step.size == k + 1
     assert set(batched.static) == set(stepwise.static)
+
+
+def test_step_columns_pad_missing_names_and_see_in_place_changes():
+    """The wrapper keeps each step's numbers in columns: a name first seen later is NaN before it,
+    a name a step lacks is NaN there, bools and non-numbers are left out, ``total`` is the reward
+    unless the terms have one, and a dict changed in place between steps is read again."""
+    from flatbody_env.recording.wrapper import _Columns
+
+    c = _Columns()
+    c.add({"a": 1.0, "flag": True, "label": "x"}, total=0.5)
+    c.add({"a": 2.0, "b": np.float32(3.0)}, total=1.5)
+    c.add(None)
+    c.add({"b": 4.0, "total": 9.0}, total=2.5)
+    cols = c.arrays(np.arange(4))
+    assert list(cols) == ["a", "total", "b"]
+    np.testing.assert_array_equal(cols["a"], [1.0, 2.0, np.nan, np.nan])
+    np.testing.assert_array_equal(cols["b"], [np.nan, 3.0, np.nan, 4.0])
+    np.testing.assert_array_equal(cols["total"], [0.5, 1.5, np.nan, 9.0])
+
+    target = {"lambda": 1.2, "mu": 1.0, "label": "circle"}
+    t = _Columns()
+    t.add(target, names=("lambda", "mu"))
+    t.add(target, names=("lambda", "mu"))  # the same row again
+    target["lambda"] = 1.3  # the env changed its dict in place
+    t.add(target, names=("lambda", "mu"))
+    t.add({"mu": 0.9}, names=("lambda", "mu"))
+    cols = t.arrays(np.array([0, 1, 2, 3]))
+    assert list(cols) == ["lambda", "mu"]
+    np.testing.assert_array_equal(cols["lambda"], [1.2, 1.2, 1.3, np.nan])
+    np.testing.assert_array_equal(cols["mu"], [1.0, 1.0, 1.0, 0.9])
+
+
+def test_wrapper_records_terms_and_targets_that_change_within_an_episode(tmp_path):
+    class Changing(FakeFlatBodyEnv):
+        def step(self, action):
+            obs, reward, term, trunc, info = super().step(action)
+            if self._k >= 4:  # a term that appears mid-episode; the target moves in place
+                info["reward_terms"]["bonus"] = 0.25
+                self.target["lambda"] = 1.4
+            return obs, reward, term, trunc, info
+
+    env = RerunRecorder(Changing(n_steps=8), tmp_path / "c.rrd", block=3)
+    env.reset()
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(np.zeros(4, np.float32))
+        done = term or trunc
+    data = read_recording(tmp_path / "c.rrd")
+    np.testing.assert_array_equal(data["/series/reward/bonus"].step, np.arange(4, 9))
+    np.testing.assert_array_equal(series(data, "reward/bonus"), 0.25)
+    np.testing.assert_array_equal(data["/series/reward/shape"].step, np.arange(1, 9))
+    np.testing.assert_array_equal(series(data, "target/lambda"), [1.2] * 4 + [1.4] * 5)
+
+
+def test_wrapper_names_a_physics_state_out_of_order(tmp_path):
+    class Shuffled(FakeFlatBodyEnv):
+        @property
+        def physics_state(self):
+            return self._obs()[::-1].copy()
+
+    env = RerunRecorder(Shuffled(n_steps=3), tmp_path / "x.rrd")
+    with pytest.raises(ValueError, match="env.unwrapped.physics_state"):
+        env.reset()
+
+
+def test_step_columns_take_rows_with_array_entries():
+    from flatbody_env.recording.wrapper import _Columns
+
+    c = _Columns()
+    row = {"lambda": 1.2, "axes": np.array([1.0, 2.0])}
+    c.add(row, names=("lambda",))
+    c.add(dict(row), names=("lambda",))  # equal keys, an array entry: compared without error
+    np.testing.assert_array_equal(c.arrays(np.arange(2))["lambda"], [1.2, 1.2])
