@@ -244,6 +244,10 @@ class RerunRecorder(gym.Wrapper):
         ``Tensor`` views of G and C every k-th step.
     title : str, optional
         Recording name (default ``"flatbody episode K"``).
+    recorder : callable, optional
+        Makes each episode's recorder, called as :class:`~flatbody_env.recording.writer.Recorder`
+        (the default) is: e.g. a :class:`~flatbody_env.recording.process.RecorderProcess`, which
+        writes the files from a helper process.
 
     Attributes
     ----------
@@ -260,6 +264,7 @@ class RerunRecorder(gym.Wrapper):
         block: int = 1024,
         tensor_every: int = 1,
         title: str | None = None,
+        recorder: Callable[..., Any] | None = None,
     ) -> None:
         super().__init__(env)
         path = str(path)
@@ -270,6 +275,7 @@ class RerunRecorder(gym.Wrapper):
         if isinstance(tensor_every, bool) or not isinstance(tensor_every, int) or tensor_every < 1:
             raise ValueError(f"tensor_every: must be an integer ≥ 1, got {tensor_every!r}")
         self._path = path
+        self._recorder = recorder
         self._trigger = episode_trigger or (lambda k: True)
         self._block = block
         self._tensor_every = tensor_every
@@ -386,7 +392,7 @@ class RerunRecorder(gym.Wrapper):
             target = _numeric(getattr(u, "target", None))
             state = u.state
             extent = max([float(state[k]) for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho") if k in target])
-            self._rec = Recorder(
+            self._rec = (self._recorder or Recorder)(
                 self.episode_path(self._episode),
                 u.body,
                 title=self._title or f"flatbody episode {self._episode}",

@@ -198,3 +198,19 @@ def test_a_demo_that_fails_midway_leaves_no_recording(tmp_path):
     with pytest.raises(RuntimeError, match="policy failed"):
         rollout(failing, seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path)
     assert path.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["demo.rrd"]
+
+
+def test_a_demo_recorded_by_the_helper_that_fails_midway_leaves_no_recording(tmp_path):
+    """The same through a :class:`RecorderProcess`: the helper may create the file after the caller
+    failed; closing the helper removes what it started."""
+    from agents.demo import rollout
+    from flatbody_env.recording.process import RecorderProcess
+
+    def failing(obs):
+        raise RuntimeError("policy failed")
+
+    for _ in range(3):
+        with RecorderProcess() as helper:
+            with pytest.raises(RuntimeError, match="policy failed"):
+                rollout(failing, seed=7, env_kwargs={"max_episode_steps": 30}, record_to=tmp_path / "demo.rrd", recorder=helper)
+        assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,77 @@
+"""``RecorderProcess``: recordings written by a helper process are the files the process itself writes."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+from flatbody_env.recording.process import RecorderProcess
+from flatbody_env.recording.reader import read_recording, verify_recording
+from flatbody_env.recording.wrapper import RerunRecorder
+
+
+def _episode(path, recorder=None) -> None:
+    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=40), path, recorder=recorder)
+    env.reset(seed=3)
+    rng = np.random.default_rng(3)
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
+        done = term or trunc
+    env.close()
+
+
+def test_recorder_process_writes_the_file_the_process_itself_writes(tmp_path):
+    _episode(tmp_path / "here.rrd")
+    with RecorderProcess() as helper:
+        _episode(tmp_path / "helper.rrd", recorder=helper)
+        _episode(tmp_path / "again.rrd", recorder=helper)  # one helper, recording after recording
+    verify_recording(tmp_path / "helper.rrd")
+    here, there, again = (read_recording(tmp_path / f"{n}.rrd") for n in ("here", "helper", "again"))
+    assert set(here.entities) == set(there.entities) == set(again.entities) and len(here.entities) >= 40
+    for name, e in here.entities.items():
+        for other in (there, again):
+            o = other.entities[name]
+            np.testing.assert_array_equal(o.step, e.step, err_msg=name)
+            np.testing.assert_array_equal(o.sim_time, e.sim_time, err_msg=name)
+            for comp, values in e.components.items():
+                if isinstance(values, np.ndarray):
+                    np.testing.assert_array_equal(o.components[comp], values, err_msg=f"{name} {comp}")
+                else:
+                    assert o.components[comp] == values, f"{name} {comp}"
+    assert set(here.static) == set(there.static) and here.views == there.views
+
+
+def test_recorder_process_raises_the_helpers_error_at_close(tmp_path):
+    from flatbody_env.physics.state import STATE_NAMES, pack
+    from flatbody_env.scene import load_scene
+
+    scene = load_scene("default")
+    body, y0 = scene.body, pack(scene.state)
+    with RecorderProcess() as helper:
+        rec = helper(tmp_path / "bad.rrd", body, episode=True)
+        Y = np.stack([y0, y0], axis=1)
+        Y[STATE_NAMES.index("lambda"), 1] = -1.0
+        rec.extend([0.0, 0.1], Y, np.stack([np.eye(3)] * 2))
+        with pytest.raises(ValueError, match="states: lambda must be > 0"):
+            rec.close()
+        with pytest.raises(ValueError, match="path: a rerun recording file must end in .rrd"):
+            helper(tmp_path / "bad.txt", body).close()
+        ok = helper(tmp_path / "ok.rrd", body)  # the helper goes on serving after an error
+        ok.extend([0.0], y0[:, None], np.eye(3)[None])
+        assert ok.close() == tmp_path / "ok.rrd"
+    verify_recording(tmp_path / "ok.rrd")
+
+
+def test_a_helper_that_ended_is_named_not_waited_for(tmp_path):
+    from flatbody_env.physics.body import default_body
+
+    helper = RecorderProcess()
+    helper._proc.kill()
+    helper._proc.wait()
+    with pytest.raises(RuntimeError, match="recorder process: it ended"):
+        rec = helper(tmp_path / "x.rrd", default_body())
+        rec.close()
+    helper.close()
