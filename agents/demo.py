@@ -133,13 +133,10 @@ def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None 
     current, so the demo imports neither torch nor SB3 (``backend``: :data:`agents.evaluate.POLICY_BACKENDS`).
     With a recording to write and a second processor, rerun is imported and the file written by a
     :class:`~flatbody_env.recording.process.RecorderProcess` started first, beside the policy's and
-    the kernels' loading (the same file; ≈ 0.2–0.4 s less wall time on two cores)."""
-    from contextlib import ExitStack
+    the kernels' loading (the same file; ≈ 0.4 s less wall time on two cores)."""
+    from flatbody_env.recording.process import helper_recorder
 
-    from flatbody_env.recording.process import RecorderProcess, can_overlap
-
-    with ExitStack() as stack:
-        helper = stack.enter_context(RecorderProcess()) if out and can_overlap() else None
+    with helper_recorder(bool(out)) as helper:
         from agents.evaluate import Agent
 
         agent = Agent(model, backend=backend)

@@ -73,11 +73,15 @@ def _record_agent(args) -> int:
     the env recorder (the same path as ``flatbody demo`` and ``flatbody record-env``)."""
     if args.scene_file or args.scene:
         raise ValueError("agent: --agent records an environment episode; give no scene")
-    from agents.demo import format_demo, rollout
-    from agents.evaluate import Agent
+    from flatbody_env.recording.process import helper_recorder
 
-    agent = Agent(args.agent or None)
-    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+    with helper_recorder(True) as helper:  # rerun imported beside the agent's loading, as in flatbody demo
+        from agents.demo import format_demo, rollout
+        from agents.evaluate import Agent
+
+        agent = Agent(args.agent or None)
+        ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})",
+                     recorder=helper)
     print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
     if args.verify:

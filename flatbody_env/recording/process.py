@@ -16,12 +16,14 @@ helper ends when its input closes (:meth:`RecorderProcess.close`, or the command
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import struct
 import subprocess
 import sys
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any, BinaryIO
 
 _HEAD = struct.Struct("<Q")
@@ -52,12 +54,24 @@ def _receive(stream: BinaryIO) -> Any:
 def can_overlap() -> bool:
     """Whether a helper process can run beside this one: a POSIX system (the helper's reply pipe is
     an inherited file descriptor) with more than one processor available."""
-    if os.name != "posix":
+    if os.name != "posix" or not sys.executable:  # (an embedded interpreter has no executable to start)
         return False
     try:
         return len(os.sched_getaffinity(0)) > 1
     except AttributeError:  # pragma: no cover - platforms without sched_getaffinity
         return (os.cpu_count() or 1) > 1
+
+
+@contextlib.contextmanager
+def helper_recorder(needed: bool) -> Iterator["RecorderProcess | None"]:
+    """A started :class:`RecorderProcess` when a recording is ``needed`` and :func:`can_overlap`, else
+    None (the caller records in its own process); closed on leaving the block. Start it before the
+    slow imports it is meant to overlap."""
+    if not (needed and can_overlap()):
+        yield None
+        return
+    with RecorderProcess() as helper:
+        yield helper
 
 
 class RecorderProcess:

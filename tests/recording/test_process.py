@@ -75,3 +75,17 @@ def test_a_helper_that_ended_is_named_not_waited_for(tmp_path):
         rec = helper(tmp_path / "x.rrd", default_body())
         rec.close()
     helper.close()
+
+
+def test_a_helper_only_where_it_can_help(monkeypatch):
+    from flatbody_env.recording import process
+
+    with process.helper_recorder(False) as helper:
+        assert helper is None  # nothing to record
+    monkeypatch.setattr(process, "can_overlap", lambda: False)
+    with process.helper_recorder(True) as helper:
+        assert helper is None  # one processor: recording in the process itself is faster
+    monkeypatch.setattr(process, "can_overlap", lambda: True)
+    with process.helper_recorder(True) as helper:
+        assert isinstance(helper, process.RecorderProcess) and helper._proc.poll() is None
+    assert helper._proc.poll() == 0  # ended on leaving the block
