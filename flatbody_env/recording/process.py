@@ -180,7 +180,8 @@ class _RemoteRecorder:
 
 
 def _serve(inp: BinaryIO, out: BinaryIO) -> None:
-    """The helper's loop: import rerun and the writer, then serve open/extend/note/close."""
+    """The helper's loop: import rerun and the writer, then serve open, extend, note, close and abort
+    (close an open recording and remove its file)."""
     from flatbody_env.recording import writer
 
     writer.warm_up()
