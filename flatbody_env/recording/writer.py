@@ -299,12 +299,23 @@ def _column_types() -> dict[str, tuple]:
     return out
 
 
-@functools.lru_cache(maxsize=32)
-def _offsets(n: int, per: int):
-    """Arrow offsets of n list rows of ``per`` entries each (immutable, so shared between columns)."""
+_SHARED_OFFSETS = 4096
+"""Blocks of at most this many steps share their Arrow offsets (an episode's block; a few kB each)."""
+
+
+def _build_offsets(n: int, per: int):
     import pyarrow as pa
 
     return pa.array(np.arange(0, per * n + 1, per, dtype=np.int32))
+
+
+_shared_offsets = functools.lru_cache(maxsize=32)(_build_offsets)
+
+
+def _offsets(n: int, per: int):
+    """Arrow offsets of n list rows of ``per`` entries each; immutable, so a block's columns share
+    them (cached up to :data:`_SHARED_OFFSETS` rows, so that the cache stays small)."""
+    return _shared_offsets(n, per) if n <= _SHARED_OFFSETS else _build_offsets(n, per)
 
 
 def _fixed(values: np.ndarray, n: int, per: int, key: str):
