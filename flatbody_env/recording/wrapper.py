@@ -38,22 +38,23 @@ from flatbody_env.physics.state import STATE_NAMES
 from flatbody_env.recording.layout import TARGET_SERIES
 
 
+def _number(v: Any) -> float | None:
+    """``v`` as a float; None for a bool or what is not a number (the one rule for what is drawn)."""
+    if type(v) is float:
+        return v
+    if isinstance(v, bool):
+        return None
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return None
+
+
 def _numeric(d: Any) -> dict[str, float]:
-    """The entries of ``d`` that are numbers (bools left out), as floats."""
-    out: dict[str, float] = {}
+    """The entries of ``d`` that are numbers (:func:`_number`), as floats."""
     if not isinstance(d, dict):
-        return out
-    if all(type(v) is float for v in d.values()) and all(type(k) is str for k in d):
-        return dict(d)
-    for k, v in d.items():
-        if isinstance(v, bool):
-            continue
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            continue
-        out[str(k)] = f
-    return out
+        return {}
+    return {str(k): f for k, v in d.items() if (f := _number(v)) is not None}
 
 
 class _Columns:
@@ -70,7 +71,7 @@ class _Columns:
         self._last: Any = None  # the row added last, when it was a dict (an episode's target repeats)
 
     def add(self, d: Any, names: tuple[str, ...] | None = None, total: float | None = None) -> None:
-        """Add one row: the numeric entries of ``d`` (bools left out; only ``names`` when given),
+        """Add one row: the entries of ``d`` that are numbers (:func:`_number`; only ``names`` when given),
         and ``total`` under ``"total"`` unless ``d`` has that entry."""
         r = self.rows
         cols = self.cols
@@ -87,13 +88,9 @@ class _Columns:
                     k = str(k)
                 if names is not None and k not in names:
                     continue
-                if type(v) is not float:
-                    if isinstance(v, bool):
-                        continue
-                    try:
-                        v = float(v)
-                    except (TypeError, ValueError):
-                        continue
+                v = _number(v)
+                if v is None:
+                    continue
                 col = cols.get(k)
                 if col is None:
                     col = cols[k] = [math.nan] * r
@@ -155,14 +152,8 @@ def _state_vector(u) -> np.ndarray:
 
 def _distance(info: dict | None) -> float:
     """``info["distance"]`` as a float; NaN where absent or not finite (not drawn)."""
-    v = info.get("distance") if isinstance(info, dict) else None
-    if v is None or isinstance(v, bool):
-        return math.nan
-    try:
-        d = float(v)
-    except (TypeError, ValueError):
-        return math.nan
-    return d if math.isfinite(d) else math.nan
+    d = _number(info.get("distance")) if isinstance(info, dict) else None
+    return d if d is not None and math.isfinite(d) else math.nan
 
 
 def _check_contract(u) -> None:

@@ -860,11 +860,11 @@ def _tensor_type() -> tuple:
     return rr.Tensor.descriptor_data(), TensorDataBatch._ARROW_DATATYPE
 
 
-def warm_up(*, episode: bool = True) -> None:
-    """Import rerun and build now what every recording shares (the blueprint template, the Arrow
-    column types), so that the first recording does not wait for them (a
+def warm_up() -> None:
+    """Import rerun and build now what an env episode's recording needs first (the episode blueprint
+    template, the Arrow column types), so that it does not wait for them (a
     :class:`~flatbody_env.recording.process.RecorderProcess` calls it while its caller works)."""
-    _blueprint_template(bool(episode), None)
+    _blueprint_template(True, None)
     _column_types()
     _tensor_type()
 

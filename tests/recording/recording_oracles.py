@@ -53,6 +53,21 @@ def series(data, name):
     return np.asarray(data[f"/series/{name}"].components[SCALARS])[:, 0]
 
 
+def record_flatbody_episode(path, *, seed: int, steps: int, **wrapper_kwargs) -> None:
+    """One FlatBody-v0 episode of ``steps`` seeded random actions recorded to ``path`` by ``RerunRecorder``."""
+    import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+    from flatbody_env.recording.wrapper import RerunRecorder
+
+    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=steps), path, **wrapper_kwargs)
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    done = False
+    while not done:
+        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
+        done = term or trunc
+    env.close()
+
+
 def material_U(theta):
     c, s = np.cos(theta), np.sin(theta)
     U = np.zeros(theta.shape + (3, 3))

@@ -4,7 +4,6 @@ some view, colours and names follow one convention."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -12,12 +11,12 @@ import recording_oracles as oracles
 from flatbody_env.env.rendering import COLORS
 from flatbody_env.recording.layout import TARGET_SERIES, view_specs
 from flatbody_env.recording.reader import read_blueprint, read_recording
-from flatbody_env.recording.wrapper import RerunRecorder
 
 strict_rerun = oracles.strict_rerun
 scene = oracles.scene
 traj = oracles.traj
 recorded = oracles.recorded  # fixtures
+record_flatbody_episode = oracles.record_flatbody_episode
 
 NOT_DRAWN = {"/__properties", "/world", "/material"}
 """Entities that carry settings, not pictures (recording properties, view coordinates)."""
@@ -26,14 +25,7 @@ NOT_DRAWN = {"/__properties", "/world", "/material"}
 @pytest.fixture(scope="module")
 def episode(tmp_path_factory):
     path = tmp_path_factory.mktemp("ep") / "episode.rrd"
-    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=25), path, block=10)
-    env.reset(seed=5)
-    rng = np.random.default_rng(5)
-    done = False
-    while not done:
-        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
-        done = term or trunc
-    env.close()
+    record_flatbody_episode(path, seed=5, steps=25, block=10)
     return path
 
 

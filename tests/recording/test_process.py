@@ -2,25 +2,16 @@
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
-import flatbody_env  # noqa: F401  (registers FlatBody-v0)
 from flatbody_env.recording.process import RecorderProcess
 from flatbody_env.recording.reader import read_recording, verify_recording
-from flatbody_env.recording.wrapper import RerunRecorder
+from recording_oracles import record_flatbody_episode
 
 
 def _episode(path, recorder=None) -> None:
-    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=40), path, recorder=recorder)
-    env.reset(seed=3)
-    rng = np.random.default_rng(3)
-    done = False
-    while not done:
-        _, _, term, trunc, _ = env.step(rng.uniform(-1, 1, 4).astype(np.float32))
-        done = term or trunc
-    env.close()
+    record_flatbody_episode(path, seed=3, steps=40, recorder=recorder)
 
 
 def test_recorder_process_writes_the_file_the_process_itself_writes(tmp_path):
