@@ -172,26 +172,40 @@ def write(bench: TrainBenchmark, out_dir: Path) -> None:
     plot(out_dir / "train_benchmark.csv", out_dir / "train_benchmark.png")
 
 
+TRAIN_CAPTION = (
+    "environment: time spent inside the environment stack's step/reset; for FlatBody-v0 it includes the LQR\n"
+    "(linear-quadratic regulator: the baseline controller whose action the agent's output is added to, as in training).\n"
+    "PPO: Proximal Policy Optimization (stable-baselines3, agents/hyperparams/ppo.yml): the rest of the wall time,\n"
+    "i.e. the policy's forward passes while collecting rollouts and the gradient updates. Pendulum-v1 (Gymnasium) is the yardstick.\n"
+    "Bar labels: total wall time (share of it in the environment). Best of the repeats, one process."
+)
+"""The chart's caption: what each colour and the bar labels mean."""
+
+
 def plot(csv_path: Path, png_path: Path) -> None:
-    """Stacked bars (environment vs the rest of PPO) from the saved CSV."""
+    """Stacked bars (environment vs the rest of PPO) from the saved CSV; legend and caption below the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from flatbody_env.chart_text import add_caption
+
     rows = list(csv.DictReader(open(csv_path)))
     names = [r["env_id"] for r in rows]
     env = [float(r["env_s"]) for r in rows]
     rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]
-    fig, ax = plt.subplots(figsize=(7, 2.6))
+    fig, ax = plt.subplots(figsize=(7.6, 3.9))
     ax.barh(names, env, color="tab:blue", label="environment (+ LQR)")
     ax.barh(names, rest, left=env, color="tab:gray", label="PPO (rollout policy, updates)")
     for y, (e, r) in enumerate(zip(env, rest)):
         ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
+    ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest)))
     ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
     ax.set_title("flatbody bench train (same run)")
-    ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
+    bottom = add_caption(fig, TRAIN_CAPTION, fontsize=7)
+    fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, bottom))
+    fig.tight_layout(rect=(0, bottom + 0.06, 1, 1))
     save_figure(fig, png_path, dpi=120)
     plt.close(fig)
 

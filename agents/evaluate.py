@@ -1,4 +1,5 @@
-"""Evaluate agents and baselines on ``FlatBody-v0`` over seeded episodes.
+"""Evaluate agents and baselines on the flatbody tasks (``FlatBody-v0`` and the others of
+``docs/tasks.md``) over seeded episodes.
 
 Episode i is reset with seed ``seed + i`` — the same target and initial state for every policy
 (the batched :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` reproduces single-env resets
@@ -10,13 +11,17 @@ seed for seed). Per episode:
 * ``time_to_reach``: sim time of the first step with d ≤ tolerance (None if never);
 * ``energy_change``: H(end) − H(start) (the controls do work: Ḣ = ω·τ + ϱ̇ f);
 * ``action_effort``: mean over steps of ‖a‖² (normalised actions in [−1, 1]ⁿ);
-* ``return``, ``length``, ``failed`` (integrator failure or left the domain).
+* ``return``, ``length``, ``failed`` (integrator failure, left the domain, or — on a task that ends
+  there — left the target's tolerance).
 
 Policies: the agent (an SB3 model, observations normalised by its frozen VecNormalize
 statistics, deterministic actions; for a residual agent combined with the LQR action, :class:`agents.heuristic.ResidualAction`), and the
 baselines ``zero`` (a = 0), ``random`` (uniform actions from a seeded generator), ``heuristic``
 (LQR about the target, :class:`agents.heuristic.HeuristicController`) and ``passivity``
-(:class:`agents.heuristic.PassivityController`).
+(:class:`agents.heuristic.PassivityController`), and on the tasks whose starts come with a witness
+(:class:`flatbody_env.env.witness.ReachWithWitness`) ``witness``: the witness replayed open loop. A
+baseline that cannot be built for a task (the LQR where the controls are not linearly controllable)
+is reported as such (:data:`CANNOT_BE_BUILT`).
 """
 
 from __future__ import annotations
@@ -31,16 +36,43 @@ import numpy as np
 BASELINES = ("zero", "random", "heuristic", "passivity")
 """``heuristic``: LQR about the target (:class:`agents.heuristic.HeuristicController`);
 ``passivity``: the energy-based damping law (:class:`agents.heuristic.PassivityController`)."""
+WITNESS = "witness"
+"""The baseline of the tasks with witnessed starts: each episode's witness replayed open loop."""
+GROWTH_FLOOR = 1e-4
+"""Growth rates (s⁻¹) below this count as 0 in :func:`target_features` (the finite-difference linearisation of a
+spectrally stable target has eigenvalues within ~1e-6 of the imaginary axis)."""
+CANNOT_BE_BUILT = "cannot be built"
+"""The ``status`` of a baseline that does not exist for a task (its ``reason`` says why)."""
 METRICS = ("success_rate", "final_distance", "final_distance_median", "reach_rate", "time_to_reach", "energy_change",
            "abs_energy_change", "action_effort", "return", "failure_rate")
 
 Policy = Callable[[np.ndarray], np.ndarray]
-"""Observations (N, 16) → actions (N, n)."""
+"""Observations (N, 16) (or (N, 21) with the body's constants) → actions (N, n)."""
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+"""Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...)."""
 
 
 def shipped_model_dir() -> Path:
     """The folder of the agent shipped in the package (``agents/models/ppo-FlatBody-v0``)."""
-    return Path(__file__).resolve().parent / "models" / "ppo-FlatBody-v0"
+    return MODELS_DIR / "ppo-FlatBody-v0"
+
+
+def shipped_agents(env_id: str) -> dict[str, Path]:
+    """The shipped agents of a task: ``{algo: folder}`` for every ``MODELS_DIR/<algo>-<env_id>/model.zip``."""
+    found = {}
+    for folder in sorted(MODELS_DIR.glob(f"*-{env_id}")):
+        algo = folder.name[: -len(env_id) - 1]
+        if (folder / "model.zip").exists() and algo and "-" not in algo:
+            found[algo] = folder
+    return found
+
+
+def baselines_for(env_id: str) -> tuple[str, ...]:
+    """The baselines evaluated on a task: :data:`BASELINES`, and :data:`WITNESS` where its starts come with a witness."""
+    from flatbody_env.env.registration import task_spec
+
+    spec = task_spec(env_id)
+    return BASELINES + ((WITNESS,) if spec.kwargs.get("task") == "reach-witnessed" else ())
 
 
 POLICY_BACKENDS = ("auto", "numpy", "sb3")
@@ -100,16 +132,19 @@ class Agent:
             self._load_sb3(model_file, folder, algo)
         self.backend = "numpy" if self.policy is not None else "sb3"
         hp = self.config.get("hyperparams") or {}
+        self.env_id: str = self.config.get("env_id") or "FlatBody-v0"
         self.env_kwargs: dict[str, Any] = dict(hp.get("env_kwargs") or {})
+        if self.env_id != "FlatBody-v0":  # another task: its registered keywords (task, control, ...) come with it
+            self.env_kwargs = env_kwargs_for(self.env_id, self.env_kwargs)
         self.residual = hp.get("residual") or None
         self.residual_scale = float(hp.get("residual_scale", 1.0))
         self.residual_gate = float(hp.get("residual_gate", 0.0))
         self._base = None
-        if self.residual == "heuristic":
+        if self.residual in ("heuristic", "passivity"):
             from agents.heuristic import ResidualAction
 
             self._base = ResidualAction(self.env_kwargs, self.residual_scale, self.residual_gate,
-                                        str(hp.get("residual_mode", "additive")))
+                                        str(hp.get("residual_mode", "additive")), self.residual)
 
     def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
         import pickle
@@ -158,27 +193,43 @@ def heuristic_policy(env, kind: str = "heuristic") -> Policy:
     return lambda obs: ctl.predict(obs)[0]
 
 
-def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None,
-                 batch: int = 50, progress: bool = False, label: str = "") -> list[dict[str, Any]]:
-    """Roll out ``episodes`` seeded episodes (batched ``batch`` at a time); one record per episode.
+def env_kwargs_for(env_id: str, env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The keyword arguments of a registered id (``docs/tasks.md``) updated by ``env_kwargs``."""
+    from flatbody_env.env.registration import task_spec
 
-    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`).
+    return {**task_spec(env_id).kwargs, **(env_kwargs or {})}
+
+
+def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None, env_id: str = "FlatBody-v0",
+                 batch: int = 50, progress: bool = False, label: str = "") -> list[dict[str, Any]]:
+    """Roll out ``episodes`` seeded episodes of ``env_id`` (batched ``batch`` at a time); one record per episode.
+
+    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`WITNESS`); ``env_kwargs``
+    update the id's registered keywords.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When the LQR baseline cannot be built for the task's targets (:func:`evaluate_policies` reports it).
     """
-    from flatbody_env.env.registration import MAX_EPISODE_STEPS
+    from flatbody_env.env.registration import task_spec
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
     if not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes: must be an integer >= 1, got {episodes!r}")
+    steps = task_spec(env_id).max_episode_steps
+    kwargs = env_kwargs_for(env_id, env_kwargs)
     records: list[dict[str, Any]] = []
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from flatbody_env.progress import progress_bar
 
-        bar = tqdm(total=episodes * MAX_EPISODE_STEPS, desc=label or "evaluate", unit="step", leave=False, dynamic_ncols=True)
+        bar = progress_bar(total=episodes * steps, desc=label or "evaluate", unit="step", leave=False)
     for start in range(0, episodes, batch):
         n = min(batch, episodes - start)
-        env = FlatBodyVectorEnv(num_envs=n, **(env_kwargs or {}))
+        env = FlatBodyVectorEnv(num_envs=n, max_episode_steps=steps, **kwargs)
         adim = env.single_action_space.shape[0]
+        step_index = [0]
         if isinstance(policy, str):
             if policy == "zero":
                 pol = zero_policy(adim)
@@ -186,12 +237,16 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
                 pol = random_policy(adim, seed + start)
             elif policy in ("heuristic", "passivity"):
                 pol = heuristic_policy(env, policy)
+            elif policy == WITNESS:
+                pol = None  # after the reset, which draws the witnesses
             else:
-                raise ValueError(f"baseline: must be one of {', '.join(BASELINES)}, got {policy!r}")
+                raise ValueError(f"baseline: must be one of {', '.join(BASELINES + (WITNESS,))}, got {policy!r}")
         else:
             pol = policy
         tol = env.task.success_tolerance
         obs, info = env.reset(seed=seed + start)
+        if pol is None:
+            pol = _witness_policy(env, step_index)
         e0 = np.asarray(info["energy"], dtype=float).copy()
         active = np.ones(n, dtype=bool)
         ret = np.zeros(n)
@@ -205,6 +260,7 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
         while active.any():
             a = np.asarray(pol(obs), dtype=np.float32).reshape(n, adim)
             obs, r, term, trunc, info = env.step(a)
+            step_index[0] += 1
             act = active
             ac = np.clip(a.astype(np.float64), -1.0, 1.0)
             ret[act] += r[act]
@@ -240,14 +296,40 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
     return records
 
 
+def _witness_policy(env, step_index: list[int]) -> Policy:
+    """Each body's witness (``env.witnesses``, drawn at the reset) replayed open loop: step k plays row k."""
+    witnesses = env.witnesses
+    if any(w is None for w in witnesses):
+        raise ValueError("baseline: witness needs a task whose starts come with a witness (FlatBodyTorque-v0, FlatBodyDilatation-v0)")
+    W = np.stack(witnesses)
+    return lambda obs: W[:, min(step_index[0], W.shape[1] - 1)].astype(np.float32)
+
+
+def success_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a success rate k/n (E. B. Wilson, J. Am. Stat. Assoc. 22, 209 (1927)):
+    (p̂ + z²/2n ∓ z √(p̂(1 − p̂)/n + z²/4n²)) / (1 + z²/n), z = Φ⁻¹(0.975)."""
+    if n < 1:
+        raise ValueError(f"episodes: must be >= 1, got {n!r}")
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
 def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     """Means over episodes (``time_to_reach`` over the episodes that reached the target)."""
     fd = np.array([r["final_distance"] for r in records])
     ttr = [r["time_to_reach"] for r in records if r["time_to_reach"] is not None]
     de = np.array([r["energy_change"] for r in records])
+    wins = int(sum(r["success"] for r in records))
+    lengths = np.array([r["length"] for r in records])
     return {
         "episodes": len(records),
         "success_rate": float(np.mean([r["success"] for r in records])),
+        "success_ci95": list(success_interval(wins, len(records))),
+        "length_mean": float(np.mean(lengths)),
+        "length_median": float(np.median(lengths)),
         "final_distance": float(np.mean(fd)),
         "final_distance_median": float(np.median(fd)),
         "reach_rate": float(len(ttr) / len(records)),
@@ -262,36 +344,119 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: int = 10_000, baselines: bool = True,
                  progress: bool = False, backend: str = "auto") -> dict[str, Any]:
-    """The evaluation report: ``{"agent": {...}, "baselines": {"zero", "random", "heuristic"}, ...}``;
+    """The evaluation report of an agent on its task (``FlatBody-v0`` for the shipped one):
+    ``{"agent": {...}, "baselines": {"zero", "random", "heuristic", "passivity"}, ...}``;
     ``policy_backend`` says how the agent's policy ran (``numpy`` or ``sb3``, :class:`Agent`)."""
     agent = Agent(model, backend=backend)
+    env_id = agent.config.get("env_id") or "FlatBody-v0"
     env_kwargs = agent.env_kwargs
     report: dict[str, Any] = {
-        "env_id": "FlatBody-v0",
+        "env_id": env_id,
         "episodes": episodes,
         "seed": seed,
         "model": str(agent.path),
         "policy_backend": agent.backend,
-        "agent": summarize(run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=env_kwargs, progress=progress, label="agent")),
+        "agent": summarize(run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=env_kwargs, env_id=env_id, progress=progress,
+                                        label="agent")),
     }
     if baselines:
-        report["baselines"] = {
-            name: summarize(run_episodes(name, episodes=episodes, seed=seed, env_kwargs=env_kwargs, progress=progress, label=name))
-            for name in BASELINES
-        }
+        report["baselines"] = {name: _summary_or_status(name, episodes=episodes, seed=seed, env_kwargs=env_kwargs, env_id=env_id,
+                                                        progress=progress)[0]
+                               for name in baselines_for(env_id)}
     return report
 
 
+def _summary_or_status(name: str, **kwargs) -> tuple[dict[str, Any], list[dict[str, Any]] | None]:
+    """A baseline's summary and records, or ``{"status": CANNOT_BE_BUILT, "reason": ...}`` (and no records)
+    where it does not exist for the task (the LQR where the Riccati equation has no stabilising solution)."""
+    try:
+        records = run_episodes(name, label=name, **kwargs)
+    except np.linalg.LinAlgError as exc:
+        return {"status": CANNOT_BE_BUILT, "reason": f"LinAlgError: {' '.join(str(exc).split())}"}, None
+    return summarize(records), records
+
+
+def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = 10_000, model: str | Path | None = None, baselines: bool = True,
+                  with_agents: bool = True, progress: bool = False, backend: str = "auto") -> dict[str, Any]:
+    """The reference report of one registered task: every baseline (:func:`baselines_for`) and agent — the one
+    in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes`` seeded episodes,
+    with each episode's target features (:func:`target_features`) and per-episode results.
+
+    ``{"env_id", "episodes", "seed", "targets": {"seed", "settling_rate", "growth_rate"}, "policies": {name:
+    {"kind", "summary", "episodes": {"success", "final_distance", "return", "length"}}}}``; for ``FlatBody-v0``
+    also the keys of :func:`evaluate_all` (``agent``, ``baselines``).
+    """
+    from flatbody_env.env.registration import task_spec
+
+    spec = task_spec(env_id)
+    report: dict[str, Any] = {"env_id": env_id, "episodes": episodes, "seed": seed, "max_episode_steps": spec.max_episode_steps,
+                              "dt": float(spec.kwargs.get("dt", 0.05)), "env_kwargs": dict(spec.kwargs), "summary": spec.summary,
+                              "targets": target_features(env_id, episodes=episodes, seed=seed), "policies": {}}
+    policies = report["policies"]
+    columns = ("success", "final_distance", "return", "length")
+    if baselines:
+        for name in baselines_for(env_id):
+            summary, records = _summary_or_status(name, episodes=episodes, seed=seed, env_id=env_id, progress=progress)
+            entry: dict[str, Any] = {"kind": "baseline", "summary": summary}
+            if records is not None:
+                entry["episodes"] = {c: [r[c] for r in records] for c in columns}
+            policies[name] = entry
+    found = {"agent": Path(model)} if model is not None else (shipped_agents(env_id) if with_agents else {})
+    for name, folder in found.items():
+        agent = Agent(folder, backend=backend)
+        records = run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=agent.env_kwargs, env_id=env_id, progress=progress, label=name)
+        policies[name] = {"kind": "agent", "model": str(folder), "policy_backend": agent.backend, "summary": summarize(records),
+                          "episodes": {c: [r[c] for r in records] for c in columns}}
+    agents_found = [k for k, v in policies.items() if v["kind"] == "agent"]
+    if agents_found:
+        report["agent"] = policies[agents_found[0]]["summary"]
+        report["policy_backend"] = policies[agents_found[0]]["policy_backend"]
+    report["baselines"] = {k: v["summary"] for k, v in policies.items() if v["kind"] == "baseline"}
+    return report
+
+
+def target_features(env_id: str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None) -> dict[str, list]:
+    """Each seeded episode's target: its settling rate r under the task's controls
+    (:func:`flatbody_env.physics.controllability.settling_rate`; 0 where the controls stabilise no target
+    at linear order) and its instability growth rate γ = max(0, max Re eig A) of the linearisation
+    (:func:`flatbody_env.physics.controllability.linearize`; below :data:`GROWTH_FLOOR` — the finite
+    differences' noise on the imaginary axis of a spectrally stable target — it counts as 0), of the
+    episode's own body."""
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+    from flatbody_env.env.task import control_mask
+    from flatbody_env.physics.controllability import linearize, settling_rate
+
+    env = FlatBodyVectorEnv(num_envs=episodes, **env_kwargs_for(env_id, env_kwargs))
+    obs, _ = env.reset(seed=seed)
+    mask = control_mask(env.control)
+    rates, growth = [], []
+    for i, body in enumerate(env.bodies):
+        t = env.target_vectors[i]
+        y_star = np.array([0.0, 0.0, t[3], env.states[i, 3], 0.0, 0.0, 0.0, t[0], t[1], t[2], 0.0])
+        rates.append(settling_rate(body, y_star, env.limits, mask))
+        A, _ = linearize(body, y_star, env.limits)
+        g = float(np.max(np.linalg.eigvals(A).real))
+        growth.append(g if g > GROWTH_FLOOR else 0.0)
+    env.close()
+    return {"seed": [seed + i for i in range(episodes)], "settling_rate": rates, "growth_rate": growth}
+
+
 def format_table(report: dict[str, Any]) -> str:
-    """A Markdown table of the report (one row per policy)."""
-    rows = [("agent", report["agent"])] + list((report.get("baselines") or {}).items())
-    head = "| policy | success rate | final distance (mean) | final distance (median) | time to reach (mean, s) | ΔH (mean) | action effort ‖a‖² | return |"
-    lines = [f"FlatBody-v0, {report['episodes']} episodes, seeds {report['seed']}..{report['seed'] + report['episodes'] - 1}", "",
+    """A Markdown table of the report (one row per policy; a baseline that cannot be built says why)."""
+    rows = ([("agent", report["agent"])] if "agent" in report else []) + list((report.get("baselines") or {}).items())
+    head = ("| policy | success rate (95 % interval) | final distance (mean) | final distance (median) | time to reach (mean, s) "
+            "| ΔH (mean) | action effort ‖a‖² | return |")
+    env_id = report.get("env_id", "FlatBody-v0")
+    lines = [f"{env_id}, {report['episodes']} episodes, seeds {report['seed']}..{report['seed'] + report['episodes'] - 1}", "",
              head, "|" + "---|" * 8]
     for name, s in rows:
+        if s.get("status"):
+            lines.append(f"| {name} | {s['status']}: {s['reason']} | | | | | | |")
+            continue
         ttr = "—" if s["time_to_reach"] is None else f"{s['time_to_reach']:.2f} ({s['reach_rate']:.0%} reach)"
+        lo, hi = s.get("success_ci95", (float("nan"), float("nan")))
         lines.append(
-            f"| {name} | {s['success_rate']:.0%} | {s['final_distance']:.4f} | {s['final_distance_median']:.4f} | {ttr} | "
+            f"| {name} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {s['final_distance']:.4f} | {s['final_distance_median']:.4f} | {ttr} | "
             f"{s['energy_change']:+.3f} | {s['action_effort']:.3f} | {s['return']:.1f} |"
         )
     return "\n".join(lines)

@@ -87,7 +87,7 @@ import numpy as np
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
 from flatbody_env.physics.hamiltonian import kinetic_kernel
-from flatbody_env.env.task import DEFAULT_LIMITS, OBS_TARGET, control_mask, state_from_observation  # noqa: F401  (re-exported)
+from flatbody_env.env.task import DEFAULT_LIMITS, OBS_TARGET, OBSERVATION_SIZE, control_mask, state_from_observation  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -135,13 +135,15 @@ class PassivityController:
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, gains)
 
-    def control(self, y: np.ndarray, target: np.ndarray) -> np.ndarray:
-        """Physical controls u = (τ1, τ2, τ3, f_ϱ) for state y (11,) and target (λ*, μ*, ϱ*, s3*)."""
+    def control(self, y: np.ndarray, target: np.ndarray, P: np.ndarray | None = None) -> np.ndarray:
+        """Physical controls u = (τ1, τ2, τ3, f_ϱ) for state y (11,) and target (λ*, μ*, ϱ*, s3*); ``P``: the
+        body's kernel parameters when they are not the controller's body's (a body drawn per episode)."""
         g = self.gains
-        kinetic_kernel(y, self._P, self._vel, self._force)
+        P = self._P if P is None else P
+        kinetic_kernel(y, P, self._vel, self._force)
         w1, w2, w3, _, _, _, rho_dot = self._vel
         yt = np.array([0.0, 0.0, target[3], y[3], 0.0, 0.0, 0.0, target[0], target[1], target[2], y[10]])
-        kinetic_kernel(yt, self._P, self._vel_t, self._force)
+        kinetic_kernel(yt, P, self._vel_t, self._force)
         w3_star = self._vel_t[2]
         return np.array([
             -g.k_omega * w1,
@@ -151,9 +153,11 @@ class PassivityController:
         ])
 
     def action(self, obs: np.ndarray) -> np.ndarray:
-        """Normalised action in [−1, 1]ⁿ for one observation (16,)."""
-        y, target = state_from_observation(obs)
-        u = self.control(y, target)
+        """Normalised action in [−1, 1]ⁿ for one observation (16,), or (21,) with the body's constants
+        (``FlatBodyAnyBody-v0``: the body of those constants)."""
+        obs = np.asarray(obs)
+        y, target = state_from_observation(obs[:OBSERVATION_SIZE])
+        u = self.control(y, target, None if obs.shape[-1] == OBSERVATION_SIZE else _body_of(obs[OBSERVATION_SIZE:]).kernel_params())
         if not self.mask.any():
             return np.zeros(1, dtype=np.float32)
         a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
@@ -306,12 +310,13 @@ class HeuristicController:
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, weights)
 
-    def gain(self, y_star: np.ndarray) -> np.ndarray:
-        """The exact K (k, 9) for the target state y_star (cached per target), k = the driven controls."""
-        key = tuple(np.round(y_star[:10], 12))
+    def gain(self, y_star: np.ndarray, body: Body | None = None) -> np.ndarray:
+        """The exact K (k, 9) for the target state y_star (cached per target and body), k = the driven controls;
+        ``body``: another body than the controller's (a body drawn per episode)."""
+        key = tuple(np.round(y_star[:10], 12)) + (() if body is None else tuple(body.kernel_params().tolist()))
         K = self._cache.get(key)
         if K is None:
-            K = lqr_gain(self.body, y_star, self.limits, self.mask, self.weights)
+            K = lqr_gain(self.body if body is None else body, y_star, self.limits, self.mask, self.weights)
             if len(self._cache) > 1024:
                 self._cache.clear()
             self._cache[key] = K
@@ -332,7 +337,8 @@ class HeuristicController:
             L, W = t["lambdas"], t["ws"]
             x = (lam - L[0]) / (L[1] - L[0])
             y = (w - W[0]) / (W[1] - W[0])
-            inside = (x >= 0) & (x <= len(L) - 1) & (y >= 0) & (y <= len(W) - 1 + 1e-6) & (p_theta != 0)
+            # the table holds the circulation family (|s3*| < |p_θ|) only: targets of the rotation branch solve exactly
+            inside = (x >= 0) & (x <= len(L) - 1) & (y >= 0) & (y <= len(W) - 1 + 1e-6) & (p_theta != 0) & (np.abs(targets[:, 3]) < np.abs(p_theta))
             i = np.clip(np.floor(x).astype(np.int64), 0, len(L) - 2)
             j = np.clip(np.floor(y).astype(np.int64), 0, len(W) - 2)
             fx = (x - i)[:, None, None]
@@ -344,25 +350,40 @@ class HeuristicController:
             K[inside] = Ki[inside]
             todo = ~inside
         for r in np.flatnonzero(todo):
-            tg = targets[r]
-            K[r] = self.gain(np.array([0.0, 0.0, tg[3], p_theta[r], 0.0, 0.0, 0.0, tg[0], tg[1], tg[2], 0.0]))
+            K[r] = self.gain(_target_state(targets[r], p_theta[r]))
         return K
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, k) float32 for observations (N, 16), one vectorised call:
-        a = clip(−K (x − x*), −1, 1) per row, with the row's stored gain (refreshed where its target changed)."""
-        obs = np.asarray(obs, dtype=np.float64).reshape(-1, 16)
+        a = clip(−K (x − x*), −1, 1) per row, with the row's stored gain (refreshed where its target changed).
+
+        Observations (N, 21) carry the body's constants (``FlatBodyAnyBody-v0``): each row's gain is then
+        the exact one for its own body (cached per target and body).
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            When no LQR exists for a target (e.g. torque only or dilatation only: those modes are not
+            linearly controllable, and the Riccati equation has no stabilising solution).
+        """
+        obs = np.asarray(obs, dtype=np.float64)
+        width = obs.shape[-1]
+        obs = obs.reshape(-1, width)
         n = obs.shape[0]
         if not self.mask.any():
             return np.zeros((n, 1), dtype=np.float32)
-        keys = obs[:, _KEY_COLUMNS]
-        if self._keys.shape[0] != n:
-            self._keys = np.full((n, 5), np.nan)
+        keys = np.concatenate([obs[:, _KEY_COLUMNS], obs[:, OBSERVATION_SIZE:]], axis=1)
+        if self._keys.shape != keys.shape:
+            self._keys = np.full(keys.shape, np.nan)
             self._K = np.empty((n, int(self.mask.sum()), 9))
             self._minus_K = np.empty_like(self._K)
         changed = (keys != self._keys).any(axis=1)
         if changed.any():
-            self._K[changed] = self.gains(keys[changed, :4], keys[changed, 4])
+            if width == OBSERVATION_SIZE:
+                self._K[changed] = self.gains(keys[changed, :4], keys[changed, 4])
+            else:
+                for r in np.flatnonzero(changed):
+                    self._K[r] = self.gain(_target_state(keys[r, :4], keys[r, 4]), _body_of(keys[r, 5:]))
             self._minus_K[changed] = -self._K[changed]
             self._keys[changed] = keys[changed]
         dx = obs[:, _REDUCED_OBS]  # x − x*, x* = (0, 0, s3*, 0, 0, 0, λ*, μ*, ϱ*) from the target entries
@@ -373,7 +394,7 @@ class HeuristicController:
         return a.astype(np.float32)
 
     def action(self, obs: np.ndarray) -> np.ndarray:
-        """Normalised action in [−1, 1]ⁿ for one observation (16,)."""
+        """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""
         return self.act(np.asarray(obs)[None, :])[0]
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
@@ -384,6 +405,18 @@ class HeuristicController:
         return self.act(obs), None
 
 
+def _target_state(target, p_theta) -> np.ndarray:
+    """The packed state of the target (λ*, μ*, ϱ*, s3*) with p_θ (s1 = s2 = 0, p = 0, θ = 0)."""
+    return np.array([0.0, 0.0, target[3], p_theta, 0.0, 0.0, 0.0, target[0], target[1], target[2], 0.0])
+
+
+def _body_of(constants) -> Body:
+    """The body of the constants an observation carries after its 16 shared entries (``FlatBodyAnyBody-v0``)."""
+    from flatbody_env.env.any_body import body_from_constants
+
+    return body_from_constants(constants)
+
+
 _REDUCED_OBS = np.array(REDUCED_STATE)
 """Observation columns of x = (s1, s2, s3, p_λ, p_μ, p_ϱ, λ, μ, ϱ) (the observation copies state entries 0–9)."""
 _KEY_COLUMNS = np.array([OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.start + 2, OBS_TARGET.start + 3, 3])
@@ -391,6 +424,8 @@ _KEY_COLUMNS = np.array([OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.star
 
 
 RESIDUAL_MODES = ("additive", "gain")
+RESIDUAL_BASES = ("heuristic", "passivity")
+"""The controllers a residual agent can act on: the LQR (``heuristic``) or the passivity law."""
 
 
 class ResidualAction:
@@ -405,10 +440,14 @@ class ResidualAction:
       [1 − scale, 1 + scale]); the target stays an equilibrium (a_LQR = 0 there) whatever the
       policy outputs.
 
-    Reads physical (unnormalised) observations (N, 16).
+    ``base="passivity"``: the same with :class:`PassivityController` in place of the LQR (a task where
+    the passivity law is the better prior, e.g. ``FlatBodyHoldUnstable-v0``). ``env_kwargs`` are the
+    environment's full keywords (the task's included: ``agents.evaluate.env_kwargs_for``).
+
+    Reads physical (unnormalised) observations (N, 16) (or (N, 21) with the body's constants).
     """
 
-    def __init__(self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive") -> None:
+    def __init__(self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic") -> None:
         from flatbody_env.env.env import FlatBodyEnv
 
         if not (math.isfinite(scale) and scale >= 0):
@@ -420,7 +459,11 @@ class ResidualAction:
         self.mode = mode
         proto = FlatBodyEnv(**(env_kwargs or {}))
         self.body, self.task = proto.body, proto.task
-        self.controller = HeuristicController(proto.body, proto.control, proto.limits)
+        if base not in RESIDUAL_BASES:
+            raise ValueError(f"residual: must be one of {', '.join(RESIDUAL_BASES)}, got {base!r}")
+        self.base = base
+        cls = HeuristicController if base == "heuristic" else PassivityController
+        self.controller = cls(proto.body, proto.control, proto.limits)
         self.scale, self.gate = float(scale), float(gate)
 
     def __call__(self, obs: np.ndarray, actions: np.ndarray) -> np.ndarray:
@@ -436,7 +479,7 @@ class ResidualAction:
         return np.clip(base + a, -1.0, 1.0).astype(np.float32)
 
 
-def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive"):
+def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic"):
     """Wrap an SB3 VecEnv over ``FlatBody-v0`` so that actions are residuals on the heuristic.
 
     The executed action is :class:`ResidualAction` (residual policy learning: the agent starts
@@ -445,7 +488,7 @@ def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.
     """
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    residual = ResidualAction(env_kwargs, scale, gate, mode)
+    residual = ResidualAction(env_kwargs, scale, gate, mode, base)
 
     class ResidualOnHeuristic(VecEnvWrapper):
         def reset(self):

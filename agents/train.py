@@ -1,4 +1,4 @@
-"""Train SB3 agents on ``FlatBody-v0`` in the RL-Zoo spirit.
+"""Train SB3 agents on the flatbody tasks (``FlatBody-v0`` and every id of docs/tasks.md) in the RL-Zoo spirit.
 
 Hyperparameters live in ``agents/hyperparams/<algo>.yml`` keyed by environment id; a run writes,
 beside the model::
@@ -13,8 +13,8 @@ beside the model::
 
 Training uses :class:`agents.vec_env.FlatBodySB3VecEnv` (the natively batched env) wrapped in
 ``VecMonitor`` and ``VecNormalize``; nothing integrator-specific is passed: the env's default
-integrator runs. ``torch.set_num_threads(1)`` by default (ECOSYSTEM.md: more threads are slower
-on a loaded 2-core machine).
+integrator runs. ``torch.set_num_threads(1)`` by default (``--threads N``; docs/agents.md: on a loaded
+2-core machine two threads made half the runs 8-12 times slower, and none faster).
 """
 
 from __future__ import annotations
@@ -113,10 +113,12 @@ def algo_kwargs_of(hp: dict[str, Any]) -> dict[str, Any]:
 
 def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
                  success_bonus: float = 0.0, residual_scale: float = 1.0, residual_gate: float = 0.0,
-                 precision_bonus: float = 0.0, residual_mode: str = "additive"):
-    """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env).
+                 precision_bonus: float = 0.0, residual_mode: str = "additive", env_id: str = ENV_ID):
+    """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env) of the task ``env_id``
+    (any registered flatbody id, docs/tasks.md: its registered keywords updated by ``env_kwargs``).
 
-    ``residual="heuristic"``: the policy's actions are residuals added to the hand-designed
+    ``residual="heuristic"`` (the LQR; on ``FlatBodyAnyBody-v0`` re-solved for each episode's body from the
+    observed constants) or ``"passivity"`` (the passivity law): the policy's actions are residuals added to the hand-designed
     controller's, scaled by ``residual_scale`` and faded out within ``residual_gate`` of the target,
     or (``residual_mode="gain"``) rescale its components (:class:`agents.heuristic.ResidualAction`). ``success_bonus`` > 0: training
     reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so
@@ -129,13 +131,16 @@ def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | Non
 
     from agents.vec_env import FlatBodySB3VecEnv
 
-    venv = FlatBodySB3VecEnv(n_envs, seed=seed, **(env_kwargs or {}))
+    from agents.evaluate import env_kwargs_for
+
+    env_kwargs = env_kwargs_for(env_id, env_kwargs)
+    venv = FlatBodySB3VecEnv(n_envs, seed=seed, **env_kwargs)
     if residual:
-        if residual != "heuristic":
-            raise ValueError(f"residual: must be 'heuristic' or empty, got {residual!r}")
+        if residual not in ("heuristic", "passivity"):
+            raise ValueError(f"residual: must be 'heuristic', 'passivity' or empty, got {residual!r}")
         from agents.heuristic import residual_vec_env
 
-        venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode)
+        venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode, residual)
     venv = VecMonitor(venv)
     if success_bonus or precision_bonus:
         from flatbody_env.env.env import FlatBodyEnv
@@ -198,13 +203,17 @@ class TrainResult:
 
 def _progress_callback(total: int, start: int, enabled: bool):
     from stable_baselines3.common.callbacks import BaseCallback
-    from tqdm.auto import tqdm
+
+    from flatbody_env.progress import progress_bar
 
     class TqdmCallback(BaseCallback):
-        """tqdm over environment steps, showing the recent return and success rate."""
+        """A progress bar over environment steps (:func:`flatbody_env.progress.progress_bar`: tqdm on a
+        terminal, a line every few seconds otherwise), showing the recent return and success rate."""
+
+        bar = None
 
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, initial=start, unit="step", disable=not enabled, dynamic_ncols=True, desc="train")
+            self.bar = progress_bar(total=total, initial=start, unit="step", enabled=enabled, desc="train")
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
@@ -220,9 +229,67 @@ def _progress_callback(total: int, start: int, enabled: bool):
             return True
 
         def _on_training_end(self) -> None:
-            self.bar.close()
+            self.close()
+
+        def close(self) -> None:
+            if self.bar is not None:
+                self.bar.close()
 
     return TqdmCallback()
+
+
+def rollout_steps(algo: str, hp: dict[str, Any]) -> int | None:
+    """Environment steps SB3 collects between two looks at the step budget, so the steps trained are
+    a multiple of it: PPO's rollout of ``n_envs × n_steps``; SAC's ``n_envs × train_freq`` (``train_freq``
+    in steps). None where it is not a fixed number of steps (SAC with ``train_freq`` in episodes)."""
+    nenv = int(hp.get("n_envs", 1))
+    if algo == "ppo":
+        return nenv * int(hp.get("n_steps", 2048))
+    freq = hp.get("train_freq", 1)
+    if isinstance(freq, (list, tuple)):
+        if len(freq) != 2 or str(freq[1]) != "step":
+            return None
+        freq = freq[0]
+    return nenv * int(freq)
+
+
+def check_out(out: str | Path, *, force: bool = False) -> Path:
+    """``out`` as a Path when a new training run may be written there.
+
+    Raises
+    ------
+    ValueError
+        ``out`` is the shipped agent's folder (``agents/models/…``), or already holds a run (its
+        ``model.zip``, ``config.yml``, ``run.json`` or ``checkpoints/``), and ``force`` is False: one
+        line naming the folder and saying that ``--force`` overwrites it.
+    """
+    out = Path(out)
+    shipped = Path(__file__).resolve().parent / "models"
+    if not force:
+        if out.resolve().is_relative_to(shipped):
+            raise ValueError(f"out: {str(out)!r} is the shipped agent's folder; --force overwrites it "
+                             "(or give another --out, e.g. runs/ppo)")
+        held = [name for name in ("model.zip", "config.yml", "run.json", "checkpoints") if (out / name).exists()]
+        if held:
+            raise ValueError(f"out: {str(out)!r} already holds a training run ({', '.join(held)}); --force overwrites it "
+                             "(--resume continues it)")
+    return out
+
+
+def _save_checkpoint(model, env, folder: Path, norm: bool, algo: str) -> Path:
+    """Save ``model`` (and its VecNormalize statistics, SAC's replay buffer) as the checkpoint of its
+    current step count in ``folder``, under the names :func:`latest_checkpoint` reads, atomically."""
+    steps = int(model.num_timesteps)
+    folder.mkdir(parents=True, exist_ok=True)
+    with atomic_path(folder / f"rl_model_{steps}_steps.zip") as tmp:
+        model.save(str(tmp))
+    if norm:
+        with atomic_path(folder / f"rl_model_vecnormalize_{steps}_steps.pkl") as tmp:
+            env.save(str(tmp))
+    if algo == "sac" and hasattr(model, "save_replay_buffer"):
+        with atomic_path(folder / f"rl_model_replay_buffer_{steps}_steps.pkl") as tmp:
+            model.save_replay_buffer(str(tmp))
+    return folder / f"rl_model_{steps}_steps.zip"
 
 
 def train(
@@ -242,30 +309,48 @@ def train(
     progress: bool = True,
     command: list[str] | None = None,
     extra_callbacks: list | None = None,
+    force: bool = False,
+    notes: bool = True,
 ) -> TrainResult:
     """Train ``algo`` on ``env_id`` with the YAML hyperparameters and save everything in ``out``.
 
     Parameters
     ----------
+    n_timesteps : int, optional
+        Environment steps; SB3 trains a whole number of :func:`rollout_steps`, so it rounds up
+        (one line on stderr says so, unless ``notes`` is False).
     checkpoint_freq : int
-        Environment steps between checkpoints (0: none).
+        Environment steps between checkpoints (0: none). With checkpoints on, a run stopped by
+        Ctrl-C saves one at the step it reached (``--resume`` continues from it).
     resume : bool
         Continue from the newest checkpoint in ``out/checkpoints`` (same hyperparameters: the
         saved ``config.yml`` is used) up to the total ``n_timesteps``.
     extra_callbacks : list, optional
         SB3 callbacks added to the run (e.g. the intermediate evaluations of :mod:`agents.tune`).
+    force : bool
+        Train into ``out`` even if it holds a run or is the shipped agent (:func:`check_out`); the
+        old run's checkpoints are removed first.
+    notes : bool
+        Say on stderr when ``n_timesteps`` rounds up (False for the many runs of a search or sweep).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Ctrl-C; its message says where the checkpoint was kept.
     """
+    from flatbody_env.env.registration import task_spec
+
+    task_spec(env_id)  # ValueError naming env for an id that is not a registered flatbody task
+    out = Path(out) if resume else check_out(out, force=force)  # before the heavy imports: a refusal is immediate
+
     import torch
     from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecNormalize
 
-    if env_id != ENV_ID:
-        raise ValueError(f"env: only {ENV_ID} is supported, got {env_id!r}")
     if not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads: must be an integer >= 1, got {threads!r}")
     torch.set_num_threads(threads)
-    out = Path(out)
     ckpt_dir = out / "checkpoints"
     resumed_from = None
     if resume:
@@ -293,13 +378,21 @@ def train(
     if norm is True:
         norm = {"norm_obs": True, "norm_reward": True}
     algo_kwargs = algo_kwargs_of(hp)
+    unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
+    start = found[3] if resume else 0
+    planned = start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)  # what SB3 will train
+    if planned > total and notes:
+        what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
+        print(f"flatbody: note: n_timesteps {total} rounds up to {planned} ({algo.upper()} trains whole {what} = "
+              f"{nenv} x {unit // nenv} = {unit} steps)", file=sys.stderr)
 
+    if force and not resume and ckpt_dir.exists():
+        shutil.rmtree(ckpt_dir)  # an old run's checkpoints would be what a later --resume continues
     out.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)),
                          float(hp.get("residual_gate", 0.0)), float(hp.get("precision_bonus", 0.0)),
-                         str(hp.get("residual_mode", "additive")))
+                         str(hp.get("residual_mode", "additive")), env_id=env_id)
     cls = _algo_class(algo)
-    start = 0
     if resume:
         model_path, vn_path, rb_path, start = found
         if norm:
@@ -319,7 +412,8 @@ def train(
         atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
     model.set_logger(configure(str(out), ["csv"]) if not resume else configure(str(out / f"resumed-{start}"), ["csv"]))
 
-    callbacks = [_progress_callback(total, start, progress), *(extra_callbacks or [])]
+    bar = _progress_callback(planned, start, progress)
+    callbacks = [bar, *(extra_callbacks or [])]
     if checkpoint_freq and checkpoint_freq > 0:
         callbacks.append(
             CheckpointCallback(
@@ -332,7 +426,17 @@ def train(
         )
     t0 = time.perf_counter()
     remaining = max(total - start, 0)
-    model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False)
+    try:
+        model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False)
+    except KeyboardInterrupt:
+        bar.close()
+        steps = int(model.num_timesteps)
+        if checkpoint_freq and checkpoint_freq > 0 and steps > start:
+            kept = _save_checkpoint(model, env, ckpt_dir, bool(norm), algo)
+            raise KeyboardInterrupt(f"training stopped at {steps} steps; checkpoint {kept}: "
+                                    f"flatbody train --algo {algo} --out {out} --resume continues") from None
+        why = "no step trained yet" if steps <= start else "--checkpoint-freq 0"
+        raise KeyboardInterrupt(f"training stopped at {steps} steps; no checkpoint saved ({why})") from None
     wall = time.perf_counter() - t0
 
     with atomic_path(out / "model.zip") as tmp:  # a killed run leaves the previous model, never half of one

@@ -25,6 +25,7 @@ as ``key=value`` overrides for ``flatbody train --study NAME --trial-id K``.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import socket
@@ -272,7 +273,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     callback = _pruning_callback(trial, out, every, cfg.eval_episodes)
     train(cfg.algo, out, seed=cfg.seed, n_timesteps=cfg.n_timesteps, n_envs=cfg.n_envs,
           overrides=[*cfg.overrides, *as_overrides(params)], hyperparams_file=cfg.hyperparams_file, checkpoint_freq=0,
-          threads=1, progress=False, extra_callbacks=[callback],
+          threads=1, progress=False, extra_callbacks=[callback], force=True, notes=False,
           command=["flatbody", "tune", f"--algo={cfg.algo}", f"--study={cfg.study}", f"--trial={trial.number}"])
     if callback.pruned:
         raise optuna.TrialPruned(f"pruned at evaluation {callback.step - 1}")
@@ -280,6 +281,25 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     trial.set_user_attr("success_rate", final["success_rate"])
     trial.set_user_attr("run", str(out))
     return float(final["final_distance"])
+
+
+class _QuietInterrupt(logging.Filter):
+    """Drop Optuna's log of a trial stopped by Ctrl-C (its traceback, then a second line): the trial
+    is stored as failed, and the command says in one line that it was interrupted."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.dropped = ""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if record.exc_info and isinstance(record.exc_info[1], KeyboardInterrupt):
+            self.dropped = message.split(" failed", 1)[0] + " failed with value"  # "Trial N failed with value"
+            return False
+        if self.dropped and message.startswith(self.dropped):
+            self.dropped = ""
+            return False
+        return True
 
 
 def tune_worker(cfg: TuneConfig, worker: int = 0, n_trials: int | None = None) -> int:
@@ -290,6 +310,9 @@ def tune_worker(cfg: TuneConfig, worker: int = 0, n_trials: int | None = None) -
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     optuna.logging.set_verbosity(optuna.logging.WARNING)
+    trial_log = logging.getLogger("optuna.study._optimize")  # the module that logs failed trials
+    if not any(isinstance(f, _QuietInterrupt) for f in trial_log.filters):
+        trial_log.addFilter(_QuietInterrupt())
     space = load_search_space(cfg.algo, path=cfg.search_file)
     study = _study(cfg, worker)
     finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED, optuna.trial.TrialState.FAIL)

@@ -177,23 +177,33 @@ def _horizon_reference(t_end: float):
     return sc, ref, float(np.max(np.abs(cross - ref))), t_end
 
 
-def failure_study(
-    studies=STUDIES, methods=DEFAULT_METHODS, *, quick: bool = False, repeats: int = 1, max_run_s: float = 10.0, progress: bool = True
-) -> list[FailurePoint]:
-    """Run the studies; a method's sweep along an axis stops once a run exceeds ``max_run_s``
-    (or, on the horizon axis, once the next run is predicted to)."""
-    from tqdm import tqdm
-
-    from flatbody_env.integrators.compiled_methods import warm_up
-
-    warm_up()  # load (or compile) the kernels before anything is timed
-    axes = {
+def _axes(quick: bool) -> dict:
+    return {
         "gap": ("delta", QUICK_GAP_DELTAS if quick else GAP_DELTAS, _gap_reference, "relative_gap", GAP_T_END),
         "rho": ("p_rho", QUICK_RHO_P if quick else RHO_P, _rho_reference, "rho_min", RHO_T_END),
         "horizon": ("t_end", QUICK_HORIZONS if quick else HORIZONS, _horizon_reference, "t_end", None),
     }
-    total = sum(len(axes[s][1]) * (len(methods) + 1) for s in studies)
-    bar = tqdm(total=total, desc="failure study", unit="run", disable=not progress)
+
+
+def planned_runs(studies=STUDIES, methods=DEFAULT_METHODS, *, quick: bool = False) -> int:
+    """Runs the study plans: one per method and axis value. :func:`failure_study` returns one point per
+    run it made; the others were skipped, over the time budget (the reference runs are not counted)."""
+    axes = _axes(quick)
+    return sum(len(axes[s][1]) * len(methods) for s in studies)
+
+
+def failure_study(
+    studies=STUDIES, methods=DEFAULT_METHODS, *, quick: bool = False, repeats: int = 1, max_run_s: float = 10.0, progress: bool = True
+) -> list[FailurePoint]:
+    """Run the studies; a method's sweep along an axis stops once a run exceeds ``max_run_s``
+    (or, on the horizon axis, once the next run is predicted to). The progress bar counts the
+    :func:`planned_runs`, skipped ones included."""
+    from flatbody_env.integrators.compiled_methods import warm_up
+    from flatbody_env.progress import progress_bar
+
+    warm_up()  # load (or compile) the kernels before anything is timed
+    axes = _axes(quick)
+    bar = progress_bar(total=planned_runs(studies, methods, quick=quick), desc="failure study", unit="run", enabled=progress)
     out: list[FailurePoint] = []
     for study in studies:
         pname, values, make_ref, mname, t_fixed = axes[study]
@@ -202,7 +212,6 @@ def failure_study(
         for value in values:
             bar.set_postfix_str(f"{study} {pname}={value:g} reference")
             sc, ref, floor, measured = make_ref(value)
-            bar.update(1)
             t_end = t_fixed if t_fixed is not None else value
             for m in methods:
                 bar.set_postfix_str(f"{study} {pname}={value:g} {m}")
@@ -225,4 +234,4 @@ def failure_study(
     return out
 
 
-__all__ = ["DEFAULT_METHODS", "FailurePoint", "STUDIES", "failure_study", "gap_scene", "relative_gap_min", "rho_scene"]
+__all__ = ["DEFAULT_METHODS", "FailurePoint", "STUDIES", "failure_study", "gap_scene", "planned_runs", "relative_gap_min", "rho_scene"]

@@ -436,9 +436,9 @@ def follow_family(
     seed_params = np.linspace(start, stop, seeds)
     iterator = seed_params
     if progress:
-        from tqdm import tqdm
+        from flatbody_env.progress import progress_bar
 
-        iterator = tqdm(seed_params, desc=f"family over {param}", unit="seed")
+        iterator = progress_bar(seed_params, desc=f"family over {param}", unit="seed")
     for ps in iterator:
         b = prob.body(float(ps))
         s3_p, pt_p = prob.spins(float(ps))
@@ -508,12 +508,15 @@ SHAPE_COLUMNS = ("lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot", 
                  "nonlinear", "max_real_part")
 
 
-def shape_stability_grid(body: Body, lam_values, mu_values) -> list[dict[str, Any]]:
+def shape_stability_grid(body: Body, lam_values, mu_values, *, progress: bool = False) -> list[dict[str, Any]]:
     """For each shape (λ, μ) with λ > μ on the grid: the spins that make it stationary (inverse problem,
     docs/physics.md §8) — one rigid-like (|s3| > |p_θ|) and one circulating (|p_θ| > |s3|) solution with σ₊ ≥ 0 —
-    and their stability. Shapes that cannot be stationary give no row."""
+    and their stability. Shapes that cannot be stationary give no row. ``progress``: a bar over the λ rows
+    (:func:`flatbody_env.progress.progress_bar`)."""
+    from flatbody_env.progress import progress_bar
+
     rows = []
-    for lam in lam_values:
+    for lam in progress_bar(lam_values, desc="stability map", unit="row", enabled=progress):
         for mu in mu_values:
             if not float(lam) > float(mu):
                 continue

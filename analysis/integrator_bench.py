@@ -289,16 +289,15 @@ def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
 
 def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
                       with_compile: bool = True) -> BenchReport:
-    from tqdm import tqdm
-
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
+    from flatbody_env.progress import progress_bar
 
     warm_up()  # compile time is measured separately (in fresh processes)
     deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
     from flatbody_env.scene import builtin_scenes
 
     total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS) + len(builtin_scenes())
-    bar = tqdm(total=total, desc="bench integrators", unit="task", disable=not progress)
+    bar = progress_bar(total=total, desc="bench integrators", unit="task", enabled=progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
     close = _close(1 if quick else repeats, max_run_s, bar, deltas)
     long_h = _long(bar, 1e3 if quick else 1e4)

@@ -223,11 +223,17 @@ def ladder_study(scenes=None, *, quick: bool = False, repeats: int = 3, max_run_
 def speedups(points, target: float = TARGET_ERROR) -> list[dict]:
     """Per scene and method: the cheapest run with error ≤ ``target`` (or the most accurate one), and the
     ratios of the cheapest full-model run (compiled or not) and of ``simulate``'s default method
-    (:data:`DEFAULT_METHOD`) reaching the same target to it."""
+    (:data:`DEFAULT_METHOD`) reaching the same target to it.
+
+    A ratio that cannot be computed is nan, and ``why_no_full`` / ``why_no_default`` say why (empty
+    when the ratio is a number): the row itself missed the target, no full model (or the default
+    method) reached it on the scene, or the default method was not run there (the horizon rows).
+    """
     out = []
     scenes = list(dict.fromkeys(p.scene for p in points))
     for sc in scenes:
         sub = [p for p in points if p.scene == sc and p.status == "ok"]
+        ran = {p.method for p in points if p.scene == sc}
         best = {}
         for method in dict.fromkeys(p.method for p in sub):
             pts = [p for p in sub if p.method == method]
@@ -237,12 +243,23 @@ def speedups(points, target: float = TARGET_ERROR) -> list[dict]:
         full_time = min((p.wall_time for p in full), default=math.nan)
         default = best.get(DEFAULT_METHOD)
         default_time = default[0].wall_time if default is not None and default[1] else math.nan
+        no_full = "" if full else f"no full model reached {target:g}"
+        if DEFAULT_METHOD not in ran:
+            no_default = "not run on this scene"
+        elif default is None or not default[1]:
+            cut = any(p.scene == sc and p.method == DEFAULT_METHOD and p.status == "skipped" for p in points)
+            no_default = f"it did not reach {target:g}" + (" within the time budget" if cut else "")
+        else:
+            no_default = ""
         for method, (p, reached) in best.items():
+            missed = f"this row did not reach {target:g}"
             out.append({
                 "scene": sc, "chosen": p.chosen, "rung": p.rung, "method": method, "setting": p.setting, "error": p.error,
                 "wall_time": p.wall_time, "reached_target": reached,
                 "speedup_vs_full": full_time / p.wall_time if reached else math.nan,
                 "speedup_vs_default": default_time / p.wall_time if reached else math.nan,
+                "why_no_full": "" if reached and full else (no_full or missed),
+                "why_no_default": "" if reached and not no_default else (no_default or missed),
             })
     return out
 

@@ -4,6 +4,7 @@
 (min of repeats) against final-state error for every rung that applies, the rung ``model="auto"``
 chooses drawn thick and named in the title, the reference's agreement floor as a grey band, failed
 runs as crosses on the right edge; an error of exactly 0 (the exact rungs against themselves) is drawn at 1e-16.
+A caption under the legend (:data:`CAPTION`) says what a rung, ``auto``, each model and the floor are.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 
 from analysis.integrator_plots import _plt, _save
 from analysis.ladder import read_csv
+from flatbody_env.chart_text import add_caption
 
 RUNG_STYLE = {
     "stationary": ("#2ca02c", "*"),
@@ -25,19 +27,33 @@ _DASHED = ("DOP853",)
 """Methods drawn dotted with open markers (scipy, ``simulate``'s default)."""
 _LABELS = {"DOP853": "two-polar (scipy DOP853, simulate's default)", "two-polar": "two-polar (DOP853-numba)", "regular": "regular (RATTLE-kahanli6)", "planar": "planar (2 small DOP853)",
            "planar-V1": "planar-V1 (exact in-plane)", "stationary": "stationary (exact)"}
+CAPTION = (
+    "Rung: one model of the same body, simplest first. stationary: the closed-form motion of a stationary ellipse; "
+    "planar-V1: closed form in the plane (potential V1) + compiled DOP853 for the thickness ϱ;\n"
+    "planar: two small systems (motion that stays in the plane), compiled DOP853; two-polar: the full model in two-polar "
+    "coordinates (compiled DOP853-numba; dotted: scipy DOP853, simulate's default method);\n"
+    "regular: the full model in the regular chart, RATTLE-kahanli6 (constrained symplectic, order 6). "
+    "auto: the rung simulate(model='auto') picks for the scene (drawn thick, named in each title).\n"
+    "Final-state error: max |y(T) - y_ref(T)| over the 11 state variables; grey band: below the scene's floor "
+    "(agreement of two independent references: smaller errors are not resolved). Wall time: min of repeats."
+)
+"""The ladder chart's caption: the jargon of its titles and legend."""
 
 
 def _horizon_panel(ax, rows) -> None:
-    """Wall time against t for the horizon rows (``"<scene> t=<T>"``)."""
-    for rung in ("stationary", "two-polar"):
+    """Wall time against t for the horizon rows (``"<scene> t=<T>"``); each point labelled with its final-state
+    error: the rising (time-stepper) curve above-left of its points, the flat one below its points."""
+    for rung, offset, ha, va in (("stationary", (0, -8), "center", "top"), ("two-polar", (-6, 4), "right", "bottom")):
         pts = sorted([r for r in rows if r["rung"] == rung and r["status"] == "ok"], key=lambda r: r["t_end"])
         if pts:
             color, marker = RUNG_STYLE[rung]
             ax.plot([r["t_end"] for r in pts], [r["wall_time"] for r in pts], marker=marker, color=color, lw=1.5)
             for r in pts:
-                ax.annotate(f"{r['error']:.0e}", (r["t_end"], r["wall_time"]), fontsize=6, xytext=(2, 2), textcoords="offset points")
+                ax.annotate(f"{r['error']:.0e}", (r["t_end"], r["wall_time"]), fontsize=7, xytext=offset,
+                            textcoords="offset points", ha=ha, va=va, color=color)
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.margins(x=0.15, y=0.12)
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("horizon t (labels: final-state error)")
     ax.set_title(f"{rows[0]['scene'].split(' t=')[0]}: cost against horizon", fontsize=9)
@@ -52,7 +68,7 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
     names = list(dict.fromkeys(r["scene"] for r in rows))
     ncol = 4
     nrow = math.ceil((len(names) + (1 if horizon else 0)) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.6 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.6 * nrow + 0.9), squeeze=False)
     seen = set()
     for k, name in enumerate(names):
         ax = axes[k // ncol, k % ncol]
@@ -92,10 +108,11 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
         names.append("horizon")
     for k in range(len(names), nrow * ncol):
         axes[k // ncol, k % ncol].axis("off")
-    fig.legend(loc="lower center", ncol=6, fontsize=9, frameon=False)
+    bottom = add_caption(fig, CAPTION, fontsize=8)
+    fig.legend(loc="lower center", ncol=6, fontsize=9, frameon=False, bbox_to_anchor=(0.5, bottom))
     fig.suptitle("A ladder of models: error against cost per rung (thick: the rung model='auto' picks; grey: below the "
                  "reference's agreement floor; x at the right: failed)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.04, 1, 0.96))
+    fig.tight_layout(rect=(0, bottom + 0.035, 1, 0.96))
     return _save(plt, fig, png_path)
 
 

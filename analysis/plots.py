@@ -3,7 +3,9 @@
 :func:`plot_family` reads a family CSV (:func:`analysis.families.write_family_csv`) and draws λ
 and μ against the varied parameter, each point coloured by its stability classification, with
 folds and stability changes marked; a second panel shows the largest real part of the
-eigenvalues (the growth rate of the unstable ones).
+eigenvalues (the growth rate of the unstable ones). :func:`plot_shape_map` draws a shape stability map.
+Each chart carries a caption (:data:`FAMILY_CAPTION`, :data:`SHAPE_MAP_CAPTION`) that says what branch N,
+the classifications and the energy–Casimir test are.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.families import read_family_csv
+from flatbody_env.chart_text import add_caption
 from flatbody_env.output import save_figure
 
 COLOURS = {"elliptic": "#1f77b4", "hyperbolic": "#d62728", "degenerate": "#7f7f7f"}
@@ -21,6 +24,25 @@ LABELS = {
     "hyperbolic": "hyperbolic (unstable)",
     "degenerate": "degenerate (inconclusive)",
 }
+
+FAMILY_CAPTION = (
+    "Branch N (the paper's stationary motions, eqs. 52-54; docs/physics.md §8): the ellipse turns rigidly about the plate's\n"
+    "normal with s1 = s2 = 0, ω1 = ω2 = 0, p_λ = p_μ = p_ϱ = 0 (isotropic J1 = J2); s3: spin about the normal, "
+    "p_θ: material momentum.\n"
+    "Elliptic: every eigenvalue of the linearisation on the imaginary axis (spectrally stable); hyperbolic: one with\n"
+    "positive real part (unstable; max Re(eigenvalue) is its growth rate). Fold: two stationary ellipses merge."
+)
+"""The family chart's caption: branch N, the classifications, the lower panel."""
+
+SHAPE_MAP_CAPTION = (
+    "energy-Casimir: the energy-Casimir test certifies nonlinear (Lyapunov) stability: the Hessian of H - a|s|² - b p_θ "
+    "restricted to\nfixed |s|² and p_θ is definite (filled squares); hollow: spectrally stable only (that form is indefinite or "
+    "the test does not apply).\n"
+    "Elliptic / hyperbolic: every eigenvalue of the linearisation on the imaginary axis / one with positive real part. "
+    "Each shape (stretches λ, μ)\nis stationary (branch N: turning about the plate's normal) for two pairs of spins: "
+    "rigid-like |s3| > |p_θ| (spin s3 dominates) and circulating |p_θ| > |s3|\n(material momentum p_θ dominates)."
+)
+"""The shape map's caption: energy–Casimir, the classifications, the two panels."""
 
 
 def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None = None) -> Path:
@@ -36,7 +58,7 @@ def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None
     if not points:
         raise ValueError(f"family: {csv_path} holds no points (no stationary ellipse in the range)")
     pname = points[0]["param_name"]
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7.5, 7.0), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(7.5, 8.0), sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
     branches = sorted({r["branch"] for r in points})
     seen: set[str] = set()
     for b in branches:
@@ -83,7 +105,8 @@ def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None
         fixed += [] if pname == "p_theta" else [f"p_θ = {first['p_theta']:g}"]
         title = f"Stationary ellipses (branch N) vs {pname}" + (f", {', '.join(fixed)}" if fixed else "")
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
+    bottom = add_caption(fig, FAMILY_CAPTION, fontsize=7)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     out = Path(png_path)
     save_figure(fig, out, dpi=110)
     plt.close(fig)
@@ -108,7 +131,7 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
         rows = list(csv.DictReader(fh))
     if not rows or "classification" not in rows[0]:
         raise ValueError(f"map: {path} holds no shape rows")
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5.5), sharey=True)
     for ax, kind in zip(axes, ("rigid", "circulating")):
         sel = [r for r in rows if r["kind"] == kind]
         for c, colour in COLOURS.items():
@@ -130,9 +153,10 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
         if l2 not in labels:
             handles.append(h2)
             labels.append(l2)
-    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3)
+    bottom = add_caption(fig, SHAPE_MAP_CAPTION, fontsize=7)
+    fig.legend(handles, labels, fontsize=8, loc="lower center", ncol=3, bbox_to_anchor=(0.5, bottom))
     fig.suptitle(title or "Stationary ellipses by shape: stability (inverse problem)", fontsize=11)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    fig.tight_layout(rect=(0, bottom + 0.08, 1, 1))
     out = Path(png_path)
     save_figure(fig, out, dpi=110)
     plt.close(fig)

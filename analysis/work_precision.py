@@ -183,9 +183,8 @@ def work_precision(
     horizon, predicts that (recorded with status ``"skipped"``). Failures are recorded with
     their kind.
     """
-    from tqdm import tqdm
-
     from flatbody_env.integrators.compiled_methods import warm_up
+    from flatbody_env.progress import progress_bar
 
     warm_up()  # load (or compile) the kernels before anything is timed
     horizons = QUICK_HORIZONS if quick else HORIZONS
@@ -197,7 +196,7 @@ def work_precision(
                 jobs.append((sc_name, m, s))
     points: list[WorkPrecisionPoint] = []
     refs: list[ReferenceInfo] = []
-    bar = tqdm(total=len(jobs), desc="work-precision", unit="run", disable=not progress)
+    bar = progress_bar(total=len(jobs), desc="work-precision", unit="run", enabled=progress)
     ref_cache: dict[str, tuple] = {}
     stopped: set[tuple[str, str]] = set()
     for sc_name, m, (kind, value) in jobs:

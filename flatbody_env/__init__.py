@@ -62,7 +62,7 @@ _register_when_gymnasium_is_imported()
 
 def __getattr__(name: str):
     """Lazy access to the environment classes (they import gymnasium)."""
-    if name in ("FlatBodyEnv", "FlatBodyVectorEnv"):
+    if name in ("FlatBodyEnv", "FlatBodyVectorEnv", "FlatBodyTorchVectorEnv"):
         import flatbody_env.env as env
 
         return getattr(env, name)
@@ -74,6 +74,7 @@ __all__ = [
     "Body",
     "CustomPotential",
     "FlatBodyEnv",
+    "FlatBodyTorchVectorEnv",
     "FlatBodyVectorEnv",
     "Inertia",
     "IntegrationError",

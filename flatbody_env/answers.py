@@ -118,14 +118,15 @@ def family_answer(body, vary: str, start: float, stop: float, **options) -> dict
     return family_run(body, vary, start, stop, **options)[1]
 
 
-def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot=None) -> dict:
-    """What ``flatbody stability-map --json`` prints: ``{"rows": [...]}`` (files written when asked)."""
+def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot=None, progress: bool = False) -> dict:
+    """What ``flatbody stability-map --json`` prints: ``{"rows": [...]}`` (files written when asked;
+    ``progress``: a bar over the grid's rows on stderr)."""
     import numpy as np
 
     from analysis.families import shape_stability_grid, write_table_csv
 
     (lo_l, hi_l), (lo_m, hi_m) = lam_range, mu_range
-    rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, grid), np.linspace(lo_m, hi_m, grid))
+    rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, grid), np.linspace(lo_m, hi_m, grid), progress=progress)
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
     if out is not None:

@@ -26,13 +26,13 @@ import numpy as np
 
 from flatbody_env.integrators import DEFAULT_MAX_NFEV, Tolerances, get_method
 from flatbody_env.integrators.base import check_step
+from flatbody_env.integrators.specs import BATCH_METHODS, BY_NAME
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE
 from flatbody_env.simulation import FIXED_STEP_ENERGY_TOL
 
 DEVICES = ("cpu", "cuda")
-BATCH_METHODS = ("RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4", "DOP853-numba")
 """Methods with batch kernels (the compiled two-polar methods)."""
 MAX_BODIES = 1 << 24
 """Most bodies in one call."""
@@ -216,16 +216,17 @@ def simulate_batch(
     from flatbody_env.integrators.compiled_methods import _check_compiled_body, _check_fixed_budget, kernel_params
 
     _check_compiled_body(body, method)
-    kind, coeffs = bs.KIND[method]
-    if kind == bs.SPLIT_KIND and not body.inertia.is_isotropic:
+    spec = BY_NAME[method]
+    kind, coeffs = spec.code, spec.coeffs
+    if spec.kind == "split" and not body.inertia.is_isotropic:
         raise ValueError(f"body: {method} (Poisson splitting) needs J1 = J2; use RK4 or DOP853-numba")
-    if kind != bs.DOP853_KIND:
-        _check_fixed_budget(method, grid, h, 4 if kind == bs.RK4_KIND else coeffs.size, tol)
+    if not spec.info.adaptive:
+        _check_fixed_budget(method, grid, h, spec.stages, tol)
     P = kernel_params(body)
     if energy_tol is None:
         H0 = np.empty(n)
         bs.batch_energy(Y0, P, H0)
-        scale = FIXED_STEP_ENERGY_TOL if kind != bs.DOP853_KIND else max(1e-8, 1e4 * max(tol.rtol, tol.atol))
+        scale = FIXED_STEP_ENERGY_TOL if not spec.info.adaptive else max(1e-8, 1e4 * max(tol.rtol, tol.atol))
         etol = scale * np.maximum(1.0, np.abs(H0))
     else:
         etol = np.full(n, tol.energy_tol)

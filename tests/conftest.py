@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -16,6 +20,13 @@ def _custom() -> CustomPotential:
         gradient=lambda l, m, r: (l - 0.3 / (l * l * m) + 0.2 * m * r * r, m - 0.3 / (l * m * m) + 0.2 * l * r * r, 0.4 * l * m * r),
         label="test-custom",
     )
+
+
+# Commands the tests start (rerun, dask, flatbody) come from the environment that runs the tests, as in
+# an activated virtual environment: README's test command runs .venv/bin/python without activating it.
+_SCRIPTS = str(Path(sys.executable).parent)
+if _SCRIPTS not in os.environ.get("PATH", "").split(os.pathsep):
+    os.environ["PATH"] = _SCRIPTS + os.pathsep + os.environ.get("PATH", "")
 
 
 BODIES = {

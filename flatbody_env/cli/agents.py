@@ -14,7 +14,25 @@ from flatbody_env.cli.args import int_at_least
 
 
 
+def _train_rsl(args) -> int:
+    """``train --algo rsl-ppo``: rsl_rl's PPO on the torch vector env (agents/rsl.py)."""
+    from agents.rsl import ALGO, train_rsl
+
+    if args.study is not None or args.resume or args.hyperparams_file:
+        raise ValueError("--algo rsl-ppo: --study, --resume and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)")
+    command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
+    result = train_rsl(args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}", seed=args.seed, n_timesteps=args.n_timesteps,
+                       n_envs=args.n_envs, device=args.device, overrides=args.hyperparams or [], env_id=args.env, threads=args.threads,
+                       progress=not args.no_progress, command=command, force=args.force)
+    print(f"trained {ALGO} for {result.timesteps} steps in {result.wall_time_s:.0f} s; saved in {result.out}")
+    return 0
+
+
 def _train(args) -> int:
+    if args.algo == "rsl-ppo":
+        return _train_rsl(args)
+    if args.device != "cpu":
+        raise ValueError("--device: only rsl-ppo trains on another device than the CPU")
     from agents.train import train
 
     if args.study is not None:  # retrain a tuned trial: its hyperparameters become overrides
@@ -46,6 +64,7 @@ def _train(args) -> int:
         threads=args.threads,
         progress=not args.no_progress,
         command=command,
+        force=args.force,
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
     print(f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}")
@@ -55,6 +74,8 @@ def _train(args) -> int:
 def _evaluate(args) -> int:
     from agents.evaluate import evaluate_all, format_table
 
+    if args.env is not None or args.out_dir or args.docs:
+        return _evaluate_tasks(args)
     report = evaluate_all(
         args.model,
         episodes=args.episodes,
@@ -74,10 +95,55 @@ def _evaluate(args) -> int:
     return 0
 
 
+def _evaluate_tasks(args) -> int:
+    """``evaluate --env ID|all``: the reference report of each task (agents.reference), saved with --out-dir, the docs block with --docs."""
+    from agents.evaluate import evaluate_task, format_table
+    from agents.reference import REFERENCE_DIR, save_report, update_docs
+    from flatbody_env.env.registration import TASK_IDS, task_spec
+
+    if args.env is None and not args.out_dir:  # --docs alone: the table from the saved reports, no evaluation
+        update_docs(args.docs, REFERENCE_DIR)
+        print(f"updated the table in {args.docs} from {REFERENCE_DIR}")
+        return 0
+    ids = TASK_IDS if args.env == "all" else (task_spec(args.env or "FlatBody-v0").env_id,)
+    if args.model is not None and len(ids) > 1:
+        raise ValueError("--env: give one task id with MODEL (all evaluates the shipped agents)")
+    reports = []
+    for env_id in ids:
+        report = evaluate_task(env_id, episodes=args.episodes, seed=args.seed, model=args.model, baselines=not args.no_baselines,
+                               progress=not args.json, backend=args.backend)
+        reports.append(report)
+        if args.out_dir:
+            print(f"wrote {save_report(report, args.out_dir)}", file=sys.stderr)
+    if args.docs:
+        update_docs(args.docs, args.out_dir or REFERENCE_DIR)
+        print(f"updated the table in {args.docs}", file=sys.stderr)
+    if args.out:
+        from flatbody_env.output import atomic_write
+
+        atomic_write(args.out, json.dumps(reports[0] if len(reports) == 1 else reports, indent=2) + "\n")
+    if args.json:
+        brief = [{k: v for k, v in r.items() if k not in ("policies", "targets")} for r in reports]
+        print(json.dumps(brief[0] if len(brief) == 1 else brief, indent=2))
+    else:
+        print("\n\n".join(format_table(r) for r in reports))
+    return 0
+
+
 def _demo(args) -> int:
+    import shlex
+
     from agents.demo import run_demo
 
-    return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend)
+    if args.docs:  # checked before the episode runs
+        from flatbody_env.output import check_output_path
+
+        if not check_output_path("--docs", args.docs, (".md",)).is_file():
+            raise ValueError(f"--docs: {args.docs[:60]!r} does not exist (a Markdown page with <!-- demo:transcript --> markers)")
+    # the transcript's command line: the options given, less --docs
+    given = [("--model", args.model, None), ("--seed", args.seed, 7), ("--out", args.out, "demo.rrd"), ("--backend", args.backend, "auto")]
+    command = shlex.join(["flatbody", "demo", *(x for flag, value, default in given if value != default for x in (flag, str(value)))])
+    return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend, docs=args.docs or None, command=command)
 
 
 def _export_policy(args) -> int:
@@ -103,19 +169,21 @@ def _lqr_table(args) -> int:
 def register(sub) -> None:
     from agents.train import ALGOS, ENV_ID
 
-    p = sub.add_parser("train", help="train an SB3 agent (PPO or SAC) on FlatBody-v0 with the YAML hyperparameters")
-    p.add_argument("--algo", choices=ALGOS, help="algorithm (required unless --study)")
+    p = sub.add_parser("train", help="train an agent (SB3 PPO or SAC, or rsl_rl's PPO: rsl-ppo) on FlatBody-v0")
+    p.add_argument("--algo", choices=(*ALGOS, "rsl-ppo"), help="algorithm (required unless --study); rsl-ppo: rsl_rl's PPO on the torch vector env")
     p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
     p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="random seed (default 0)")
     p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
-    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--n-envs", "--num-envs", dest="n_envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
+    p.add_argument("--force", action="store_true", help="train into DIR even if it holds a run or is the shipped agent (overwrites it)")
     p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
     p.add_argument("--threads", type=int_at_least("threads", 1), default=1, help="torch threads (default 1)")
+    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of env and policy (rsl-ppo; default cpu)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--study", metavar="NAME", help="retrain a trial of this Optuna study ('flatbody tune') with its hyperparameters")
     p.add_argument("--trial-id", type=int_at_least("trial_id", 0), default=None, metavar="K", help="with --study: the trial number")
@@ -131,6 +199,11 @@ def register(sub) -> None:
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
     p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
                    help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
+    p.add_argument("--env", default=None, metavar="ID",
+                   help="task id (docs/tasks.md) or 'all': the baselines, the task's shipped agents (agents/models/ALGO-ID/) and target features")
+    p.add_argument("--out-dir", default="", metavar="DIR", help="with --env: save each task's report as DIR/ID.json (the reference table)")
+    p.add_argument("--docs", default="", metavar="FILE.md",
+                   help="regenerate the table between <!-- bench:tasks --> markers in FILE.md from the saved reports (--out-dir, default the shipped ones)")
     p.set_defaults(handler=_evaluate)
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
@@ -139,6 +212,8 @@ def register(sub) -> None:
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
                    help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
+    p.add_argument("--docs", default="", metavar="FILE.md",
+                   help="also regenerate the transcript between <!-- demo:transcript --> markers in FILE.md")
     p.set_defaults(handler=_demo)
     p = sub.add_parser("lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)")
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")

@@ -11,7 +11,6 @@ Bad input → exit code 2 with one line (a ``ValueError`` naming the flag and th
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 from flatbody_env.answers import ellipses_answer, family_run, invariants_run, solutions, stability_answer, stability_map_answer
@@ -148,7 +147,7 @@ def _stability(args) -> int:
 def _family(args) -> int:
     body, s3, pt = resolve_body(args, need_spins=False)
     fam, answer = family_run(body, args.vary, args.start, args.stop, s3=s3, p_theta=pt, seeds=args.seeds, box=_box(args),
-                              step=args.step, out=args.out, plot=args.plot, progress=sys.stderr.isatty())
+                              step=args.step, out=args.out, plot=args.plot, progress=True)
     start, stop, s3, pt, out, npts = answer["range"][0], answer["range"][1], answer["s3"], answer["p_theta"], answer["csv"], answer["points"]
     if args.json:
         print(json.dumps(answer))
@@ -176,7 +175,7 @@ def _stability_map(args) -> int:
     out = args.out
     if out is None and args.plot is not None:
         out = str(check_output_path("--out", Path(args.plot).with_suffix(".csv"), (".csv",)))
-    rows = stability_map_answer(body, args.lam_range, args.mu_range, args.grid, out=out, plot=args.plot)["rows"]
+    rows = stability_map_answer(body, args.lam_range, args.mu_range, args.grid, out=out, plot=args.plot, progress=True)["rows"]
     if args.json:
         print(json.dumps({"rows": rows}))
         return 0

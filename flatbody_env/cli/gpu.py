@@ -22,7 +22,7 @@ def _sizes(text: str) -> list[int]:
 def _methods(text: str) -> list[str]:
     import argparse
 
-    allowed = ("RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4", "DOP853-numba")
+    from flatbody_env.integrators.specs import GPU_METHODS as allowed
     names = [p.strip() for p in text.split(",") if p.strip()]
     bad = [m for m in names if m not in allowed]
     if not names or bad:

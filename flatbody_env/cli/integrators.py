@@ -6,6 +6,9 @@
 * ``flatbody chart --ladder [--quick] [--scenes ...] [--out DIR]`` — the model ladder
   (:mod:`analysis.ladder`): every built-in scene's rung and error against cost per rung →
   ``DIR/ladder.csv``, ``ladder_scenes.csv``, ``ladder.png``.
+* ``flatbody chart --tasks [--from DIR] [--out DIR]`` — the tasks' reference chart
+  (:mod:`agents.reference_chart`): success against the target's settling rate and growth rate, drawn
+  from the saved task reports (``flatbody evaluate --env all --out-dir DIR``) → ``DIR/tasks_success.png``.
 * ``flatbody failure-study [--quick] [--studies gap rho horizon] [--out DIR]`` —
   :mod:`analysis.failure_study` → ``DIR/failure_study.csv``, ``failure_study.png``.
 * ``flatbody bench integrators [--quick] [--no-compile] [--out DIR]`` —
@@ -18,6 +21,7 @@ Every command can redraw its PNG from the saved tables with ``--plot-only``.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from flatbody_env.answers import failure_rows
@@ -41,6 +45,11 @@ def _budget(args) -> float:
     return 1.0 if args.quick else 5.0
 
 
+def _ratio(value: float, against: str, why: str) -> str:
+    """``x12.3 vs AGAINST``, or ``vs AGAINST n/a (WHY)`` when the ratio was not measured."""
+    return f"x{value:.3g} vs {against}" if math.isfinite(value) else f"vs {against} n/a ({why or 'not measured'})"
+
+
 def _ladder(args) -> int:
     from analysis.ladder import ladder_study, speedups, write_csv, write_scenes
     from analysis.ladder_plots import plot_ladder
@@ -52,9 +61,11 @@ def _ladder(args) -> int:
         write_csv(points, csv_path)
         write_scenes(records, scenes_path)
         for r in records:
-            print(f"{r.scene:<20} auto -> {r.chosen:<10} (reference {r.reference}; floor {r.floor:.1e})")
+            floor = f"floor {r.floor:.1e}" if math.isfinite(r.floor) else f"floor n/a ({r.cross_check or 'no cross-check'})"
+            print(f"{r.scene:<20} auto -> {r.chosen:<10} (reference {r.reference}; {floor})")
         for s in speedups(points):
-            txt = (f"x{s['speedup_vs_full']:.3g} vs the cheapest full model, x{s['speedup_vs_default']:.3g} vs scipy DOP853"
+            txt = (f"{_ratio(s['speedup_vs_full'], 'the cheapest full model', s['why_no_full'])}, "
+                   f"{_ratio(s['speedup_vs_default'], 'scipy DOP853', s['why_no_default'])}"
                    if s["reached_target"] else "error target not reached")
             print(f"  {s['scene']:<26} {s['rung']:<10} {s['method']:<17} {s['setting']:<11} error {s['error']:.1e} "
                   f"in {s['wall_time'] * 1e3:.3f} ms: {txt}")
@@ -66,6 +77,13 @@ def _ladder(args) -> int:
 
 
 def _chart(args) -> int:
+    if args.tasks:  # the tasks' reference chart (agents.reference_chart), from the saved reports
+        from agents.reference import REFERENCE_DIR
+        from agents.reference_chart import plot_task_success
+
+        png = plot_task_success(Path(args.out) / "tasks_success.png", args.reports or REFERENCE_DIR)
+        print(f"wrote {png}")
+        return 0
     if args.ladder:
         return _ladder(args)
     from analysis.integrator_plots import plot_work_precision
@@ -94,7 +112,7 @@ def _chart(args) -> int:
 
 
 def _failure(args) -> int:
-    from analysis.failure_study import DEFAULT_METHODS, STUDIES, failure_study
+    from analysis.failure_study import DEFAULT_METHODS, STUDIES, failure_study, planned_runs
     from analysis.integrator_plots import plot_failure_study
     from analysis.work_precision import write_records
 
@@ -114,7 +132,9 @@ def _failure(args) -> int:
             plot_failure_study(csv_path, png_path)
             return 0
         fails = [p for p in points if p.status != "ok"]
-        print(f"{len(points)} runs, {len(fails)} detected failures:")
+        planned = planned_runs(studies, methods, quick=args.quick)
+        skipped = f" ({planned - len(points)} skipped: over the {_budget(args):g} s budget per run, --max-run-s)" if planned > len(points) else ""
+        print(f"{len(points)} of {planned} runs{skipped}, {len(fails)} detected failures:")
         seen = set()
         for p in fails:
             key = (p.study, p.method)
@@ -201,6 +221,11 @@ def register(sub) -> None:
     p.add_argument("--scenes", nargs="+", metavar="SCENE", help="regular close-approach small-rho-bounce long-horizon (default all; "
                    "with --ladder: any built-in scene, default all)")
     p.add_argument("--ladder", action="store_true", help="the model ladder: each scene's rung, error vs cost per rung (ladder.csv, ladder.png)")
+    p.add_argument("--tasks", action="store_true",
+                   help="the tasks' reference chart: success against the target's settling rate and growth rate (tasks_success.png), "
+                        "drawn from the saved task reports")
+    p.add_argument("--from", dest="reports", default="", metavar="DIR",
+                   help="with --tasks: the folder of saved task reports (default: the shipped ones, agents/data/reference)")
     p.set_defaults(handler=_chart)
 
     p = sub.add_parser("failure-study", help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon")

@@ -48,15 +48,26 @@ def build_parser() -> Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from flatbody_env.integrators import IntegrationError
+    """Run one ``flatbody`` command; returns its exit code.
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "handler", None) is None:
-        parser.print_help()
-        return 2
+    Every command is dispatched here, so this is where an error becomes one line on stderr and an
+    exit code (module docstring), and where Ctrl-C ends any command: ``flatbody: interrupted`` (with
+    what was kept, when the command says so) and exit code 130, no traceback. Commands keep their
+    partial results themselves (a sweep's stored rows, training's checkpoint).
+    """
     try:
+        from flatbody_env.integrators import IntegrationError
+
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if getattr(args, "handler", None) is None:
+            parser.print_help()
+            return 2
         return int(args.handler(args) or 0)
+    except KeyboardInterrupt as exc:
+        detail = _one_line(exc)
+        sys.stderr.write(f"flatbody: interrupted{f' ({detail})' if detail else ''}\n")
+        return 130
     except IntegrationError as exc:
         sys.stderr.write(f"flatbody: {_one_line(exc)}\n")
         return 1
@@ -69,9 +80,6 @@ def main(argv: list[str] | None = None) -> int:
         where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
         sys.stderr.write(f"flatbody: I/O error{where}: {_one_line(exc.strerror or exc)}\n")
         return 1
-    except KeyboardInterrupt:
-        sys.stderr.write("flatbody: interrupted\n")
-        return 130
 
 
 def _one_line(exc) -> str:

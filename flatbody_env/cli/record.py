@@ -73,15 +73,11 @@ def _record_agent(args) -> int:
     the env recorder (the same path as ``flatbody demo`` and ``flatbody record-env``)."""
     if args.scene_file or args.scene:
         raise ValueError("agent: --agent records an environment episode; give no scene")
-    from flatbody_env.recording.process import helper_recorder
+    from agents.demo import format_demo, rollout
+    from agents.evaluate import Agent
 
-    with helper_recorder(True) as helper:  # rerun imported beside the agent's loading, as in flatbody demo
-        from agents.demo import format_demo, rollout
-        from agents.evaluate import Agent
-
-        agent = Agent(args.agent or None)
-        ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})",
-                     recorder=helper)
+    agent = Agent(args.agent or None)
+    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
     print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
     if args.verify:
@@ -111,8 +107,8 @@ def _make_env(env_id: str, max_steps: int | None):
 
 def _record_env(args) -> int:
     import numpy as np
-    from tqdm import tqdm
 
+    from flatbody_env.progress import progress_bar
     from flatbody_env.recording.reader import verify_recording
     from flatbody_env.recording.wrapper import RerunRecorder
 
@@ -127,7 +123,7 @@ def _record_env(args) -> int:
         for ep in range(args.episodes):
             env.reset(seed=args.seed + ep)
             done = False
-            with tqdm(desc=f"episode {ep}", unit="step", disable=not sys.stderr.isatty(), leave=False) as bar:
+            with progress_bar(desc=f"episode {ep}", unit="step", leave=False) as bar:
                 while not done:
                     action = zero if args.policy == "zero" else space.sample()
                     _, _, terminated, truncated, _ = env.step(action)
@@ -411,8 +407,19 @@ def _frame_bench(scene, frames: int) -> dict:
     }
 
 
+RECORDING_CAPTION = (
+    "record_trajectory: a whole simulated trajectory written at once (rerun's send_columns: one call per series);\n"
+    "live Recorder.append: the same steps logged while they are simulated, in blocks. .rrd: rerun's recording file.\n"
+    "Points: median of {repeats} repeats; error bars: the fastest and the slowest. Steps: time samples of the trajectory."
+)
+"""The recording benchmark chart's caption (``{repeats}`` filled in)."""
+
+
 def _bench_chart(result: dict, path: Path) -> None:
+    """The chart of ``recording.json``'s ``result`` (drawn from the saved table, never from a fresh run)."""
     import matplotlib
+
+    from flatbody_env.chart_text import add_caption
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -421,7 +428,7 @@ def _bench_chart(result: dict, path: Path) -> None:
     med = [r["median_s"] for r in result["sizes"]]
     lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
     hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6, 4.7))
     ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
     if result.get("live"):
         lv = result["live"]
@@ -434,7 +441,8 @@ def _bench_chart(result: dict, path: Path) -> None:
     ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    bottom = add_caption(fig, RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
 

@@ -41,8 +41,38 @@ def _serve(args) -> int:
               "there is no authentication built in (put it behind a reverse proxy to share it)", file=sys.stderr)
     print(f"flatbody serve: {where} (page), {where}docs (API); data in {args.data_dir}; {args.workers} worker process(es)",
           file=sys.stderr)
-    uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+    interrupted = _serve_until_stopped(lambda: uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level))
+    if interrupted:
+        raise KeyboardInterrupt  # stopped by Ctrl-C: 'flatbody: interrupted', exit code 130
     return 0
+
+
+def _serve_until_stopped(run) -> bool:
+    """Call ``run()`` (uvicorn, which stops cleanly on SIGINT and swallows it); True when a Ctrl-C stopped it.
+
+    uvicorn restores the SIGINT handler it found and raises the signal again once the server is
+    down: the handler installed here notes it (and raises KeyboardInterrupt as Python's does).
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        run()
+        return False
+    seen: list[int] = []
+
+    def on_sigint(signum, frame):
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+    try:
+        run()
+    except KeyboardInterrupt:
+        seen.append(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    return bool(seen)
 
 
 def _bench(args) -> int:

@@ -26,7 +26,7 @@ def _run(args, spec) -> int:
     from flatbody_env.sweep.runner import run_sweep
 
     report = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                       progress=not args.no_progress and sys.stderr.isatty())
+                       progress=not args.no_progress)
     _write_table(spec, report, Path(args.out), getattr(args, "plot", None))
     if args.json:
         print(json.dumps(as_json(report)))
@@ -189,12 +189,19 @@ def _tune(args) -> int:
     if args.workers <= 1 and args.scheduler is None:
         tune_worker(cfg)
     elif left > 0:
+        from distributed import as_completed
+
         from flatbody_env.sweep.cluster import dask_client
 
         with dask_client(workers=args.workers, scheduler=args.scheduler) as client:
             n = args.workers if args.scheduler is None else max(1, len(client.scheduler_info()["workers"]))
             futures = [client.submit(tune_worker, cfg, i, k, pure=False) for i, k in enumerate(shares(left, n))]
-            client.gather(futures)
+            try:
+                for fut in as_completed(futures):  # not client.gather: a Ctrl-C there leaves Dask's tasks to print tracebacks
+                    fut.result()
+            finally:
+                for fut in futures:
+                    fut.cancel()
     rep = summary(cfg.study, cfg.storage)
     if args.json:
         print(json.dumps(rep))

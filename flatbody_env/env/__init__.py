@@ -1,6 +1,6 @@
-"""The Gymnasium environment ``FlatBody-v0``: body + integrator + task.
+"""The Gymnasium environment ``FlatBody-v0`` and the other tasks of ``docs/tasks.md``: body + integrator + task.
 
-Importing this package registers ``FlatBody-v0`` with Gymnasium.
+Importing this package registers every task id with Gymnasium (:mod:`flatbody_env.env.registration`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,11 @@ def __getattr__(name: str):
         from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
         return FlatBodyVectorEnv
+    if name == "FlatBodyTorchVectorEnv":  # imports torch
+        from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv
+
+        return FlatBodyTorchVectorEnv
     raise AttributeError(f"module 'flatbody_env.env' has no attribute {name!r}")
 
 
-__all__ = ["ENV_ID", "FlatBodyEnv", "FlatBodyVectorEnv", "MAX_EPISODE_STEPS", "register_envs"]
+__all__ = ["ENV_ID", "FlatBodyEnv", "FlatBodyTorchVectorEnv", "FlatBodyVectorEnv", "MAX_EPISODE_STEPS", "register_envs"]

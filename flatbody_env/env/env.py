@@ -21,9 +21,10 @@ import numpy as np
 from gymnasium import spaces
 
 from flatbody_env.env import kernels as python_kernels
+from flatbody_env.env.registration import TASK_CLASSES
 from flatbody_env.env.task import (
-    CONTROLS, OBSERVATION_NAMES, OBSERVATION_SIZE, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse, control_mask, domain_code,
-    target_vector,
+    CONTROLS, OBSERVATION_NAMES, OBSERVATION_SIZE, REWARD_TERMS, TARGET_NAMES, Episode, ReachStationaryEllipse, control_mask, domain_code,
+    target_row,
 )
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.integrators.steppers import make_env_step
@@ -141,19 +142,24 @@ class FlatBodyEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("FlatBody-v0", control="torque+dilatation", body=None, dt=0.05, integrator=...,
+    ``gym.make("FlatBody-v0", control="torque+dilatation", task="reach", body=None, dt=0.05, integrator=...,
     rtol=1e-11, atol=1e-11, step=None, torque_limit=0.5, force_limit=1.0, render_mode=None,
     track_rotation=False, stretch_bounds=(0.2, 4.0), rho_bounds=(0.1, 4.0), momentum_bound=50.0,
     gap_min=1e-3, **task_kwargs)`` where ``body`` is a :class:`~flatbody_env.physics.body.Body` or a scene-like
     dict ``{"params", "potential", "thickness"}`` (default: J = J3 = 1, V3 with κ = 1 and V_ϱ with
-    a = b = 1 — barriers against every collapse, erratum E10 of [2]) and ``task_kwargs`` are the weights and
-    ranges of :class:`~flatbody_env.env.task.ReachStationaryEllipse`. ``integrator`` is any name of
+    a = b = 1 — barriers against every collapse, erratum E10 of [2]), ``task`` names the task
+    (:data:`~flatbody_env.env.registration.TASK_CLASSES`: ``"reach"`` — this docstring's —, ``"hold-unstable"``,
+    ``"reach-witnessed"``, ``"any-body"``; ``docs/tasks.md``) or is a task instance, and ``task_kwargs`` are the
+    weights and ranges of the task (:class:`~flatbody_env.env.task.ReachStationaryEllipse` and its subclasses).
+    The other registered ids (``FlatBodySlow-v0``, ``FlatBodyHoldUnstable-v0``, ``FlatBodyTorque-v0``,
+    ``FlatBodyDilatation-v0``, ``FlatBodyAnyBody-v0``) are this class with another task; a task may add reward
+    terms, end episodes of its own accord and append observation entries (:attr:`observation_size`). ``integrator`` is any name of
     ``flatbody methods``; the default :data:`DEFAULT_INTEGRATOR` is the fastest method measured to keep
     the episode state error ≤ 1e-8 (``docs/env.md``).
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version (unchanged when the other tasks were added: same draws, numbers bit for bit).
 
     References
     ----------
@@ -167,6 +173,7 @@ class FlatBodyEnv(gym.Env):
     def __init__(
         self,
         control: str = "torque+dilatation",
+        task: str | ReachStationaryEllipse = "reach",
         body: Body | Mapping[str, Any] | None = None,
         dt: float = 0.05,
         integrator: str = DEFAULT_INTEGRATOR,
@@ -185,6 +192,9 @@ class FlatBodyEnv(gym.Env):
     ) -> None:
         self.mask = control_mask(control)
         self.control = control
+        self.task = _as_task(task, task_kwargs)
+        if self.task.varies_body and body is not None:
+            raise ValueError("body: this task draws its own body at every reset (leave body unset)")
         self.body = _as_body(body)
         self.custom_potential = self.body.potential if getattr(self.body.potential, "kind", None) == KIND_CUSTOM else None
         """The body's custom (Python) potential, whose part of H the bookkeeping kernels leave out
@@ -217,7 +227,6 @@ class FlatBodyEnv(gym.Env):
                 raise
             # methods that do not carry R: drawing/recording integrates with the reference (info names it)
             self.stepper = make_env_step(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol), with_rotation=True)
-        self.task = ReachStationaryEllipse(**task_kwargs)
         self.limits = np.array([torque_limit, torque_limit, torque_limit, force_limit])
         self.stretch_bounds = (float(stretch_bounds[0]), float(stretch_bounds[1]))
         self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
@@ -231,9 +240,17 @@ class FlatBodyEnv(gym.Env):
         n_act = int(self.mask.sum()) or 1
         self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
         m, (slo, shi), (rlo, rhi) = self.momentum_bound, self.stretch_bounds, self.rho_bounds
-        low = np.array([-m] * 7 + [slo, slo, rlo, -1.0, -1.0, slo, slo, rlo, -m], dtype=np.float32)
-        high = np.array([m] * 7 + [shi, shi, rhi, 1.0, 1.0, shi, shi, rhi, m], dtype=np.float32)
+        xlo, xhi = self.task.observation_extra_bounds()
+        low = np.array([-m] * 7 + [slo, slo, rlo, -1.0, -1.0, slo, slo, rlo, -m, *xlo], dtype=np.float32)
+        high = np.array([m] * 7 + [shi, shi, rhi, 1.0, 1.0, shi, shi, rhi, m, *xhi], dtype=np.float32)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.observation_size = OBSERVATION_SIZE + len(self.task.observation_extra_names)
+        """Entries of the observation: the 16 of :data:`~flatbody_env.env.task.OBSERVATION_NAMES` and the task's own."""
+        self.reward_names = self.task.reward_names
+        """The names of ``info["reward_terms"]`` (the task's)."""
+        self._own_terms = bool(self.task.extra_reward_names)
+        self._obs_extra = self.task.observation_extra(self.body).astype(np.float32)
+        self._witness: np.ndarray | None = None
 
         # work arrays of the one step path
         self._a = np.zeros(n_act)
@@ -241,7 +258,7 @@ class FlatBodyEnv(gym.Env):
         self._views()
         self._ynew = np.empty(STATE_SIZE)
         self._yout = np.empty(STATE_SIZE)
-        self._terms = np.empty(len(REWARD_TERMS))
+        self._terms = np.empty(len(self.reward_names))
         self._sc = np.empty(4)
         self._vel = np.empty(7)
         self._force = np.empty(4)
@@ -273,6 +290,12 @@ class FlatBodyEnv(gym.Env):
         return None if self._R is None else self._R.copy()
 
     @property
+    def witness(self) -> np.ndarray | None:
+        """The current episode's witness — actions (steps, n) that take the start into the success ball at the
+        last step — for tasks that draw one (:class:`~flatbody_env.env.witness.ReachWithWitness`); else None."""
+        return None if self._witness is None else self._witness.copy()
+
+    @property
     def sampler(self):
         """The :class:`~flatbody_env.env.sampling.EpisodeSampler` of this configuration (compiled when the
         stepper is), which draws a reset's target and initial state without Python per draw."""
@@ -288,7 +311,7 @@ class FlatBodyEnv(gym.Env):
         """The target stationary ellipse: lambda, mu, rho, s3, p_theta, omega3, theta_dot, energy."""
         if self._target is None and self._target_shape is not None:
             lam, mu, sign = self._target_shape
-            self._target = stationary_from_shape(self.body, lam, mu, branch="circulation", sign=sign)
+            self._target = stationary_from_shape(self.body, lam, mu, branch=self.task.target_branch, sign=sign)
         t = self._target
         if t is None:
             return {}
@@ -328,23 +351,82 @@ class FlatBodyEnv(gym.Env):
     # --- gymnasium API ---------------------------------------------------------------------------------
     def sample_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None = None) -> tuple[np.ndarray, StationaryEllipse]:
         """The initial state y (11,) and the target that :meth:`reset` draws from ``rng`` with ``options``
-        (the env itself is not changed; ``rng`` advances exactly as in ``reset``)."""
+        (the env itself is not changed; ``rng`` advances exactly as in ``reset``). :meth:`draw_episodes`
+        gives the task's whole draw (body and witness included)."""
+        ep = self.draw_episodes([rng], options)[0]
+        target = ep.ellipse
+        if target is None:
+            body = ep.body or self.body
+            target = stationary_from_shape(body, float(ep.target[0]), float(ep.target[1]), branch=self.task.target_branch,
+                                           sign=float(ep.target[5]))
+        return ep.state, target
+
+    def draw_episodes(self, rngs, options: Mapping[str, Any] | None = None) -> list[Episode]:
+        """What :meth:`reset` draws for each generator in ``rngs`` with ``options`` — the task's draws
+        (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.draw_batch`; each generator advances exactly as
+        in a reset of its own), or the target and state the options give. The env itself is not changed."""
         options = _checked_options(options)
+        if not options:
+            episodes = self.task.draw_batch(list(rngs), self.body, limits=self.limits, control=self.control, simulator=self)
+        else:
+            episodes = [self._draw_with_options(rng, options) for rng in rngs]
+        for ep in episodes:
+            self.check_start(ep.state, "options.state" if "state" in options else "initial_noise")
+        return episodes
+
+    def _draw_with_options(self, rng: np.random.Generator, options: Mapping[str, Any]) -> Episode:
+        """The target and/or state that ``options`` give; what they do not give is drawn by the task for the env's
+        current body (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target`,
+        :meth:`~flatbody_env.env.task.ReachStationaryEllipse.start_near`), without a witness."""
         if "target" in options:
             target = self.task.target_from(options["target"], self.body)
         else:
             target = self.task.sample_target(rng, self.body, limits=self.limits, control=self.control)
         if "state" in options:
-            state = options["state"]
             try:
-                validate_state(state, where="options.state")
+                validate_state(options["state"], where="options.state")
             except ValueError as exc:
                 raise ValueError(str(exc)) from None
-            y = pack(state, validate=False)
+            y = pack(options["state"], validate=False)
         else:
-            y = self.task.sample_initial_state(rng, target, self.control)
-        self.check_start(y, "options.state" if "state" in options else "initial_noise")
-        return y, target
+            y = self.task.start_near(rng, target, self.control, body=self.body)
+        return Episode(state=y, target=target_row(target), ellipse=target)
+
+    def rollout(self, Y: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance N bodies from the states ``Y`` (11, N) under the normalised actions ``actions`` (steps, N, n)
+        with this env's integrator and body; returns the final states (11, N) and whether each body stayed
+        inside the domain without an integrator failure (N,) bool (a failed body keeps its last valid state).
+        The task's simulations at reset use it (:class:`~flatbody_env.env.witness.ReachWithWitness`)."""
+        from flatbody_env.env import task as task_module
+
+        Y = np.array(Y, dtype=np.float64, order="C")
+        n = Y.shape[1]
+        actions = np.asarray(actions, dtype=np.float64)
+        if actions.ndim != 3 or actions.shape[1] != n or actions.shape[2] != self._a.size:
+            raise ValueError(f"actions: expected shape (steps, {n}, {self._a.size}), got {actions.shape}")
+        codes_of = self.kernels.domain_codes if self.stepper.compiled else task_module.domain_codes
+        out, status, nfev, codes = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+        U, A = np.empty((4, n)), np.empty((n, self._a.size))
+        ok = np.ones(n, dtype=bool)
+        for k in range(actions.shape[0]):
+            if not self.kernels.controls_batch(np.ascontiguousarray(actions[k]), self._mask_u8, self.limits, A, U):
+                raise ValueError("actions: must be finite numbers")
+            self.stepper.advance_batch(Y, U, self.dt, out, status, nfev)
+            codes_of(out, self._cfg, codes)
+            ok &= (status == 0) & (codes == 0)
+            np.copyto(Y, out, where=ok)
+        return Y, ok
+
+    def use_body(self, body: Body) -> None:
+        """Make ``body`` the env's body (a task that draws its body per episode): the stepper, the kernel
+        parameters and the observation's body entries follow."""
+        if body is self.body:
+            return
+        self.body = body
+        self.stepper = self.stepper.with_body(body)
+        self._P = np.array(body.kernel_params(), dtype=np.float64)
+        self._obs_extra = self.task.observation_extra(body).astype(np.float32)
+        self._sampler = None
 
     def energy_left_out(self, Y: np.ndarray) -> np.ndarray | float:
         """The part of H (eq. (41)) that the bookkeeping kernels leave out of ``info["energy"]`` at the
@@ -364,9 +446,11 @@ class FlatBodyEnv(gym.Env):
             raise ValueError(f"{field}: the initial state starts outside the domain ({left})")
 
     def observe(self, y: np.ndarray, target_vector: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
-        """The observation (16,) float32 and the reset ``info`` of state ``y`` with target (λ*, μ*, ϱ*, s3*)."""
-        obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
+        """The observation (:attr:`observation_size`,) float32 and the reset ``info`` of state ``y`` with target
+        (λ*, μ*, ϱ*, s3*) (the env's current body)."""
+        obs = np.empty(self.observation_size, dtype=np.float32)
         self.kernels.post_step(y, y, 0, self._a, 0, target_vector, self._cfg, self._P, self._yout, obs, self._terms, self._sc, self._vel, self._force)
+        obs[OBSERVATION_SIZE:] = self._obs_extra
         if self.custom_potential is not None:
             self._sc[1] += self.energy_left_out(self._yout)
         return obs, build_info(t=0.0, scalars=self._sc, p_theta=y[3], ended=False, failure=None, left=None, method=self.stepper.method,
@@ -374,20 +458,30 @@ class FlatBodyEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        if not options and self.sampler.applies:  # the same draws as sample_episode, through the sampler's kernels
+        if not options and self.task.compiled_resets and self.sampler.applies:  # the task's draws, through the sampler's kernels
             Y = np.empty((STATE_SIZE, 1))
             tg = self.sampler.sample([self.np_random], Y, [0])[0]
             y = Y[:, 0].copy()
             self.check_start(y, "initial_noise")
             self._y, self._target, self._target_shape = y, None, (float(tg[0]), float(tg[1]), float(tg[5]))
             self._tvec = tg[:4].copy()
+            self._witness = None
         else:
-            self._y, self._target = self.sample_episode(self.np_random, options)
-            self._target_shape = None
-            self._tvec = target_vector(self._target)
+            self.start_episode(self.draw_episodes([self.np_random], options)[0])
         self._R = np.eye(3) if self.track_rotation else None
         self.time = 0.0
         return self.observe(self._y, self._tvec)
+
+    def start_episode(self, episode: Episode) -> None:
+        """Set the state, target, body and witness of a drawn episode (:meth:`draw_episodes`)."""
+        if episode.body is not None:
+            self.use_body(episode.body)
+        self._y = np.array(episode.state, dtype=np.float64)
+        self._target = episode.ellipse
+        tg = episode.target
+        self._target_shape = (float(tg[0]), float(tg[1]), float(tg[5]))
+        self._tvec = np.array(tg[:4], dtype=np.float64)
+        self._witness = episode.witness
 
     def controls(self, action) -> tuple[np.ndarray, np.ndarray]:
         """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies
@@ -417,14 +511,26 @@ class FlatBodyEnv(gym.Env):
         y = self._y
         self._counters[:] = 0
         st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)
-        obs = np.empty(OBSERVATION_SIZE, dtype=np.float32)
+        obs = np.empty(self.observation_size, dtype=np.float32)
         terms = self._terms
         ended = k.post_step(y, self._ynew, st, self._a, self._a.size, self._tvec, self._cfg, self._P, self._yout, obs, terms, self._sc,
                             self._vel, self._force)
+        obs[OBSERVATION_SIZE:] = self._obs_extra
         if self.custom_potential is not None:
             self._sc[1] += self.energy_left_out(self._yout)
         failure = left = None
-        if ended:
+        leaves = False
+        if self._own_terms:  # the task's own termination and terms (e.g. leaving the tolerance of an unstable target)
+            leaves = self.task.leaves(float(self._sc[0]), bool(ended))
+            self.task.extra_terms(bool(ended or leaves), leaves, terms)
+        if leaves:  # the new state is valid physics: kept, the episode ends
+            left = self.describe_leaving(float(self._sc[0]))
+            ended = 1
+            y[:] = self._yout
+            if self._R is not None:
+                self._R = self._Rnew.copy()
+            self.time += self.dt
+        elif ended:
             if st != 0:
                 failure = self.stepper.describe(st)
             else:
@@ -436,7 +542,7 @@ class FlatBodyEnv(gym.Env):
             self.time += self.dt
         tl = terms.tolist()
         info = build_info(t=self.time, scalars=self._sc, p_theta=y[3], ended=bool(ended), failure=failure, left=left,
-                          method=self.stepper.method, nfev=int(self._counters[0]), terms=dict(zip(REWARD_TERMS, tl)),
+                          method=self.stepper.method, nfev=int(self._counters[0]), terms=dict(zip(self.reward_names, tl)),
                           success_tolerance=self.task.success_tolerance)
         return obs, sum(tl), bool(ended), False, info
 
@@ -446,6 +552,10 @@ class FlatBodyEnv(gym.Env):
         from flatbody_env.env.rendering import render_frame
 
         return render_frame(self._y, self._R if self._R is not None else np.eye(3), self.target, self.time)
+
+    def describe_leaving(self, distance: float) -> str:
+        """``info["left_domain"]`` of a step the task ends because the body left the target's tolerance."""
+        return f"distance = {distance:.4g} > success_tolerance = {self.task.success_tolerance:g} (left the target's neighbourhood)"
 
     def left_domain(self, y: np.ndarray) -> str | None:
         """None inside the documented domain, else what left it (the test itself is the task's
@@ -505,6 +615,25 @@ def build_info(*, t, scalars, p_theta, ended, failure, left, method: str, nfev, 
     if terms is not None:
         info["reward_terms"] = terms
     return info
+
+
+def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any]) -> ReachStationaryEllipse:
+    """The task of ``task=`` (a name of :data:`~flatbody_env.env.registration.TASK_CLASSES` with its fields in
+    ``task_kwargs``, or a task instance)."""
+    if isinstance(task, ReachStationaryEllipse):
+        if task_kwargs:
+            raise ValueError(f"{sorted(task_kwargs)[0]}: give the task's fields to its constructor, not beside a task instance")
+        return task
+    if not isinstance(task, str) or task not in TASK_CLASSES:
+        raise ValueError(f"task: must be one of {', '.join(TASK_CLASSES)} or a task instance, got {task!r}")
+    import importlib
+
+    module, name = TASK_CLASSES[task].split(":")
+    cls = getattr(importlib.import_module(module), name)
+    try:
+        return cls(**task_kwargs)
+    except TypeError as exc:  # an unknown keyword: name it
+        raise ValueError(f"task: {exc}") from None
 
 
 def _as_body(body: Body | Mapping[str, Any] | None) -> Body:

@@ -1,26 +1,84 @@
-"""Registers ``FlatBody-v0`` with Gymnasium when :mod:`flatbody_env` is imported.
+"""Registers the flatbody tasks with Gymnasium when :mod:`flatbody_env` is imported.
 
-``gym.make("FlatBody-v0")`` (or ``gym.make("flatbody_env:FlatBody-v0")``, which imports the
-package first) builds :class:`~flatbody_env.env.env.FlatBodyEnv` inside PassiveEnvChecker,
-OrderEnforcing and a TimeLimit of 400 steps; ``gym.make_vec("FlatBody-v0", num_envs,
+Every id builds :class:`~flatbody_env.env.env.FlatBodyEnv` (body + integrator + task) with the task
+and keyword arguments of its :class:`TaskSpec` (:data:`TASKS`): ``gym.make(ID)`` (or
+``gym.make("flatbody_env:ID")``, which imports the package first) wraps it in PassiveEnvChecker,
+OrderEnforcing and a TimeLimit of ``max_episode_steps``; ``gym.make_vec(ID, num_envs,
 vectorization_mode="vector_entry_point")`` builds the natively batched
-:class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` (it truncates by itself).
+:class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` with the same keywords (it truncates by
+itself). Keywords given to ``gym.make`` override the registered ones. ``docs/tasks.md`` is the
+page of each task.
+
+This module stays light (no numpy, no task classes): the task classes are named by dotted path
+(:data:`TASK_CLASSES`) and imported by the environment.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from typing import Any
+
 ENV_ID = "FlatBody-v0"
 MAX_EPISODE_STEPS = 400
+"""Steps of every registered task (t = 20 at dt = 0.05)."""
+
+TASK_CLASSES = {
+    "reach": "flatbody_env.env.task:ReachStationaryEllipse",
+    "hold-unstable": "flatbody_env.env.hold:HoldUnstableEllipse",
+    "reach-witnessed": "flatbody_env.env.witness:ReachWithWitness",
+    "any-body": "flatbody_env.env.any_body:ReachAnyBody",
+}
+"""The tasks :class:`~flatbody_env.env.env.FlatBodyEnv` composes (``task=NAME``), by module path."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskSpec:
+    """A registered id: which task, with which keywords, and what it is for (``docs/tasks.md``)."""
+
+    env_id: str
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    """Keyword arguments of :class:`~flatbody_env.env.env.FlatBodyEnv` (``task``, ``control`` and the task's fields)."""
+    max_episode_steps: int = MAX_EPISODE_STEPS
+    summary: str = ""
+
+
+TASKS = (
+    TaskSpec(env_id=ENV_ID, kwargs={"task": "reach"},
+             summary="reach a stable stationary ellipse that linear feedback settles fast (settling rate r >= 0.15/s)"),
+    TaskSpec(env_id="FlatBodySlow-v0", kwargs={"task": "reach", "min_settling_rate": 0.0},
+             summary="reach any stable ellipse of the circulation family in the same shape ranges (no settling-rate filter)"),
+    TaskSpec(env_id="FlatBodyHoldUnstable-v0", kwargs={"task": "hold-unstable"},
+             summary="stay within the tolerance of a hyperbolic stationary ellipse (rotation about the intermediate axis)"),
+    TaskSpec(env_id="FlatBodyTorque-v0", kwargs={"task": "reach-witnessed", "control": "torque", "min_uncontrolled_offset": 0.05},
+             summary="reach a stable ellipse with torque only (thickness uncontrolled), from witnessed starts"),
+    TaskSpec(env_id="FlatBodyDilatation-v0", kwargs={"task": "reach-witnessed", "control": "dilatation"},
+             summary="reach a stable ellipse with the thickness force only, from witnessed starts"),
+    TaskSpec(env_id="FlatBodyAnyBody-v0", kwargs={"task": "any-body"},
+             summary="FlatBody-v0 for a body drawn per episode (J, J3, kappa, a, b), the constants in the observation"),
+)
+"""The registered tasks, in the order of ``docs/tasks.md``."""
+
+TASK_IDS = tuple(spec.env_id for spec in TASKS)
+
+
+def task_spec(env_id: str) -> TaskSpec:
+    """The :class:`TaskSpec` of a registered id; ``ValueError`` naming ``env`` otherwise."""
+    for spec in TASKS:
+        if spec.env_id == env_id:
+            return spec
+    raise ValueError(f"env: must be one of {', '.join(TASK_IDS)}, got {env_id!r}")
 
 
 def register_envs() -> None:
     import gymnasium
 
-    if ENV_ID in gymnasium.registry:
-        return
-    gymnasium.register(
-        id=ENV_ID,
-        entry_point="flatbody_env.env.env:FlatBodyEnv",
-        vector_entry_point="flatbody_env.env.vector_env:FlatBodyVectorEnv",
-        max_episode_steps=MAX_EPISODE_STEPS,
-    )
+    for spec in TASKS:
+        if spec.env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=spec.env_id,
+            entry_point="flatbody_env.env.env:FlatBodyEnv",
+            vector_entry_point="flatbody_env.env.vector_env:FlatBodyVectorEnv",
+            max_episode_steps=spec.max_episode_steps,
+            kwargs=dict(spec.kwargs),
+        )

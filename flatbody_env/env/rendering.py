@@ -9,11 +9,16 @@ turns inside the ellipse with U(θ), eq. (24)), and the target ellipse (λ*, μ*
 magenta along the current principal axes — the same colours as the top-down view of a recording.
 
 Anti-aliasing: the shapes are drawn with aggdraw (Anti-Grain Geometry, sub-pixel coverage) — a
-supersampled Pillow drawing cost several milliseconds a frame; the text (time, ϱ, scale) is Pillow's
-bitmap font and the legend a cached image. The view's half-width is a "nice"
-number (1, 1.5, 2, 3, 4, 5, 6, 8, 10, …) that holds 1.25 × the target's larger semi-axis, so it
-stays fixed through an episode, and grows (never clips) when the body stretches beyond it; a scale
-bar gives the length unit.
+supersampled Pillow drawing cost several milliseconds a frame. The text is DejaVu Sans (Greek
+included) at 12–13 px, anti-aliased: each character is rasterised once and cached, and a line of text
+is composed from the cached glyphs (the bitmap fallback, ASCII names, only where no DejaVu font is
+found). A key in the top right corner says what the fill's shade means (the thickness ϱ, with a mark
+at the current value); the legend (bottom left) names the lines.
+
+The view's half-width is fixed, :data:`HALF_WIDTH` = 2.5 length units for every episode of every task
+(the targets of FlatBody-v0 have semi-axes up to ≈ 2), and widens to a "nice" number (3, 4, 5, 6, 8,
+10, …) only when the body itself stretches beyond 1.1 × it — it never clips. The scale bar is one
+length unit: the radius of the undeformed plate (λ = μ = 1).
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ SIZE = 256
 COLORS: dict[str, tuple[int, int, int]] = {
     "lambda": (214, 39, 40),
     "mu": (44, 160, 44),
-    "rho": (31, 119, 180),
+    "rho": (60, 140, 255),
     "theta": (23, 170, 190),
     "s3": (148, 103, 189),
     "p_theta": (255, 127, 14),
@@ -61,81 +66,184 @@ def nice_half_width(extent: float) -> float:
     return 10.0 ** (k + 1)
 
 
-def view_half_width(lam: float, mu: float, target: dict | None) -> float:
-    """Half-width of the frame's view: nice ≥ 1.25 × the target's larger semi-axis (fixed through an
-    episode), widened to hold 1.1 × the body's larger semi-axis when it stretches beyond."""
-    ref = 0.0
-    if target:
-        ref = 1.25 * max(float(target.get("lambda", 0.0)), float(target.get("mu", 0.0)))
-    need = max(ref, 1.1 * max(lam, mu), 1e-3)
-    return nice_half_width(need)
+HALF_WIDTH = 2.5
+"""The frame's half-width in length units, the same for every episode (see the module docstring)."""
+
+
+def view_half_width(lam: float, mu: float, target: dict | None = None) -> float:
+    """Half-width of the frame's view: :data:`HALF_WIDTH`, widened to a nice number that holds 1.1 ×
+    the body's larger semi-axis when it stretches beyond (the target does not change it)."""
+    need = 1.1 * max(lam, mu)
+    return HALF_WIDTH if need <= HALF_WIDTH else nice_half_width(need)
 
 
 _ANG = np.linspace(0.0, 2.0 * math.pi, 72, endpoint=False)
 _CIRCLE = np.stack([np.cos(_ANG), np.sin(_ANG)])
 
 
-def _scale_bar_length(half: float) -> float:
-    """The largest "nice" length ≤ half the view's half-width (a bar ≤ a quarter of the frame)."""
-    k = math.floor(math.log10(half / 2.0))
-    return max(m * 10.0**k for m in _NICE if m * 10.0**k <= half / 2.0 * (1.0 + 1e-12))
-
-
-_FONT = None
-_LEGEND: tuple[np.ndarray, np.ndarray] | None = None
+_FONTS: dict[int, object] = {}
+_GLYPHS: dict[tuple[str, int], tuple[np.ndarray, int]] = {}
+_STATIC: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 _BACKGROUND = (250, 250, 250)
-_INK = np.array([20, 20, 20], dtype=np.uint8)
+_INK = np.array([20, 20, 20], dtype=np.float32)
+_FONT_FILES = (
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+)
 
 
-def _font():
-    """Pillow's built-in bitmap font (fast: no FreeType rasterising per frame), loaded once."""
-    global _FONT
-    if _FONT is None:
+def _font_file() -> str | None:
+    """DejaVu Sans (has Greek): the system's, else matplotlib's copy (found without importing it)."""
+    import importlib.util
+    import os
+
+    for f in _FONT_FILES:
+        if os.path.exists(f):
+            return f
+    spec = importlib.util.find_spec("matplotlib")
+    for base in (spec.submodule_search_locations or []) if spec else []:
+        f = os.path.join(base, "mpl-data", "fonts", "ttf", "DejaVuSans.ttf")
+        if os.path.exists(f):
+            return f
+    return None
+
+
+def _font(size: int):
+    """The frame's font at ``size`` px (DejaVu Sans; Pillow's bitmap font where none is installed)."""
+    font = _FONTS.get(size)
+    if font is None:
         from PIL import ImageFont
 
-        _FONT = ImageFont.load_default_imagefont() if hasattr(ImageFont, "load_default_imagefont") else ImageFont.load_default()
-    return _FONT
+        path = _font_file()
+        if path is not None:
+            font = ImageFont.truetype(path, size)
+        else:  # pragma: no cover - a system without DejaVu
+            font = ImageFont.load_default_imagefont() if hasattr(ImageFont, "load_default_imagefont") else ImageFont.load_default()
+        _FONTS[size] = font
+    return font
+
+
+def _ascii(text: str) -> str:
+    return text.replace("ϱ", "rho").replace("λ", "lambda").replace("μ", "mu").replace("₁", "1")
+
+
+def _glyph(ch: str, size: int) -> tuple[np.ndarray, int]:
+    """Coverage (h, w) in [0, 1] of one character and its advance in pixels, rasterised once."""
+    key = (ch, size)
+    g = _GLYPHS.get(key)
+    if g is None:
+        from PIL import Image, ImageDraw
+
+        font = _font(size)
+        h = size + size // 3 + 2
+        adv = int(round(font.getlength(ch))) if hasattr(font, "getlength") else font.getbbox(ch)[2]
+        img = Image.new("L", (max(adv, 1) + 2, h), 0)
+        ImageDraw.Draw(img).text((0, 0), ch, fill=255, font=font)
+        g = _GLYPHS[key] = (np.asarray(img, dtype=np.float32) / 255.0, adv)
+    return g
+
+
+def _text_alpha(text: str, size: int = 13) -> np.ndarray:
+    """Coverage (h, w) of a line of text composed from cached glyphs (no kerning)."""
+    if _font_file() is None:  # pragma: no cover
+        text = _ascii(text)
+    glyphs = [_glyph(c, size) for c in text]
+    w = sum(a for _, a in glyphs) + 2
+    h = size + size // 3 + 2
+    out = np.zeros((h, w), dtype=np.float32)
+    x = 0
+    for m, a in glyphs:
+        ww = min(m.shape[1], w - x)
+        np.maximum(out[:, x : x + ww], m[:, :ww], out=out[:, x : x + ww])
+        x += a
+    return out
+
+
+def _blend(frame: np.ndarray, alpha: np.ndarray, color, x: int, y: int) -> None:
+    """Paint ``color`` (3,) or (h, w, 3) with coverage ``alpha`` (h, w) at top-left (x, y), clipped."""
+    h = min(alpha.shape[0], frame.shape[0] - y)
+    w = min(alpha.shape[1], frame.shape[1] - x)
+    if h <= 0 or w <= 0:
+        return
+    a = alpha[:h, :w, None]
+    region = frame[y : y + h, x : x + w]
+    c = color[:h, :w] if np.ndim(color) == 3 else np.asarray(color, dtype=np.float32)
+    region[:] = (region * (1.0 - a) + c * a + 0.5).astype(np.uint8)
 
 
 def _text_mask(text: str) -> np.ndarray:
-    """Boolean mask (h, w) of ``text`` in the bitmap font."""
-    from PIL import Image, ImageDraw
-
-    font = _font()
-    box = font.getbbox(text)
-    img = Image.new("L", (box[2] + 1, box[3] + 1), 0)
-    ImageDraw.Draw(img).text((0, 0), text, fill=255, font=font)
-    return np.asarray(img) > 127
+    """Boolean mask (h, w) of ``text`` (coverage above one half)."""
+    return _text_alpha(text) > 0.5
 
 
-def _put(frame: np.ndarray, mask: np.ndarray, colors: np.ndarray, x: int, y: int) -> None:
-    """Paint ``colors`` (h, w, 3 or 3) where ``mask`` (h, w) is set, with its top-left at (x, y), clipped."""
-    h = min(mask.shape[0], frame.shape[0] - y)
-    w = min(mask.shape[1], frame.shape[1] - x)
-    if h <= 0 or w <= 0:
-        return
-    m = mask[:h, :w]
-    region = frame[y : y + h, x : x + w]
-    region[m] = colors[:h, :w][m] if colors.ndim == 3 else colors
+def plate_fill(rho: float) -> tuple[int, int, int]:
+    """The plate's fill for the thickness ϱ: the palette's tone at ϱ = 1, darker for a thicker plate."""
+    k = float(np.clip(0.5 + 0.5 * math.tanh(1.5 * (rho - 1.0)), 0.0, 1.0))
+    return tuple(int(v) for v in np.clip(np.array(COLORS["plate"], dtype=float) * (1.25 - 0.5 * k), 0, 255))
+
+
+RHO_KEY = (0.5, 1.5)
+"""The ϱ range of the fill key (the shade saturates outside it)."""
 
 
 def _legend() -> tuple[np.ndarray, np.ndarray]:
-    """The static legend (λ axis, μ axis, target, fibre e₁) as a mask and its colours, built once."""
-    global _LEGEND
-    if _LEGEND is None:
-        rows = (("lambda", "lambda axis"), ("mu", "mu axis"), ("target", "target"), ("fibre", "fibre e1"))
-        h, w = 12 * len(rows), 80
-        mask = np.zeros((h, w), dtype=bool)
-        colors = np.zeros((h, w, 3), dtype=np.uint8)
+    """The static legend (λ axis, μ axis, target, fibre e₁) as coverage and colours, built once."""
+    got = _STATIC.get("legend")
+    if got is None:
+        rows = (("lambda", "λ axis"), ("mu", "μ axis"), ("target", "target"), ("fibre", "fibre e₁"))
+        h, w = 15 * len(rows), 84
+        alpha = np.zeros((h, w), dtype=np.float32)
+        colors = np.zeros((h, w, 3), dtype=np.float32)
         for i, (name, label) in enumerate(rows):
-            y = 12 * i
-            mask[y + 4 : y + 6, 0:12] = True
-            colors[y + 4 : y + 6, 0:12] = COLORS[name]
-            tm = _text_mask(label)[:12, : w - 16]
-            mask[y : y + tm.shape[0], 16 : 16 + tm.shape[1]] |= tm
-            colors[y : y + tm.shape[0], 16 : 16 + tm.shape[1]][tm] = _INK
-        _LEGEND = (mask, colors)
-    return _LEGEND
+            y = 15 * i
+            alpha[y + 7 : y + 10, 0:14] = 1.0
+            colors[y + 7 : y + 10, 0:14] = COLORS[name]
+            tm = _text_alpha(label, 12)[:15, : w - 18]
+            alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]] = np.maximum(alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]], tm)
+            colors[y : y + tm.shape[0], 18 : 18 + tm.shape[1]][tm > 0] = _INK
+        got = _STATIC["legend"] = (alpha, colors)
+    return got
+
+
+def _rho_key() -> tuple[np.ndarray, np.ndarray]:
+    """The static key of the fill: "fill = ϱ" over a strip of the shades from ϱ = 0.5 to 1.5."""
+    got = _STATIC.get("rho_key")
+    if got is None:
+        title = _text_alpha("fill: thickness ϱ", 12)
+        lo, hi = _text_alpha(f"{RHO_KEY[0]:g}", 11), _text_alpha(f"{RHO_KEY[1]:g}", 11)
+        w = max(title.shape[1], KEY_W + 4)
+        h = title.shape[0] + 10 + lo.shape[0]
+        alpha = np.zeros((h, w), dtype=np.float32)
+        colors = np.zeros((h, w, 3), dtype=np.float32)
+        alpha[: title.shape[0], : title.shape[1]] = title
+        colors[: title.shape[0], : title.shape[1]] = _INK
+        y0 = title.shape[0]
+        for j in range(KEY_W):
+            rho = RHO_KEY[0] + (RHO_KEY[1] - RHO_KEY[0]) * j / (KEY_W - 1)
+            colors[y0 : y0 + 8, j] = plate_fill(rho)
+        alpha[y0 : y0 + 8, :KEY_W] = 1.0
+        yl = y0 + 9
+        alpha[yl : yl + lo.shape[0], : lo.shape[1]] = lo
+        colors[yl : yl + lo.shape[0], : lo.shape[1]] = _INK
+        xr = KEY_W - hi.shape[1] + 2
+        alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]] = np.maximum(alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]], hi)
+        colors[yl : yl + hi.shape[0], xr : xr + hi.shape[1]] = _INK
+        got = _STATIC["rho_key"] = (alpha, colors)
+    return got
+
+
+KEY_W = 80
+"""Width of the fill key's strip in pixels."""
+
+
+def _scale_bar() -> tuple[np.ndarray, np.ndarray]:
+    """The static label of the scale bar."""
+    got = _STATIC.get("bar")
+    if got is None:
+        a = _text_alpha("1 = rest radius", 11)
+        got = _STATIC["bar"] = (a, np.broadcast_to(_INK, a.shape + (3,)).copy())
+    return got
 
 
 def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_width: float | None = None) -> np.ndarray:
@@ -166,9 +274,8 @@ def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_w
         return np.stack([c0 + scale * xy[0], c0 - scale * xy[1]], axis=1).ravel().tolist()
 
     canvas = aggdraw.Draw("RGB", (SIZE, SIZE), _BACKGROUND)
-    # plate: R·diag(λ, μ)·circle, shaded darker for a thicker plate (ϱ = 1: the palette's tone)
-    k = float(np.clip(0.5 + 0.5 * math.tanh(1.5 * (rho - 1.0)), 0.0, 1.0))
-    fill = tuple(int(v) for v in np.clip(np.array(COLORS["plate"], dtype=float) * (1.25 - 0.5 * k), 0, 255))
+    # plate: R·diag(λ, μ)·circle, shaded darker for a thicker plate (the key in the corner)
+    fill = plate_fill(rho)
     canvas.polygon(px(R2 @ (np.array([[lam], [mu]]) * _CIRCLE)), aggdraw.Pen(COLORS["plate_edge"], 1.2), aggdraw.Brush(fill))
     # principal semi-axes (columns of R, lengths λ, μ) in the colours of λ and μ
     for col, (length, name) in enumerate(((lam, "lambda"), (mu, "mu"))):
@@ -181,14 +288,24 @@ def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_w
         tgt = R2 @ (np.array([[float(target["lambda"])], [float(target["mu"])]]) * _CIRCLE)
         canvas.polygon(px(tgt), aggdraw.Pen(COLORS["target"], 1.6))
     frame = np.frombuffer(canvas.tobytes(), dtype=np.uint8).reshape(SIZE, SIZE, 3).copy()
-    _put(frame, _text_mask(f"t = {t:6.2f}   rho = {rho:.3f}"), _INK, 5, 4)
-    mask, colors = _legend()
-    _put(frame, mask, colors, 4, SIZE - mask.shape[0] - 3)
-    bar = _scale_bar_length(half)
-    bar_px = int(round(bar * scale))
+    _blend(frame, _text_alpha(f"t = {t:.2f}", 13), _INK, 5, 3)
+    # the fill's key (top right) with a mark at the current ϱ
+    alpha, colors = _rho_key()
+    kx = SIZE - alpha.shape[1] - 4
+    _blend(frame, alpha, colors, kx, 3)
+    strip_y = 3 + _text_alpha("ϱ", 12).shape[0]
+    j = int(round((min(max(rho, RHO_KEY[0]), RHO_KEY[1]) - RHO_KEY[0]) / (RHO_KEY[1] - RHO_KEY[0]) * (KEY_W - 1)))
+    frame[strip_y - 2 : strip_y + 10, kx + max(j - 1, 0) : kx + j + 1] = (20, 20, 20)
+    value = _text_alpha(f"ϱ = {rho:.3f}", 12)
+    _blend(frame, value, _INK, SIZE - value.shape[1] - 4, strip_y + 24)
+    alpha, colors = _legend()
+    _blend(frame, alpha, colors, 4, SIZE - alpha.shape[0] - 3)
+    # scale bar: one length unit, the undeformed plate's radius
+    bar_px = int(round(scale))
     x1 = SIZE - 8
-    frame[SIZE - 10 : SIZE - 8, x1 - bar_px : x1] = _INK
-    frame[SIZE - 14 : SIZE - 4, x1 - bar_px : x1 - bar_px + 1] = _INK
-    frame[SIZE - 14 : SIZE - 4, x1 - 1 : x1] = _INK
-    _put(frame, _text_mask(f"{bar:g}"), _INK, x1 - bar_px, SIZE - 25)
+    frame[SIZE - 10 : SIZE - 8, x1 - bar_px : x1] = (20, 20, 20)
+    frame[SIZE - 14 : SIZE - 4, x1 - bar_px : x1 - bar_px + 1] = (20, 20, 20)
+    frame[SIZE - 14 : SIZE - 4, x1 - 1 : x1] = (20, 20, 20)
+    alpha, colors = _scale_bar()
+    _blend(frame, alpha, colors, SIZE - alpha.shape[1] - 6, SIZE - 16 - alpha.shape[0])
     return frame

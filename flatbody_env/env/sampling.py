@@ -18,11 +18,16 @@ methods would have left it), or a code: :data:`NEED_MORE` (the block ran out), :
 (the table is unsure about a candidate: the exact Riccati test decides, in Python, and the kernel
 is run again with the answer in ``decisions``) or :data:`NO_TARGET` (the attempts ran out).
 
-``cfg`` (:data:`CFG_SIZE`): λ* range lo, hi; aspect range lo, hi; the settling-rate threshold;
-how reachability is decided (1: the settling-rate table, 0: the exact test for every shape, 2: no
-filter applies); the initial noise; 1 with torque; ϱ* (the
-body's equilibrium thickness, constant for the built-in thickness potential). ``P``: the body's
-kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`).
+``cfg`` (:data:`CFG_SIZE`): 0–1 λ* range lo, hi; 2–3 aspect range lo, hi; 4 the settling-rate
+threshold; 5 how reachability is decided (1: the settling-rate table, 0: the exact test for every
+shape, 2: no filter applies); 6 the initial noise; 7 1 with torque; 8 ϱ* (the body's equilibrium
+thickness, constant for the built-in thickness potential); 9 1 for the rotation branch (|s3| > |p_θ|),
+0 for the circulation branch; 10 the stability class of a target (:data:`STABLE`: q < 0 and the shape
+Hessian positive definite; :data:`HYPERBOLIC`: q > 0 with growth rate √q in [cfg[11], cfg[12]] and the
+shape Hessian positive definite); 13 the start (:data:`START_NOISE`: :func:`initial_state_kernel`;
+:data:`START_BALL`: :func:`ball_state_kernel` with distance radii [cfg[14], cfg[15]]; :data:`START_NONE`: none,
+``y`` is left as it is). ``P``: the
+body's kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`).
 """
 
 from __future__ import annotations
@@ -36,8 +41,14 @@ from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import equilibrium_thickness, stationary_shape_kernel, stencil_step
 from flatbody_env.physics.potentials import potential_kernel
 
-CFG_SIZE = 9
+CFG_SIZE = 16
 """Length of the sampler's configuration vector (module docstring)."""
+STABLE, HYPERBOLIC = 0.0, 1.0
+"""Stability classes of a target (``cfg[10]``)."""
+START_NOISE, START_BALL, START_NONE = 0.0, 1.0, 2.0
+"""How the start is drawn (``cfg[13]``); :data:`START_NONE`: no start, the target only (the caller draws the start)."""
+BALL_DRAWS = 12
+"""Uniforms of :func:`ball_state_kernel`."""
 MAX_ATTEMPTS = 500
 """Candidate shapes drawn before a reset gives up (:data:`NO_TARGET`)."""
 NEED_MORE, NEED_DECISION, NO_TARGET = -1, -2, -3
@@ -75,7 +86,9 @@ def candidate_kernel(u_lam, u_aspect, u_sign, cfg, P, pot, table_code, grid, rat
 
     ``pot`` (7, 4): work space (the potential stencil, :func:`potential_stencil_kernel`).
     ``table_code`` (1,) int64 receives the table's answer. ``cand`` (10,) receives λ*, μ*, ϱ*, s3*,
-    p_θ*, ω3, θ̇, q, h_min of the stationary ellipse (when it exists) and the sign.
+    p_θ*, ω3, θ̇, q, h_min of the stationary ellipse (when it exists) and the sign. The branch
+    (``cfg[9]``) and the stability class a target must have (``cfg[10]``–``cfg[12]``) are in the
+    module docstring.
 
     Returns
     -------
@@ -100,10 +113,17 @@ def candidate_kernel(u_lam, u_aspect, u_sign, cfg, P, pot, table_code, grid, rat
     cand[1] = mu
     cand[2] = rho
     cand[9] = sign
-    if not stationary_shape_kernel(P[0], P[2], lam, mu, rho, pot, False, sign, cand[3:]):
+    if not stationary_shape_kernel(P[0], P[2], lam, mu, rho, pot, cfg[9] != 0.0, sign, cand[3:]):
         return REJECT
-    if not (cand[7] < 0.0 and cand[8] > 0.0):  # q < 0 and the shape Hessian positive definite
-        return REJECT
+    if cfg[10] == STABLE:
+        if not (cand[7] < 0.0 and cand[8] > 0.0):  # q < 0 and the shape Hessian positive definite
+            return REJECT
+    else:  # hyperbolic: the out-of-plane saddle s̈1 = q s1, q > 0, growth rate √q in range
+        if not (cand[7] > 0.0 and cand[8] > 0.0):
+            return REJECT
+        growth = math.sqrt(cand[7])
+        if growth < cfg[11] or growth > cfg[12]:
+            return REJECT
     if code == UNSURE:
         return UNSURE
     return ACCEPT  # ACCEPT, or ACCEPT_IF_STABLE on a stable ellipse
@@ -143,6 +163,68 @@ def initial_state_kernel(u, noise, torque, lam, mu, rho, s3t, pt, y):
     y[10] = -pi + (pi - -pi) * u[o + 6]
 
 
+def ball_state_kernel(u, r_lo, r_hi, lam, mu, rho, s3t, pt, J, J3, y):
+    """A state at task distance R from the target, R uniform in [``r_lo``, ``r_hi``], in a uniformly
+    random direction, from 12 uniforms ``u`` (the start of :class:`~flatbody_env.env.hold.HoldUnstableEllipse`).
+
+    The distance coordinates are e = (Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ) (the task distance
+    d = ‖e‖, :func:`~flatbody_env.env.task.score_kernel`): e = R z/‖z‖ with z nine standard normals
+    from u[0:10] by the Box–Muller transform (z₂ₖ, z₂ₖ₊₁ = √(−2 ln(1 − u₂ₖ)) (cos, sin)(2π u₂ₖ₊₁));
+    R = r_lo + (r_hi − r_lo) u[10]; θ = −π + 2π u[11]. The state: λ = λ* + e₀, μ = μ* + e₁,
+    ϱ = ϱ* + e₂, s3 = s3* + e₃, s1 = e₄ (Jμ² + J3ϱ²), s2 = e₅ (Jλ² + J3ϱ²) (so that ω1, ω2 =
+    e₄, e₅ by the inverse Legendre map after eq. (31) of [1]), p_θ = p_θ* (conserved), p = e₆…₈.
+
+    References
+    ----------
+    .. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
+       degenerate dimension", arXiv:0902.3573 (2009).
+    """
+    z0 = 0.0
+    z1 = 0.0
+    z2 = 0.0
+    z3 = 0.0
+    z4 = 0.0
+    z5 = 0.0
+    z6 = 0.0
+    z7 = 0.0
+    z8 = 0.0
+    for k in range(5):
+        r = math.sqrt(-2.0 * math.log(1.0 - u[2 * k]))
+        c = r * math.cos(2.0 * math.pi * u[2 * k + 1])
+        s = r * math.sin(2.0 * math.pi * u[2 * k + 1])
+        if k == 0:
+            z0 = c
+            z1 = s
+        elif k == 1:
+            z2 = c
+            z3 = s
+        elif k == 2:
+            z4 = c
+            z5 = s
+        elif k == 3:
+            z6 = c
+            z7 = s
+        else:
+            z8 = c
+    norm = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2 + z3 * z3 + z4 * z4 + z5 * z5 + z6 * z6 + z7 * z7 + z8 * z8)
+    radius = r_lo + (r_hi - r_lo) * u[10]
+    f = radius / norm if norm > 0.0 else 0.0
+    lam0 = lam + f * z0
+    mu0 = mu + f * z1
+    rho0 = rho + f * z2
+    y[0] = f * z4 * (J * mu0 * mu0 + J3 * rho0 * rho0)
+    y[1] = f * z5 * (J * lam0 * lam0 + J3 * rho0 * rho0)
+    y[2] = s3t + f * z3
+    y[3] = pt
+    y[4] = f * z6
+    y[5] = f * z7
+    y[6] = f * z8
+    y[7] = lam0
+    y[8] = mu0
+    y[9] = rho0
+    y[10] = -math.pi + 2.0 * math.pi * u[11]
+
+
 def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, decisions,
                           y, tgt, pot, table_code, cand):
     """One episode (target and initial state) from the uniforms ``D[:n]`` of one body.
@@ -154,7 +236,8 @@ def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, ed
 
     Returns the number of uniforms used (> 0), or :data:`NEED_MORE`, :data:`NEED_DECISION`, :data:`NO_TARGET`.
     """
-    m = 10 if cfg[7] != 0.0 else 9
+    ball = cfg[13] == START_BALL
+    m = BALL_DRAWS if ball else (0 if cfg[13] == START_NONE else (10 if cfg[7] != 0.0 else 9))
     for a in range(MAX_ATTEMPTS):
         if 3 * a + 3 > n:
             return NEED_MORE
@@ -174,7 +257,12 @@ def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, ed
         for i in range(5):
             tgt[i] = cand[i]
         tgt[5] = cand[9]
-        initial_state_kernel(D[used:used + m], cfg[6], cfg[7] != 0.0, cand[0], cand[1], cand[2], cand[3], cand[4], y)
+        if cfg[13] == START_NONE:
+            return used
+        if ball:
+            ball_state_kernel(D[used:used + m], cfg[14], cfg[15], cand[0], cand[1], cand[2], cand[3], cand[4], P[0], P[2], y)
+        else:
+            initial_state_kernel(D[used:used + m], cfg[6], cfg[7] != 0.0, cand[0], cand[1], cand[2], cand[3], cand[4], y)
         return used + m
     return NO_TARGET
 
@@ -220,14 +308,16 @@ class EpisodeSampler:
         self.limits = np.asarray(limits, dtype=float)
         filtered = task.filter_applies(control)
         table = task.table_for(body, self.limits, control) if filtered else None
-        self.applies = bool(body.compiled and body.inertia.is_isotropic and body.thickness is not None and (table is not None or not filtered))
+        self.applies = bool(task.compiled_targets and body.compiled and body.inertia.is_isotropic and body.thickness is not None
+                            and (table is not None or not filtered))
         """Whether resets go through the kernels (class docstring)."""
         if not self.applies:
             return
         mode = 1.0 if table is not None else 2.0
         (l0, l1), (a0, a1) = task.target_lambda, task.target_aspect
         self.cfg = np.array([l0, l1, a0, a1, task.min_settling_rate, mode, task.initial_noise, 1.0 if "torque" in control else 0.0,
-                             equilibrium_thickness(body, l0, l0 / a1)])
+                             equilibrium_thickness(body, l0, l0 / a1), *task.sampler_settings()])
+        assert self.cfg.size == CFG_SIZE
         self.P = np.ascontiguousarray(body.kernel_params(), dtype=np.float64)
         if table is not None:
             self.table = table.kernel_arrays()
@@ -281,8 +371,7 @@ class EpisodeSampler:
             row = D[b:b + 1]
             while used[b] < 0:
                 if used[b] == NO_TARGET:
-                    raise ValueError("target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
-                                     "found for this body in the target ranges")
+                    raise ValueError(self.task.no_target_message)
                 if used[b] == NEED_MORE:  # a long run of rejections: draw enough for every attempt
                     rngs[b].bit_generator.state = states[b]
                     row = rngs[b].random((1, 3 * MAX_ATTEMPTS + 10))
@@ -301,5 +390,6 @@ class EpisodeSampler:
         return TG
 
 
-__all__ = ["CFG_SIZE", "DECIDE_ACCEPT", "EpisodeSampler", "DECIDE_REJECT", "MAX_ATTEMPTS", "NEED_DECISION", "NEED_MORE", "NO_TARGET", "candidate_kernel",
-           "initial_state_kernel", "potential_stencil_kernel", "sample_episode_kernel", "sample_episodes"]
+__all__ = ["BALL_DRAWS", "CFG_SIZE", "DECIDE_ACCEPT", "EpisodeSampler", "DECIDE_REJECT", "HYPERBOLIC", "MAX_ATTEMPTS", "NEED_DECISION", "NEED_MORE",
+           "NO_TARGET", "STABLE", "START_BALL", "START_NOISE", "START_NONE", "ball_state_kernel", "candidate_kernel", "initial_state_kernel",
+           "potential_stencil_kernel", "sample_episode_kernel", "sample_episodes"]

@@ -237,13 +237,13 @@ def _rates(args) -> list[float]:
 def _map_rates(body: Body, limits, points: list[tuple[float, float]], workers: int, progress: bool) -> list[float]:
     from concurrent.futures import ProcessPoolExecutor
 
-    from tqdm import tqdm
+    from flatbody_env.progress import progress_bar
 
     chunks = [points[k:k + 64] for k in range(0, len(points), 64)]
     jobs = [(body.to_dict(), limits, c) for c in chunks]
     out: list[float] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for part in tqdm(pool.map(_rates, jobs), total=len(jobs), desc="settling rates", disable=not progress):
+        for part in progress_bar(pool.map(_rates, jobs), total=len(jobs), desc="settling rates", unit="chunk", enabled=progress):
             out.extend(part)
     return out
 

@@ -1,4 +1,6 @@
-"""The task: reach and hold a stationary ellipse (dm_control's Task half of the environment).
+"""The task: reach and hold a stationary ellipse (dm_control's Task half of the environment) — the task of
+``FlatBody-v0`` and ``FlatBodySlow-v0`` and the base of the other tasks (:mod:`flatbody_env.env.hold`,
+:mod:`flatbody_env.env.witness`, :mod:`flatbody_env.env.any_body`; ``docs/tasks.md``).
 
 The task knows nothing of integrators: it samples a target and an initial state, scores a state
 and decides success. :class:`~flatbody_env.env.env.FlatBodyEnv` composes it with a body and an
@@ -93,8 +95,9 @@ References
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -128,6 +131,24 @@ DEFAULT_LIMITS = (0.5, 0.5, 0.5, 1.0)
 """(τ1, τ2, τ3, f_ϱ) limits of :class:`~flatbody_env.env.env.FlatBodyEnv`'s defaults (torque_limit, force_limit)."""
 
 
+@dataclass(frozen=True, kw_only=True)
+class Episode:
+    """What a task draws at a reset: the initial state, the target and, where the task decides them,
+    the episode's body and a witness."""
+
+    state: np.ndarray
+    """The initial state y (11,)."""
+    target: np.ndarray
+    """The target (λ*, μ*, ϱ*, s3*, p_θ*, sign of (s3*, p_θ*)) (6,) (:func:`target_row`)."""
+    ellipse: StationaryEllipse | None = None
+    """The target's full record where the draw built it (else the environment builds it from the shape when asked)."""
+    body: Body | None = None
+    """The episode's body when the task draws one (:class:`~flatbody_env.env.any_body.ReachAnyBody`); None: the env's."""
+    witness: np.ndarray | None = None
+    """A sequence of normalised actions (steps, n) that takes the initial state into the success ball at the
+    last step (:class:`~flatbody_env.env.witness.ReachWithWitness`); None where the task has none."""
+
+
 def control_mask(control: str) -> np.ndarray:
     """Which of (τ1, τ2, τ3, f_ϱ) an action drives, shape (4,) bool."""
     if control not in CONTROLS:
@@ -139,7 +160,28 @@ def control_mask(control: str) -> np.ndarray:
 
 @dataclass(frozen=True, kw_only=True)
 class ReachStationaryEllipse:
-    """Reach and hold a stationary ellipse (module docstring)."""
+    """Reach and hold a stationary ellipse (module docstring) — the task of ``FlatBody-v0`` and
+    ``FlatBodySlow-v0``, and the base of the other tasks (``docs/tasks.md``).
+
+    What a task owns and the environment asks it for: the draws of a reset (:meth:`draw`,
+    :meth:`draw_batch`), the reward terms (:attr:`reward_names`; the kernels' six and the task's own,
+    :meth:`extra_terms`), the termination beyond the domain (:meth:`leaves`), the entries the
+    observation adds to the 16 shared ones (:meth:`observation_extra`) and the configuration of the
+    compiled reset (:meth:`sampler_settings`).
+    """
+
+    target_branch: ClassVar[str] = "circulation"
+    """The branch of the targets (:data:`flatbody_env.physics.equilibria.BRANCHES`)."""
+    compiled_targets: ClassVar[bool] = True
+    """Whether the episode sampler's kernels (:class:`~flatbody_env.env.sampling.EpisodeSampler`) can draw its targets."""
+    compiled_resets: ClassVar[bool] = True
+    """Whether they draw its whole reset (target and start); else the environment asks :meth:`draw_batch`."""
+    varies_body: ClassVar[bool] = False
+    """Whether each episode draws its own body (:attr:`Episode.body`)."""
+    extra_reward_names: ClassVar[tuple[str, ...]] = ()
+    """Reward terms beyond the kernels' six (:data:`REWARD_TERMS`), computed by :meth:`extra_terms`."""
+    observation_extra_names: ClassVar[tuple[str, ...]] = ()
+    """Observation entries after the 16 of :data:`OBSERVATION_NAMES` (:meth:`observation_extra`)."""
 
     w_shape: float = 1.0
     w_spin: float = 0.5
@@ -171,6 +213,62 @@ class ReachStationaryEllipse:
                 raise ValueError(f"{name}: must be a range (lo, hi) with 0 < lo <= hi, got {(lo, hi)!r}")
         if self.target_aspect[0] <= 1.0:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
+
+    # --- what the environment asks --------------------------------------------------------------
+    @property
+    def reward_names(self) -> tuple[str, ...]:
+        """The names of the reward terms, in the order of ``info["reward_terms"]`` (their sum is the reward)."""
+        return REWARD_TERMS + self.extra_reward_names
+
+    @property
+    def no_target_message(self) -> str:
+        """The ``ValueError`` of a reset that finds no target in the ranges."""
+        return ("target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
+                "found for this body in the target ranges")
+
+    def accepts(self, target: StationaryEllipse) -> bool:
+        """The stability class of a target: spectrally stable (q < 0, shape Hessian positive definite)."""
+        return bool(target.stable)
+
+    def sampler_settings(self) -> tuple[float, ...]:
+        """Entries 9–15 of the episode sampler's configuration (:mod:`flatbody_env.env.sampling`):
+        circulation branch, stable class, the noise start."""
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def observation_extra(self, body: Body) -> np.ndarray:
+        """The observation's entries after the 16 shared ones (none here)."""
+        return np.zeros(0)
+
+    def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (low, high) of :meth:`observation_extra`."""
+        return np.zeros(0), np.zeros(0)
+
+    def leaves(self, distance, ended):
+        """Termination by the task beyond the domain and the integrator (bool, or bool array for N bodies): none here."""
+        return np.zeros(np.shape(distance), dtype=bool) if np.ndim(distance) else False
+
+    def extra_terms(self, ended, left, terms) -> None:
+        """Write the terms of :attr:`extra_reward_names` into ``terms[6:]`` (and the ``failure`` term of a
+        step the task ends, ``left``): none here."""
+
+    def start_near(self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body) -> np.ndarray:
+        """The task's start near a given target (:meth:`sample_initial_state` here)."""
+        return self.sample_initial_state(rng, target, control)
+
+    def draw(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
+             simulator: Any = None) -> Episode:
+        """One reset's draws: a target (:meth:`sample_target`), then a start near it (:meth:`sample_initial_state`).
+
+        ``simulator`` is the environment's (:meth:`flatbody_env.env.env.FlatBodyEnv.rollout`), for tasks
+        that simulate while they draw; unused here.
+        """
+        target = self.sample_target(rng, body, limits=limits, control=control)
+        return Episode(state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target)
+
+    def draw_batch(self, rngs: Sequence[np.random.Generator], body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
+                   simulator: Any = None) -> list[Episode]:
+        """:meth:`draw` for each generator (each draws exactly what it would alone)."""
+        return [self.draw(rng, body, limits=limits, control=control, simulator=simulator) for rng in rngs]
 
     # --- targets --------------------------------------------------------------------------------
     def reachable(self, target: StationaryEllipse, body: Body, limits=DEFAULT_LIMITS, control: str = "torque+dilatation") -> bool:
@@ -208,18 +306,15 @@ class ReachStationaryEllipse:
             if code == _targets.REJECT:
                 continue
             try:
-                target = stationary_from_shape(body, lam, mu, branch="circulation", sign=sign)
+                target = stationary_from_shape(body, lam, mu, branch=self.target_branch, sign=sign)
             except ValueError:
                 continue
-            if not target.stable:
+            if not self.accepts(target):
                 continue
             if code == _targets.UNSURE and not self.reachable(target, body, limits, control):
                 continue
             return target
-        raise ValueError(
-            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
-            "found for this body in the target ranges"
-        )
+        raise ValueError(self.no_target_message)
 
     def filter_applies(self, control: str) -> bool:
         """Whether the reachability filter applies (:meth:`reachable`): on, and both τ3 and f_ϱ driven."""
@@ -254,7 +349,7 @@ class ReachStationaryEllipse:
         lam, mu = float(spec["lambda"]), float(spec["mu"])
         if not (math.isfinite(lam) and math.isfinite(mu) and lam > 0 and mu > 0) or lam == mu:
             raise ValueError(f"target.lambda: need finite λ, μ > 0 with λ ≠ μ, got {lam}, {mu}")
-        return stationary_from_shape(body, lam, mu, branch=spec.get("branch", "circulation"), sign=float(spec.get("sign", 1.0)))
+        return stationary_from_shape(body, lam, mu, branch=spec.get("branch", self.target_branch), sign=float(spec.get("sign", 1.0)))
 
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""
@@ -324,6 +419,12 @@ def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return y, o[OBS_TARGET].copy()
 
 
+def target_row(target: StationaryEllipse) -> np.ndarray:
+    """(λ*, μ*, ϱ*, s3*, p_θ*, sign) (6,): the target as :class:`Episode` and the episode sampler hold it
+    (sign: of σ₊ = s3* + p_θ*, the ``sign`` of :func:`~flatbody_env.physics.equilibria.stationary_from_shape`)."""
+    return np.array([target.lam, target.mu, target.rho, target.s3, target.p_theta, 1.0 if target.s3 + target.p_theta > 0 else -1.0])
+
+
 def target_vector(target: StationaryEllipse) -> np.ndarray:
     """(λ*, μ*, ϱ*, s3*) — the target entries of the observation (:data:`TARGET_NAMES`)."""
     return np.array([target.lam, target.mu, target.rho, target.s3])
@@ -382,6 +483,12 @@ def observe_kernel(y, tgt, obs):
     obs[11] = math.cos(y[10])
     for i in range(4):
         obs[12 + i] = tgt[i]
+
+
+def domain_codes(Y, cfg, out):
+    """:func:`domain_code` of each column of ``Y`` (11, N) into ``out`` (N,) int64."""
+    for k in range(Y.shape[1]):
+        out[k] = domain_code(Y[:, k], cfg)
 
 
 def domain_code(y, cfg):

@@ -6,7 +6,7 @@ by :func:`flatbody_env.env.kernels.controls_batch`, the seam's stepper
 (structure-of-arrays; compiled where the method has a compiled environment stepper), the
 bookkeeping :func:`flatbody_env.env.kernels.post_step_lanes` checks the domain, observes and scores
 all N, and :func:`flatbody_env.env.env.build_info` builds the infos. It uses the single env only
-through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.sample_episode`,
+through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.draw_episodes`, ``use_body``,
 :meth:`~flatbody_env.env.env.FlatBodyEnv.observe`, ``sampler``, ``stepper``, ``kernels``, ``kernel_params``,
 ``kernel_config``, ``left_domain``).
 
@@ -23,9 +23,24 @@ reward 0, terminated = truncated = False), or in SAME_STEP mode (``autoreset_mod
 episode ends is reset within the same step, its last observation in ``info["final_obs"]`` (rows
 flagged by ``info["_final_obs"]``).
 
+Episode clocks and partial resets (Isaac Lab's episode-length randomisation): ``reset(options={"stagger": True})``
+starts every body's clock at a uniform random step in [0, ``max_episode_steps``) (drawn from a generator of
+its own, seeded from ``seed``: the bodies' episode draws are unchanged), so that the first truncations are
+spread over an episode's length instead of all falling on one step; :attr:`~FlatBodyVectorEnv.episode_steps`
+reads the clocks and :meth:`~FlatBodyVectorEnv.set_episode_steps` sets them. ``reset(options={"reset_mask": m})``
+(Gymnasium's convention) resets only the bodies where the bool mask ``m`` (N,) is set (re-seeded with
+``seed + i`` when ``seed`` is given); the others keep their state, clock and observation, which the returned
+observation carries in their rows.
+
 Sub-environment ``i`` reset with ``seed=s`` draws exactly what a single ``FlatBody-v0`` reset with
 ``seed=s + i`` draws, so N single environments and one vector environment produce the same
-rollouts step for step (tested).
+rollouts step for step (tested, for every registered task). A task's draws run through the episode
+sampler's kernels where they can (``FlatBody-v0``, ``FlatBodySlow-v0``, ``FlatBodyHoldUnstable-v0``),
+else through the task's batch draw (:meth:`~flatbody_env.env.env.FlatBodyEnv.draw_episodes`: the
+witnessed starts of ``FlatBodyTorque-v0`` simulate all resetting bodies as one batch). A task's own
+termination and reward terms are applied after the bookkeeping, as in the single env. A task that
+draws a body per episode (``FlatBodyAnyBody-v0``) steps each body with its own stepper and kernel
+parameters, one body after another (the single env's step, body by body; one thread).
 """
 
 from __future__ import annotations
@@ -42,7 +57,7 @@ from gymnasium.vector.utils import batch_space
 
 from flatbody_env.env.env import FlatBodyEnv, build_info
 from flatbody_env.env.registration import MAX_EPISODE_STEPS
-from flatbody_env.env.task import OBSERVATION_SIZE, REWARD_TERMS, target_vector
+from flatbody_env.env.task import OBSERVATION_SIZE, Episode
 from flatbody_env.physics.state import STATE_SIZE
 
 
@@ -120,6 +135,14 @@ class FlatBodyVectorEnv(VectorEnv):
         self.stepper = p.stepper
         self._kernels = p.kernels
         n_act = self.single_action_space.shape[0]
+        self.reward_names = p.reward_names
+        """The names of ``info["reward_terms"]`` (the task's)."""
+        n_terms = len(self.reward_names)
+        self._own_terms = bool(self.task.extra_reward_names)
+        self._bodies = [p.body] * num_envs if self.task.varies_body else None
+        self._lane_steppers = [self.stepper] * num_envs if self.task.varies_body else None
+        self._lane_P = np.tile(p.kernel_params[:, None], (1, num_envs)) if self.task.varies_body else None
+        self._witnesses: list[np.ndarray | None] = [None] * num_envs
         self._Ys = np.zeros((STATE_SIZE, num_envs))
         self._OUT = np.zeros((STATE_SIZE, num_envs))
         self._Ynext = np.zeros((STATE_SIZE, num_envs))
@@ -127,17 +150,20 @@ class FlatBodyVectorEnv(VectorEnv):
         self._STATUS = np.zeros(num_envs, dtype=np.int64)
         self._NFEV = np.zeros(num_envs, dtype=np.int64)
         self._A = np.zeros((num_envs, n_act))
-        self._OBS = np.zeros((num_envs, OBSERVATION_SIZE), dtype=np.float32)
-        self._TERMS = np.zeros((len(REWARD_TERMS), num_envs))
+        self._OBS = np.zeros((num_envs, p.observation_size), dtype=np.float32)
+        self._OBS_EXTRA = np.tile(self.task.observation_extra(p.body).astype(np.float32), (num_envs, 1))
+        self._TERMS = np.zeros((n_terms, num_envs))
         self._SC = np.zeros((4, num_envs))
         self._ENDED = np.zeros(num_envs, dtype=np.int64)
         self._T = np.zeros((num_envs, 4))
         self._steps = np.zeros(num_envs, dtype=np.int64)
         self._autoreset = np.zeros(num_envs, dtype=bool)
+        self._cur_obs = np.zeros((num_envs, p.observation_size), dtype=np.float32)  # every body's current observation
+        self._cur_sc = np.zeros((4, num_envs))  # and its scalars (distance, energy, casimir, code)
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._blank = np.full(num_envs, "", dtype=object)
         self._mask_u8 = self.single_env.mask.astype(np.uint8)
-        if not self.stepper.compiled:
+        if not self.stepper.compiled or self.task.varies_body:
             threads = 1
         elif num_threads is None:
             threads = max(1, min(available_cores(), num_envs // LANES_PER_THREAD))
@@ -151,7 +177,7 @@ class FlatBodyVectorEnv(VectorEnv):
         self._lane_works = [(np.empty(sl.stop - sl.start), np.empty((4, sl.stop - sl.start)), np.empty(7), np.empty(4), np.empty(STATE_SIZE))
                             for sl in self._slices]
         # per thread, contiguous copies of its columns of the (k, N) arrays (the kernels run faster on them)
-        self._columns = [tuple(np.empty((k, sl.stop - sl.start)) for k in (STATE_SIZE, 4, STATE_SIZE, STATE_SIZE, len(REWARD_TERMS), 4))
+        self._columns = [tuple(np.empty((k, sl.stop - sl.start)) for k in (STATE_SIZE, 4, STATE_SIZE, STATE_SIZE, n_terms, 4))
                          for sl in self._slices] if threads > 1 else []
         self._pool: ThreadPoolExecutor | None = None
         self._pool_pid = 0
@@ -175,39 +201,72 @@ class FlatBodyVectorEnv(VectorEnv):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
         return U.T.copy()
 
+    @property
+    def episode_steps(self) -> np.ndarray:
+        """Each body's steps into its current episode (N,) int64 (a copy); it truncates at ``max_episode_steps``."""
+        return self._steps.copy()
+
+    def set_episode_steps(self, steps) -> None:
+        """Set each body's episode clock (N,) (integers in [0, ``max_episode_steps``)), e.g. to stagger the
+        bodies' truncations (Isaac Lab's ``episode_length_buf``); ``reset(options={"stagger": True})`` draws them."""
+        s = np.asarray(steps)
+        if s.shape != (self.num_envs,) or not np.issubdtype(s.dtype, np.integer) or (s < 0).any() or (s >= self.max_episode_steps).any():
+            raise ValueError(f"steps: must be {self.num_envs} integers in [0, {self.max_episode_steps})")
+        self._steps[:] = s
+
     # --- helpers -----------------------------------------------------------------------------------------
-    def _reset_one(self, i: int, options: dict[str, Any] | None, sc: np.ndarray) -> np.ndarray:
-        """Reset body i exactly as a single env would; its scalars go to ``sc[:, i]``; returns its observation."""
+    @property
+    def witnesses(self) -> list[np.ndarray | None]:
+        """Each body's witness for the current episode (actions (steps, n) into the success ball at the last
+        step; :class:`~flatbody_env.env.witness.ReachWithWitness`), None where the task has none."""
+        return [None if w is None else w.copy() for w in self._witnesses]
+
+    @property
+    def bodies(self) -> list:
+        """Each body's :class:`~flatbody_env.physics.body.Body` (the same one unless the task draws a body per episode)."""
+        return list(self._bodies) if self._bodies is not None else [self.body] * self.num_envs
+
+    def _start(self, i: int, ep: Episode, sc: np.ndarray) -> np.ndarray:
+        """Start body i's drawn episode exactly as a single env would; its scalars go to ``sc[:, i]``; returns its observation."""
         p = self.single_env
-        y, target = p.sample_episode(self._rngs[i], options)
-        self._Ys[:, i] = y
-        self._T[i] = target_vector(target)
+        if self._bodies is not None:
+            body = ep.body if ep.body is not None else p.body
+            p.use_body(body)
+            self._bodies[i] = body
+            self._lane_steppers[i] = p.stepper
+            self._lane_P[:, i] = p.kernel_params
+        self._Ys[:, i] = ep.state
+        self._T[i] = ep.target[:4]
         self._steps[i] = 0
-        obs, info = p.observe(y, self._T[i])
+        self._witnesses[i] = ep.witness
+        obs, info = p.observe(ep.state, self._T[i])
+        self._OBS_EXTRA[i] = obs[OBSERVATION_SIZE:]
         sc[0, i], sc[1, i], sc[2, i] = info["distance"], info["energy"], info["casimir"]
         return obs
 
     def _reset_many(self, idx: np.ndarray, options: dict[str, Any] | None, sc: np.ndarray, obs: np.ndarray) -> None:
         """Reset the bodies ``idx`` exactly as single envs would (their scalars into ``sc[:, idx]``, their
         observations into ``obs[idx]``): through the episode sampler's kernels for all of them at once
-        where it applies (:class:`~flatbody_env.env.sampling.EpisodeSampler`), else one by one."""
+        where it applies (:class:`~flatbody_env.env.sampling.EpisodeSampler`), else by the task's draws
+        (:meth:`~flatbody_env.env.env.FlatBodyEnv.draw_episodes`, all of them at once)."""
         if idx.size == 0:
             return
-        sampler = self.single_env.sampler
-        if options or not sampler.applies:
-            for i in idx:
-                obs[i] = self._reset_one(int(i), options, sc)
+        if options or not (self.task.compiled_resets and self.single_env.sampler.applies):
+            episodes = self.single_env.draw_episodes([self._rngs[i] for i in idx], options)
+            for i, ep in zip(idx, episodes):
+                obs[i] = self._start(int(i), ep, sc)
             return
-        TG = sampler.sample([self._rngs[i] for i in idx], self._Ys, idx)
+        TG = self.single_env.sampler.sample([self._rngs[i] for i in idx], self._Ys, idx)
         self._T[idx] = TG[:, :4]
         self._steps[idx] = 0
         m = idx.size
         Y = np.ascontiguousarray(self._Ys[:, idx])
         p = self.single_env
-        OBS, SC, TERMS = np.empty((m, OBSERVATION_SIZE), dtype=np.float32), np.empty((4, m)), np.empty((len(REWARD_TERMS), m))
+        OBS, SC, TERMS = np.empty((m, p.observation_size), dtype=np.float32), np.empty((4, m)), np.empty((len(self.reward_names), m))
         self._kernels.post_step_lanes(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
                                       p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), np.empty(m), np.empty((4, m)),
                                       np.empty(7), np.empty(4), np.empty(STATE_SIZE))
+        OBS[:, OBSERVATION_SIZE:] = self._OBS_EXTRA[idx]
         if np.any(SC[3] != 0):
             p.check_start(Y[:, int(np.flatnonzero(SC[3] != 0)[0])], "initial_noise")
         if p.custom_potential is not None:
@@ -219,6 +278,33 @@ class FlatBodyVectorEnv(VectorEnv):
         state = dict(self.__dict__)
         state["_pool"] = None  # threads are not pickled: started again on the first step
         return state
+
+    def _advance_bodies(self) -> None:
+        """Advance, check and score each body with its own body's stepper and kernel parameters (a task that
+        draws a body per episode): the single env's step, body by body."""
+        p = self.single_env
+        k = self._kernels
+        n_act = self._A.shape[1]
+        y, u, ynew, yout = np.empty(STATE_SIZE), np.empty(4), np.empty(STATE_SIZE), np.empty(STATE_SIZE)
+        counters, terms, sc = np.zeros(3, np.int64), np.empty(len(self.reward_names)), np.empty(4)
+        vel, force = np.empty(7), np.empty(4)
+        obs = np.empty(p.observation_size, dtype=np.float32)
+        a = np.empty(n_act)
+        for i in range(self.num_envs):
+            y[:] = self._Ys[:, i]
+            u[:] = self._U[:, i]
+            a[:] = self._A[i]
+            counters[:] = 0
+            st = self._lane_steppers[i].advance(y, u, self.dt, ynew, counters)
+            P = self._lane_P[:, i].copy()
+            self._ENDED[i] = k.post_step(y, ynew, st, a, n_act, self._T[i].copy(), p.kernel_config, P, yout, obs, terms, sc, vel, force)
+            self._STATUS[i] = st
+            self._NFEV[i] = counters[0]
+            self._OUT[:, i] = ynew
+            self._Ynext[:, i] = yout
+            self._OBS[i] = obs
+            self._TERMS[:, i] = terms
+            self._SC[:, i] = sc
 
     def _advance(self, c: int) -> None:
         """Advance, check and score the bodies of slice ``c`` (thread-safe: disjoint slices, own work arrays)."""
@@ -245,19 +331,39 @@ class FlatBodyVectorEnv(VectorEnv):
 
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            seeds = list(seed) if isinstance(seed, (list, tuple)) else [seed + i for i in range(self.num_envs)]
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"seed: expected {self.num_envs} seeds, got {len(seeds)}")
-            self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        obs = np.empty((self.num_envs, OBSERVATION_SIZE), dtype=np.float32)
-        sc = np.zeros((4, self.num_envs))
-        self._reset_many(np.arange(self.num_envs), options, sc, obs)
-        self._autoreset[:] = False
+        """Reset every body, or those of ``options["reset_mask"]``; ``options["stagger"]``: start the reset bodies'
+        clocks at random steps (module docstring). Other options are the single env's (``target``, ``state``)."""
         n = self.num_envs
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        stagger = bool(options.pop("stagger", False))
+        options = options or None
+        if mask is None:
+            idx = np.arange(n)
+        else:
+            mask = np.asarray(mask)
+            if mask.shape != (n,) or mask.dtype != np.bool_:
+                raise ValueError(f"options.reset_mask: must be a bool array of shape ({n},)")
+            idx = np.flatnonzero(mask)
+        if seed is not None:
+            seeds = list(seed) if isinstance(seed, (list, tuple)) else [seed + i for i in range(n)]
+            if len(seeds) != n:
+                raise ValueError(f"seed: expected {n} seeds, got {len(seeds)}")
+            for i in idx.tolist():
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
+        obs = self._cur_obs.copy()
+        sc = self._cur_sc.copy()
+        self._reset_many(idx, options, sc, obs)
+        self._autoreset[idx] = False
+        if stagger and idx.size:  # a generator of its own: the episode draws stay those of single envs
+            rng = np.random.default_rng(None if seed is None or not isinstance(seed, int) else (seed, 0x57A6))
+            self._steps[idx] = rng.integers(0, self.max_episode_steps, idx.size)
+        self._cur_obs[:] = obs
+        self._cur_sc[:] = sc
         blank = np.array([""] * n, dtype=object)
-        info = build_info(t=np.zeros(n), scalars=sc, p_theta=self._Ys[3], ended=np.zeros(n, dtype=bool), failure=blank, left=blank.copy(),
-                          method=self.stepper.method, nfev=np.zeros(n, np.int64), terms=None, success_tolerance=self.task.success_tolerance)
+        info = build_info(t=self._steps * self.dt, scalars=sc, p_theta=self._Ys[3], ended=np.zeros(n, dtype=bool), failure=blank,
+                          left=blank.copy(), method=self.stepper.method, nfev=np.zeros(n, np.int64), terms=None,
+                          success_tolerance=self.task.success_tolerance)
         return obs, info
 
     def step(self, actions):
@@ -267,7 +373,9 @@ class FlatBodyVectorEnv(VectorEnv):
         if not k.controls_batch(A, self._mask_u8, self.limits, self._A, self._U):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
         resetting = self._autoreset.copy()
-        if self.num_threads == 1:
+        if self._bodies is not None:
+            self._advance_bodies()
+        elif self.num_threads == 1:
             self._advance(0)
         else:
             if self._pool is None or self._pool_pid != os.getpid():  # (re)started lazily, also after a fork
@@ -277,12 +385,19 @@ class FlatBodyVectorEnv(VectorEnv):
             self._advance(0)
             for f in futures:
                 f.result()
+        self._OBS[:, OBSERVATION_SIZE:] = self._OBS_EXTRA
         status = self._STATUS
-        ended = self._ENDED.astype(bool) & ~resetting
+        leaves = np.zeros(self.num_envs, dtype=bool)
+        if self._own_terms:  # the task's own termination and terms (as the single env: FlatBodyEnv.step)
+            leaves = self.task.leaves(self._SC[0], self._ENDED.astype(bool))
+            self.task.extra_terms(self._ENDED.astype(bool) | leaves, leaves, self._TERMS)
+        ended = (self._ENDED.astype(bool) | leaves) & ~resetting
         failures = self._blank.copy()
         lefts = self._blank.copy()
         for i in np.flatnonzero(ended):
-            if status[i] != 0:
+            if leaves[i]:
+                lefts[i] = p.describe_leaving(float(self._SC[0, i]))
+            elif status[i] != 0:
                 failures[i] = self.stepper.describe(int(status[i]), lane=int(i))
             else:
                 lefts[i] = p.left_domain(self._OUT[:, i]) or ""
@@ -296,7 +411,7 @@ class FlatBodyVectorEnv(VectorEnv):
         truncated = (self._steps >= self.max_episode_steps) & ~terminated & keep
         obs = self._OBS.copy()
         rewards = self._TERMS.sum(axis=0)
-        terms = dict(zip(REWARD_TERMS, self._TERMS.copy()))
+        terms = dict(zip(self.reward_names, self._TERMS.copy()))
         sc = self._SC.copy()
         nfev = self._NFEV.copy()
         idx = np.flatnonzero(resetting)
@@ -311,10 +426,14 @@ class FlatBodyVectorEnv(VectorEnv):
         same_step = self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
         if same_step:
             final_obs = obs.copy()
-            self._reset_many(np.flatnonzero(done), None, np.zeros((4, self.num_envs)), obs)
+            sc_now = sc.copy()
+            self._reset_many(np.flatnonzero(done), None, sc_now, obs)
             self._autoreset[:] = False
         else:
+            sc_now = sc
             self._autoreset = done
+        self._cur_obs[:] = obs
+        self._cur_sc[:] = sc_now
         info = build_info(t=t, scalars=sc, p_theta=self._Ys[3], ended=ended, failure=failures, left=lefts, method=self.stepper.method,
                           nfev=nfev, terms=terms, success_tolerance=self.task.success_tolerance)
         if same_step:

@@ -1,6 +1,6 @@
 """One fused DOP853 environment step for N bodies in structure-of-arrays layout.
 
-Plain-Python kernels over arrays, compiled with :func:`flatbody_env.integrators.jit.jit_copy`
+Plain-Python kernels over arrays, compiled with :func:`flatbody_env.integrators.jit.retarget`
 (:data:`dop853_batch_env_step` is the compiled driver): no numpy allocation inside, no
 ``np.nextafter``, no per-lane branch in the stage loops — the same source can later be given a GPU
 target. The physics is the physics layer's scalar right-hand side for J1 = J2,
@@ -41,10 +41,9 @@ import math
 import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators import jit as _jit
 from flatbody_env.integrators.batch_solve import DOP853_KIND, env_step_body
 from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
-from flatbody_env.integrators.jit import jit_copy
+from flatbody_env.integrators.jit import retarget
 from flatbody_env.physics.equations import rhs_iso
 from flatbody_env.physics.potentials import potential_kernel
 
@@ -390,16 +389,9 @@ _MAX_FACTOR = _tk._MAX_FACTOR
 _ERROR_EXPONENT = _tk._ERROR_EXPONENT
 
 
-_rhs_lanes_c = jit_copy(rhs_lanes, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso)
-_dop853_lanes_c = jit_copy(dop853_lanes, rhs_lanes=_rhs_lanes_c, combine_lanes=jit_copy(combine_lanes))
-# the rejected lanes go on in blocks of REDO_BLOCK lanes: the same code with BLOCK (and S) re-bound
-_R = {"BLOCK": REDO_BLOCK, "S": N * REDO_BLOCK}
-_dop853_lanes_redo = jit_copy(dop853_lanes, variant="redo", **_R,
-                              rhs_lanes=jit_copy(rhs_lanes, variant="redo", **_R, potential_kernel=_jit.potential_kernel, rhs_iso=_jit.rhs_iso),
-                              combine_lanes=jit_copy(combine_lanes, variant="redo", **_R))
-_redo_lanes_c = jit_copy(dop853_redo_lanes, **_R, dop853_lanes=_dop853_lanes_redo, state_status=_tk._state_status,
-                         may_cross=_tk.may_cross, next_up=_tk.next_up)
-dop853_batch_env_step_c = jit_copy(dop853_batch_env_step, dop853_lanes=_dop853_lanes_c, dop853_redo_lanes=_redo_lanes_c)
+# compiled with every callee re-bound recursively (the physics kernels included); the rejected lanes go on
+# in blocks of REDO_BLOCK lanes: the same code with BLOCK (and S) re-bound
+dop853_batch_env_step_c = retarget(dop853_batch_env_step, dop853_redo_lanes=retarget(dop853_redo_lanes, BLOCK=REDO_BLOCK, S=N * REDO_BLOCK))
 """Compiled :func:`dop853_batch_env_step`."""
 
 

@@ -7,8 +7,8 @@ twins). So nothing here allocates: work arrays come in as arguments, which the C
 allocate with ``np.empty`` (once per chunk of bodies) and the CUDA kernels with
 ``cuda.local.array`` (once per thread).
 
-Method kinds (:data:`KIND`): 0 RK4, 1 a splitting with coefficients ``coeffs``
-(:data:`~.twopolar_kernels.STRANG`, ``SUZUKI4``, ``YOSHIDA4``), 2 DOP853.
+Method kinds (:data:`KIND`, derived from :data:`~.specs.SPECS`): 0 RK4, 1 a splitting with coefficients
+``coeffs`` (:mod:`.compositions`), 2 DOP853.
 
 * :func:`~.twopolar_kernels.fixed_solve_into` / :func:`~.twopolar_kernels.dop853_solve_into` (imported
   from there): the drivers behind ``simulate`` with their work arrays passed in
@@ -16,7 +16,8 @@ Method kinds (:data:`KIND`): 0 RK4, 1 a splitting with coefficients ``coeffs``
   call these). ``fail`` (3,) gets a third entry here: the index of the output row at which a failure
   was detected.
 * :func:`solve_body`: one body's trajectory into ``Y`` (11, T); rows from the failing one on are NaN.
-* :func:`env_step_body`: one body's environment step (the kernels of ``env_stepper(NAME).batch``).
+* :func:`env_step_body`: one body's environment step; :func:`batch_env_step_serial` loops it (the
+  environment's batch, ``env_stepper(NAME).batch``).
 * :func:`batch_solve` / :func:`batch_env_step`: the CPU batch kernels, parallel over chunks of bodies
   (``numba.prange``).
 
@@ -33,33 +34,13 @@ import numba
 import numpy as np
 
 from flatbody_env.integrators.failure import OK
-from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel
-from flatbody_env.integrators.twopolar_kernels import (
-    N,
-    STRANG,
-    SUZUKI4,
-    YOSHIDA4,
-    _dop853_env,
-    _fixed_env,
-    dop853_solve_into,
-    fixed_solve_into,
-)
+from flatbody_env.integrators.jit import njit, energy_kernel
+from flatbody_env.integrators.specs import BATCH_METHODS, BY_NAME, DOP853_KIND, RK4_KIND, SPLIT_KIND
+from flatbody_env.integrators.twopolar_kernels import N, STRANG, dop853_solve_into, env_step_into, fixed_solve_into
 
-njit = numba.njit(**JIT_OPTIONS)
 
-RK4_KIND = 0
-SPLIT_KIND = 1
-DOP853_KIND = 2
-
-KIND = {
-    "RK4": (RK4_KIND, STRANG),
-    "splitting-strang": (SPLIT_KIND, STRANG),
-    "splitting-suzuki4": (SPLIT_KIND, SUZUKI4),
-    "splitting-yoshida4": (SPLIT_KIND, YOSHIDA4),
-    "DOP853-numba": (DOP853_KIND, STRANG),
-}
-"""Batch methods: name → (kind, composition coefficients)."""
-BATCH_METHODS = tuple(KIND)
+KIND = {name: (BY_NAME[name].code, BY_NAME[name].coeffs) for name in BATCH_METHODS}
+"""Batch methods: name → (kind, composition coefficients), from the method table (:mod:`.specs`)."""
 
 CHUNK = 32
 """Bodies per task of the parallel CPU kernels (work arrays are allocated once per chunk)."""
@@ -98,7 +79,7 @@ def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_
 def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
                   y, u, out, K, ynew, ytmp, vel, force, f, counters):
     """Body ``b``'s environment step: column b of Y (11, N) and U (4, N) → column b of OUT, STATUS[b],
-    NFEV[b]; the same kernels as ``env_stepper(NAME).batch`` (:mod:`.compiled_methods`)."""
+    NFEV[b]; the env step of :func:`~.twopolar_kernels.env_step_into`."""
     for i in range(N):
         y[i] = Y[i, b]
     for i in range(4):
@@ -106,18 +87,14 @@ def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, 
     counters[0] = 0
     counters[1] = 0
     counters[2] = 0
-    if kind == DOP853_KIND:
-        st = _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
-    else:
-        st = _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, K, vel, force, counters)
-    STATUS[b] = st
+    STATUS[b] = env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
     NFEV[b] = counters[0]
     for i in range(N):
         OUT[i, b] = out[i]
 
 
 # --------------------------------------------------------------------------------------------- CPU batch kernels
-@numba.njit(parallel=True, **JIT_OPTIONS)
+@njit(parallel=True)
 def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
     """Trajectories of N bodies: Y0 (N, 11) → OUT (N, T, 11), STATUS, NFEV (N,) int64, TFAIL (N,);
     one energy tolerance per body (ENERGY_TOL (N,)); parallel over chunks of :data:`CHUNK` bodies."""
@@ -137,10 +114,27 @@ def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nf
                        y, f, K, ynew, ytmp, vel, force, counters, fail)
 
 
-@numba.njit(parallel=True, **JIT_OPTIONS)
+@njit
+def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+    """:func:`batch_env_step` in one thread (the environment's compiled loop over bodies)."""
+    y = np.empty(N)
+    u = np.empty(4)
+    out = np.empty(N)
+    K = np.empty((13, N))
+    ynew = np.empty(N)
+    ytmp = np.empty(N)
+    vel = np.empty(7)
+    force = np.empty(4)
+    f = np.empty(N)
+    counters = np.zeros(3, np.int64)
+    for b in range(Y.shape[1]):
+        env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, y, u, out, K, ynew, ytmp, vel, force, f, counters)
+
+
+@njit(parallel=True)
 def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
     """One environment step of N bodies: Y, OUT (11, N), U (4, N), STATUS, NFEV (N,) int64; parallel
-    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to ``env_stepper(NAME).batch_counted``."""
+    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to :func:`batch_env_step_serial`."""
     n = Y.shape[1]
     for c in numba.prange((n + CHUNK - 1) // CHUNK):
         y = np.empty(N)
@@ -158,7 +152,7 @@ def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, ST
                           y, u, out, K, ynew, ytmp, vel, force, f, counters)
 
 
-@numba.njit(parallel=True, **JIT_OPTIONS)
+@njit(parallel=True)
 def batch_energy(Y0, P, H):
     """H (eq. (41)) of each row of Y0 (N, 11) into H (N,)."""
     n = Y0.shape[0]
@@ -169,5 +163,6 @@ def batch_energy(Y0, P, H):
             H[b] = energy_kernel(Y0[b], P, vel, force)
 
 
-__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "RK4_KIND", "SPLIT_KIND", "batch_energy", "batch_env_step", "batch_solve",
+__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "RK4_KIND", "SPLIT_KIND", "STRANG", "batch_energy", "batch_env_step",
+           "batch_env_step_serial", "batch_solve",
            "env_step_body", "solve_body"]

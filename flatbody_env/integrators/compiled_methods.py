@@ -29,12 +29,10 @@ under-resolved, budget, unsupported).
 
 Environment API
 ---------------
-Through the seam: ``make_stepper(name, body, tol)`` / ``make_batch_stepper(name, body, tol)`` of
-:mod:`.base` find :meth:`CompiledTwoPolar.make_stepper` / ``make_batch_stepper`` (one compiled call
-per env step; failures as ``StepResult.ok = False`` with ``kind``); the regular-chart methods use
-the generic per-step :meth:`integrate` path (it converts and returns R). Underneath,
-:func:`env_stepper` (name) → :class:`EnvStepper` with two compiled functions and no Python work per
-sub-step::
+The environment steps through :func:`flatbody_env.integrators.steppers.make_env_step` (it calls
+:meth:`CompiledTwoPolar.check_env` for the refusals). Underneath, :func:`env_stepper` (name) →
+:class:`EnvStepper`, the one compiled env step of :mod:`.twopolar_kernels` (or RATTLE's) bound to the
+method's ``(kind, coefficients)`` from the method table (:mod:`.specs`), no Python work per sub-step::
 
     stepper = env_stepper("RK4")
     status = stepper.step(y, u, P, dt, h, rtol, atol, energy_tol, out)         # -> int
@@ -58,6 +56,7 @@ sub-step::
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,10 +65,9 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.kinematics import Decomposition
 from flatbody_env.physics.potentials import V2
 from flatbody_env.physics.regular import paper_from_regular, regular_from_paper
-from flatbody_env.integrators import rattle_kernels as _rk
-from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error, check_step, register_method
-from flatbody_env.integrators.failure import KINDS, failure_reason, raise_for
+from flatbody_env.integrators.base import IntegrationError, Solution, Tolerances, budget_error, check_step, register_method
+from flatbody_env.integrators.failure import KINDS, raise_for
+from flatbody_env.integrators.specs import BY_NAME, ENV_METHODS, SPECS, MethodSpec
 
 
 def kernel_params(body: Body) -> np.ndarray:
@@ -118,45 +116,43 @@ def _detail(st: int, fail: np.ndarray, tol: Tolerances) -> str:
 
 
 class CompiledTwoPolar:
-    """A compiled method in the two-polar chart (:mod:`.twopolar_kernels`)."""
+    """A compiled method in the two-polar chart (:mod:`.twopolar_kernels`), from its :class:`~.specs.MethodSpec`.
+    The kernels are imported on first use: registering compiles nothing and imports no numba."""
 
-    def __init__(self, info: MethodInfo, kind: str, coeffs: np.ndarray | None = None) -> None:
-        self.info = info
-        self.kind = kind  # "dop853", "rk4", "split"
-        self.coeffs = coeffs if coeffs is not None else _tk.STRANG
+    def __init__(self, spec: MethodSpec) -> None:
+        self.spec = spec
+        self.info = spec.info
+        self.kind = spec.kind  # "dop853", "rk4", "split"
+        self.coeffs = spec.coeffs
 
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        _check_compiled_body(body, name)
-        h = check_step(self.info, tol)
-        if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
+        h = self.check_env(body, tol)
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
         uu = _controls(u)
         P = kernel_params(body)
-        Y = np.empty((11, times.size))
         counters = np.array([0, 0, 0, tol.max_nfev], np.int64)
         fail = np.zeros(2)
         energy_tol = float(tol.energy_tol)
         if self.kind != "dop853":
-            _check_fixed_budget(name, times, h, 4 if self.kind == "rk4" else self.coeffs.size, tol)
+            _check_fixed_budget(name, times, h, self.spec.stages, tol)
         if with_rotation:
             # the same stepping code on z = (y, vec(R)) (rotation_kernels): y bit for bit as without R
-            from flatbody_env.integrators import rotation_kernels as _rot
+            from flatbody_env.integrators import rotation_kernels as kernels
 
             R0 = np.eye(3) if R0 is None else np.asarray(R0, dtype=np.float64)
-            z0 = np.concatenate([y0, R0.ravel()])
-            Z = np.empty((z0.size, times.size))
-            if self.kind == "dop853":
-                st = _rot.dop853_solve_R(z0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
-            else:
-                st = _rot.fixed_solve_R(0 if self.kind == "rk4" else 1, self.coeffs, z0, times, uu, P, h, energy_tol, Z, counters, fail)
-            Y = Z[:11]
-        elif self.kind == "dop853":
-            st = _tk.dop853_solve(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Y, counters, fail)
+            y0 = np.concatenate([y0, R0.ravel()])
+            dop853, fixed = kernels.dop853_solve_R, kernels.fixed_solve_R
         else:
-            st = _tk.fixed_solve(0 if self.kind == "rk4" else 1, self.coeffs, y0, times, uu, P, h, energy_tol, Y, counters, fail)
+            from flatbody_env.integrators import twopolar_kernels as kernels
+
+            dop853, fixed = kernels.dop853_solve, kernels.fixed_solve
+        Z = np.empty((y0.size, times.size))
+        if self.kind == "dop853":
+            st = dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+        else:
+            st = fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail)
         if KINDS[st] == "budget":
             raise budget_error(t=float(fail[0]), method=name, tol=tol, used=f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps")
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
@@ -164,40 +160,25 @@ class CompiledTwoPolar:
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
         rotation = np.ascontiguousarray(Z[11:].T).reshape(times.size, 3, 3) if with_rotation else None
-        return Solution(t=times.copy(), Y=np.ascontiguousarray(Y), rotation=rotation, nfev=int(counters[0]), stats=stats)
+        return Solution(t=times.copy(), Y=np.ascontiguousarray(Z[:11]), rotation=rotation, nfev=int(counters[0]), stats=stats)
 
-    # -- the environment seam (flatbody_env.integrators.base.make_stepper / make_batch_stepper) --
-    def _check_env(self, body: Body, tol: Tolerances) -> None:
+    def check_env(self, body: Body, tol: Tolerances) -> float:
+        """The method's refusals (custom potential, step setting, J1 ≠ J2 for a splitting); returns the fixed step (0 if adaptive)."""
         name = self.info.name
         _check_compiled_body(body, name)
-        check_step(self.info, tol)
+        h = check_step(self.info, tol)
         if self.kind == "split" and not body.inertia.is_isotropic:
             raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
-
-    def make_stepper(self, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> "CompiledStepper":
-        """Compiled single-body env stepper ``(y, R, u, dt) -> StepResult`` (one compiled call per step).
-        It passes R through unchanged; the environment carries R with
-        :func:`flatbody_env.integrators.steppers.make_env_step` (``with_rotation=True``) instead."""
-        if with_rotation:
-            raise ValueError(
-                f"with_rotation: this stepper of {self.info.name} does not integrate R; use "
-                "flatbody_env.integrators.steppers.make_env_step(..., with_rotation=True), which carries R compiled"
-            )
-        self._check_env(body, tol)
-        return CompiledStepper(self.info.name, body, tol)
-
-    def make_batch_stepper(self, body: Body, tol: Tolerances) -> "CompiledBatchStepper":
-        """Compiled batch stepper ``(Y (N, 11), U (N, 4), dt) -> BatchStepResult`` (one compiled call)."""
-        self._check_env(body, tol)
-        return CompiledBatchStepper(self.info.name, body, tol)
+        return h
 
 
 class CompiledRattle:
-    """Compiled RATTLE (composition ``coeffs``) in the regular chart (:mod:`.rattle_kernels`)."""
+    """Compiled RATTLE (composition ``spec.coeffs``) in the regular chart (:mod:`.rattle_kernels`)."""
 
-    def __init__(self, info: MethodInfo, coeffs: np.ndarray) -> None:
-        self.info = info
-        self.coeffs = coeffs
+    def __init__(self, spec: MethodSpec) -> None:
+        self.spec = spec
+        self.info = spec.info
+        self.coeffs = spec.coeffs
 
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
@@ -229,7 +210,9 @@ class CompiledRattle:
         DEC = np.empty((13, n))
         counters = np.zeros(3, np.int64)
         fail = np.zeros(2)
-        st = _rk.rattle_solve(self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail)
+        from flatbody_env.integrators.rattle_kernels import rattle_solve
+
+        st = rattle_solve(self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail)
         if KINDS[st] == "chart-singularity":
             raise IntegrationError(
                 "the paper chart's frame could not be followed through lambda ~ mu (the regular state itself is fine; "
@@ -263,131 +246,15 @@ def paper_states(Z: np.ndarray, DEC: np.ndarray, body: Body, times: np.ndarray, 
 
 
 # --------------------------------------------------------------------------------------------- registry
-_TWO_POLAR = "two-polar"
+for _spec in SPECS:
+    register_method(CompiledRattle(_spec) if _spec.kind == "rattle" else CompiledTwoPolar(_spec))
 
-DOP853_NUMBA = register_method(
-    CompiledTwoPolar(
-        MethodInfo(
-            name="DOP853-numba", adaptive=True, order=8, chart=_TWO_POLAR, compiled=True, preserves=(),
-            description="compiled port of scipy's DOP853 (Hairer's coefficients and step control), two-polar chart",
-        ),
-        "dop853",
-    )
-)
-RK4 = register_method(
-    CompiledTwoPolar(
-        MethodInfo(name="RK4", adaptive=False, order=4, chart=_TWO_POLAR, compiled=True, preserves=(),
-                   description="classical fixed-step Runge-Kutta 4, compiled, two-polar chart"),
-        "rk4",
-    )
-)
-_SPLIT_PRESERVES = ("casimir", "p_theta", "symplectic")
-SPLITTING_STRANG = register_method(
-    CompiledTwoPolar(
-        MethodInfo(name="splitting-strang", adaptive=False, order=2, chart=_TWO_POLAR, compiled=True, preserves=_SPLIT_PRESERVES,
-                   description="Poisson splitting with exact flows (docs/physics.md 8), Strang, J1 = J2 only"),
-        "split", _tk.STRANG,
-    )
-)
-SPLITTING_SUZUKI4 = register_method(
-    CompiledTwoPolar(
-        MethodInfo(name="splitting-suzuki4", adaptive=False, order=4, chart=_TWO_POLAR, compiled=True, preserves=_SPLIT_PRESERVES,
-                   description="Poisson splitting, Suzuki 5-stage order-4 composition, J1 = J2 only"),
-        "split", _tk.SUZUKI4,
-    )
-)
-SPLITTING_YOSHIDA4 = register_method(
-    CompiledTwoPolar(
-        MethodInfo(name="splitting-yoshida4", adaptive=False, order=4, chart=_TWO_POLAR, compiled=True, preserves=_SPLIT_PRESERVES,
-                   description="Poisson splitting, Yoshida triple-jump order-4 composition, J1 = J2 only"),
-        "split", _tk.YOSHIDA4,
-    )
-)
-_RATTLE_PRESERVES = ("constraints", "casimir", "lab_spin", "p_theta", "symplectic")
-RATTLE = register_method(
-    CompiledRattle(
-        MethodInfo(name="RATTLE", adaptive=False, order=2, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
-                   description="RATTLE on the regular phi-psi formulation (docs/physics.md 5), passes through lambda = mu; "
-                   "p_theta only for J1 = J2"),
-        _tk.STRANG,
-    )
-)
-RATTLE_SUZUKI4 = register_method(
-    CompiledRattle(
-        MethodInfo(name="RATTLE-suzuki4", adaptive=False, order=4, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
-                   description="Suzuki 5-stage composition of RATTLE, regular chart, passes through lambda = mu; "
-                   "p_theta only for J1 = J2"),
-        _tk.SUZUKI4,
-    )
-)
-
-RATTLE_KAHANLI6 = register_method(
-    CompiledRattle(
-        MethodInfo(name="RATTLE-kahanli6", adaptive=False, order=6, chart="regular", compiled=True, preserves=_RATTLE_PRESERVES,
-                   description="Kahan-Li 9-stage order-6 composition of RATTLE, regular chart, passes through lambda = mu; "
-                   "p_theta only for J1 = J2"),
-        _tk.KAHAN_LI6,
-    )
-)
 
 # --------------------------------------------------------------------------------------------- env API
-class _EnvBase:
-    """Picklable holder of a method name and its settings; the compiled kernel is looked up lazily."""
-
-    def __init__(self, name: str, body: Body, tol: Tolerances) -> None:
-        self.name = name
-        self.P = kernel_params(body)
-        self.h = float(tol.step) if tol.step is not None else 0.0
-        self.rtol = float(tol.rtol)
-        self.atol = float(tol.atol)
-        self.energy_tol = float(tol.energy_tol)
-        self._stepper = None
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state["_stepper"] = None
-        return state
-
-    @property
-    def stepper(self) -> "EnvStepper":
-        if self._stepper is None:
-            self._stepper = env_stepper(self.name)
-        return self._stepper
-
-
-class CompiledStepper(_EnvBase):
-    """``stepper(y, R, u, dt) -> StepResult``; R is passed through unchanged (two-polar state only).
-    ``nfev`` is not counted on this path (reported as 0)."""
-
-    def __call__(self, y, R, u, dt):
-        from flatbody_env.integrators.base import StepResult
-
-        y = np.ascontiguousarray(y, dtype=np.float64)
-        out = np.empty(11)
-        st = self.stepper.step(y, _controls(u), self.P, float(dt), self.h, self.rtol, self.atol, self.energy_tol, out)
-        if st != 0:
-            return StepResult(y=y.copy(), R=R, ok=False, reason=failure_reason(st), kind=KINDS[st])
-        return StepResult(y=out, R=R, ok=True)
-
-
-class CompiledBatchStepper(_EnvBase):
-    """``batch(Y (N, 11), U (N, 4), dt) -> BatchStepResult``: transposes to the kernels'
-    structure-of-arrays layout and runs all bodies in one compiled call."""
-
-    def __call__(self, Y, U, dt):
-        from flatbody_env.integrators.base import BatchStepResult
-
-        Y = np.asarray(Y, dtype=np.float64)
-        Ys = np.ascontiguousarray(Y.T)
-        Us = np.ascontiguousarray(np.asarray(U, dtype=np.float64).T)
-        OUT = np.empty_like(Ys)
-        STATUS = np.zeros(Ys.shape[1], np.int64)
-        self.stepper.batch(Ys, Us, self.P, float(dt), self.h, self.rtol, self.atol, self.energy_tol, OUT, STATUS)
-        ok = STATUS == 0
-        out = OUT.T.copy()
-        out[~ok] = Y[~ok]
-        reasons = ["" if s == 0 else f"{KINDS[s]}: {failure_reason(s)}" for s in STATUS]
-        return BatchStepResult(Y=out, ok=ok, reasons=reasons)
+def _uncounted(kernel, *args):
+    """``kernel`` with a trailing counters (3,) (one body) or NFEV (N,) (a batch, ``args[0]`` (n, N)) it discards."""
+    work = np.zeros(args[0].shape[1] if args[0].ndim == 2 else 3, np.int64)
+    return kernel(*args, work)
 
 
 @dataclass(frozen=True)
@@ -410,29 +277,22 @@ class EnvStepper:
         return 11 if self.state == "paper" else 18
 
 
-_ENV = {
-    "DOP853-numba": (_tk.dop853_env_step, _tk.batch_dop853_env_step, "paper", False,
-                     _tk.dop853_env_step_counted, _tk.batch_dop853_env_step_counted),
-    "RK4": (_tk.rk4_env_step, _tk.batch_rk4_env_step, "paper", True, _tk.rk4_env_step_counted, _tk.batch_rk4_env_step_counted),
-    "splitting-strang": (_tk.strang_env_step, _tk.batch_strang_env_step, "paper", True,
-                         _tk.strang_env_step_counted, _tk.batch_strang_env_step_counted),
-    "splitting-suzuki4": (_tk.suzuki4_env_step, _tk.batch_suzuki4_env_step, "paper", True,
-                          _tk.suzuki4_env_step_counted, _tk.batch_suzuki4_env_step_counted),
-    "splitting-yoshida4": (_tk.yoshida4_env_step, _tk.batch_yoshida4_env_step, "paper", True,
-                           _tk.yoshida4_env_step_counted, _tk.batch_yoshida4_env_step_counted),
-    "RATTLE-suzuki4": (_rk.rattle_env_step, _rk.batch_rattle_env_step, "regular", True, None, None),
-}
-ENV_METHODS = tuple(_ENV)
-"""Methods with an environment stepper."""
-
-
 def env_stepper(name: str) -> EnvStepper:
     """The compiled per-step functions of method ``name`` (one of :data:`ENV_METHODS`)."""
-    if name not in _ENV:
+    if name not in ENV_METHODS:
         raise ValueError(f"method: no environment stepper for {name!r} (allowed: {', '.join(ENV_METHODS)})")
-    step, batch, state, fixed, step_counted, batch_counted = _ENV[name]
-    return EnvStepper(name=name, step=step, batch=batch, state=state, fixed_step=fixed, step_counted=step_counted,
-                      batch_counted=batch_counted)
+    spec = BY_NAME[name]
+    if spec.kind == "rattle":
+        from flatbody_env.integrators import rattle_kernels as _rk
+
+        return EnvStepper(name=name, step=_rk.rattle_env_step, batch=_rk.batch_rattle_env_step, state="regular", fixed_step=True)
+    from flatbody_env.integrators.batch_solve import batch_env_step_serial
+    from flatbody_env.integrators.twopolar_kernels import env_step
+
+    step = functools.partial(env_step, spec.code, spec.coeffs)
+    batch = functools.partial(batch_env_step_serial, spec.code, spec.coeffs)
+    return EnvStepper(name=name, step=functools.partial(_uncounted, step), batch=functools.partial(_uncounted, batch), state="paper",
+                      fixed_step=not spec.info.adaptive, step_counted=step, batch_counted=batch)
 
 
 def warm_up(names=None) -> None:
@@ -460,4 +320,4 @@ def warm_up(names=None) -> None:
         meth.integrate(body, y, times, tol=tol)
 
 
-__all__ = ["CompiledBatchStepper", "CompiledRattle", "CompiledStepper", "CompiledTwoPolar", "ENV_METHODS", "EnvStepper", "env_stepper", "kernel_params", "paper_states", "warm_up"]
+__all__ = ["CompiledRattle", "CompiledTwoPolar", "ENV_METHODS", "EnvStepper", "env_stepper", "kernel_params", "paper_states", "warm_up"]

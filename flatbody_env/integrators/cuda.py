@@ -1,10 +1,10 @@
 """The CUDA target of the integrators: the same plain-Python kernels, compiled by numba's CUDA target.
 
-The twin of :mod:`.jit`. Every integrator function is a numba CPU dispatcher around plain Python
-(``.py_func``). :func:`device_twin` re-compiles that function with ``cuda.jit(device=True)`` after
-re-binding each dispatcher it calls to *its* device twin, recursively
-(``types.FunctionType(f.__code__, {**f.__globals__, **twins})``, as :func:`.jit.jit_copy` does for
-the CPU). No formula is restated: the physics kernels, the RK4/splitting/DOP853 steps and the
+The CUDA target of :func:`.jit.retarget`, the one way a kernel is compiled: every integrator function
+is plain Python (or a numba CPU dispatcher around it, ``.py_func``); :func:`device_twin` compiles it
+with ``cuda.jit(device=True)`` with every function it calls re-bound to *its* device twin,
+recursively, as the CPU target does with ``njit``. No formula is restated: the physics kernels, the
+RK4/splitting/DOP853 steps (one step control, :func:`~.twopolar_kernels.dop853_advance`) and the
 per-body drivers of :mod:`.batch_solve` run on the GPU from the source the CPU runs.
 
 Only the target glue is written here: the two kernels (one thread per body) that take their work
@@ -35,15 +35,13 @@ from __future__ import annotations
 
 import functools
 import os
-import types
 
-import numba
 import numpy as np
 from numba import float64, int64
 
 from flatbody_env.integrators import batch_solve as _bs
-from flatbody_env.integrators import twopolar_kernels as _tk
 from flatbody_env.integrators.batch_solve import env_step_body, solve_body
+from flatbody_env.integrators.jit import Target, rebound, retarget
 from flatbody_env.integrators.twopolar_kernels import dop853_initial_step_into
 
 INSTALL_HINT = 'pip install "flatbody[gpu]" on a machine with an NVIDIA driver'
@@ -110,51 +108,20 @@ def device_name() -> str:
 
 
 # --------------------------------------------------------------------------------------------- device twins
-def _is_dispatcher(obj) -> bool:
-    return isinstance(obj, numba.core.dispatcher.Dispatcher)
-
-
-def _names(code: types.CodeType) -> set[str]:
-    names = set(code.co_names)
-    for const in code.co_consts:
-        if isinstance(const, types.CodeType):
-            names |= _names(const)
-    return names
-
-
-class _Twins:
-    """Device twins of CPU dispatchers, built once per process (memoised by dispatcher)."""
-
-    def __init__(self, module) -> None:
-        self.cuda = module
-        self.memo: dict[int, object] = {}
-
-    def rebound(self, func):
-        """A copy of the plain function ``func`` whose dispatcher globals are their device twins and whose
-        ``cuda`` global is numba.cuda."""
-        glob = dict(func.__globals__)
-        for name in _names(func.__code__):
-            value = glob.get(name)
-            if _is_dispatcher(value):
-                glob[name] = self.twin(value)
-        glob["cuda"] = self.cuda
-        clone = types.FunctionType(func.__code__, glob, func.__name__, func.__defaults__, func.__closure__)
-        clone.__module__ = func.__module__
-        clone.__qualname__ = func.__qualname__
-        clone.__doc__ = func.__doc__
-        return clone
-
-    def twin(self, dispatcher):
-        key = id(dispatcher)
-        if key not in self.memo:
-            self.memo[key] = self.cuda.jit(device=True)(self.rebound(dispatcher.py_func))
-        return self.memo[key]
+@functools.lru_cache(maxsize=1)
+def _target() -> tuple[Target, dict]:
+    """The CUDA target of :func:`~.jit.retarget` and the globals re-bound on it: the kernels' ``cuda``, and the
+    device side of the initial step (its CPU wrapper allocates) wherever a device function calls it."""
+    module = require()
+    return Target("cuda", module.jit(device=True), share_compiled=False), dict(cuda=module, dop853_initial_step=_dop853_initial_step_device)
 
 
 def device_twin(func):
-    """The CUDA device function compiled from ``func`` (a numba CPU dispatcher) with everything it calls
-    re-bound to device twins, recursively. :class:`CudaUnavailableError` without a CUDA target."""
-    return _kernels()[0].twin(func)
+    """The CUDA device function compiled from ``func`` (a numba CPU dispatcher or plain Python) with everything
+    it calls re-bound to device twins, recursively (:func:`~.jit.retarget` on the CUDA target).
+    :class:`CudaUnavailableError` without a CUDA target."""
+    target, constants = _target()
+    return retarget(func, target, **constants)
 
 
 def _dop853_initial_step_device(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, counters):
@@ -201,13 +168,9 @@ def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_
 
 @functools.lru_cache(maxsize=1)
 def _kernels():
-    module = require()
-    twins = _Twins(module)
-    # the CPU wrapper of the initial step allocates: every device twin that calls it gets the device side
-    twins.memo[id(_tk.dop853_initial_step)] = module.jit(device=True)(twins.rebound(_dop853_initial_step_device))
-    env_kernel = module.jit(twins.rebound(_env_step_kernel))
-    solve_kernel = module.jit(twins.rebound(_solve_kernel))
-    return twins, env_kernel, solve_kernel
+    target, constants = _target()
+    module = constants["cuda"]
+    return module.jit(rebound(_env_step_kernel, target, **constants)), module.jit(rebound(_solve_kernel, target, **constants))
 
 
 # --------------------------------------------------------------------------------------------- host API
@@ -230,7 +193,7 @@ def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=n
     ``NFEV`` (N,) int64 are allocated on the device when not given. Returns (OUT, STATUS, NFEV) as
     given/allocated (device arrays unless host arrays were passed in, which are then filled)."""
     kind, coeffs = _method(method)
-    _, kernel, _ = _kernels()
+    kernel, _ = _kernels()
     n = Y.shape[1]
     if OUT is None:
         OUT = cuda.device_array((11, n), np.float64)
@@ -247,7 +210,7 @@ def solve(method, Y0, times, u, P, *, h, rtol, atol, energy_tol, max_nfev, threa
     """N trajectories on the GPU: Y0 (N, 11) host → (OUT (N, T, 11), STATUS, NFEV, TFAIL) host arrays
     (the batch analogue of :func:`~.batch_solve.batch_solve`; ``energy_tol`` (N,))."""
     kind, coeffs = _method(method)
-    _, _, kernel = _kernels()
+    _, kernel = _kernels()
     n = Y0.shape[0]
     T = times.size
     d_Y0 = cuda.to_device(np.ascontiguousarray(Y0.T))

@@ -4,17 +4,16 @@ The physics layer stays free of numba: :func:`flatbody_env.physics.hamiltonian.k
 :func:`flatbody_env.physics.potentials.potential_kernel`, :func:`flatbody_env.physics.equations.rhs_core` and
 :func:`flatbody_env.physics.equations.rhs_kernel` are plain-float Python functions. numba compiles a
 function's calls to globals only when those globals are numba dispatchers themselves, so each
-kernel is copied here with
+kernel is compiled here by :func:`retarget`: the same code object (the physics module's source)
+with every function it calls re-bound to its compiled copy, recursively
+(``types.FunctionType(f.__code__, {**f.__globals__, **compiled_callees})``). No formula is restated
+here. The same :func:`retarget` clones the stepping code for the 20-entry state that carries R
+(:mod:`.rotation_kernels`) and the fused batch's block sizes (:mod:`.batch_kernels`).
 
-.. code-block:: python
-
-    types.FunctionType(f.__code__, {**f.__globals__, **jitted_callees}, f.__name__)
-
-(the same code object, i.e. the physics module's source, with the called kernels re-bound to
-their jitted copies) and wrapped by ``numba.njit(cache=True)``. No formula is restated here.
-numba's cache keys on the code object's file and line, so the compiled machine code lands in
-``flatbody_env/__pycache__`` (or ``$NUMBA_CACHE_DIR``) and is re-used by later processes;
-editing a physics module invalidates it (numba compares the source file's time stamp).
+The on-disk cache (:func:`njit`): numba keys a function by its file, line and bytecode and checks
+its own file's time stamp; :func:`code_digest` adds the constants, the numeric globals and,
+recursively, the code of every compiled callee, so a caller recompiles when a callee in another
+file changes, and copies of one code object with other callees get their own entries.
 
 Read-only installs: :data:`CACHE` (``cache=`` of every compiled function) is decided once at
 import by :func:`cache_location`: ``$NUMBA_CACHE_DIR`` when set and writable, else the package's
@@ -36,12 +35,17 @@ References
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 import types
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba
+import numpy as np
+from numba.core.caching import FunctionCache
 
 from flatbody_env.physics import equations as _equations
 from flatbody_env.physics import hamiltonian as _hamiltonian
@@ -97,39 +101,179 @@ JIT_OPTIONS = {"cache": CACHE, "nogil": True, "error_model": "numpy"}
 inf/nan instead of raising, so failures surface as status flags)."""
 
 
-def jit_copy(func, *, variant: str = "", **callees):
-    """A numba-compiled copy of the plain-Python ``func`` (or of a numba dispatcher's Python
-    function) whose called globals ``callees`` are replaced by (jitted) substitutes. ``func``
-    itself is left untouched.
+def _names(code: types.CodeType) -> set[str]:
+    """The global names ``code`` (and the code nested in it) reads."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _names(const)
+    return names
 
-    ``variant``: a name suffix for a second copy of the same code object with other callees (e.g.
-    the stepping loops re-bound to the 20-entry state that carries R). numba's on-disk cache keys a
-    function by its file, line, qualified name and argument types — not by its globals — so two
-    copies of one code object under one name would load each other's machine code; the suffix
-    gives each copy its own cache entry.
-    """
+
+def _consts(code: types.CodeType) -> list:
+    return [_consts(c) if isinstance(c, types.CodeType) else c for c in code.co_consts]
+
+
+def _value_digest(value) -> bytes | None:
+    if isinstance(value, np.ndarray):
+        return repr((value.dtype.str, value.shape)).encode() + value.tobytes()
+    if isinstance(value, (bool, int, float, complex, str, np.number)):
+        return repr(value).encode()
+    return None
+
+
+def code_digest(func, _active=None) -> str:
+    """A hash of what ``func`` compiles to besides its own bytecode: its constants, the values of the
+    numeric globals it reads (e.g. a re-bound ``N``) and, recursively, the code of every compiled
+    function it calls. It is part of the on-disk cache key of every compiled function
+    (:func:`njit`), so a caller recompiles when a callee in another file changes (numba alone
+    compares only the caller's own file) and two copies of one code object with other callees or
+    constants get their own cache entries."""
     func = getattr(func, "py_func", func)
-    glob = dict(func.__globals__)
-    glob.update(callees)
-    clone = types.FunctionType(func.__code__, glob, func.__name__, func.__defaults__, func.__closure__)
-    clone.__module__ = func.__module__
-    clone.__qualname__ = func.__qualname__ + (f"__{variant}" if variant else "")
-    clone.__doc__ = func.__doc__
-    return numba.njit(**JIT_OPTIONS)(clone)
+    cached = getattr(func, "_flatbody_digest", None)
+    if cached is not None:
+        return cached
+    active = set() if _active is None else _active
+    if id(func) in active:  # recursion: the cycle is hashed once
+        return func.__qualname__
+    active.add(id(func))
+    h = hashlib.sha256(func.__code__.co_code + repr(_consts(func.__code__)).encode())
+    for name in sorted(_names(func.__code__)):
+        value = func.__globals__.get(name)
+        if isinstance(value, numba.core.dispatcher.Dispatcher):
+            h.update(f"{name}:{code_digest(value, active)}".encode())
+        elif (digest := _value_digest(value)) is not None:
+            h.update(name.encode() + digest)
+    active.discard(id(func))
+    func._flatbody_digest = digest = h.hexdigest()
+    return digest
 
 
-kinetic_iso = jit_copy(_hamiltonian.kinetic_iso)
-kinetic_kernel = jit_copy(_hamiltonian.kinetic_kernel, kinetic_iso=kinetic_iso)
-potential_kernel = jit_copy(_potentials.potential_kernel)
-rhs_iso = jit_copy(_equations.rhs_iso, kinetic_iso=kinetic_iso)
-rhs_core = jit_copy(_equations.rhs_core, kinetic_kernel=kinetic_kernel, rhs_iso=rhs_iso)
-rhs_kernel = jit_copy(_equations.rhs_kernel, potential_kernel=potential_kernel, rhs_core=rhs_core)
-rotation_rate_kernel = jit_copy(_equations.rotation_rate_kernel)
-rhs_rotation_kernel = jit_copy(_equations.rhs_rotation_kernel, rhs_kernel=rhs_kernel, rotation_rate_kernel=rotation_rate_kernel)
-turn_rotation_kernel = jit_copy(_equations.turn_rotation_kernel)
+class _DigestCache(FunctionCache):
+    """numba's function cache with :func:`code_digest` in the index key."""
+
+    def _index_key(self, sig, codegen):
+        return super()._index_key(sig, codegen) + (code_digest(self._py_func),)
 
 
-@numba.njit(**JIT_OPTIONS)
+def njit(func=None, **options):
+    """``numba.njit`` with :data:`JIT_OPTIONS` (and ``options``) whose on-disk cache entry is keyed by
+    :func:`code_digest` too; as ``@njit`` or ``njit(parallel=True)(func)``."""
+    def compile_(f):
+        dispatcher = numba.njit(**{**JIT_OPTIONS, **options})(f)
+        if CACHE:
+            dispatcher._cache = _DigestCache(dispatcher.py_func)
+        return dispatcher
+
+    return compile_ if func is None else compile_(func)
+
+
+def _clone(func, callees):
+    """The plain-Python ``func`` (or a dispatcher's Python function) with the globals ``callees`` replaced."""
+    func = getattr(func, "py_func", func)
+    clone = types.FunctionType(func.__code__, {**func.__globals__, **callees}, func.__name__, func.__defaults__, func.__closure__)
+    clone.__module__, clone.__qualname__, clone.__doc__ = func.__module__, func.__qualname__, func.__doc__
+    return clone
+
+
+def _compile_cpu(clone):
+    # a name of its own: numba's cached machine code names its symbols after the qualified name, so two
+    # copies of one code object under one name would link to each other's code
+    clone.__qualname__ = f"{clone.__qualname__}__{code_digest(clone)[:12]}"
+    return njit(clone)
+
+
+def jit_copy(func, **callees):
+    """A compiled copy (:func:`njit`) of the plain-Python ``func`` with the globals ``callees`` replaced,
+    only those; named after its :func:`code_digest`. The CPU target's compile step of :func:`retarget`,
+    which finds the callees itself (recursively)."""
+    return _compile_cpu(_clone(func, callees))
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where :func:`retarget` compiles: ``compile`` turns a re-bound plain-Python function into the
+    target's compiled function. ``share_compiled``: a compiled (CPU) callee with nothing re-bound
+    beneath it is used as it is (the CPU); else every callee is compiled anew (CUDA, :mod:`.cuda`)."""
+
+    name: str
+    compile: Callable
+    share_compiled: bool = True
+
+
+CPU = Target("cpu", _compile_cpu)
+"""The CPU target (:func:`njit`, the on-disk cache keyed by :func:`code_digest`)."""
+
+_RETARGETED: dict = {}
+
+
+def _is_function(value) -> bool:
+    return isinstance(value, (numba.core.dispatcher.Dispatcher, types.FunctionType))
+
+
+def retarget(func, target: Target = CPU, **constants):
+    """``func`` (plain Python or a compiled dispatcher) compiled for ``target`` with the globals
+    ``constants`` re-bound in it and, recursively, in every function it calls: a plain-Python callee
+    (e.g. a physics kernel) is compiled the same way; a compiled callee is copied only when a
+    re-bound name is read somewhere beneath it (on the CPU; on other targets always), else shared.
+    A constant that is a plain-Python function is a substitute, compiled like a callee; any other
+    constant (a number, an array, a compiled function, a module) is used as given. Memoised: one
+    copy per (target, function, constants).
+
+    The one way the integrators and the env compile a kernel for another state, size or target (the
+    physics kernels, the R-carrying state, the fused batch's block sizes, the ladder's sub-systems,
+    the env's kernels, CUDA device functions)."""
+    return _retarget(func, target, constants, _key(constants))
+
+
+def rebound(func, target: Target = CPU, **constants):
+    """The plain-Python copy of ``func`` that :func:`retarget` compiles (its callees retargeted), not
+    compiled itself: for an entry point the caller compiles (a CUDA kernel)."""
+    return _clone(func, _callees(getattr(func, "py_func", func), target, constants, _key(constants)))
+
+
+def _key(constants) -> tuple:
+    return tuple(sorted((k, v if isinstance(v, (int, float)) else id(v)) for k, v in constants.items()))
+
+
+def _callees(py, target, constants, key) -> dict:
+    callees = {}
+    for name in _names(py.__code__):
+        value = constants[name] if name in constants else py.__globals__.get(name)
+        if name in constants and not isinstance(value, types.FunctionType):
+            callees[name] = value
+        elif _is_function(value) and value is not py:
+            twin = _retarget(value, target, constants, key)
+            if twin is not value:
+                callees[name] = twin
+    return callees
+
+
+def _retarget(func, target, constants, key):
+    memo_key = (target.name, id(func), key)
+    if memo_key in _RETARGETED:
+        return _RETARGETED[memo_key][1]
+    _RETARGETED[memo_key] = (func, func)  # a recursive call sees the function itself
+    py = getattr(func, "py_func", func)
+    callees = _callees(py, target, constants, key)
+    shared = target.share_compiled and isinstance(func, numba.core.dispatcher.Dispatcher) and not callees
+    result = func if shared else target.compile(_clone(py, callees))
+    _RETARGETED[memo_key] = (func, result)  # keeps func alive: its id stays unique
+    return result
+
+
+kinetic_iso = retarget(_hamiltonian.kinetic_iso)
+kinetic_kernel = retarget(_hamiltonian.kinetic_kernel)
+potential_kernel = retarget(_potentials.potential_kernel)
+rhs_iso = retarget(_equations.rhs_iso)
+rhs_core = retarget(_equations.rhs_core)
+rhs_kernel = retarget(_equations.rhs_kernel)
+rotation_rate_kernel = retarget(_equations.rotation_rate_kernel)
+rhs_rotation_kernel = retarget(_equations.rhs_rotation_kernel)
+turn_rotation_kernel = retarget(_equations.turn_rotation_kernel)
+
+
+@njit
 def energy_kernel(y, P, vel, force):
     """H = 𝒯 + V of the packed state ``y`` (11,) with kernel parameters ``P`` (9,) (eq. (41) of [1]);
     ``vel`` (7,), ``force`` (4,) are work space."""
@@ -137,5 +281,5 @@ def energy_kernel(y, P, vel, force):
     return kinetic_kernel(y, P, vel, force) + v
 
 
-__all__ = ["CACHE", "CACHE_DIR", "JIT_OPTIONS", "cache_location", "jit_copy", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
+__all__ = ["CACHE", "CACHE_DIR", "CPU", "JIT_OPTIONS", "Target", "cache_location", "code_digest", "jit_copy", "njit", "rebound", "retarget", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
            "rhs_core", "rhs_kernel", "rotation_rate_kernel", "rhs_rotation_kernel", "turn_rotation_kernel", "energy_kernel"]

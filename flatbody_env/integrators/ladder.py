@@ -278,15 +278,13 @@ def _times(times) -> np.ndarray:
     return times
 
 
-def _small(x0, times, template, state_idx, rate_idx, u, P, tol: Tolerances, positive: int, check_gap: bool, name: str):
-    from flatbody_env.integrators import ladder_kernels as _lk
+def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, name: str):
     from flatbody_env.integrators.failure import raise_for
 
     X = np.empty((x0.size, times.size))
     counters = np.zeros(3, np.int64)
     fail = np.zeros(1)
-    st = _lk.dop853_small(np.ascontiguousarray(x0, dtype=np.float64), times, template, state_idx, rate_idx, u, P,
-                          float(tol.rtol), float(tol.atol), positive, check_gap, X, counters, fail)
+    st = solve(np.ascontiguousarray(x0, dtype=np.float64), times, template, u, P, float(tol.rtol), float(tol.atol), check_gap, X, counters, fail)
     raise_for(st, t=fail[0], method=name)
     return X, counters
 
@@ -330,7 +328,7 @@ def _template(y0: np.ndarray) -> np.ndarray:
 def _thickness(y0, times, u, P, tol, name):
     from flatbody_env.integrators import ladder_kernels as _lk
 
-    return _small(np.array([y0[9], y0[6]]), times, _template(y0), _lk.THICKNESS_STATE, _lk.THICKNESS_RATE, u, P, tol, 1, False, name)
+    return _small(_lk.dop853_thickness, np.array([y0[9], y0[6]]), times, _template(y0), u, P, tol, False, name)
 
 
 class PlanarModel:
@@ -355,7 +353,7 @@ class PlanarModel:
         P = kernel_params(body)
         x0 = np.array([y0[7], y0[8], y0[4], y0[5], y0[10], 0.0])
         check_gap = bool(y0[2] != y0[3])
-        Xp, cp = _small(x0, times, _template(y0), _lk.INPLANE_STATE, _lk.INPLANE_RATE, uu, P, tol, 2, check_gap, name)
+        Xp, cp = _small(_lk.dop853_inplane, x0, times, _template(y0), uu, P, tol, check_gap, name)
         Xr, cr = _thickness(y0, times, uu, P, tol, name)
         Y = np.repeat(_template(y0)[:, None], times.size, axis=1)
         Y[7], Y[8], Y[4], Y[5], Y[10] = Xp[0], Xp[1], Xp[2], Xp[3], Xp[4]

@@ -10,15 +10,17 @@ no variable (:mod:`.ladder`):
 * the thickness oscillator x = (ϱ, p_ϱ): ϱ̇ = p_ϱ/J3, ṗ_ϱ = −V_ϱ′(ϱ) + f_ϱ (eqs. (40), (49) at
   s1 = s2 = 0).
 
-Neither right-hand side is written here: :func:`sub_rhs` writes the system's variables into a
+Neither right-hand side is written here: :func:`subsystem_rhs` writes the system's variables into a
 full packed state (the template, which holds the constants), calls the physics layer's
 :func:`~flatbody_env.physics.equations.rhs_kernel` (its jitted copy, :mod:`.jit`) and reads the
 system's rates back through two index maps. That the rates it reads do not depend on the
 other system's variables at s1 = s2 = 0 is checked in ``tests/integrators/test_ladder.py``.
 
-:func:`dop853_small` is Hairer's DOP853 (scipy's coefficients, initial step and step control, as
-in :mod:`.twopolar_kernels`) on such an n-variable system, stepping exactly onto every output time;
-each system runs with its own steps.
+:data:`dop853_inplane` and :data:`dop853_thickness` are the two-polar DOP853 itself (scipy's
+coefficients, initial step and step control: :func:`~.twopolar_kernels.dop853_initial_step_into`,
+:func:`~.twopolar_kernels.dop853_advance`) compiled by :func:`~.jit.retarget` for each system, with
+``N`` (6 or 2), the right-hand side (:func:`subsystem_rhs`) and the status rule re-bound; each system runs
+with its own steps, stepping exactly onto every output time.
 
 References
 ----------
@@ -29,23 +31,11 @@ References
 
 from __future__ import annotations
 
-import math
-
-import numba
 import numpy as np
-from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
 
-from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, MAX_STEPS, NON_FINITE, OK, STEP_COLLAPSE
-from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, rhs_kernel
-from flatbody_env.integrators.twopolar_kernels import next_up
-
-njit = numba.njit(**JIT_OPTIONS)
-
-_SAFETY = 0.9
-_MIN_FACTOR = 0.2
-_MAX_FACTOR = 10.0
-_ERROR_EXPONENT = -1.0 / 8.0
-MAX_STEPS_SMALL = 50_000_000
+from flatbody_env.integrators import twopolar_kernels as _tk
+from flatbody_env.integrators.failure import OK
+from flatbody_env.integrators.jit import energy_kernel, njit, retarget, rhs_kernel
 
 RATE_OMEGA3 = 11
 """Index of ω3 in the extended rate vector (dy/dt (11,) followed by ω3)."""
@@ -60,26 +50,27 @@ THICKNESS_RATE = np.array([9, 6], dtype=np.int64)
 
 
 @njit
-def sub_rhs(x, template, state_idx, rate_idx, u, P, dx, work, ext, vel, force):
-    """dx/dt of a sub-system through the full right-hand side (module docstring).
+def subsystem_rhs(x, u, PT, dx, W, force):
+    """dx/dt of a sub-system through the full right-hand side (module docstring), with the signature of
+    :func:`~flatbody_env.physics.equations.rhs_kernel` so that the two-polar DOP853 runs on it unchanged:
+    the system's data ride in the arguments the step passes through to its right-hand side.
 
     Parameters
     ----------
     x : array (n,)
         The sub-system's variables.
-    template : array (11,)
-        Packed state holding the other entries (constants of the planar motion).
-    state_idx, rate_idx : int64 arrays (n,)
-        Where each variable sits in the packed state (−1: none) and where its rate sits in the
-        extended rate vector (dy/dt, then ω3 at :data:`RATE_OMEGA3`).
     u : array (4,)
         Controls (only f_ϱ is used on the planar set).
-    P : array (9,)
-        Kernel parameters.
+    PT : tuple (P, template, state_idx, rate_idx)
+        Kernel parameters (9,); the packed state (11,) holding the other entries (constants of the
+        planar motion); where each variable sits in the packed state (−1: none) and where its rate
+        sits in the extended rate vector (dy/dt, then ω3 at :data:`RATE_OMEGA3`), int64 (n,).
     dx : array (n,), output
-    work, ext, vel, force : arrays (11,), (12,), (7,), (4,)
-        Work space.
+    W, force : tuple of arrays (7,), (11,), (12,); array (4,)
+        Work space (velocities, the packed state, the extended rates; forces).
     """
+    P, template, state_idx, rate_idx = PT
+    vel, work, ext = W
     for i in range(11):
         work[i] = template[i]
     for j in range(x.size):
@@ -92,170 +83,62 @@ def sub_rhs(x, template, state_idx, rate_idx, u, P, dx, work, ext, vel, force):
 
 
 @njit
-def _rms(x, scale):
-    acc = 0.0
-    for i in range(x.size):
-        r = x[i] / scale[i]
-        acc += r * r
-    return math.sqrt(acc / x.size)
+def sub_rhs(x, template, state_idx, rate_idx, u, P, dx, work, ext, vel, force):
+    """:func:`subsystem_rhs` with its data as separate arguments (``work``, ``ext``, ``vel``, ``force``: (11,), (12,), (7,), (4,))."""
+    subsystem_rhs(x, u, (P, template, state_idx, rate_idx), dx, (vel, work, ext), force)
 
 
-@njit
-def _status(x, positive, gap_sign, check_gap):
-    for i in range(x.size):
-        if not math.isfinite(x[i]):
-            return NON_FINITE
-    for i in range(positive):
-        if x[i] <= 0.0:
-            return DOMAIN
-    if check_gap and (x[0] - x[1]) * gap_sign <= 0.0:
-        return CHART_SINGULARITY
-    return OK
+def _subsystem_status(x, gap_sign, check_gap):
+    """The two-polar status rule (:func:`~.twopolar_kernels.state_code`) on a sub-system: its first
+    ``POSITIVE`` variables (λ, μ; ϱ) must stay > 0, x[0] − x[1] (λ − μ) keep its sign where checked."""
+    return state_code(_finite(x), x[0], x[1] if POSITIVE > 1 else 1.0, 1.0, gap_sign, check_gap)
 
 
-@njit
-def dop853_small(x0, times, template, state_idx, rate_idx, u, P, rtol, atol, positive, check_gap, X, counters, fail):
-    """DOP853 on a sub-system from ``times[0]`` through every output time.
-
-    Parameters
-    ----------
-    x0 : array (n,)
-        Initial values.
-    times : array (m,)
-        Strictly increasing output times.
-    template, state_idx, rate_idx, u, P
-        As in :func:`sub_rhs`.
-    rtol, atol : float
-        Tolerances (scipy's error norm).
-    positive : int
-        The first ``positive`` variables must stay > 0 (λ, μ; ϱ).
-    check_gap : bool
-        Whether x[0] − x[1] (λ − μ) must keep its sign (the chart's barrier, σ₋ ≠ 0).
-    X : array (n, m), output
-        The values at the output times.
-    counters : int64 array (3,)
-        [RHS evaluations, accepted steps, rejected steps] (accumulated).
-    fail : array (1,)
-        The time reached (the failure time on failure).
-
-    Returns
-    -------
-    int
-        Status (:mod:`.failure`).
-    """
-    n = x0.size
-    work = np.empty(11)
-    ext = np.empty(12)
-    vel = np.empty(7)
-    force = np.empty(4)
-    K = np.empty((13, n))
+def _dop853_subsystem(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail):
+    """DOP853 on one system of ``N`` variables (:data:`dop853_inplane`, :data:`dop853_thickness`): the two-polar DOP853's
+    initial step and step control (:func:`~.twopolar_kernels.dop853_advance`) with ``N``, the index maps
+    ``STATE_IDX``, ``RATE_IDX``, the right-hand side (:func:`subsystem_rhs`) and the status rule re-bound."""
+    K = np.empty((13, N))
     x = x0.copy()
-    xnew = np.empty(n)
-    xtmp = np.empty(n)
-    f = np.empty(n)
-    scale = np.empty(n)
-    sub_rhs(x, template, state_idx, rate_idx, u, P, f, work, ext, vel, force)
+    xnew = np.empty(N)
+    xtmp = np.empty(N)
+    f = np.empty(N)
+    force = np.empty(4)
+    PT = (P, template, STATE_IDX, RATE_IDX)
+    W = (np.empty(7), np.empty(11), np.empty(12))
+    rhs_kernel(x, u, PT, f, W, force)
     counters[0] += 1
     gap_sign = 1.0 if x[0] > x[1] else -1.0
-    for i in range(n):
+    for i in range(N):
         X[i, 0] = x[i]
     t = times[0]
     fail[0] = t
-    t_final = times[times.size - 1]
-    # initial step (scipy's select_initial_step, error order 7)
-    h_abs = 0.0
-    if t_final > t:
-        for i in range(n):
-            scale[i] = atol + abs(x[i]) * rtol
-        d0 = _rms(x, scale)
-        d1 = _rms(f, scale)
-        h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-        h0 = min(h0, t_final - t)
-        for i in range(n):
-            xtmp[i] = x[i] + h0 * f[i]
-        sub_rhs(xtmp, template, state_idx, rate_idx, u, P, xnew, work, ext, vel, force)
-        counters[0] += 1
-        for i in range(n):
-            xtmp[i] = xnew[i] - f[i]
-        d2 = _rms(xtmp, scale) / h0
-        if d1 <= 1e-15 and d2 <= 1e-15:
-            h1 = max(1e-6, h0 * 1e-3)
-        else:
-            h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
-        h_abs = min(100.0 * h0, h1, t_final - t)
+    h_abs = dop853_initial_step_into(x, f, t, times[times.size - 1], u, PT, rtol, atol, W, force, xtmp, xnew, counters)
     for k in range(1, times.size):
-        t_bound = times[k]
-        while t < t_bound:
-            min_step = 10.0 * abs(next_up(t) - t)
-            if h_abs < min_step:
-                h_abs = min_step
-            rejected = False
-            while True:
-                if h_abs < min_step:
-                    fail[0] = t
-                    return STEP_COLLAPSE
-                if counters[1] + counters[2] > MAX_STEPS_SMALL:
-                    fail[0] = t
-                    return MAX_STEPS
-                t_new = min(t + h_abs, t_bound)
-                h = t_new - t
-                h_abs = abs(h)
-                for i in range(n):
-                    K[0, i] = f[i]
-                for s in range(1, 12):
-                    for i in range(n):
-                        acc = 0.0
-                        for q in range(STAGE_L[s]):  # the nonzero a_sj, in increasing j
-                            acc += K[STAGE_J[s, q], i] * STAGE_C[s, q]
-                        xtmp[i] = x[i] + h * acc
-                    sub_rhs(xtmp, template, state_idx, rate_idx, u, P, K[s], work, ext, vel, force)
-                for i in range(n):
-                    acc = 0.0
-                    for q in range(STAGE_L[12]):  # the nonzero b_j
-                        acc += K[STAGE_J[12, q], i] * STAGE_C[12, q]
-                    xnew[i] = x[i] + h * acc
-                sub_rhs(xnew, template, state_idx, rate_idx, u, P, K[12], work, ext, vel, force)
-                counters[0] += 12
-                e5 = 0.0
-                e3 = 0.0
-                for i in range(n):
-                    sc = atol + max(abs(x[i]), abs(xnew[i])) * rtol
-                    a5 = 0.0
-                    a3 = 0.0
-                    for q in range(ERROR_J.shape[0]):
-                        kj = K[ERROR_J[q], i]
-                        a5 += kj * ERROR_E5[q]
-                        a3 += kj * ERROR_E3[q]
-                    a5 /= sc
-                    a3 /= sc
-                    e5 += a5 * a5
-                    e3 += a3 * a3
-                err = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * n)
-                if err < 1.0:
-                    factor = _MAX_FACTOR if err == 0.0 else min(_MAX_FACTOR, _SAFETY * err**_ERROR_EXPONENT)
-                    if rejected:
-                        factor = min(1.0, factor)
-                    h_abs *= factor
-                    break
-                factor = _SAFETY * err**_ERROR_EXPONENT
-                if not factor > _MIN_FACTOR:
-                    factor = _MIN_FACTOR
-                h_abs *= factor
-                rejected = True
-                counters[2] += 1
-            counters[1] += 1
-            t = t_new
-            for i in range(n):
-                x[i] = xnew[i]
-                f[i] = K[12, i]
-            st = _status(x, positive, gap_sign, check_gap)
-            if st != OK:
-                fail[0] = t
-                return st
+        st, t, h_abs = dop853_advance(x, f, t, times[k], h_abs, u, PT, rtol, atol, gap_sign, check_gap, K, xnew, xtmp, W, force, counters)
         fail[0] = t
-        for i in range(n):
+        if st != OK:
+            return st
+        for i in range(N):
             X[i, k] = x[i]
     return OK
+
+
+_finite = _tk._finite
+state_code = _tk.state_code
+dop853_advance = _tk.dop853_advance
+dop853_initial_step_into = _tk.dop853_initial_step_into
+dop853_inplane = retarget(_dop853_subsystem, N=6, STATE_IDX=INPLANE_STATE, RATE_IDX=INPLANE_RATE, rhs_kernel=subsystem_rhs,
+                          _state_status=retarget(_subsystem_status, POSITIVE=2))
+"""DOP853 on the in-plane system from ``times[0]`` through every output time:
+``(x0 (6,), times (m,), template (11,), u, P, rtol, atol, check_gap, X (6, m), counters, fail) -> status``.
+
+``template``, ``u``, ``P`` as in :func:`sub_rhs`; ``check_gap``: whether λ − μ must keep its sign (the
+chart's barrier, σ₋ ≠ 0); ``counters`` (3,) int64 accumulates [RHS evaluations, accepted steps, rejected
+steps]; ``fail`` (1,) receives the time reached (the failure time on failure); the status is :mod:`.failure`'s."""
+dop853_thickness = retarget(_dop853_subsystem, N=2, STATE_IDX=THICKNESS_STATE, RATE_IDX=THICKNESS_RATE, rhs_kernel=subsystem_rhs,
+                            _state_status=retarget(_subsystem_status, POSITIVE=1))
+"""DOP853 on the thickness oscillator (ϱ, p_ϱ): the arguments of :data:`dop853_inplane` (``check_gap`` False)."""
 
 
 @njit
@@ -270,4 +153,5 @@ def energy_series(Y, P, out):
         out[k] = energy_kernel(y, P, vel, force)
 
 
-__all__ = ["energy_series", "INPLANE_RATE", "INPLANE_STATE", "RATE_OMEGA3", "THICKNESS_RATE", "THICKNESS_STATE", "dop853_small", "sub_rhs"]
+__all__ = ["energy_series", "INPLANE_RATE", "INPLANE_STATE", "RATE_OMEGA3", "THICKNESS_RATE", "THICKNESS_STATE", "dop853_inplane", "dop853_thickness",
+           "sub_rhs", "subsystem_rhs"]

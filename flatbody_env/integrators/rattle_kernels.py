@@ -14,8 +14,8 @@ g1 = ψ·φ1 = 0, g2 = ψ·φ2 = 0 with ∂g1 = (ψ, 0, φ1), ∂g2 = (0, ψ, φ
 Λ by Newton's method on the two quadratic constraints, μ from a 2×2 linear system (the matrix
 of :func:`flatbody_env.physics.regular.regular_rhs`). RATTLE is symmetric and symplectic (order 2); it
 conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage composition
-(:data:`~.twopolar_kernels.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
-(:data:`~.twopolar_kernels.KAHAN_LI6`) to order 6; forces are re-used across stages.
+(:data:`~.compositions.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
+(:data:`~.compositions.KAHAN_LI6`) to order 6; forces are re-used across stages.
 
 Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (docs/physics.md §7):
 F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
@@ -54,16 +54,14 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from flatbody_env.physics.potentials import KIND_V1, KIND_V2, KIND_V3
 from flatbody_env.physics.regular import MAX_CHART_JUMP
 from flatbody_env.integrators.failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
-from flatbody_env.integrators.jit import JIT_OPTIONS, potential_kernel
-from flatbody_env.integrators.twopolar_kernels import SUZUKI4
+from flatbody_env.integrators.jit import njit, potential_kernel
+from flatbody_env.integrators.compositions import SUZUKI4
 
-njit = numba.njit(**JIT_OPTIONS)
 
 NZ = 18
 NEWTON_MAX = 30

@@ -2,7 +2,7 @@
 
 Rendering and recording need R(t) (Ṙ = R W(ω), eq. (25) of [1]). The compiled methods of
 :mod:`.twopolar_kernels` step the eleven paper variables only; this module compiles *the same
-stepping source* a second time (:func:`~flatbody_env.integrators.jit.jit_copy` with ``variant``) on
+stepping source* a second time (:func:`~flatbody_env.integrators.jit.retarget`, which re-binds recursively) on
 the 20-entry state z = (y, R row by row) of :data:`flatbody_env.physics.equations.ROTATED_STATE_SIZE`,
 so no loop, coefficient or step-control rule is restated:
 
@@ -22,12 +22,12 @@ so no loop, coefficient or step-control rule is restated:
 
 Kernels (arrays C-contiguous float64; z, zout (20,)):
 
-    status = <method>_env_step_R(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters)
+    status = env_step_R(kind, coeffs, z, u, P, dt, h, rtol, atol, energy_tol, zout, counters)
     status = dop853_solve_R(z0, times, u, P, rtol, atol, energy_tol, Z, counters, fail)      # Z (20, n)
     status = fixed_solve_R(kind, coeffs, z0, times, u, P, h, energy_tol, Z, counters, fail)
 
 with the arguments of :mod:`.twopolar_kernels`. :data:`ENV_STEP_WITH_ROTATION` maps a method name
-to its env step.
+(:data:`~.specs.ROTATION_METHODS`) to its env step.
 
 References
 ----------
@@ -36,28 +36,13 @@ References
 
 from __future__ import annotations
 
-import hashlib
-from pathlib import Path
+import functools
 
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.jit import jit_copy, rhs_rotation_kernel, turn_rotation_kernel
-from flatbody_env.physics import equations as _equations
+from flatbody_env.integrators.jit import njit, retarget, rhs_rotation_kernel, turn_rotation_kernel
+from flatbody_env.integrators.specs import BY_NAME, ROTATION_METHODS
 from flatbody_env.physics.equations import ROTATED_STATE_SIZE
 
-def _source_tag() -> str:
-    """A short hash of the sources the copies below are built from besides their own file.
-
-    numba's cache invalidates a function when *its* source file changes, not when a callee does;
-    the copies live under :mod:`.twopolar_kernels`' file but call this module's and the physics
-    layer's kernels, so their cache name carries this tag and an edit of either gives new entries.
-    """
-    digest = hashlib.sha256()
-    for path in (Path(__file__), Path(_equations.__file__)):
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:10]
-
-
-_V = f"with_R_{_source_tag()}"
 _NZ = ROTATED_STATE_SIZE
 
 
@@ -97,43 +82,19 @@ _flow_h3 = _tk._flow_h3
 dop853_initial_step = _tk.dop853_initial_step
 dop853_initial_step_into = _tk.dop853_initial_step_into
 
-# ---------------------------------------------------------------------------------- DOP853
-_dop853_stages_R = jit_copy(_tk._dop853_stages, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel)
-_dop853_advance_R = jit_copy(_tk.dop853_advance, variant=_V, N=_NZ, _dop853_stages=_dop853_stages_R)
-_initial_step_R = jit_copy(dop853_initial_step_paper, variant=_V)
-_dop853_env_R = jit_copy(_tk._dop853_env, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel, dop853_advance=_dop853_advance_R,
-                         dop853_initial_step=_initial_step_R)
-dop853_env_step_R = jit_copy(_tk.dop853_env_step_counted, variant=_V, N=_NZ, _dop853_env=_dop853_env_R)
-_dop853_solve_into_R = jit_copy(_tk.dop853_solve_into, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel, dop853_advance=_dop853_advance_R,
-                                dop853_initial_step_into=jit_copy(dop853_initial_step_paper_into, variant=_V))
-dop853_solve_R = jit_copy(_tk.dop853_solve, variant=_V, N=_NZ, dop853_solve_into=_dop853_solve_into_R)
+# the stepping code re-bound, recursively, to z: N = 20 and the right-hand side carrying R; the error
+# norm and the first-step guess keep to the paper entries, the splitting's pieces turn R by their exact flows
+_ON_Z = dict(N=_NZ, rhs_kernel=rhs_rotation_kernel, _dop853_error=_tk._dop853_error, _masked_rates=_tk._masked_rates,
+             dop853_initial_step=njit(dop853_initial_step_paper), dop853_initial_step_into=njit(dop853_initial_step_paper_into),
+             _flow_h1=njit(flow_h1_with_rotation), _flow_h2=njit(flow_h2_with_rotation), _flow_h3=njit(flow_h3_with_rotation))
+dop853_solve_R = retarget(_tk.dop853_solve, **_ON_Z)
+fixed_solve_R = retarget(_tk.fixed_solve, **_ON_Z)
+env_step_R = retarget(_tk.env_step, **_ON_Z)
+""":func:`~.twopolar_kernels.env_step` on z = (y, vec(R)): ``(kind, coeffs, z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``."""
 
-# ---------------------------------------------------------------------------------- RK4 and the splittings
-_rk4_step_R = jit_copy(_tk._rk4_step, variant=_V, N=_NZ, rhs_kernel=rhs_rotation_kernel)
-_rk4_advance_R = jit_copy(_tk._rk4_advance, variant=_V, _rk4_step=_rk4_step_R)
-_flow_h1_R = jit_copy(flow_h1_with_rotation, variant=_V, _flow_h1=_tk._flow_h1)
-_flow_h2_R = jit_copy(flow_h2_with_rotation, variant=_V, _flow_h2=_tk._flow_h2)
-_flow_h3_R = jit_copy(flow_h3_with_rotation, variant=_V, _flow_h3=_tk._flow_h3)
-_strang_step_R = jit_copy(_tk.strang_step, variant=_V, _flow_h1=_flow_h1_R, _flow_h2=_flow_h2_R, _flow_h3=_flow_h3_R)
-_split_advance_R = jit_copy(_tk._split_advance, variant=_V, strang_step=_strang_step_R)
-_fixed_advance_R = jit_copy(_tk._fixed_advance, variant=_V, _rk4_advance=_rk4_advance_R, _split_advance=_split_advance_R)
-_fixed_env_R = jit_copy(_tk._fixed_env, variant=_V, N=_NZ, _fixed_advance=_fixed_advance_R)
-fixed_solve_R = jit_copy(_tk.fixed_solve, variant=_V, N=_NZ,
-                         fixed_solve_into=jit_copy(_tk.fixed_solve_into, variant=_V, N=_NZ, _fixed_advance=_fixed_advance_R))
-rk4_env_step_R = jit_copy(_tk.rk4_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
-strang_env_step_R = jit_copy(_tk.strang_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
-suzuki4_env_step_R = jit_copy(_tk.suzuki4_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
-yoshida4_env_step_R = jit_copy(_tk.yoshida4_env_step_counted, variant=_V, N=_NZ, _fixed_env=_fixed_env_R)
+ENV_STEP_WITH_ROTATION = {name: functools.partial(env_step_R, BY_NAME[name].code, BY_NAME[name].coeffs) for name in ROTATION_METHODS}
+"""Method name → its compiled env step on z = (y, vec(R)): ``(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``
+(:data:`env_step_R` bound to the method's (kind, coefficients) from :mod:`.specs`)."""
 
-ENV_STEP_WITH_ROTATION = {
-    "DOP853-numba": dop853_env_step_R,
-    "RK4": rk4_env_step_R,
-    "splitting-strang": strang_env_step_R,
-    "splitting-suzuki4": suzuki4_env_step_R,
-    "splitting-yoshida4": yoshida4_env_step_R,
-}
-"""Method name → its compiled env step on z = (y, vec(R)): ``(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``."""
-
-__all__ = ["ENV_STEP_WITH_ROTATION", "dop853_env_step_R", "dop853_solve_R", "fixed_solve_R", "flow_h1_with_rotation",
-           "flow_h2_with_rotation", "flow_h3_with_rotation", "rk4_env_step_R", "strang_env_step_R", "suzuki4_env_step_R",
-           "yoshida4_env_step_R"]
+__all__ = ["ENV_STEP_WITH_ROTATION", "dop853_solve_R", "env_step_R", "fixed_solve_R", "flow_h1_with_rotation", "flow_h2_with_rotation",
+           "flow_h3_with_rotation"]

@@ -3,7 +3,7 @@
 :func:`make_env_step` is the seam an environment steps through. It returns
 
 * a :class:`CompiledEnvStep` when the method has a compiled environment stepper for the paper
-  state (:data:`flatbody_env.integrators.compiled_methods.ENV_METHODS`, two-polar chart): one
+  state (:data:`flatbody_env.integrators.specs.ENV_METHODS`, two-polar chart): one
   compiled call per env step (and one per batch of N), no Python per sub-step. For
   ``DOP853-numba`` with the first step guessed as dt (the env's default) and J1 = J2 the batch runs
   the fused SIMD structure-of-arrays step of :mod:`.batch_kernels` (bit for bit the scalar kernel's
@@ -20,6 +20,7 @@ Both have the same interface, so the environment has one step path::
     status = step.advance(y, u, dt, out, counters, R, R_out)   # 0 = success
     step.advance_batch(Y, U, dt, OUT, STATUS, NFEV)             # structure-of-arrays, in place
     step.describe(status)                                       # "kind: reason" of a failure
+    step.with_body(body)                                        # the same stepper for another body
 
 * ``y``, ``out`` (11,) paper states (:mod:`flatbody_env.physics.state`); ``u`` (4,) the controls
   (τ1, τ2, τ3, f_ϱ); ``counters`` (3,) int64 accumulates [nfev, steps, rejected steps];
@@ -33,6 +34,8 @@ Both have the same interface, so the environment has one step path::
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 
@@ -85,6 +88,16 @@ class CompiledEnvStep:
         self.__dict__.update(state)
         self._load()
 
+    def with_body(self, body: Body) -> "CompiledEnvStep":
+        """The same stepper for another body (its kernel parameters; the compiled code is shared)."""
+        if not body.compiled:
+            raise ValueError("body: a compiled stepper needs a built-in potential")
+        other = copy.copy(self)
+        other.P = np.array(body.kernel_params(), dtype=np.float64)
+        if self._fused is not None and other.P[0] != other.P[1]:
+            other._fused = None
+        return other
+
     def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
         return self._step(y, u, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, out, counters)
 
@@ -110,6 +123,13 @@ class GenericEnvStep:
         self.carries_rotation = bool(with_rotation)
         self._last = ""
         self._lane_reasons: dict[int, str] = {}
+
+    def with_body(self, body: Body) -> "GenericEnvStep":
+        """The same stepper for another body."""
+        other = copy.copy(self)
+        other.body = body
+        other._lane_reasons = {}
+        return other
 
     def _run(self, y, u, dt, R):
         try:
@@ -191,23 +211,18 @@ def make_env_step(name: str, body: Body, tol: Tolerances, *, with_rotation: bool
 
     With ``with_rotation=True`` the compiled two-polar methods carry R in their own compiled step
     (:class:`CompiledRotationEnvStep`); other methods return R through :meth:`Method.integrate`.
-    Raises ValueError for an unknown name, a step setting the method refuses, or
-    ``with_rotation=True`` for a method that cannot carry R.
+    Raises ValueError for an unknown name or a step setting or body the method refuses.
     ``first_step`` is DOP853's first step guess (0 = automatic).
     """
-    from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper
+    from flatbody_env.integrators.specs import BY_NAME
 
     meth = get_method(name)  # ValueError for an unknown name
-    checker = getattr(meth, "make_stepper", None)
-    compiled_paper = body.compiled and name in ENV_METHODS and env_stepper(name).state == "paper"
-    if with_rotation and compiled_paper:
-        if checker is not None:
-            checker(body, tol)  # the method's own refusals (step, body); R is carried by the rotation kernels
-        return CompiledRotationEnvStep(name, body, tol, first_step=first_step)
-    if checker is not None:
-        checker(body, tol, with_rotation=with_rotation)  # the method's own refusals (step, body, R)
-    if not with_rotation and compiled_paper:
-        return CompiledEnvStep(name, body, tol, first_step=first_step)
+    check = getattr(meth, "check_env", None)
+    if check is not None:
+        check(body, tol)  # the method's own refusals (step, body)
+    spec = BY_NAME.get(name)
+    if body.compiled and spec is not None and spec.env and spec.kind != "rattle" and (spec.carries_R or not with_rotation):
+        return (CompiledRotationEnvStep if with_rotation else CompiledEnvStep)(name, body, tol, first_step=first_step)
     return GenericEnvStep(name, body, tol, with_rotation=with_rotation)
 
 

@@ -30,20 +30,15 @@ under-resolution (fixed steps that turn θ by more than 1 rad), energy error bey
 (without controls).
 
 Environment API (one env step, no Python per sub-step; ``P`` = ``Body.kernel_params()`` as a
-writable float64 array (9,); arrays C-contiguous float64)::
+writable float64 array (9,); arrays C-contiguous float64), one kernel for every method::
 
-    status = <method>_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out)
-    batch_<method>_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)
-    status = <method>_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters)
-    batch_<method>_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV)
+    status = env_step(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, counters)
 
-with y, out (11,); u (4,); Y, OUT (11, N) and U (4, N) structure-of-arrays (row k = state entry k
-of every body); STATUS (N,) int64; the ``_counted`` variants also report the work: ``counters`` (3,) int64
-accumulates [nfev, steps, rejected steps], NFEV (N,) int64 receives each body's function
-evaluations. ``h`` is the largest sub-step of fixed-step methods and the
-initial step guess of DOP853 (0: automatic); rtol/atol are read by DOP853 only; energy_tol = inf
-switches the energy check off. Method names: ``dop853``, ``rk4``, ``strang``, ``suzuki4``,
-``yoshida4``.
+with ``(kind, coeffs)`` from the method table (:data:`~.specs.SPECS`: ``spec.code``, ``spec.coeffs``);
+y, out (11,); u (4,); ``counters`` (3,) int64 accumulates [nfev, steps, rejected steps]. ``h`` is the
+largest sub-step of fixed-step methods and the initial step guess of DOP853 (0: automatic);
+rtol/atol are read by DOP853 only; energy_tol = inf switches the energy check off. N bodies:
+:func:`~.batch_solve.batch_env_step_serial` (and the parallel :func:`~.batch_solve.batch_env_step`).
 
 References
 ----------
@@ -56,7 +51,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from flatbody_env.integrators.dop853_tableau import ERROR_E3 as _ERROR_E3
 from flatbody_env.integrators.dop853_tableau import ERROR_E5 as _ERROR_E5
@@ -65,10 +59,11 @@ from flatbody_env.integrators.dop853_tableau import STAGE_C as _STAGE_C
 from flatbody_env.integrators.dop853_tableau import STAGE_J as _STAGE_J
 from flatbody_env.integrators.dop853_tableau import STAGE_L as _STAGE_L
 
+from flatbody_env.integrators.compositions import KAHAN_LI6, STRANG, SUZUKI4, YOSHIDA4  # noqa: F401 (re-exported)
 from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
-from flatbody_env.integrators.jit import JIT_OPTIONS, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
+from flatbody_env.integrators.specs import DOP853_KIND
+from flatbody_env.integrators.jit import njit, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
 
-njit = numba.njit(**JIT_OPTIONS)
 
 N = 11
 _SAFETY = 0.9
@@ -77,20 +72,6 @@ _MAX_FACTOR = 10.0
 _ERROR_EXPONENT = -1.0 / 8.0  # scipy: -1/(error_estimator_order + 1), order 7
 DOP853_MAX_STEPS = 50_000_000
 
-_P4 = 1.0 / (4.0 - 4.0 ** (1.0 / 3.0))
-STRANG = np.array([1.0])
-SUZUKI4 = np.array([_P4, _P4, 1.0 - 4.0 * _P4, _P4, _P4])
-"""Suzuki's 5-stage fourth-order composition of a symmetric second-order step."""
-_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
-YOSHIDA4 = np.array([_W1, 1.0 - 2.0 * _W1, _W1])
-"""Yoshida's (triple-jump) fourth-order composition."""
-KAHAN_LI6 = np.array([
-    0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981, 0.082213596293550800230,
-    0.79854399093482996340,
-    0.082213596293550800230, -0.70624617255763935981, 0.33259913678935943860, 0.39216144400731413928,
-])
-"""Kahan & Li's 9-stage sixth-order composition s9odr6a (Math. Comp. 66, 1997; HLW Geometric Numerical
-Integration §V.3.2) of a symmetric second-order step."""
 
 
 # --------------------------------------------------------------------------------------------- checks
@@ -362,51 +343,6 @@ def _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel,
     return OK
 
 
-@njit
-def dop853_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
-    """One environment step of DOP853 from t = 0 to exactly dt (module docstring); ``counters`` (3,)
-    int64 accumulates [nfev, accepted, rejected]."""
-    return _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, np.empty((13, N)), np.empty(N), np.empty(N),
-                       np.empty(7), np.empty(4), np.empty(N), counters)
-
-
-@njit
-def dop853_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of DOP853 from t = 0 to exactly dt (module docstring)."""
-    return dop853_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
-
-
-@njit
-def batch_dop853_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,), NFEV (N,) int64 (output)."""
-    K = np.empty((13, N))
-    ynew = np.empty(N)
-    ytmp = np.empty(N)
-    vel = np.empty(7)
-    force = np.empty(4)
-    f = np.empty(N)
-    y = np.empty(N)
-    u = np.empty(4)
-    out = np.empty(N)
-    counters = np.zeros(3, np.int64)
-    for b in range(Y.shape[1]):
-        for i in range(N):
-            y[i] = Y[i, b]
-        for i in range(4):
-            u[i] = U[i, b]
-        counters[0] = 0
-        STATUS[b] = _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
-        NFEV[b] = counters[0]
-        for i in range(N):
-            OUT[i, b] = out[i]
-
-
-@njit
-def batch_dop853_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    """:func:`dop853_env_step` for N bodies; Y, OUT (11, N), U (4, N), STATUS (N,)."""
-    batch_dop853_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
-
-
 # --------------------------------------------------------------------------------------------- RK4
 @njit
 def _rk4_step(y, h, u, P, k1, k2, k3, k4, ytmp, vel, force):
@@ -631,113 +567,22 @@ def _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, 
     return OK
 
 
+# --------------------------------------------------------------------------------------------- the env step
 @njit
-def _fixed_batch(kind, coeffs, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV):
-    work = np.empty((5, N))
-    vel = np.empty(7)
-    force = np.empty(4)
-    y = np.empty(N)
-    u = np.empty(4)
-    out = np.empty(N)
-    counters = np.zeros(3, np.int64)
-    for b in range(Y.shape[1]):
-        for i in range(N):
-            y[i] = Y[i, b]
-        for i in range(4):
-            u[i] = U[i, b]
-        counters[0] = 0
-        STATUS[b] = _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, counters)
-        NFEV[b] = counters[0]
-        for i in range(N):
-            OUT[i, b] = out[i]
+def env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters):
+    """One environment step of method ``kind`` (:data:`~.specs.KIND_CODES`; ``coeffs`` for a splitting)
+    from t = 0 to exactly dt, with its work arrays ``K`` (13, N), ``ynew``, ``ytmp``, ``f`` (N,), ``vel``
+    (7,), ``force`` (4,) passed in (allocates nothing); ``counters`` (3,) accumulates [nfev, steps, rejected]."""
+    if kind == DOP853_KIND:
+        return _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+    return _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, K, vel, force, counters)
 
 
 @njit
-def rk4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
-    """One environment step of RK4 (⌈dt/h⌉ equal sub-steps); returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
-    return _fixed_env(0, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
-
-
-@njit
-def rk4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of RK4 (⌈dt/h⌉ equal sub-steps); returns the status."""
-    return rk4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
-
-
-@njit
-def batch_rk4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
-
-
-@njit
-def batch_rk4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(0, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
-
-
-@njit
-def strang_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
-    """One environment step of the Strang splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
-    return _fixed_env(1, STRANG, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
-
-
-@njit
-def strang_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of the Strang splitting; returns the status."""
-    return strang_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
-
-
-@njit
-def batch_strang_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
-
-
-@njit
-def batch_strang_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, STRANG, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
-
-
-@njit
-def suzuki4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
-    """One environment step of the Suzuki-4 splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
-    return _fixed_env(1, SUZUKI4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
-
-
-@njit
-def suzuki4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of the Suzuki-4 splitting; returns the status."""
-    return suzuki4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
-
-
-@njit
-def batch_suzuki4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
-
-
-@njit
-def batch_suzuki4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, SUZUKI4, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
-
-
-@njit
-def yoshida4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
-    """One environment step of the Yoshida-4 splitting; returns the status, ``counters`` (3,) accumulates [nfev, steps, 0]."""
-    return _fixed_env(1, YOSHIDA4, y, u, P, dt, h, energy_tol, out, np.empty((5, N)), np.empty(7), np.empty(4), counters)
-
-
-@njit
-def yoshida4_env_step(y, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of the Yoshida-4 splitting; returns the status."""
-    return yoshida4_env_step_counted(y, u, P, dt, h, rtol, atol, energy_tol, out, np.zeros(3, np.int64))
-
-
-@njit
-def batch_yoshida4_env_step_counted(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS, NFEV)
-
-
-@njit
-def batch_yoshida4_env_step(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    _fixed_batch(1, YOSHIDA4, Y, U, P, dt, h, energy_tol, OUT, STATUS, np.zeros(Y.shape[1], np.int64))
+def env_step(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
+    """One environment step (module docstring): :func:`env_step_into` with its work arrays allocated."""
+    return env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, np.empty((13, N)), np.empty(N), np.empty(N),
+                         np.empty(7), np.empty(4), np.empty(N), counters)
 
 
 @njit

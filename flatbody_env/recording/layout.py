@@ -52,13 +52,36 @@ TARGET_SERIES = ("lambda", "mu", "rho", "s3", "p_theta", "energy")
 DRIFT_SERIES = (("energy", "ΔH/|H₀|"), ("casimir", "Δ|s|²/|s|²₀"), ("p_theta", "Δp_θ/|p_θ,₀|"))
 """Relative drift of the conserved quantities, (Q − Q₀)/|Q₀| (absolute Q − Q₀ where Q₀ = 0)."""
 
-TENSOR_ENTRY_COLORS = np.array(
-    [COLORS["lambda"], COLORS["mu"], COLORS["rho"], COLORS["p_theta"], COLORS["s3"], COLORS["theta"]], dtype=np.uint8
-)
-"""Colours of the entries 11, 22, 33 (the diagonal, in the colours of λ, μ, ϱ), 12, 13, 23."""
+SERIES_COLORS: dict[str, tuple[int, int, int]] = {
+    # the controls u = (τ₁, τ₂, τ₃, f_ϱ): light tints, none of them a state variable's colour
+    "action/tau1": (255, 152, 150),
+    "action/tau2": (152, 223, 138),
+    "action/tau3": (174, 199, 232),
+    "action/f_rho": (255, 187, 120),
+    # the energy balance of an episode
+    "power": (0, 255, 255),
+    "balance/work": (255, 255, 0),
+    "balance/delta_energy": COLORS["energy"],
+    # reward terms of FlatBody-v0 (others take the spare colours below, in order of appearance)
+    "reward/shape": (247, 182, 210),
+    "reward/spin": (219, 219, 141),
+    "reward/tumble": (160, 120, 60),
+    "reward/rest": (0, 200, 160),
+    "reward/action": (120, 80, 255),
+    "reward/failure": (255, 80, 160),
+    "reward/total": (180, 255, 80),
+    "distance_tolerance": (250, 250, 250),
+}
+"""Colours of the series that are not state variables (actions, reward terms, the energy balance,
+the tolerance line): each differs from every variable's colour in :data:`COLORS` and from the
+others by a CIE ΔE ≥ 20 (``tests/recording/test_layout.py`` checks it in the files)."""
 
-CATEGORICAL = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207))
-"""Distinct colours for the members of one view (actions, reward terms)."""
+SPARE_COLORS = ((230, 140, 255), (110, 130, 60), (50, 255, 119), (187, 50, 255), (255, 0, 0), (84, 255, 50))
+"""Colours for reward terms or actions this layout does not name, in order of appearance."""
+
+TENSOR_ENTRY_COLORS = np.array([(140, 255, 216), (140, 235, 255), (140, 178, 255), (216, 140, 255), (255, 140, 216), (255, 187, 50)], dtype=np.uint8)
+"""Colours of the entries 11, 22, 33, 12, 13, 23 of G and C (the same entry the same colour in both
+views; none of them a variable's colour)."""
 
 AXIS_COLORS = np.array([(*COLORS["lambda"], 255), (*COLORS["mu"], 255), (*COLORS["rho"], 255)], dtype=np.uint8)
 """Principal-axis arrows e₁, e₂, e₃ (semi-axes λ, μ, ϱ) in the colours of λ, μ, ϱ."""
@@ -66,6 +89,10 @@ AXIS_COLORS = np.array([(*COLORS["lambda"], 255), (*COLORS["mu"], 255), (*COLORS
 LINE_WIDTH = 2.0
 TARGET_WIDTH = 6.0
 TARGET_ALPHA = 90
+
+FLAT_RTOL = 1e-8
+"""A panel whose values spread by less than this, relative to the panel's scale, is round-off: it is
+drawn flat on a fixed axis and its title says so (:func:`y_axis`)."""
 
 
 def rgba(rgb, alpha: int = 255) -> list[int]:
@@ -92,8 +119,13 @@ def series_style(path: str, index: int = 0) -> tuple[str, list[int], float]:
     parts = path.strip("/").split("/")
     if parts[0] != "series" or len(parts) < 2:
         raise ValueError(f"path: not a series entity: {path!r}")
+    key = "/".join(parts[1:])
     if len(parts) == 2 and parts[1] in COLORS:
         return display_name(parts[1]), rgba(COLORS[parts[1]]), LINE_WIDTH
+    if key in SERIES_LABELS:
+        if key == "balance/delta_energy":  # a wide faint band under the work W that should cover it
+            return SERIES_LABELS[key], rgba(SERIES_COLORS[key], 150), TARGET_WIDTH
+        return SERIES_LABELS[key], rgba(SERIES_COLORS[key]), (3.0 if key == "reward/total" else LINE_WIDTH)
     group, name = parts[1], "/".join(parts[2:])
     if group == "target" and name in COLORS:
         return f"{display_name(name)}* (target)", rgba(COLORS[name], TARGET_ALPHA), TARGET_WIDTH
@@ -101,13 +133,20 @@ def series_style(path: str, index: int = 0) -> tuple[str, list[int], float]:
         label = dict(DRIFT_SERIES).get(name)
         if label is not None:
             return label, rgba(COLORS[name]), LINE_WIDTH
-    if group == "action":
-        return display_name(name), rgba(CATEGORICAL[index % len(CATEGORICAL)]), LINE_WIDTH
-    if group == "reward":
-        if name == "total":
-            return "total reward", rgba((90, 90, 90)), 3.0
-        return name, rgba(CATEGORICAL[index % len(CATEGORICAL)]), LINE_WIDTH
+    if group in ("action", "reward"):
+        color = SERIES_COLORS.get(key) or SPARE_COLORS[index % len(SPARE_COLORS)]
+        return (display_name(name) if group == "action" else name), rgba(color), LINE_WIDTH
     raise ValueError(f"path: no place in the layout for the series {path!r}")
+
+
+SERIES_LABELS = {
+    "power": "P̄ = ω·τ + ϱ̇ f_ϱ (mean over the step)",
+    "balance/work": "W = ∫ P dt (work of the control)",
+    "balance/delta_energy": "H − H₀",
+    "distance_tolerance": "success tolerance",
+    "reward/total": "total reward",
+}
+"""Legend names of the series that are not state variables."""
 
 
 def nice_range(m: float) -> float:
@@ -133,112 +172,194 @@ def camera(view: str, extent: float):
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[1.4 * d, -1.9 * d, 1.6 * d], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0])
 
 
-def _series_view(name: str, paths: list[str], *, origin: str = "/series", y_range: float | None = None):
+def _series_view(name: str, contents: list[str], *, axis: tuple[float, float] | None, legend: bool, t_range: tuple[float, float] | None):
+    import rerun as rr
     import rerun.blueprint as rrb
 
-    axis = rrb.ScalarAxis(range=(-y_range, y_range)) if y_range else None
-    return rrb.TimeSeriesView(name=name, origin=origin, contents=paths, plot_legend=rrb.PlotLegend(corner="RightBottom", visible=True), axis_y=axis)
+    axis_y = rrb.ScalarAxis(range=axis, zoom_lock=False) if axis is not None else None
+    axis_x = None
+    if t_range is not None:  # the whole run, and room on the right for the last tick label
+        t0, t1 = t_range
+        end = t1 + TIME_MARGIN * max(t1 - t0, 1e-9)
+        axis_x = rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.absolute(seconds=t0), end=rr.TimeRangeBoundary.absolute(seconds=end)))
+    return rrb.TimeSeriesView(
+        name=name, origin="/series", contents=contents, plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend), axis_y=axis_y, axis_x=axis_x
+    )
 
 
-DRIFT_FLOOR = 1e-6
-"""Smallest half-range of the drift plot's fixed axis: round-off (1e-12 … 1e-9) reads as a flat line at 0."""
+TIME_MARGIN = 0.07
+"""Room right of the last sample on every time axis (a fraction of the run), so that the last tick
+label is not cut by the panel's edge."""
+
+LEGEND_ROW = 0.075
+"""Head room above the data per legend entry (a fraction of the data's span): the legend, in the top
+right corner, sits over empty space instead of over the curves' ends."""
+
+FLAT_NOTE = " (flat: constant to 1e-8)"
+"""Appended to the title of a panel whose values are constant to :data:`FLAT_RTOL` (:func:`y_axis`)."""
+
+def _shape_paths(episode: bool) -> tuple[str, ...]:
+    return ("/series/lambda", "/series/mu", "/series/rho") + (("/series/target/lambda", "/series/target/mu", "/series/target/rho") if episode else ())
 
 
-def drift_axis(max_abs_drift: float) -> float:
-    """Half-range of the relative-drift axis of a free scene: nice ≥ 1.2 × the largest drift, at least :data:`DRIFT_FLOOR`."""
-    return max(DRIFT_FLOOR, nice_range(1.2 * float(max_abs_drift))) if max_abs_drift > 0 else DRIFT_FLOOR
+def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
+    """(base title, series entity paths or groups, scale rule) of every time-series view, in layout order.
+
+    The scale rule names what a spread is compared with (:func:`y_axis`): ``"self"`` the largest
+    value shown, ``"spin"`` |s| (for s₃, p_θ), ``"angle"`` π, ``"relative"`` 1 (a relative drift),
+    ``"energy"`` the largest |H| (the energy balance), ``"power"`` the largest |H| per unit time,
+    ``"unit"`` 1 (actions in [−1, 1])."""
+    views = [("λ, μ, ϱ" + (" vs target λ*, μ*, ϱ* (wide bands)" if episode else ""), _shape_paths(episode), "self")]
+    if episode:
+        views += [
+            ("reward terms", ("/series/reward",), "self"),
+            ("distance to the target, tolerance", ("/series/distance", "/series/distance_tolerance"), "self"),
+            ("actions u = (τ₁, τ₂, τ₃, f_ϱ) in [−1, 1]", ("/series/action",), "unit"),
+            ("energy balance: H − H₀ = W (control work)", ("/series/balance",), "energy"),
+            ("control power P̄ = ω·τ + ϱ̇ f_ϱ", ("/series/power",), "power"),
+        ]
+    else:
+        views += [("conserved: drift (Q − Q₀)/|Q₀|", ("/series/drift",), "relative"), ("energy H", ("/series/energy",), "self")]
+    views += [
+        ("s₃" + (" vs s₃*" if episode else ""), ("/series/s3",) + (("/series/target/s3",) if episode else ()), "spin"),
+        ("p_θ" + (" vs p_θ*" if episode else ""), ("/series/p_theta",) + (("/series/target/p_theta",) if episode else ()), "spin"),
+    ]
+    if episode:
+        views.append(("energy H vs H*", ("/series/energy", "/series/target/energy"), "self"))
+    views += [
+        ("|s|² (Casimir)", ("/series/casimir",), "self"),
+        ("θ (material angle)", ("/series/theta",), "angle"),
+        ("G = ΦᵀΦ entries 11 22 33 12 13 23", ("/series/G",), "self"),
+        ("C = Φ⁻ᵀΦ⁻¹ entries 11 22 33 12 13 23", ("/series/C",), "self"),
+    ]
+    return views
 
 
-def view_specs(*, episode: bool) -> list[tuple[str, str, tuple[str, ...]]]:
+def _members(paths: tuple[str, ...], ranges: dict[str, tuple[float, float, int]]) -> list[str]:
+    """The logged series a view shows: its paths, and the entities under a group path."""
+    out = []
+    for p in paths:
+        out += [q for q in ranges if q == p or q.startswith(p + "/")]
+    return out
+
+
+def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, float, int]], t_range: tuple[float, float] | None = None):
+    """(y range, flat, legend entries) of a time-series view from the logged values' ranges.
+
+    ``ranges``: entity path → (min, max, number of series in it). The view's values are *flat* when
+    their spread is at most :data:`FLAT_RTOL` × the view's scale (``rule``, see :func:`series_views`):
+    round-off then sits on a fixed axis of ±10 % of the scale around the value (drawn as a flat line,
+    ticks labelled with a few digits) and the title says so. Otherwise the axis holds the data with 5 %
+    margins and head room above for the legend (:data:`LEGEND_ROW` per entry). None when nothing is logged.
+    """
+    members = _members(paths, ranges)
+    if not members:
+        return None, False, 0
+    lo = min(ranges[m][0] for m in members)
+    hi = max(ranges[m][1] for m in members)
+    entries = sum(ranges[m][2] for m in members)
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return None, False, entries
+    big = max(abs(lo), abs(hi))
+    if rule == "spin":
+        cas = ranges.get("/series/casimir")
+        big = max(big, float(np.sqrt(max(cas[1], 0.0))) if cas else 0.0)
+    elif rule == "angle":
+        big = max(big, float(np.pi))
+    elif rule in ("relative", "unit"):
+        big = max(big, 1.0)
+    elif rule == "energy":
+        h = ranges.get("/series/energy")
+        big = max(big, max(abs(h[0]), abs(h[1])) if h else 0.0)
+    elif rule == "power":
+        h = ranges.get("/series/energy")
+        if h and t_range and t_range[1] > t_range[0]:
+            big = max(big, max(abs(h[0]), abs(h[1])) / (t_range[1] - t_range[0]))
+    if hi - lo <= FLAT_RTOL * big:
+        half = nice_range(0.1 * big) if big > 0 else 1.0
+        step = half / 5.0
+        c = round(0.5 * (lo + hi) / step) * step
+        return (c - half, c + half), True, entries
+    span = hi - lo
+    top = hi + span * (0.05 + (LEGEND_ROW * entries + 0.05 if entries > 1 else 0.0))
+    return (lo - 0.05 * span, top), False, entries
+
+
+def view_specs(*, episode: bool, ranges: dict | None = None, t_range: tuple[float, float] | None = None) -> list[tuple[str, str, tuple[str, ...]]]:
     """(view class, name, entity paths or origins) of every view :func:`blueprint` lays out, in order.
 
     The single source of the layout: :func:`blueprint` builds the views from it and the tests check
-    the file against it.
+    the file against it. With the logged values' ``ranges`` (:func:`y_axis`) a time-series view whose
+    values are round-off carries :data:`FLAT_NOTE` in its name.
     """
-    shape = ["/series/lambda", "/series/mu", "/series/rho"] + (["/series/target/lambda", "/series/target/mu", "/series/target/rho"] if episode else [])
     specs = [
         ("3D", "plate, top view (lab +z)", ("/world",)),
         ("3D", "3-D view", ("/world",)),
         ("3D", "material frame: U(θ), G axes", ("/material",)),
-        ("Tensor", "G = ΦᵀΦ (fixed colour range)", ("/tensors/G",)),
-        ("Tensor", "C = Φ⁻ᵀΦ⁻¹ (fixed colour range)", ("/tensors/C",)),
         ("TextDocument", "G, C: numbers and eigenvalues", ("/tensors/numbers",)),
-        ("TimeSeries", "λ, μ, ϱ" + (" vs target λ*, μ*, ϱ*" if episode else ""), tuple(shape)),
+        ("TextDocument", "description: what each view shows", ("/description",)),
     ]
-    if episode:
-        specs += [
-            ("TimeSeries", "reward terms", ("/series/reward",)),
-            ("TimeSeries", "distance to the target", ("/series/distance",)),
-            ("TimeSeries", "actions u = (τ₁, τ₂, τ₃, f_ϱ)", ("/series/action",)),
-        ]
-    specs += [
-        ("TimeSeries", "conserved: relative drift", ("/series/drift",)),
-        ("TimeSeries", "s₃" + (" vs s₃*" if episode else ""), ("/series/s3",) + (("/series/target/s3",) if episode else ())),
-        ("TimeSeries", "p_θ" + (" vs p_θ*" if episode else ""), ("/series/p_theta",) + (("/series/target/p_theta",) if episode else ())),
-        ("TimeSeries", "energy H" + (" vs H*" if episode else ""), ("/series/energy",) + (("/series/target/energy",) if episode else ())),
-        ("TimeSeries", "|s|² (Casimir)", ("/series/casimir",)),
-        ("TimeSeries", "θ", ("/series/theta",)),
-        ("TimeSeries", "G entries 11 22 33 12 13 23", ("/series/G",)),
-        ("TimeSeries", "C entries 11 22 33 12 13 23", ("/series/C",)),
-        ("TextDocument", "description", ("/description",)),
-    ]
+    for name, paths, rule in series_views(episode=episode):
+        flat = bool(ranges) and y_axis(paths, rule, ranges, t_range)[1]
+        specs.append(("TimeSeries", name + (FLAT_NOTE if flat else ""), paths))
     return specs
 
 
-def blueprint(*, episode: bool, extent: float = 2.0, drift_range: float | None = None):
+def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None, t_range: tuple[float, float] | None = None):
     """The default blueprint of a recording.
 
     Parameters
     ----------
     episode : bool
-        An env episode (adds the target, reward, distance and action views).
+        An env episode (adds the target, reward, distance, action and energy-balance views).
     extent : float
         The body's size (largest semi-axis expected); sets the cameras' distance.
-    drift_range : float, optional
-        A fixed axis ±``drift_range`` for the relative-drift plot (free scenes, where the drift
-        is known before the file is written: :func:`drift_axis`); None lets the axis follow the
-        data (episodes, where control changes H, |s|² and p_θ on purpose).
+    ranges : dict, optional
+        Entity path → (min, max, series) of everything logged (the writer knows them when the whole
+        recording is one block: a free scene, an episode): every time-series view then gets a fixed
+        y axis (:func:`y_axis`: round-off drawn flat, room for the legend). None: axes follow the data.
+    t_range : (float, float), optional
+        The run's first and last ``sim_time``: every time axis shows the whole run.
     """
     import rerun.blueprint as rrb
 
-    specs = {name: (cls, paths) for cls, name, paths in view_specs(episode=episode)}
+    series = {name: (paths, rule) for name, paths, rule in series_views(episode=episode)}
+    specs = view_specs(episode=episode, ranges=ranges, t_range=t_range)
 
-    def view(name: str):
-        cls, paths = specs[name]
+    def view(cls: str, name: str, paths: tuple[str, ...]):
         if cls == "3D":
             kind = camera_kind(name)
+            contents = [paths[0] + "/**"]
+            if kind == "top":  # seen from +z the ϱ axis is a point at the centre: its label would sit on μ's
+                contents.append("- /world/labels/normal")
             return rrb.Spatial3DView(
-                name=name,
-                origin=paths[0],
-                eye_controls=camera(kind, extent),
-                line_grid=rrb.LineGrid3D(visible=kind != "top", spacing=0.5),
+                name=name, origin=paths[0], contents=contents, eye_controls=camera(kind, extent), line_grid=rrb.LineGrid3D(visible=kind != "top", spacing=0.5)
             )
-        if cls == "Tensor":
-            return rrb.TensorView(name=name, origin=paths[0], scalar_mapping=rrb.TensorScalarMapping(colormap="cyantoyellow"), view_fit="Fill")
         if cls == "TextDocument":
             return rrb.TextDocumentView(name=name, origin=paths[0])
-        if len(paths) == 1:
-            return _series_view(name, [paths[0], paths[0] + "/**"], y_range=drift_range if paths[0] == "/series/drift" else None)
-        return _series_view(name, list(paths))
+        base = name[: -len(FLAT_NOTE)] if name.endswith(FLAT_NOTE) else name
+        sp, rule = series[base]
+        contents = [c for p in sp for c in (p, p + "/**")]
+        axis, entries = None, len(sp)
+        if ranges:
+            axis, _, entries = y_axis(sp, rule, ranges, t_range)
+        return _series_view(name, contents, axis=axis, legend=entries > 1, t_range=t_range)
 
-    names = [n for _, n, _ in view_specs(episode=episode)]
-    shape, rest = names[6], names[7:]
-    if episode:
-        middle = rrb.Tabs(*(view(n) for n in rest[:3]), active_tab=0)
-        right = rrb.Tabs(*(view(n) for n in rest[3:]), active_tab=0)
-    else:
-        middle = rrb.Tabs(*(view(n) for n in rest[:1] + rest[3:4]), active_tab=0)  # drift, H
-        right = rrb.Tabs(*(view(n) for n in rest[1:3] + rest[4:]), active_tab=0)  # s₃, p_θ, |s|², θ, G, C, text
+    views = [view(*s) for s in specs]
     top_row = rrb.Horizontal(
-        view(names[0]),
-        rrb.Tabs(view(names[1]), view(names[2]), active_tab=0),
-        rrb.Vertical(view(names[3]), view(names[4])),
-        view(names[5]),
-        column_shares=[3, 3, 2, 2.4],
+        views[0], rrb.Tabs(views[1], views[2], active_tab=0), views[3], views[4], column_shares=[3, 3, 2.2, 2.6]
     )
-    bottom_row = rrb.Horizontal(view(shape), middle, right, column_shares=[1, 1, 1])
+    shape, rest = views[5], views[6:]
+    k = 5 if episode else 2  # episode: reward, distance, actions | balance, power, …; free: drift, H | …
+    if episode:
+        middle = rrb.Tabs(*rest[:3], active_tab=0)
+        right = rrb.Tabs(*rest[3:], active_tab=0)
+    else:
+        middle = rrb.Tabs(*rest[:k], active_tab=0)
+        right = rrb.Tabs(*rest[k:], active_tab=0)
+    bottom_row = rrb.Horizontal(shape, middle, right, column_shares=[1, 1, 1])
     return rrb.Blueprint(
-        rrb.Vertical(top_row, bottom_row, row_shares=[3, 2]),
+        rrb.Vertical(top_row, bottom_row, row_shares=[1, 1]),
         rrb.TimePanel(state="collapsed", timeline="sim_time"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
@@ -259,20 +380,24 @@ _TENSOR_TEXT = (
     "%+7.3f%+7.3f%+7.3f  μ⁻² %.3f\n"
     "%+7.3f%+7.3f%+7.3f  ϱ⁻² %.3f\n"
     "```\n\n"
-    "Heat maps: fixed range −%s (cyan) … 0 (grey) … +%s (yellow)."
+    "Green tensor G (material frame) and Cauchy tensor C (laboratory): their entries over time are "
+    "the tabs *G entries* and *C entries*."
 )
-"""One step of :func:`tensor_text`: 1 + 2 × 12 numbers and the colour range twice (its only ``%s``)."""
+"""One step of :func:`tensor_text`: 1 + 2 × 12 numbers."""
 
 _SEP = "\x00"  # joins the steps' texts for one formatting call; no number or label contains it
 
 
-def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray, value_range: float) -> list[str]:
+def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray) -> list[str]:
     """Markdown, one per step: G and C as numbers with their eigenvalues.
 
     The eigenvalues are λ², μ², ϱ² for G and 1/λ², 1/μ², 1/ϱ² for C (eq. (35) of the paper; C per
     the corrected eq. (51) remark in ``docs/physics.md``), computed from the semi-axes ``half``
-    (n, 3); ``value_range`` is the tensor views' colour range ±r. All steps are formatted in one
-    ``%`` call over a table of their numbers (the per-step text is the same as formatting each alone).
+    (n, 3). All steps are formatted in one ``%`` call over a table of their numbers (the per-step
+    text is the same as formatting each alone).
+
+    (G and C are shown as numbers only: rerun 0.41's tensor view covers a 3×3 heat map with its
+    row/column selectors and has no colour key, so a heat map of them could not be read.)
     """
     t = np.asarray(t, dtype=np.float64).ravel()
     n = t.size
@@ -280,12 +405,10 @@ def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray, v
         return []
     half = np.asarray(half, dtype=np.float64).reshape(n, 3)
     sq = half * half
-    r = "%g" % value_range  # the same in every step: written into the template, not formatted n times
-    step = _TENSOR_TEXT.replace("%s", r)  # its only %s are the range's two
     cols = [t[:, None]]
     for M, eig in ((np.asarray(G, dtype=np.float64).reshape(n, 3, 3), sq), (np.asarray(C, dtype=np.float64).reshape(n, 3, 3), 1 / sq)):
         cols.append(np.concatenate([M, eig[:, :, None]], axis=2).reshape(n, 12))
-    return ((step + _SEP) * n % tuple(np.concatenate(cols, axis=1).ravel().tolist())).split(_SEP)[:n]
+    return ((_TENSOR_TEXT + _SEP) * n % tuple(np.concatenate(cols, axis=1).ravel().tolist())).split(_SEP)[:n]
 
 
 def axis_labels(half: np.ndarray) -> list[str]:
@@ -303,30 +426,32 @@ def description_markdown(title: str, body, extra: str, *, episode: bool) -> str:
         desc = body.describe()
     except AttributeError:  # a duck-typed body without describe()
         desc = repr(body)
+    balance = ("\n  **Energy balance** — the controls u = (τ₁, τ₂, τ₃, f_ϱ) change H on purpose: H − H₀ is drawn with the work W = ∫P dt\n  of the control, P = ω·τ + ϱ̇ f_ϱ (ω = ∂H/∂s, ϱ̇ = ∂H/∂p_ϱ); the two curves coincide (checked to the\n  integrator's tolerance). **Control power** P̄ is its mean over each step. Reward terms, the distance to the\n  target with the success tolerance, and the actions (scaled to [−1, 1]) are drawn at the step they lead to.") if episode else ""
     text = f"""# {title}
 
-A flat affinely-rigid body with thickness (V. Kovalchuk & E. E. Rożko, arXiv:0902.3573; corrections in `docs/physics.md`). Body: {desc}.
+A flat affinely-rigid body with thickness (V. Kovalchuk & E. E. Rożko, arXiv:0902.3573; corrections in
+`docs/physics.md`). Body: {desc}. Configuration Φ = R · diag(λ, μ, ϱ) · U(θ)⁻¹ (eqs. (23)–(24)).
+{("" if not extra else chr(10) + extra.strip() + chr(10))}
+**What each view shows** (scrub the time bar at the bottom; tabs hold more plots):
 
-**Configuration** Φ = R · diag(λ, μ, ϱ) · U(θ)⁻¹ (eqs. (23)–(24) of the paper).
+* **plate, top view** — the body seen down the lab's z axis: the blue-grey wireframe ellipsoid has
+  semi-axes λ, μ, ϱ along the columns of R; grey material lines (rim, spokes; the gold spoke is the
+  fibre along e₁) are drawn under Φ, so the spokes turn inside the ellipse with U(θ). Arrows: the
+  principal axes (λ red, μ green; ϱ blue points at you and is labelled in the 3-D view), **length = the
+  number on their label**; they are the eigenvectors of C = Φ⁻ᵀΦ⁻¹ (eigenvalues 1/λ², 1/μ², 1/ϱ²).{" The magenta outline is the target ellipse (λ*, μ*)." if episode else ""}
+* **3-D view** — the same from above the plate; **material frame** — the undeformed body and
+  G^½(ball); arrows along the columns of U(θ), the principal axes of G = ΦᵀΦ (eigenvalues λ², μ², ϱ²).
+* **G, C: numbers** — both tensors and their eigenvalues at the current time.
+* **time plots** — time in seconds of model time; every plot shows the whole run, the white line is
+  the current time. A plot whose values are constant to 1 part in 10⁸ (round-off of the integrator) is
+  drawn flat on a fixed axis and says so in its title.
+  λ, μ, ϱ{" (the targets λ*, μ*, ϱ* as wide faint bands of the same colour)" if episode else ""}; s₃, p_θ, θ, the energy H (eq. (41)),
+  the Casimir |s|², the entries of G and C.{"" if episode else " **Conserved: relative drift** — (Q − Q₀)/|Q₀| of H, |s|² and p_θ, which the free motion conserves."}{balance}
 
-* **plate, top view** — the body seen from the laboratory's +z axis: the blue wireframe ellipsoid
-  has semi-axes λ, μ, ϱ along the columns of R; the grey material lines (rim, spokes; the gold
-  spoke is the fibre along e₁) are drawn under Φ, so the spokes turn inside the ellipse with U(θ).
-  Arrows: the principal axes, **length = the semi-axis printed on them** (λ red, μ green, ϱ blue);
-  they are the eigenvectors of C = Φ⁻ᵀΦ⁻¹ = R D⁻² Rᵀ (eigenvalues 1/λ², 1/μ², 1/ϱ²).{" The magenta outline is the target ellipse (λ*, μ*) along the current axes." if episode else ""}
-* **3-D view** — the same, from an oblique camera; **material frame** — the undeformed material
-  lines and G^½(ball) = U D (ball); arrows along the columns of U(θ), the principal axes of the
-  Green tensor G = ΦᵀΦ = U D² Uᵀ (eq. (33)), length λ, μ, ϱ (eigenvalues λ², μ², ϱ², eq. (35)).
-* **G, C** — heat maps with a fixed, symmetric colour range, and beside them the numbers with
-  their eigenvalues.
-* **time series** — λ, μ, ϱ{" with the target as a faint band of the same colour" if episode else ""}; s₃, p_θ, θ, the
-  energy H (eq. (41)) and the Casimir |s|²; the conserved quantities H, |s|², p_θ as relative drift
-  (Q − Q₀)/|Q₀|{"; reward terms, the distance to the target and the actions u = (τ₁, τ₂, τ₃, f_ϱ), drawn at the step they lead to" if episode else ""}.
-
-Timelines: `sim_time` (simulated time, the default) and `step`.
+One colour per variable in every view (λ red, μ green, ϱ blue, θ cyan, s₃ purple, p_θ orange, H olive,
+|s|² brown); actions, reward terms and the energy balance have colours of their own.
+Timelines: `sim_time` (model time, the default) and `step`.
 """
-    if extra:
-        text += "\n" + extra.strip() + "\n"
     return text
 
 

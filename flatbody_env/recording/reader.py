@@ -263,7 +263,8 @@ def sdk_version() -> str:
 
 
 def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
-    """A readable account of a recording, read back from the file: entities, rows, first values."""
+    """A readable account of a recording, read back from the file: entities, rows, first values, and G and C
+    as 3×3 matrices at the first and the last step (rebuilt from their entry series, :func:`_tensor_lines`)."""
     data = read_recording(path)
     lines = [f"{path}: application {data.application_id!r}, recording {data.recording_id}, {data.blueprints} blueprint(s)"]
     if data.views:
@@ -286,11 +287,31 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
             head = "  ".join(f"{x:.6f}" for x in v[:rows])
             tail = "  ".join(f"{x:.6f}" for x in v[-rows:])
             lines.append(f"  {ent:<22} {head}  …  {tail}")
-    for ent in ("/tensors/G", "/tensors/C"):
-        if ent in data.entities:
-            e = data.entities[ent]
-            M = e.components["Tensor:data"][-1]
-            lines.append(f"  {ent} at step {int(e.step[-1])} (sim_time {e.sim_time[-1]:g}):")
-            lines.extend("    [" + "  ".join(f"{x:+.6f}" for x in row) + "]" for row in M)
+    lines.extend(_tensor_lines(data))
     return "\n".join(lines)
+
+
+def _tensor_lines(data) -> list[str]:
+    """G = ΦᵀΦ and C = Φ⁻ᵀΦ⁻¹ as 3×3 matrices at the first and the last logged step, rebuilt from their
+    entries (11, 22, 33, 12, 13, 23) logged as the scalar series ``/series/G`` and ``/series/C``; a recording
+    made before that change still has the tensor entities ``/tensors/G``, ``/tensors/C``, read as they are."""
+    from flatbody_env.recording.geometry import symmetric_from_entries
+
+    out = []
+    for sym in ("G", "C"):
+        series, tensor = f"/series/{sym}", f"/tensors/{sym}"
+        if series in data.entities:
+            e = data.entities[series]
+            mats = symmetric_from_entries(np.asarray(e.components["Scalars:scalars"], dtype=np.float64).reshape(-1, 6))
+            ent = series
+        elif tensor in data.entities:
+            e = data.entities[tensor]
+            mats = np.asarray(e.components["Tensor:data"], dtype=np.float64).reshape(-1, 3, 3)
+            ent = tensor
+        else:
+            continue
+        for k in dict.fromkeys((0, len(mats) - 1)):
+            out.append(f"  {sym} ({ent}) at step {int(e.step[k])} (sim_time {e.sim_time[k]:g}):")
+            out.extend("    [" + "  ".join(f"{x:+.6f}" for x in row) + "]" for row in mats[k])
+    return out
 

@@ -16,6 +16,7 @@ import os
 import shutil
 import socket
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +48,11 @@ def _lavapipe() -> str | None:
 
 
 def _rerun_exe() -> str | None:
+    """The ``rerun`` viewer of this interpreter's environment (its scripts folder, as a virtual
+    environment used without activation has it), else the one on ``PATH``."""
+    beside = Path(sys.executable).parent / "rerun"
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return str(beside)
     return shutil.which("rerun")
 
 

@@ -45,13 +45,12 @@ G = ΦᵀΦ = U D² U⁻¹ (eq. (33) of [1]); C = Φ⁻ᵀΦ⁻¹ = R D⁻² R�
 see ``docs/physics.md``); both come from :mod:`flatbody_env.physics.kinematics`. Names, colours and
 views: :mod:`flatbody_env.recording.layout`.
 
-Data are sent column-wise in blocks, one chunk per entity and block: a whole trajectory at once
-from :func:`record_arrays`, an env episode (up to ``block`` steps at a time) from
-:class:`~flatbody_env.recording.wrapper.RerunRecorder` through :meth:`Recorder.extend`, blocks of
-``block`` steps from :meth:`Recorder.append`. The columns are built in Arrow directly, and the
-blueprint and the static parts are converted to Arrow once per process and sent again to each file
-(rerun's archetype conversions cost more than the rest of a short recording); the Arrow arrays are
-the archetypes' own, so a file holds the same data either way.
+Everything goes through rerun's public API: a :class:`rerun.RecordingStream` saved to the file with
+the default blueprint (``save``), static parts with ``log(..., static=True)``, and the data
+column-wise with ``send_columns``, one chunk per entity and block — a whole trajectory at once from
+:func:`record_arrays`, ``block`` steps at a time from :meth:`Recorder.append` (the one per-step buffer,
+which :class:`~flatbody_env.recording.wrapper.RerunRecorder` fills) or :meth:`Recorder.extend`. One
+escape hatch, :func:`_matrix_column`, builds the two columns of 3×3 matrices in Arrow (see there why).
 
 References
 ----------
@@ -61,12 +60,12 @@ References
 
 from __future__ import annotations
 
-import functools
 import math
 import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -81,16 +80,15 @@ from flatbody_env.recording.layout import (
     TENSOR_ENTRY_COLORS,
     axis_labels,
     blueprint,
-    camera,
-    camera_kind,
     description_markdown,
-    drift_axis,
     material_line_colors,
-    nice_range,
     rgba,
     series_style,
     tensor_text,
 )
+
+LABEL_GAP = 0.12
+"""Gap between an arrow's tip and its label, a fraction of the body's size (``extent``)."""
 
 APP_ID = "flatbody"
 """rerun application id of every flatbody recording."""
@@ -107,21 +105,26 @@ BODY_ENTITIES = (
     "/world/material",
     "/world/material/lines",
     "/world/axes_C",
+    "/world/labels/in_plane",
+    "/world/labels/normal",
     "/material/reference",
     "/material/G_ellipsoid",
     "/material/axes_G",
-    "/tensors/G",
-    "/tensors/C",
+    "/material/labels",
     "/tensors/numbers",
     "/series/G",
     "/series/C",
     *(f"/series/{name}" for name in BODY_SERIES),
-    *(f"/series/drift/{name}" for name, _ in DRIFT_SERIES),
 )
 """Entity paths present in every recording."""
 
-EPISODE_ENTITIES = ("/series/distance", "/world/target", "/world/target/outline", *(f"/series/target/{n}" for n in TARGET_SERIES))
-"""Entity paths an env episode adds (besides ``/series/action/…``, ``/series/reward/…`` and ``/events``)."""
+FREE_ENTITIES = tuple(f"/series/drift/{name}" for name, _ in DRIFT_SERIES)
+"""Entity paths a free scene adds: the relative drift of its conserved quantities."""
+
+EPISODE_ENTITIES = ("/series/distance", "/world/target", "/world/target/outline", "/series/balance/delta_energy", *(f"/series/target/{n}" for n in TARGET_SERIES))
+"""Entity paths an env episode adds (besides ``/series/action/…``, ``/series/reward/…``, the control's
+power and work ``/series/power``, ``/series/balance/work`` when the env tells its controls, the
+success tolerance ``/series/distance_tolerance`` when it has one, and ``/events``)."""
 
 _IDX = {name: i for i, name in enumerate(STATE_NAMES)}
 
@@ -135,8 +138,8 @@ class _Block:
     states: np.ndarray
     rotations: np.ndarray
     energy: np.ndarray
-    index: dict
-    """The block's timelines (``step``, ``sim_time``) as Arrow arrays, shared by its entities."""
+    index: list
+    """The block's timelines (``step``, ``sim_time``) as ``rr.TimeColumn``, shared by its entities."""
 
 
 def _check_finite(name: str, a: np.ndarray) -> None:
@@ -198,173 +201,168 @@ def _safe_name(name: str) -> str:
     return out or "_"
 
 
-def _ns(t) -> np.ndarray:
-    return np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
-
-
-# -- Arrow, once per process ---------------------------------------------------------------------------
-def _components(*archetypes) -> dict:
-    """Component descriptor → Arrow array of rerun archetypes (what ``RecordingStream.log`` sends)."""
-    out = {}
-    for arch in archetypes:
-        batches = arch.as_component_batches() if hasattr(arch, "as_component_batches") else arch
-        for b in batches:
-            array = b.as_arrow_array()
-            if array is not None:
-                out.setdefault(b.component_descriptor(), array)
-    return out
-
-
-_STATIC: dict[tuple, dict] = {}
-
-
-def _static(key: tuple, build) -> dict:
-    """The components of a static archetype that does not change between files, converted once per process."""
-    comps = _STATIC.get(key)
-    if comps is None:
-        comps = _STATIC[key] = _components(build())
-    return comps
-
-
-class _Capture:
-    """Stands in for a blueprint stream: keeps what a blueprint logs, as (path, components, static)."""
-
-    def __init__(self) -> None:
-        self.calls: list[tuple[str, dict, bool]] = []
-
-    def log(self, entity_path, entity, *extra, static: bool = False) -> None:
-        self.calls.append((str(entity_path), _components(entity, *extra), bool(static)))
-
-
-def _views(container):
-    import rerun.blueprint as rrb
-
-    if isinstance(container, rrb.View):
-        yield container
-        return
-    for item in container.contents:
-        yield from _views(item)
-
-
-@functools.lru_cache(maxsize=8)
-def _blueprint_template(episode: bool, drift_range: float | None) -> tuple[tuple[tuple[str, dict, bool], ...], dict[str, str]]:
-    """What :func:`~flatbody_env.recording.layout.blueprint` logs, converted once per (episode, drift
-    axis); and the camera property of each 3-D view (path → ``"top"``/``"oblique"``), the only part
-    that depends on the body's extent."""
-    import rerun.blueprint as rrb
-
-    bp = blueprint(episode=episode, extent=1.0, drift_range=drift_range)
-    cap = _Capture()
-    bp._log_to_stream(cap)
-    cameras = {f"{v.blueprint_path()}/EyeControls3D": camera_kind(v.name) for v in _views(bp.root_container) if isinstance(v, rrb.Spatial3DView)}
-    logged = {path for path, _, _ in cap.calls}
-    if not set(cameras) <= logged:  # pragma: no cover - a rerun version that logs view properties elsewhere
-        raise RuntimeError("rerun blueprint: the 3-D views' EyeControls3D were not logged where expected")
-    return tuple(cap.calls), cameras
-
-
-def _blueprint_storage(*, episode: bool, extent: float, drift_range: float | None):
-    """The default blueprint of one file as rerun's in-memory blueprint storage (what ``save`` takes):
-    the cached template with the cameras placed for ``extent``."""
-    import rerun_bindings as bindings
-
-    calls, cameras = _blueprint_template(bool(episode), drift_range)
-    eyes = {kind: _components(camera(kind, extent)) for kind in set(cameras.values())}
-    stream = bindings.new_blueprint(application_id=APP_ID, make_default=False, make_thread_default=False, default_enabled=True)
-    bindings.set_time_sequence("blueprint", 0, recording=stream)
-    for path, comps, static in calls:
-        kind = cameras.get(path)
-        bindings.log_arrow_msg(path, components=eyes[kind] if kind is not None else comps, static_=static, recording=stream)
-    return bindings.memory_recording(recording=stream)
-
-
-@functools.lru_cache(maxsize=1)
-def _column_types() -> dict[str, tuple]:
-    """(descriptor, Arrow list type) of every temporal component column, taken from rerun's own
-    ``columns()`` once; the columns are then built in Arrow directly."""
+def _timelines(step: np.ndarray, t: np.ndarray) -> list:
     import rerun as rr
 
-    one = np.zeros((1, 3))
-    cols = [
-        *rr.Scalars.columns(scalars=[0.0]),
-        *rr.Ellipsoids3D.columns(half_sizes=one, quaternions=[[0.0, 0.0, 0.0, 1.0]]),
-        *rr.Transform3D.columns(mat3x3=np.eye(3)[None]),
-        *rr.Arrows3D.columns(vectors=one, labels=["x"]),
-        *rr.TextDocument.columns(text=["x"]),
-    ]
-    out = {}
-    for c in cols:
-        d = c.component_descriptor()
-        out[str(d.component)] = (d, c.as_arrow_array().type)
-    return out
+    ns = np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+    return [rr.TimeColumn("step", sequence=np.asarray(step, dtype=np.int64)), rr.TimeColumn("sim_time", duration=ns)]
 
 
-_SHARED_OFFSETS = 4096
-"""Blocks of at most this many steps share their Arrow offsets (an episode's block; a few kB each)."""
+# -- the one per-step buffer -----------------------------------------------------------------------------
+def _number(v: Any) -> float | None:
+    """``v`` as a float; None for a bool or what is not a number (the one rule for what is drawn)."""
+    if type(v) is float:
+        return v
+    if isinstance(v, bool):
+        return None
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return None
 
 
-def _build_offsets(n: int, per: int):
+def _same(a: Any, b: dict) -> bool:
+    """``a == b``, False where the comparison has no single answer (e.g. array entries)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):
+        return False
+
+
+class _Columns:
+    """Float columns by name, one row per step, NaN where a step lacks a name.
+
+    Only floats go into the columns (no per-step dict or tuple is kept), so buffering an episode
+    leaves nothing for the garbage collector to scan."""
+
+    __slots__ = ("cols", "rows", "_last")
+
+    def __init__(self) -> None:
+        self.cols: dict[str, list[float]] = {}
+        self.rows = 0
+        self._last: Any = None  # the row added last, when it was a dict (an episode's target repeats)
+
+    def add(self, d: Any, names: tuple[str, ...] | None = None, total: float | None = None) -> None:
+        """Add one row: the entries of ``d`` that are numbers (:func:`_number`; only ``names`` when given),
+        and ``total`` under ``"total"`` unless ``d`` has that entry."""
+        r = self.rows
+        cols = self.cols
+        if total is None and r and d is not None and self._last is not None and _same(d, self._last):  # the same row again: repeat it
+            for col in cols.values():
+                col.append(col[-1])
+            self.rows = r + 1
+            return
+        self._last = dict(d) if isinstance(d, dict) and total is None else None  # a copy: an env may change its dict in place
+        added = 0
+        items = list(d.items()) if isinstance(d, Mapping) else []
+        if total is not None:
+            items.append(("total", total))
+        for k, v in items:
+            if type(k) is not str:
+                k = str(k)
+            if names is not None and k not in names:
+                continue
+            v = _number(v)
+            if v is None:
+                continue
+            col = cols.get(k)
+            if col is None:
+                col = cols[k] = [math.nan] * r
+            if len(col) == r:  # the first of two keys that read the same wins
+                col.append(v)
+                added += 1
+        if added != len(cols):
+            for col in cols.values():
+                if len(col) == r:
+                    col.append(math.nan)
+        self.rows = r + 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """name → the column as a float array."""
+        return {k: np.array(v, dtype=np.float64) for k, v in self.cols.items()}
+
+
+class _Steps:
+    """The steps :meth:`Recorder.append` buffered and has not sent yet, in columns."""
+
+    __slots__ = ("step", "t", "y", "R", "energy", "actions", "controls", "terms", "target", "distance")
+
+    def __init__(self) -> None:
+        self.step: list[int] = []
+        self.t: list[float] = []
+        self.y: list[np.ndarray] = []
+        self.R: list[np.ndarray] = []
+        self.energy: list[float] = []
+        self.actions: list[np.ndarray | None] = []
+        self.controls: list[np.ndarray | None] = []
+        self.terms = _Columns()
+        self.target = _Columns()
+        self.distance: list[float] = []
+
+
+# -- rerun ----------------------------------------------------------------------------------------------
+_MATRIX_TYPES: dict[str, tuple] = {}
+
+
+def _matrix_column(component: str, M: np.ndarray):
+    """The writer's one escape hatch from rerun's archetype columns: a column of one 3×3 matrix per
+    step, ``"Tensor:data"`` (G, C) or ``"Transform3D:mat3x3"`` (Φ, the target ellipse), built in Arrow.
+
+    rerun 0.41 has no public way to send these fast: ``rr.Tensor.columns()`` cannot express a time
+    series of tensors (a ``TensorDataBatch`` holds one tensor: "Tensors do not support batches"),
+    and ``rr.Transform3D.columns(mat3x3=...)`` converts the matrices one at a time in Python. So the
+    Arrow array is assembled here in the layout of rerun's own one-element batches — ``TensorData``:
+    shape [3, 3], names ``row``/``col`` and a dense union whose ``F64`` arm holds the nine entries;
+    ``Mat3x3``: nine float32, column-major — with the Arrow type those public batches report, and it
+    goes out through the public ``rr.ComponentColumn`` (any ``rerun.ComponentBatchLike``). What
+    depends on rerun's layout is this function only; the values read back from a file equal the
+    ones sent (``tests/recording/test_writer.py``, against the pinned rerun).
+    """
     import pyarrow as pa
+    import rerun as rr
 
-    return pa.array(np.arange(0, per * n + 1, per, dtype=np.int32))
-
-
-_shared_offsets = functools.lru_cache(maxsize=32)(_build_offsets)
-
-
-def _offsets(n: int, per: int):
-    """Arrow offsets of n list rows of ``per`` entries each; immutable, so a block's columns share
-    them (cached up to :data:`_SHARED_OFFSETS` rows, so that the cache stays small)."""
-    return _shared_offsets(n, per) if n <= _SHARED_OFFSETS else _build_offsets(n, per)
-
-
-def _fixed(values: np.ndarray, n: int, per: int, key: str):
-    """A list column of n rows, ``per`` fixed-size float32 vectors each (``values`` (n·per, width))."""
-    import pyarrow as pa
-
-    descriptor, typ = _column_types()[key]
-    inner = typ.value_type
-    flat = pa.array(np.ascontiguousarray(values, dtype=np.float32).ravel())
-    vectors = pa.FixedSizeListArray.from_arrays(flat, type=inner)
-    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), vectors, type=typ)
-
-
-def _scalars(values: np.ndarray):
-    import pyarrow as pa
-
-    descriptor, typ = _column_types()["Scalars:scalars"]
-    values = np.ascontiguousarray(values, dtype=np.float64).ravel()
-    return descriptor, pa.ListArray.from_arrays(_offsets(values.size, 1), pa.array(values), type=typ)
-
-
-def _scalar_rows(values: np.ndarray, per: int):
-    """A ``Scalars`` column of rows of ``per`` values each (``values`` (n, per))."""
-    import pyarrow as pa
-
-    descriptor, typ = _column_types()["Scalars:scalars"]
-    values = np.ascontiguousarray(values, dtype=np.float64)
-    n = values.shape[0]
-    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), pa.array(values.ravel()), type=typ)
-
-
-def _strings(texts: list[str], per: int, key: str):
-    import pyarrow as pa
-
-    descriptor, typ = _column_types()[key]
-    n = len(texts) // per
-    return descriptor, pa.ListArray.from_arrays(_offsets(n, per), pa.array(texts, type=typ.value_type), type=typ)
-
-
-def _mat3x3(M: np.ndarray):
-    """``Transform3D:mat3x3`` of n matrices (rerun stores them column-major, float32)."""
+    if component not in _MATRIX_TYPES:
+        one = rr.encodings.TensorDataBatch(np.zeros((3, 3))) if component == "Tensor:data" else rr.components.TransformMat3x3Batch(np.eye(3))
+        descriptor = rr.Tensor.descriptor_data() if component == "Tensor:data" else rr.Transform3D.descriptor_mat3x3()
+        _MATRIX_TYPES[component] = (descriptor, one.as_arrow_array().type)
+    descriptor, typ = _MATRIX_TYPES[component]
     M = np.asarray(M, dtype=np.float64)
-    return _fixed(np.swapaxes(M, 1, 2).reshape(-1, 9), M.shape[0], 1, "Transform3D:mat3x3")
+    n = M.shape[0]
+    if component == "Transform3D:mat3x3":
+        array = pa.FixedSizeListArray.from_arrays(pa.array(np.swapaxes(M, 1, 2).astype(np.float32).ravel()), type=typ)
+    else:
+        pair = pa.array(np.arange(0, 2 * n + 1, 2, dtype=np.int32))
+        shape = pa.ListArray.from_arrays(pair, pa.array(np.full(2 * n, 3, dtype=np.uint64)), type=typ.field("shape").type)
+        names = pa.ListArray.from_arrays(pair, pa.array(["row", "col"] * n, type=pa.string()), type=typ.field("names").type)
+        union = typ.field("buffer").type
+        arms = [f.name for f in union]
+        children = [pa.array([], type=f.type) for f in union]
+        children[arms.index("F64")] = pa.ListArray.from_arrays(
+            pa.array(np.arange(0, 9 * n + 1, 9, dtype=np.int32)), pa.array(np.ascontiguousarray(M).ravel()), type=union.field(arms.index("F64")).type
+        )
+        codes = np.full(n, union.type_codes[arms.index("F64")], dtype=np.int8)
+        buffer = pa.Array.from_buffers(union, n, [None, pa.py_buffer(codes.tobytes()), pa.py_buffer(np.arange(n, dtype=np.int32).tobytes())], children=children)
+        array = pa.StructArray.from_arrays([shape, names, buffer], fields=list(typ))
+
+    class _Batch:  # the rerun.ComponentBatchLike protocol
+        def as_arrow_array(self):
+            return array
+
+        def component_descriptor(self):
+            return descriptor
+
+    return rr.ComponentColumn(descriptor, _Batch())
 
 
-def _timelines(step: np.ndarray, t: np.ndarray) -> dict:
-    import pyarrow as pa
+_STATIC: dict[tuple, Any] = {}
 
-    return {"step": pa.array(np.asarray(step, dtype=np.int64), pa.int64()), "sim_time": pa.array(_ns(t), pa.duration("ns"))}
+
+def _static(key: tuple, build) -> Any:
+    """A static archetype that does not change between files, built once per process."""
+    arch = _STATIC.get(key)
+    if arch is None:
+        arch = _STATIC[key] = build()
+    return arch
 
 
 class Recorder:
@@ -395,10 +393,18 @@ class Recorder:
         An env episode: the layout adds the target, reward, distance and action views.
     extent : float
         The body's expected size (largest semi-axis), which places the cameras (> 0).
-    drift_range : float, optional
-        A fixed axis ±``drift_range`` for the relative-drift plot (default: it follows the data).
+    success_tolerance : float, optional
+        Episodes: the distance at or below which the target counts as reached, drawn as a line on the
+        distance plot.
 
     Use as a context manager or call :meth:`close`; the file is complete only after that.
+
+    The file is opened (``RecordingStream.save``) when the first block is sent; rerun keeps what was
+    logged before in memory and writes it then. When the whole recording is one block — a free scene
+    from :func:`record_arrays`, an env episode of up to ``block`` steps — the default blueprint is
+    built from the values logged (fixed axes, round-off drawn flat, the whole run on every time axis:
+    :func:`flatbody_env.recording.layout.blueprint`); a recording sent in several blocks gets axes that
+    follow the data.
     """
 
     def __init__(
@@ -415,10 +421,9 @@ class Recorder:
         spokes: int = 12,
         episode: bool = False,
         extent: float = 2.0,
-        drift_range: float | None = None,
+        success_tolerance: float | None = None,
     ) -> None:
         import rerun as rr
-        import rerun_bindings as bindings
 
         for name, value in (("block", block), ("tensor_every", tensor_every), ("spokes", spokes)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -433,65 +438,67 @@ class Recorder:
         self.tensor_every = int(tensor_every)
         self.action_names = tuple(action_names) if action_names is not None else None
         self.episode = bool(episode)
-        self._buf: dict[str, list] = self._empty_buffer()
+        self._buf = _Steps()
         self._closed = False
         self._steps = 0
         self._styled: dict[str, int] = {}
         self._members: dict[str, list[str]] = {"action": [], "reward": []}
         self._q0: dict[str, float] | None = None
-        self._range = 0.0
+        self._extent = float(extent)
+        self._tolerance = None if success_tolerance is None else float(success_tolerance)
+        self._ranges: dict[str, tuple[float, float, int]] = {}
+        self._t_range: tuple[float, float] | None = None
+        self._blocks = 0
+        self._saved = False
+        self._work = 0.0
+        self._last: tuple[float, np.ndarray] | None = None  # (t, state) of the last step sent: the start of the next step's work
         self._rr = rr
-        self._bindings = bindings
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id or str(uuid.uuid4()), send_properties=True)
         if not self.rec.is_enabled():
             raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
-        self._native = self.rec.to_native()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        storage = _blueprint_storage(episode=self.episode, extent=float(extent), drift_range=drift_range)
-        bindings.save(path=str(self.path), default_blueprint=storage, recording=self._native, write_footer=True)
         self.rec.send_recording_name(title)
         self._log_static(title, description, int(spokes))
 
     # -- static parts ------------------------------------------------------------------------------
-    def _static_log(self, path: str, comps: dict) -> None:
-        self._bindings.log_arrow_msg(path, components=comps, static_=True, recording=self._native)
+    def _static_log(self, path: str, archetype) -> None:
+        self.rec.log(path, archetype, static=True, strict=True)
 
     def _log_static(self, title: str, description: str, spokes: int) -> None:
         rr = self._rr
         text = description_markdown(title, self.body, description, episode=self.episode)
-        self._static_log("/description", _components(rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN)))
+        self._static_log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
         self._static_log("/tensors/numbers", _static(("numbers",), lambda: rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN)))
-        coords = _static(("coords",), lambda: rr.ViewCoordinates.RIGHT_HAND_Z_UP)
-        self._static_log("/world", coords)
-        self._static_log("/material", coords)
+        for ent in ("/world", "/material"):
+            self._static_log(ent, rr.ViewCoordinates.RIGHT_HAND_Z_UP)
         lines = _static(("lines", spokes), lambda: rr.LineStrips3D(material_lines(spokes), colors=material_line_colors(spokes), radii=0.008))
         self._static_log("/world/material/lines", lines)
         self._static_log("/material/reference", lines)
         ellipsoid = _static(
             ("ellipsoid",),
-            lambda: rr.Ellipsoids3D.from_fields(colors=[rgba((90, 140, 255))], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
+            lambda: rr.Ellipsoids3D.from_fields(colors=[rgba((150, 165, 195))], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
         )
         self._static_log("/world/body", ellipsoid)
         self._static_log("/material/G_ellipsoid", ellipsoid)
-        arrows = _static(("arrows",), lambda: rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=True))
+        arrows = _static(("arrows",), lambda: rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=False))
         for ent in ("/world/axes_C", "/material/axes_G"):
             self._static_log(ent, arrows)
+        for ent, colors in (("/world/labels/in_plane", AXIS_COLORS[:2]), ("/world/labels/normal", AXIS_COLORS[2:]), ("/material/labels", AXIS_COLORS)):
+            self._static_log(ent, _static(("labels", ent), lambda colors=colors: rr.Points3D.from_fields(colors=colors, radii=0.012, show_labels=True)))
         for name in BODY_SERIES:
             self._style(f"/series/{name}")
-        for name, _ in DRIFT_SERIES:
-            self._style(f"/series/drift/{name}")
+        if not self.episode:
+            for name, _ in DRIFT_SERIES:
+                self._style(f"/series/drift/{name}")
         for sym in ("G", "C"):
-            self._static_log(
-                f"/series/{sym}",
-                _static(("entries", sym), lambda: rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS)),
-            )
+            entries = _static(("entries", sym), lambda: rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS))
+            self._static_log(f"/series/{sym}", entries)
         if self.episode:
             from flatbody_env.env.rendering import COLORS
 
-            self._static_log(
-                "/world/target/outline", _static(("outline",), lambda: rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012))
-            )
+            self._static_log("/world/target/outline", _static(("outline",), lambda: rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012)))
             self._style("/series/distance")
+            self._style("/series/balance/delta_energy")
             for name in TARGET_SERIES:
                 self._style(f"/series/target/{name}")
 
@@ -507,10 +514,6 @@ class Recorder:
             self._styled[path] = index
 
     # -- appending ---------------------------------------------------------------------------------
-    @staticmethod
-    def _empty_buffer() -> dict[str, list]:
-        return {k: [] for k in ("t", "y", "R", "energy", "step", "action", "reward_terms", "target", "distance")}
-
     def append(
         self,
         t: float,
@@ -521,15 +524,24 @@ class Recorder:
         step: int | None = None,
         action: np.ndarray | Sequence[float] | None = None,
         reward_terms: Mapping[str, float] | None = None,
+        reward: float | None = None,
         target: Mapping[str, float] | None = None,
         distance: float | None = None,
+        control: np.ndarray | Sequence[float] | None = None,
     ) -> None:
-        """Buffer one step; a full buffer (``block`` steps) is sent as one block.
+        """Buffer one step (numbers and array copies, in columns); a full buffer (``block`` steps) is
+        sent as one block. The one per-step buffer: :class:`~flatbody_env.recording.wrapper.RerunRecorder`
+        feeds its episodes through it.
 
         ``state`` is a dict of the eleven names or an array in :data:`STATE_NAMES` order;
         ``energy`` defaults to H(state) (eq. (41) of [1]); ``step`` to the running count.
-        ``action``, ``reward_terms``, ``target`` (its :data:`~flatbody_env.recording.layout.TARGET_SERIES`
-        entries) and ``distance`` are an env episode's (``episode=True``); they must be finite.
+        An env episode's (``episode=True``) ``action``, ``reward_terms`` (their numeric entries;
+        ``reward`` is plotted as ``total`` unless the terms have one), ``target`` (its
+        :data:`~flatbody_env.recording.layout.TARGET_SERIES` entries) and ``distance``: a value that
+        is missing or not finite is not drawn at that step, a non-finite target is an error; a step
+        whose state or R is not finite is noted on ``/events`` and not drawn (:meth:`flush`).
+        ``control`` is the physical u = (τ₁, τ₂, τ₃, f_ϱ) that ``action`` applied over the step that led
+        here: with it the recording draws the control's power and work (:mod:`flatbody_env.recording.work`).
         """
         if self._closed:
             raise ValueError("recorder: already closed")
@@ -539,67 +551,80 @@ class Recorder:
                 raise ValueError(f"state: missing entries {', '.join(missing)}")
             y = np.array([float(state[k]) for k in STATE_NAMES])
         else:
-            y = np.asarray(state, dtype=np.float64).ravel()
+            y = np.array(state, dtype=np.float64).ravel()
             if y.shape != (len(STATE_NAMES),):
                 raise ValueError(f"state: expected {len(STATE_NAMES)} entries, got shape {y.shape}")
-        if (action is not None or reward_terms or target or distance is not None) and not self.episode:
+        if (action is not None or reward_terms or reward is not None or target or distance is not None) and not self.episode:
             raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
-        act = None if action is None else np.array(action, dtype=np.float64).ravel()
-        terms = {str(k): float(v) for k, v in reward_terms.items()} if reward_terms else None
-        tgt = {k: float(target[k]) for k in TARGET_SERIES if k in target} if target else None
-        dist = None if distance is None else float(distance)
-        checks = (("action", [] if act is None else act.tolist()), ("reward_terms", list((terms or {}).values())),
-                  ("target", list((tgt or {}).values())), ("distance", [] if dist is None else [dist]))
-        for name, values in checks:
-            if not all(math.isfinite(v) for v in values):
-                raise ValueError(f"{name}: must be finite, got {values!r}")
-        buf = self._buf
-        buf["t"].append(float(t))
-        buf["y"].append(y)
-        buf["R"].append(np.array(rotation, dtype=np.float64))
-        buf["energy"].append(None if energy is None else float(energy))
-        buf["step"].append(self._steps if step is None else int(step))
-        buf["action"].append(act)
-        buf["reward_terms"].append(terms)
-        buf["target"].append(tgt)
-        buf["distance"].append(np.nan if dist is None else dist)
+        b = self._buf
+        b.t.append(float(t))
+        b.y.append(y)
+        b.R.append(np.array(rotation, dtype=np.float64))
+        b.energy.append(math.nan if energy is None else float(energy))
+        b.step.append(self._steps if step is None else int(step))
+        if self.episode:
+            b.actions.append(None if action is None else np.array(action, dtype=np.float64).ravel())
+            b.controls.append(None if control is None else np.array(control, dtype=np.float64).ravel())
+            b.terms.add(reward_terms, total=None if reward is None else float(reward))
+            b.target.add(target, names=TARGET_SERIES)
+            d = None if distance is None else _number(distance)
+            b.distance.append(d if d is not None and math.isfinite(d) else math.nan)
         self._steps += 1
-        if len(buf["t"]) >= self.block:
+        if len(b.t) >= self.block:
             self.flush()
 
-    def flush(self) -> None:
-        """Send the steps buffered by :meth:`append` as one block (no-op when empty)."""
-        buf = self._buf
-        if not buf["t"]:
+    def flush(self, *, final: bool = False) -> None:
+        """Send the steps buffered by :meth:`append` as one block (no-op when empty). In an episode a
+        step whose state or R is not finite is noted on ``/events`` and not drawn. ``final``: no step
+        follows (:meth:`close`), so a recording of one block gets its blueprint from its values."""
+        b = self._buf
+        n = len(b.t)
+        if not n:
             return
-        self._buf = self._empty_buffer()
-        n = len(buf["t"])
-        Y = np.stack(buf["y"], axis=1)
-        missing = np.array([e is None for e in buf["energy"]])
-        energy = np.array([np.nan if e is None else e for e in buf["energy"]])
+        self._buf = _Steps()
+        t, Y, R, step = np.array(b.t), np.stack(b.y, axis=1), np.stack(b.R), np.array(b.step, dtype=np.int64)
+        energy = np.array(b.energy)
+        episode = {}
+        if self.episode:
+            keep = np.isfinite(Y).all(axis=0) & np.isfinite(R.reshape(n, 9)).all(axis=1)
+            for i in np.flatnonzero(~keep):
+                self.note("non-finite state (integration failure): step not drawn", step=step[i], t=t[i] if math.isfinite(t[i]) else 0.0)
+            if not keep.any():
+                return
+            actions = None
+            rows = [i for i, a in enumerate(b.actions) if a is not None and keep[i]]
+            if rows:
+                sizes = {b.actions[i].size for i in rows}
+                if len(sizes) != 1:
+                    raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
+                given = np.stack([b.actions[i] for i in rows])
+                given[~np.isfinite(given).all(axis=1)] = np.nan  # not drawn
+                actions = np.full((n, given.shape[1]), np.nan)
+                actions[rows] = given
+                actions = actions[keep]
+            target = {k: v[keep] for k, v in b.target.arrays().items()}
+            for name, values in target.items():
+                if not np.all(np.isfinite(values[~np.isnan(values)])):
+                    raise ValueError(f"target[{name!r}]: must be finite")
+            terms = {k: np.where(np.isfinite(v), v, np.nan)[keep] for k, v in b.terms.arrays().items()}
+            controls = None
+            if any(c is not None for c in b.controls):
+                controls = np.full((n, 4), np.nan)
+                for i, c in enumerate(b.controls):
+                    if c is not None and c.size == 4:
+                        controls[i] = c
+                controls = controls[keep]
+            episode = {"actions": actions, "reward_terms": terms or None, "target": target or None, "distance": np.array(b.distance)[keep], "controls": controls}
+            t, Y, R, step, energy = t[keep], Y[:, keep], R[keep], step[keep], energy[keep]
+        missing = np.isnan(energy)
         if missing.any():
             from flatbody_env.physics.hamiltonian import hamiltonian_series
 
             _check_finite("states", Y.T)
             energy[missing] = hamiltonian_series(Y[:, missing], self.body)
-        actions = terms = target = None
-        with_action = [a for a in buf["action"] if a is not None]
-        if with_action:
-            sizes = {a.size for a in with_action}
-            if len(sizes) != 1:
-                raise ValueError(f"action: sizes differ within an episode ({sorted(sizes)})")
-            actions = np.full((n, sizes.pop()), np.nan)
-            for i, a in enumerate(buf["action"]):
-                if a is not None:
-                    actions[i] = a
-        names = {k for d in buf["reward_terms"] if d for k in d}
-        if names:
-            terms = {name: np.array([d.get(name, np.nan) if d else np.nan for d in buf["reward_terms"]]) for name in names}
-        names = {k for d in buf["target"] if d for k in d}
-        if names:
-            target = {name: np.array([d.get(name, np.nan) if d else np.nan for d in buf["target"]]) for name in names}
-        self._extend(buf["t"], Y, np.stack(buf["R"]), step=np.array(buf["step"], dtype=np.int64), energy=energy, actions=actions,
-                     reward_terms=terms, target=target, distance=np.array(buf["distance"]) if self.episode else None)
+        self._extend(t, Y, R, step=step, energy=energy, **episode)
+        if not final and not self._saved:
+            self._save()
 
     def extend(
         self,
@@ -613,6 +638,7 @@ class Recorder:
         reward_terms: Mapping[str, np.ndarray] | None = None,
         target: Mapping[str, np.ndarray] | None = None,
         distance=None,
+        controls=None,
     ) -> None:
         """Send n steps at once, column-wise (what :meth:`append` buffers, given as columns).
 
@@ -637,6 +663,8 @@ class Recorder:
             :data:`~flatbody_env.recording.layout.TARGET_SERIES` entries; NaN where a step has none.
         distance : array (n,), optional
             Episodes: the distance to the target; NaN where a step has none.
+        controls : array (n, 4), optional
+            Episodes: u = (τ₁, τ₂, τ₃, f_ϱ) applied over the step that led to each step (NaN: none).
 
         Raises
         ------
@@ -652,10 +680,12 @@ class Recorder:
         if step is None:
             step = np.arange(self._steps, self._steps + n, dtype=np.int64)
         self._steps += n
-        self._extend(t, states, rotations, step=step, energy=energy, actions=actions, reward_terms=reward_terms, target=target, distance=distance)
+        self._extend(t, states, rotations, step=step, energy=energy, actions=actions, reward_terms=reward_terms, target=target, distance=distance, controls=controls)
+        if not self._saved:
+            self._save()
 
-    def _extend(self, t, states, rotations, *, step, energy, actions, reward_terms, target, distance) -> None:
-        if (actions is not None or reward_terms or target or distance is not None) and not self.episode:
+    def _extend(self, t, states, rotations, *, step, energy, actions=None, reward_terms=None, target=None, distance=None, controls=None) -> None:
+        if (actions is not None or reward_terms or target or distance is not None or controls is not None) and not self.episode:
             raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
         if energy is None:
             from flatbody_env.physics.hamiltonian import hamiltonian_series
@@ -674,6 +704,7 @@ class Recorder:
                 "reward_terms": {str(k): _optional_column(f"reward_terms[{k!r}]", v, n) for k, v in (reward_terms or {}).items()},
                 "target": {k: _optional_column(f"target[{k!r}]", target[k], n) for k in TARGET_SERIES if target and k in target},
                 "distance": None if distance is None else _optional_column("distance", distance, n),
+                "controls": None if controls is None else _optional_column("controls", controls, n, 4),
             }
         self._send_block(block)
         if episode is not None:
@@ -684,14 +715,43 @@ class Recorder:
         rr = self._rr
         self.rec.set_time("step", sequence=int(step))
         self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9)), "ns"))
-        self.rec.log("/events", rr.TextLog(str(text), level=level))
+        self.rec.log("/events", rr.TextLog(str(text), level=level), strict=True)
 
-    def _send(self, path: str, timelines: dict, *columns) -> None:
-        self._bindings.send_arrow_chunk(path, timelines=timelines, components=dict(columns), recording=self._native)
+    def _send(self, path: str, timelines: list, columns) -> None:
+        self.rec.send_columns(path, indexes=timelines, columns=columns, strict=True)
+
+    def _scalars(self, values: np.ndarray, per: int = 1) -> list:
+        """A ``Scalars`` column of rows of ``per`` values each."""
+        rr = self._rr
+        values = np.ascontiguousarray(values, dtype=np.float64).ravel()
+        offsets = np.arange(0, values.size + 1, per, dtype=np.int32)
+        return [rr.ComponentColumn(rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch(values), offsets=offsets)]
+
+    def _note(self, path: str, values: np.ndarray, per: int = 1) -> None:
+        """Keep the range of what ``path`` shows (the blueprint of a one-block recording is built from it)."""
+        v = np.asarray(values, dtype=np.float64)
+        v = v[np.isfinite(v)]
+        if v.size:
+            lo, hi = float(v.min()), float(v.max())
+            old = self._ranges.get(path)
+            self._ranges[path] = (lo, hi, per) if old is None else (min(old[0], lo), max(old[1], hi), per)
+
+    def _save(self, *, final: bool = False) -> None:
+        """Open the file with the default blueprint: built from the logged values when all of them
+        are one block (``final``: no block follows; see the class docstring), else with axes that
+        follow the data."""
+        one = final and self._blocks == 1
+        bp = blueprint(episode=self.episode, extent=self._extent, ranges=self._ranges if one else None, t_range=self._t_range if one else None)
+        self.rec.save(self.path, default_blueprint=bp)
+        self._saved = True
 
     def _send_block(self, block: _Block) -> None:
         """Log a whole block of steps column-wise (one chunk per entity)."""
+        rr = self._rr
         n = block.t.size
+        self._blocks += 1
+        t0 = float(block.t[0]) if self._t_range is None else self._t_range[0]
+        self._t_range = (t0, float(block.t[-1]))
         y = block.states
         lam, mu, rho, theta = (y[_IDX[k]] for k in ("lambda", "mu", "rho", "theta"))
         R = block.rotations
@@ -701,38 +761,44 @@ class Recorder:
         C = cauchy_tensor(lam, mu, rho, R)
         Phi = configuration(lam, mu, rho, theta, R)
         idx = block.index
-        self._send("/world/body", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(R), n, 1, "Ellipsoids3D:quaternions"))
-        self._send("/material/G_ellipsoid", idx, _fixed(half, n, 1, "Ellipsoids3D:half_sizes"), _fixed(quaternions_xyzw(U), n, 1, "Ellipsoids3D:quaternions"))
-        self._send("/world/material", idx, _mat3x3(Phi))
-        labels = _strings(axis_labels(half), 3, "Arrows3D:labels")
+        self._send("/world/body", idx, rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(R)))
+        self._send("/material/G_ellipsoid", idx, rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(U)))
+        self._send("/world/material", idx, [_matrix_column("Transform3D:mat3x3", Phi)])
+        labels = np.array(axis_labels(half), dtype=object).reshape(n, 3)
+        gap = LABEL_GAP * self._extent  # labels just beyond the arrows' tips: off the spokes, the fibre and each other
         for ent, frames in (("/world/axes_C", R), ("/material/axes_G", U)):
-            self._send(ent, idx, _fixed(principal_axes(frames, half).reshape(3 * n, 3), n, 3, "Arrows3D:vectors"), labels)
-        self._send("/series/G", idx, _scalar_rows(symmetric_entries(G), 6))
-        self._send("/series/C", idx, _scalar_rows(symmetric_entries(C), 6))
+            vectors = principal_axes(frames, half)  # (n, 3 arrows, 3)
+            self._send(ent, idx, rr.Arrows3D.columns(vectors=vectors.reshape(3 * n, 3)).partition(np.full(n, 3)))
+            tips = vectors + gap * np.swapaxes(frames, 1, 2)
+            if ent == "/world/axes_C":
+                self._send("/world/labels/in_plane", idx, rr.Points3D.columns(positions=tips[:, :2].reshape(2 * n, 3), labels=labels[:, :2].ravel().tolist()).partition(np.full(n, 2)))
+                self._send("/world/labels/normal", idx, rr.Points3D.columns(positions=tips[:, 2], labels=labels[:, 2].tolist()))
+            else:
+                self._send("/material/labels", idx, rr.Points3D.columns(positions=tips.reshape(3 * n, 3), labels=labels.ravel().tolist()).partition(np.full(n, 3)))
+        for sym, M in (("G", G), ("C", C)):
+            entries = symmetric_entries(M)
+            self._send(f"/series/{sym}", idx, self._scalars(entries, 6))
+            self._note(f"/series/{sym}", entries, 6)
         casimir = y[_IDX["s1"]] ** 2 + y[_IDX["s2"]] ** 2 + y[_IDX["s3"]] ** 2
         series = {"lambda": lam, "mu": mu, "rho": rho, "theta": theta, "s3": y[_IDX["s3"]], "p_theta": y[_IDX["p_theta"]], "energy": block.energy, "casimir": casimir}
         if self._q0 is None:
-            self._q0 = {name: float(series[name][0]) for name, _ in DRIFT_SERIES}
+            self._q0 = {name: float(series[name][0]) for name in ("energy", "casimir", "p_theta")}
         for name, values in series.items():
-            self._send(f"/series/{name}", idx, _scalars(values))
-        for name, _ in DRIFT_SERIES:
-            self._send(f"/series/drift/{name}", idx, _scalars(relative_drift(series[name], self._q0[name])))
+            self._send(f"/series/{name}", idx, self._scalars(values))
+            self._note(f"/series/{name}", values)
+        if not self.episode:  # under control H and |s|² change on purpose: episodes draw the control's work instead
+            for name, _ in DRIFT_SERIES:
+                drift = relative_drift(series[name], self._q0[name])
+                self._send(f"/series/drift/{name}", idx, self._scalars(drift))
+                self._note(f"/series/drift/{name}", drift)
         sel = np.flatnonzero(block.step % self.tensor_every == 0)
         if sel.size:
-            rr = self._rr
-            m = float(max(np.abs(G[sel]).max(), np.abs(C[sel]).max()))
-            if m > self._range:  # a fixed, symmetric colour range ±r for both views (widened, never narrowed)
-                self._range = nice_range(1.05 * m)
-                comps = _static(("range", self._range), lambda: rr.Tensor.from_fields(value_range=[-self._range, self._range]))
-                for ent in ("/tensors/G", "/tensors/C"):
-                    self._static_log(ent, comps)
             tidx = idx if sel.size == n else _timelines(block.step[sel], block.t[sel])
-            self._send("/tensors/G", tidx, self._tensor_column(G[sel]))
-            self._send("/tensors/C", tidx, self._tensor_column(C[sel]))
-            self._send("/tensors/numbers", tidx, _strings(tensor_text(block.t[sel], G[sel], C[sel], half[sel], self._range), 1, "TextDocument:text"))
+            self._send("/tensors/numbers", tidx, rr.TextDocument.columns(text=tensor_text(block.t[sel], G[sel], C[sel], half[sel])))
 
-    def _send_episode(self, block: _Block, *, actions, reward_terms, target, distance) -> None:
-        """Actions, reward terms, target (series and outline) and distance of a block; a NaN is a step without that value."""
+    def _send_episode(self, block: _Block, *, actions, reward_terms, target, distance, controls=None) -> None:
+        """Actions, reward terms, target (series and outline), distance and the control's power and
+        work of a block; a NaN is a step without that value."""
         if actions is not None:
             has = ~np.isnan(actions).any(axis=1)
             if has.any():
@@ -758,20 +824,41 @@ class Recorder:
             d = np.stack([target["lambda"], target["mu"], target["rho"]], axis=1)
             has = ~np.isnan(d).any(axis=1)
             if has.any():  # R·diag(λ*, μ*, ϱ*): the target ellipse along the body's axes
-                self._send("/world/target", self._rows(block, has), _mat3x3(block.rotations[has] * d[has][:, None, :]))
+                self._send("/world/target", self._rows(block, has), [_matrix_column("Transform3D:mat3x3", block.rotations[has] * d[has][:, None, :])])
         if distance is not None:
             has = ~np.isnan(distance)
             if has.any():
                 self._series("/series/distance", self._rows(block, has), distance[has])
+                if self._tolerance is not None:
+                    self._series("/series/distance_tolerance", self._rows(block, has), np.full(int(has.sum()), self._tolerance))
+        dH = block.energy - self._q0["energy"]
+        self._series("/series/balance/delta_energy", block.index, dH)
+        if controls is not None:  # the work of the control, step by step (flatbody_env.recording.work)
+            from flatbody_env.recording.work import step_work
+
+            n = block.t.size
+            t_prev = np.concatenate([[np.nan if self._last is None else self._last[0]], block.t[:-1]])
+            y_prev = np.concatenate([(np.full((11, 1), np.nan) if self._last is None else self._last[1][:, None]), block.states[:, :-1]], axis=1)
+            has = ~np.isnan(controls).any(axis=1) & np.isfinite(t_prev)
+            dW = np.zeros(n)
+            if has.any():
+                dW[has] = step_work(t_prev[has], y_prev[:, has], block.t[has], block.states[:, has], controls[has], self.body)
+            W = self._work + np.cumsum(dW)
+            self._work = float(W[-1])
+            self._series("/series/balance/work", block.index, W)
+            if has.any():
+                h = block.t[has] - t_prev[has]
+                self._series("/series/power", self._rows(block, has), np.where(h > 0, dW[has] / np.where(h > 0, h, 1.0), 0.0))
+        self._last = (float(block.t[-1]), block.states[:, -1].copy())
 
     @staticmethod
-    def _rows(block: _Block, has: np.ndarray) -> dict:
+    def _rows(block: _Block, has: np.ndarray) -> list:
         """The timelines of the steps ``has`` of ``block`` (the block's own when it is all of them)."""
         if has.all():
             return block.index
         return _timelines(block.step[has], block.t[has])
 
-    def _series(self, path: str, idx: dict, values: np.ndarray, *, group: str | None = None) -> None:
+    def _series(self, path: str, idx: list, values: np.ndarray, *, group: str | None = None) -> None:
         if path not in self._styled:
             index = 0
             if group is not None:
@@ -779,52 +866,8 @@ class Recorder:
                 members.append(path)
                 index = len(members) - 1
             self._style(path, index)
-        self._send(path, idx, _scalars(values))
-
-    def _tensor_column(self, M: np.ndarray):
-        """A ``Tensor:data`` column of n 3×3 float64 tensors, built directly in Arrow.
-
-        ``rr.Tensor.columns()`` cannot express a time series of tensors (ECOSYSTEM.md), so the
-        ``TensorData`` struct (shape, names, dense-union buffer with the F64 arm) is assembled
-        with pyarrow from the type rerun itself reports.
-        """
-        import pyarrow as pa
-
-        rr = self._rr
-        descriptor, typ = _tensor_type()
-        n = M.shape[0]
-        pair = np.arange(0, 2 * n + 1, 2, dtype=np.int32)
-        shape = pa.ListArray.from_arrays(pa.array(pair), pa.array(np.full(2 * n, 3, dtype=np.uint64)), type=typ.field("shape").type)
-        names = pa.ListArray.from_arrays(pa.array(pair), pa.array(["row", "col"] * n, type=pa.string()), type=typ.field("names").type)
-        union = typ.field("buffer").type
-        children = []
-        f64_code = None
-        for i, f in enumerate(union):
-            if f.name == "F64":
-                f64_code = union.type_codes[i]
-                offsets = pa.array(np.arange(0, 9 * n + 1, 9, dtype=np.int32))
-                children.append(pa.ListArray.from_arrays(offsets, pa.array(np.ascontiguousarray(M, dtype=np.float64).ravel()), type=f.type))
-            else:
-                children.append(pa.array([], type=f.type))
-        if f64_code is None:  # pragma: no cover - a rerun version without the F64 arm
-            raise RuntimeError("rerun TensorData has no F64 buffer arm")
-        buffer = pa.Array.from_buffers(
-            union,
-            n,
-            [None, pa.py_buffer(np.full(n, f64_code, dtype=np.int8).tobytes()), pa.py_buffer(np.arange(n, dtype=np.int32).tobytes())],
-            children=children,
-        )
-        data = pa.StructArray.from_arrays([shape, names, buffer], fields=list(typ))
-
-        class _Batch:
-            def as_arrow_array(self):
-                return data
-
-            def component_descriptor(self):
-                return descriptor
-
-        column = rr.ComponentColumn(descriptor, _Batch())
-        return column.component_descriptor(), column.as_arrow_array()
+        self._send(path, idx, self._scalars(values))
+        self._note(path, values)
 
     # -- finishing ---------------------------------------------------------------------------------
     @property
@@ -836,7 +879,9 @@ class Recorder:
         """Flush, write the footer and release the file; returns the path. Idempotent."""
         if not self._closed:
             try:
-                self.flush()
+                self.flush(final=True)
+                if not self._saved:
+                    self._save(final=True)
             finally:
                 self._closed = True
                 self.rec.flush()
@@ -848,25 +893,6 @@ class Recorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-@functools.lru_cache(maxsize=1)
-def _tensor_type() -> tuple:
-    """(descriptor, Arrow type of one ``TensorData``) of rerun's ``Tensor:data`` (read from rerun's
-    own tables: building a template tensor would import ``pyarrow.compute``, 45 ms)."""
-    import rerun as rr
-    from rerun.encodings.tensor_data import TensorDataBatch
-
-    return rr.Tensor.descriptor_data(), TensorDataBatch._ARROW_DATATYPE
-
-
-def warm_up() -> None:
-    """Import rerun and build now what an env episode's recording needs first (the episode blueprint
-    template, the Arrow column types), so that it does not wait for them (a
-    :class:`~flatbody_env.recording.process.RecorderProcess` calls it while its caller works)."""
-    _blueprint_template(True, None)
-    _column_types()
-    _tensor_type()
 
 
 def record_arrays(
@@ -928,9 +954,7 @@ def record_arrays(
         energy = hamiltonian_series(Y, body)
     block = _as_block(t, Y, rotations, energy=energy, step=step)
     extent = float(max(Y[_IDX["lambda"]].max(), Y[_IDX["mu"]].max(), Y[_IDX["rho"]].max()))
-    casimir = Y[_IDX["s1"]] ** 2 + Y[_IDX["s2"]] ** 2 + Y[_IDX["s3"]] ** 2
-    drift = max(float(np.abs(relative_drift(q, float(q[0]))).max()) for q in (block.energy, casimir, Y[_IDX["p_theta"]]))
-    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent, drift_range=drift_axis(drift)) as rec:
+    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent) as rec:
         rec._send_block(block)
     return Path(path)
 

@@ -129,6 +129,27 @@ def methods(_: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
     return methods_answer()
 
 
+def _check_family_range(params: Mapping[str, Any]) -> None:
+    """A family's range in the request's own words (``from``, ``to``): from < to, and from > 0 for a body
+    constant — refused when the job is submitted, not when it runs."""
+    from analysis.families import BODY_PARAMETERS
+
+    lo, hi = params["from"], params["to"]
+    if not lo < hi:
+        raise ValueError(f"to: must be greater than from ({lo:g}), got {hi:g}")
+    if params["vary"] in BODY_PARAMETERS:
+        from analysis.families import body_with
+
+        if not lo > 0:
+            raise ValueError(f"from: the constant {params['vary']} must stay > 0 (allowed range (0, inf)), got {lo:g}")
+        try:
+            body_with(build_body(params["body"]), params["vary"], lo)
+        except ValueError as exc:
+            if str(exc).startswith("body"):
+                raise
+            raise ValueError(f"vary: {str(exc).split(': ', 1)[-1]}") from None
+
+
 def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
     """Check a job's body or scene and its cost before it is queued (``{"kind", "params"}``); ``{}`` if fine.
 
@@ -139,6 +160,8 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
     """
     params = p["params"]
     try:
+        if p.get("kind") == "family":
+            _check_family_range(params)
         if "body" in params:
             build_body(params["body"])
         if "scene" in params:

@@ -33,6 +33,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Route
 
 from flatbody_env.service import models
 from flatbody_env.service.jobs import JobRunner, die_with_service, process_context
@@ -222,6 +223,10 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2) -> F
     )
     app.state.service = service
     app.add_middleware(BodyLimit, max_bytes=limits.max_body_bytes)
+    # ReDoc's bundle shows a logo it fetches from cdn.redoc.ly: served here with that address emptied
+    # (the image fails to load and ReDoc leaves it out), so /redoc makes no request outside the service.
+    # Inserted ahead of the /docs-assets mount, which would otherwise answer this path.
+    app.router.routes.insert(0, Route(f"{DOCS_ASSETS}/redoc.standalone.js", _redoc_bundle, methods=["GET"], include_in_schema=False))
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
@@ -355,8 +360,26 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2) -> F
     async def page() -> Response:
         return HTMLResponse((PAGE_DIR / "index.html").read_text(encoding="utf-8"))
 
+    @app.get("/favicon.ico", include_in_schema=False)
+    async def favicon() -> Response:
+        from flatbody_env.service.favicon import FAVICON_ICO
+
+        return Response(FAVICON_ICO, media_type="image/x-icon", headers={"cache-control": "max-age=86400"})
+
     app.mount("/page", StaticFiles(directory=PAGE_DIR), name="page")
     return app
+
+
+REDOC_LOGO = "https://cdn.redoc.ly/redoc/logo-mini.svg"
+"""The one outside address in ReDoc's bundle (its footer logo); :func:`_redoc_bundle` empties it."""
+
+
+def _redoc_bundle(request: Request) -> Response:
+    import fastapi_offline
+
+    path = Path(fastapi_offline.__file__).with_name("static") / "redoc.standalone.js"
+    text = path.read_text(encoding="utf-8").replace(REDOC_LOGO, "data:,")
+    return Response(text, media_type="text/javascript; charset=utf-8", headers={"cache-control": "max-age=3600"})
 
 
 def _public(job: dict[str, Any]) -> dict[str, Any]:

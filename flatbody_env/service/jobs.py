@@ -6,6 +6,12 @@ job's work is :data:`WORK` [kind]; it calls the same functions as the ``flatbody
 (``family``, ``stability-map``, ``record``, ``evaluate``, ``simulate``) and writes its files to
 ``DATA_DIR/jobs/ID/``.
 
+Progress is the work's own: a job's process turns the command's progress bars
+(:func:`flatbody_env.progress.progress_bar`: the stability map's rows, the family's seeds, the
+evaluation's episodes) into the job's ``progress`` and ``stage`` (:func:`reporting_bars`), and an
+integration by a scipy method reports the time it has reached (:func:`reporting_integration`);
+each job kind splits 0 … 1 over its steps (:class:`Reporter`). Progress never decreases.
+
 A worker process dies with the service (:func:`die_with_service`); a job found ``running``
 when the service starts is marked failed with :data:`~flatbody_env.service.store.RESTART_REASON`
 and is never re-run silently.
@@ -16,28 +22,160 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import signal
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from flatbody_env.service.store import JobStore
 from flatbody_env.output import atomic_write
 
-Progress = Callable[[float], None]
+Progress = Callable[..., None]
+"""``progress(fraction, stage=None)``: record the job's progress (0 … 1) and what it is doing."""
+
+REPORT_EVERY_S = 0.2
+"""Least seconds between two progress writes of one job (the first and the last of a step always go)."""
+
+
+class Reporter:
+    """The job's progress over its steps: step ``k`` of a job covers ``[lo, hi]`` of 0 … 1.
+
+    ``step(lo, hi, stage)`` starts a step; ``part(fraction, stage)`` reports how far into the current
+    step the work is (0 … 1). Writes are at most one per :data:`REPORT_EVERY_S` seconds, and the
+    reported value never decreases.
+    """
+
+    def __init__(self, progress: Progress, *, every: float = REPORT_EVERY_S) -> None:
+        self._progress = progress
+        self.every = every
+        self.lo, self.hi = 0.0, 0.0
+        self.done = 0.0
+        self._last = -1e9
+        self.stage: str | None = None
+
+    def step(self, lo: float, hi: float, stage: str | None = None) -> None:
+        self.lo, self.hi = float(lo), float(hi)
+        self._report(self.lo, stage, force=True)
+
+    def part(self, fraction: float, stage: str | None = None, *, force: bool = False) -> None:
+        fraction = min(max(float(fraction), 0.0), 1.0)
+        self._report(self.lo + (self.hi - self.lo) * fraction, stage, force=force)
+
+    def _report(self, value: float, stage: str | None, *, force: bool = False) -> None:
+        now = time.monotonic()
+        if stage is not None:
+            self.stage = stage
+        if not force and now - self._last < self.every:
+            return
+        self.done = max(self.done, value)
+        self._last = now
+        self._progress(self.done, self.stage)
+
+
+def _bar_class(reporter: Reporter, bars: int):
+    """A silent :class:`~flatbody_env.progress.LineProgress` that reports to ``reporter``; the ``bars``
+    bars a job's work opens one after the other share its current step evenly."""
+    from flatbody_env.progress import LineProgress
+
+    opened = [0]
+
+    class JobBar(LineProgress):
+        def __init__(self, iterable=None, *, total=None, desc="", unit="it", initial=0, **_ignored) -> None:
+            super().__init__(iterable, total=total, desc=desc, unit=unit, initial=initial, enabled=False)
+            self.index = min(opened[0], bars - 1)
+            opened[0] += 1
+            self._tell(force=True)
+
+        def update(self, n: int = 1) -> None:
+            super().update(n)
+            self._tell()
+
+        def close(self) -> None:
+            if not self._closed and self.index == bars - 1 and (not self.total or self.n >= self.total):
+                reporter.part(1.0, "writing the files", force=True)
+            super().close()
+
+        def _tell(self, force: bool = False) -> None:
+            share = (self.n / self.total) if self.total else 0.0
+            units = self.unit if self.unit.endswith("s") else self.unit + "s"
+            what = f"{self.desc}: " if self.desc else ""
+            stage = f"{what}{self.n} of {self.total} {units}" if self.total else f"{what}{self.n} {units}"
+            reporter.part((self.index + min(share, 1.0)) / bars, stage, force=force)
+
+    return JobBar
+
+
+@contextmanager
+def reporting_bars(reporter: Reporter, *, bars: int = 1) -> Iterator[None]:
+    """While inside, the command's progress bars (:func:`flatbody_env.progress.progress_bar`) in this
+    worker process report to ``reporter`` instead of printing (one job per process, so this is the job's)."""
+    import flatbody_env.progress as progress_module
+
+    bar = _bar_class(reporter, max(1, bars))
+    saved = progress_module.progress_bar
+
+    def progress_bar(iterable=None, **kwargs):
+        return bar(iterable, **kwargs)
+
+    progress_module.progress_bar = progress_bar
+    try:
+        yield
+    finally:
+        progress_module.progress_bar = saved
+
+
+@contextmanager
+def reporting_integration(reporter: Reporter, t_end: float) -> Iterator[None]:
+    """While inside, an integration by a scipy method (``scipy.integrate.solve_ivp``) in this worker
+    process reports ``t / t_end``: the time its right-hand side has reached. (The compiled methods run
+    in one call and report when they are done: they take well under a second for the job limits.)"""
+    import scipy.integrate
+
+    saved = scipy.integrate.solve_ivp
+
+    def solve_ivp(fun, t_span, y0, *args, **kwargs):
+        t0, t1 = float(t_span[0]), float(t_span[-1])
+        width = (t1 - t0) or 1.0
+        calls = [0]
+
+        def watched(t, y, *more):
+            calls[0] += 1
+            if calls[0] % 32 == 0:
+                reporter.part((float(t) - t0) / width, f"integrating: t = {float(t):.4g} of {t_end:g}")
+            return fun(t, y, *more)
+
+        return saved(watched, t_span, y0, *args, **kwargs)
+
+    scipy.integrate.solve_ivp = solve_ivp
+    try:
+        yield
+    finally:
+        scipy.integrate.solve_ivp = saved
 
 
 # ----------------------------------------------------------------------------------------------
 # the work of each kind (runs in the worker process)
 # ----------------------------------------------------------------------------------------------
-def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
-    from flatbody_env.service.answers import trajectory
+def _integrate(p: Mapping[str, Any], report: Reporter, lo: float, hi: float, **options):
+    """The job's trajectory (as ``flatbody simulate``), its progress reported over ``[lo, hi]``."""
+    from flatbody_env.service.answers import build_scene, trajectory
 
-    progress(0.05)
-    _, traj = trajectory(p, in_job=True)
-    progress(0.9)
+    t_end = p.get("t_end") or build_scene(p["scene"]).t_end
+    report.step(lo, hi, f"integrating to t = {t_end:g}")
+    with reporting_integration(report, t_end):
+        scene, traj = trajectory(p, in_job=True, **options)
+    report.part(1.0, f"integrated to t = {t_end:g} ({traj.method})", force=True)
+    return scene, traj
+
+
+def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
+    report = Reporter(progress)
+    _, traj = _integrate(p, report, 0.02, 0.9)
+    report.step(0.9, 1.0, "writing trajectory.json")
     answer = traj.to_dict()
     atomic_write(out / "trajectory.json", json.dumps(answer) + "\n")
     return answer, ["trajectory.json"]
@@ -45,12 +183,12 @@ def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
 
 def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
     from flatbody_env.recording import record_trajectory
-    from flatbody_env.service.answers import trajectory
 
-    progress(0.05)
-    scene, traj = trajectory(p, in_job=True, with_rotation=True)
-    progress(0.5)
-    path = record_trajectory(traj, scene.body, out / "recording.rrd", title=p.get("title"), tensor_every=p["tensor_every"])
+    report = Reporter(progress)
+    scene, traj = _integrate(p, report, 0.02, 0.5, with_rotation=True)
+    report.step(0.5, 0.98, f"writing recording.rrd ({traj.t.size} samples)")
+    with reporting_bars(report):
+        path = record_trajectory(traj, scene.body, out / "recording.rrd", title=p.get("title"), tensor_every=p["tensor_every"])
     return {
         "recording": path.name,
         "samples": int(traj.t.size),
@@ -68,11 +206,13 @@ def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
     from flatbody_env.answers import family_answer
     from flatbody_env.service.answers import build_body
 
+    report = Reporter(progress)
     body = build_body(p["body"])
-    progress(0.05)
+    report.step(0.02, 0.9, f"following the family over {p['vary']}")
     box = SearchBox(lam=tuple(p["lam_range"]), mu=tuple(p["mu_range"]), n=p["grid"])
-    answer = family_answer(body, p["vary"], p["from"], p["to"], s3=p["s3"], p_theta=p["p_theta"], seeds=p["seeds"], box=box,
-                           step=p["step"], out=str(out / "family.csv"), plot=str(out / "family.png"))
+    with reporting_bars(report):
+        answer = family_answer(body, p["vary"], p["from"], p["to"], s3=p["s3"], p_theta=p["p_theta"], seeds=p["seeds"], box=box,
+                               step=p["step"], out=str(out / "family.csv"), plot=str(out / "family.png"), progress=True)
     answer["csv"], answer["plot"] = "family.csv", "family.png"
     return answer, ["family.png", "family.csv"]
 
@@ -81,20 +221,25 @@ def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple
     from flatbody_env.answers import stability_map_answer
     from flatbody_env.service.answers import build_body
 
+    report = Reporter(progress)
     body = build_body(p["body"])
-    progress(0.05)
-    answer = stability_map_answer(body, tuple(p["lam_range"]), tuple(p["mu_range"]), p["grid"],
-                                  out=str(out / "stability-map.csv"), plot=str(out / "stability-map.png"))
+    report.step(0.02, 0.92, f"stability map: {p['grid']} × {p['grid']} shapes")
+    with reporting_bars(report):
+        answer = stability_map_answer(body, tuple(p["lam_range"]), tuple(p["mu_range"]), p["grid"],
+                                      out=str(out / "stability-map.csv"), plot=str(out / "stability-map.png"), progress=True)
     return answer, ["stability-map.png", "stability-map.csv"]
 
 
 def _evaluate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
-    from agents.evaluate import evaluate_all
+    from agents.evaluate import baselines_for, evaluate_all
 
-    progress(0.05)
-    report = evaluate_all(None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"])  # the shipped agent only
-    atomic_write(out / "evaluation.json", json.dumps(report, indent=2) + "\n")
-    return report, ["evaluation.json"]
+    report = Reporter(progress)
+    report.step(0.02, 0.98, "evaluating the shipped agent")
+    bars = 1 + (len(baselines_for("FlatBody-v0")) if p["baselines"] else 0)
+    with reporting_bars(report, bars=bars):
+        report_json = evaluate_all(None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"], progress=True)  # the shipped agent only
+    atomic_write(out / "evaluation.json", json.dumps(report_json, indent=2) + "\n")
+    return report_json, ["evaluation.json"]
 
 
 WORK: dict[str, Callable[[Mapping[str, Any], Path, Progress], tuple[Any, list[str]]]] = {
@@ -114,6 +259,9 @@ def die_with_service(service_pid: int) -> None:
     ``PR_SET_PDEATHSIG`` cannot tie them to it; a daemon thread waits on a pidfd of the service
     (Linux ≥ 5.3; elsewhere it polls the pid twice a second) and exits the process. So a killed
     service leaves no job running behind it.
+
+    The worker also ignores SIGINT: a Ctrl-C at the terminal reaches the whole process group, and
+    it is the service's to handle (it stops its workers and jobs itself), not a traceback per worker.
     """
 
     def watch() -> None:
@@ -138,6 +286,7 @@ def die_with_service(service_pid: int) -> None:
 
     if service_pid == os.getpid():
         return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=watch, name="flatbody-service-watch", daemon=True).start()
 
 
@@ -151,8 +300,8 @@ def run_job(data_dir: str, job_id: str, kind: str, params: dict[str, Any], servi
     folder = store.job_dir(job_id)
     folder.mkdir(parents=True, exist_ok=True)
 
-    def progress(fraction: float) -> None:
-        if not store.progress(job_id, pid, fraction):
+    def progress(fraction: float, stage: str | None = None) -> None:
+        if not store.progress(job_id, pid, fraction, stage):
             os._exit(0)  # deleted or failed meanwhile: stop working
 
     try:
@@ -282,4 +431,5 @@ def _stop_process(proc) -> None:
         proc.join(timeout=3)
 
 
-__all__ = ["JobRunner", "WORK", "die_with_service", "process_context", "run_job"]
+__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "process_context", "reporting_bars",
+           "reporting_integration", "run_job"]

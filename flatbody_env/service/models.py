@@ -317,7 +317,7 @@ class JobStatus(BaseModel):
     id: str
     kind: str
     status: Literal["queued", "running", "done", "failed"]
-    progress: float = Field(ge=0.0, le=1.0)
+    progress: float = Field(ge=0.0, le=1.0, description="fraction done, reported by the worker while the job runs; never decreases")
     params: dict[str, Any]
     result: Union[Any, None] = None
     error: Union[str, None] = None
@@ -325,6 +325,9 @@ class JobStatus(BaseModel):
     created: float = Field(description="Unix time")
     started: Union[float, None] = None
     finished: Union[float, None] = None
+    stage: Union[str, None] = Field(None, description="what the job is doing now (e.g. 'row 12 of 30'), while it runs")
+    elapsed: Union[float, None] = Field(None, description="seconds since the job started (to its end once it has ended)")
+    remaining: Union[float, None] = Field(None, description="while it runs: estimated seconds left at its mean rate so far")
 
 
 class JobList(BaseModel):

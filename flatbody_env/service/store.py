@@ -7,7 +7,8 @@ id             32 hex digits (random)
 kind           ``simulate``, ``family``, ``stability-map``, ``record``, ``evaluate``
 params         the validated parameters (JSON)
 status         ``queued`` → ``running`` → ``done`` | ``failed``
-progress       0 … 1
+progress       0 … 1 (never decreases while the job runs)
+stage          what the job is doing now (one short line, e.g. ``row 12 of 30``), or NULL
 result         the answer (JSON), when done
 error          one line, when failed
 artifacts      file names in ``DATA_DIR/jobs/ID/`` (JSON list), the first is the main one
@@ -51,10 +52,13 @@ CREATE TABLE IF NOT EXISTS jobs (
     created REAL NOT NULL,
     started REAL,
     finished REAL,
-    pid INTEGER
+    pid INTEGER,
+    stage TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, created);
 """
+_MIGRATIONS = (("stage", "ALTER TABLE jobs ADD COLUMN stage TEXT"),)
+"""Columns added since the first schema: a data dir written by an older service gets them on start."""
 
 
 class JobStore:
@@ -72,6 +76,10 @@ class JobStore:
         self.db_path = self.data_dir / "jobs.sqlite3"
         with self.connect() as db:
             db.executescript(_SCHEMA)
+            have = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
+            for column, statement in _MIGRATIONS:
+                if column not in have:
+                    db.execute(statement)
 
     @contextmanager
     def connect(self) -> Iterator[sqlite3.Connection]:
@@ -173,11 +181,13 @@ class JobStore:
         return cur.rowcount == 1
 
     # -- the worker's side -------------------------------------------------------------------
-    def progress(self, job_id: str, pid: int, fraction: float) -> bool:
-        """Record progress; False when the job is no longer this worker's (deleted or failed)."""
+    def progress(self, job_id: str, pid: int, fraction: float, stage: str | None = None) -> bool:
+        """Record progress (never lower than the job's last one) and, when given, what the job is doing;
+        False when the job is no longer this worker's (deleted or failed)."""
         with self.connect() as db:
-            cur = db.execute("UPDATE jobs SET progress = ? WHERE id = ? AND status = 'running' AND pid = ?",
-                             (min(max(float(fraction), 0.0), 1.0), job_id, pid))
+            cur = db.execute("UPDATE jobs SET progress = MAX(progress, ?), stage = COALESCE(?, stage) "
+                             "WHERE id = ? AND status = 'running' AND pid = ?",
+                             (min(max(float(fraction), 0.0), 1.0), None if stage is None else str(stage)[:200], job_id, pid))
             return cur.rowcount == 1
 
     def finish(self, job_id: str, pid: int, *, result: Any = None, artifacts: list[str] | None = None, error: str | None = None) -> bool:
@@ -210,7 +220,23 @@ def _as_dict(row: sqlite3.Row, *, with_result: bool = True) -> dict[str, Any]:
         "started": row["started"],
         "finished": row["finished"],
         "pid": row["pid"],
+        "stage": row["stage"],
+        **_timing(row),
     }
+
+
+def _timing(row: sqlite3.Row) -> dict[str, float | None]:
+    """``elapsed``: seconds since the job started (to its end when it has ended); ``remaining``: while it
+    runs, the seconds left at its mean rate so far (elapsed · (1 − progress) / progress), once it has
+    reported some progress."""
+    started, finished, progress = row["started"], row["finished"], float(row["progress"])
+    if started is None:
+        return {"elapsed": None, "remaining": None}
+    elapsed = max(0.0, (finished if finished is not None else time.time()) - started)
+    remaining = None
+    if row["status"] == "running" and 0.05 <= progress < 1.0:
+        remaining = elapsed * (1.0 - progress) / progress
+    return {"elapsed": elapsed, "remaining": remaining}
 
 
 __all__ = ["JobStore", "RESTART_REASON", "STATUSES"]

@@ -58,11 +58,11 @@ def run_tasks(tasks: list[Task], store: ResultStore, *, workers: int = 1, schedu
     ``workers=0`` runs them one after another in this process, without Dask (the reference path);
     otherwise an embedded or remote Dask cluster (:func:`flatbody_env.sweep.cluster.dask_client`).
     """
-    from tqdm.auto import tqdm
+    from flatbody_env.progress import progress_bar
 
     if not tasks:
         return 0
-    bar = tqdm(total=len(tasks), desc=desc, unit="task", disable=not progress, dynamic_ncols=True)
+    bar = progress_bar(total=len(tasks), desc=desc, unit="task", enabled=progress)
     try:
         if workers == 0 and scheduler is None:
             for task in tasks:

@@ -135,9 +135,13 @@ def scaling_benchmark(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...
 
     import logging
 
-    cluster = LocalCluster(n_workers=sim_workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    from flatbody_env.sweep.cluster import QUIET_SCHEDULER, workers_leave_sigint
+
+    cluster = None
     try:
+        with workers_leave_sigint():
+            cluster = LocalCluster(n_workers=sim_workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR, scheduler_kwargs=QUIET_SCHEDULER)
         t = time.perf_counter()
         client = Client(cluster.scheduler_address)  # as a user connects to a running cluster
         client.wait_for_workers(sim_workers)
@@ -152,7 +156,8 @@ def scaling_benchmark(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...
         sim_wall = time.perf_counter() - t
         client.close()
     finally:
-        cluster.close()
+        if cluster is not None:
+            cluster.close()
     sim_model = model_time(costs, sim_workers, t0=0.0, overhead=overhead)
     # the same map at a larger grid: G/chunk tasks of chunk·G points each, at the measured cost per point
     big_grid = 1000

@@ -137,7 +137,7 @@ def seed_case(task: Task) -> dict[str, Any]:
     seed = seed_of(task.key)
     out = Path(p["model_dir"])
     train(p["algo"], out, seed=seed, n_timesteps=p["n_timesteps"], n_envs=p["n_envs"], overrides=list(p["overrides"]),
-          hyperparams_file=p["hyperparams_file"], checkpoint_freq=0, threads=1, progress=False,
+          hyperparams_file=p["hyperparams_file"], checkpoint_freq=0, threads=1, progress=False, force=True, notes=False,
           command=["flatbody", "sweep", "seeds", f"--algo={p['algo']}", f"--seed={seed}"])
     agent = Agent(out)
     summary = summarize(run_episodes(agent, episodes=p["episodes"], seed=p["eval_seed"], env_kwargs=agent.env_kwargs))

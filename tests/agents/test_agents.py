@@ -221,6 +221,7 @@ def test_train_resume_evaluate_smoke(tmp_path):
         assert 0.0 <= s["success_rate"] <= 1.0 and s["final_distance"] >= 0.0
 
 
+@pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_sac_trains_and_saves(tmp_path):
     out = tmp_path / "sac"
     p = _cli("train", "--algo", "sac", "--n-timesteps", "256", "--n-envs", "2", "--out", str(out), "--no-progress",

@@ -42,3 +42,39 @@ def test_save_figure_writes_a_png_and_a_missing_folder_is_one_error(tmp_path):
     with pytest.raises(OutputError, match="missing"):
         save_figure(fig, tmp_path / "missing" / "c.png", dpi=50)
     plt.close(fig)
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_outputs_get_the_mode_the_umask_gives(tmp_path, umask, mode):
+    """Every atomic output (text, bytes, a writer given the path, a CSV, a chart) ends up 0666 & ~umask,
+    as a file any program creates would; an old 0600 output is replaced by one with that mode."""
+    import os
+    import stat
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flatbody_env.output import atomic_path, atomic_write
+
+    old = tmp_path / "old.txt"
+    old.write_text("old\n")
+    old.chmod(0o600)
+    fig, ax = plt.subplots(figsize=(1, 1))
+    previous = os.umask(umask)
+    try:
+        atomic_write(tmp_path / "a.txt", "text\n")
+        atomic_write(tmp_path / "b.bin", b"\x00\x01")
+        atomic_write(tmp_path / "c.rrd", lambda p: p.write_bytes(b"rrd"))
+        with atomic_path(tmp_path / "d.zip") as tmp:  # a writer that replaces the temporary file with its own
+            tmp.unlink()
+            tmp.write_bytes(b"zip")
+        write_csv(tmp_path / "e.csv", ["a"], [[1]])
+        save_figure(fig, tmp_path / "f.png", dpi=20)
+        atomic_write(old, "new\n")
+    finally:
+        os.umask(previous)
+        plt.close(fig)
+    modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
+    assert modes == dict.fromkeys(["a.txt", "b.bin", "c.rrd", "d.zip", "e.csv", "f.png", "old.txt"], mode), {k: oct(v) for k, v in modes.items()}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import types
 
 import numpy as np
 
@@ -36,6 +37,28 @@ def _diff(a: np.ndarray, b: np.ndarray) -> float:
         return float("inf")
     ok = ~np.isnan(a)
     return float(np.max(np.abs(a[ok] - b[ok]))) if ok.any() else 0.0
+
+
+def _device_functions() -> dict:
+    """The device functions the two kernels reach, walked through the globals their code reads: how many, and any
+    function left un-retargeted (a CPU dispatcher or plain Python, which the simulator would run silently)."""
+    from numba.core.dispatcher import Dispatcher
+
+    from flatbody_env.integrators.jit import _names
+
+    seen: set[int] = set()
+    left: list[str] = []
+    todo = [kernel.py_func for kernel in cuda._kernels()]
+    while todo:
+        fn = todo.pop()
+        for name in _names(fn.__code__):
+            value = fn.__globals__.get(name)
+            if isinstance(value, (Dispatcher, types.FunctionType)):
+                left.append(f"{fn.__name__}.{name}")
+            elif hasattr(value, "py_func") and id(value) not in seen:
+                seen.add(id(value))
+                todo.append(value.py_func)
+    return {"count": len(seen), "not_retargeted": sorted(left)}
 
 
 def main() -> dict:
@@ -82,6 +105,7 @@ def main() -> dict:
     on_gpu = simulate_batch(body, Y0[:3], times=[0.3, 0.6], method="RK4", step=0.05, device="cuda")
     report["simulate_batch"] = {"diff": _diff(on_cpu.state, on_gpu.state), "device": on_gpu.device,
                                 "status_equal": bool(np.array_equal(on_cpu.status, on_gpu.status))}
+    report["device_functions"] = _device_functions()
     return report
 
 

@@ -61,6 +61,13 @@ def test_simulate_batch_on_cuda_equals_cpu(report):
     assert r["device"] == "cuda" and r["status_equal"] and r["diff"] <= 1e-14
 
 
+def test_every_device_function_is_retargeted(report):
+    """The kernels reach only device functions (:func:`flatbody_env.integrators.jit.retarget` on the CUDA target): no CPU
+    dispatcher or plain-Python function is left in the globals their code reads (the simulator would run one silently)."""
+    r = report["device_functions"]
+    assert r["not_retargeted"] == [] and r["count"] >= 30
+
+
 def _real_gpu() -> bool:
     if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0"):
         return False

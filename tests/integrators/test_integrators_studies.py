@@ -49,3 +49,25 @@ def test_chart_command_quick(tmp_path):
 
     assert main(["chart", "--quick", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "work_precision.png").exists() and (tmp_path / "work_precision.csv").exists()
+
+
+def test_failure_study_progress_and_summary_count_the_same_runs(tmp_path, capsys, monkeypatch):
+    """The bar counts the planned runs (one per method and axis value, the reference runs not counted);
+    the summary says how many of them ran and that the rest were skipped over the time budget."""
+    import re
+
+    from analysis.failure_study import planned_runs
+    from flatbody_env.cli.main import main
+
+    monkeypatch.setenv("FLATBODY_PROGRESS_S", "0")  # stderr is not a terminal here: a progress line per run
+    argv = ["failure-study", "--quick", "--studies", "horizon", "--methods", "RK4", "DOP853-numba", "--max-run-s", "0.05", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    planned = planned_runs(("horizon",), ("RK4", "DOP853-numba"), quick=True)
+    assert planned == 6
+    counts = re.findall(r"^failure study: (\d+)/(\d+) runs", err, re.M)
+    assert counts and {int(total) for _, total in counts} == {planned} and int(counts[-1][0]) == planned, err
+    ran = len(read_csv(tmp_path / "failure_study.csv"))
+    summary = next(line for line in out.splitlines() if "detected failures" in line)
+    skipped = f" ({planned - ran} skipped: over the 0.05 s budget per run, --max-run-s)" if ran < planned else ""
+    assert summary.startswith(f"{ran} of {planned} runs{skipped}, "), summary

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -50,3 +51,34 @@ def test_cli_chart_ladder_bad_input(tmp_path, capsys):
 def test_new_scenes_validate(scene):
     sc = load_scene(scene)
     assert sc.state["s1"] == 0.0 and sc.state["s2"] == 0.0 and sc.t_end == 100.0
+
+
+def test_cli_ladder_prints_no_nan(tmp_path, capsys):
+    """The horizon rows run no scipy DOP853 and their reference is exact: the ratio and the floor
+    that cannot be measured are said so ("n/a (why)"), never printed as nan."""
+    assert main(["chart", "--ladder", "--quick", "--scenes", "stationary-ellipse", "--max-run-s", "0.2", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert not re.search(r"\bx?nan\b", out), out
+    horizon = [line for line in out.splitlines() if "stationary-ellipse t=1e+02" in line and " ms: " in line]
+    assert horizon and all("vs scipy DOP853 n/a (not run on this scene)" in line for line in horizon), out
+    assert any("floor n/a" in line for line in out.splitlines() if "auto ->" in line)
+
+
+def test_speedups_say_why_a_ratio_is_missing():
+    from analysis.ladder import LadderPoint
+
+    def point(scene, rung, method, error, wall, status="ok"):
+        return LadderPoint(scene=scene, chosen="stationary", rung=rung, method=method, setting="s", t_end=1.0, error=error,
+                           wall_time=wall, nfev=1, status=status)
+
+    points = [point("a", "stationary", "ladder-stationary", 0.0, 1e-5), point("a", "two-polar", "DOP853-numba", 1e-12, 1e-4),
+              point("a", "two-polar", "DOP853", 1e-7, 1e-2), point("a", "two-polar", "DOP853", math.nan, math.nan, "skipped"),
+              point("b", "stationary", "ladder-stationary", 0.0, 1e-5), point("b", "two-polar", "DOP853-numba", 1e-6, 1e-4)]
+    by = {(s["scene"], s["method"]): s for s in speedups(points)}
+    a = by["a", "ladder-stationary"]
+    assert a["speedup_vs_full"] == pytest.approx(10.0) and a["why_no_full"] == ""
+    assert math.isnan(a["speedup_vs_default"]) and a["why_no_default"] == "it did not reach 1e-09 within the time budget"
+    b = by["b", "ladder-stationary"]
+    assert math.isnan(b["speedup_vs_full"]) and b["why_no_full"] == "no full model reached 1e-09"
+    assert b["why_no_default"] == "not run on this scene"
+    assert by["b", "DOP853-numba"]["why_no_full"] == "no full model reached 1e-09"

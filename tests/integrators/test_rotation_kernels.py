@@ -11,8 +11,7 @@ import pytest
 from scipy.linalg import expm
 
 from flatbody_env.integrators import Tolerances, get_method
-from flatbody_env.integrators import twopolar_kernels as tk
-from flatbody_env.integrators.compiled_methods import kernel_params
+from flatbody_env.integrators.compiled_methods import env_stepper, kernel_params
 from flatbody_env.integrators.rotation_kernels import ENV_STEP_WITH_ROTATION
 from flatbody_env.integrators.steppers import CompiledRotationEnvStep, make_env_step
 from flatbody_env.physics.body import default_body
@@ -22,13 +21,7 @@ from tests.conftest import BODIES
 
 Y0 = np.array([0.05, 0.02, 1.45, 1.77, 0.02, 0.0, 0.05, 1.4, 0.9, 1.0, 0.3])
 U = np.array([0.1, -0.2, 0.05, 0.3])
-PLAIN = {
-    "DOP853-numba": tk.dop853_env_step_counted,
-    "RK4": tk.rk4_env_step_counted,
-    "splitting-strang": tk.strang_env_step_counted,
-    "splitting-suzuki4": tk.suzuki4_env_step_counted,
-    "splitting-yoshida4": tk.yoshida4_env_step_counted,
-}
+PLAIN = {name: env_stepper(name).step_counted for name in ("DOP853-numba", "RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4")}
 # largest |R - R_ref| after 20 steps of dt = 0.05 with h = 0.01 (DOP853: rtol = atol = 1e-11): the
 # method's order shows; Strang is second order
 R_TOL = {"DOP853-numba": 1e-9, "RK4": 1e-7, "splitting-strang": 1e-4, "splitting-suzuki4": 1e-7, "splitting-yoshida4": 1e-6}

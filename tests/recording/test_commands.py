@@ -26,6 +26,15 @@ def test_record_command(tmp_path, capsys):
     assert main(["record-info", str(out)]) == 0
     text = capsys.readouterr().out
     assert "/world/body" in text and "51" in text and "verified" in text
+    # G and C, rebuilt from their logged entries (/series/G, /series/C), at the first and the last step
+    lam, mu, rho = (data[f"/series/{n}"].components[SCALARS][0, 0] for n in ("lambda", "mu", "rho"))
+    for sym, eig in (("G", [lam**2, mu**2, rho**2]), ("C", [lam**-2, mu**-2, rho**-2])):
+        assert f"{sym} (/series/{sym}) at step 0 (sim_time 0):" in text and f"{sym} (/series/{sym}) at step 50 (sim_time 1):" in text
+        rows = text.split(f"{sym} (/series/{sym}) at step 0 (sim_time 0):\n", 1)[1].splitlines()[:3]
+        M = np.array([[float(x) for x in r.strip().strip("[]").split()] for r in rows])
+        assert np.allclose(M, M.T) and np.allclose(np.linalg.eigvalsh(M), sorted(eig), atol=1e-5)
+        entries = data[f"/series/{sym}"].components[SCALARS][0]
+        assert np.allclose(M[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]], entries, atol=1e-6)
 
 
 def test_record_command_bad_input(tmp_path, capsys):

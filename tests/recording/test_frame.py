@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from flatbody_env.env.rendering import COLORS, SIZE, nice_half_width, render_frame, view_half_width
+from flatbody_env.env.rendering import COLORS, HALF_WIDTH, SIZE, _text_alpha, nice_half_width, plate_fill, render_frame, view_half_width
 
 
 def _state(lam, mu, rho=1.0, theta=0.0):
@@ -77,20 +77,38 @@ def test_view_holds_a_large_body_and_stays_fixed_through_an_episode():
     # a body far beyond the old fixed scale (which clipped semi-axes above ≈ 2.7)
     img = render_frame(_state(4.5, 0.8), np.eye(3), target, 0.0)
     body = ~_near(img, (250, 250, 250), 3)
-    body[:14] = body[-45:] = False  # the text line, legend and scale bar
+    body[:60] = body[-65:] = False  # the time, the fill key, legend and scale bar
     cols = np.flatnonzero(body.any(axis=0))
     assert cols.min() > 2 and cols.max() < SIZE - 3  # not clipped
-    # while the body stays within 1.25 × the target, the view does not zoom with it
-    assert view_half_width(1.2, 0.9, target) == view_half_width(1.6, 0.7, target) == nice_half_width(1.25 * 1.4)
+    # one view for every episode and target: the scale bar means the same length in every frame
+    assert view_half_width(1.2, 0.9, target) == view_half_width(1.6, 0.7, {"lambda": 2.0, "mu": 0.5}) == view_half_width(1.0, 1.0) == HALF_WIDTH
 
 
-def test_legend_and_scale_bar_are_drawn():
+def test_legend_fill_key_and_scale_bar_are_drawn():
     img = render_frame(_state(1.2, 0.9), np.eye(3), {"lambda": 1.2, "mu": 0.9}, 0.0)
-    legend = img[SIZE - 60 :, :20]
+    legend = img[SIZE - 65 :, :20]
     for name in ("lambda", "mu", "target", "fibre"):
         assert _near(legend, COLORS[name], 10).sum() >= 10, name
-    bar = img[SIZE - 11 : SIZE - 7, SIZE // 2 :]
-    assert (bar.mean(axis=2) < 60).sum() > 40  # a dark horizontal bar
+    # the scale bar is one length unit: SIZE / (2 × HALF_WIDTH) pixels, the same in every episode
+    row = img[SIZE - 10, SIZE // 2 :].mean(axis=1)
+    dark = np.flatnonzero(row < 60)
+    assert dark.size and (dark.max() - dark.min() + 1) == pytest.approx(SIZE / (2 * HALF_WIDTH), abs=2)
+    # the key of the fill: the shades of ϱ = 0.5 and ϱ = 1.5 both appear in the top right corner
+    corner = img[:40, SIZE // 2 :]
+    for rho in (0.5, 1.5):
+        assert _near(corner, plate_fill(rho), 6).sum() >= 8, rho
+    assert plate_fill(1.5) != plate_fill(0.5)
+
+
+def test_labels_are_greek_and_readable():
+    """The labels are drawn in a font with Greek letters at ≥ 11 px (the bitmap font had ~7 px ASCII)."""
+    a = _text_alpha("λ μ ϱ", 12)
+    assert a.shape[0] >= 14
+    rows = np.flatnonzero((a > 0.5).any(axis=1))
+    assert rows.max() - rows.min() + 1 >= 9  # ascender to descender of λ, μ, ϱ
+    # each letter is its own glyph, not a fallback box: the three differ
+    glyphs = [_text_alpha(c, 12) for c in "λμϱ"]
+    assert not np.array_equal(glyphs[0], glyphs[1]) and not np.array_equal(glyphs[1], glyphs[2])
 
 
 def test_env_frames_use_it():

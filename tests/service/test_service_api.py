@@ -292,7 +292,10 @@ def test_evaluate_job_reports_the_shipped_agent(client):
     assert job["status"] == "done", job["error"]
     agent = Agent(None)
     expected = summarize(run_episodes(agent, episodes=2, seed=7, env_kwargs=agent.env_kwargs))
-    assert job["result"]["agent"] == pytest.approx(expected)
+    got = job["result"]["agent"]
+    assert got.keys() == expected.keys()
+    for key, value in expected.items():  # the interval is a (low, high) pair
+        assert got[key] == pytest.approx(list(value) if isinstance(value, tuple) else value), key
     assert "baselines" not in job["result"]
 
 
@@ -316,6 +319,62 @@ def test_cancel_a_running_job(client):
     # the runner has a free slot again: a small job still runs
     small = client.post("/jobs", json={"kind": "stability-map", "params": {"grid": 4}}).json()["id"]
     assert wait_job(client.get, small)["status"] == "done"
+
+
+@pytest.mark.parametrize("params, field, words", [
+    ({"from": 3.0, "to": 1.0}, "params.to", ("must be greater than from (3)", "got 1")),
+    ({"from": 2.0, "to": 2.0}, "params.to", ("must be greater than from (2)",)),
+    ({"vary": "kappa", "from": 0.0, "to": 2.0}, "params.from", ("kappa must stay > 0",)),
+    ({"vary": "k", "from": 1.0, "to": 2.0}, "params.vary", ("not a constant of this body",)),
+])
+def test_a_family_range_is_checked_when_submitted_in_the_requests_words(client, params, field, words):
+    """from > to (and a body constant's range reaching 0) is refused at submission, naming from/to, never
+    accepted and then failed inside the job as start/stop."""
+    before = len(client.get("/jobs").json()["jobs"])
+    data = assert_error(client.post("/jobs", json={"kind": "family", "params": params}), 422, field, *words)
+    assert "start" not in data["detail"] and "stop" not in data["detail"]
+    assert len(client.get("/jobs").json()["jobs"]) == before
+
+
+def test_a_job_reports_its_progress_stage_and_times_while_it_runs(client):
+    """A scipy integration reports the time it has reached: progress rises in steps while it runs (never
+    falls), with what it is doing, the seconds elapsed and an estimate of those left."""
+    params = {"scene": "default", "t_end": 800.0, "samples": 801, "method": "DOP853"}
+    job_id = client.post("/jobs", json={"kind": "simulate", "params": params}).json()["id"]
+    seen = []
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        job = client.get(f"/jobs/{job_id}").json()
+        seen.append(job)
+        if job["status"] in ("done", "failed"):
+            break
+        time.sleep(0.05)
+    assert job["status"] == "done", job["error"]
+    values = [j["progress"] for j in seen]
+    assert values == sorted(values)
+    running = [j for j in seen if j["status"] == "running" and 0 < j["progress"] < 1]
+    assert len({j["progress"] for j in running}) >= 2, values
+    assert any((j["stage"] or "").startswith("integrating: t = ") for j in running)
+    assert all(j["elapsed"] is not None and j["elapsed"] >= 0 for j in running)
+    assert any(j["remaining"] is not None for j in running)
+    assert job["elapsed"] > 0 and job["remaining"] is None and job["progress"] == 1.0
+    listed = next(j for j in client.get("/jobs").json()["jobs"] if j["id"] == job_id)
+    assert listed["elapsed"] == pytest.approx(job["elapsed"]) and "stage" in listed
+
+
+def test_a_data_dir_of_an_older_service_gets_the_new_columns(tmp_path):
+    import sqlite3
+
+    from flatbody_env.service.store import JobStore
+
+    with sqlite3.connect(tmp_path / "jobs.sqlite3") as db:  # the first schema, without `stage`
+        db.execute("CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT NULL, params TEXT NOT NULL, status TEXT NOT NULL, "
+                   "progress REAL NOT NULL DEFAULT 0, result TEXT, error TEXT, artifacts TEXT NOT NULL DEFAULT '[]', "
+                   "created REAL NOT NULL, started REAL, finished REAL, pid INTEGER)")
+        db.execute("INSERT INTO jobs (id, kind, params, status, created) VALUES ('old', 'simulate', '{}', 'queued', 1.0)")
+    store = JobStore(tmp_path)
+    job = store.get("old")
+    assert job["stage"] is None and job["elapsed"] is None and job["status"] == "queued"
 
 
 @pytest.mark.parametrize("req, status, field", [
@@ -369,6 +428,14 @@ def test_docs_pages_load_their_scripts_from_the_service(client):
             got = client.get(f"{DOCS_ASSETS}/{name}")
             assert got.status_code == 200 and len(got.content) > 10_000
     assert "/openapi.json" in client.get("/docs").text
+    assert "cdn.redoc.ly" not in client.get(f"{DOCS_ASSETS}/redoc.standalone.js").text  # ReDoc's footer logo, the one outside address
+
+
+def test_favicon_is_served(client):
+    r = client.get("/favicon.ico")
+    assert r.status_code == 200 and r.headers["content-type"] == "image/x-icon"
+    assert r.content[:4] == b"\x00\x00\x01\x00" and len(r.content) > 500
+    assert 'rel="icon"' in client.get("/").text
 
 
 def test_oversized_chunked_body_is_413(client):

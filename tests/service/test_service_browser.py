@@ -1,13 +1,17 @@
-"""The page at ``/`` in a real browser (Debian's chromium + chromedriver, driven by selenium).
+"""The page at ``/`` in a real browser (Debian's chromium + chromedriver, driven by selenium), checked as a
+user sees it: results drawn, errors next to the field at fault and inside the window, jobs back after a
+reload, progress that moves while a job runs.
 
-Skipped with the reason when chromium, its driver or selenium is missing. Saves a screenshot
-(``docs/img/service-page.png`` when ``FLATBODY_SCREENSHOT`` names it, else under the test's tmp dir).
+Skipped with the reason when chromium, its driver or selenium is missing. Saves screenshots
+``page-*.png`` under ``FLATBODY_SCREENSHOT_DIR`` (``docs/img`` refreshes the documentation's), else
+under the test's tmp dir.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -19,14 +23,14 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
                                 reason="needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)")
 
 
-def _chrome(*extra: str):
+def _chrome(*extra: str, size: str = "1200,1700"):
     webdriver = pytest.importorskip("selenium.webdriver", reason="needs selenium (pip install selenium)")
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
 
     opts = Options()
     opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1200,1700", *extra):
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", f"--window-size={size}", *extra):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     driver.set_page_load_timeout(60)
@@ -34,8 +38,9 @@ def _chrome(*extra: str):
 
 
 @pytest.fixture
-def browser():
-    driver = _chrome()
+def window():
+    """A browser window of 1400 × 900 px, as a user's, that can reach this machine only."""
+    driver = _chrome("--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1", size="1400,900")
     try:
         yield driver
     finally:
@@ -67,28 +72,75 @@ def test_api_docs_render_without_internet_access(offline_browser, live_service):
     offline_browser.get(url + "/redoc")
     wait.until(lambda d: "flatbody analysis service" in d.find_element(By.TAG_NAME, "body").text)
     assert "/ellipses" in offline_browser.find_element(By.TAG_NAME, "body").text
+    # every resource the page asked for came from the service (ReDoc's footer logo included)
+    asked = offline_browser.execute_script("return performance.getEntriesByType('resource').map(e => e.name)")
+    assert asked and all(u.startswith(url) or u.startswith(("data:", "blob:")) for u in asked), asked
 
 
-def test_page_finds_ellipses_runs_a_recording_job_and_shows_a_chart(browser, live_service, tmp_path):
+def _ready(driver, url):
     from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    driver.get(url + "/")
+    WebDriverWait(driver, 60).until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "yes")
+
+
+def _type(driver, field: str, value: str) -> None:
+    from selenium.webdriver.common.by import By
+
+    el = driver.find_element(By.ID, field)
+    el.clear()
+    el.send_keys(value)
+
+
+def _shot(driver, tmp_path: Path, name: str) -> Path:
+    """Save a screenshot as ``page-NAME.png`` (under FLATBODY_SCREENSHOT_DIR when set)."""
+    folder = Path(os.environ.get("FLATBODY_SCREENSHOT_DIR") or tmp_path)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"page-{name}.png"
+    driver.save_screenshot(str(path))
+    assert path.stat().st_size > 10_000
+    return path
+
+
+def _full_height(driver) -> None:
+    """Make the window as tall as the page (for a screenshot of all of it)."""
+    height = driver.execute_script("return document.documentElement.scrollHeight")
+    driver.set_window_size(1400, min(int(height) + 120, 6000))
+    driver.execute_script("window.scrollTo(0, 0)")
+    time.sleep(0.3)
+
+
+def _in_viewport(driver, element) -> bool:
+    return driver.execute_script(
+        "const r = arguments[0].getBoundingClientRect();"
+        "return r.width > 0 && r.top >= 0 && r.left >= 0 && r.bottom <= window.innerHeight && r.right <= window.innerWidth;", element)
+
+
+def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a_reload(window, live_service, tmp_path):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
     from selenium.webdriver.support import expected_conditions as EC
     from selenium.webdriver.support.ui import Select, WebDriverWait
 
+    browser = window
     _, url, data_dir = live_service
     wait = WebDriverWait(browser, 180)
-    browser.get(url + "/")
-    wait.until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "yes")
+    _ready(browser, url)
     assert "service ok" in browser.find_element(By.ID, "health").text
     scene_names = [o.get_attribute("value") for o in Select(browser.find_element(By.ID, "scene")).options]
     assert "default" in scene_names and "regular" in scene_names
+    method = Select(browser.find_element(By.ID, "method"))
+    assert method.first_selected_option.get_attribute("value") == "auto"  # the API's default, offered and chosen
+    assert "DOP853" in [o.get_attribute("value") for o in method.options]
+    # the icon is served (no 404 on every load)
+    assert browser.execute_script("return fetch('/favicon.ico').then(r => r.status + ' ' + r.headers.get('content-type'))") == "200 image/x-icon"
 
-    # a V1 body with s3 p_theta > 0: the closed form has exactly one stationary ellipse (lambda mu = (s3/p)^2 ...)
+    # a V1 body with s3 p_theta > 0: the closed form has exactly one stationary ellipse; Enter in a field finds it
     Select(browser.find_element(By.ID, "potential")).select_by_value("V1")
     for field, value in (("k", "1"), ("J", "1"), ("J3", "1"), ("s3", "2"), ("p_theta", "0.5")):
-        el = browser.find_element(By.ID, field)
-        el.clear()
-        el.send_keys(value)
-    browser.find_element(By.ID, "find-ellipses").click()
+        _type(browser, field, value)
+    browser.find_element(By.ID, "p_theta").send_keys(Keys.ENTER)
     wait.until(EC.text_to_be_present_in_element((By.ID, "ellipses-status"), "stationary ellipse"))
     rows = browser.find_elements(By.CSS_SELECTOR, "#ellipses-table tbody tr")
     assert len(rows) == 1
@@ -96,46 +148,212 @@ def test_page_finds_ellipses_runs_a_recording_job_and_shows_a_chart(browser, liv
     # the page shows what POST /ellipses answers: omega3 = 1 for this body (energy 3.5), and a stability class
     assert float(cells[4]) == pytest.approx(1.0, abs=1e-5)
     assert float(cells[6]) == pytest.approx(3.5, abs=1e-6)
+    assert cells[5] == "0"  # theta_dot: round-off (|x| < 1e-12) is shown as 0, never as 1.11022e-16
+    assert all("e-" not in c for c in cells)
     assert cells[7] in ("elliptic", "hyperbolic", "degenerate")
-
     assert "V1, s3 = 2, p_θ = 0.5" in browser.find_element(By.ID, "ellipses-status").text
     assert "stale" not in browser.find_element(By.ID, "ellipses-table").get_attribute("class")
+    assert "dimensionless" in browser.find_element(By.ID, "units-note").text
 
-    # a small recording job of the default scene, watched to completion; picking the scene changes
-    # the body, so the ellipse table no longer answers the form: greyed out and said so
+    # picking a scene changes the body: the ellipse table no longer answers the form, greyed out and said so
     Select(browser.find_element(By.ID, "scene")).select_by_value("default")
     assert "stale" in browser.find_element(By.ID, "ellipses-table").get_attribute("class")
     assert "form has changed" in browser.find_element(By.ID, "ellipses-status").text
-    for field, value in (("t_end", "1"), ("samples", "11")):
-        el = browser.find_element(By.ID, field)
-        el.clear()
-        el.send_keys(value)
+
+    # a simulation job: λ, μ, ϱ, s3 and H drawn against t, and the ellipse
+    _type(browser, "t_end", "2")
+    _type(browser, "samples", "41")
+    browser.find_element(By.ID, "t_end").send_keys(Keys.ENTER)  # Enter in the run form: a simulation job
+    card = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=simulate]"))
+    lines = card.find_elements(By.CSS_SELECTOR, "svg.chart path.line")
+    assert {p.get_attribute("data-name") for p in lines} == {"λ", "μ", "ϱ", "s₃", "H"}
+    assert all(len(p.get_attribute("d")) > 100 for p in lines)
+    assert card.find_element(By.CSS_SELECTOR, "svg.chart").size["width"] > 400
+    assert card.find_element(By.CSS_SELECTOR, "svg.ellipse ellipse.now").get_attribute("rx")
+    assert "t (model time unit)" in card.text and "(dimensionless)" in card.text
+
+    # a small recording job: says what to run and offers the file
+    _type(browser, "t_end", "1")
+    _type(browser, "samples", "11")
     browser.find_element(By.ID, "start-record").click()
-    wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#jobs tr[data-kind=record][data-status=done]")
-               or d.find_elements(By.CSS_SELECTOR, "#jobs tr[data-kind=record][data-status=failed]"))
+    rec = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=record]"))
+    assert "rerun recording.rrd" in rec.text
+    link = rec.find_element(By.PARTIAL_LINK_TEXT, "Download recording.rrd")
+    assert "/artifact?name=recording.rrd" in link.get_attribute("href")
     row = browser.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind=record]")
     assert row.get_attribute("data-status") == "done", row.text
-    link = row.find_element(By.LINK_TEXT, "recording (.rrd)")
-    assert "/artifact?name=recording.rrd" in link.get_attribute("href")
-    assert "rerun recording.rrd" in row.text
+    assert "took" in row.text
     rrd = list(Path(data_dir).glob("jobs/*/recording.rrd"))
     assert len(rrd) == 1 and rrd[0].stat().st_size > 1000
 
-    # a small stability map: the picture appears on the page
-    el = browser.find_element(By.ID, "map-grid")
-    el.clear()
-    el.send_keys("8")
+    # a small stability map and a family: full-width pictures, captioned with their parameters
+    _type(browser, "map-grid", "8")
     browser.find_element(By.ID, "start-map").click()
     browser.find_element(By.ID, "start-family").click()
-    wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#pictures img")) == 2)
     loaded = "return [...document.querySelectorAll('#pictures img')].map(i => i.complete ? i.naturalWidth : 0)"
-    wait.until(lambda d: all(w > 0 for w in d.execute_script(loaded)))
-    assert all(w > 100 for w in browser.execute_script(loaded))
-    captions = {c.text for c in browser.find_elements(By.CSS_SELECTOR, "#pictures figcaption")}
-    assert captions == {"family", "stability-map"}
+    wait.until(lambda d: len(d.execute_script(loaded)) == 2 and all(w > 0 for w in d.execute_script(loaded)))
+    captions = [c.text for c in browser.find_elements(By.CSS_SELECTOR, "#pictures figcaption")]
+    assert any("Family of stationary ellipses over s3 from 0.05 to 4" in c and "p_θ = 1.77" in c for c in captions), captions
+    assert any("Stability map of 8 × 8 shapes" in c for c in captions), captions
+    img = browser.find_element(By.CSS_SELECTOR, "#pictures img")
+    assert img.size["width"] > 900  # the section's full width, not capped at 500 px
+    img.click()  # click to enlarge
+    zoom = browser.find_element(By.ID, "zoom")
+    assert zoom.is_displayed() and zoom.find_element(By.TAG_NAME, "img").get_attribute("src") == img.get_attribute("src")
+    zoom.find_element(By.CSS_SELECTOR, "button.close").click()
+    assert not zoom.is_displayed()
     assert not browser.find_element(By.ID, "error").is_displayed()
+    _full_height(browser)
+    _shot(browser, tmp_path, "results")
+    browser.set_window_size(1400, 900)
 
-    shot = Path(os.environ.get("FLATBODY_SCREENSHOT") or tmp_path / "service-page.png")
-    shot.parent.mkdir(parents=True, exist_ok=True)
-    browser.save_screenshot(str(shot))
-    assert shot.stat().st_size > 10_000
+    # a reload: every job and its results come back (the page reads GET /jobs)
+    jobs_before = {r.get_attribute("id") for r in browser.find_elements(By.CSS_SELECTOR, "#jobs tbody tr")}
+    browser.refresh()
+    _ready(browser, url)
+    wait.until(lambda d: len(d.execute_script(loaded)) == 2 and all(w > 0 for w in d.execute_script(loaded)))
+    wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#runs article[data-kind=simulate] svg.chart path.line"))
+    assert {r.get_attribute("id") for r in browser.find_elements(By.CSS_SELECTOR, "#jobs tbody tr")} == jobs_before
+    assert len(jobs_before) == 4
+    assert browser.find_elements(By.CSS_SELECTOR, "#runs article[data-kind=record]")
+
+
+def test_bad_input_is_refused_next_to_the_field_inside_the_window(window, live_service, tmp_path):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select, WebDriverWait
+
+    browser = window
+    _, url, _ = live_service
+    wait = WebDriverWait(browser, 120)
+    _ready(browser, url)
+    # two pictures shown first, so that the page is long (the old error box landed far below the window)
+    _type(browser, "map-grid", "6")
+    browser.find_element(By.ID, "start-map").click()
+    browser.find_element(By.ID, "start-map").click()
+    wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#pictures img")) == 2)
+    posted = "return performance.getEntriesByType('resource').filter(e => /\\/(ellipses|jobs)$/.test(e.name)).length"
+
+    def message_for(field):
+        label = browser.find_element(By.ID, field).find_element(By.XPATH, "./ancestor::label[1]")
+        msg = wait.until(lambda d: label.find_elements(By.CSS_SELECTOR, ".msg"))[0]
+        assert "bad" in label.get_attribute("class")
+        assert _in_viewport(browser, msg), f"the message for {field} is outside the window"
+        return msg.text
+
+    # the service refuses J = 1e7: its message, in the form's words, next to J and inside the window
+    _type(browser, "J", "1e7")
+    browser.find_element(By.ID, "start-map").click()
+    text = message_for("J")
+    assert text.startswith("J: ") and "body.params" not in text and "1e+06" in text, text
+    summary = browser.find_element(By.ID, "map-error")
+    assert summary.is_displayed() and "J" in summary.text
+    _shot(browser, tmp_path, "field-error")
+
+    # an empty field and a half-typed number are refused in the browser: nothing is sent
+    before = browser.execute_script(posted)
+    _type(browser, "J", "1")
+    _type(browser, "J3", "")
+    browser.find_element(By.ID, "find-ellipses").click()
+    assert message_for("J3") == "J3: enter a number"
+    _type(browser, "J3", "1e")
+    browser.find_element(By.ID, "find-ellipses").click()
+    assert "not a number" in message_for("J3")
+    assert browser.execute_script(posted) == before
+
+    # from > to in a family: refused before sending, at "to", in the form's words
+    _type(browser, "J3", "1")
+    _type(browser, "vary-from", "3")
+    _type(browser, "vary-to", "1")
+    browser.find_element(By.ID, "start-family").click()
+    text = message_for("vary-to")
+    assert text.startswith("to: must be greater than from") and "stop" not in text
+    assert browser.execute_script(posted) == before
+    # a body constant's range starting at 0: refused at "from"
+    Select(browser.find_element(By.ID, "vary")).select_by_value("kappa")
+    _type(browser, "vary-from", "0")
+    _type(browser, "vary-to", "2")
+    browser.find_element(By.ID, "start-family").click()
+    assert "must stay > 0" in message_for("vary-from")
+    assert browser.execute_script(posted) == before
+
+
+def _progress_seen(browser, kind: str, timeout: float) -> tuple[list[float], list[str], str]:
+    """Sample the progress bar of the newest ``kind`` job in the page until it is done: the values and texts seen."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    WebDriverWait(browser, 30).until(lambda d: d.find_elements(By.CSS_SELECTOR, f"#jobs tbody tr[data-kind='{kind}']"))
+    values: list[float] = []
+    texts: list[str] = []
+    deadline = time.monotonic() + timeout
+    status = ""
+    while time.monotonic() < deadline:
+        row = browser.find_element(By.CSS_SELECTOR, f"#jobs tbody tr[data-kind='{kind}']")
+        status = row.get_attribute("data-status") or ""
+        value = float(row.find_element(By.TAG_NAME, "progress").get_attribute("data-value") or 0)
+        if not values or value != values[-1]:
+            values.append(value)
+            texts.append(row.find_element(By.CSS_SELECTOR, ".pct").text)
+        if status in ("done", "failed"):
+            break
+        time.sleep(0.05)
+    return values, texts, status
+
+
+def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(window, live_service, tmp_path):
+    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    browser = window
+    _, url, _ = live_service
+    _ready(browser, url)
+    _type(browser, "map-grid", "60")  # about 3 s on an idle core, reported row by row
+    browser.find_element(By.ID, "start-map").click()
+    row = WebDriverWait(browser, 30).until(
+        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]"))
+    assert "its progress is in Jobs below" in browser.find_element(By.ID, "map-error").text  # said where the user clicked
+    WebDriverWait(browser, 30).until(lambda d: "left" in row.text)
+    browser.execute_script("arguments[0].scrollIntoView({block: 'end'})", row)
+    _shot(browser, tmp_path, "progress")
+    values, texts, status = _progress_seen(browser, "stability-map", 120)
+    assert status == "done"
+    between = [v for v in values if 0 < v < 1]
+    assert len(set(between)) >= 3, values  # the worker's own progress, seen by the page while it runs
+    assert values == sorted(values), values
+    assert any("elapsed" in t for t in texts) and any("left" in t for t in texts), texts
+
+    # cancel a running job from the page: it stops and goes
+    _type(browser, "map-grid", "200")
+    browser.find_element(By.ID, "start-map").click()
+    row = WebDriverWait(browser, 30).until(
+        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]"))
+    # the page redraws a row's buttons as progress comes in: look the button up afresh until a click lands
+    row_id = row.get_attribute("id")
+    WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
+        lambda d: d.find_element(By.CSS_SELECTOR, f"#{row_id} button.cancel").click() is None)
+    WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
+        lambda d: d.find_element(By.ID, row_id).get_attribute("data-status") == "cancelled")
+    jobs = browser.execute_script("return fetch('/jobs').then(r => r.json())")["jobs"]
+    assert [j["status"] for j in jobs] == ["done"]
+
+
+@pytest.mark.slow
+def test_progress_strictly_increases_during_a_ten_second_job(window, live_service):
+    """A stability map of 120 × 120 shapes (about 10 s or more): every value the page shows is higher than the last."""
+    from selenium.webdriver.common.by import By
+
+    browser = window
+    _, url, _ = live_service
+    _ready(browser, url)
+    _type(browser, "map-grid", "120")
+    started = time.monotonic()
+    browser.find_element(By.ID, "start-map").click()
+    values, texts, status = _progress_seen(browser, "stability-map", 300)
+    took = time.monotonic() - started
+    assert status == "done"
+    assert took > 8, f"the job took {took:.1f} s: too short to check"
+    assert all(b > a for a, b in zip(values, values[1:])), values
+    assert len(values) >= 10, values
+    elapsed = [t for t in texts if "elapsed" in t]
+    assert len(elapsed) >= 5, texts

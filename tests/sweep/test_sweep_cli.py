@@ -38,6 +38,7 @@ def test_stability_map_identical_serial_workers_and_cluster(cli, dask_cluster, t
     assert workers and all(w.startswith("tcp://127.0.0.1:") for w in workers)
 
 
+@pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_two_seed_training_sweep_identical_everywhere(cli, dask_cluster, tmp_path):
     runs = {}
     for name, mode in {"serial": ["--workers", "0"], "2-processes": ["--workers", "2"], "cluster": ["--scheduler", dask_cluster]}.items():

@@ -85,6 +85,7 @@ def _check_study(storage: str, name: str, trials: int) -> list:
     return done
 
 
+@pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_journal_study_shared_by_two_workers_and_retrained(cli, tmp_path):
     journal = str(tmp_path / "optuna.log")
     rep = json.loads(_ok(cli("tune", "--algo", "ppo", "--trials", "3", *FIXED, "--storage", journal, "--study", "j",

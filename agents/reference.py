@@ -1,0 +1,112 @@
+"""Reference scores of the registered tasks: the saved table, its Markdown, and the docs block.
+
+``flatbody evaluate --env ID --out-dir DIR`` writes one report per task (:func:`agents.evaluate.evaluate_task`)
+as ``DIR/<ID>.json`` (:func:`save_report`); the shipped reports live in :data:`REFERENCE_DIR`. With
+``--docs FILE.md`` the command regenerates the block between ``<!-- bench:tasks -->`` and
+``<!-- /bench:tasks -->`` in FILE.md from every report in the folder (:func:`markdown`,
+:func:`flatbody_env.output.replace_marked_block`, the mechanism of the benchmark tables), so that a
+task's trained agent, evaluated later into the same folder, joins the table. ``flatbody chart
+--tasks`` draws from the same saved reports (:mod:`agents.reference_chart`).
+
+A report holds, per policy, the summary of :func:`agents.evaluate.summarize` (success rate with its
+95 % Wilson interval, mean and median final distance, return, episode length) and the per-episode
+columns (success, final distance, return, length), and per episode the target's settling rate and
+growth rate (:func:`agents.evaluate.target_features`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+REFERENCE_DIR = Path(__file__).resolve().parent / "data" / "reference"
+"""The shipped reference reports (one JSON per task)."""
+DOCS_BLOCK = "tasks"
+"""The name of the docs block (``<!-- bench:tasks -->``)."""
+REPORT_VERSION = 1
+"""Layout version of a saved report (``"version"``)."""
+
+
+def report_path(folder: str | Path, env_id: str) -> Path:
+    """Where the report of ``env_id`` lives in ``folder``."""
+    return Path(folder) / f"{env_id}.json"
+
+
+def save_report(report: dict[str, Any], folder: str | Path = REFERENCE_DIR) -> Path:
+    """Write ``report`` (:func:`agents.evaluate.evaluate_task`) as ``folder/<env id>.json`` (atomically)."""
+    from flatbody_env.output import atomic_write
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    data = {"version": REPORT_VERSION, **report}
+    return atomic_write(report_path(folder, report["env_id"]), json.dumps(data, separators=(",", ":")) + "\n")
+
+
+def load_reports(folder: str | Path = REFERENCE_DIR) -> list[dict[str, Any]]:
+    """The saved reports in ``folder``, in the order of the registered tasks (others after, by name).
+
+    Raises
+    ------
+    ValueError
+        Naming ``--from`` when the folder holds no report or a report of another layout version.
+    """
+    from flatbody_env.env.registration import TASK_IDS
+
+    folder = Path(folder)
+    files = sorted(folder.glob("*.json")) if folder.is_dir() else []
+    if not files:
+        raise ValueError(f"--from: no saved task reports (*.json) in {str(folder)!r}; write them with "
+                         "'flatbody evaluate --env all --out-dir DIR'")
+    reports = []
+    for f in files:
+        data = json.loads(f.read_text(encoding="utf-8"))
+        if data.get("version") != REPORT_VERSION or "env_id" not in data or "policies" not in data:
+            raise ValueError(f"--from: {str(f)!r} is not a task report of version {REPORT_VERSION}")
+        reports.append(data)
+    order = {k: i for i, k in enumerate(TASK_IDS)}
+    return sorted(reports, key=lambda r: (order.get(r["env_id"], len(order)), r["env_id"]))
+
+
+POLICY_LABELS = {"zero": "zero", "random": "random", "passivity": "passivity", "heuristic": "LQR", "witness": "witness (open loop)"}
+"""Row labels of the baselines; agents are labelled ``agent (<algo>)``."""
+
+
+def _label(name: str, entry: dict[str, Any]) -> str:
+    if entry.get("kind") == "agent":
+        return f"agent ({name})" if name != "agent" else "agent"
+    return POLICY_LABELS.get(name, name)
+
+
+def markdown(reports: list[dict[str, Any]]) -> str:
+    """The reference table: one row per task and policy (module docstring)."""
+    head = ("| task | policy | success (95 % interval) | final distance (mean) | final distance (median) | return (mean) "
+            "| episode length (median, s) |")
+    lines = [head, "|" + "---|" * 7]
+    for rep in reports:
+        dt = rep.get("dt", 0.05)
+        for name, entry in rep["policies"].items():
+            label = _label(name, entry)
+            s = entry["summary"]
+            if s.get("status"):
+                lines.append(f"| {rep['env_id']} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |")
+                continue
+            lo, hi = s["success_ci95"]
+            lines.append(f"| {rep['env_id']} | {label} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {s['final_distance']:.4f} | "
+                         f"{s['final_distance_median']:.4f} | {s['return']:.1f} | {s['length_median'] * dt:.2f} |")
+    first = reports[0] if reports else {"episodes": 0, "seed": 0}
+    lines.append("")
+    lines.append(f"{first['episodes']} seeded episodes per task (episode i reset with seed {first['seed']} + i; the same targets and "
+                 "starts for every policy); regenerate with `flatbody evaluate --env all --out-dir agents/data/reference --docs docs/tasks.md`.")
+    return "\n".join(lines)
+
+
+def update_docs(path: str | Path, folder: str | Path = REFERENCE_DIR) -> None:
+    """Regenerate the ``<!-- bench:tasks -->`` block of ``path`` from the reports saved in ``folder``."""
+    from flatbody_env.output import replace_marked_block
+
+    replace_marked_block(path, DOCS_BLOCK, markdown(load_reports(folder)))
+
+
+__all__ = ["DOCS_BLOCK", "POLICY_LABELS", "REFERENCE_DIR", "REPORT_VERSION", "load_reports", "markdown", "report_path", "save_report",
+           "update_docs"]

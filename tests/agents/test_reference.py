@@ -1,0 +1,92 @@
+"""Reference scores of the tasks: ``flatbody evaluate --env``, the saved reports, the docs table regenerated
+from them, the chart drawn from them, and the confidence interval."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents import evaluate
+from agents.evaluate import CANNOT_BE_BUILT, shipped_agents, success_interval
+from agents.reference import REFERENCE_DIR, load_reports, markdown
+from flatbody_env.cli.main import main
+from flatbody_env.env.registration import TASK_IDS
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_wilson_interval_matches_known_values():
+    # E. B. Wilson (1927), z = 1.96, worked by hand: 0/100 -> [0, 0.0370], 67/100 -> [0.5731, 0.7544], 1/2 -> [0.0945, 0.9055]
+    for k, n, lo, hi in [(0, 100, 0.0, 0.0370), (67, 100, 0.5731, 0.7544), (100, 100, 0.9630, 1.0), (1, 2, 0.0945, 0.9055)]:
+        a, b = success_interval(k, n)
+        assert a == pytest.approx(lo, abs=5e-5) and b == pytest.approx(hi, abs=5e-5)
+    with pytest.raises(ValueError, match="episodes"):
+        success_interval(0, 0)
+
+
+def test_evaluate_a_task_prints_its_figures(capsys):
+    assert main(["evaluate", "--env", "FlatBodyHoldUnstable-v0", "--episodes", "2", "--seed", "10000", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["env_id"] == "FlatBodyHoldUnstable-v0" and report["episodes"] == 2
+    assert set(report["baselines"]) == {"zero", "random", "heuristic", "passivity"}
+    for s in report["baselines"].values():
+        lo, hi = s["success_ci95"]
+        assert 0.0 <= lo <= s["success_rate"] <= hi <= 1.0
+        assert {"final_distance", "final_distance_median", "return", "length_median"} <= set(s)
+
+
+def test_reports_are_saved_the_docs_block_and_the_chart_come_from_them(tmp_path, capsys):
+    out = tmp_path / "reports"
+    page = tmp_path / "page.md"
+    page.write_text("# page\n\n<!-- bench:tasks -->\nstale\n<!-- /bench:tasks -->\n\nafter\n")
+    argv = ["evaluate", "--env", "FlatBodyDilatation-v0", "--episodes", "3", "--seed", "10000", "--out-dir", str(out), "--docs", str(page)]
+    assert main(argv) == 0
+    saved = json.loads((out / "FlatBodyDilatation-v0.json").read_text())
+    assert saved["version"] == 1 and saved["targets"]["seed"] == [10000, 10001, 10002]
+    # the LQR does not exist without torque; the witness replays every episode into the ball
+    assert saved["policies"]["heuristic"]["summary"]["status"] == CANNOT_BE_BUILT
+    assert "LinAlgError" in saved["policies"]["heuristic"]["summary"]["reason"]
+    assert saved["policies"]["witness"]["episodes"]["success"] == [True, True, True]
+    text = page.read_text()
+    assert "stale" not in text and text.endswith("<!-- /bench:tasks -->\n\nafter\n")
+    assert "| FlatBodyDilatation-v0 | LQR | cannot be built (LinAlgError) |" in text
+    assert main(["chart", "--tasks", "--from", str(out), "--out", str(tmp_path)]) == 2  # no reach or hold report there
+    assert "--from" in capsys.readouterr().err
+    assert main(["evaluate", "--env", "FlatBodySlow-v0", "--episodes", "5", "--out-dir", str(out)]) == 0
+    assert main(["chart", "--tasks", "--from", str(out), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "tasks_success.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
+    page = (ROOT / "docs" / "tasks.md").read_text(encoding="utf-8")
+    block = re.search(r"<!-- bench:tasks -->\n(.*?)\n<!-- /bench:tasks -->", page, re.S).group(1)
+    reports = load_reports(REFERENCE_DIR)
+    assert block == markdown(reports)
+    assert [r["env_id"] for r in reports] == list(TASK_IDS)
+    for rep in reports:  # 100 held-out episodes from seed 10000, summaries consistent with the saved episodes
+        assert rep["episodes"] == 100 and rep["seed"] == 10_000
+        for name, entry in rep["policies"].items():
+            if "episodes" in entry:
+                assert entry["summary"]["success_rate"] == pytest.approx(np.mean(entry["episodes"]["success"])), (rep["env_id"], name)
+    # FlatBody-v0's figures are those of docs/agents.md (the task is unchanged)
+    v0 = reports[0]["policies"]
+    assert v0["heuristic"]["summary"]["final_distance"] == pytest.approx(0.0032, abs=5e-5)
+    assert v0["ppo"]["summary"]["final_distance"] == pytest.approx(0.0018, abs=5e-5)
+
+
+def test_a_task_agent_is_found_in_its_folder(tmp_path, monkeypatch):
+    folder = tmp_path / "sac-FlatBodySlow-v0"
+    folder.mkdir()
+    (folder / "model.zip").write_bytes(b"")
+    (tmp_path / "ppo-FlatBodySlow-v0").mkdir()  # no model.zip: not an agent
+    monkeypatch.setattr(evaluate, "MODELS_DIR", tmp_path)
+    assert shipped_agents("FlatBodySlow-v0") == {"sac": folder}
+    assert shipped_agents("FlatBody-v0") == {}
+    rep = {"env_id": "FlatBodySlow-v0", "episodes": 1, "seed": 0,
+           "policies": {"sac": {"kind": "agent", "summary": {"success_rate": 1.0, "success_ci95": [0.2, 1.0], "final_distance": 0.01,
+                                                              "final_distance_median": 0.01, "return": -1.0, "length_median": 400}}}}
+    assert "| FlatBodySlow-v0 | agent (sac) | 100% (20%–100%) |" in markdown([rep])

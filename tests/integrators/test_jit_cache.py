@@ -1,0 +1,44 @@
+"""The on-disk cache of the compiled kernels: a caller recompiles when a callee in another file changes."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+CALLER = textwrap.dedent('''
+    import callee_mod
+    from flatbody_env.integrators.jit import njit, retarget
+
+    g = retarget(callee_mod.g)
+
+    @njit
+    def f(x):
+        return 2.0 * g(x)
+''')
+RUN = "import caller_mod; print(caller_mod.f(1.0), sum(caller_mod.f.stats.cache_hits.values()))"
+
+
+def _run(folder: Path) -> tuple[float, int]:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(folder / "cache"), PYTHONPATH=os.pathsep.join([str(folder), str(ROOT)]))
+    proc = subprocess.run([sys.executable, "-c", RUN], capture_output=True, text=True, cwd=folder, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    value, hits = proc.stdout.split()
+    return float(value), int(hits)
+
+
+def test_caller_recompiles_when_a_callee_changes(tmp_path):
+    callee = tmp_path / "callee_mod.py"
+    callee.write_text("def g(x):\n    return x + 1.0\n")
+    (tmp_path / "caller_mod.py").write_text(CALLER)
+    assert _run(tmp_path) == (4.0, 0)  # compiled and cached
+    assert _run(tmp_path) == (4.0, 1)  # loaded from the cache
+    callee.write_text("def g(x):\n    return x + 2.0\n")  # only the callee's file changes
+    stat = callee.stat()
+    os.utime(callee, (stat.st_atime + 10, stat.st_mtime + 10))
+    assert _run(tmp_path) == (6.0, 0)  # the caller did not load its stale machine code
+    assert _run(tmp_path) == (6.0, 1)
