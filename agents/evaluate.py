@@ -96,18 +96,19 @@ class Agent:
     """
 
     def __init__(self, path: str | Path | None = None, *, backend: str = "auto") -> None:
-        import yaml
-
         if backend not in POLICY_BACKENDS:
             raise ValueError(f"backend: must be one of {', '.join(POLICY_BACKENDS)}, got {backend!r}")
         p = Path(path) if path is not None else shipped_model_dir()
         folder = p if p.is_dir() else p.parent
         model_file = p if p.is_file() else folder / "model.zip"
-        if not model_file.exists():
+        if not model_file.is_file():
             raise ValueError(f"model: no model at {str(p)!r} (expected a run folder with model.zip, or a .zip)")
-        cfg_file = folder / "config.yml"
-        self.config: dict[str, Any] = yaml.safe_load(cfg_file.read_text(encoding="utf-8")) if cfg_file.exists() else {}
+        from agents.numpy_policy import read_run_config
+
+        self.config: dict[str, Any] = read_run_config(folder)  # a mapping, or a ValueError naming config.yml
         algo = self.config.get("algo") or ("sac" if "sac" in model_file.name.lower() else "ppo")
+        if algo not in ("ppo", "sac"):
+            raise ValueError(f"config.yml.algo: must be ppo or sac, got {algo!r:.60}")
         self.algo = algo
         self.path = folder
         self.policy = None
@@ -125,9 +126,7 @@ class Agent:
                     import sys
 
                     sys.stderr.write(f"flatbody: {exc}; evaluating with Stable-Baselines3 instead\n")
-            except ValueError:
-                if backend == "numpy":
-                    raise
+            # a damaged policy.npz (DamagedPolicyError) is an error, never a silent fall-back to the pickle
         if self.policy is None:
             self._load_sb3(model_file, folder, algo)
         self.backend = "numpy" if self.policy is not None else "sb3"
@@ -149,17 +148,23 @@ class Agent:
     def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
         import pickle
 
+        from agents.numpy_policy import check_trusted, load_sb3
+
+        check_trusted(folder, "model.zip (a pickle-based SB3 file)")  # docs/reliability.md, Trust model
         import torch
         from stable_baselines3 import PPO, SAC
 
         torch.set_num_threads(1)
         cls = {"ppo": PPO, "sac": SAC}[algo]
-        self.model = cls.load(str(model_file), device="cpu")
+        self.model = load_sb3(cls, model_file)
         vn = folder / "vecnormalize.pkl"
         if vn.exists():
-            with vn.open("rb") as fh:
-                self.vecnormalize = pickle.load(fh)
-            self.vecnormalize.training = False
+            try:
+                with vn.open("rb") as fh:
+                    self.vecnormalize = pickle.load(fh)
+                self.vecnormalize.training = False
+            except Exception as exc:  # truncated or foreign pickle
+                raise ValueError(f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
     def policy_actions(self, obs: np.ndarray) -> np.ndarray:
         """The trained policy's deterministic actions (N, n) for raw observations (N, 16), before any residual."""

@@ -41,6 +41,76 @@ class StalePolicyError(ValueError):
     """``policy.npz`` is missing, of another format version, or was exported from other files."""
 
 
+class DamagedPolicyError(ValueError):
+    """``policy.npz`` is there but cannot be read (truncated, not an npz, pickled content, wrong arrays):
+    an error, never a silent fall-back to the pickled model."""
+
+
+# -- trust: what may be unpickled (docs/reliability.md, "Trust model") ---------------------------------
+_TRUST = {"required": False}
+
+
+def require_trust(required: bool = True) -> None:
+    """Set whether loading a pickle (SB3 ``model.zip``, ``vecnormalize.pkl``, checkpoints) needs the
+    folder to be trusted (:func:`trusted`). The CLI turns it on unless ``--trust`` is given; the
+    Python API leaves it off (the caller names the paths in code)."""
+    _TRUST["required"] = bool(required)
+
+
+def _trust_file() -> Path:
+    import os
+
+    base = os.environ.get("FLATBODY_CONFIG_HOME") or os.path.join(os.environ.get("XDG_CONFIG_HOME") or os.path.expanduser("~/.config"), "flatbody")
+    return Path(base) / "trusted-runs.txt"
+
+
+def trusted_roots() -> list[Path]:
+    """Folders whose pickles load without ``--trust``: the shipped agents (``agents/models``), the run
+    folders this user created with ``flatbody train`` / ``flatbody sweep`` (:func:`remember_run`) and
+    the folders listed in ``$FLATBODY_TRUSTED_DIRS`` (``os.pathsep``-separated)."""
+    import os
+
+    from agents.evaluate import MODELS_DIR
+
+    roots = [MODELS_DIR.resolve()]
+    roots += [Path(x).expanduser().resolve() for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep) if x.strip()]
+    try:
+        text = _trust_file().read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        text = ""
+    roots += [Path(line) for line in text.splitlines() if line.strip()]
+    return roots
+
+
+def trusted(folder: str | Path) -> bool:
+    """Whether ``folder`` lies in one of :func:`trusted_roots`."""
+    f = Path(folder).resolve()
+    return any(f == r or r in f.parents for r in trusted_roots())
+
+
+def remember_run(folder: str | Path) -> None:
+    """Record ``folder`` as one of this user's run folders (best effort: an unwritable config is ignored)."""
+    f = Path(folder).resolve()
+    try:
+        if trusted(f):
+            return
+        path = _trust_file()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with path.open("a", encoding="utf-8") as fh:
+            fh.write(f"{f}\n")
+    except OSError:
+        pass
+
+
+def check_trusted(folder: str | Path, what: str) -> None:
+    """Refuse (``ValueError`` naming ``model``) to unpickle ``what`` from an untrusted folder while
+    :func:`require_trust` is on."""
+    if _TRUST["required"] and not trusted(folder):
+        raise ValueError(f"model: loading {what} from {str(folder)[:80]!r} unpickles it, which can run arbitrary code, and the folder is "
+                         "neither the shipped agent nor one of your runs (flatbody train, sweep); pass --trust if you trust its source "
+                         "(docs/reliability.md, Trust model)")
+
+
 def sha256(path: Path) -> str:
     h = hashlib.sha256()
     with Path(path).open("rb") as fh:
@@ -68,6 +138,46 @@ def model_folder(path: str | Path | None) -> Path:
     if not (folder / "model.zip").exists():
         raise ValueError(f"model: no model at {str(p)!r} (expected a run folder with model.zip, or a model.zip)")
     return folder
+
+
+def read_run_config(folder: Path) -> dict:
+    """A run folder's ``config.yml`` (safe YAML) as a mapping ({} when absent); a damaged or non-mapping
+    file, or a non-mapping ``hyperparams`` / ``env_kwargs``, is a ``ValueError`` naming ``config.yml``."""
+    import yaml
+
+    cfg_file = Path(folder) / "config.yml"
+    if not cfg_file.exists():
+        return {}
+    try:
+        if not cfg_file.is_file() or cfg_file.stat().st_size > 1 << 20:
+            raise ValueError("not a regular file of at most 1 MiB")
+        config = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
+        raise ValueError(f"config.yml: cannot read {str(cfg_file)[:80]!r} ({' '.join(str(exc).split())[:120]})") from None
+    if config is None:
+        return {}
+    if not isinstance(config, dict):
+        raise ValueError(f"config.yml: {str(cfg_file)[:80]!r} must hold a mapping (algo, env_id, hyperparams), got a {type(config).__name__}")
+    hp = config.get("hyperparams")
+    if hp is not None and not isinstance(hp, dict):
+        raise ValueError(f"config.yml.hyperparams: must be a mapping, got a {type(hp).__name__}")
+    if hp and hp.get("env_kwargs") is not None and not isinstance(hp["env_kwargs"], dict):
+        raise ValueError(f"config.yml.hyperparams.env_kwargs: must be a mapping, got a {type(hp['env_kwargs']).__name__}")
+    for key in ("algo", "env_id"):
+        if config.get(key) is not None and not isinstance(config[key], str):
+            raise ValueError(f"config.yml.{key}: must be a string, got {config[key]!r:.60}")
+    return config
+
+
+def load_sb3(cls, model_file: Path):
+    """``cls.load(model_file)`` on the CPU; a file SB3 cannot read (empty, truncated, not a model) is a
+    one-line ``ValueError`` naming ``model``."""
+    try:
+        if Path(model_file).stat().st_size == 0:
+            raise ValueError("the file is empty")
+        return cls.load(str(model_file), device="cpu")
+    except Exception as exc:  # zipfile.BadZipFile, KeyError, pickle errors, RuntimeError of torch.load
+        raise ValueError(f"model: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
 
 @dataclass(frozen=True)
@@ -120,19 +230,18 @@ def export_policy(path: str | Path | None = None) -> Path:
     """
     import pickle
 
+    folder = model_folder(path)
+    config = read_run_config(folder)
+    algo = config.get("algo") or "ppo"
+    if algo not in ("ppo", "sac"):
+        raise ValueError(f"algo: export supports ppo and sac, got {algo!r}")
+    check_trusted(folder, "model.zip and vecnormalize.pkl")
     import torch
-    import yaml
     from stable_baselines3 import PPO, SAC
 
     torch.set_num_threads(1)
-    folder = model_folder(path)
-    cfg_file = folder / "config.yml"
-    config = yaml.safe_load(cfg_file.read_text(encoding="utf-8")) if cfg_file.exists() else {}
-    algo = (config or {}).get("algo") or "ppo"
-    if algo not in ("ppo", "sac"):
-        raise ValueError(f"algo: export supports ppo and sac, got {algo!r}")
     sources = _sources(folder)
-    model = {"ppo": PPO, "sac": SAC}[algo].load(str(folder / "model.zip"), device="cpu")
+    model = load_sb3({"ppo": PPO, "sac": SAC}[algo], folder / "model.zip")
     policy = model.policy
     if algo == "sac":
         trunk, head = policy.actor.latent_pi, policy.actor.mu
@@ -204,17 +313,46 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
     redo = f"run: flatbody export-policy {folder}"
     if not file.exists():
         raise StalePolicyError(f"policy: no {POLICY_FILE} beside {folder / 'model.zip'}; {redo}")
-    with np.load(file, allow_pickle=False) as data:
-        arrays = {k: data[k] for k in data.files}
-    meta = json.loads(str(arrays.pop("meta")))
+    try:
+        with np.load(file, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        meta = json.loads(str(arrays.pop("meta")))
+        if not isinstance(meta, dict):
+            raise ValueError("meta is not an object")
+    except Exception as exc:  # truncated, not an npz, pickled arrays, bad JSON: an error, never a fall-back
+        raise DamagedPolicyError(f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}") from None
     if meta.get("format") != FORMAT_VERSION:
         raise StalePolicyError(f"policy: {file} has format {meta.get('format')!r}, this version reads {FORMAT_VERSION}; {redo}")
     now = _sources(folder)
     if meta.get("sources") != now:
         changed = [k for k in now if (meta.get("sources") or {}).get(k) != now[k]]
         raise StalePolicyError(f"policy: {file} is stale ({', '.join(changed)} changed since the export); {redo}")
+    try:
+        return _policy_from(arrays, meta)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DamagedPolicyError(f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}") from None
+
+
+def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
+    """The policy of a loaded ``policy.npz``, its arrays checked (float, finite, chained shapes)."""
     n = int(meta["layers"])
+    if not 1 <= n <= 64:
+        raise ValueError(f"layers = {n}")
+    for k, v in arrays.items():
+        if v.dtype.kind not in "fiu" or not np.all(np.isfinite(v)):
+            raise ValueError(f"array {k} is not finite numbers")
+    width = None
+    for k in range(n):
+        W, b = arrays[f"W{k}"], arrays[f"b{k}"]
+        if W.ndim != 2 or b.shape != (W.shape[0],) or (width is not None and W.shape[1] != width):
+            raise ValueError(f"layer {k} has shapes {W.shape}, {b.shape}")
+        width = W.shape[0]
+    if arrays["low"].shape != (width,) or arrays["high"].shape != (width,):
+        raise ValueError("action bounds do not match the last layer")
     has_norm = "obs_mean" in arrays
+    if has_norm and (arrays["obs_mean"].shape != (arrays["W0"].shape[1],) or arrays["obs_scale"].shape != arrays["obs_mean"].shape
+                     or np.any(arrays["obs_scale"] <= 0)):
+        raise ValueError("normalisation statistics do not match the first layer")
     return NumpyPolicy(
         weights=tuple(arrays[f"W{k}"] for k in range(n)),
         biases=tuple(arrays[f"b{k}"] for k in range(n)),
@@ -229,4 +367,5 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
     )
 
 
-__all__ = ["FORMAT_VERSION", "NumpyPolicy", "POLICY_FILE", "StalePolicyError", "export_policy", "load_policy", "model_folder", "sha256"]
+__all__ = ["DamagedPolicyError", "check_trusted", "load_sb3", "read_run_config", "remember_run", "require_trust", "trusted", "trusted_roots",
+           "FORMAT_VERSION", "NumpyPolicy", "POLICY_FILE", "StalePolicyError", "export_policy", "load_policy", "model_folder", "sha256"]

@@ -29,6 +29,7 @@ import logging
 import math
 import os
 import socket
+import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,7 +42,14 @@ from flatbody_env.output import atomic_path
 
 TUNE_EVAL_SEED = 50_000
 """First episode seed of the tuning evaluations (held apart from training and from ``evaluate``)."""
-DEFAULT_STORAGE = "runs/tune/optuna-journal.log"
+DEFAULT_STORAGE = "sqlite:///runs/tune/optuna.sqlite3"
+"""The default storage: an SQLite database through Optuna's RDBStorage, which has a heartbeat (a
+journal file has none: trials of a killed worker would stay RUNNING for ever)."""
+HEARTBEAT_INTERVAL = int(os.environ.get("FLATBODY_TUNE_HEARTBEAT", "20") or 20)
+"""Seconds between a running trial's heartbeats (database storages; ``$FLATBODY_TUNE_HEARTBEAT``)."""
+GRACE_PERIOD = 3 * HEARTBEAT_INTERVAL
+"""A RUNNING trial with no heartbeat for this long belongs to a killed worker: Optuna marks it FAIL
+(when the next trial starts, and in :func:`prepare` / :func:`summary`) and calls :func:`on_failed_trial`."""
 _TYPES = ("float", "int", "categorical")
 
 
@@ -173,13 +181,41 @@ def open_storage(url: str):
     if url.startswith("journal:"):
         url = url[len("journal:"):]
     elif "://" in url:
+        engine: dict[str, Any] = {"pool_pre_ping": True}
+        if url.startswith("sqlite:///"):
+            from flatbody_env.physics import validation
+
+            db = Path(url[len("sqlite:///"):])
+            validation.sqlite_file("storage", db, ("studies",))  # a directory, corrupt or foreign file: one line, exit 2
+            db.parent.mkdir(parents=True, exist_ok=True)
+            engine["connect_args"] = {"timeout": 60}
         try:
-            return optuna.storages.RDBStorage(url, engine_kwargs={"pool_pre_ping": True})
+            # Optuna's heartbeat: a killed worker's RUNNING trial is marked FAIL after GRACE_PERIOD
+            return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_INTERVAL, grace_period=GRACE_PERIOD,
+                                              failed_trial_callback=on_failed_trial)
         except Exception as exc:  # sqlalchemy's errors: a bad URL, an unreachable server, a missing driver
             raise ValueError(f"storage: cannot open {url.split('@')[-1]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
     path = Path(url)
     path.parent.mkdir(parents=True, exist_ok=True)
     return JournalStorage(JournalFileBackend(str(path)))
+
+
+def on_failed_trial(study, trial) -> None:
+    """Optuna's ``failed_trial_callback``: a trial whose worker stopped beating (killed) was marked FAIL."""
+    sys.stderr.write(f"flatbody tune: trial {trial.number} of study {study.study_name!r} lost its worker (no heartbeat for "
+                     f"{GRACE_PERIOD} s); marked FAIL\n")
+
+
+def _fail_stale(study) -> None:
+    """Mark the trials of killed workers FAIL now (Optuna's heartbeat check; database storages only)."""
+    import optuna
+    from optuna.storages._heartbeat import is_heartbeat_enabled
+
+    if is_heartbeat_enabled(study._storage):
+        try:
+            optuna.storages.fail_stale_trials(study)
+        except Exception:  # noqa: BLE001 - a storage without a heartbeat
+            pass
 
 
 def prepare(cfg: TuneConfig) -> int:
@@ -189,6 +225,7 @@ def prepare(cfg: TuneConfig) -> int:
     import optuna
 
     study = _study(cfg, 0)
+    _fail_stale(study)
     finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED, optuna.trial.TrialState.FAIL)
     return max(0, cfg.trials - len(study.get_trials(deepcopy=False, states=finished)))
 
@@ -337,6 +374,7 @@ def summary(study_name: str, storage: str) -> dict[str, Any]:
         study = optuna.load_study(study_name=study_name, storage=open_storage(storage))
     except KeyError:
         raise ValueError(f"study: no study {study_name!r} in {storage}") from None
+    _fail_stale(study)
     trials = [{"number": t.number, "state": t.state.name, "value": t.value, "params": t.params,
                "success_rate": t.user_attrs.get("success_rate"), "evaluations": len(t.intermediate_values)}
               for t in study.get_trials(deepcopy=False)]

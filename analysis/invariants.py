@@ -144,6 +144,11 @@ def invariants_along(source: Trajectory | Mapping[str, Any] | str | Path, body: 
     InvariantReport
     """
     t, Y, R, E = _arrays(source)
+    with np.errstate(all="ignore"):  # a singular state gives NaN/inf, refused below with the reason (no warnings)
+        return _invariants(t, Y, R, E, body)
+
+
+def _invariants(t, Y, R, E, body: Body | None) -> InvariantReport:
     st = {n: Y[i] for i, n in enumerate(STATE_NAMES)}
     lam, mu, rho, theta = st["lambda"], st["mu"], st["rho"], st["theta"]
     G = green_tensor(lam, mu, rho, theta)
@@ -172,6 +177,11 @@ def invariants_along(source: Trajectory | Mapping[str, Any] | str | Path, body: 
             omega = np.stack([v["omega1"], v["omega2"], v["omega3"]], axis=-1)
             C_rate = cauchy_rate(lam, mu, rho, R, omega, v["lambda_dot"], v["mu_dot"], v["rho_dot"])
             series["dC/dt"] = np.linalg.norm(C_rate, axis=(1, 2))
+    # no silent non-finite numbers: a singular state (e.g. lambda = mu, where the two-polar velocities
+    # diverge) makes a quantity NaN/inf; it is refused with the reason, never reported or called conserved
+    from flatbody_env.physics import validation
+
+    validation.finite_result("invariants", {**series, "G": G, "C": C})
     rows = [_row(name, series[name], True) for name in CONSERVED if name in series]
     rows += [_row(name, series[name], False) for name in ("K1", "K2", "K3", "trace_G", "det_G")]
     return InvariantReport(t=t, series=series, G=G, C=C, G_rate=G_rate, C_rate=C_rate, drift=tuple(rows))

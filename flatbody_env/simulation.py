@@ -229,6 +229,11 @@ class Trajectory:
         st = validation.mapping(f"{where}.state", data["state"])
         validation.keys(f"{where}.state", st, STATE_NAMES, STATE_NAMES)
         state = {name: validation.float_array(f"{where}.state.{name}", st[name], shape=(n,)) for name in STATE_NAMES}
+        lo, hi = validation.STRETCH_RANGE
+        for name in ("lambda", "mu", "rho"):  # the documented range (docs/reliability.md), as for a scene's state
+            bad = np.flatnonzero((state[name] < lo) | (state[name] > hi))
+            if bad.size:
+                raise ValueError(f"{where}.state.{name}: must lie in [{lo:g}, {hi:g}], got {float(state[name][bad[0]])!r} at t = {t[bad[0]]:g}")
         series = {}
         for key in ("energy", "casimir", "p_theta"):
             if key in data:
@@ -371,6 +376,9 @@ def simulate(
     method = validation.string("method", method)
     if not isinstance(with_rotation, bool):
         raise ValueError(f"with_rotation: must be true or false, got {with_rotation!r}")
+    if step is not None:  # bounded work: a fixed step below the floor is an error, never replaced
+        step = validation.fixed_step("step", step)
+    max_wall_time = validation.number("max_wall_time", max_wall_time, positive=True, high=validation.MAX_SECONDS)
     body = sc.body
     y0 = pack(sc.state)
     if method == AUTO:

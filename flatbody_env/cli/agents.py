@@ -10,6 +10,7 @@ import json
 import sys
 
 from flatbody_env.cli.args import int_at_least
+from flatbody_env.physics import validation
 
 
 
@@ -28,7 +29,15 @@ def _train_rsl(args) -> int:
     return 0
 
 
+def _trust(args) -> None:
+    """Loading a pickle (SB3 model.zip, vecnormalize.pkl, checkpoints) needs a trusted folder or ``--trust``."""
+    from agents.numpy_policy import require_trust
+
+    require_trust(not getattr(args, "trust", False))
+
+
 def _train(args) -> int:
+    _trust(args)
     if args.algo == "rsl-ppo":
         return _train_rsl(args)
     if args.device != "cpu":
@@ -49,9 +58,16 @@ def _train(args) -> int:
     elif args.algo is None:
         raise ValueError("--algo: required (ppo or sac), or give --study NAME --trial-id K")
     command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
+    from agents.numpy_policy import check_trusted, remember_run
+
+    out = args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}"
+    if args.resume:  # the checkpoints are pickles: only from one of your runs, or with --trust
+        check_trusted(out, "the checkpoints (pickle-based SB3 files)")
+    else:
+        remember_run(out)  # a run folder this user creates: its model loads later without --trust
     result = train(
         args.algo,
-        args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}",
+        out,
         seed=args.seed,
         n_timesteps=args.n_timesteps,
         n_envs=args.n_envs,
@@ -72,6 +88,7 @@ def _train(args) -> int:
 
 
 def _evaluate(args) -> int:
+    _trust(args)
     from agents.evaluate import evaluate_all, format_table
 
     if args.env is not None or args.out_dir or args.docs:
@@ -131,6 +148,7 @@ def _evaluate_tasks(args) -> int:
 
 
 def _demo(args) -> int:
+    _trust(args)
     import shlex
 
     from agents.demo import run_demo
@@ -147,6 +165,7 @@ def _demo(args) -> int:
 
 
 def _export_policy(args) -> int:
+    _trust(args)
     from agents.numpy_policy import export_policy
 
     path = export_policy(args.model)
@@ -172,28 +191,29 @@ def register(sub) -> None:
     p = sub.add_parser("train", help="train an agent (SB3 PPO or SAC, or rsl_rl's PPO: rsl-ppo) on FlatBody-v0")
     p.add_argument("--algo", choices=(*ALGOS, "rsl-ppo"), help="algorithm (required unless --study); rsl-ppo: rsl_rl's PPO on the torch vector env")
     p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="random seed (default 0)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="total environment steps (default: the YAML's)")
-    p.add_argument("--n-envs", "--num-envs", dest="n_envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="random seed (default 0)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=None, metavar="N", help="total environment steps (default: the YAML's)")
+    p.add_argument("--n-envs", "--num-envs", dest="n_envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
     p.add_argument("--force", action="store_true", help="train into DIR even if it holds a run or is the shipped agent (overwrites it)")
-    p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
+    p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0, validation.MAX_TIMESTEPS), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
-    p.add_argument("--threads", type=int_at_least("threads", 1), default=1, help="torch threads (default 1)")
+    p.add_argument("--threads", type=int_at_least("threads", 1, validation.MAX_WORKERS), default=1, help="torch threads (default 1)")
     p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of env and policy (rsl-ppo; default cpu)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--study", metavar="NAME", help="retrain a trial of this Optuna study ('flatbody tune') with its hyperparameters")
-    p.add_argument("--trial-id", type=int_at_least("trial_id", 0), default=None, metavar="K", help="with --study: the trial number")
-    p.add_argument("--storage", metavar="URL", help="with --study: journal file or database URL (default runs/tune/optuna-journal.log)")
+    p.add_argument("--trial-id", type=int_at_least("trial_id", 0, validation.MAX_COUNT), default=None, metavar="K", help="with --study: the trial number")
+    p.add_argument("--storage", metavar="URL", help="with --study: journal file or database URL (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)")
+    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
     p.set_defaults(handler=_train)
 
     p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
     p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1), default=100, metavar="N", help="episodes (default 100)")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="episodes (default 100)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
@@ -204,26 +224,29 @@ def register(sub) -> None:
     p.add_argument("--out-dir", default="", metavar="DIR", help="with --env: save each task's report as DIR/ID.json (the reference table)")
     p.add_argument("--docs", default="", metavar="FILE.md",
                    help="regenerate the table between <!-- bench:tasks --> markers in FILE.md from the saved reports (--out-dir, default the shipped ones)")
+    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
     p.set_defaults(handler=_evaluate)
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
     p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="seed of the target and the initial state (default 7)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="seed of the target and the initial state (default 7)")
     p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
     p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
                    help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
     p.add_argument("--docs", default="", metavar="FILE.md",
                    help="also regenerate the transcript between <!-- demo:transcript --> markers in FILE.md")
+    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
     p.set_defaults(handler=_demo)
     p = sub.add_parser("lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)")
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
-    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2), default=36, help="grid nodes in lambda* (shipped: 36)")
-    p.add_argument("--n-w", type=int_at_least("n_w", 2), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)")
-    p.add_argument("--workers", type=int_at_least("workers", 1), default=2, help="processes")
+    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2, 2001), default=36, help="grid nodes in lambda* (shipped: 36)")
+    p.add_argument("--n-w", type=int_at_least("n_w", 2, 2001), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)")
+    p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=2, help="processes")
     p.set_defaults(handler=_lqr_table)
 
     p = sub.add_parser("export-policy", help="export a trained agent's policy to numpy (policy.npz beside model.zip) for torch-free evaluate/demo")
     p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
+    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
     p.set_defaults(handler=_export_policy)
 
 
@@ -248,9 +271,9 @@ def _bench_train(args) -> int:
 
 def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1; share in env + LQR")
-    p.add_argument("--timesteps", type=int_at_least("timesteps", 1), default=64_000, help="environment steps per run")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=1, help="runs per environment; the fastest is kept")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of both runs")
+    p.add_argument("--timesteps", type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS), default=64_000, help="environment steps per run")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="runs per environment; the fastest is kept")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of both runs")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
     p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")

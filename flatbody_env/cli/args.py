@@ -34,8 +34,9 @@ def number(name: str, *, low: float | None = None, high: float | None = None, po
     return parse
 
 
-def positive_float(name: str, high: float | None = None):
-    """argparse type: a finite number > 0 (at most ``high``); the error names ``name`` and the range."""
+def positive_float(name: str, high: float | None = validation.MAX_COUNT):
+    """argparse type: a finite number > 0 (at most ``high``, by default
+    :data:`~flatbody_env.physics.validation.MAX_COUNT`); the error names ``name`` and the range."""
 
     def parse(text: str) -> float:
         value = _float(name, text)
@@ -47,8 +48,9 @@ def positive_float(name: str, high: float | None = None):
     return parse
 
 
-def int_at_least(name: str, low: int = 1, high: int | None = None):
-    """argparse type: an integer in [``low``, ``high``]; the error names ``name`` and the allowed range."""
+def int_at_least(name: str, low: int = 1, high: int | None = validation.MAX_COUNT):
+    """argparse type: an integer in [``low``, ``high``] (every count has an upper bound: by default
+    :data:`~flatbody_env.physics.validation.MAX_COUNT`); the error names ``name`` and the allowed range."""
 
     def parse(text: str) -> int:
         try:
@@ -62,6 +64,21 @@ def int_at_least(name: str, low: int = 1, high: int | None = None):
 
     return parse
 
+
+
+def seed(name: str = "seed"):
+    """argparse type: a seed in [0, :data:`~flatbody_env.physics.validation.MAX_SEED`]."""
+    return int_at_least(name, 0, validation.MAX_SEED)
+
+
+def seconds(name: str):
+    """argparse type: a wall-clock budget in (0, :data:`~flatbody_env.physics.validation.MAX_SECONDS`] seconds."""
+    return positive_float(name, validation.MAX_SECONDS)
+
+
+def fixed_step(name: str = "step"):
+    """argparse type: a fixed step in [:data:`~flatbody_env.physics.validation.STEP_MIN`, 1e6] (never replaced)."""
+    return number(name, low=validation.STEP_MIN, high=validation.T_END_MAX)
 
 
 def body_constant(name: str):
@@ -164,10 +181,10 @@ def add_integration_arguments(p) -> None:
     p.add_argument("--method", default="auto", help="integrator (see 'flatbody methods') or auto (default): the fastest that meets --rtol/--atol in the chosen model")
     p.add_argument("--rtol", type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="relative tolerance (adaptive methods), in [1e-16, 1]")
     p.add_argument("--atol", type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="absolute tolerance (adaptive methods), in [1e-16, 1]")
-    p.add_argument("--step", type=positive_float("step", validation.T_END_MAX), default=None, metavar="H", help="step size (fixed-step methods)")
+    p.add_argument("--step", type=fixed_step("step"), default=None, metavar="H", help="step size (fixed-step methods), in [1e-6, 1e6]")
     p.add_argument("--model", default="auto", choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
                    help="rung of the model ladder (default auto: the lowest the scene allows)")
     p.add_argument("--max-nfev", type=int_at_least("max_nfev", 1, 10**12), default=DEFAULT_MAX_NFEV, metavar="N",
                    help=f"work budget: right-hand-side evaluations (default {DEFAULT_MAX_NFEV:.0e})")
-    p.add_argument("--max-seconds", type=positive_float("max_seconds"), default=DEFAULT_MAX_WALL_TIME, metavar="S",
-                   help=f"work budget: wall-clock seconds of the integration (default {DEFAULT_MAX_WALL_TIME:g})")
+    p.add_argument("--max-seconds", type=seconds("max_seconds"), default=DEFAULT_MAX_WALL_TIME, metavar="S",
+                   help=f"work budget: wall-clock seconds of the integration, at most 86400 (default {DEFAULT_MAX_WALL_TIME:g})")

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from flatbody_env.cli.args import int_at_least
+from flatbody_env.physics import validation
 
 
 def _cmd(args) -> int:
@@ -36,12 +37,12 @@ def _cmd(args) -> int:
 
 def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("env", help="FlatBody-v0 step rates vs Pendulum/Acrobot; batched vs CartPoleVectorEnv")
-    p.add_argument("--steps", type=int_at_least("steps", 1), default=2000, help="steps per timed block (single envs)")
-    p.add_argument("--batch", type=int_at_least("batch", 1), default=1024, help="N for the batched comparison")
-    p.add_argument("--batch-steps", type=int_at_least("batch_steps", 1), default=50, help="steps per timed block (batched CartPole: x10)")
-    p.add_argument("--episode-steps", type=int_at_least("episode_steps", 1), default=None,
+    p.add_argument("--steps", type=int_at_least("steps", 1, validation.MAX_EPISODE_STEPS), default=2000, help="steps per timed block (single envs)")
+    p.add_argument("--batch", type=int_at_least("batch", 1, validation.MAX_BATCH), default=1024, help="N for the batched comparison")
+    p.add_argument("--batch-steps", type=int_at_least("batch_steps", 1, 10_000), default=50, help="steps per timed block (batched CartPole: x10)")
+    p.add_argument("--episode-steps", type=int_at_least("episode_steps", 1, validation.MAX_EPISODE_STEPS), default=None,
                    help="episode length of the batched FlatBody timing (default: the registered 400)")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=5, help="timed blocks; the best is kept")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=5, help="timed blocks; the best is kept")
     p.add_argument("--out-dir", default="bench", help="where to write env_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the tables between <!-- bench:env --> markers in FILE.md")
     p.set_defaults(handler=_cmd)
@@ -67,8 +68,8 @@ def _targets_table(args) -> int:
 def register(sub) -> None:
     p = sub.add_parser("targets-table", help="regenerate the task's settling-rate table (default body, limits and controls)")
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
-    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2), default=71, help="grid nodes in lambda* (shipped: 71)")
-    p.add_argument("--n-aspect", type=int_at_least("n_aspect", 2), default=81, help="grid nodes in lambda*/mu* (shipped: 81)")
-    p.add_argument("--workers", type=int_at_least("workers", 1), default=2, help="processes")
+    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2, 2001), default=71, help="grid nodes in lambda* (shipped: 71)")
+    p.add_argument("--n-aspect", type=int_at_least("n_aspect", 2, 2001), default=81, help="grid nodes in lambda*/mu* (shipped: 81)")
+    p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=2, help="processes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_targets_table)

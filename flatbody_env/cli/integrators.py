@@ -26,6 +26,7 @@ from pathlib import Path
 
 from flatbody_env.answers import failure_rows
 from flatbody_env.cli.args import int_at_least, positive_float
+from flatbody_env.physics import validation
 from flatbody_env.output import atomic_open, atomic_write
 
 DEFAULT_OUT = "runs/integrators"
@@ -208,8 +209,8 @@ def _bench(args) -> int:
 def _common(p, what):
     p.add_argument("--quick", action="store_true", help=f"a short {what} (shorter horizons, fewer settings, 1 repeat)")
     p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (see 'flatbody methods'); default: a representative set")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
-    p.add_argument("--max-run-s", type=positive_float("max_run_s"), default=None, metavar="S",
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=3, help="timing repeats (minimum taken; default 3)")
+    p.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=None, metavar="S",
                    help="stop a method's sweep once one run takes (or is predicted to take) longer (default 5; 1 with --quick)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved table")
@@ -238,8 +239,8 @@ def register(sub) -> None:
 def register_bench(bsub) -> None:
     b = bsub.add_parser("integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time")
     b.add_argument("--quick", action="store_true", help="shorter horizons, one close-approach case, 1 repeat")
-    b.add_argument("--repeats", type=int_at_least("repeats", 1), default=3, help="timing repeats (minimum taken; default 3)")
-    b.add_argument("--max-run-s", type=positive_float("max_run_s"), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
+    b.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=3, help="timing repeats (minimum taken; default 3)")
+    b.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
     b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
     b.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")

@@ -10,6 +10,7 @@ Exit codes: 0 success; 1 an integration or run failed, or an output file could n
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from flatbody_env.cli import agents, analysis, bench, gpu, integrators, record, serve, simulate, sweep
@@ -21,11 +22,19 @@ inside their handlers so that ``flatbody --help`` stays fast."""
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (exit code 2)."""
+    """argparse with one-line errors (exit code 2); negative numbers in any spelling (``-2``, ``-.5``,
+    ``-2e0``, ``-1E-3``) are values, not flags."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str) -> None:  # type: ignore[override]
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise SystemExit(2)
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
 def build_parser() -> Parser:
@@ -55,6 +64,10 @@ def main(argv: list[str] | None = None) -> int:
     what was kept, when the command says so) and exit code 130, no traceback. Commands keep their
     partial results themselves (a sweep's stored rows, training's checkpoint).
     """
+    import os
+
+    # rerun's Rust log lines (e.g. a file sink's failed write) would add lines to the one-line errors below
+    os.environ.setdefault("RUST_LOG", "off")
     try:
         from flatbody_env.integrators import IntegrationError
 
@@ -80,6 +93,29 @@ def main(argv: list[str] | None = None) -> int:
         where = f" {exc.filename!r}" if getattr(exc, "filename", None) else ""
         sys.stderr.write(f"flatbody: I/O error{where}: {_one_line(exc.strerror or exc)}\n")
         return 1
+    except MemoryError:
+        sys.stderr.write("flatbody: out of memory (use smaller sizes; docs/reliability.md lists the bounds)\n")
+        return 1
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        import os
+        import sqlite3
+
+        if os.environ.get("FLATBODY_DEBUG"):
+            raise
+        if isinstance(exc, sqlite3.Error) or _writer_failure(exc):
+            # a database or a recording's file writer failed (disk full, I/O error): what was stored is kept
+            what = "the database" if isinstance(exc, sqlite3.Error) else "the recording (disk full or file too large?)"
+            sys.stderr.write(f"flatbody: I/O error writing {what}: {_one_line(exc)}\n")
+            return 1
+        sys.stderr.write(f"flatbody: internal error ({type(exc).__name__}: {_one_line(exc)}); "
+                         "set FLATBODY_DEBUG=1 for the traceback and please report it\n")
+        return 1
+
+
+def _writer_failure(exc: BaseException) -> bool:
+    """rerun's file sink reports a failed write (disk full, file too large) as a RuntimeError."""
+    text = str(exc)
+    return isinstance(exc, RuntimeError) and any(k in text for k in ("File-writer", "Failed to write", "sink", "os error"))
 
 
 def _one_line(exc) -> str:

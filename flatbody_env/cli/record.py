@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
+from flatbody_env.physics import validation
 from flatbody_env.physics.validation import MAX_SAMPLES
 from flatbody_env.output import atomic_write, save_figure
 
@@ -75,6 +76,9 @@ def _record_agent(args) -> int:
         raise ValueError("agent: --agent records an environment episode; give no scene")
     from agents.demo import format_demo, rollout
     from agents.evaluate import Agent
+    from agents.numpy_policy import require_trust
+
+    require_trust(not args.trust)  # pickles only from trusted folders (docs/reliability.md, Trust model)
 
     agent = Agent(args.agent or None)
     ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
@@ -463,28 +467,29 @@ def register(sub) -> None:
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
     p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
-    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
     p.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
                    help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=7, help="with --agent: the episode's seed (default 7)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="with --agent: the episode's seed (default 7)")
+    p.add_argument("--trust", action="store_true", help="with --agent: allow unpickling a model from outside the shipped agent and your own runs")
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
     p.add_argument("--env-id", default="FlatBody-v0", help="gymnasium id (default FlatBody-v0)")
-    p.add_argument("--episodes", type=int_at_least("episodes"), default=1, metavar="N", help="episodes to run (default 1)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=1, metavar="N", help="episodes to run (default 1)")
     p.add_argument("--policy", choices=("zero", "random"), default="zero", help="actions: zero control or uniform random (default zero)")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="seed of the first episode (then seed+1, ...)")
-    p.add_argument("--max-steps", type=int_at_least("max_steps"), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
-    p.add_argument("--tensor-every", type=int_at_least("tensor_every"), default=1, metavar="K", help="log the G and C tensor views every K steps")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of the first episode (then seed+1, ...)")
+    p.add_argument("--max-steps", type=int_at_least("max_steps", 1, validation.MAX_EPISODE_STEPS), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
+    p.add_argument("--tensor-every", type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES), default=1, metavar="K", help="log the G and C tensor views every K steps")
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="episode 0's file; episode k ≥ 1 goes to RUN-k.rrd ({episode} in the name formats it)")
     p.add_argument("--verify", action="store_true", help="check each file with 'rerun rrd verify'")
     p.set_defaults(handler=_record_env)
 
     p = sub.add_parser("record-info", help="read a recording back offline and summarize it (entities, rows, first values)")
     p.add_argument("file", metavar="RUN.rrd")
-    p.add_argument("--rows", type=int_at_least("rows"), default=3, help="values shown per series (default 3)")
+    p.add_argument("--rows", type=int_at_least("rows", 1, validation.MAX_SAMPLES), default=3, help="values shown per series (default 3)")
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
@@ -495,21 +500,21 @@ def register(sub) -> None:
     p.add_argument("--size", type=_size, default=(1600, 1000), metavar="WxH", help="window size (default 1600x1000)")
     p.add_argument("--views", action="store_true", help="also save each visible view on its own")
     p.add_argument("--prefix", default=None, help="file-name prefix (default: the recording's stem)")
-    p.add_argument("--colors", type=int_at_least("colors", 0), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
+    p.add_argument("--colors", type=int_at_least("colors", 0, 256), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
     p.set_defaults(handler=_record_shots)
 
 
 
 def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000) and to draw an rgb_array frame (budget 1 ms)")
-    p.add_argument("--steps", type=int_at_least("steps", 2), default=10000, help="the size judged against the 1 s budget (default 10000)")
+    p.add_argument("--steps", type=int_at_least("steps", 2, validation.MAX_EPISODE_STEPS), default=10000, help="the size judged against the 1 s budget (default 10000)")
     p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
-    p.add_argument("--repeats", type=int_at_least("repeats"), default=5, help="runs per size (median reported; default 5)")
-    p.add_argument("--block", type=int_at_least("block"), default=256, help="block size of the live-recorder measurement")
-    p.add_argument("--frames", type=int_at_least("frames", 2), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=5, help="runs per size (median reported; default 5)")
+    p.add_argument("--block", type=int_at_least("block", 1, validation.MAX_SAMPLES), default=256, help="block size of the live-recorder measurement")
+    p.add_argument("--frames", type=int_at_least("frames", 2, validation.MAX_SAMPLES), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
     p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
-    p.add_argument("--episode-repeats", type=int_at_least("episode_repeats"), default=3,
+    p.add_argument("--episode-repeats", type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS), default=3,
                    help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)")
     p.add_argument("--docs", metavar="FILE.md", help="also regenerate the table between <!-- bench:recording --> markers in FILE.md")
     p.set_defaults(handler=_record_bench)

@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from flatbody_env.cli.args import float_range, int_at_least, positive_float
+from flatbody_env.physics import validation
 
 
 def _run(args, spec) -> int:
@@ -156,6 +157,9 @@ def _seeds(args) -> int:
             "n_envs": args.n_envs, "overrides": list(args.hyperparams or []),
             "hyperparams_file": None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()),
             "episodes": args.episodes, "eval_seed": args.eval_seed}
+    from agents.numpy_policy import remember_run
+
+    remember_run(args.out)  # the seeds' run folders are this user's own: their models load without --trust
     return _run(args, spec)
 
 
@@ -242,7 +246,7 @@ def _bench_sweep(args) -> int:
 def _engine_arguments(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (results.sqlite, tables, models)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int_at_least("workers", 0), default=1, metavar="N",
+    g.add_argument("--workers", type=int_at_least("workers", 0, validation.MAX_WORKERS), default=1, metavar="N",
                    help="embedded Dask cluster: N local worker processes (1: in this process; 0: no Dask); default 1")
     g.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://HOST:8786")
     p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: run only the tasks without a result")
@@ -261,8 +265,8 @@ def register(sub) -> None:
     add_body_arguments(p)
     p.add_argument("--lam-range", type=float_range("--lam-range"), default=(1.02, 3.0), metavar="LO,HI", help="lambda range (default 1.02,3)")
     p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.3, 3.0), metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
-    p.add_argument("--grid", type=int, default=30, metavar="N", help="grid points per axis (default 30; any size)")
-    p.add_argument("--chunk", type=int_at_least("chunk", 1), default=None, metavar="ROWS",
+    p.add_argument("--grid", type=int_at_least("grid", *validation.SWEEP_GRID_RANGE), default=30, metavar="N", help="grid points per axis, in [4, 20000] (default 30)")
+    p.add_argument("--chunk", type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]), default=None, metavar="ROWS",
                    help="lambda rows per task (default: about 512 grid points per task, at least one row)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
     _engine_arguments(p)
@@ -272,8 +276,8 @@ def register(sub) -> None:
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
     p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (default: the study's set)")
     p.add_argument("--quick", action="store_true", help="fewer cases per axis")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1), default=1, help="timing repeats (default 1)")
-    p.add_argument("--max-run-s", type=positive_float("max_run_s"), default=None, metavar="S",
+    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="timing repeats (default 1)")
+    p.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=None, metavar="S",
                    help="stop a method's axis once one run takes longer (default 5; 1 with --quick)")
     _engine_arguments(p)
     p.set_defaults(handler=_failure_study)
@@ -284,8 +288,8 @@ def register(sub) -> None:
     p.add_argument("--bodies", nargs="+", metavar="BODY", help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags")
     p.add_argument("--vary", nargs="+", default=["s3"], metavar="PARAM", help="parameters to vary (s3, p_theta or a constant); default s3")
     p.add_argument("--ranges", nargs="+", type=float_range("--ranges", low=-1e6, high=1e6), default=[(0.05, 4.0)], metavar="LO,HI", help="parameter ranges (default 0.05,4)")
-    p.add_argument("--seeds", type=int, default=5, help="parameter values at which all solutions are sought (default 5)")
-    p.add_argument("--step", type=positive_float("step"), default=None, help="largest continuation step (default range/60)")
+    p.add_argument("--seeds", type=int_at_least("seeds", 2, 200), default=5, help="parameter values at which all solutions are sought (default 5)")
+    p.add_argument("--step", type=positive_float("step", validation.STRETCH_RANGE[1]), default=None, help="largest continuation step (default range/60)")
     _engine_arguments(p)
     p.set_defaults(handler=_family)
 
@@ -294,12 +298,12 @@ def register(sub) -> None:
     p = kinds.add_parser("seeds", help="train and evaluate one configuration over many seeds (one task per seed)")
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
     p.add_argument("--seeds", default="0-7", metavar="RANGE", help="seeds, e.g. 0-7 or 0,3,5 (default 0-7)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=None, metavar="N", help="steps per seed (default: the YAML's)")
-    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=None, metavar="N", help="steps per seed (default: the YAML's)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1), default=100, metavar="N", help="evaluation episodes per seed (default 100)")
-    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0), default=10_000, metavar="S",
+    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="evaluation episodes per seed (default 100)")
+    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0, validation.MAX_SEED), default=10_000, metavar="S",
                    help="evaluation episode i is reset with seed S + i (default 10000, held apart from training)")
     _engine_arguments(p)
     p.set_defaults(handler=_seeds)
@@ -311,19 +315,19 @@ def register(sub) -> None:
 
     p = sub.add_parser("tune", help="Optuna hyperparameter search (TPE sampler, median pruner) over the YAML hyperparameters")
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
-    p.add_argument("--trials", type=int_at_least("trials", 1), default=20, metavar="N", help="trials in the study, over all workers (default 20)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1), default=20_000, metavar="N", help="training steps per trial (default 20000)")
-    p.add_argument("--evaluations", type=int_at_least("evaluations", 1), default=4, metavar="N", help="intermediate evaluations per trial (pruning points; default 4)")
-    p.add_argument("--eval-episodes", type=int_at_least("eval_episodes", 1), default=20, metavar="N", help="episodes per evaluation (default 20)")
-    p.add_argument("--n-envs", type=int_at_least("n_envs", 1), default=None, metavar="N", help="parallel bodies while training (default: the YAML's)")
-    p.add_argument("--seed", type=int_at_least("seed", 0), default=0, help="training seed of every trial (default 0)")
+    p.add_argument("--trials", type=int_at_least("trials", 1, validation.MAX_REPEATS), default=20, metavar="N", help="trials in the study, over all workers (default 20)")
+    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=20_000, metavar="N", help="training steps per trial (default 20000)")
+    p.add_argument("--evaluations", type=int_at_least("evaluations", 1, validation.MAX_REPEATS), default=4, metavar="N", help="intermediate evaluations per trial (pruning points; default 4)")
+    p.add_argument("--eval-episodes", type=int_at_least("eval_episodes", 1, validation.MAX_EPISODES), default=20, metavar="N", help="episodes per evaluation (default 20)")
+    p.add_argument("--n-envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies while training (default: the YAML's)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="training seed of every trial (default 0)")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="fixed overrides of YAML entries")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--search-file", metavar="FILE", help="search space (default: agents/hyperparams/ALGO_search.yml)")
-    p.add_argument("--storage", metavar="URL", help="journal file or database URL, e.g. postgresql://USER@HOST/DB (default runs/tune/optuna-journal.log)")
+    p.add_argument("--storage", metavar="URL", help="journal file or database URL, e.g. postgresql://USER@HOST/DB (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)")
     p.add_argument("--study", metavar="NAME", help="study name (default ALGO-FlatBody-v0); workers of one study share it")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int_at_least("workers", 1), default=1, metavar="N", help="local worker processes sharing the study (default 1)")
+    g.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=1, metavar="N", help="local worker processes sharing the study (default 1)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="one search worker per worker of a running Dask scheduler (the storage: a database URL, or a journal file all of them see)")
     p.add_argument("--out", default="runs/tune", metavar="DIR", help="folder of the trials' runs (default runs/tune)")
     p.add_argument("--json", action="store_true", help="print the study's trials as JSON")
@@ -332,12 +336,12 @@ def register(sub) -> None:
 
 def register_bench(bsub) -> None:
     b = bsub.add_parser("sweep", help="sweep scaling: speed-up over workers, scheduler overhead per task, extrapolation to 8/32/128 workers")
-    b.add_argument("--grid", type=int_at_least("grid", 4), default=48, metavar="N", help="stability-map grid per axis (default 48)")
-    b.add_argument("--chunk", type=int_at_least("chunk", 1), default=2, metavar="ROWS", help="lambda rows per task (default 2)")
-    b.add_argument("--workers", type=int_at_least("workers", 1), nargs="+", default=[1, 2], metavar="N", help="local worker counts (default 1 2)")
-    b.add_argument("--sim-workers", type=int_at_least("sim_workers", 1), default=4, metavar="N",
+    b.add_argument("--grid", type=int_at_least("grid", 4, validation.SWEEP_GRID_RANGE[1]), default=48, metavar="N", help="stability-map grid per axis (default 48)")
+    b.add_argument("--chunk", type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]), default=2, metavar="ROWS", help="lambda rows per task (default 2)")
+    b.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), nargs="+", default=[1, 2], metavar="N", help="local worker counts (default 1 2)")
+    b.add_argument("--sim-workers", type=int_at_least("sim_workers", 1, validation.MAX_WORKERS), default=4, metavar="N",
                    help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)")
-    b.add_argument("--noop-tasks", type=int_at_least("noop_tasks", 10), default=400, metavar="N", help="empty tasks timing the scheduler overhead (default 400)")
+    b.add_argument("--noop-tasks", type=int_at_least("noop_tasks", 10, 1_000_000), default=400, metavar="N", help="empty tasks timing the scheduler overhead (default 400)")
     b.add_argument("--out", default="runs/sweep-bench", metavar="DIR", help="output folder (default runs/sweep-bench)")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
     b.set_defaults(handler=_bench_sweep)

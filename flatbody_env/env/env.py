@@ -28,6 +28,7 @@ from flatbody_env.env.task import (
 )
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.integrators.steppers import make_env_step
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body, default_body
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
 from flatbody_env.physics.potentials import KIND_CUSTOM
@@ -201,22 +202,34 @@ class FlatBodyEnv(gym.Env):
         (:meth:`energy_left_out`); None for a built-in potential."""
         if not self.body.inertia.is_isotropic:
             raise ValueError("body: the task's stationary ellipses need J1 = J2 (isotropic in the plane)")
-        for name, value in (("dt", dt), ("torque_limit", torque_limit), ("force_limit", force_limit), ("momentum_bound", momentum_bound)):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name}: must be a finite number > 0, got {value!r}")
-        for name, (lo, hi) in (("stretch_bounds", stretch_bounds), ("rho_bounds", rho_bounds)):
-            if not (0 < lo < hi and math.isfinite(hi)):
+        for name, value in (("torque_limit", torque_limit), ("force_limit", force_limit), ("momentum_bound", momentum_bound)):
+            validation.number(name, value, low=validation.PARAM_RANGE[0], high=validation.MOMENTUM_MAX)
+        for name, pair in (("stretch_bounds", stretch_bounds), ("rho_bounds", rho_bounds)):
+            if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
+                raise ValueError(f"{name}: must be (lo, hi) with 0 < lo < hi <= {validation.STRETCH_RANGE[1]:g}, got {pair!r:.60}")
+            lo, hi = (validation.number(f"{name}[{i}]", x, low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1]) for i, x in enumerate(pair))
+            if not lo < hi:
                 raise ValueError(f"{name}: must be (lo, hi) with 0 < lo < hi, got {(lo, hi)!r}")
+        validation.number("gap_min", gap_min, low=0.0, high=0.5)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode: must be None or 'rgb_array', got {render_mode!r}")
-        self.dt = float(dt)
+        self.dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
+        if not isinstance(integrator, str):
+            raise ValueError(f"integrator: must be a method name (see 'flatbody methods'), got {integrator!r:.60}")
         self.integrator = integrator
         info = get_method(integrator).info  # ValueError for an unknown name
         self.render_mode = render_mode
         self.track_rotation = bool(track_rotation or render_mode is not None)
         if not info.adaptive and step is None:
             step = self.dt  # one fixed step per env step unless step= asks for sub-steps
-        self.tolerances = Tolerances(rtol=rtol, atol=atol, step=step)
+        if step is not None:  # bounded work: a floor (never replaced) and at most ENV_MAX_SUBSTEPS sub-steps per env step
+            step = validation.fixed_step("step", step, high=self.dt)
+            if math.ceil(self.dt / step) > validation.ENV_MAX_SUBSTEPS:
+                raise ValueError(f"step: at most {validation.ENV_MAX_SUBSTEPS} sub-steps per env step (step >= dt / "
+                                 f"{validation.ENV_MAX_SUBSTEPS} = {self.dt / validation.ENV_MAX_SUBSTEPS:g}), got step = {step!r}")
+        # the per-step budget (docs/reliability.md): every env step stops within these
+        self.tolerances = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=validation.ENV_STEP_MAX_NFEV,
+                                     max_wall_time=validation.ENV_STEP_MAX_SECONDS)
         # adaptive methods: the first step guessed as one whole env step (accepted in one step at
         # the default tolerance; rejected and halved where needed)
         first_step = 0.0 if not info.adaptive else self.dt
@@ -226,7 +239,8 @@ class FlatBodyEnv(gym.Env):
             if not self.track_rotation:
                 raise
             # methods that do not carry R: drawing/recording integrates with the reference (info names it)
-            self.stepper = make_env_step(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol), with_rotation=True)
+            self.stepper = make_env_step(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol, max_nfev=validation.ENV_STEP_MAX_NFEV,
+                                                                                    max_wall_time=validation.ENV_STEP_MAX_SECONDS), with_rotation=True)
         self.limits = np.array([torque_limit, torque_limit, torque_limit, force_limit])
         self.stretch_bounds = (float(stretch_bounds[0]), float(stretch_bounds[1]))
         self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
@@ -262,7 +276,8 @@ class FlatBodyEnv(gym.Env):
         self._sc = np.empty(4)
         self._vel = np.empty(7)
         self._force = np.empty(4)
-        self._counters = np.zeros(3, np.int64)
+        self._counters = np.zeros(4, np.int64)  # [nfev, steps, rejected, nfev budget of one env step (compiled DOP853)]
+        self._counters[3] = validation.ENV_STEP_MAX_NFEV
         self._Rnew = np.eye(3)
 
         self._y = np.zeros(STATE_SIZE)
@@ -509,7 +524,7 @@ class FlatBodyEnv(gym.Env):
         k = self.kernels
         self._set_controls(action)
         y = self._y
-        self._counters[:] = 0
+        self._counters[:3] = 0
         st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)
         obs = np.empty(self.observation_size, dtype=np.float32)
         terms = self._terms

@@ -6,7 +6,7 @@ reward terms and the scalars of ``info`` — by calling the task's kernels
 (:func:`~flatbody_env.env.task.domain_code`, :func:`~flatbody_env.env.task.score_kernel`,
 :func:`~flatbody_env.env.task.observe_kernel`, where each formula lives) and the energy H of
 eq. (41) of the paper. No numpy allocation, so the same code runs in Python (generic integrators)
-and, through :func:`flatbody_env.integrators.jit.jit_copy`, compiled (single body; and
+and, through :func:`flatbody_env.integrators.jit.retarget`, compiled (single body; and
 :func:`post_step_lanes`, the same decisions and formulas over N bodies in loops numba vectorises).
 :func:`controls_batch` is the one place where actions (one or N) are clipped and scaled into the
 controls u = (τ1, τ2, τ3, f_ϱ).

@@ -61,7 +61,7 @@ Success: the distance d = ‖(Δλ, Δμ, Δϱ, Δs3, ω1, ω2, p_λ, p_μ, p_ϱ
 Observation, scoring and termination as kernels
 -----------------------------------------------
 Each formula is written once, as a plain-float function of this module that numba compiles
-unchanged (:func:`flatbody_env.integrators.jit.jit_copy`, see :mod:`flatbody_env.env.compiled`):
+unchanged (:func:`flatbody_env.integrators.jit.retarget`, see :mod:`flatbody_env.env.compiled`):
 :func:`omega12_kernel` (ω1, ω2), :func:`score_kernel` (reward terms and distance),
 :func:`observe_kernel` (the observation) and :func:`domain_code` (termination by leaving the
 domain). ``omega12_kernel`` and ``score_kernel`` use arithmetic and numpy ufuncs only, so the same

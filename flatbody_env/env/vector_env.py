@@ -103,10 +103,10 @@ class FlatBodyVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = 1, **kwargs: Any) -> None:
-        if not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs: must be an integer >= 1, got {num_envs!r}")
-        if not isinstance(max_episode_steps, int) or max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps: must be an integer >= 1, got {max_episode_steps!r}")
+        from flatbody_env.physics import validation
+
+        num_envs = validation.count("num_envs", num_envs, high=validation.MAX_BATCH)  # bounded before any allocation
+        max_episode_steps = validation.count("max_episode_steps", max_episode_steps, high=validation.MAX_EPISODE_STEPS)
         try:
             mode = AutoresetMode(autoreset_mode)
         except ValueError:

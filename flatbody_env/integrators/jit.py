@@ -8,7 +8,9 @@ kernel is compiled here by :func:`retarget`: the same code object (the physics m
 with every function it calls re-bound to its compiled copy, recursively
 (``types.FunctionType(f.__code__, {**f.__globals__, **compiled_callees})``). No formula is restated
 here. The same :func:`retarget` clones the stepping code for the 20-entry state that carries R
-(:mod:`.rotation_kernels`) and the fused batch's block sizes (:mod:`.batch_kernels`).
+(:mod:`.rotation_kernels`), the fused batch's block sizes (:mod:`.batch_kernels`) and the ladder's
+sub-systems (:mod:`.ladder_kernels`), compiles the env's kernels (:mod:`flatbody_env.env.compiled`)
+and, on its CUDA :class:`Target`, the device functions (:mod:`.cuda`).
 
 The on-disk cache (:func:`njit`): numba keys a function by its file, line and bytecode and checks
 its own file's time stamp; :func:`code_digest` adds the constants, the numeric globals and,
@@ -183,13 +185,6 @@ def _compile_cpu(clone):
     return njit(clone)
 
 
-def jit_copy(func, **callees):
-    """A compiled copy (:func:`njit`) of the plain-Python ``func`` with the globals ``callees`` replaced,
-    only those; named after its :func:`code_digest`. The CPU target's compile step of :func:`retarget`,
-    which finds the callees itself (recursively)."""
-    return _compile_cpu(_clone(func, callees))
-
-
 @dataclass(frozen=True)
 class Target:
     """Where :func:`retarget` compiles: ``compile`` turns a re-bound plain-Python function into the
@@ -281,5 +276,5 @@ def energy_kernel(y, P, vel, force):
     return kinetic_kernel(y, P, vel, force) + v
 
 
-__all__ = ["CACHE", "CACHE_DIR", "CPU", "JIT_OPTIONS", "Target", "cache_location", "code_digest", "jit_copy", "njit", "rebound", "retarget", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
+__all__ = ["CACHE", "CACHE_DIR", "CPU", "JIT_OPTIONS", "Target", "cache_location", "code_digest", "njit", "rebound", "retarget", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
            "rhs_core", "rhs_kernel", "rotation_rate_kernel", "rhs_rotation_kernel", "turn_rotation_kernel", "energy_kernel"]

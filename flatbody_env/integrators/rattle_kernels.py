@@ -20,14 +20,26 @@ conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage compos
 Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (docs/physics.md §7):
 F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
 V_ϱ′ comes from :func:`flatbody_env.physics.potentials.potential_kernel` (in-plane kind 0); the invariant
-gradient (V_tr, V_det) from :func:`invariant_gradient_kernel`, the compiled twin of the potentials'
-``invariant_gradient`` methods (V1; V2 with c = d; V3 — tested against them). V2 with c ≠ d
-is no function of the invariants (erratum E9) and is refused by the method layer.
+gradient (V_tr, V_det) from :func:`invariant_gradient_kernel` (V1; V2 with c = d; V3 — tested against
+the potentials' ``invariant_gradient`` methods). V2 with c ≠ d is no function of the invariants
+(erratum E9) and is refused by the method layer.
+
+What is stated here and not called from the physics layer, and why: the physics layer states the
+regular formulation as numpy code on a :class:`~flatbody_env.physics.body.Body`
+(:mod:`flatbody_env.physics.regular`: ``_in_plane_gradient``, ``regular_energy``, the multiplier
+system of ``regular_rhs``) and (V_tr, V_det) as methods of the potential dataclasses, none of them a
+plain-float kernel that :func:`~.jit.retarget` can compile; :func:`forces`, :func:`stretches`,
+:func:`regular_energy_kernel`, :func:`invariant_gradient_kernel` and the multiplier solve in
+:func:`rattle_step` are their allocation-free forms on q (9,) (plain-float kernels in the physics
+layer, called by its numpy forms, would let this module call them instead). The only physics kernel
+that exists for them, :func:`~flatbody_env.physics.potentials.potential_kernel`, is called.
 
 Chart following. The paper's state needs the two-polar decomposition Φ = R D U(θ)⁻¹ chosen by
-continuity (docs/physics.md §7). :func:`decompose_kernel` is a compiled twin of
-:func:`flatbody_env.physics.kinematics.decompose` for the Kirchhoff–Love Φ (closed-form 2×2 eigen-
-decomposition of φᵀφ; the four discrete candidates; ``keep_order``). After every step the
+continuity (docs/physics.md §7). :func:`decompose_kernel` continues it for the Kirchhoff–Love Φ by the
+rule of :func:`flatbody_env.physics.kinematics.decompose` (the four discrete candidates, the nearest to
+the reference, ``keep_order``) but by a different algorithm, on purpose: the closed-form 2×2
+eigen-decomposition of φᵀφ instead of LAPACK's SVD, allocation-free and never raising inside the step
+loop; the two agree to round-off, not bit for bit. After every step the
 decomposition is continued from the previous one; when the chart frame jumps by more than
 :data:`~flatbody_env.physics.regular.MAX_CHART_JUMP` (near λ = μ it turns by ±π/2 within a tiny time) the
 step is re-walked on the cubic Hermite interpolant of Φ with adaptive sub-intervals. At output
@@ -220,7 +232,8 @@ def composed_step(z, h, coeffs, P, f_rho, F, qt, Fn):
 # --------------------------------------------------------------------------------------------- chart
 @njit
 def decompose_kernel(Phi9, ref, keep_order, out):
-    """Compiled twin of :func:`flatbody_env.physics.kinematics.decompose` with a reference.
+    """:func:`flatbody_env.physics.kinematics.decompose` with a reference, in closed form (module docstring: not
+    the SVD, so equal to it to round-off only).
 
     Phi9: q (9,) = (φ1, φ2, ψ); ref, out (13,) = (R row-major (9), λ, μ, ϱ, θ). The candidate
     nearest ``ref`` (score ‖R − R_ref‖_F + |θ − θ_ref| + |λ − λ_ref| + |μ − μ_ref|) among the

@@ -21,8 +21,12 @@ s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ, θ            within ± :data:`MOMENTUM_MAX`
 t_end                                       (0, :data:`T_END_MAX`] = (0, 1e6]
 output times (``times=``, ``--samples``)     at most :data:`MAX_SAMPLES` = 100 000
 rtol, atol                                  :data:`TOL_RANGE` = [1e-16, 1]
-fixed step h                                (0, :data:`T_END_MAX`]
+fixed step h                                [:data:`STEP_MIN`, :data:`T_END_MAX`] = [1e-6, 1e6]
 ==========================================  ==========================================
+
+Sizes, counts and budgets (env ``dt``, sub-steps, batch sizes, workers, episodes, seeds, grids,
+wall-clock seconds) have the upper bounds of the constants below (``STEP_MIN`` … ``MAX_SECONDS``),
+checked before any allocation or loop.
 """
 
 from __future__ import annotations
@@ -49,6 +53,61 @@ TOL_RANGE = (1e-16, 1.0)
 """Allowed range of rtol and atol."""
 MAX_JSON_BYTES = 256 * 1024 * 1024
 """Largest JSON file :func:`read_json` reads (a trajectory of :data:`MAX_SAMPLES` rows is ~40 MB)."""
+
+# --- bounded work: every size, count and step a user can give (docs/reliability.md, "Bounded work") ---
+STEP_MIN = 1e-6
+"""Smallest fixed step h (``step=``, ``--step``): a smaller step is refused, never replaced."""
+ENV_DT_RANGE = (1e-4, 1.0)
+"""Allowed env step ``dt`` of ``FlatBody-v0`` (default 0.05)."""
+ENV_MAX_SUBSTEPS = 100_000
+"""Most fixed sub-steps ⌈dt/step⌉ in one env step."""
+ENV_STEP_MAX_SECONDS = 10.0
+"""Per-env-step wall-clock budget (``max_wall_time`` of the env's integrator)."""
+ENV_STEP_MAX_NFEV = 1_000_000
+"""Per-env-step budget of right-hand-side evaluations (``max_nfev`` of the env's integrator)."""
+MAX_EPISODE_STEPS = 1_000_000
+"""Largest ``max_episode_steps`` (vector env, ``--max-steps``, ``--episode-steps``)."""
+MAX_BATCH = 65_536
+"""Most bodies in one batch or vector env (``num_envs``, ``--batch``, ``--n-envs``)."""
+MAX_WORKERS = 256
+"""Most worker processes or threads a command starts (``--workers``, ``--threads``)."""
+MAX_EPISODES = 100_000
+"""Most episodes one command runs (``--episodes``, ``--eval-episodes``)."""
+MAX_TIMESTEPS = 1_000_000_000
+"""Most environment steps of one training run or benchmark (``--n-timesteps``, ``--timesteps``, ``--steps``)."""
+MAX_REPEATS = 1_000
+"""Most timing repeats or trials (``--repeats``, ``--trials``, ``--evaluations``)."""
+MAX_SEED = 2**32 - 1
+"""Largest seed (numpy's)."""
+MAX_COUNT = 10**9
+"""Upper bound of any other count a user can give (the default of :func:`count`)."""
+MAX_SECONDS = 86_400.0
+"""Largest wall-clock budget in seconds (``max_wall_time``, ``--max-seconds``, ``--max-run-s``)."""
+SWEEP_GRID_RANGE = (4, 20_000)
+"""Grid points per axis of ``flatbody sweep stability-map`` (:data:`flatbody_env.sweep.tasks.MAX_GRID`; rows are stored in chunks)."""
+
+
+def count(where: str, value: Any, *, low: int = 1, high: int = MAX_COUNT) -> int:
+    """``value`` as an ``int`` in [low, high] — every size and count a user can give has an upper
+    bound, checked before any allocation or loop (``ValueError`` naming ``where`` and the range)."""
+    return integer(where, value, low=low, high=high)
+
+
+def fixed_step(where: str, value: Any, *, high: float = T_END_MAX) -> float:
+    """A fixed step h in [:data:`STEP_MIN`, ``high``]; a smaller step is an error, never replaced."""
+    return number(where, value, low=STEP_MIN, high=high)
+
+
+def finite_result(where: str, values: Mapping[str, Any]) -> None:
+    """Refuse a result holding NaN or ±inf: ``ValueError`` naming ``where``, the first quantity and why
+    (no silent non-finite numbers in an output)."""
+    for name, value in values.items():
+        if value is None:
+            continue
+        arr = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{where}.{name}: not finite on this input (NaN or infinity; e.g. at a singular state such as "
+                             "lambda = mu or lambda = 0), so it is not reported")
 
 
 def number(where: str, value: Any, *, positive: bool = False, low: float | None = None, high: float | None = None) -> float:
@@ -197,6 +256,50 @@ def read_json(where: str, path: Any) -> Any:
     return parse_json(f"{where} ({p})", data)
 
 
+def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
+    """Check a SQLite database a command is about to open (and write): it is missing or empty (a
+    new one will be made), or a regular file holding an intact SQLite database with ``tables``.
+    A directory, a special file, a corrupt file or another program's (foreign) database raises
+    ``ValueError`` naming ``where`` — nothing is written to it."""
+    import os
+    import sqlite3
+    import stat
+    from pathlib import Path
+
+    p = Path(path)
+    try:
+        info = p.stat()
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot open {str(p)!r} ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise ValueError(f"{where}: {str(p)!r} is a directory, not a database file (move it away)")
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{where}: {str(p)!r} is not a regular file")
+    if info.st_size == 0:
+        return
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(16)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
+    if head != b"SQLite format 3\x00":
+        raise ValueError(f"{where}: {str(p)!r} is not an SQLite database (corrupt or another kind of file; move it away)")
+    try:
+        db = sqlite3.connect(f"file:{os.fspath(p.resolve())}?mode=ro", uri=True, timeout=30.0)
+        try:
+            have = {name for (name,) in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            db.execute("PRAGMA quick_check(1)").fetchone()
+        finally:
+            db.close()
+    except sqlite3.Error as exc:
+        raise ValueError(f"{where}: {str(p)!r} is a damaged SQLite database ({_short(str(exc))}; move it away)") from None
+    missing = sorted(set(tables) - have)
+    if missing:
+        raise ValueError(f"{where}: {str(p)!r} is another program's SQLite database (no table {missing[0]!r}); move it away or choose another folder")
+
+
 def _range_text(positive: bool, low: float | None, high: float | None) -> str:
     if low is not None or high is not None:
         lo = "-inf" if low is None else f"{low:g}"
@@ -213,5 +316,8 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["MAX_JSON_BYTES", "MAX_SAMPLES", "MOMENTUM_MAX", "PARAM_RANGE", "STRETCH_RANGE", "TOL_RANGE", "T_END_MAX", "float_array",
+__all__ = ["ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "MAX_BATCH", "MAX_COUNT", "MAX_EPISODES",
+           "MAX_EPISODE_STEPS", "MAX_REPEATS", "MAX_SECONDS", "MAX_SEED", "MAX_TIMESTEPS", "MAX_WORKERS", "STEP_MIN", "SWEEP_GRID_RANGE",
+           "count", "finite_result", "fixed_step", "sqlite_file",
+           "MAX_JSON_BYTES", "MAX_SAMPLES", "MOMENTUM_MAX", "PARAM_RANGE", "STRETCH_RANGE", "TOL_RANGE", "T_END_MAX", "float_array",
            "integer", "keys", "mapping", "number", "parse_json", "read_json", "string"]

@@ -18,6 +18,10 @@ from typing import Any
 
 from flatbody_env.service.limits import DEFAULT_LIMITS, LimitExceeded, Limits, check_integration_cost
 
+LIMITS = DEFAULT_LIMITS.with_environment()
+"""The limits of this process: the defaults with any ``FLATBODY_LIMIT_<NAME>`` variable applied (worker processes
+inherit the service's environment)."""
+
 
 def _prefixed(where: str, exc: ValueError) -> ValueError:
     return ValueError(f"{where}.{exc}" if not str(exc).startswith(where) else str(exc))
@@ -76,11 +80,12 @@ def stability(p: Mapping[str, Any]) -> dict[str, Any]:
     return stability_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
 
 
-def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None = None, limits: Limits = DEFAULT_LIMITS):
+def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None = None, limits: Limits | None = None):
     """The :class:`~flatbody_env.simulation.Trajectory` of ``flatbody simulate`` for request ``p``,
     after checking its cost against ``limits`` (request or job limits)."""
     from flatbody_env.answers import simulate_trajectory
 
+    limits = limits or LIMITS
     scene = build_scene(p["scene"])
     t_end = p.get("t_end") or scene.t_end
     times = p.get("times")
@@ -169,7 +174,7 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
             t_end = params.get("t_end") or scene.t_end
             times = params.get("times")
             samples = len(times) if times else (params.get("samples") or 101)
-            check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True)
+            check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True, limits=LIMITS)
             from flatbody_env.integrators import get_method
 
             if params["method"] != "auto":
@@ -181,6 +186,29 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
     return {}
 
 
+def invariants_json(body: bytes) -> dict[str, Any]:
+    """``POST /invariants`` from its raw body: parsed and checked here (a worker process), not in the event loop."""
+    from pydantic import ValidationError
+
+    from flatbody_env.service.models import TrajectoryRequest, describe_errors
+
+    try:
+        request = TrajectoryRequest.model_validate_json(body)
+    except ValidationError as exc:
+        raise RequestInvalid(describe_errors(exc.errors(include_url=False), where="other")) from None
+    payload = request.trajectory()
+    payload["body"] = request.body.as_data() if request.body is not None else None
+    return invariants(payload)
+
+
+class RequestInvalid(ValueError):
+    """A request body that breaks its model (checked in a worker process): ``data`` is the error answer."""
+
+    def __init__(self, data: dict[str, Any]) -> None:
+        super().__init__(data["detail"])
+        self.data = data
+
+
 ANSWERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
     "scenes": scenes,
     "methods": methods,
@@ -189,6 +217,7 @@ ANSWERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
     "stability": stability,
     "simulate": simulate,
     "invariants": invariants,
+    "invariants-json": invariants_json,
 }
 """Request-path computations by endpoint name."""
 
@@ -197,6 +226,8 @@ def error_data(exc: BaseException) -> dict[str, Any]:
     """An exception as the service's error answer (:class:`~flatbody_env.service.models.ErrorAnswer`)."""
     from flatbody_env.integrators import IntegrationError
 
+    if isinstance(exc, RequestInvalid):
+        return dict(exc.data)
     if isinstance(exc, IntegrationError):
         # a used-up work budget is a request over the limits (413); any other failure is the integration's (422)
         return {"kind": "too-large" if exc.kind == "budget" else "integration", "detail": str(exc),
@@ -220,6 +251,20 @@ def outcome(name: str, payload: Mapping[str, Any]) -> tuple[bool, Any]:
         return False, error_data(exc)
 
 
+def outcome_json(name: str, payload: Any) -> tuple[bool, Any]:
+    """:func:`outcome` with the answer rendered here as JSON bytes (NaN/inf as null): ``(True, bytes)`` or
+    ``(False, error_data)``. The event loop then only passes the bytes on."""
+    from flatbody_env.service.store import finite_json
+
+    ok, data = outcome(name, payload)
+    if not ok:
+        return ok, data
+    try:
+        return True, finite_json(data).encode("utf-8")
+    except (TypeError, ValueError, RecursionError) as exc:
+        return False, error_data(exc)
+
+
 def warm_up() -> bool:
     """Import the analysis stack in a fresh worker process (so that the first request is not slow)."""
     import analysis.stability  # noqa: F401
@@ -228,5 +273,5 @@ def warm_up() -> bool:
     return True
 
 
-__all__ = ["ANSWERS", "build_body", "build_scene", "ellipses", "error_data", "invariants", "methods", "outcome", "scenes", "simulate",
-           "stability", "trajectory", "warm_up"]
+__all__ = ["ANSWERS", "LIMITS", "RequestInvalid", "build_body", "build_scene", "ellipses", "error_data", "invariants", "invariants_json",
+           "methods", "outcome", "outcome_json", "scenes", "simulate", "stability", "trajectory", "warm_up"]

@@ -82,14 +82,21 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:
-    """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers."""
+def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0, env: dict[str, str] | None = None,
+                  preexec_fn=None) -> tuple[subprocess.Popen, str]:
+    """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers.
+
+    ``env`` adds variables to the service's environment (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS``); ``preexec_fn`` runs
+    in the child before it starts (e.g. a ``resource.setrlimit``)."""
     import httpx
 
     port = port or _free_port()
     cmd = [sys.executable, "-m", "flatbody_env.cli", "serve", "--host", "127.0.0.1", "--port", str(port), "--workers", str(workers),
            "--data-dir", str(data_dir), "--log-level", "warning"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    import os
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
+                            preexec_fn=preexec_fn)
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

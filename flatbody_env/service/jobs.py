@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.service.store import JobStore
-from flatbody_env.output import atomic_write
+from flatbody_env.output import atomic_path, atomic_write
 
 Progress = Callable[..., None]
 """``progress(fraction, stage=None)``: record the job's progress (0 … 1) and what it is doing."""
@@ -187,8 +187,10 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
     report = Reporter(progress)
     scene, traj = _integrate(p, report, 0.02, 0.5, with_rotation=True)
     report.step(0.5, 0.98, f"writing recording.rrd ({traj.t.size} samples)")
-    with reporting_bars(report):
-        path = record_trajectory(traj, scene.body, out / "recording.rrd", title=p.get("title"), tensor_every=p["tensor_every"])
+    target = out / "recording.rrd"
+    with reporting_bars(report), atomic_path(target) as tmp:  # a failed or killed job leaves no half-written recording.rrd
+        record_trajectory(traj, scene.body, tmp, title=p.get("title"), tensor_every=p["tensor_every"])
+    path = target
     return {
         "recording": path.name,
         "samples": int(traj.t.size),
@@ -356,8 +358,9 @@ class JobRunner:
         self._thread.start()
         return failed
 
-    def submit(self, kind: str, params: dict[str, Any]) -> str:
-        job_id = self.store.create(kind, params)
+    def submit(self, kind: str, params: dict[str, Any], **quota: Any) -> str:
+        """Queue a job (``quota``: the :meth:`JobStore.create` limits and client); its id."""
+        job_id = self.store.create(kind, params, **quota)
         self._wake.set()
         return job_id
 

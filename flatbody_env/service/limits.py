@@ -7,7 +7,8 @@ limit gets HTTP 413 with a message naming the limit and the value asked for.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+from dataclasses import dataclass, fields, replace
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -17,7 +18,7 @@ class Limits:
     Attributes
     ----------
     max_body_bytes : int
-        Largest request body (bytes); larger bodies get 413.
+        Largest request body (bytes) but for ``POST /invariants``; larger bodies get 413.
     sync_samples, job_samples : int
         Most output times of ``POST /simulate`` / a ``simulate`` or ``record`` job.
     sync_t_end, job_t_end : float
@@ -39,9 +40,27 @@ class Limits:
         also the wall-clock budget of a request's integration.
     job_seconds : float
         Wall-clock budget of a job's integration.
+    max_trajectory_body_bytes : int
+        Largest body of ``POST /invariants`` (a trajectory); it is parsed in a worker process.
+    max_times : int
+        Most explicit output times (``times``) of a request or job: they are stored with the job.
+    max_string : int
+        Longest free-text string (a scene's ``description``; names and titles are shorter).
+    max_queued_jobs : int
+        Most jobs queued (not yet running) at once; more get 429 with ``Retry-After``.
+    max_queued_per_client : int
+        Most jobs queued at once by one client address; more get 429 with ``Retry-After``.
+    max_stored_jobs : int
+        Most jobs kept in the data dir (any status); more get 429 until some are deleted.
+    max_list_jobs : int
+        Most jobs in one ``GET /jobs`` page.
+    max_list_bytes : int
+        Largest ``GET /jobs`` answer: a page stops before it and says where the next one starts.
+    retry_after_s : int
+        The ``Retry-After`` of a 429.
     """
 
-    max_body_bytes: int = 16 * 1024 * 1024
+    max_body_bytes: int = 1024 * 1024
     sync_samples: int = 2001
     job_samples: int = 20001
     sync_t_end: float = 200.0
@@ -55,14 +74,43 @@ class Limits:
     trajectory_samples: int = 20001
     request_seconds: float = 60.0
     job_seconds: float = 3600.0
+    max_trajectory_body_bytes: int = 16 * 1024 * 1024
+    max_times: int = 2001
+    max_string: int = 2000
+    max_queued_jobs: int = 64
+    max_queued_per_client: int = 16
+    max_stored_jobs: int = 1000
+    max_list_jobs: int = 100
+    max_list_bytes: int = 1024 * 1024
+    retry_after_s: int = 10
 
     def as_dict(self) -> dict[str, float]:
         """The limits as JSON (``GET /limits``)."""
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
 
+    def with_environment(self, environ=None) -> "Limits":
+        """These limits with any ``FLATBODY_LIMIT_<NAME>`` environment variable applied
+        (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS=8``); a bad value is a ``ValueError`` naming the variable."""
+        environ = os.environ if environ is None else environ
+        changes = {}
+        for f in fields(self):
+            var = f"FLATBODY_LIMIT_{f.name.upper()}"
+            if var not in environ:
+                continue
+            text = environ[var]
+            try:
+                value = int(text) if f.type in (int, "int") else float(text)
+            except ValueError:
+                raise ValueError(f"{var}: expected a number, got {text[:40]!r}") from None
+            if not value > 0 or value != value or value == float("inf"):
+                raise ValueError(f"{var}: must be a finite number > 0, got {text[:40]!r}")
+            changes[f.name] = value
+        return replace(self, **changes) if changes else self
+
+
 DEFAULT_LIMITS = Limits()
-"""The limits ``flatbody serve`` runs with."""
+"""The limits ``flatbody serve`` runs with (each can be changed by ``FLATBODY_LIMIT_<NAME>``)."""
 
 
 class LimitExceeded(ValueError):

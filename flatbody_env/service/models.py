@@ -1,35 +1,79 @@
 """The JSON bodies of the analysis service: requests, answers and errors (pydantic models).
 
-The request models check types, shapes and counts (HTTP 422 naming the field and the allowed
-range); the physics of a body or a scene is checked by the package's one validator set
-(:mod:`flatbody_env.physics.validation`, through ``Body.from_dict`` and ``load_scene``), whose
-messages name the field too. The answers are the ``flatbody`` command's ``--json`` answers: the
-service returns the very dicts the command prints; the answer models here document their shape
-in the OpenAPI document.
+The request models state every bound the service checks (HTTP 422 naming the field and the allowed
+range, as the OpenAPI document says): the ranges of the package's one validator set
+(:mod:`flatbody_env.physics.validation`: constants, stretches, spins and momenta, t_end,
+tolerances), the service's limits (:mod:`flatbody_env.service.limits`: output times, grids,
+stored strings and arrays) and the shapes of bodies and scenes. What a schema cannot say (a
+trajectory's arrays as long as its ``t``, output times increasing, λ ≠ μ, J1 = J2 for the
+analysis, from < to) is checked by the same validators when the request is computed (422 too).
+The answers are the ``flatbody`` command's ``--json`` answers; the answer models document their
+shape in the OpenAPI document.
 """
 
 from __future__ import annotations
 
+import json
+from importlib import resources
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_serializer
 
+from flatbody_env.physics.validation import MOMENTUM_MAX, PARAM_RANGE, STRETCH_RANGE, TOL_RANGE
 from flatbody_env.service.limits import DEFAULT_LIMITS
+
+L = DEFAULT_LIMITS
 
 Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
 """A finite number (NaN and ±inf are refused; so are strings and booleans)."""
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
 """A finite number > 0."""
-Count = Annotated[int, Field(strict=True)]
-"""An integer (not a float, string or boolean)."""
+Constant = Annotated[float, Field(ge=PARAM_RANGE[0], le=PARAM_RANGE[1], allow_inf_nan=False, strict=True)]
+"""A body constant (J, J3, k, c, d, κ, a, b) in :data:`~flatbody_env.physics.validation.PARAM_RANGE`."""
+Stretch = Annotated[float, Field(ge=STRETCH_RANGE[0], le=STRETCH_RANGE[1], allow_inf_nan=False, strict=True)]
+"""λ, μ or ϱ in :data:`~flatbody_env.physics.validation.STRETCH_RANGE` (states and search ranges)."""
+Momentum = Annotated[float, Field(ge=-MOMENTUM_MAX, le=MOMENTUM_MAX, allow_inf_nan=False, strict=True)]
+"""A spin or momentum component (s1, s2, s3, p_θ, …) within ± :data:`~flatbody_env.physics.validation.MOMENTUM_MAX`."""
+Tolerance = Annotated[float, Field(ge=TOL_RANGE[0], le=TOL_RANGE[1], allow_inf_nan=False, strict=True)]
+"""rtol or atol in :data:`~flatbody_env.physics.validation.TOL_RANGE`."""
+def _integral(value: Any) -> Any:
+    """An integral JSON number written with a fraction or exponent (``263.0``, ``2e2``) as the integer it is:
+    JSON Schema counts it an integer, so the service does too. ``263.5``, strings and booleans are left
+    as they are (and refused by the strict integer that follows)."""
+    return int(value) if isinstance(value, float) and value.is_integer() and abs(value) < 2**53 else value
+
+
+def Count(lo: int, hi: int):  # noqa: N802 - a type, spelled as one
+    """An integer in [lo, hi]: an integral JSON number (``263`` or ``263.0``), not a fraction (``263.5``), a string
+    or a boolean. The bounds sit inside the strict integer, after the conversion, so the OpenAPI document states
+    them as ``minimum`` / ``maximum``."""
+    return Annotated[int, Field(strict=True, ge=lo, le=hi), BeforeValidator(_integral)]
 Flag = Annotated[bool, Field(strict=True)]
 """true or false (not 0/1 or a string)."""
+Name = Annotated[str, Field(max_length=64)]
+"""A short name (a scene's, a method's)."""
 
 DEFAULT_BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}
 """The default body of ``flatbody ellipses`` (J = J3 = 1, V3 with κ = 1, V_ϱ with a = b = 1)."""
 
 FAMILY_PARAMETERS = ("s3", "p_theta", "k", "c", "d", "kappa", "a", "b", "J", "J3")
 """What a family may vary (``flatbody family --vary``)."""
+
+
+def _builtin_scene_names() -> tuple[str, ...]:
+    names = []
+    for entry in sorted(resources.files("flatbody_env.scenes").iterdir(), key=lambda p: p.name):
+        if entry.name.endswith(".json"):
+            names.append(json.loads(entry.read_text(encoding="utf-8")).get("name", entry.name[:-5]))
+    return tuple(names)
+
+
+BUILTIN_SCENES = _builtin_scene_names()
+"""The names of the built-in scenes (``GET /scenes``)."""
+SceneName = Literal[BUILTIN_SCENES]  # type: ignore[valid-type]
+
+UNION_TAGS = frozenset({"isotropic", "three-moments", "V1", "V2", "V3", "scene-name", "scene-object"})
+"""Names pydantic puts in an error's location for a member of a union; left out of the field's dotted name."""
 
 
 class _Strict(BaseModel):
@@ -46,24 +90,142 @@ def _check_range(name: str, value: tuple[float, float]) -> tuple[float, float]:
 # ----------------------------------------------------------------------------------------------
 # requests
 # ----------------------------------------------------------------------------------------------
+class IsotropicInertia(_Strict):
+    """``{"J", "J3"}``: J1 = J2 = J (eq. (29))."""
+
+    J: Constant
+    J3: Constant
+
+
+class Inertia(_Strict):
+    """``{"J1", "J2", "J3"}`` (the analysis needs J1 = J2)."""
+
+    J1: Constant
+    J2: Constant
+    J3: Constant
+
+
+def _inertia_tag(value: Any) -> str:
+    return "three-moments" if isinstance(value, dict) and ("J1" in value or "J2" in value) else "isotropic"
+
+
+InertiaSpec = Annotated[Union[Annotated[IsotropicInertia, Tag("isotropic")], Annotated[Inertia, Tag("three-moments")]],
+                        Discriminator(_inertia_tag)]
+
+
+class PotentialV1(_Strict):
+    """V1 (eq. (37)) with its constant k."""
+
+    name: Literal["V1"]
+    k: Constant
+
+
+class PotentialV2(_Strict):
+    """V2 (eq. (38)) with its constants c, d."""
+
+    name: Literal["V2"]
+    c: Constant
+    d: Constant
+
+
+class PotentialV3(_Strict):
+    """V3 (eq. (39)) with its constant κ (``kappa``)."""
+
+    name: Literal["V3"]
+    kappa: Constant
+
+
+PotentialSpec = Annotated[Union[PotentialV1, PotentialV2, PotentialV3], Field(discriminator="name")]
+
+
+class ThicknessSpec(_Strict):
+    """The thickness potential V_ϱ (eq. (40)) with its constants a, b."""
+
+    a: Constant
+    b: Constant
+
+
 class BodySpec(_Strict):
     """A body: a scene's ``params`` / ``potential`` / ``thickness`` objects (``Body.from_dict``).
 
-    ``params`` is ``{"J", "J3"}`` (the analysis needs J1 = J2); ``potential`` is
-    ``{"name": "V1", "k"}``, ``{"name": "V2", "c", "d"}`` or ``{"name": "V3", "kappa"}``
-    (eqs. (37)-(39) of the paper); ``thickness`` is ``{"a", "b"}`` (eq. (40)) or null.
+    ``params`` is ``{"J", "J3"}`` (the analysis needs J1 = J2) or ``{"J1", "J2", "J3"}``; ``potential``
+    is ``{"name": "V1", "k"}``, ``{"name": "V2", "c", "d"}`` or ``{"name": "V3", "kappa"}``
+    (eqs. (37)-(39) of the paper); ``thickness`` is ``{"a", "b"}`` (eq. (40)) or null. Every constant
+    lies in [1e-6, 1e6].
     """
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [DEFAULT_BODY]})
 
-    params: dict[str, Finite] = Field(description='inertia: {"J", "J3"} (isotropic) or {"J1", "J2", "J3"}, each > 0')
-    potential: dict[str, Union[Finite, str]] = Field(description='{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa (> 0)}')
-    thickness: Union[dict[str, Finite], None] = Field(default=None, description='thickness potential V_rho {"a", "b"} (> 0), or null')
+    params: InertiaSpec = Field(description='inertia: {"J", "J3"} (isotropic) or {"J1", "J2", "J3"}, each in [1e-6, 1e6]')
+    potential: PotentialSpec = Field(description='{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in [1e-6, 1e6]}')
+    thickness: Union[ThicknessSpec, None] = Field(default=None, description='thickness potential V_rho {"a", "b"}, or null')
     spin_convention: Literal["corrected", "paper"] = "corrected"
 
     def as_data(self) -> dict[str, Any]:
         """The dict ``Body.from_dict`` reads."""
-        return self.model_dump(mode="python")
+        return self.model_dump(mode="python", by_alias=True)
+
+
+class AnalysisBodySpec(BodySpec):
+    """A body for the analysis (ellipses, stability, families, maps): the corrected bracket only (erratum E3)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [DEFAULT_BODY]})
+
+    spin_convention: Literal["corrected"] = "corrected"
+
+
+class StateSpec(_Strict):
+    """A state (a scene's ``state``): λ, μ, ϱ in [1e-6, 1e6], every other entry within ±1e6 (λ ≠ μ)."""
+
+    s1: Momentum
+    s2: Momentum
+    s3: Momentum
+    p_theta: Momentum
+    p_lambda: Momentum
+    p_mu: Momentum
+    p_rho: Momentum
+    lambda_: Stretch = Field(alias="lambda")
+    mu: Stretch
+    rho: Stretch
+    theta: Momentum
+
+
+class SceneSpec(BodySpec):
+    """A scene object, as a scene JSON file (``scene_from_dict``); ``t_end`` at most the request limit."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    name: Union[Name, None] = None
+    description: Union[Annotated[str, Field(max_length=L.max_string)], None] = None
+    thickness: Union[ThicknessSpec, None] = Field(description='thickness potential V_rho {"a", "b"}, or null (required)')
+    state: StateSpec
+    t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = None
+
+    @model_serializer(mode="wrap")
+    def _without_nulls(self, handler):
+        data = handler(self)
+        return {k: v for k, v in data.items() if v is not None or k == "thickness"}
+
+
+class JobSceneSpec(SceneSpec):
+    """A scene object of a job: ``t_end`` at most the job limit."""
+
+    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+
+
+def _scene_tag(value: Any) -> str:
+    return "scene-name" if isinstance(value, str) else "scene-object"
+
+
+RequestScene = Annotated[Union[Annotated[SceneName, Tag("scene-name")], Annotated[SceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)]
+JobScene = Annotated[Union[Annotated[SceneName, Tag("scene-name")], Annotated[JobSceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)]
+
+
+SearchRange = tuple[Stretch, Stretch]
+STEP_MIN_REQUEST = L.sync_t_end / L.sync_steps
+"""Smallest fixed step of a request: ``t_end / step`` stays within the request's step limit for any t_end."""
+STEP_MIN_JOB = L.job_t_end / L.job_steps
+"""Smallest fixed step of a job."""
 
 
 class SpinsRequest(_Strict):
@@ -71,14 +233,14 @@ class SpinsRequest(_Strict):
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"body": DEFAULT_BODY, "s3": 2.0, "p_theta": 0.5}]})
 
-    body: BodySpec
-    s3: Finite = Field(description="spin component s3 (conserved with |s|)")
-    p_theta: Finite = Field(description="material momentum p_theta")
+    body: AnalysisBodySpec
+    s3: Momentum = Field(description="spin component s3 (conserved with |s|), within ±1e6")
+    p_theta: Momentum = Field(description="material momentum p_theta, within ±1e6")
     branch: Literal["N", "A", "all"] = Field("N", description="N: s1 = s2 = 0 (paper); A: in-plane axis (needs spin)")
-    spin: Union[Finite, None] = Field(None, description="spin about the in-plane axis for branch A")
-    lam_range: tuple[Positive, Positive] = Field((0.02, 50.0), description="search range of lambda [LO, HI], 0 < LO < HI")
-    mu_range: tuple[Positive, Positive] = Field((0.02, 50.0), description="search range of mu [LO, HI], 0 < LO < HI")
-    grid: Count = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid, description="grid points per axis of the root search")
+    spin: Union[Momentum, None] = Field(None, description="spin about the in-plane axis for branch A, within ±1e6")
+    lam_range: SearchRange = Field((0.02, 50.0), description="search range of lambda [LO, HI], 1e-6 <= LO < HI <= 1e6")
+    mu_range: SearchRange = Field((0.02, 50.0), description="search range of mu [LO, HI], 1e-6 <= LO < HI <= 1e6")
+    grid: Count(8, L.sync_grid) = Field(121, description="grid points per axis of the root search")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -87,19 +249,21 @@ class SpinsRequest(_Strict):
 
 
 class SimulateRequest(_Strict):
-    """``flatbody simulate``: a scene (object or built-in name) and the integration settings."""
+    """``flatbody simulate``: a scene (object or built-in name) and the integration settings, within the request limits."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 2.0, "samples": 21}]})
 
-    scene: Union[str, dict[str, Any]] = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
-    t_end: Union[Positive, None] = Field(None, description="final time (default: the scene's t_end)")
-    times: Union[list[Finite], None] = Field(None, min_length=1, max_length=DEFAULT_LIMITS.job_samples,
-                                             description="output times in [0, t_end], increasing (default: an even grid)")
-    samples: Union[Count, None] = Field(None, ge=2, le=DEFAULT_LIMITS.job_samples, description="number of evenly spaced output times (default 101)")
-    method: str = Field("auto", max_length=64, description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
-    rtol: Positive = Field(1e-10, description="relative tolerance (adaptive methods)")
-    atol: Positive = Field(1e-10, description="absolute tolerance (adaptive methods)")
-    step: Union[Positive, None] = Field(None, description="step size (fixed-step methods)")
+    scene: RequestScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
+    t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+        None, description="final time (default: the scene's t_end)")
+    times: Union[list[Annotated[float, Field(ge=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
+        None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
+    samples: Union[Count(2, L.sync_samples), None] = Field(None, description="number of evenly spaced output times (default 101)")
+    method: Name = Field("auto", description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
+    rtol: Tolerance = Field(1e-10, description="relative tolerance (adaptive methods), in [1e-16, 1]")
+    atol: Tolerance = Field(1e-10, description="absolute tolerance (adaptive methods), in [1e-16, 1]")
+    step: Union[Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+        None, description="step size (fixed-step methods)")
     model: Literal["auto", "two-polar", "regular"] = "auto"
     with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
 
@@ -108,16 +272,18 @@ class TrajectoryRequest(_Strict):
     """A trajectory as ``flatbody simulate`` writes it (``Trajectory.to_dict()``), plus an optional body.
 
     Without ``body`` the body of the built-in scene named in ``meta.scene`` is used (as the CLI does).
+    The body of ``POST /invariants`` may be larger than other bodies; it is read in a worker process.
     """
 
-    t: list[Finite] = Field(min_length=1, max_length=DEFAULT_LIMITS.trajectory_samples)
-    state: dict[str, list[Finite]]
-    energy: Union[list[Finite], None] = None
-    casimir: Union[list[Finite], None] = None
-    p_theta: Union[list[Finite], None] = None
-    rotation: Union[list[list[list[Finite]]], None] = None
-    initial_state: Union[dict[str, Finite], None] = None
-    meta: Union[dict[str, Any], None] = None
+    t: list[Finite] = Field(min_length=1, max_length=L.trajectory_samples)
+    state: dict[str, Annotated[list[Finite], Field(max_length=L.trajectory_samples)]] = Field(max_length=16)
+    energy: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
+    casimir: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
+    p_theta: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
+    rotation: Union[Annotated[list[Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)]],
+                              Field(max_length=L.trajectory_samples)], None] = None
+    initial_state: Union[Annotated[dict[str, Finite], Field(max_length=16)], None] = None
+    meta: Union[Annotated[dict[str, Any], Field(max_length=64)], None] = None
     body: Union[BodySpec, None] = Field(None, description="the body (default: the built-in scene named in meta.scene)")
 
     def trajectory(self) -> dict[str, Any]:
@@ -130,42 +296,56 @@ class TrajectoryRequest(_Strict):
         return out
 
 
-class _IntegrationParams(_Strict):
-    scene: Union[str, dict[str, Any]] = Field("default", description="a scene object or a built-in scene name")
-    t_end: Union[Positive, None] = Field(None, description="final time (default: the scene's t_end)")
-    method: str = Field("auto", max_length=64)
-    rtol: Positive = 1e-10
-    atol: Positive = 1e-10
-    step: Union[Positive, None] = None
-    model: Literal["auto", "two-polar", "regular"] = "auto"
-
-
-class SimulateJobParams(SimulateRequest):
+class SimulateJobParams(_Strict):
     """A ``simulate`` job: as ``POST /simulate``, with the larger job limits; artifact ``trajectory.json``."""
 
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 200.0, "samples": 2001}]})
 
-class RecordJobParams(_IntegrationParams):
+    scene: JobScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
+    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+        None, description="final time (default: the scene's t_end)")
+    times: Union[list[Annotated[float, Field(ge=0, le=L.job_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
+        None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
+    samples: Union[Count(2, L.job_samples), None] = Field(None, description="number of evenly spaced output times (default 101)")
+    method: Name = Field("auto", description="integrator (GET /methods) or auto")
+    rtol: Tolerance = 1e-10
+    atol: Tolerance = 1e-10
+    step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+    model: Literal["auto", "two-polar", "regular"] = "auto"
+    with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
+
+
+class RecordJobParams(_Strict):
     """A ``record`` job (``flatbody record``): simulate with R(t) and write a rerun recording ``recording.rrd``."""
 
-    samples: Count = Field(401, ge=2, le=DEFAULT_LIMITS.job_samples, description="recorded time steps")
-    title: Union[str, None] = Field(None, max_length=200, description="recording title")
-    tensor_every: Count = Field(1, ge=1, le=10_000, description="log the tensors every N-th step")
+    scene: JobScene = Field("default", description="a scene object or a built-in scene name")
+    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+        None, description="final time (default: the scene's t_end)")
+    method: Name = "auto"
+    rtol: Tolerance = 1e-10
+    atol: Tolerance = 1e-10
+    step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+    model: Literal["auto", "two-polar", "regular"] = "auto"
+    samples: Count(2, L.job_samples) = Field(401, description="recorded time steps")
+    title: Union[Annotated[str, Field(max_length=200)], None] = Field(None, description="recording title")
+    tensor_every: Count(1, 10_000) = Field(1, description="log the tensors every N-th step")
 
 
 class FamilyJobParams(_Strict):
     """A ``family`` job (``flatbody family``): artifacts ``family.png`` and ``family.csv``."""
 
-    body: BodySpec = Field(default_factory=lambda: BodySpec(**DEFAULT_BODY))
+    body: AnalysisBodySpec = Field(default_factory=lambda: AnalysisBodySpec(**DEFAULT_BODY))
     vary: Literal[FAMILY_PARAMETERS] = "s3"  # type: ignore[valid-type]
-    start: Finite = Field(0.05, alias="from", description="start of the range")
-    stop: Finite = Field(4.0, alias="to", description="end of the range")
-    s3: Union[Finite, None] = Field(None, description="s3 held fixed (default 2)")
-    p_theta: Union[Finite, None] = Field(None, description="p_theta held fixed (default 0.5)")
-    seeds: Count = Field(5, ge=2, le=DEFAULT_LIMITS.job_family_seeds, description="parameter values at which all solutions are sought")
-    step: Union[Positive, None] = Field(None, description="largest continuation step (default range/60)")
-    lam_range: tuple[Positive, Positive] = (0.02, 50.0)
-    mu_range: tuple[Positive, Positive] = (0.02, 50.0)
-    grid: Count = Field(121, ge=8, le=DEFAULT_LIMITS.sync_grid)
+    start: Momentum = Field(0.05, alias="from", description="start of the range (within ±1e6)")
+    stop: Momentum = Field(4.0, alias="to", description="end of the range (within ±1e6; greater than from)")
+    s3: Union[Momentum, None] = Field(None, description="s3 held fixed (default 2)")
+    p_theta: Union[Momentum, None] = Field(None, description="p_theta held fixed (default 0.5)")
+    seeds: Count(2, L.job_family_seeds) = Field(5, description="parameter values at which all solutions are sought")
+    step: Union[Annotated[float, Field(gt=0, le=2 * MOMENTUM_MAX, allow_inf_nan=False, strict=True)], None] = Field(
+        None, description="largest continuation step (default range/60)")
+    lam_range: SearchRange = (0.02, 50.0)
+    mu_range: SearchRange = (0.02, 50.0)
+    grid: Count(8, L.sync_grid) = 121
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -176,10 +356,10 @@ class FamilyJobParams(_Strict):
 class StabilityMapJobParams(_Strict):
     """A ``stability-map`` job (``flatbody stability-map``): artifacts ``stability-map.png`` and ``.csv``."""
 
-    body: BodySpec = Field(default_factory=lambda: BodySpec(**DEFAULT_BODY))
-    lam_range: tuple[Positive, Positive] = (1.02, 3.0)
-    mu_range: tuple[Positive, Positive] = (0.3, 3.0)
-    grid: Count = Field(30, ge=4, le=DEFAULT_LIMITS.job_map_grid, description="grid points per axis")
+    body: AnalysisBodySpec = Field(default_factory=lambda: AnalysisBodySpec(**DEFAULT_BODY))
+    lam_range: SearchRange = (1.02, 3.0)
+    mu_range: SearchRange = (0.3, 3.0)
+    grid: Count(4, L.job_map_grid) = Field(30, description="grid points per axis")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -193,8 +373,8 @@ class EvaluateJobParams(_Strict):
     Only the agent shipped with the package is evaluated: models are never loaded from request data.
     """
 
-    episodes: Count = Field(20, ge=1, le=DEFAULT_LIMITS.job_episodes)
-    seed: Count = Field(10_000, ge=0, le=2**31 - 1)
+    episodes: Count(1, L.job_episodes) = 20
+    seed: Count(0, 2**31 - 1) = 10_000
     baselines: Flag = Field(True, description="also evaluate the zero, random and heuristic baselines")
 
 
@@ -319,7 +499,7 @@ class JobStatus(BaseModel):
     status: Literal["queued", "running", "done", "failed"]
     progress: float = Field(ge=0.0, le=1.0, description="fraction done, reported by the worker while the job runs; never decreases")
     params: dict[str, Any]
-    result: Union[Any, None] = None
+    result: Union[Any, None] = Field(None, description="the answer, when done (left out of GET /jobs)")
     error: Union[str, None] = None
     artifacts: list[str] = Field(description="file names for GET /jobs/{id}/artifact?name=...")
     created: float = Field(description="Unix time")
@@ -331,7 +511,10 @@ class JobStatus(BaseModel):
 
 
 class JobList(BaseModel):
+    """A page of jobs, newest first; ``next`` is the ``before`` of the next page (null: no more)."""
+
     jobs: list[JobStatus]
+    next: Union[str, None] = Field(None, description="pass as ?before= for the next page; null when this page is the last")
 
 
 class JobDeleted(BaseModel):
@@ -344,8 +527,71 @@ class ErrorAnswer(BaseModel):
     """Every error: one line (``detail``) naming the field and the allowed range or the limit."""
 
     detail: str
-    kind: Literal["validation", "too-large", "integration", "not-found", "conflict", "unavailable"]
+    kind: Literal["validation", "too-large", "integration", "not-found", "conflict", "unavailable", "too-many-jobs",
+                  "method-not-allowed", "bad-host"]
     field: Union[str, None] = Field(None, description="the request field at fault (dotted)")
     when: Union[float, None] = Field(None, description="integration failures: the time t at which it failed")
     why: Union[str, None] = Field(None, description="integration failures: the reason (IntegrationError)")
     method: Union[str, None] = None
+
+
+# ----------------------------------------------------------------------------------------------
+# pydantic's errors as the service's one-line answers
+# ----------------------------------------------------------------------------------------------
+WORK_FIELDS = {"t_end": "t_end", "samples": "output times", "times": "output times", "step": "step"}
+"""Fields whose bound is a work limit of a request (413 with the hint to send a job, as the cost checks say)."""
+
+
+def _bound_text(kind: str, ctx: dict[str, Any], value: Any) -> str | None:
+    got = repr(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+    if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and ctx:
+        op = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}[kind]
+        bound = next(iter(ctx.values()))
+        return f"outside the allowed range: must be {op} {bound:g}, got {got}" if isinstance(bound, (int, float)) else None
+    return None
+
+
+def describe_errors(errors: list[dict[str, Any]], *, where: str = "request") -> dict[str, Any]:
+    """pydantic's validation errors as ``{"status", "kind", "field", "detail"}``: the first error, one line.
+
+    The field is the dotted path in the request (a job's kind left out: ``params.grid``). A work bound
+    (``t_end``, ``samples``, ``times``, ``step`` of ``POST /simulate`` or of a job's ``params``) is 413
+    (``too-large``), as the cost checks answer, with the hint to send a request's work as a job;
+    everything else is 422 (``validation``).
+    """
+    first = errors[0] if errors else {"loc": (), "msg": "invalid request", "type": "invalid"}
+    raw = list(first.get("loc", ()))
+    if raw and raw[0] in ("body", "query", "path"):
+        raw = raw[1:]
+    if where == "job" and len(raw) > 1 and raw[0] in JOB_KINDS:
+        raw = raw[1:]
+    loc = [str(x) for x in raw if str(x) not in UNION_TAGS]
+    kind = str(first.get("type", ""))
+    ctx = first.get("ctx") or {}
+    if kind.startswith("union_tag"):
+        loc.append(str(ctx.get("discriminator", "kind")).strip("'"))
+    loc = ["lambda" if x == "lambda_" else x for x in loc]
+    field = ".".join(loc) or "body"
+    msg = str(first.get("msg", "invalid")).replace("\n", " ")
+    if kind == "json_invalid":
+        msg = f"not valid JSON ({ctx.get('error', 'parse error')})"
+    else:
+        msg = _bound_text(kind, ctx, first.get("input")) or msg
+    more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""
+    name = loc[-1] if loc else ""
+    at_top = loc == [name] if where == "request" else loc == ["params", name]
+    over = kind in ("less_than_equal", "too_long") or (kind == "greater_than_equal" and name == "step")
+    if at_top and name in WORK_FIELDS and over and where in ("request", "job"):
+        limit = ctx.get("le", ctx.get("max_length", ctx.get("ge")))
+        what = "at least" if kind == "greater_than_equal" else "at most"
+        hint = "; send it as a job (POST /jobs with kind simulate or record)" if where == "request" else ""
+        return {"status": 413, "kind": "too-large", "field": field,
+                "detail": f"{field}: {what} {limit:g} ({WORK_FIELDS[name]}) in a {where}, got {_got(first.get('input'))}{hint}"}
+    return {"status": 422, "kind": "validation", "field": field, "detail": f"{field}: {msg}{more}"}
+
+
+def _got(value: Any) -> str:
+    if isinstance(value, list):
+        return f"{len(value)} values"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

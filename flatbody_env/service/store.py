@@ -14,12 +14,20 @@ error          one line, when failed
 artifacts      file names in ``DATA_DIR/jobs/ID/`` (JSON list), the first is the main one
 created, started, finished   Unix times
 pid            the worker process running the job
+client         the address of the client that queued it (for the per-client queue quota)
 =============  ========================================================================
 
 The service and its worker processes write to the same database (WAL mode, one connection per
 process and thread). A worker finishes a job only while the row still says ``running`` under its
 own pid, so a job that was marked failed (the service restarted) or deleted is never
 overwritten. Results are kept until the job is deleted.
+
+Quotas: :meth:`JobStore.create` counts the queued jobs (in all, and of the client) and the stored
+jobs in the same transaction as the insert, and refuses with :class:`QueueFull` past the limits.
+Results are stored as finite JSON text (NaN/inf as null) and spliced into answers without being
+parsed again (:meth:`JobStore.get_json`); :meth:`JobStore.list_json` answers a page of jobs without
+results, at most ``max_bytes`` long, and the cursor of the next page. A database that is missing,
+corrupt or on a full disk raises ``sqlite3.Error`` or ``OSError``: the service answers 503.
 """
 
 from __future__ import annotations
@@ -53,11 +61,27 @@ CREATE TABLE IF NOT EXISTS jobs (
     started REAL,
     finished REAL,
     pid INTEGER,
-    stage TEXT
+    stage TEXT,
+    client TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, created);
 """
-_MIGRATIONS = (("stage", "ALTER TABLE jobs ADD COLUMN stage TEXT"),)
+_MIGRATIONS = (("stage", "ALTER TABLE jobs ADD COLUMN stage TEXT"), ("client", "ALTER TABLE jobs ADD COLUMN client TEXT"))
+
+_PUBLIC = "id, kind, params, status, progress, error, artifacts, created, started, finished, stage"
+"""The columns of a job as GET /jobs lists it (no result, no pid, no client)."""
+
+
+class QueueFull(Exception):
+    """A job refused by a quota (HTTP 429); ``field`` names the quota, ``retry`` whether waiting helps."""
+
+    def __init__(self, message: str, *, retry: bool = True) -> None:
+        super().__init__(message)
+        self.retry = retry
+
+
+class MissingDatabase(sqlite3.OperationalError):
+    """The job database file is gone from the data dir (the service answers 503)."""
 """Columns added since the first schema: a data dir written by an older service gets them on start."""
 
 
@@ -74,16 +98,20 @@ class JobStore:
         self.data_dir = Path(data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
         self.db_path = self.data_dir / "jobs.sqlite3"
+        self._created = False
         with self.connect() as db:
             db.executescript(_SCHEMA)
             have = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
             for column, statement in _MIGRATIONS:
                 if column not in have:
                     db.execute(statement)
+        self._created = True
 
     @contextmanager
     def connect(self) -> Iterator[sqlite3.Connection]:
         """A short-lived connection (a transaction committed on exit)."""
+        if self._created and not self.db_path.exists():  # deleted under the service: never a new, empty database
+            raise MissingDatabase(f"the job database {self.db_path} is missing")
         db = sqlite3.connect(self.db_path, timeout=30.0, isolation_level=None)
         try:
             db.execute("PRAGMA journal_mode=WAL")
@@ -122,12 +150,41 @@ class JobStore:
         return self.data_dir / "jobs" / job_id
 
     # -- the service's side ------------------------------------------------------------------
-    def create(self, kind: str, params: dict[str, Any]) -> str:
-        """A new queued job; its id."""
+    def create(self, kind: str, params: dict[str, Any], *, client: str | None = None, max_queued: int | None = None,
+               max_queued_per_client: int | None = None, max_stored: int | None = None) -> str:
+        """A new queued job; its id.
+
+        Raises
+        ------
+        QueueFull
+            More than ``max_queued`` jobs queued, ``max_queued_per_client`` of them from ``client``, or
+            ``max_stored`` jobs kept (counted in the transaction that inserts the job).
+        """
         job_id = secrets.token_hex(16)
+        text = json.dumps(params, allow_nan=False)
         with self.connect() as db:
-            db.execute("INSERT INTO jobs (id, kind, params, status, created) VALUES (?, ?, ?, 'queued', ?)",
-                       (job_id, kind, json.dumps(params), time.time()))
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                if max_queued is not None:
+                    queued = db.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued'").fetchone()[0]
+                    if queued >= max_queued:
+                        raise QueueFull(f"jobs: the queue is full ({queued} jobs waiting, at most {max_queued}); try again later")
+                if max_queued_per_client is not None:
+                    mine = db.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND client IS ?", (client,)).fetchone()[0]
+                    if mine >= max_queued_per_client:
+                        raise QueueFull(f"jobs: you have {mine} jobs waiting (at most {max_queued_per_client} per client); "
+                                        "try again when some have started")
+                if max_stored is not None:
+                    stored = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
+                    if stored >= max_stored:
+                        raise QueueFull(f"jobs: the service keeps at most {max_stored} jobs; delete finished ones "
+                                        "(DELETE /jobs/{{id}}) first", retry=False)
+                db.execute("INSERT INTO jobs (id, kind, params, status, created, client) VALUES (?, ?, ?, 'queued', ?, ?)",
+                           (job_id, kind, text, time.time(), client))
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+            db.execute("COMMIT")
         return job_id
 
     def get(self, job_id: str) -> dict[str, Any] | None:
@@ -139,8 +196,47 @@ class JobStore:
     def list(self, limit: int = 100) -> list[dict[str, Any]]:
         """The newest jobs first, without their results."""
         with self.connect() as db:
-            rows = db.execute("SELECT * FROM jobs ORDER BY created DESC LIMIT ?", (limit,)).fetchall()
+            rows = db.execute(f"SELECT {_PUBLIC}, NULL AS result FROM jobs ORDER BY created DESC, id DESC LIMIT ?", (limit,)).fetchall()
         return [_as_dict(r, with_result=False) for r in rows]
+
+    def get_json(self, job_id: str) -> bytes | None:
+        """The job as ``GET /jobs/{id}`` answers it (JSON bytes, the stored result spliced in unparsed), or None."""
+        with self.connect() as db:
+            row = db.execute(f"SELECT {_PUBLIC}, result FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        if row is None:
+            return None
+        public = _as_dict(row, with_result=False)
+        del public["result"]
+        head = json.dumps(public, allow_nan=False)
+        return (head[:-1] + ', "result": ' + _finite_text(row["result"]) + "}").encode("utf-8")
+
+    def list_json(self, limit: int, *, before: str | None = None, max_bytes: int) -> bytes:
+        """A page of ``GET /jobs``: ``{"jobs": [...], "next"}``, newest first, without results, at most ``max_bytes``
+        long (at least one job); ``next`` is the ``before`` cursor of the next page, or null.
+
+        ``before`` is the ``next`` of a previous page (``created:id``); the page starts after that job.
+        """
+        where, args = "", []
+        if before:
+            created, _, last_id = before.partition(":")
+            where, args = "WHERE created < ? OR (created = ? AND id < ?)", [float(created), float(created), last_id]
+        parts: list[str] = []
+        size = 32
+        next_cursor = None
+        with self.connect() as db:
+            cur = db.execute(f"SELECT {_PUBLIC}, NULL AS result FROM jobs {where} ORDER BY created DESC, id DESC LIMIT ?", (*args, limit + 1))
+            for row in cur:
+                if len(parts) == limit:
+                    next_cursor = _cursor(last)
+                    break
+                text = json.dumps(_as_dict(row, with_result=False), allow_nan=False)
+                if parts and size + len(text) + 2 > max_bytes:
+                    next_cursor = _cursor(last)
+                    break
+                parts.append(text)
+                size += len(text) + 2
+                last = row
+        return ('{"jobs": [' + ", ".join(parts) + '], "next": ' + json.dumps(next_cursor) + "}").encode("utf-8")
 
     def fail_interrupted(self) -> int:
         """Mark the jobs left ``running`` by a previous service process failed (:data:`RESTART_REASON`)."""
@@ -198,7 +294,7 @@ class JobStore:
                 cur = db.execute(
                     "UPDATE jobs SET status = 'done', progress = 1, result = ?, artifacts = ?, finished = ?, pid = NULL "
                     "WHERE id = ? AND status = 'running' AND pid = ?",
-                    (json.dumps(result), json.dumps(artifacts or []), now, job_id, pid))
+                    (finite_json(result), json.dumps(artifacts or []), now, job_id, pid))
             else:
                 cur = db.execute(
                     "UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ? AND status = 'running' AND pid = ?",
@@ -206,7 +302,41 @@ class JobStore:
             return cur.rowcount == 1
 
 
+def finite_json(value: Any) -> str:
+    """``value`` as JSON text, with NaN and ±inf (never valid JSON) as null."""
+    try:
+        return json.dumps(value, allow_nan=False)
+    except ValueError:
+        return json.dumps(_finite(value), allow_nan=False)
+
+
+def _finite(value: Any) -> Any:
+    import math
+
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _finite_text(text: str | None) -> str:
+    """A stored result as finite JSON text (a row written by an older service may hold NaN/Infinity)."""
+    if text is None:
+        return "null"
+    if "NaN" in text or "Infinity" in text:
+        return finite_json(json.loads(text))
+    return text
+
+
+def _cursor(row: sqlite3.Row) -> str:
+    return f"{row['created']!r}:{row['id']}"
+
+
 def _as_dict(row: sqlite3.Row, *, with_result: bool = True) -> dict[str, Any]:
+    keys = row.keys()
     return {
         "id": row["id"],
         "kind": row["kind"],
@@ -219,7 +349,7 @@ def _as_dict(row: sqlite3.Row, *, with_result: bool = True) -> dict[str, Any]:
         "created": row["created"],
         "started": row["started"],
         "finished": row["finished"],
-        "pid": row["pid"],
+        **({"pid": row["pid"]} if "pid" in keys else {}),
         "stage": row["stage"],
         **_timing(row),
     }
@@ -239,4 +369,4 @@ def _timing(row: sqlite3.Row) -> dict[str, float | None]:
     return {"elapsed": elapsed, "remaining": remaining}
 
 
-__all__ = ["JobStore", "RESTART_REASON", "STATUSES"]
+__all__ = ["JobStore", "MissingDatabase", "QueueFull", "RESTART_REASON", "STATUSES", "finite_json"]

@@ -82,20 +82,37 @@ class ResultStore:
     """
 
     def __init__(self, folder: str | Path) -> None:
+        from flatbody_env.physics import validation
+
         self.folder = Path(folder)
+        if self.folder.exists() and not self.folder.is_dir():
+            raise ValueError(f"out: {str(self.folder)!r} exists and is not a directory")
         self.folder.mkdir(parents=True, exist_ok=True)
         self.path = self.folder / STORE_NAME
-        self._db = sqlite3.connect(self.path, timeout=30.0)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")
-        self._db.executescript(_SCHEMA)
-        self._db.commit()
+        # a directory, corrupt or foreign file in its place is refused before anything is written to it
+        validation.sqlite_file("out", self.path, ("sweep", "rows"))
+        try:
+            self._db = sqlite3.connect(self.path, timeout=30.0)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._db.executescript(_SCHEMA)
+            self._db.commit()
+        except sqlite3.Error as exc:
+            raise store_error(self.path, exc) from None
 
     # -- the sweep's specification --------------------------------------------------------
     def spec(self) -> dict[str, Any] | None:
         """The stored sweep specification, or ``None`` for a new store."""
         row = self._db.execute("SELECT spec FROM sweep WHERE id = 1").fetchone()
-        return None if row is None else json.loads(row[0])
+        if row is None:
+            return None
+        try:
+            spec = json.loads(row[0])
+        except (TypeError, ValueError):
+            spec = None
+        if not isinstance(spec, dict):
+            raise ValueError(f"out: {str(self.path)!r} holds a damaged sweep specification; move it away or choose another folder")
+        return spec
 
     def begin(self, spec: dict[str, Any], *, resume: bool) -> None:
         """Record ``spec`` for a new sweep, or check it against the stored one on resume.
@@ -124,6 +141,12 @@ class ResultStore:
     def put(self, key: str, *, payload: Any = None, error: str | None = None, seconds: float = 0.0, worker: str = "local") -> None:
         """Upsert the outcome of task ``key`` (one atomic commit): ok when ``error`` is None."""
         status = "ok" if error is None else "error"
+        try:
+            self._put(key, status, payload, error, seconds, worker)
+        except sqlite3.Error as exc:  # disk full, I/O error: one line, exit 1; committed rows stay
+            raise store_error(self.path, exc) from None
+
+    def _put(self, key, status, payload, error, seconds, worker) -> None:
         self._db.execute(
             "INSERT INTO rows (key, status, payload, error, seconds, worker, finished_utc) VALUES (?, ?, ?, ?, ?, ?, ?) "
             "ON CONFLICT(key) DO UPDATE SET status = excluded.status, payload = excluded.payload, error = excluded.error, "
@@ -158,4 +181,13 @@ class ResultStore:
         self.close()
 
 
-__all__ = ["STORE_NAME", "ResultStore", "StoredResult"]
+def store_error(path: Path, exc: BaseException) -> OSError:
+    """An SQLite failure as one-line ``OSError`` (the CLI's exit 1): disk full, I/O error, locked."""
+    import errno
+
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    code = errno.ENOSPC if "full" in text else errno.EIO
+    return OSError(code, f"results database: {text} (the rows stored so far are kept; --resume continues)", str(path))
+
+
+__all__ = ["STORE_NAME", "ResultStore", "StoredResult", "store_error"]

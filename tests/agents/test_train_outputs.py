@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from processes import interrupt
 
 from flatbody_env.cli.main import main
 
@@ -71,16 +71,10 @@ def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
             "batch_size=64", "n_epochs=1", "--out", str(out)]
     proc = subprocess.Popen([*argv, "--n-timesteps", "1000000"], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True)
-    try:
-        for line in proc.stderr:  # progress lines (FLATBODY_PROGRESS_S=0: one per update)
-            if line.startswith("train: ") and int(line.split()[1].split("/")[0]) >= 200:
-                break
-        os.killpg(proc.pid, signal.SIGINT)
-        _, rest = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+    for line in proc.stderr:  # progress lines (FLATBODY_PROGRESS_S=0: one per update)
+        if line.startswith("train: ") and int(line.split()[1].split("/")[0]) >= 200:
+            break
+    _, rest = interrupt(proc)
     assert proc.returncode == 130, rest[-3000:]
     last = rest.strip().splitlines()[-1]
     assert "Traceback" not in rest and last.startswith("flatbody: interrupted (training stopped at ") and "--resume continues" in last, rest

@@ -21,7 +21,7 @@ V1_BODY = {"params": {"J": 1.0, "J3": 0.7}, "potential": {"name": "V1", "k": 1.3
 def client(tmp_path_factory):
     """The app with its lifespan (job runner, worker processes) on a fresh data dir."""
     app = create_app(tmp_path_factory.mktemp("service-data"), workers=2)
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://localhost") as c:
         yield c
 
 

@@ -4,7 +4,6 @@ prints a traceback, the last line says so, exit code 130, no process left behind
 from __future__ import annotations
 
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -12,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import interrupt
 
 psutil = pytest.importorskip("psutil")
 httpx = pytest.importorskip("httpx")
@@ -45,12 +45,8 @@ def test_ctrl_c_stops_the_service_and_its_workers_quietly(tmp_path):
             time.sleep(0.1)
         children = psutil.Process(proc.pid).children(recursive=True)
         assert len(children) >= 3  # the forkserver, the request workers, the job's process
-        os.killpg(proc.pid, signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        _, stderr = interrupt(proc)
     assert proc.returncode == 130, stderr[-3000:]
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr[-3000:]
     assert stderr.strip().splitlines()[-1] == "flatbody: interrupted"

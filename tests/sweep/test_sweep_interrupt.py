@@ -4,7 +4,6 @@ finished rows kept, and ``--resume`` runs only the rest."""
 from __future__ import annotations
 
 import os
-import signal
 import sqlite3
 import subprocess
 import sys
@@ -12,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import interrupt
 
 psutil = pytest.importorskip("psutil")
 
@@ -50,12 +50,8 @@ def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
             time.sleep(0.02)
         children = psutil.Process(proc.pid).children(recursive=True)
         assert len(children) >= 2  # the two Dask worker processes (and multiprocessing's resource tracker)
-        os.killpg(proc.pid, signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        stdout, stderr = interrupt(proc)
     assert proc.returncode == 130, stderr[-3000:]
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) <= 2, stderr[-3000:]
     assert stderr.strip().splitlines()[-1] == "flatbody: interrupted"
