@@ -53,7 +53,7 @@ def _inner(venv):
 
 def curriculum_callback(env_id: str, key: str, stages: list[float], *, seed: int, env_kwargs: dict[str, Any] | None = None,
                         advance_at: float = 0.8, min_steps: int = 100_000, max_steps: int = 500_000, window: int = 2,
-                        train_env_kwargs: dict[str, Any] | None = None):
+                        train_env_kwargs: dict[str, Any] | None = None, log_std_per_action: list[float] | None = None):
     from gymnasium.vector import AutoresetMode
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -87,6 +87,12 @@ def curriculum_callback(env_id: str, key: str, stages: list[float], *, seed: int
             print(f"curriculum: stage {stage} ({key}={stages[stage]}) from step {self.model.num_timesteps}", file=sys.stderr)
 
         def _on_training_start(self) -> None:
+            if log_std_per_action:  # exploration per action component (gSDE: columns of the log_std matrix)
+                import torch
+
+                with torch.no_grad():
+                    ls = self.model.policy.log_std
+                    ls[..., :] = torch.as_tensor(log_std_per_action, dtype=ls.dtype)
             self._switch(0)
 
         def _on_step(self) -> bool:
@@ -128,6 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--train-env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
                     help="task keywords of the training environments only (reward shaping, e.g. w_tumble=0); "
                          "the model is evaluated on the task's own")
+    ap.add_argument("--log-std-per-action", help="comma-separated initial log std of each action component "
+                    "(overrides policy_kwargs.log_std_init per component)")
     ap.add_argument("--n-timesteps", type=int)
     ap.add_argument("--hyperparams", nargs="*", default=[])
     ap.add_argument("--force", action="store_true")
@@ -136,10 +144,11 @@ def main(argv: list[str] | None = None) -> int:
     from agents.train import apply_overrides, load_hyperparams
 
     hp = apply_overrides(load_hyperparams("ppo", args.env), args.hyperparams)
+    per_action = [float(x) for x in args.log_std_per_action.split(",")] if args.log_std_per_action else None
     train_kw = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.train_env_kwargs)}
     cb = curriculum_callback(args.env, args.key, stages, seed=args.seed, env_kwargs=hp.get("env_kwargs"),
                              advance_at=args.advance_at, min_steps=args.min_stage_steps, max_steps=args.max_stage_steps,
-                             window=args.window, train_env_kwargs=train_kw)
+                             window=args.window, train_env_kwargs=train_kw, log_std_per_action=per_action)
     command = ["python", "-m", "agents.curriculum", *(argv if argv is not None else sys.argv[1:])]
     res = train("ppo", args.out, seed=args.seed, n_timesteps=args.n_timesteps, overrides=args.hyperparams, env_id=args.env,
                 progress=False, command=command, extra_callbacks=[cb], force=args.force, checkpoint_freq=0)
@@ -147,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
     cfg["curriculum"] = {"key": args.key, "stages": stages, "advance_at": args.advance_at, "min_stage_steps": args.min_stage_steps,
                          "max_stage_steps": args.max_stage_steps, "window": args.window,
-                         "train_env_kwargs": train_kw, "history": cb.history}
+                         "train_env_kwargs": train_kw, "log_std_per_action": per_action, "history": cb.history}
     atomic_write(cfg_file, yaml.safe_dump(cfg, sort_keys=False))
     print(f"trained {res.timesteps} steps in {res.wall_time_s:.0f} s; stages: {cb.history}", file=sys.stderr)
     return 0

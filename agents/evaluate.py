@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from agents.numpy_policy import MODELS_DIR, shipped_model_dir  # where shipped agents live (numpy_policy: no import back)
+
 BASELINES = ("zero", "random", "heuristic", "passivity")
 """``heuristic``: LQR about the target (:class:`agents.heuristic.HeuristicController`);
 ``passivity``: the energy-based damping law (:class:`agents.heuristic.PassivityController`)."""
@@ -48,13 +50,6 @@ METRICS = ("success_rate", "final_distance", "final_distance_median", "reach_rat
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Observations (N, 16) (or (N, 21) with the body's constants) → actions (N, n)."""
-MODELS_DIR = Path(__file__).resolve().parent / "models"
-"""Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...)."""
-
-
-def shipped_model_dir() -> Path:
-    """The folder of the agent shipped in the package (``agents/models/ppo-FlatBody-v0``)."""
-    return MODELS_DIR / "ppo-FlatBody-v0"
 
 
 def shipped_agents(env_id: str) -> dict[str, Path]:
@@ -163,7 +158,7 @@ class Agent:
                 with vn.open("rb") as fh:
                     self.vecnormalize = pickle.load(fh)
                 self.vecnormalize.training = False
-            except Exception as exc:  # truncated or foreign pickle
+            except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
                 raise ValueError(f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
     def policy_actions(self, obs: np.ndarray) -> np.ndarray:

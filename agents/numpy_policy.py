@@ -28,6 +28,7 @@ import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Self
 
 import numpy as np
 
@@ -35,6 +36,13 @@ FORMAT_VERSION = 1
 """Version of the ``policy.npz`` layout; a file of another version is refused (re-export it)."""
 POLICY_FILE = "policy.npz"
 ACTIVATIONS = ("tanh", "relu")
+MODELS_DIR = Path(__file__).resolve().parent / "models"
+"""Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...); also :data:`agents.evaluate.MODELS_DIR`."""
+
+
+def shipped_model_dir() -> Path:
+    """The folder of the agent shipped in the package (``agents/models/ppo-FlatBody-v0``); also :func:`agents.evaluate.shipped_model_dir`."""
+    return MODELS_DIR / "ppo-FlatBody-v0"
 
 
 class StalePolicyError(ValueError):
@@ -57,6 +65,22 @@ def require_trust(required: bool = True) -> None:
     _TRUST["required"] = bool(required)
 
 
+class trust_policy:
+    """Context manager: :func:`require_trust` (``required``) inside, the previous setting restored after
+    (the CLI wraps each command that loads a model in it)."""
+
+    def __init__(self, required: bool) -> None:
+        self.required = bool(required)
+
+    def __enter__(self) -> Self:
+        self._old = _TRUST["required"]
+        _TRUST["required"] = self.required
+        return self
+
+    def __exit__(self, *exc) -> None:
+        _TRUST["required"] = self._old
+
+
 def _trust_file() -> Path:
     import os
 
@@ -69,8 +93,6 @@ def trusted_roots() -> list[Path]:
     folders this user created with ``flatbody train`` / ``flatbody sweep`` (:func:`remember_run`) and
     the folders listed in ``$FLATBODY_TRUSTED_DIRS`` (``os.pathsep``-separated)."""
     import os
-
-    from agents.evaluate import MODELS_DIR
 
     roots = [MODELS_DIR.resolve()]
     roots += [Path(x).expanduser().resolve() for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep) if x.strip()]
@@ -128,8 +150,6 @@ def _sources(folder: Path) -> dict[str, str | None]:
 def model_folder(path: str | Path | None) -> Path:
     """The run folder of ``path`` (a folder with ``model.zip`` or the ``model.zip`` itself; None: the shipped agent)."""
     if path is None:
-        from agents.evaluate import shipped_model_dir
-
         return shipped_model_dir()
     p = Path(path)
     folder = p if p.is_dir() else p.parent
@@ -176,7 +196,7 @@ def load_sb3(cls, model_file: Path):
         if Path(model_file).stat().st_size == 0:
             raise ValueError("the file is empty")
         return cls.load(str(model_file), device="cpu")
-    except Exception as exc:  # zipfile.BadZipFile, KeyError, pickle errors, RuntimeError of torch.load
+    except Exception as exc:  # noqa: BLE001 - zipfile.BadZipFile, KeyError, pickle errors, RuntimeError of torch.load
         raise ValueError(f"model: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
 
@@ -319,7 +339,7 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
         meta = json.loads(str(arrays.pop("meta")))
         if not isinstance(meta, dict):
             raise ValueError("meta is not an object")
-    except Exception as exc:  # truncated, not an npz, pickled arrays, bad JSON: an error, never a fall-back
+    except Exception as exc:  # noqa: BLE001 - truncated, not an npz, pickled arrays, bad JSON: an error, never a fall-back
         raise DamagedPolicyError(f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}") from None
     if meta.get("format") != FORMAT_VERSION:
         raise StalePolicyError(f"policy: {file} has format {meta.get('format')!r}, this version reads {FORMAT_VERSION}; {redo}")
@@ -367,5 +387,5 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     )
 
 
-__all__ = ["DamagedPolicyError", "check_trusted", "load_sb3", "read_run_config", "remember_run", "require_trust", "trusted", "trusted_roots",
+__all__ = ["DamagedPolicyError", "check_trusted", "trust_policy", "load_sb3", "read_run_config", "remember_run", "require_trust", "trusted", "trusted_roots",
            "FORMAT_VERSION", "NumpyPolicy", "POLICY_FILE", "StalePolicyError", "export_policy", "load_policy", "model_folder", "sha256"]

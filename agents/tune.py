@@ -191,8 +191,10 @@ def open_storage(url: str):
             engine["connect_args"] = {"timeout": 60}
         try:
             # Optuna's heartbeat: a killed worker's RUNNING trial is marked FAIL after GRACE_PERIOD
-            return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_INTERVAL, grace_period=GRACE_PERIOD,
-                                              failed_trial_callback=on_failed_trial)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_INTERVAL, grace_period=GRACE_PERIOD,
+                                                  heartbeat_stale_trial_callback=on_failed_trial)
         except Exception as exc:  # sqlalchemy's errors: a bad URL, an unreachable server, a missing driver
             raise ValueError(f"storage: cannot open {url.split('@')[-1]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
     path = Path(url)
@@ -201,7 +203,8 @@ def open_storage(url: str):
 
 
 def on_failed_trial(study, trial) -> None:
-    """Optuna's ``failed_trial_callback``: a trial whose worker stopped beating (killed) was marked FAIL."""
+    """Optuna's ``heartbeat_stale_trial_callback`` (``failed_trial_callback`` before Optuna 4.9): a trial whose
+    worker stopped beating (killed) was marked FAIL."""
     sys.stderr.write(f"flatbody tune: trial {trial.number} of study {study.study_name!r} lost its worker (no heartbeat for "
                      f"{GRACE_PERIOD} s); marked FAIL\n")
 

@@ -29,15 +29,23 @@ def _train_rsl(args) -> int:
     return 0
 
 
-def _trust(args) -> None:
-    """Loading a pickle (SB3 model.zip, vecnormalize.pkl, checkpoints) needs a trusted folder or ``--trust``."""
-    from agents.numpy_policy import require_trust
+def _trusting(handler):
+    """Run ``handler`` with loading a pickle (SB3 model.zip, vecnormalize.pkl, checkpoints) allowed only
+    from a trusted folder, unless ``--trust`` was given (docs/reliability.md, Trust model)."""
+    import functools
 
-    require_trust(not getattr(args, "trust", False))
+    @functools.wraps(handler)
+    def run(args) -> int:
+        from agents.numpy_policy import trust_policy
+
+        with trust_policy(not getattr(args, "trust", False)):
+            return handler(args)
+
+    return run
 
 
+@_trusting
 def _train(args) -> int:
-    _trust(args)
     if args.algo == "rsl-ppo":
         return _train_rsl(args)
     if args.device != "cpu":
@@ -84,11 +92,24 @@ def _train(args) -> int:
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
     print(f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}")
+    _export_after_training(result.out)
     return 0
 
 
+def _export_after_training(out) -> None:
+    """Write ``policy.npz`` beside the new model, so that evaluate/demo/record load this run without
+    unpickling anything (docs/reliability.md, Trust model); a policy the numpy evaluator cannot run
+    is reported on stderr and left to SB3."""
+    from agents.numpy_policy import export_policy
+
+    try:
+        export_policy(out)
+    except ValueError as exc:
+        sys.stderr.write(f"flatbody: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n")
+
+
+@_trusting
 def _evaluate(args) -> int:
-    _trust(args)
     from agents.evaluate import evaluate_all, format_table
 
     if args.env is not None or args.out_dir or args.docs:
@@ -147,8 +168,8 @@ def _evaluate_tasks(args) -> int:
     return 0
 
 
+@_trusting
 def _demo(args) -> int:
-    _trust(args)
     import shlex
 
     from agents.demo import run_demo
@@ -158,14 +179,18 @@ def _demo(args) -> int:
 
         if not check_output_path("--docs", args.docs, (".md",)).is_file():
             raise ValueError(f"--docs: {args.docs[:60]!r} does not exist (a Markdown page with <!-- demo:transcript --> markers)")
+    if args.out:  # rerun's writer cannot stop cleanly on a full disk: refuse up front what it cannot hold
+        from flatbody_env.cli.record import check_space
+
+        check_space(args.out, 1000)
     # the transcript's command line: the options given, less --docs
     given = [("--model", args.model, None), ("--seed", args.seed, 7), ("--out", args.out, "demo.rrd"), ("--backend", args.backend, "auto")]
     command = shlex.join(["flatbody", "demo", *(x for flag, value, default in given if value != default for x in (flag, str(value)))])
     return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend, docs=args.docs or None, command=command)
 
 
+@_trusting
 def _export_policy(args) -> int:
-    _trust(args)
     from agents.numpy_policy import export_policy
 
     path = export_policy(args.model)

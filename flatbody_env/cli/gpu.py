@@ -1,5 +1,5 @@
-"""``flatbody bench gpu``: body-steps/s of the batched dynamics against N on every backend here (the measurement
-lives in :mod:`flatbody_env.integrators.batch_bench`)."""
+"""``flatbody bench gpu``: body-steps/s of the batched dynamics, then of the whole env step, against N on every backend
+here (the measurement lives in :mod:`flatbody_env.integrators.batch_bench`)."""
 
 from __future__ import annotations
 
@@ -33,14 +33,19 @@ def _methods(text: str) -> list[str]:
 def _cmd(args) -> int:
     import json
 
-    from flatbody_env.integrators.batch_bench import plot, run
+    from flatbody_env.env.device_bench import run as run_env
+    from flatbody_env.integrators.batch_bench import WHAT, plot, run
     from flatbody_env.output import atomic_write
 
     def show(row):
-        print(f"{row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  ({row['device_name']})",
-              flush=True)
+        what = "dynamics" if row["what"] == WHAT else "whole env"
+        print(f"{what:<9} {row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  "
+              f"({row['device_name']})", flush=True)
 
     result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, progress=show)
+    names = sorted({r["backend"] for r in result["rows"]})
+    devices = {r["backend"]: r["device_name"] for r in result["rows"]}
+    result["rows"] += run_env(names, devices, sizes=args.sizes, steps=args.steps, repeats=args.repeats, progress=show)
     for note in result["left_out"]:
         print(f"left out: {note}")
     out = Path(args.out)
@@ -52,7 +57,8 @@ def _cmd(args) -> int:
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("gpu", help="batched dynamics: body-steps/s against N on the CPU (serial, parallel) and a CUDA GPU when present")
+    p = bench_sub.add_parser("gpu", help="batched dynamics and the whole env step: body-steps/s against N on the CPU (serial, parallel) "
+                                         "and a CUDA GPU when present")
     p.add_argument("--out", required=True, type=output_file("out", (".json",)), metavar="FILE.json",
                    help="JSON of the rows; the chart goes beside it (FILE.png)")
     p.add_argument("--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies")

@@ -29,9 +29,35 @@ def _rrd_path(text: str) -> str:
     return text
 
 
+RECORDING_BYTES_PER_STEP = 2048
+"""Upper estimate of a recording's size per logged step (measured: ~0.9 KB with every tensor view)."""
+
+
+def check_space(path: str, steps: int, files: int = 1) -> None:
+    """Refuse up front (``OSError`` ENOSPC / EFBIG: one line, exit 1) a recording the disk or the
+    file-size limit cannot hold: rerun's file writer cannot be stopped cleanly once a write fails."""
+    import errno
+    import os
+    import resource
+    import shutil
+
+    need = (1 << 20) + RECORDING_BYTES_PER_STEP * int(steps)
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+    if soft != resource.RLIM_INFINITY and soft < need:
+        raise OSError(errno.EFBIG, f"the file-size limit ({soft} bytes) is below the ~{need} bytes this recording needs", path)
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return
+    if free < need * files:
+        raise OSError(errno.ENOSPC, f"{free} bytes free, the recording needs ~{need * files}", path)
+
+
 def _record(args) -> int:
     if args.agent is not None:
         return _record_agent(args)
+    check_space(args.out, args.samples)
     import numpy as np
 
     from flatbody_env.recording.reader import verify_recording
@@ -76,11 +102,12 @@ def _record_agent(args) -> int:
         raise ValueError("agent: --agent records an environment episode; give no scene")
     from agents.demo import format_demo, rollout
     from agents.evaluate import Agent
-    from agents.numpy_policy import require_trust
+    from agents.numpy_policy import trust_policy
 
-    require_trust(not args.trust)  # pickles only from trusted folders (docs/reliability.md, Trust model)
-
-    agent = Agent(args.agent or None)
+    with trust_policy(not args.trust):  # pickles only from trusted folders (docs/reliability.md, Trust model)
+        agent = Agent(args.agent or None)
+    if args.out:
+        check_space(args.out, 1000)
     ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
     print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
@@ -116,6 +143,7 @@ def _record_env(args) -> int:
     from flatbody_env.recording.reader import verify_recording
     from flatbody_env.recording.wrapper import RerunRecorder
 
+    check_space(args.out, args.max_steps or 1000, files=args.episodes)
     env = RerunRecorder(_make_env(args.env_id, args.max_steps), args.out, tensor_every=args.tensor_every)
     space = env.action_space
     space.seed(args.seed)

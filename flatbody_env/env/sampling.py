@@ -32,6 +32,7 @@ body's kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`)
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
@@ -296,7 +297,8 @@ class EpisodeSampler:
     limits : (4,) control limits
     control : str
     kernels : module
-        :mod:`flatbody_env.env.compiled` (compiled) or this module (plain Python): ``sample_episodes``.
+        :mod:`flatbody_env.env.compiled` (compiled) or this module (plain Python): ``sample_episodes``;
+        handed in by the caller (this module imports neither :mod:`~flatbody_env.env.compiled` nor anything above it).
     """
 
     DRAWS = 3 * 32 + 10
@@ -330,16 +332,14 @@ class EpisodeSampler:
 
     def __getstate__(self):
         state = dict(self.__dict__)
-        del state["kernels"]  # a module: re-imported on unpickling
+        state["kernels"] = self.kernels.__name__  # a module: pickled by name, re-imported on unpickling
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
-        if self._compiled:
-            from flatbody_env.env import compiled as kernels
-        else:
-            import flatbody_env.env.sampling as kernels
-        self.kernels = kernels
+        # by the name the caller's module had: this module never names :mod:`.compiled`, which imports it
+        # (no import circle; the caller hands the kernels in)
+        self.kernels = importlib.import_module(state["kernels"])
 
     def sample(self, rngs, Y: np.ndarray, cols) -> np.ndarray:
         """Draw one episode per generator in ``rngs``: body b's initial state into column ``cols[b]``

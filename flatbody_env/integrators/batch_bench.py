@@ -15,6 +15,9 @@ Backends:
   simulator is never timed).
 
 Rows: ``{"what", "backend", "method", "n", "steps_per_s", "device_name"}``.
+
+The whole env step (controls, observation, rewards, termination, autoresets) is timed on the same backends by
+:mod:`flatbody_env.env.device_bench` (``flatbody bench gpu`` adds its rows to these).
 """
 
 from __future__ import annotations
@@ -175,11 +178,13 @@ def plot(result: dict, path: str | Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    keys = sorted({(r["backend"], r["method"]) for r in result["rows"]})
-    for backend, method in keys:
-        rows = sorted((r for r in result["rows"] if r["backend"] == backend and r["method"] == method), key=lambda r: r["n"])
-        ax.plot([r["n"] for r in rows], [r["steps_per_s"] for r in rows], marker="o", linestyle="-" if method == "RK4" else "--",
-                label=f"{backend}, {method} ({rows[0]['device_name']})")
+    keys = sorted({(r["what"], r["backend"], r["method"]) for r in result["rows"]})
+    for what, backend, method in keys:
+        rows = sorted((r for r in result["rows"] if r["what"] == what and r["backend"] == backend and r["method"] == method), key=lambda r: r["n"])
+        whole = what != WHAT
+        ax.plot([r["n"] for r in rows], [r["steps_per_s"] for r in rows], marker="s" if whole else "o",
+                linestyle=":" if whole else ("-" if method == "RK4" else "--"),
+                label=f"{'whole env, ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})")
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set_xlabel("bodies N")

@@ -173,6 +173,14 @@ def _kernels():
     return module.jit(rebound(_env_step_kernel, target, **constants)), module.jit(rebound(_solve_kernel, target, **constants))
 
 
+@functools.cache
+def kernel(func):
+    """The CUDA kernel compiled from ``func``, a module-level plain-Python kernel from outside this module (the env's,
+    :mod:`flatbody_env.env.device`) whose ``cuda`` global is bound here, with the same device twins as :func:`env_step`'s."""
+    target, constants = _target()
+    return constants["cuda"].jit(rebound(func, target, **constants))
+
+
 # --------------------------------------------------------------------------------------------- host API
 def _blocks(n: int, threads: int) -> tuple[int, int]:
     threads = max(1, min(int(threads), n))
@@ -186,12 +194,23 @@ def _method(method: str) -> tuple[int, np.ndarray]:
 
 
 def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=np.inf, OUT=None, STATUS=None, NFEV=None,
-             threads_per_block=THREADS_PER_BLOCK):
+             threads_per_block=THREADS_PER_BLOCK, task=None):
     """One environment step of N bodies on the GPU, one kernel launch.
 
     ``Y`` (11, N), ``U`` (4, N), ``P`` (9,) host or device arrays; outputs ``OUT`` (11, N), ``STATUS``,
     ``NFEV`` (N,) int64 are allocated on the device when not given. Returns (OUT, STATUS, NFEV) as
-    given/allocated (device arrays unless host arrays were passed in, which are then filled)."""
+    given/allocated (device arrays unless host arrays were passed in, which are then filled).
+
+    With ``task`` (a :class:`flatbody_env.env.device.DeviceBatch` on CUDA) the same single launch is the whole env step:
+    ``U`` is then the actions (N, n) (clipped and scaled on the device), ``Y`` the batch's states, advanced in place, and
+    the task's observation, reward terms, termination, truncation and autoresets land in the batch's arrays
+    (:func:`flatbody_env.env.device.step_body`); returns None."""
+    if task is not None:
+        blocks, threads = _blocks(Y.shape[1], threads_per_block)
+        task.cuda_kernels()[0][blocks, threads](task.kind, task.coeffs, U, Y, task.T, task.OBS, task.FINAL, task.INFO, task.I, task.ENDS, task.FLAGS, P,
+                                task.kcfg, task.scfg, task.limits, task.mask, float(dt), float(h), float(rtol), float(atol), float(energy_tol),
+                                task.max_episode_steps, 1 if task.same_step else 0, task.key[0], task.key[1], *task.table)
+        return None
     kind, coeffs = _method(method)
     kernel, _ = _kernels()
     n = Y.shape[1]
@@ -225,5 +244,16 @@ def solve(method, Y0, times, u, P, *, h, rtol, atol, energy_tol, max_nfev, threa
     return OUT, d_STATUS.copy_to_host(), d_NFEV.copy_to_host(), d_TFAIL.copy_to_host()
 
 
-__all__ = ["CudaUnavailableError", "INSTALL_HINT", "THREADS_PER_BLOCK", "device_name", "device_twin", "env_step", "is_available", "require",
-           "simulated", "solve"]
+__all__ = [
+    "INSTALL_HINT",
+    "THREADS_PER_BLOCK",
+    "CudaUnavailableError",
+    "device_name",
+    "device_twin",
+    "env_step",
+    "is_available",
+    "kernel",
+    "require",
+    "simulated",
+    "solve",
+]

@@ -88,6 +88,11 @@ def sub_rhs(x, template, state_idx, rate_idx, u, P, dx, work, ext, vel, force):
     subsystem_rhs(x, u, (P, template, state_idx, rate_idx), dx, (vel, work, ext), force)
 
 
+# Re-bound for each sub-system by ``retarget`` (:data:`dop853_inplane`, :data:`dop853_thickness`): its size,
+# the index maps into the paper state and its rates, and how many leading variables must stay > 0.
+N = STATE_IDX = RATE_IDX = POSITIVE = None
+
+
 def _subsystem_status(x, gap_sign, check_gap):
     """The two-polar status rule (:func:`~.twopolar_kernels.state_code`) on a sub-system: its first
     ``POSITIVE`` variables (λ, μ; ϱ) must stay > 0, x[0] − x[1] (λ − μ) keep its sign where checked."""

@@ -234,6 +234,9 @@ def error_data(exc: BaseException) -> dict[str, Any]:
                 "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason, "method": exc.method or None}
     if isinstance(exc, LimitExceeded):
         return {"kind": "too-large", "detail": str(exc), "field": exc.field}
+    if isinstance(exc, OSError):  # a job's file could not be written (disk full, file-size limit): the server's fault
+        text = " ".join(str(exc).split())[:200] or type(exc).__name__
+        return {"kind": "unavailable", "detail": f"the service could not write the job's files ({text})", "status": 503}
     if isinstance(exc, ValueError):
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         field = text.split(":", 1)[0] if ":" in text and " " not in text.split(":", 1)[0] else None

@@ -316,7 +316,13 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         if exc.status_code == 400:  # a body that cannot be decoded (FastAPI says 400): bad input, as every other
             return error(422, "validation", f"body: not valid JSON ({exc.detail})", field="body")
         kind = {404: "not-found", 405: "method-not-allowed", 409: "conflict", 413: "too-large"}.get(exc.status_code, "validation")
-        response = error(exc.status_code, kind, str(exc.detail))
+        named = {404: "path", 405: "method"}.get(exc.status_code)  # no such path / a method the path does not have
+        detail = str(exc.detail)
+        if exc.status_code == 404:
+            detail = f"path: no such endpoint {request.url.path[:80]!r} (see /docs)"
+        elif exc.status_code == 405:
+            detail = f"method: {request.method[:20]} is not allowed on {request.url.path[:80]}"
+        response = error(exc.status_code, kind, detail, field=named)
         for name, value in (exc.headers or {}).items():
             response.headers[name] = value
         if exc.status_code == 405:  # Allow: every method of every route at this path (starlette names the first route's only)

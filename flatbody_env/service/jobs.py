@@ -188,7 +188,8 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
     scene, traj = _integrate(p, report, 0.02, 0.5, with_rotation=True)
     report.step(0.5, 0.98, f"writing recording.rrd ({traj.t.size} samples)")
     target = out / "recording.rrd"
-    with reporting_bars(report), atomic_path(target) as tmp:  # a failed or killed job leaves no half-written recording.rrd
+    # a failed or killed job leaves no half-written recording.rrd (the runner removes the temporary file of a killed one)
+    with reporting_bars(report), atomic_path(target) as tmp, killed_past_file_size_limit():
         record_trajectory(traj, scene.body, tmp, title=p.get("title"), tensor_every=p["tensor_every"])
     path = target
     return {
@@ -200,6 +201,26 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
         "model": traj.model,
         "open_with": f"rerun {path.name}",
     }, [path.name]
+
+
+@contextmanager
+def killed_past_file_size_limit() -> Iterator[None]:
+    """While inside, a write past ``RLIMIT_FSIZE`` kills this worker process (SIGXFSZ's default action).
+
+    Python ignores SIGXFSZ, so a write past the limit fails with EFBIG: an ``OSError`` where Python
+    writes. rerun writes its file from its own threads, and when that write fails its flush waits
+    forever (the job would sit ``running``). Killed instead, the worker's job is marked failed by the
+    runner with one line (:func:`exit_reason`) and its temporary files removed.
+    """
+    try:
+        saved = signal.signal(signal.SIGXFSZ, signal.SIG_DFL)
+    except (AttributeError, ValueError):  # no SIGXFSZ here, or not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGXFSZ, saved)
 
 
 def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
@@ -406,9 +427,10 @@ class JobRunner:
                 del self._procs[jid]
         for jid, proc in done:
             proc.join(timeout=1)
-            code = proc.exitcode
-            # A worker that ended without writing its outcome (killed, out of memory, crashed):
-            self.store.fail(jid, f"the worker process ended without an answer (exit code {code})")
+            # A worker that ended without writing its outcome (killed, out of memory, crashed): the job fails
+            # with one line, and the temporary files of its unfinished writes are removed.
+            if self.store.fail(jid, exit_reason(proc.exitcode)):
+                remove_partial_files(self.store.job_dir(jid))
 
     def _launch(self) -> None:
         while not self._stop.is_set():
@@ -426,6 +448,36 @@ class JobRunner:
                 self._procs[job["id"]] = proc
 
 
+def exit_reason(code: int | None) -> str:
+    """The one-line error of a job whose worker process ended without writing its outcome (exit code ``code``)."""
+    if code is not None and code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        if name == "SIGXFSZ":
+            return "the job's file went over the service's file-size limit (RLIMIT_FSIZE); the worker process was stopped by SIGXFSZ"
+        if name == "SIGKILL":
+            return "the worker process was killed (SIGKILL: out of memory?) before it answered"
+        return f"the worker process ended without an answer (killed by {name})"
+    return f"the worker process ended without an answer (exit code {code})"
+
+
+def remove_partial_files(folder: Path) -> None:
+    """Remove the temporary files (``.NAME.XXXX.tmp.SUFFIX``, :func:`flatbody_env.output.atomic_path`) a killed
+    worker left in a job's folder; finished files are never touched."""
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        if entry.name.startswith(".") and ".tmp" in entry.name and entry.is_file():
+            try:
+                entry.unlink()
+            except OSError:
+                pass
+
+
 def _stop_process(proc) -> None:
     proc.terminate()
     proc.join(timeout=3)
@@ -434,5 +486,5 @@ def _stop_process(proc) -> None:
         proc.join(timeout=3)
 
 
-__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "process_context", "reporting_bars",
-           "reporting_integration", "run_job"]
+__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "exit_reason", "killed_past_file_size_limit",
+           "process_context", "remove_partial_files", "reporting_bars", "reporting_integration", "run_job"]

@@ -570,11 +570,14 @@ def describe_errors(errors: list[dict[str, Any]], *, where: str = "request") -> 
     ctx = first.get("ctx") or {}
     if kind.startswith("union_tag"):
         loc.append(str(ctx.get("discriminator", "kind")).strip("'"))
+    if kind == "json_invalid":  # the location is the byte offset of the error, not a field
+        at = f" at position {loc[0]}" if loc and loc[0].isdigit() else ""
+        loc = []
     loc = ["lambda" if x == "lambda_" else x for x in loc]
     field = ".".join(loc) or "body"
     msg = str(first.get("msg", "invalid")).replace("\n", " ")
     if kind == "json_invalid":
-        msg = f"not valid JSON ({ctx.get('error', 'parse error')})"
+        msg = f"not valid JSON ({ctx.get('error', 'parse error')}{at})"
     else:
         msg = _bound_text(kind, ctx, first.get("input")) or msg
     more = f" (+{len(errors) - 1} more)" if len(errors) > 1 else ""

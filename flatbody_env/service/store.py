@@ -223,6 +223,7 @@ class JobStore:
         parts: list[str] = []
         size = 32
         next_cursor = None
+        last = None  # the last job put on the page (the cursor of the next one)
         with self.connect() as db:
             cur = db.execute(f"SELECT {_PUBLIC}, NULL AS result FROM jobs {where} ORDER BY created DESC, id DESC LIMIT ?", (*args, limit + 1))
             for row in cur:

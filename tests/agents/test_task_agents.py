@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import flatbody_env  # noqa: F401  (registers the tasks)
-from agents.evaluate import MODELS_DIR, env_kwargs_for, run_episodes, summarize
+from agents.evaluate import MODELS_DIR, env_kwargs_for, run_episodes
 from agents.heuristic import ResidualAction
 from flatbody_env.env.registration import TASK_IDS
 

@@ -13,6 +13,7 @@ from gymnasium.utils.env_checker import check_env
 import flatbody_env  # noqa: F401  (registers FlatBody-v0)
 from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.env.task import CONTROLS
+from oracles import documented_reward_terms
 
 
 @pytest.mark.parametrize("control", CONTROLS)
@@ -48,13 +49,18 @@ def _rollout(env, seed, n=60):
     env.action_space.seed(seed)
     out = [obs]
     rewards = []
+    u = env.unwrapped
     for _ in range(n):
-        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        a = env.action_space.sample()
+        obs, r, term, trunc, info = env.step(a)
         out.append(obs)
         rewards.append(r)
-        # the named terms sum to the reward
-        assert r == pytest.approx(sum(info["reward_terms"].values()), abs=1e-12)
-        assert set(info["reward_terms"]) == {"shape", "spin", "tumble", "rest", "action", "failure"}
+        # each term and the reward from docs/env.md's formulas on the state after the step (tests/oracles.py, not the env's kernels)
+        expect = {k: float(v[0]) for k, v in documented_reward_terms(u.physics_state, u.target_vector, a, term, u.body).items()}
+        assert list(info["reward_terms"]) == list(expect)
+        for name, value in expect.items():
+            assert info["reward_terms"][name] == pytest.approx(value, rel=1e-11, abs=1e-12), name
+        assert r == pytest.approx(sum(expect.values()), rel=1e-11, abs=1e-12)
         if term or trunc:
             break
     return np.array(out), np.array(rewards)

@@ -106,3 +106,20 @@ def test_a_sampled_start_outside_the_domain_names_the_noise():
             env.reset(seed=seed)
     with pytest.raises(ValueError, match="initial_noise: the initial state starts outside the domain"):
         FlatBodyVectorEnv(num_envs=50, initial_noise=3.0).reset(seed=0)
+
+
+@pytest.mark.parametrize("kernels", [compiled, sampling], ids=["compiled", "python"])
+def test_sampler_pickles_with_the_kernels_it_was_handed(kernels):
+    """The sampler is handed its kernels (sampling.py imports no module above it): pickled, it comes back with
+    the same module, by name, and draws the same episodes."""
+    import pickle
+
+    env = FlatBodyEnv()
+    sampler = EpisodeSampler(env.task, env.body, env.limits, env.control, kernels)
+    clone = pickle.loads(pickle.dumps(sampler))
+    assert clone.kernels is kernels
+    Y1, Y2 = np.empty((11, 3)), np.empty((11, 3))
+    a = sampler.sample([np.random.default_rng(s) for s in range(3)], Y1, [0, 1, 2])
+    b = clone.sample([np.random.default_rng(s) for s in range(3)], Y2, [0, 1, 2])
+    np.testing.assert_array_equal(Y1, Y2)
+    np.testing.assert_array_equal(a, b)

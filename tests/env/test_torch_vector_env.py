@@ -99,8 +99,11 @@ def test_next_step_mode_and_bad_devices():
         got, want = env.step(torch.zeros(2, 4)), ref.step(np.zeros((2, 4)))
         np.testing.assert_array_equal(got[0].numpy(), want[0])
         np.testing.assert_array_equal(got[3].numpy(), want[3])
-    with pytest.raises(NotImplementedError, match="cuda"):
-        FlatBodyTorchVectorEnv(2, device="cuda")
+    if not torch.cuda.is_available():  # one clear error without a GPU (docs/gpu.md); with one: tests/env/test_device_env.py
+        from flatbody_env.integrators.cuda import CudaUnavailableError
+
+        with pytest.raises(CudaUnavailableError, match="device: 'cuda' needs a CUDA GPU"):
+            FlatBodyTorchVectorEnv(2, device="cuda")
     with pytest.raises(ValueError, match="device"):
         FlatBodyTorchVectorEnv(2, device="meta")
 

@@ -9,7 +9,7 @@ import pytest
 
 import recording_oracles as oracles
 from flatbody_env.env.rendering import COLORS
-from flatbody_env.recording.layout import FLAT_NOTE, FLAT_RTOL, SERIES_COLORS, TARGET_SERIES, series_views, view_specs
+from flatbody_env.recording.layout import FLAT_NOTE, FLAT_RTOL, TARGET_SERIES, series_views, view_specs
 from flatbody_env.recording.reader import read_blueprint, read_recording
 
 strict_rerun = oracles.strict_rerun

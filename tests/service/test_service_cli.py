@@ -33,7 +33,7 @@ def test_serve_elsewhere_is_said_in_the_log(fake_uvicorn, capsys, tmp_path):
 
 @pytest.mark.parametrize("argv, words", [
     (["serve", "--port", "70000"], "port: must be an integer in [0, 65535]"),
-    (["serve", "--workers", "0"], "workers: must be an integer >= 1"),
+    (["serve", "--workers", "0"], "argument --workers: workers: must be an integer in [1, 256], got 0"),
     (["bench", "service", "--clients", "0,8"], "clients: each must be an integer in [1, 256]"),
 ])
 def test_bad_options_exit_2_with_one_line(fake_uvicorn, capsys, argv, words):

@@ -89,3 +89,35 @@ def test_full_disk_is_503(tmp_path):
             assert http.get("/jobs", params={"limit": 5}).status_code in (200, 503)
     finally:
         _stop(proc)
+
+
+def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
+    """A recording that goes over ``RLIMIT_FSIZE`` ends ``failed`` with one line, at once, and leaves no file.
+
+    rerun writes the file from its own threads; Python ignores SIGXFSZ, so the write fails with EFBIG there and
+    rerun's flush waits forever: the job sat ``running``. The worker takes SIGXFSZ's default action while rerun
+    writes (it is killed), and the runner fails the job and removes its temporary file."""
+    data = tmp_path / "data"
+    proc, url = start_service(data, workers=1, preexec_fn=_limit_files(300_000))
+    try:
+        with httpx.Client(base_url=url, timeout=60) as http:
+            r = http.post("/jobs", json={"kind": "record", "params": {"scene": "default", "t_end": 50.0, "samples": 5001}})
+            assert r.status_code == 202, r.text[:300]
+            job_id = r.json()["id"]
+            deadline = time.monotonic() + 90
+            while True:
+                job = http.get(f"/jobs/{job_id}").json()
+                if job["status"] in ("done", "failed") or time.monotonic() > deadline:
+                    break
+                time.sleep(0.3)
+            assert job["status"] == "failed", job
+            error = job["error"]
+            assert "\n" not in error and "Traceback" not in error and "file-size limit" in error, error
+            folder = data / "jobs" / job_id
+            left = sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+            assert left == [], left  # no recording.rrd, no truncated temporary file
+            r = http.get(f"/jobs/{job_id}/artifact")
+            assert r.status_code == 409 and r.json()["kind"] == "conflict"
+            assert http.get("/health").status_code == 200
+    finally:
+        _stop(proc)

@@ -1,0 +1,51 @@
+"""CLI bounds and faults: negative numbers in any spelling, a port that cannot be bound, non-finite
+invariants, the per-flag upper bounds (docs/reliability.md)."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+
+from flatbody_env.cli.main import main
+
+
+def test_negative_numbers_in_e_notation_are_values(capsys):
+    assert main(["ellipses", "--s3", "-2e0", "--p-theta", "-1E+0", "--grid", "10", "--json"]) == 0
+    assert main(["ellipses", "--s3", "-.5", "--p-theta", "-1", "--grid", "10", "--json"]) == 0
+
+
+@pytest.mark.parametrize("argv", [["bench", "env", "--batch", "1000000000"], ["bench", "env", "--steps", "10000000000"],
+                                  ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-30"],
+                                  ["simulate", "--scene", "default", "--max-seconds", "1e9"], ["sweep", "stability-map", "--out", "x", "--grid", "-5"]])
+def test_sizes_beyond_the_bounds_exit_2(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and ("must" in err or "allowed" in err)
+
+
+def test_serve_exits_2_when_it_cannot_bind(tmp_path, capsys):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert main(["serve", "--data-dir", str(tmp_path / "d"), "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert "port" in err and len(err.strip().splitlines()) == 1
+
+
+def test_invariants_refuse_non_finite_results(tmp_path, capsys):
+    from flatbody_env.simulation import simulate
+
+    d = simulate("default", t_end=0.2, times=[0.0, 0.1, 0.2], with_rotation=True).to_dict()
+    d["state"]["mu"] = list(d["state"]["lambda"])  # lambda = mu: the two-polar velocities diverge
+    (tmp_path / "eq.json").write_text(json.dumps(d))
+    assert main(["invariants", str(tmp_path / "eq.json"), "--json", "--scene", "default"]) == 2
+    assert "not finite" in capsys.readouterr().err
+    d["state"]["lambda"][1] = 1e-7  # outside the documented range
+    (tmp_path / "small.json").write_text(json.dumps(d))
+    assert main(["invariants", str(tmp_path / "small.json"), "--json"]) == 2
+    assert "trajectory.state.lambda" in capsys.readouterr().err

@@ -1,0 +1,45 @@
+"""Bounded work in the environment: dt, the fixed step and its sub-steps, batch sizes, and the per-step
+budget of right-hand-side evaluations (docs/reliability.md, "Bounded work")."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import flatbody_env
+from flatbody_env.env.env import FlatBodyEnv
+from flatbody_env.env.vector_env import FlatBodyVectorEnv
+from flatbody_env.physics import validation
+
+
+@pytest.mark.parametrize("kw,field", [
+    (dict(dt=1e6), "dt"), (dict(dt=1e9), "dt"), (dict(dt=0.0), "dt"), (dict(dt=float("nan")), "dt"),
+    (dict(integrator="RK4", step=1e-12), "step"), (dict(integrator="RK4", step=1e-30), "step"),  # a floor, never replaced by dt
+    (dict(integrator="RK4", dt=1.0, step=5e-6), "step"), (dict(integrator=7), "integrator"), (dict(momentum_bound=1e300), "momentum_bound"),
+])
+def test_env_settings_beyond_the_bounds_are_refused(kw, field):
+    with pytest.raises(ValueError, match=f"^{field}"):
+        gym.make("FlatBody-v0", **kw)
+
+
+@pytest.mark.parametrize("kw,field", [(dict(num_envs=10**9), "num_envs"), (dict(num_envs=2, max_episode_steps=10**12), "max_episode_steps")])
+def test_vector_env_sizes_are_bounded_before_allocation(kw, field):
+    with pytest.raises(ValueError, match=f"^{field}"):
+        FlatBodyVectorEnv(**kw)
+
+
+def test_env_step_carries_the_per_step_budget():
+    env = FlatBodyEnv(integrator="DOP853")
+    assert env.tolerances.max_nfev == validation.ENV_STEP_MAX_NFEV
+    assert env.tolerances.max_wall_time == validation.ENV_STEP_MAX_SECONDS
+
+
+def test_compiled_step_past_its_nfev_budget_ends_the_episode_with_the_reason():
+    env = FlatBodyEnv()
+    env.reset(seed=3)
+    env._counters[3] = 0  # no evaluations left: the compiled DOP853 stops inside the step (checked before each step)
+    y0 = env.physics_state.copy()
+    obs, reward, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
+    assert terminated and info["integrator_failure"].startswith("budget")
+    assert np.array_equal(env.physics_state, y0) and np.all(np.isfinite(obs))
