@@ -131,8 +131,10 @@ class Agent:
         if self.env_id != "FlatBody-v0":  # another task: its registered keywords (task, control, ...) come with it
             self.env_kwargs = env_kwargs_for(self.env_id, self.env_kwargs)
         self.residual = hp.get("residual") or None
-        self.residual_scale = float(hp.get("residual_scale", 1.0))
-        self.residual_gate = float(hp.get("residual_gate", 0.0))
+        from flatbody_env.physics import validation
+
+        self.residual_scale = validation.number("config.yml.hyperparams.residual_scale", hp.get("residual_scale", 1.0), low=0.0, high=1e6)
+        self.residual_gate = validation.number("config.yml.hyperparams.residual_gate", hp.get("residual_gate", 0.0), low=0.0, high=1e6)
         self._base = None
         if self.residual in ("heuristic", "passivity"):
             from agents.heuristic import ResidualAction

@@ -13,7 +13,17 @@ import argparse
 import re
 import sys
 
-from flatbody_env.cli import agents, analysis, bench, gpu, integrators, record, serve, simulate, sweep
+from flatbody_env.cli import (
+    agents,
+    analysis,
+    bench,
+    gpu,
+    integrators,
+    record,
+    serve,
+    simulate,
+    sweep,
+)
 
 COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve, gpu)
 """The declared command registry: modules that contribute sub-commands, in help order. Each has
@@ -96,8 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:
         sys.stderr.write("flatbody: out of memory (use smaller sizes; docs/reliability.md lists the bounds)\n")
         return 1
-    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
-        import os
+    except Exception as exc:
         import sqlite3
 
         if os.environ.get("FLATBODY_DEBUG"):

@@ -213,6 +213,8 @@ class FlatBodyEnv(gym.Env):
         validation.number("gap_min", gap_min, low=0.0, high=0.5)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode: must be None or 'rgb_array', got {render_mode!r}")
+        if not isinstance(track_rotation, (bool, np.bool_)):
+            raise ValueError(f"track_rotation: must be true or false, got {track_rotation!r:.60}")
         self.dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
         if not isinstance(integrator, str):
             raise ValueError(f"integrator: must be a method name (see 'flatbody methods'), got {integrator!r:.60}")

@@ -22,7 +22,26 @@ def test_every_task_has_ppo_hyperparameters():
 
     for env_id in TASK_IDS:
         hp = load_hyperparams("ppo", env_id)
-        assert hp["residual"] if env_id not in ("FlatBodyDilatation-v0", "FlatBodyTorque-v0") else not hp.get("residual")
+        assert hp["residual"] if env_id != "FlatBodyDilatation-v0" else not hp.get("residual")  # no LQR exists there
+
+
+def test_curriculum_switches_the_training_task_and_keeps_the_registered_one(tmp_path):
+    """agents/curriculum.py: the stages rebuild the training environments with the keyword, the last stage is
+    the task's own, config.yml records the schedule and keeps the task's hyperparameters (what evaluation reads)."""
+    import yaml
+
+    from agents.curriculum import main
+
+    out = tmp_path / "run"
+    assert main(["--env", "FlatBodySlow-v0", "--out", str(out), "--stages", "0.15,0", "--min-stage-steps", "1",
+                 "--max-stage-steps", "1", "--n-timesteps", "64", "--train-env-kwargs", "w_tumble=0",
+                 "--log-std-per-action=-1,-1,-3,-3",
+                 "--hyperparams", "n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=1"]) == 0
+    cfg = yaml.safe_load((out / "config.yml").read_text())
+    assert [h["value"] for h in cfg["curriculum"]["history"]] == [0.15, 0.0]
+    assert cfg["curriculum"]["train_env_kwargs"] == {"w_tumble": 0}
+    assert cfg["hyperparams"]["env_kwargs"] == {}
+    assert "curriculum/value" in (out / "progress.csv").read_text().splitlines()[0]
 
 
 def test_train_refuses_an_unregistered_id(tmp_path):

@@ -68,6 +68,10 @@ FLOAT_FLAGS: list[tuple[tuple[str, ...], str, list[str]]] = [
 ]
 
 
+_HELD: list = []
+"""Sockets held open while the corpus runs."""
+
+
 @dataclass
 class Case:
     kind: str
@@ -203,6 +207,16 @@ def cli_cases(folder: Path) -> list[Case]:
         _bad_sqlite(db, kind)
         cases.append(Case("cli", f"tune on a {kind} storage", "refuse", ["tune", "--algo", "ppo", "--trials", "1", "--storage",
                                                                           f"sqlite:///{db}", "--out", str(folder / "tune")]))
+    import socket
+
+    held = socket.socket()  # a port in use for the whole run: serve must refuse it (exit 2), not exit 3
+    held.bind(("127.0.0.1", 0))
+    held.listen()
+    _HELD.append(held)
+    cases.append(Case("cli", "serve on a port in use", "refuse", ["serve", "--data-dir", str(folder / "serve-ok"), "--port",
+                                                                  str(held.getsockname()[1])]))
+    cases.append(Case("cli", "serve on an unknown host", "refuse", ["serve", "--data-dir", str(folder / "serve-ok"), "--host",
+                                                                    "no-such-host.invalid", "--port", "0"]))
     (folder / "a-file").write_text("x")
     cases.append(Case("cli", "sweep --out is a file", "refuse", ["sweep", "stability-map", "--grid", "4", "--workers", "0", "--out",
                                                                  str(folder / "a-file")]))
@@ -257,7 +271,8 @@ def api_cases(folder: Path) -> list[Case]:
                   dict(integrator="RK4", step=-0.01), dict(integrator="RK4", step=0.06), dict(integrator="RK4", dt=1.0, step=5e-6),
                   dict(integrator=123), dict(integrator="nope"), dict(integrator=None), dict(rtol=0.0), dict(atol=math.nan),
                   dict(torque_limit=1e300), dict(force_limit=-1.0), dict(momentum_bound=math.inf), dict(stretch_bounds=(5,)),
-                  dict(stretch_bounds="ab"), dict(stretch_bounds=(2.0, 1.0)), dict(rho_bounds=(0.0, 1e400)), dict(gap_min=2.0)]
+                  dict(stretch_bounds="ab"), dict(stretch_bounds=(2.0, 1.0)), dict(rho_bounds=(0.0, 1e400)), dict(gap_min=2.0),
+                  dict(track_rotation="x"), dict(foo=1), dict(control=5), dict(task=3), dict(body=[1])]
     for kw in refuse_env:
         cases.append(Case("api", f"gym.make {kw}", "refuse", call=env_step(**kw)))
     for kw in [dict(num_envs=10**9), dict(num_envs=0), dict(num_envs=True), dict(num_envs=2.5), dict(num_envs=2, max_episode_steps=10**12),

@@ -73,3 +73,18 @@ def _one_step(kw):
         obs, *_ = env.step(env.action_space.sample() * 0)
         return {"obs": obs}
     return call
+
+
+@FAST
+@given(step=st.floats(allow_nan=True, allow_infinity=True, min_value=None, max_value=None),
+       wall=st.floats(allow_nan=True, allow_infinity=True) | st.integers(min_value=-5, max_value=10**12),
+       nfev=st.integers(min_value=-5, max_value=10**14) | st.booleans())
+def test_simulate_step_and_budget_are_bounded_or_refused(step, wall, nfev):
+    from flatbody_env.simulation import simulate
+
+    row = corpus.run(corpus.Case("api", f"simulate step={step} wall={wall} nfev={nfev}", "clean",
+                                 call=lambda: {"y": simulate("default", t_end=0.5, times=[0.0, 0.5], method="RK4", step=step,
+                                                             max_wall_time=wall, max_nfev=nfev).y}, limit=30.0))
+    assert corpus.bad(row) is None, row
+    if row["outcome"] == "ok":  # accepted only within the documented bounds
+        assert 1e-6 <= step <= 1e6 and 0 < wall <= 86_400 and not isinstance(nfev, bool) and 1 <= nfev <= 10**12
