@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,9 @@ def _custom() -> CustomPotential:
 
 # Commands the tests start (rerun, dask, flatbody) come from the environment that runs the tests, as in
 # an activated virtual environment: README's test command runs .venv/bin/python without activating it.
+# The run folders the tests train are remembered as trusted in a configuration folder of the test
+# session's own (agents.numpy_policy.remember_run), never in the user's ~/.config.
+os.environ.setdefault("FLATBODY_CONFIG_HOME", tempfile.mkdtemp(prefix="flatbody-test-config-"))
 _SCRIPTS = str(Path(sys.executable).parent)
 if _SCRIPTS not in os.environ.get("PATH", "").split(os.pathsep):
     os.environ["PATH"] = _SCRIPTS + os.pathsep + os.environ.get("PATH", "")

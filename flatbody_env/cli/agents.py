@@ -21,8 +21,12 @@ def _train_rsl(args) -> int:
 
     if args.study is not None or args.resume or args.hyperparams_file:
         raise ValueError("--algo rsl-ppo: --study, --resume and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)")
+    from agents.numpy_policy import remember_run
+
     command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
-    result = train_rsl(args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}", seed=args.seed, n_timesteps=args.n_timesteps,
+    out = args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}"
+    remember_run(out)  # a run folder this user creates: its model loads later without --trust
+    result = train_rsl(out, seed=args.seed, n_timesteps=args.n_timesteps,
                        n_envs=args.n_envs, device=args.device, overrides=args.hyperparams or [], env_id=args.env, threads=args.threads,
                        progress=not args.no_progress, command=command, force=args.force)
     print(f"trained {ALGO} for {result.timesteps} steps in {result.wall_time_s:.0f} s; saved in {result.out}")
