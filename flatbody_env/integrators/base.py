@@ -83,8 +83,9 @@ class Tolerances:
 
     Budget: an integration that would need more than ``max_nfev`` right-hand-side evaluations
     (fixed-step methods: known before the run, ⌈Δt/h⌉ steps × stages; adaptive methods: counted as
-    they go) or more than ``max_wall_time`` seconds (checked by the scipy methods; compiled ones
-    are bounded by ``max_nfev``) stops with :class:`IntegrationError` of ``kind="budget"``.
+    they go) or more than ``max_wall_time`` seconds (checked by the scipy methods in the right-hand side; the
+    compiled DOP853 turns it into an evaluation budget from a timed probe, compiled fixed-step methods
+    refuse a run whose predicted time exceeds it) stops with :class:`IntegrationError` of ``kind="budget"``.
     """
 
     rtol: float = 1e-10
@@ -95,7 +96,7 @@ class Tolerances:
     max_nfev: int = DEFAULT_MAX_NFEV
     """Budget of right-hand-side evaluations."""
     max_wall_time: float = DEFAULT_MAX_WALL_TIME
-    """Budget of wall-clock seconds (scipy methods)."""
+    """Budget of wall-clock seconds (every method; see the class docstring)."""
 
     def __post_init__(self) -> None:
         from flatbody_env.physics import validation as v

@@ -57,6 +57,7 @@ method's ``(kind, coefficients)`` from the method table (:mod:`.specs`), no Pyth
 from __future__ import annotations
 
 import functools
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,14 +93,64 @@ def _check_compiled_body(body: Body, name: str) -> None:
         )
 
 
-def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol: Tolerances) -> None:
+def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol: Tolerances) -> float:
     """Fixed-step work is known before the run: ⌈Δt/h⌉ steps per output interval × ``stages`` RHS
-    evaluations; beyond ``tol.max_nfev`` it is refused up front (``kind="budget"``)."""
+    evaluations; beyond ``tol.max_nfev`` it is refused up front (``kind="budget"``). Returns that work."""
     spans = np.diff(times)
     steps = float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
     if steps * stages > tol.max_nfev:
         raise budget_error(t=float(times[0]), method=name, tol=tol,
                            used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]")
+    return steps * stages
+
+
+_PROBE_NFEV = 5_000
+"""Right-hand-side evaluations of a timing probe of the wall-clock budget (a few ms compiled)."""
+_COMPILED_RATE = 2e5
+"""Evaluations per second below which a probe is taken to have included loading the kernel (compiled
+kernels run 10⁶–10⁷ per second), so a second probe measures the rate."""
+
+
+def _run_within_budget(run, counters: np.ndarray, tol: Tolerances) -> tuple[int, bool]:
+    """Run a compiled DOP853 kernel within ``tol.max_nfev`` *and* ``tol.max_wall_time``.
+
+    A compiled kernel cannot read the clock; it stops once it has used the evaluation budget in
+    ``counters[3]`` (checked before every step). ``run(budget)`` restarts the integration from its first
+    time with that budget. A short probe comes first: a run that ends within it is the answer;
+    otherwise it measures evaluations per second (a second probe when the first included loading the
+    kernel) and the last run gets the budget that the wall time left allows at that rate (at most
+    ``max_nfev``). The answer is bit for bit that of one call. Returns (status, whether the wall
+    clock, not ``max_nfev``, set the budget that stopped the run)."""
+    start = time.perf_counter()
+    if tol.max_nfev <= 2 * _PROBE_NFEV:
+        return run(tol.max_nfev), False
+    for _ in range(2):
+        t0 = time.perf_counter()
+        st = run(_PROBE_NFEV)
+        if KINDS[st] != "budget":
+            return st, False
+        rate = counters[0] / max(time.perf_counter() - t0, 1e-9)
+        if rate >= _COMPILED_RATE:
+            break
+    budget = int(min(tol.max_nfev, max(0.0, rate * (tol.max_wall_time - (time.perf_counter() - start)))))
+    if budget <= _PROBE_NFEV:
+        return st, True
+    st = run(budget)
+    return st, budget < tol.max_nfev and KINDS[st] == "budget"
+
+
+def _check_fixed_wall_time(name: str, run_probe, total_nfev: float, tol: Tolerances, t0: float) -> None:
+    """Fixed-step work is known up front: time ``run_probe()`` (a few hundred steps; returns the
+    evaluations it made; run twice, the first may load the kernel) and refuse a run whose predicted
+    time exceeds ``tol.max_wall_time`` (``kind="budget"``), before it starts."""
+    if total_nfev <= 4 * _PROBE_NFEV:
+        return
+    run_probe()
+    start = time.perf_counter()
+    n = max(1, int(run_probe()))
+    per_eval = (time.perf_counter() - start) / n
+    if total_nfev * per_eval > tol.max_wall_time:
+        raise budget_error(t=t0, method=name, tol=tol, used=f"~{total_nfev * per_eval:.3g} s predicted for {total_nfev:.6g} RHS evaluations")
 
 
 def _times(times) -> np.ndarray:
@@ -136,7 +187,7 @@ class CompiledTwoPolar:
         fail = np.zeros(2)
         energy_tol = float(tol.energy_tol)
         if self.kind != "dop853":
-            _check_fixed_budget(name, times, h, self.spec.stages, tol)
+            total = _check_fixed_budget(name, times, h, self.spec.stages, tol)
         if with_rotation:
             # the same stepping code on z = (y, vec(R)) (rotation_kernels): y bit for bit as without R
             from flatbody_env.integrators import rotation_kernels as kernels
@@ -149,12 +200,28 @@ class CompiledTwoPolar:
 
             dop853, fixed = kernels.dop853_solve, kernels.fixed_solve
         Z = np.empty((y0.size, times.size))
+        start = time.perf_counter()
+        wall = False
         if self.kind == "dop853":
-            st = dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+            def run(budget: int) -> int:  # from the first time, within ``budget`` RHS evaluations
+                counters[:] = (0, 0, 0, budget)
+                fail[:] = 0.0
+                return dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+
+            st, wall = _run_within_budget(run, counters, tol)  # max_nfev and max_wall_time
         else:
+            def probe() -> int:  # a few hundred steps from the first time: the cost of one RHS evaluation
+                c = np.zeros(4, np.int64)
+                span = min(256 * h, times[-1] - times[0])
+                fixed(self.spec.code, self.coeffs, y0, np.array([times[0], times[0] + span]), uu, P, h, np.inf, np.empty((y0.size, 2)), c,
+                      np.zeros(2))
+                return int(c[0])
+
+            _check_fixed_wall_time(name, probe, total, tol, float(times[0]))
             st = fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail)
         if KINDS[st] == "budget":
-            raise budget_error(t=float(fail[0]), method=name, tol=tol, used=f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps")
+            used = f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {time.perf_counter() - start:.3g} s"
+            raise budget_error(t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else ""))
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":

@@ -31,7 +31,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from flatbody_env.service.store import JobStore
+from flatbody_env.service.store import JobStore, MissingDatabase
 from flatbody_env.output import atomic_path, atomic_write
 
 Progress = Callable[..., None]
@@ -317,9 +317,12 @@ def run_job(data_dir: str, job_id: str, kind: str, params: dict[str, Any], servi
     """The worker process's entry point: do the job and write its outcome to the store."""
     die_with_service(service_pid)
     os.environ.setdefault("MPLBACKEND", "Agg")
-    store = JobStore(data_dir)
+    store = JobStore(data_dir, create=False)
     pid = os.getpid()
-    store.set_pid(job_id, pid)
+    try:
+        store.set_pid(job_id, pid)
+    except MissingDatabase:  # the database went away under the service: nowhere to report, nothing to do
+        return
     folder = store.job_dir(job_id)
     folder.mkdir(parents=True, exist_ok=True)
 

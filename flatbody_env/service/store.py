@@ -41,6 +41,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 STATUSES = ("queued", "running", "done", "failed")
 
@@ -92,13 +93,19 @@ class JobStore:
     ----------
     data_dir : str or Path
         Created if missing; holds ``jobs.sqlite3`` and ``jobs/ID/`` folders.
+    create : bool
+        Create the database (and bring its schema up to date) if needed: the service does, once at
+        start; a job's worker process opens the service's database and never makes a new one (a
+        database deleted under a running service stays missing: :class:`MissingDatabase`).
     """
 
-    def __init__(self, data_dir: str | Path) -> None:
+    def __init__(self, data_dir: str | Path, *, create: bool = True) -> None:
         self.data_dir = Path(data_dir)
-        self.data_dir.mkdir(parents=True, exist_ok=True)
         self.db_path = self.data_dir / "jobs.sqlite3"
-        self._created = False
+        self._created = not create
+        if not create:
+            return
+        self.data_dir.mkdir(parents=True, exist_ok=True)
         with self.connect() as db:
             db.executescript(_SCHEMA)
             have = {row[1] for row in db.execute("PRAGMA table_info(jobs)")}
@@ -110,9 +117,16 @@ class JobStore:
     @contextmanager
     def connect(self) -> Iterator[sqlite3.Connection]:
         """A short-lived connection (a transaction committed on exit)."""
+        missing = MissingDatabase(f"the job database {self.db_path} is missing")
         if self._created and not self.db_path.exists():  # deleted under the service: never a new, empty database
-            raise MissingDatabase(f"the job database {self.db_path} is missing")
-        db = sqlite3.connect(self.db_path, timeout=30.0, isolation_level=None)
+            raise missing
+        try:  # once created, opened read-write only: SQLite must not make a new file in its place
+            db = sqlite3.connect(f"file:{quote(str(self.db_path.resolve()))}?mode=rw" if self._created else self.db_path,
+                                 timeout=30.0, isolation_level=None, uri=self._created)
+        except sqlite3.OperationalError:
+            if self._created and not self.db_path.exists():
+                raise missing from None
+            raise
         try:
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA busy_timeout=30000")

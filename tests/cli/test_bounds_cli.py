@@ -49,3 +49,19 @@ def test_invariants_refuse_non_finite_results(tmp_path, capsys):
     (tmp_path / "small.json").write_text(json.dumps(d))
     assert main(["invariants", str(tmp_path / "small.json"), "--json"]) == 2
     assert "trajectory.state.lambda" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [[], ["--with-rotation"]])
+def test_compiled_dop853_honours_the_wall_clock_budget(extra, capsys):
+    import time
+
+    start = time.perf_counter()
+    assert main(["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "0.5", "--samples", "3", *extra]) == 1
+    assert time.perf_counter() - start < 2.5  # it ran 4.2 s (58.8 s under load) before
+    assert "wall-clock budget" in capsys.readouterr().err
+
+
+def test_compiled_fixed_step_refuses_a_run_predicted_past_the_wall_clock_budget(capsys):
+    assert main(["simulate", "--scene", "default", "--t-end", "1e4", "--method", "RK4", "--step", "0.01", "--max-seconds", "0.2",
+                 "--samples", "3"]) == 1
+    assert "predicted" in capsys.readouterr().err

@@ -188,8 +188,12 @@ def cli_cases(folder: Path) -> list[Case]:
         Case("cli", "negative -.5 is a value", "ok", ["ellipses", "--s3", "-.5", "--p-theta", "-1", "--grid", "10", "--json"]),
         Case("cli", "simulate RK4 step 1e-6 t_end 1e6 stops at the budget", "fail",
              ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-6", "--t-end", "1e6"]),
-        Case("cli", "DOP853-numba 1 s budget", "clean", ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1",
-                                                         "--samples", "3"], limit=30.0),
+        Case("cli", "DOP853-numba 1 s budget", "fail", ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1",
+                                                        "--samples", "3"], limit=4.0),
+        Case("cli", "DOP853-numba 1 s budget with R", "fail", ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1",
+                                                               "--samples", "3", "--with-rotation"], limit=4.0),
+        Case("cli", "RK4 predicted past 0.3 s", "fail", ["simulate", "--scene", "default", "--t-end", "1e4", "--method", "RK4", "--step",
+                                                         "0.01", "--max-seconds", "0.3", "--samples", "3"], limit=4.0),
     ]
     for name, path in _trajectories(folder).items():
         cases.append(Case("cli", f"invariants {name}", "refuse", ["invariants", str(path), "--json", "--scene", "default"]))
