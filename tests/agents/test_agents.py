@@ -189,6 +189,7 @@ def test_cli_errors_are_one_line(tmp_path):
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
 
 
+@pytest.mark.slow  # a long equality/training check (pytest -m slow); shorter ones of the same path run by default
 def test_train_resume_evaluate_smoke(tmp_path):
     out = tmp_path / "run"
     common = ["train", "--algo", "ppo", "--n-envs", "4", "--out", str(out), "--checkpoint-freq", "256", "--keep-checkpoints",

@@ -98,6 +98,7 @@ def test_killed_sweep_resumes_without_duplicate_or_loss(cli, spawn, tmp_path):
     assert all(after[k] == v for k, v in before.items())  # rows stored before the kill were not run again
 
 
+@pytest.mark.slow  # a long equality/training check (pytest -m slow); shorter ones of the same path run by default
 def test_failure_study_rows_match_serial(cli, tmp_path):
     methods = ["--methods", "RK4", "DOP853-numba"]
     serial = json.loads(_ok(cli("failure-study", "--studies", "gap", "--quick", *methods, "--out", str(tmp_path / "s"), "--json")))
