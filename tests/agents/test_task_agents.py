@@ -51,8 +51,9 @@ def test_train_refuses_an_unregistered_id(tmp_path):
         train("ppo", tmp_path / "run", env_id="CartPole-v1")
 
 
-@pytest.mark.parametrize("env_id,residual", [("FlatBodyDilatation-v0", None), ("FlatBodyHoldUnstable-v0", "passivity"),
-                                              ("FlatBodyAnyBody-v0", "heuristic")])
+@pytest.mark.parametrize("env_id,residual", [("FlatBodyDilatation-v0", None),
+                                              pytest.param("FlatBodyHoldUnstable-v0", "passivity", marks=pytest.mark.slow),
+                                              pytest.param("FlatBodyAnyBody-v0", "heuristic", marks=pytest.mark.slow)])
 def test_train_and_evaluate_on_a_task(tmp_path, env_id, residual):
     """A tiny run on the task: the saved config names it, the agent evaluates on it (its spaces, its residual)."""
     import yaml
