@@ -10,6 +10,7 @@ import pytest
 from flatbody_env.sweep.scaling import break_even_grid
 
 
+@pytest.mark.slow  # a benchmark run (flatbody bench sweep); the sweep paths it times are tested by default
 def test_bench_sweep_small_run_writes_consistent_figures(cli, tmp_path):
     r = cli("bench", "sweep", "--grid", "8", "--chunk", "3", "--workers", "1", "--sim-workers", "2", "--noop-tasks", "20",
             "--out", str(tmp_path))
