@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import flatbody_env
+import flatbody_env  # noqa: F401 - registers the env ids
 from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.env.vector_env import FlatBodyVectorEnv
 from flatbody_env.physics import validation

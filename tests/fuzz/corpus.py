@@ -243,7 +243,7 @@ def cli_cases(folder: Path) -> list[Case]:
 def api_cases(folder: Path) -> list[Case]:
     import gymnasium as gym
 
-    import flatbody_env
+    import flatbody_env  # noqa: F401 - registers the env ids
     from flatbody_env.simulation import simulate
 
     def env_step(**kw):
