@@ -83,11 +83,12 @@ def _free_port() -> int:
 
 
 def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0, env: dict[str, str] | None = None,
-                  preexec_fn=None) -> tuple[subprocess.Popen, str]:
+                  preexec_fn=None, log_path: str | Path | None = None) -> tuple[subprocess.Popen, str]:
     """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers.
 
     ``env`` adds variables to the service's environment (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS``); ``preexec_fn`` runs
-    in the child before it starts (e.g. a ``resource.setrlimit``)."""
+    in the child before it starts (e.g. a ``resource.setrlimit``); ``log_path``: the service's stdout and stderr go
+    to that file (kept, e.g. to look for tracebacks) instead of a pipe."""
     import httpx
 
     port = port or _free_port()
@@ -95,13 +96,19 @@ def start_service(data_dir: str | Path, *, workers: int, port: int | None = None
            "--data-dir", str(data_dir), "--log-level", "warning"]
     import os
 
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
-                            preexec_fn=preexec_fn)
+    if log_path is None:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
+                                preexec_fn=preexec_fn)
+    else:
+        with open(log_path, "w", encoding="utf-8") as log:  # the child keeps its own copy of the descriptor
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})},
+                                    preexec_fn=preexec_fn)
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise RuntimeError(f"flatbody serve exited with code {proc.returncode}: {proc.stderr.read()[-2000:]}")
+            said = proc.stderr.read() if proc.stderr else Path(log_path).read_text()
+            raise RuntimeError(f"flatbody serve exited with code {proc.returncode}: {said[-2000:]}")
         try:
             if httpx.get(url + "/health", timeout=1.0).status_code == 200:
                 return proc, url

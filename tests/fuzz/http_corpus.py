@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import socket
 import subprocess
 import sys
 import time
@@ -389,35 +387,12 @@ def judge(case: Case, status: int | None, headers: dict[str, str] | None, text: 
 
 
 # -- running ------------------------------------------------------------------------------------------------
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def start_service(data_dir: Path, log_path: Path, *, workers: int = 1, env: dict[str, str] | None = None, timeout: float = 90.0):
-    """``flatbody serve`` on a free loopback port with its log in ``log_path``: ``(process, url)`` once /health answers."""
-    import httpx
+    """``flatbody serve`` on a free loopback port with the corpus' small limits and its log in ``log_path``:
+    ``(process, url)`` once /health answers (:func:`flatbody_env.service.benchmark.start_service`)."""
+    from flatbody_env.service.benchmark import start_service as start
 
-    port = free_port()
-    log = open(log_path, "w", encoding="utf-8")  # noqa: SIM115 - the child writes it; closed with the process
-    proc = subprocess.Popen([sys.executable, "-m", "flatbody_env.cli", "serve", "--host", "127.0.0.1", "--port", str(port),
-                             "--workers", str(workers), "--data-dir", str(data_dir), "--log-level", "warning"],
-                            stdout=log, stderr=subprocess.STDOUT, env={**os.environ, **SMALL_LIMITS, **(env or {})})
-    log.close()
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"flatbody serve exited ({proc.returncode}): {log_path.read_text()[-2000:]}")
-        try:
-            if httpx.get(url + "/health", timeout=1.0).status_code == 200:
-                return proc, url
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError("flatbody serve did not answer /health in time")
+    return start(data_dir, workers=workers, timeout=timeout, env={**SMALL_LIMITS, **(env or {})}, log_path=log_path)
 
 
 def stop_service(proc) -> None:
