@@ -39,7 +39,7 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from flatbody_env.env.registration import MAX_EPISODE_STEPS
-from flatbody_env.env.vector_env import FlatBodyVectorEnv
+from flatbody_env.env.vector_env import FlatBodyVectorEnv, batch_arguments
 
 
 def _to_torch(x: Any) -> Any:
@@ -186,16 +186,8 @@ class _CudaBatch:
         from flatbody_env.env.device import DeviceBatch
         from flatbody_env.env.env import FlatBodyEnv
         from flatbody_env.integrators import cuda
-        from flatbody_env.physics import validation
 
-        num_envs = validation.count("num_envs", num_envs, high=validation.MAX_BATCH)
-        max_episode_steps = validation.count("max_episode_steps", max_episode_steps, high=validation.MAX_EPISODE_STEPS)
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}") from None
-        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}")
+        num_envs, max_episode_steps, mode = batch_arguments(num_envs, max_episode_steps, autoreset_mode)
         if env_kwargs.get("render_mode") is not None or env_kwargs.get("track_rotation"):
             raise ValueError("render_mode: FlatBodyTorchVectorEnv does not render; use FlatBody-v0 for frames")
         self.cuda, self.dev = cuda, dev

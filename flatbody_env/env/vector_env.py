@@ -75,6 +75,22 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+def batch_arguments(num_envs, max_episode_steps, autoreset_mode) -> tuple[int, int, AutoresetMode]:
+    """The batch's size, episode length and autoreset mode, checked before any allocation (shared by
+    :class:`FlatBodyVectorEnv` and the torch vector env). ValueError naming the argument and its range."""
+    from flatbody_env.physics import validation
+
+    num_envs = validation.count("num_envs", num_envs, high=validation.MAX_BATCH)
+    max_episode_steps = validation.count("max_episode_steps", max_episode_steps, high=validation.MAX_EPISODE_STEPS)
+    try:
+        mode = AutoresetMode(autoreset_mode)
+    except ValueError:
+        raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}") from None
+    if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}")
+    return num_envs, max_episode_steps, mode
+
+
 class FlatBodyVectorEnv(VectorEnv):
     """N copies of :class:`~flatbody_env.env.env.FlatBodyEnv` in one batched simulation.
 
@@ -103,16 +119,7 @@ class FlatBodyVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = 1, **kwargs: Any) -> None:
-        from flatbody_env.physics import validation
-
-        num_envs = validation.count("num_envs", num_envs, high=validation.MAX_BATCH)  # bounded before any allocation
-        max_episode_steps = validation.count("max_episode_steps", max_episode_steps, high=validation.MAX_EPISODE_STEPS)
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}") from None
-        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r}")
+        num_envs, max_episode_steps, mode = batch_arguments(num_envs, max_episode_steps, autoreset_mode)
         if num_threads is not None and (not isinstance(num_threads, int) or isinstance(num_threads, bool) or not 1 <= num_threads <= MAX_THREADS):
             raise ValueError(f"num_threads: must be an integer in [1, {MAX_THREADS}] or None, got {num_threads!r}")
         if kwargs.get("render_mode") is not None or kwargs.get("track_rotation"):
