@@ -1,6 +1,7 @@
 """The energy the controls put into the body: the power P = ω·τ + ϱ̇ f_ϱ and its integral, the work W.
 
-Hamilton's equations with the controls u = (τ1, τ2, τ3, f_ϱ) (:mod:`flatbody_env.physics.equations`;
+Hamilton's equations (the equations of motion, eqs. 44–49 of the paper, spin bracket corrected) with the
+controls u = (τ1, τ2, τ3, f_ϱ) (:mod:`flatbody_env.physics.equations`;
 docs/physics.md §4, "Controls") are ṡ = ω × s + τ with ω = ∂H/∂s, and ṗ_ϱ = −∂H/∂ϱ + f_ϱ. Along a
 motion the free part conserves H (ω·(ω × s) = 0 and the canonical pairs cancel), so
 
