@@ -139,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n-timesteps", type=int)
     ap.add_argument("--hyperparams", nargs="*", default=[])
     ap.add_argument("--force", action="store_true")
+    ap.add_argument("--trained-agent", metavar="RUN", help="fine-tune this run's model (flatbody train --trained-agent)")
     args = ap.parse_args(argv)
     stages = [float(s) for s in args.stages.split(",")]
     from agents.train import apply_overrides, load_hyperparams
@@ -151,7 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                              window=args.window, train_env_kwargs=train_kw, log_std_per_action=per_action)
     command = ["python", "-m", "agents.curriculum", *(argv if argv is not None else sys.argv[1:])]
     res = train("ppo", args.out, seed=args.seed, n_timesteps=args.n_timesteps, overrides=args.hyperparams, env_id=args.env,
-                progress=False, command=command, extra_callbacks=[cb], force=args.force, checkpoint_freq=0)
+                progress=False, command=command, extra_callbacks=[cb], force=args.force, checkpoint_freq=0,
+                trained_agent=args.trained_agent)
     cfg_file = Path(res.out) / "config.yml"
     cfg = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
     cfg["curriculum"] = {"key": args.key, "stages": stages, "advance_at": args.advance_at, "min_stage_steps": args.min_stage_steps,

@@ -22,6 +22,7 @@ def rollout(
     env_kwargs: dict[str, Any] | None = None,
     record_to: str | Path | None = None,
     title: str | None = None,
+    env_id: str = "FlatBody-v0",
 ) -> dict[str, Any]:
     """One seeded episode of ``agent`` (a batch policy) with the rotation tracked.
 
@@ -32,7 +33,7 @@ def rollout(
     Returns t (n,), states (11, n), actions (n, k) (row j: the action applied on [t_j, t_{j+1});
     the last row is zero), reward_terms (dict of (n,) arrays; entry j: the reward received on
     arriving at t_j, zero at t = 0), distance (n,), energy (n,), target, success, tolerance,
-    body and ``path`` (the recording, or None). Only the env's public surface is read
+    body, ``env_id`` (the task recorded) and ``path`` (the recording, or None). Only the env's public surface is read
     (``state``, ``target``, ``info``).
     """
     if record_to is not None:
@@ -42,17 +43,17 @@ def rollout(
         target = episode_file(record_to, 0)  # the one episode's file
         target.parent.mkdir(parents=True, exist_ok=True)  # as the recorder itself does
         with atomic_path(target) as tmp:
-            ep = _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=tmp, title=title)
+            ep = _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=tmp, title=title, env_id=env_id)
         return {**ep, "path": target}
-    return _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=None, title=title)
+    return _rollout(agent, seed=seed, env_kwargs=env_kwargs, record_to=None, title=title, env_id=env_id)
 
 
-def _rollout(agent, *, seed, env_kwargs, record_to, title) -> dict[str, Any]:
+def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, Any]:
     import gymnasium as gym
 
     import flatbody_env  # noqa: F401  (registers FlatBody-v0)
 
-    env = gym.make("FlatBody-v0", track_rotation=True, **(env_kwargs or {}))
+    env = gym.make(env_id, track_rotation=True, **(env_kwargs or {}))
     wrapper = None
     if record_to is not None:
         from flatbody_env.recording.wrapper import RerunRecorder
@@ -90,6 +91,7 @@ def _rollout(agent, *, seed, env_kwargs, record_to, title) -> dict[str, Any]:
         "failure": info.get("integrator_failure") or info.get("left_domain"),
         "tolerance": u.task.success_tolerance,
         "body": u.body,
+        "env_id": env_id,
         "path": wrapper.recorded_paths[0] if wrapper is not None and wrapper.recorded_paths else None,
     }
 
@@ -101,7 +103,7 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
     tol = ep["tolerance"]
     reached = np.flatnonzero(d <= tol)
     lines = [
-        f"flatbody demo: {label} steers the body onto a stationary ellipse (FlatBody-v0, seed {seed})",
+        f"flatbody demo: {label} steers the body onto a stationary ellipse ({ep.get('env_id', 'FlatBody-v0')}, seed {seed})",
         f"target: lambda* = {tg['lambda']:.4f}, mu* = {tg['mu']:.4f}, rho* = {tg['rho']:.4f}, s3* = {tg['s3']:+.4f}, "
         f"p_theta = {tg['p_theta']:+.4f} (omega3* = {tg['omega3']:+.4f}, theta_dot* = {tg['theta_dot']:+.4f})",
         "",
@@ -138,7 +140,8 @@ def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None 
     from agents.evaluate import Agent
 
     agent = Agent(model, backend=backend)
-    ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs, record_to=out or None, title=f"flatbody demo (seed {seed})")
+    ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs, record_to=out or None, title=f"flatbody demo (seed {seed})",
+                 env_id=agent.env_id)
     label = "the shipped agent" if model is None else f"agent {agent.path}"
     lines = [format_demo(ep, seed=seed, label=label)]
     if ep["path"] is not None:

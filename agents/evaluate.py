@@ -35,6 +35,10 @@ import numpy as np
 
 from agents.numpy_policy import MODELS_DIR, shipped_model_dir  # where shipped agents live (numpy_policy: no import back)
 
+EVAL_SEED = 10_000
+"""First evaluation episode seed (episode i is reset with seed ``EVAL_SEED + i``): the default of
+:func:`evaluate_all`, :func:`evaluate_task`, ``flatbody evaluate --seed``, ``flatbody sweep seeds --eval-seed``
+and the service's evaluate job — held apart from the training seeds (0, 1, …), far below."""
 BASELINES = ("zero", "random", "heuristic", "passivity")
 """``heuristic``: LQR about the target (:class:`agents.heuristic.HeuristicController`);
 ``passivity``: the energy-based damping law (:class:`agents.heuristic.PassivityController`)."""
@@ -344,7 +348,7 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: int = 10_000, baselines: bool = True,
+def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: int = EVAL_SEED, baselines: bool = True,
                  progress: bool = False, backend: str = "auto") -> dict[str, Any]:
     """The evaluation report of an agent on its task (``FlatBody-v0`` for the shipped one):
     ``{"agent": {...}, "baselines": {"zero", "random", "heuristic", "passivity"}, ...}``;
@@ -378,7 +382,7 @@ def _summary_or_status(name: str, **kwargs) -> tuple[dict[str, Any], list[dict[s
     return summarize(records), records
 
 
-def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = 10_000, model: str | Path | None = None, baselines: bool = True,
+def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = EVAL_SEED, model: str | Path | None = None, baselines: bool = True,
                   with_agents: bool = True, progress: bool = False, backend: str = "auto") -> dict[str, Any]:
     """The reference report of one registered task: every baseline (:func:`baselines_for`) and agent — the one
     in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes`` seeded episodes,

@@ -13,6 +13,11 @@ LQR residual and the policy's tensors on one torch device, and no hand-written P
   ``dones`` never hides a fake transition; ``extras["time_outs"]`` = the truncations, for rsl_rl's
   bootstrapping; ``episode_length_buf`` is the env's episode clocks, so rsl_rl's ``init_at_random_ep_len``
   staggers them).
+* :class:`HeldGaussianDistribution` — rsl_rl's Gaussian action distribution with the exploration noise held for
+  ``noise_hold_steps`` rollout steps (temporally correlated exploration, as SB3's gSDE); ``normalize_reward``
+  divides the training rewards by the running std of the discounted returns (SB3's ``VecNormalize``).
+* :func:`live_policy` — the training actor as a batch policy of :func:`agents.evaluate.run_episodes` (the
+  evaluations of ``flatbody bench time-to-goal``, through ``train_rsl``'s ``callback``).
 * :func:`export_sb3` — the trained actor as an SB3 ``PPO`` ``model.zip`` (same MLP; rsl_rl's observation
   normaliser folded into the first layer, exactly), so ``flatbody evaluate`` and ``demo`` run it unchanged
   (``config.yml`` says ``algo: ppo``, the format of the model file, and ``trainer: rsl-ppo``).
@@ -50,26 +55,33 @@ DEFAULTS: dict[str, Any] = {
     "residual_mode": "gain",
     "residual_scale": 1.0,
     "env_kwargs": {},
-    # rsl_rl's runner and PPO (its names)
-    "num_steps_per_env": 32,
+    # rsl_rl's runner and PPO (its names), but for noise_hold_steps, learn_std and normalize_reward
+    "num_steps_per_env": 64,       # 256 x 64 = 16,384 transitions per update
     "stagger": True,               # init_at_random_ep_len: the bodies' episode clocks start spread over an episode
     "hidden_dims": [64, 64],
     "activation": "tanh",
-    "init_std": 0.2,
+    "init_std": 1.5,               # wide exploration: the executed gain factor 1 + clip(a) spans [0, 2]
+    "learn_std": True,
+    "noise_hold_steps": 4,         # the exploration noise held for 4 rollout steps (HeldGaussianDistribution; SB3's gSDE)
     "obs_normalization": True,
+    "normalize_reward": True,      # rewards / std of the discounted returns (SB3's VecNormalize norm_reward), training only
     "num_learning_epochs": 5,
-    "num_mini_batches": 4,
+    "num_mini_batches": 8,
     "clip_param": 0.1,
+    "use_clipped_value_loss": False,
     "gamma": 0.995,
     "lam": 0.95,
     "value_loss_coef": 1.0,
     "entropy_coef": 0.0,
-    "learning_rate": 1.0e-4,
+    "learning_rate": 3.0e-4,       # the start: the adaptive schedule raises it to rsl_rl's cap 1e-2 within a few iterations
     "max_grad_norm": 1.0,
-    "schedule": "fixed",
+    "schedule": "adaptive",
     "desired_kl": 0.01,
 }
-"""Default hyperparameters (docs/agents.md, "rsl_rl": how they were chosen); ``--hyperparams KEY=VALUE`` overrides."""
+"""Default hyperparameters (docs/agents.md, "rsl_rl": how they were chosen — with them the residual policy beats the LQR
+on held-out seeds in 10^6 steps); ``--hyperparams KEY=VALUE`` overrides."""
+_FLOAT_KEYS = ("residual_scale", "init_std", "clip_param", "gamma", "lam", "value_loss_coef", "entropy_coef", "learning_rate",
+               "max_grad_norm", "desired_kl")
 
 
 # --- the LQR residual on the device ---------------------------------------------------------------------------
@@ -160,7 +172,8 @@ class RslVecEnv(_vec_env_base()):
     episodes that ended in the step, ``/episode/final_distance`` and ``/episode/success``.
     """
 
-    def __init__(self, env, residual: TorchResidual | None = None, seed: int | None = None, progress: list | None = None) -> None:
+    def __init__(self, env, residual: TorchResidual | None = None, seed: int | None = None, progress: list | None = None,
+                 reward_gamma: float | None = None) -> None:
         import torch
 
         self.env = env
@@ -173,6 +186,11 @@ class RslVecEnv(_vec_env_base()):
         obs, _ = env.reset(seed=seed)
         self._obs = obs.to(self.device)
         self._return = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
+        self.reward_gamma = reward_gamma
+        if reward_gamma is not None and not (0.0 < reward_gamma <= 1.0):
+            raise ValueError(f"gamma: must be in (0, 1] for the reward normalisation, got {reward_gamma!r}")
+        self._disc = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
+        self._ret_stats = [0.0, 1.0, 1e-4]  # mean, variance, count of the discounted returns (SB3's VecNormalize)
         self.episodes: list[tuple[float, float, bool]] = []
         """(return, final distance, success) of every finished episode, in order."""
 
@@ -195,6 +213,14 @@ class RslVecEnv(_vec_env_base()):
     def get_observations(self):
         return self._obs_dict(self._obs)
 
+    def _update_return_stats(self, x) -> None:
+        """Running mean and variance of the discounted returns (parallel Welford, as SB3's ``RunningMeanStd``)."""
+        mean, var, count = self._ret_stats
+        bmean, bvar, n = float(x.mean()), float(x.var(unbiased=False)), x.numel()
+        delta, tot = bmean - mean, count + n
+        m2 = var * count + bvar * n + delta * delta * count * n / tot
+        self._ret_stats = [mean + delta * n / tot, m2 / tot, tot]
+
     def step(self, actions):
         import torch
 
@@ -204,6 +230,11 @@ class RslVecEnv(_vec_env_base()):
         dones = terminated | truncated
         self._return += rewards
         extras: dict[str, Any] = {"time_outs": truncated.to(torch.float32)}
+        if self.reward_gamma is not None:  # the training signal only: episodes are logged with the raw rewards
+            self._disc = self._disc * self.reward_gamma + rewards.double()
+            self._update_return_stats(self._disc)
+            self._disc[dones] = 0.0
+            rewards = (rewards.double() / math.sqrt(self._ret_stats[1] + 1e-8)).clamp(-10.0, 10.0).to(rewards.dtype)
         if bool(dones.any()):
             d = info["distance"][dones]
             s = info["is_success"][dones]
@@ -212,6 +243,65 @@ class RslVecEnv(_vec_env_base()):
             self._return[dones] = 0.0
             extras["log"] = {"/episode/final_distance": d.double().mean(), "/episode/success": s.double().mean()}
         return self._obs_dict(obs), rewards, dones.to(torch.long), extras
+
+
+# --- temporally correlated exploration ------------------------------------------------------------------------
+def _held_gaussian_base():
+    from rsl_rl.modules.distribution import GaussianDistribution
+
+    return GaussianDistribution
+
+
+class HeldGaussianDistribution(_held_gaussian_base()):
+    """rsl_rl's ``GaussianDistribution`` whose exploration noise is held for ``hold_steps`` consecutive rollout steps.
+
+    While collecting (rsl_rl runs the rollout under ``torch.inference_mode``) :meth:`sample` returns
+    mean + σ·ε with the same standard normal ε (one per body and action component) for ``hold_steps`` calls
+    in a row, then draws a new one; outside inference mode (the PPO update's forward pass, whose sample is
+    discarded) and whenever the batch shape changes it draws afresh. Each held sample is still a draw of
+    N(mean, σ²), so the log-probabilities, entropy and KL of the parent are unchanged; the correlation in time
+    is what SB3's gSDE (``sde_sample_freq``) gives the shipped SB3 agent. ``hold_steps: 1`` is the parent.
+    """
+
+    def __init__(self, output_dim: int, hold_steps: int = 1, **kwargs) -> None:
+        super().__init__(output_dim, **kwargs)
+        if not isinstance(hold_steps, int) or isinstance(hold_steps, bool) or hold_steps < 1:
+            raise ValueError(f"noise_hold_steps: must be an integer >= 1, got {hold_steps!r}")
+        self.hold_steps = hold_steps
+        self._eps = None
+        self._age = 0
+
+    def sample(self):
+        import torch
+
+        mean, std = self._distribution.mean, self._distribution.stddev
+        if self.hold_steps == 1 or not torch.is_inference_mode_enabled():
+            return self._distribution.sample()
+        if self._eps is None or self._eps.shape != mean.shape or self._age >= self.hold_steps:
+            self._eps = torch.randn_like(mean)
+            self._age = 0
+        self._age += 1
+        return mean + std * self._eps
+
+
+def live_policy(actor, residual: TorchResidual | None, device: str = "cpu"):
+    """The deterministic executed action of the training ``actor`` (mean, clipped, through ``residual``) as a batch
+    policy of :func:`agents.evaluate.run_episodes` (numpy observations in, actions out): evaluations during training.
+    ``residual`` None (a from-scratch agent, ``residual: null``): the mean clipped to [−1, 1] is the action, on ``device``."""
+    import torch
+    from tensordict import TensorDict
+
+    dev = residual.device if residual is not None else torch.device(device)
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            o = torch.as_tensor(np.asarray(obs, dtype=np.float32), device=dev)
+            mean = actor(TensorDict({"policy": o}, batch_size=[o.shape[0]], device=dev))
+            if residual is None:
+                return mean.clamp(-1.0, 1.0).cpu().numpy()
+            return residual(o, mean).cpu().numpy()
+
+    return policy
 
 
 # --- export to SB3's format ------------------------------------------------------------------------------------
@@ -266,12 +356,14 @@ def runner_config(hp: dict[str, Any]) -> dict[str, Any]:
     net = {"class_name": "MLPModel", "hidden_dims": list(hp["hidden_dims"]), "activation": hp["activation"],
            "obs_normalization": bool(hp["obs_normalization"])}
     alg_keys = ("num_learning_epochs", "num_mini_batches", "clip_param", "gamma", "lam", "value_loss_coef", "entropy_coef",
-                "learning_rate", "max_grad_norm", "schedule", "desired_kl")
+                "learning_rate", "max_grad_norm", "schedule", "desired_kl", "use_clipped_value_loss")
     return {
         "num_steps_per_env": int(hp["num_steps_per_env"]),
         "save_interval": 10**9,
         "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "actor": {**net, "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": float(hp["init_std"]), "std_type": "scalar"}},
+        "actor": {**net, "distribution_cfg": {"class_name": "agents.rsl:HeldGaussianDistribution", "init_std": float(hp["init_std"]),
+                                                  "std_type": "scalar", "learn_std": bool(hp["learn_std"]),
+                                                  "hold_steps": hp["noise_hold_steps"]}},
         "critic": dict(net),
         "algorithm": {"class_name": "PPO", **{k: hp[k] for k in alg_keys}},
         "check_for_nan": True,
@@ -280,11 +372,13 @@ def runner_config(hp: dict[str, Any]) -> dict[str, Any]:
 
 def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None, n_envs: int | None = None, device: str = "cpu",
               overrides: list[str] | None = None, env_id: str | None = None, threads: int = 1, progress: bool = True,
-              command: list[str] | None = None, force: bool = False):
+              command: list[str] | None = None, force: bool = False, callback=None):
     """Train rsl_rl's PPO on ``FlatBody-v0`` with the LQR residual and write the run folder ``out`` (module docstring).
 
-    ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps. Returns
-    :class:`agents.train.TrainResult`.
+    ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps. ``callback``
+    (optional) is called after each iteration as ``callback(runner, row)`` (``row``: the progress row); a true return
+    value stops the training there, and the time spent in it is left out of the wall time (a benchmark's evaluations).
+    Returns :class:`agents.train.TrainResult`.
     """
     import yaml
 
@@ -303,6 +397,14 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
     unknown = sorted(set(hp) - set(DEFAULTS))
     if unknown:
         raise ValueError(f"hyperparams: unknown for rsl-ppo: {', '.join(unknown)} (known: {', '.join(DEFAULTS)})")
+    for key in _FLOAT_KEYS:  # YAML reads 3e-4 (no dot) as a string
+        try:
+            hp[key] = float(hp[key])
+        except (TypeError, ValueError):
+            raise ValueError(f"{key}: must be a number, got {hp[key]!r}") from None
+    hold = hp["noise_hold_steps"]
+    if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
+        raise ValueError(f"noise_hold_steps: must be an integer >= 1, got {hold!r}")
     if n_timesteps is not None:
         hp["n_timesteps"] = int(n_timesteps)
     if n_envs is not None:
@@ -328,7 +430,7 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
         if hp["residual"] != "heuristic":
             raise ValueError(f"residual: must be 'heuristic' or empty, got {hp['residual']!r}")
         residual = TorchResidual(hp.get("env_kwargs"), float(hp["residual_scale"]), str(hp["residual_mode"]), env.device)
-    venv = RslVecEnv(env, residual, seed=seed)
+    venv = RslVecEnv(env, residual, seed=seed, reward_gamma=float(hp["gamma"]) if hp["normalize_reward"] else None)
     cfg = {"env_id": env_id, "algo": "ppo", "seed": seed, "hyperparams": hp,
            "trainer": {"name": ALGO, "library": "rsl_rl", "version": version("rsl-rl-lib"), "device": device}}
     out.mkdir(parents=True, exist_ok=True)
@@ -355,9 +457,16 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
                      "ep_rew_mean": float(np.mean([e[0] for e in new])) if new else "",
                      "final_distance_mean": float(np.mean([e[1] for e in new])) if new else "",
                      "success_rate": float(np.mean([e[2] for e in new])) if new else "",
-                     "action_std": float(runner.alg.get_policy().output_std.detach().mean())})
+                     "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
+                     "learning_rate": float(runner.alg.learning_rate)})
         if bar is not None:
             bar.update(nenv * steps)
+        if callback is not None:
+            tc = time.perf_counter()
+            stop = callback(runner, rows[-1])
+            t0 += time.perf_counter() - tc
+            if stop:
+                break
     wall = time.perf_counter() - t0
     if bar is not None:
         bar.close()
@@ -367,7 +476,7 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
             w.writeheader()
             w.writerows(rows)
     with atomic_path(out / "rsl_model.pt") as tmp:
-        torch.save({"actor": runner.alg.actor.state_dict(), "critic": runner.alg.critic.state_dict(), "iterations": iterations,
+        torch.save({"actor": runner.alg.actor.state_dict(), "critic": runner.alg.critic.state_dict(), "iterations": len(rows),
                     "runner_cfg": runner_config(hp)}, str(tmp))
     with atomic_path(out / "model.zip") as tmp:
         export_sb3(runner.alg.actor, runner.alg.critic, Path(str(tmp)), hp, seed)
@@ -381,7 +490,7 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
         "env_id": env_id,
         "algo": ALGO,
         "seed": seed,
-        "n_timesteps": iterations * nenv * steps,
+        "n_timesteps": len(rows) * nenv * steps,
         "n_envs": nenv,
         "device": device,
         "torch_threads": threads,
@@ -398,7 +507,90 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
 
     export_policy(out)
     env.close()
-    return TrainResult(out=out, timesteps=iterations * nenv * steps, wall_time_s=wall, resumed_from=None)
+    return TrainResult(out=out, timesteps=len(rows) * nenv * steps, wall_time_s=wall, resumed_from=None)
 
 
-__all__ = ["ALGO", "DEFAULTS", "RSL_RL_VERSION", "RslVecEnv", "TorchResidual", "export_sb3", "runner_config", "train_rsl"]
+
+# --- from scratch (no LQR prior): success and final distance against wall time -------------------------------
+FROM_SCRATCH: list[str] = ["residual=null", "init_std=0.5", "hidden_dims=[128,128]"]
+"""``--hyperparams`` of the from-scratch agent (docs/agents.md, "From scratch": how they were chosen): no LQR, the
+policy's clipped output is the control."""
+CURVE_HEADER = ("timesteps", "wall_s", "success", "final_distance")
+
+
+def from_scratch_curve(out: str | Path, csv_path: str | Path, *, seed: int = 0, overrides: list[str] | None = None, budget_s: float = 600.0,
+                       eval_every_s: float = 30.0, episodes: int = 100, eval_seed: int = 10_000, force: bool = False):
+    """Train rsl-ppo with :data:`FROM_SCRATCH` (then ``overrides``) for ``budget_s`` seconds of training wall time and write the curve.
+
+    After the first iteration that ends ``eval_every_s`` or more after the previous evaluation, and at the end, the
+    deterministic policy (:func:`live_policy`, no residual) runs ``episodes`` held-out episodes (seeds ``eval_seed`` …);
+    the evaluation time is left out of the wall time (``train_rsl``'s ``callback``). The training stops at the first
+    evaluation at or past ``budget_s``, so the run folder ``out`` holds the last evaluated policy. ``csv_path``: one row
+    per evaluation (:data:`CURVE_HEADER`), rewritten after each. Returns the rows.
+    """
+    from agents.evaluate import run_episodes
+    from flatbody_env.output import write_csv
+
+    if not (budget_s > 0 and eval_every_s > 0):
+        raise ValueError(f"budget_s, eval_every_s: must be > 0, got {budget_s!r}, {eval_every_s!r}")
+    rows: list[tuple[int, float, float, float]] = []
+    due = [float(eval_every_s)]
+
+    def callback(runner, row) -> bool:
+        if row["time_s"] < min(due[0], budget_s):
+            return False
+        due[0] = row["time_s"] + eval_every_s
+        recs = run_episodes(live_policy(runner.alg.actor, None), episodes=episodes, seed=eval_seed)
+        rows.append((int(row["timesteps"]), round(float(row["time_s"]), 2), float(np.mean([r["success"] for r in recs])),
+                     float(np.mean([r["final_distance"] for r in recs]))))
+        write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
+        return row["time_s"] >= budget_s
+
+    train_rsl(out, seed=seed, n_timesteps=10**12, progress=False, overrides=[*FROM_SCRATCH, *(overrides or [])], callback=callback,
+              force=force)
+    return rows
+
+
+SCRATCH_CAPTION = (
+    "Each point: the training policy at that moment (deterministic, no LQR) on {episodes} held-out episodes; wall time: training only\n"
+    "(the evaluations left out), one torch thread on a shared 2-core machine. Dotted: the goal, success ≥ {success:.0%} and mean\n"
+    "final distance ≤ {distance:g}, within {budget:g} s (vertical line). {note}"
+)
+
+
+def plot_curve(csv_path: str | Path, png_path: str | Path, *, success_goal: float = 0.95, distance_goal: float = 0.01,
+               budget_s: float = 600.0, episodes: int = 100, note: str = "", title: str = "rsl-ppo from scratch (no LQR prior)") -> None:
+    """Success and mean final distance against wall time, drawn from the saved curve ``csv_path`` (:func:`from_scratch_curve`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flatbody_env.chart_text import add_caption
+    from flatbody_env.output import save_figure
+
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        data = list(csv.DictReader(fh))
+    w = [float(r["wall_s"]) for r in data]
+    fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
+    ax_d.plot(w, [float(r["final_distance"]) for r in data], "o-", ms=3, color="tab:orange", label="rsl-ppo, from scratch")
+    ax_s.plot(w, [float(r["success"]) for r in data], "o-", ms=3, color="tab:orange")
+    ax_d.axhline(distance_goal, color="gray", ls=":", lw=1, label="goal")
+    ax_s.axhline(success_goal, color="gray", ls=":", lw=1)
+    for ax in (ax_d, ax_s):
+        ax.axvline(budget_s, color="gray", ls=":", lw=1)
+        ax.set_xlabel("wall time (s)")
+    ax_d.set_yscale("log")
+    ax_d.set_ylabel("mean final distance")
+    ax_s.set_ylabel("success rate")
+    ax_s.set_ylim(-0.02, 1.02)
+    ax_d.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    bottom = add_caption(fig, SCRATCH_CAPTION.format(episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s,
+                                                     note=note), fontsize=7)
+    fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
+    save_figure(fig, png_path, dpi=120)
+    plt.close(fig)
+
+__all__ = ["ALGO", "CURVE_HEADER", "DEFAULTS", "FROM_SCRATCH", "HeldGaussianDistribution", "RSL_RL_VERSION", "RslVecEnv", "TorchResidual",
+           "export_sb3", "from_scratch_curve", "live_policy", "plot_curve", "runner_config", "train_rsl"]

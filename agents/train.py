@@ -176,6 +176,26 @@ def _algo_class(algo: str):
     return {"ppo": PPO, "sac": SAC}[algo]
 
 
+def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_kwargs: dict[str, Any], seed: int):
+    """The model and (normalised) env of a fine-tuning run (:func:`train`'s ``trained_agent``)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from agents.numpy_policy import check_trusted
+
+    if not (folder / "model.zip").is_file():
+        raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no model.zip")
+    check_trusted(folder, "model.zip")
+    if norm:
+        if not (folder / "vecnormalize.pkl").is_file():
+            raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no vecnormalize.pkl (this run normalises)")
+        env = VecNormalize.load(str(folder / "vecnormalize.pkl"), env)
+        env.training, env.norm_reward, env.gamma = True, bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
+    keep = {k: v for k, v in algo_kwargs.items() if k != "policy_kwargs"}  # the network is the loaded one's
+    model = cls.load(str(folder / "model.zip"), env=env, device="cpu", custom_objects=keep)
+    model.set_random_seed(seed)
+    return model, env
+
+
 def latest_checkpoint(folder: Path) -> tuple[Path, Path | None, Path | None, int] | None:
     """(model.zip, vecnormalize.pkl or None, replay_buffer.pkl or None, timesteps) of the newest checkpoint."""
     if not folder.is_dir():
@@ -311,6 +331,7 @@ def train(
     extra_callbacks: list | None = None,
     force: bool = False,
     notes: bool = True,
+    trained_agent: str | Path | None = None,
 ) -> TrainResult:
     """Train ``algo`` on ``env_id`` with the YAML hyperparameters and save everything in ``out``.
 
@@ -327,6 +348,11 @@ def train(
         saved ``config.yml`` is used) up to the total ``n_timesteps``.
     extra_callbacks : list, optional
         SB3 callbacks added to the run (e.g. the intermediate evaluations of :mod:`agents.tune`).
+    trained_agent : str or Path, optional
+        Fine-tune: start from this run folder's ``model.zip`` (weights and optimiser state) and its
+        ``vecnormalize.pkl`` instead of a fresh policy (RL Zoo's ``--trained-agent``); the rollout
+        and update settings are this run's hyperparameters. Unpickles, so the folder must be trusted
+        (:func:`agents.numpy_policy.check_trusted`). Not with ``resume``.
     force : bool
         Train into ``out`` even if it holds a run or is the shipped agent (:func:`check_out`); the
         old run's checkpoints are removed first.
@@ -404,6 +430,10 @@ def train(
         if rb_path is not None and hasattr(model, "load_replay_buffer"):
             model.load_replay_buffer(str(rb_path))
         resumed_from = start
+    elif trained_agent is not None:
+        model, env = _load_trained_agent(cls, Path(trained_agent), env, norm, hp, algo_kwargs, seed)
+        cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp, "trained_agent": str(trained_agent)}
+        atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
     else:
         if norm:
             env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)

@@ -29,7 +29,7 @@ import numpy as np
 from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import Tolerances, get_method
 from flatbody_env.scene import Scene, load_scene
-from flatbody_env.simulation import FIXED_STEP_ENERGY_TOL
+from flatbody_env.simulation import default_energy_tol
 from flatbody_env.physics.state import pack
 
 from analysis.work_precision import timed_run
@@ -124,11 +124,11 @@ def relative_gap_min(Z: np.ndarray, times: np.ndarray) -> float:
 def _run(study, method, scene, t_end, ref, floor, pname, pval, mname, mval, repeats) -> FailurePoint:
     info = get_method(method).info
     # the energy tolerances of simulate(): failures must be detected, not returned as states
-    scale = max(1.0, abs(hamiltonian(pack(scene.state), scene.body)))
+    energy_tol = default_energy_tol(hamiltonian(pack(scene.state), scene.body), ADAPTIVE["rtol"], ADAPTIVE["atol"], adaptive=info.adaptive)
     if info.adaptive:
-        tol = Tolerances(**ADAPTIVE, energy_tol=max(1e-8, 1e4 * ADAPTIVE["rtol"]) * scale)
+        tol = Tolerances(**ADAPTIVE, energy_tol=energy_tol)
     else:
-        tol = Tolerances(step=FIXED_STEP, energy_tol=FIXED_STEP_ENERGY_TOL * scale)
+        tol = Tolerances(step=FIXED_STEP, energy_tol=energy_tol)
     setting = f"rtol={ADAPTIVE['rtol']:g}" if info.adaptive else f"h={FIXED_STEP:g}"
     times = np.linspace(0.0, t_end, 101)
     sol, wall, runs, status, reason = timed_run(method, scene, times, tol, repeats=repeats)

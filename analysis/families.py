@@ -32,11 +32,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import root
 
 from flatbody_env.output import atomic_open
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
+from flatbody_env.physics.validation import FAMILY_SEEDS_RANGE
 
 from analysis.stability import analyse_stability, stability_of_shape
 from analysis.stationary import DEFAULT_TOL, SearchBox, build_ellipse, check_isotropic, equilibrium_equations, stationary_ellipses
@@ -44,6 +44,25 @@ from analysis.stationary import DEFAULT_TOL, SearchBox, build_ellipse, check_iso
 SPIN_PARAMETERS = ("s3", "p_theta")
 BODY_PARAMETERS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
 PARAMETERS = SPIN_PARAMETERS + BODY_PARAMETERS
+
+# --- the defaults of a family and of a stability map: named once here, imported by the command
+# (``flatbody family``, ``flatbody stability-map``, ``flatbody sweep``), the service's models and answers ---
+DEFAULT_S3 = 2.0
+"""s3 held fixed while another parameter varies (:func:`follow_family`, ``--s3``, the family job's ``s3``)."""
+DEFAULT_P_THETA = 0.5
+"""p_θ held fixed while another parameter varies (:func:`follow_family`, ``--p-theta``, the family job's ``p_theta``)."""
+DEFAULT_SEEDS = 5
+"""Parameter values at which all solutions are sought (:func:`follow_family`'s ``seeds``, ``--seeds``); bounds:
+:data:`~flatbody_env.physics.validation.FAMILY_SEEDS_RANGE`."""
+DEFAULT_FAMILY_RANGE = (0.05, 4.0)
+"""The parameter range [from, to] of ``flatbody family`` (``--from``, ``--to``), ``flatbody sweep family``
+(``--ranges``) and the family job."""
+MAP_LAM_RANGE = (1.02, 3.0)
+"""The λ range of a stability map (:func:`shape_stability_grid`; ``flatbody stability-map --lam-range``)."""
+MAP_MU_RANGE = (0.3, 3.0)
+"""The μ range of a stability map (only μ < λ is used; ``--mu-range``)."""
+MAP_GRID = 30
+"""Grid points per axis of a stability map (``--grid``)."""
 GAP_MIN = 1e-3
 """A branch stops where (λ − μ)/(λ + μ) falls below this or changes sign (the circle λ = μ is
 outside the two-polar chart; for symmetric V the ellipses tend to it as s3 → p_θ, docs/physics.md §7–§8)."""
@@ -250,6 +269,8 @@ def _solve_at(prob: _Problem, z0: np.ndarray, p: float) -> np.ndarray | None:
     def f(z):
         return prob.F(np.concatenate([z, [p]]))
 
+    from scipy.optimize import root  # here, not at import: flatbody --help reads the defaults without scipy
+
     try:
         with np.errstate(all="ignore"):
             sol = root(f, z0, method="hybr", options={"xtol": 1e-14})
@@ -332,6 +353,8 @@ def _refine_fold(prob: _Problem, Xa: np.ndarray, Xm: np.ndarray, Xb: np.ndarray)
         Jz = prob.jac(X)[:, :-1]
         return np.concatenate([prob.F(X), [np.linalg.det(Jz)]])
 
+    from scipy.optimize import root
+
     try:
         with np.errstate(all="ignore"):
             sol = root(g, Xm, method="hybr", options={"xtol": 1e-13})
@@ -378,9 +401,9 @@ def follow_family(
     start: float,
     stop: float,
     *,
-    s3: float = 2.0,
-    p_theta: float = 0.5,
-    seeds: int = 5,
+    s3: float = DEFAULT_S3,
+    p_theta: float = DEFAULT_P_THETA,
+    seeds: int = DEFAULT_SEEDS,
     box: SearchBox | None = None,
     step: float | None = None,
     max_points: int = 2000,
@@ -425,8 +448,9 @@ def follow_family(
         if start <= 0:
             raise ValueError(f"start: the constant {param} must stay > 0 (allowed range (0, inf)), got {start!r}")
         body_with(body, param, start)  # raises if the body has no such constant
-    if not (isinstance(seeds, int) and 2 <= seeds <= 200):
-        raise ValueError(f"seeds: must be an integer in [2, 200], got {seeds!r}")
+    seeds_lo, seeds_hi = FAMILY_SEEDS_RANGE
+    if not (isinstance(seeds, int) and seeds_lo <= seeds <= seeds_hi):
+        raise ValueError(f"seeds: must be an integer in [{seeds_lo}, {seeds_hi}], got {seeds!r}")
     box = box or SearchBox()
     prob = _Problem(body, param, float(s3), float(p_theta), rho)
     h_max = step if step is not None else (stop - start) / 60.0
@@ -594,6 +618,13 @@ def read_family_csv(path: str | Path) -> list[dict[str, Any]]:
 __all__ = [
     "BODY_PARAMETERS",
     "CSV_COLUMNS",
+    "DEFAULT_FAMILY_RANGE",
+    "DEFAULT_P_THETA",
+    "DEFAULT_S3",
+    "DEFAULT_SEEDS",
+    "MAP_GRID",
+    "MAP_LAM_RANGE",
+    "MAP_MU_RANGE",
     "Family",
     "FamilyEvent",
     "FamilyPoint",

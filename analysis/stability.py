@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.linalg import null_space
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs
@@ -220,6 +219,8 @@ def _energy_casimir(body: Body, x: np.ndarray, scale: float) -> tuple[str, tuple
         return "not applicable", ()
     hess = hamiltonian_hessian(body, x)
     hess[:3, :3] -= 2.0 * coef[0] * np.eye(3)
+    from scipy.linalg import null_space  # here, not at import (flatbody --help imports this module's neighbours)
+
     N = null_space(A.T)
     ev = np.linalg.eigvalsh(N.T @ hess @ N)
     tol = 1e-8 * max(1.0, float(np.max(np.abs(ev))))

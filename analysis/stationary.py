@@ -48,7 +48,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import root
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equilibria import StationaryEllipse, squared_sigmas
@@ -56,6 +55,7 @@ from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, potential_kernel
 from flatbody_env.physics.state import STATE_NAMES
+from flatbody_env.physics.validation import SEARCH_GRID_RANGE
 
 DEFAULT_TOL = 1e-10
 """Largest accepted residual max |dy/dt| (θ excluded) of a returned solution."""
@@ -91,8 +91,9 @@ class SearchBox:
             lo, hi = getattr(self, name)
             if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
                 raise ValueError(f"box.{name}: need 0 < low < high (finite), got ({lo!r}, {hi!r})")
-        if not (isinstance(self.n, int) and 8 <= self.n <= 2001):
-            raise ValueError(f"box.n: must be an integer in [8, 2001], got {self.n!r}")
+        lo, hi = SEARCH_GRID_RANGE
+        if not (isinstance(self.n, int) and lo <= self.n <= hi):
+            raise ValueError(f"box.n: must be an integer in [{lo}, {hi}], got {self.n!r}")
         if not (isinstance(self.n_rho, int) and 4 <= self.n_rho <= 401):
             raise ValueError(f"box.n_rho: must be an integer in [4, 401], got {self.n_rho!r}")
 
@@ -297,6 +298,8 @@ def _newton(fun, z0: np.ndarray, *, tol: float = 1e-14, maxiter: int = 60):
             zm[i] -= h
             Jm[:, i] = (fun(zp) - fun(zm)) / (2.0 * h)
         return Jm
+
+    from scipy.optimize import root  # here, not at import: flatbody --help reads SearchBox without scipy
 
     try:
         with np.errstate(all="ignore"):
@@ -539,6 +542,8 @@ def spins_for_shape(
     if lam == mu:
         raise ValueError("lambda: must differ from mu (lambda = mu is the singular set of the two-polar chart)")
     if body.potential.kind == KIND_CUSTOM:
+        from scipy.optimize import root
+
         r0 = 1.0 if rho is None else _positive("rho", rho)
         sol = root(lambda r: [body.potential_terms(lam, mu, float(r[0]))[3]], [r0], method="hybr")
         if not sol.success or sol.x[0] <= 0:

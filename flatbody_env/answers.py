@@ -91,16 +91,19 @@ def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> d
     }
 
 
-def family_run(body, vary, start, stop, *, s3=None, p_theta=None, seeds=5, box=None, step=None, out=None, plot=None,
+def family_run(body, vary, start, stop, *, s3=None, p_theta=None, seeds=None, box=None, step=None, out=None, plot=None,
                 progress=False):
     """Follow a family of stationary ellipses over ``vary`` (:func:`analysis.families.follow_family`); returns
-    ``(family, family_summary)``, writing the CSV and the chart when ``out`` / ``plot`` are given."""
-    from analysis.families import PARAMETERS, follow_family, write_family_csv
+    ``(family, family_summary)``, writing the CSV and the chart when ``out`` / ``plot`` are given. ``s3``,
+    ``p_theta``, ``seeds`` None: the library's defaults (:data:`analysis.families.DEFAULT_S3`, ``DEFAULT_P_THETA``,
+    ``DEFAULT_SEEDS``)."""
+    from analysis.families import DEFAULT_P_THETA, DEFAULT_S3, DEFAULT_SEEDS, PARAMETERS, follow_family, write_family_csv
 
     if vary not in PARAMETERS:
         raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {vary!r}")
-    s3 = 2.0 if s3 is None else float(s3)
-    pt = 0.5 if p_theta is None else float(p_theta)
+    s3 = DEFAULT_S3 if s3 is None else float(s3)
+    pt = DEFAULT_P_THETA if p_theta is None else float(p_theta)
+    seeds = DEFAULT_SEEDS if seeds is None else seeds
     fam = follow_family(body, vary, start, stop, s3=s3, p_theta=pt, seeds=seeds, box=box, step=step, progress=progress)
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))

@@ -8,10 +8,12 @@ stop the others. ``device="cpu"`` runs the compiled CPU kernels in parallel over
 GPU, one thread per body (:mod:`flatbody_env.integrators.cuda`).
 
 The defaults match :func:`~flatbody_env.simulation.simulate`: integration from t = 0 (``times``
-need not hold 0: the state at t = 0 is ``y0``), the energy tolerance
+need not hold 0: the state at t = 0 is ``y0``), the energy tolerance of
+:func:`~flatbody_env.simulation.default_energy_tol`:
 ``FIXED_STEP_ENERGY_TOL · max(1, |H₀|)`` for fixed-step methods and
-``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H₀|)`` for DOP853, and the work budget ``max_nfev``
-per body. The model ladder is not consulted: every body runs the full two-polar equations.
+``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H₀|)`` for DOP853, the work budget ``max_nfev``
+per body and ``max_wall_time`` for the batch (on the CPU). The model ladder is not consulted: every body
+runs the full two-polar equations.
 """
 
 from __future__ import annotations
@@ -24,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from flatbody_env.integrators import DEFAULT_MAX_NFEV, Tolerances, get_method
+from flatbody_env.integrators import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, Tolerances, get_method
 from flatbody_env.integrators.base import check_step
 from flatbody_env.integrators.specs import BATCH_METHODS, BY_NAME
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE
-from flatbody_env.simulation import FIXED_STEP_ENERGY_TOL
+from flatbody_env.simulation import energy_tol_scale
 
 DEVICES = ("cpu", "cuda")
 """Methods with batch kernels (the compiled two-polar methods)."""
@@ -149,6 +151,7 @@ def simulate_batch(
     atol: float = 1e-10,
     energy_tol: float | None = None,
     max_nfev: int = DEFAULT_MAX_NFEV,
+    max_wall_time: float = DEFAULT_MAX_WALL_TIME,
     device: str = "cpu",
 ) -> BatchTrajectory:
     """Integrate N bodies of one shape from the states ``y0`` (N, 11) through ``times``.
@@ -174,6 +177,13 @@ def simulate_batch(
         :func:`~flatbody_env.simulation.simulate` (per body, from its own H₀).
     max_nfev : int
         Work budget per body: right-hand-side evaluations.
+    max_wall_time : float
+        Seconds for the whole batch (``device="cpu"``; (0, 86 400]). DOP853-numba: a timed probe on the
+        first bodies measures the evaluations per second, and every body then gets the budget of
+        evaluations that the time left allows (at most ``max_nfev``): a body past it ends with the
+        ``budget`` status, the others bit for bit as without this budget. Fixed-step methods: a run whose
+        predicted time exceeds it is refused before it starts (``IntegrationError``, ``kind="budget"``).
+        The GPU (``device="cuda"``) has ``max_nfev`` only.
     device : {"cpu", "cuda"}
         Where to run: the compiled CPU kernels (parallel over bodies) or a CUDA GPU.
 
@@ -188,7 +198,8 @@ def simulate_batch(
     ValueError
         Bad arguments (naming the field and its range).
     IntegrationError
-        ``kind="budget"``: a fixed-step run that would exceed ``max_nfev`` (known before the run).
+        ``kind="budget"``: a fixed-step run that would exceed ``max_nfev`` (known before the run) or, by a timed
+        probe, ``max_wall_time``.
     flatbody_env.integrators.cuda.CudaUnavailableError
         ``device="cuda"`` without a usable CUDA GPU (the message names the fix).
     """
@@ -205,7 +216,10 @@ def simulate_batch(
         raise ValueError(f"y0, times: N * T * 11 = {n} * {grid.size} * 11 floats exceeds the limit of {MAX_OUTPUT_FLOATS} "
                          "(split the batch or ask for fewer times)")
     meth = get_method(method)
-    tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, energy_tol=math.inf if energy_tol is None else energy_tol)
+    if validation.number("max_wall_time", max_wall_time, positive=True) > validation.MAX_SECONDS:
+        raise ValueError(f"max_wall_time: must lie in (0, {validation.MAX_SECONDS:g}] seconds, got {max_wall_time!r}")
+    tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time,
+                     energy_tol=math.inf if energy_tol is None else energy_tol)
     h = check_step(meth.info, tol)
     if device == "cuda":
         from flatbody_env.integrators import cuda
@@ -226,7 +240,7 @@ def simulate_batch(
     if energy_tol is None:
         H0 = np.empty(n)
         bs.batch_energy(Y0, P, H0)
-        scale = FIXED_STEP_ENERGY_TOL if not spec.info.adaptive else max(1e-8, 1e4 * max(tol.rtol, tol.atol))
+        scale = energy_tol_scale(tol.rtol, tol.atol, adaptive=spec.info.adaptive)
         etol = scale * np.maximum(1.0, np.abs(H0))
     else:
         etol = np.full(n, tol.energy_tol)
@@ -240,7 +254,16 @@ def simulate_batch(
         STATUS = np.zeros(n, np.int64)
         NFEV = np.zeros(n, np.int64)
         TFAIL = np.empty(n)
-        bs.batch_solve(kind, coeffs, Y0, grid, u, P, h, tol.rtol, tol.atol, etol, tol.max_nfev, OUT, STATUS, NFEV, TFAIL)
+
+        def run(m: int, budget: int, span=grid) -> None:  # the first m bodies through ``span``, ``budget`` evaluations each
+            bs.batch_solve(kind, coeffs, Y0[:m], span, u, P, h, tol.rtol, tol.atol, etol[:m], budget, OUT[:m, :span.size], STATUS[:m],
+                           NFEV[:m], TFAIL[:m])
+
+        if spec.info.adaptive:
+            _solve_within_wall_time(run, n, NFEV, STATUS, tol)
+        else:
+            _refuse_fixed_over_wall_time(run, n, NFEV, grid, h, spec.stages, method, tol)
+            run(n, tol.max_nfev)
     else:
         OUT, STATUS, NFEV, TFAIL = cuda.solve(method, Y0, grid, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol,
                                               max_nfev=tol.max_nfev)
@@ -248,6 +271,62 @@ def simulate_batch(
     keep = slice(1, None) if prepended else slice(None)
     return BatchTrajectory(t=times_arr.copy(), state=OUT[:, keep], status=STATUS, nfev=NFEV, t_fail=TFAIL, y0=Y0, method=method,
                            device=device, wall_time=wall)
+
+
+_PROBE_NFEV = 5_000
+"""Evaluations per body of the timed probe of the wall-clock budget (as the scalar compiled DOP853's)."""
+def _probe_bodies(n: int) -> int:
+    """Bodies of a timed probe: enough chunks to keep every thread of the parallel kernel busy."""
+    import numba
+
+    from flatbody_env.integrators.batch_solve import CHUNK
+
+    return min(n, CHUNK * max(1, numba.get_num_threads()))
+
+
+def _solve_within_wall_time(run, n: int, NFEV: np.ndarray, STATUS: np.ndarray, tol: Tolerances) -> None:
+    """DOP853 over the batch within ``tol.max_wall_time`` (module docstring of :mod:`.integrators.compiled_methods`
+    for one body): the kernel cannot read the clock, so a probe (the first bodies, :data:`_PROBE_NFEV` evaluations
+    each, run twice: the first call may load the kernel) measures evaluations per second, and the batch runs with the
+    per-body budget that the time left allows, capped by ``max_nfev``. A probe over the whole batch that ends is the
+    answer. Every run starts from t = 0, so a body that finishes is bit for bit that of one call."""
+    if tol.max_nfev <= 2 * _PROBE_NFEV:
+        run(n, tol.max_nfev)
+        return
+    from flatbody_env.integrators.failure import KINDS
+
+    budget_code = KINDS.index("budget")
+    start = time.perf_counter()
+    m = _probe_bodies(n)
+    rate = 0.0
+    for _ in range(2):  # the second probe's rate: the first may have loaded the kernel
+        t0 = time.perf_counter()
+        run(m, _PROBE_NFEV)
+        if m == n and not (STATUS[:m] == budget_code).any():
+            return
+        rate = float(NFEV[:m].sum()) / max(time.perf_counter() - t0, 1e-9)
+    left = tol.max_wall_time - (time.perf_counter() - start)
+    run(n, int(min(tol.max_nfev, max(1.0, rate * left / n))))
+
+
+def _refuse_fixed_over_wall_time(run, n: int, NFEV: np.ndarray, grid: np.ndarray, h: float, stages: int, method: str, tol: Tolerances) -> None:
+    """Fixed-step work is known up front: time a few hundred steps of the first bodies (twice: the first call
+    may load the kernel) and refuse the batch whose predicted time exceeds ``tol.max_wall_time``."""
+    from flatbody_env.integrators.base import budget_error
+
+    spans = np.diff(grid)
+    total = n * stages * float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
+    if total <= 4 * _PROBE_NFEV:
+        return
+    m = _probe_bodies(n)
+    span = np.array([grid[0], grid[0] + min(256 * h, grid[-1] - grid[0])])
+    run(m, tol.max_nfev, span)
+    t0 = time.perf_counter()
+    run(m, tol.max_nfev, span)
+    per_eval = (time.perf_counter() - t0) / max(1, int(NFEV[:m].sum()))
+    if total * per_eval > tol.max_wall_time:
+        raise budget_error(t=float(grid[0]), method=method, tol=tol,
+                           used=f"~{total * per_eval:.3g} s predicted for {total:.6g} RHS evaluations of {n} bodies")
 
 
 __all__ = ["BATCH_METHODS", "BatchTrajectory", "DEVICES", "MAX_BODIES", "MAX_OUTPUT_FLOATS", "simulate_batch"]

@@ -63,6 +63,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp.unlink()
         if isinstance(exc, OutputError):
+            if repr(str(tmp)) in str(exc):  # a writer that is atomic itself named our temporary file: name the target
+                raise OutputError(str(exc).replace(repr(str(tmp)), repr(str(target)))) from None
             raise
         raise OutputError(f"cannot write {str(target)!r}: {exc.strerror or exc}") from None
     except BaseException:

@@ -59,9 +59,29 @@ from flatbody_env.integrators.ladder import GAP_MIN, LADDER_RUNGS, RUNGS, RungCh
 
 FIXED_STEP_ENERGY_TOL = 1e-3
 """Default relative energy tolerance of fixed-step methods (a blow-up detector, not an accuracy target)."""
+ADAPTIVE_ENERGY_TOL_FLOOR = 1e-8
+"""Smallest default relative energy tolerance of adaptive methods (:func:`energy_tol_scale`)."""
+ADAPTIVE_ENERGY_TOL_FACTOR = 1e4
+"""Default relative energy tolerance of adaptive methods per unit of max(rtol, atol) (:func:`energy_tol_scale`)."""
+
+
+def energy_tol_scale(rtol: float, atol: float, *, adaptive: bool = True) -> float:
+    """The default relative energy tolerance — the one rule of :func:`simulate`, ``simulate_batch`` and the
+    studies: ``max(ADAPTIVE_ENERGY_TOL_FLOOR, ADAPTIVE_ENERGY_TOL_FACTOR · max(rtol, atol))`` for adaptive
+    methods, :data:`FIXED_STEP_ENERGY_TOL` for fixed-step ones (``rtol``, ``atol`` unused there)."""
+    if not adaptive:
+        return FIXED_STEP_ENERGY_TOL
+    return max(ADAPTIVE_ENERGY_TOL_FLOOR, ADAPTIVE_ENERGY_TOL_FACTOR * max(rtol, atol))
+
+
+def default_energy_tol(H0: float, rtol: float, atol: float, *, adaptive: bool = True) -> float:
+    """The default absolute energy tolerance of an integration starting at energy ``H0``:
+    :func:`energy_tol_scale` · max(1, |H0|)."""
+    return energy_tol_scale(rtol, atol, adaptive=adaptive) * max(1.0, abs(H0))
 
 MODELS = ("auto",) + RUNGS
 DEFAULT_SAMPLES = 101
+"""Even output times of :func:`simulate` when neither ``times`` nor ``samples`` is given (``flatbody simulate``, the service)."""
 
 
 def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> float:
@@ -421,11 +441,8 @@ def simulate(
     check_step(meth.info, tol)
     H0 = hamiltonian(y0, body)
     if energy_tol is None:
-        if meth.info.adaptive:
-            energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
-        else:
-            # fixed step: the tolerance only catches blow-ups (see docs/integrators.md)
-            energy_tol = FIXED_STEP_ENERGY_TOL * max(1.0, abs(H0))
+        # fixed step: the tolerance only catches blow-ups (see docs/integrators.md)
+        energy_tol = default_energy_tol(H0, rtol, atol, adaptive=meth.info.adaptive)
     tol = dataclasses.replace(tol, energy_tol=energy_tol)
     # methods integrate from grid[0] = 0; a grid without 0 gets it prepended and its row dropped
     prepended = times_arr[0] != 0.0
@@ -460,7 +477,7 @@ def simulate(
 
 
 def _adaptive_energy_tol(energy_tol, rtol, atol, H0) -> float:
-    return float(energy_tol) if energy_tol is not None else max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+    return float(energy_tol) if energy_tol is not None else default_energy_tol(H0, rtol, atol)
 
 
 def _simulate_auto(sc: Scene, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
@@ -509,7 +526,7 @@ def _simulate_rung(sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, e
     y0 = pack(sc.state)
     H0 = hamiltonian(y0, sc.body)
     if energy_tol is None:
-        energy_tol = max(1e-8, 1e4 * max(rtol, atol)) * max(1.0, abs(H0))
+        energy_tol = default_energy_tol(H0, rtol, atol)
     tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol), max_nfev=max_nfev, max_wall_time=max_wall_time)
     # rungs integrate from grid[0] = 0 as the full models do: a grid without 0 gets it prepended and its row dropped
     prepended = times_arr[0] != 0.0

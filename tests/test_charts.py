@@ -78,6 +78,18 @@ def _recording(out):
     _bench_chart(json.loads((IMG / "recording.json").read_text(encoding="utf-8")), out)
 
 
+def _scaling(out):
+    from flatbody_env.sweep.scaling import plot_scaling
+
+    plot_scaling(IMG / "scaling.json", out)
+
+
+def _service(out):
+    from flatbody_env.service.benchmark import plot
+
+    plot(IMG / "service_benchmark.json", out)
+
+
 CHARTS = {
     # chart: (drawing function, phrases its caption or legend must hold: the jargon explained)
     "train_benchmark": (_train, ["LQR", "linear-quadratic regulator", "PPO", "Proximal Policy Optimization"]),
@@ -90,6 +102,8 @@ CHARTS = {
     "stability-map-default": (_shape_map, ["energy-Casimir:", "Lyapunov", "hollow", "rigid-like", "circulating"]),
     "tasks_success": (_tasks, ["LQR: the linear-quadratic regulator", "passivity:", "r: how fast", "γ: the growth rate", "Wilson"]),
     "recording": (_recording, ["send_columns", "Recorder.append", "error bars"]),
+    "scaling": (_scaling, ["makespan", "Simulated nodes", "break-even", "o the scheduler overhead"]),
+    "service_benchmark": (_service, ["p50 / p99", "99th percentile", "concurrent clients", "error(s)"]),
 }
 
 
@@ -174,3 +188,65 @@ def test_caption_is_found_and_clean_layout_passes():
         assert layout_problems(fig) == []
     finally:
         plt.close(fig)
+
+
+def _small_scaling_table(path: Path) -> Path:
+    """A scaling.json of a 2-task run, in the layout ``write_scaling`` saves."""
+    rep = {"grid": 8, "chunk": 4, "tasks": 2, "points": 64, "serial_s": 0.2, "task_cost_mean_s": 0.1, "task_cost_max_s": 0.12,
+           "cost_per_point_s": 0.003, "task_costs_s": [0.08, 0.12],
+           "local": [{"workers": 1, "startup_s": 0.01, "run_s": 0.21, "speedup": 0.95, "speedup_end_to_end": 0.9},
+                     {"workers": 2, "startup_s": 0.5, "run_s": 0.13, "speedup": 1.5, "speedup_end_to_end": 0.3}],
+           "overhead_per_task_s": 0.002, "overhead_over_task_cost": 0.02, "connect_s": 0.01, "noop_tasks": 10,
+           "simulated": {"workers": 4, "wall_s": 0.13, "model_s": 0.13, "ideal_s": 0.05, "speedup": 1.5},
+           "extrapolated": [{"workers": 8, "grid": 8, "predicted_s": 0.13, "predicted_speedup": 1.5, "grid_big": 100,
+                             "predicted_big_s": 5.0, "predicted_big_speedup": 6.0, "break_even_grid": 3.0}],
+           "break_even_local_2": 20.0, "machine": {"cpu_count": 2, "python": "3", "load_avg_1min": 0.5}}
+    path.write_text(json.dumps(rep), encoding="utf-8")
+    return path
+
+
+def _small_service_table(path: Path) -> Path:
+    """A service_benchmark.json of two endpoints at 1 and 4 clients, in the layout the benchmark saves."""
+    rows = [{"endpoint": e, "clients": c, "requests": 20, "errors": 0, "seconds": 0.5, "p50_ms": p * c, "p99_ms": 4 * p * c,
+             "requests_per_s": 100.0 / p} for e, p in (("GET /health", 1.0), ("POST /simulate", 3.0)) for c in (1, 4)]
+    path.write_text(json.dumps({"workers": 1, "cpus": 2, "long_job": {"kind": "stability-map", "params": {"grid": 20},
+                                "status_at_start": "running", "status_at_end": "running"}, "rows": rows}), encoding="utf-8")
+    return path
+
+
+def test_scaling_chart_is_drawn_from_its_saved_table(drawn, tmp_path):
+    """``plot_scaling`` reads only the saved JSON: a small table gives a chart whose numbers come from it."""
+    from flatbody_env.sweep.scaling import plot_scaling
+
+    table = _small_scaling_table(tmp_path / "scaling.json")
+    fig = drawn(lambda out: plot_scaling(table, out), tmp_path / "scaling.png")
+    assert (tmp_path / "scaling.png").read_bytes()[:4] == b"\x89PNG"
+    text = all_text(fig)
+    assert "overhead 2.0 ms/task" in text and "grid 8 (2 tasks)" in text and "grid 8, 2 tasks of 4" in caption_text(fig)
+    measured = [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_label() == "measured, local processes"]
+    assert [list(ln.get_ydata()) for ln in measured] == [[0.95, 1.5]]
+    assert layout_problems(fig) == []
+
+
+def test_service_chart_is_drawn_from_its_saved_table(drawn, tmp_path):
+    """``service.benchmark.plot`` reads only the saved JSON (``flatbody bench service --plot-only``)."""
+    from flatbody_env.service.benchmark import plot
+
+    table = _small_service_table(tmp_path / "service_benchmark.json")
+    fig = drawn(lambda out: plot(table, out), tmp_path / "service.png")
+    assert (tmp_path / "service.png").read_bytes()[:4] == b"\x89PNG"
+    latency, throughput = fig.axes
+    p50 = next(ln for ln in latency.get_lines() if ln.get_label() == "POST /simulate, p50")
+    assert list(p50.get_xdata()) == [1, 4] and list(p50.get_ydata()) == [3.0, 12.0]
+    assert [ln.get_label() for ln in throughput.get_lines()] == ["GET /health", "POST /simulate"]
+    assert "0 error(s)" in caption_text(fig) and "1 worker process(es) on 2 CPU(s)" in all_text(fig)
+    assert layout_problems(fig) == []
+
+
+def test_bench_service_plot_only_redraws_from_the_table(tmp_path):
+    from flatbody_env.cli.main import main
+
+    _small_service_table(tmp_path / "service_benchmark.json")
+    assert main(["bench", "service", "--out-dir", str(tmp_path), "--plot-only"]) == 0
+    assert (tmp_path / "service_benchmark.png").stat().st_size > 10_000
+    assert main(["bench", "service", "--out-dir", str(tmp_path / "none"), "--plot-only"]) == 2

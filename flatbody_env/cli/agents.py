@@ -73,6 +73,8 @@ def _train(args) -> int:
     from agents.numpy_policy import check_trusted, remember_run
 
     out = args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}"
+    if args.trained_agent is not None and args.resume:
+        raise ValueError("--trained-agent: not with --resume (a resumed run continues its own model)")
     if args.resume:  # the checkpoints are pickles: only from one of your runs, or with --trust
         check_trusted(out, "the checkpoints (pickle-based SB3 files)")
     else:
@@ -93,6 +95,7 @@ def _train(args) -> int:
         progress=not args.no_progress,
         command=command,
         force=args.force,
+        trained_agent=args.trained_agent,
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
     print(f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}")
@@ -227,6 +230,8 @@ def register(sub) -> None:
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
+    p.add_argument("--trained-agent", metavar="RUN", help="fine-tune: start from this run folder's model.zip and vecnormalize.pkl "
+                   "(this run's hyperparameters; SB3 algorithms)")
     p.add_argument("--force", action="store_true", help="train into DIR even if it holds a run or is the shipped agent (overwrites it)")
     p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0, validation.MAX_TIMESTEPS), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
@@ -242,7 +247,10 @@ def register(sub) -> None:
     p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
     p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
     p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="episodes (default 100)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=10_000, metavar="S", help="episode i is reset with seed S + i (default 10000)")
+    from agents.evaluate import EVAL_SEED
+
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=EVAL_SEED, metavar="S",
+                   help=f"episode i is reset with seed S + i (default {EVAL_SEED})")
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
@@ -298,6 +306,29 @@ def _bench_train(args) -> int:
     return 0
 
 
+def _bench_time_to_goal(args) -> int:
+    from agents.goal_benchmark import markdown, run
+
+    b = run(seed=args.seed, max_timesteps=args.max_timesteps, eval_every=args.eval_every, episodes=args.episodes, out_dir=args.out_dir)
+    for c in (b.sb3, b.rsl):
+        reached = f"{c.goal_s:.1f} s ({c.goal_timesteps} steps)" if c.goal_s is not None else "not reached"
+        t, w, s, d = c.points[-1]
+        beat = f"{c.lqr_s:.1f} s ({c.lqr_timesteps} steps)" if c.lqr_s is not None else "not reached"
+        print(f"{c.trainer:<8} goal: {reached:<24} beats the LQR: {beat:<24} last: success {s:.0%}, final distance {d:.4f} after {t} steps, {w:.1f} s")
+    print(f"LQR on the same seeds: success {b.lqr_success:.0%}, final distance {b.lqr_final_distance:.4f}")
+    if b.ratio is not None:
+        print(f"rsl-ppo / sb3-ppo wall time to the goal: {b.ratio:.2f} (goal <= 0.5)")
+    if b.ratio_lqr is not None:
+        print(f"rsl-ppo / sb3-ppo wall time to beat the LQR: {b.ratio_lqr:.2f}")
+    print(f"wrote {args.out_dir}/time_to_goal.json, .csv, .png")
+    if args.docs:
+        from flatbody_env.output import replace_marked_block
+
+        replace_marked_block(args.docs, "time-to-goal", markdown(b))
+        print(f"updated the table in {args.docs}")
+    return 0
+
+
 def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1; share in env + LQR")
     p.add_argument("--timesteps", type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS), default=64_000, help="environment steps per run")
@@ -307,3 +338,13 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")
     p.set_defaults(handler=_bench_train)
+    p = bench_sub.add_parser("time-to-goal", help="wall time to a good residual agent: SB3's PPO vs rsl_rl's PPO (rsl-ppo), same run")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="training seed of both runs")
+    p.add_argument("--max-timesteps", type=int_at_least("max_timesteps", 1, validation.MAX_TIMESTEPS), default=3_000_000,
+                   help="stop a trainer here if it has not reached the goal")
+    p.add_argument("--eval-every", type=int_at_least("eval_every", 1, validation.MAX_TIMESTEPS), default=50_000,
+                   help="environment steps between evaluations (rounded up to whole rollouts)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1, 10_000), default=20, help="held-out episodes per evaluation (seeds 50000...)")
+    p.add_argument("--out-dir", default="bench", help="where to write time_to_goal.json/.csv/.png")
+    p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:time-to-goal --> markers in FILE.md")
+    p.set_defaults(handler=_bench_time_to_goal)

@@ -6,6 +6,10 @@ The body is given by flags (``--potential V1|V2|V3`` with ``--k`` / ``--c --d`` 
 whose state also supplies s3 and p_θ unless ``--s3`` / ``--p-theta`` are given.
 
 Bad input → exit code 2 with one line (a ``ValueError`` naming the flag and the allowed range).
+
+Every default and bound is read from the library (:class:`analysis.stationary.SearchBox`, the family and
+map defaults of :mod:`analysis.families`, the ranges of :mod:`flatbody_env.physics.validation`), never
+written again here; those modules import without scipy, so ``flatbody --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -13,8 +17,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from analysis.families import DEFAULT_FAMILY_RANGE, DEFAULT_SEEDS, MAP_GRID, MAP_LAM_RANGE, MAP_MU_RANGE, PARAMETERS
+from analysis.stationary import SearchBox
 from flatbody_env.answers import ellipses_answer, family_run, invariants_run, solutions, stability_answer, stability_map_answer
-from flatbody_env.cli.args import body_constant, check_output_path, float_range, int_at_least, momentum, number, output_file, positive_float
+from flatbody_env.cli.args import body_constant, check_output_path, float_range, int_at_least, momentum, output_file, positive_float
+from flatbody_env.physics.validation import FAMILY_SEEDS_RANGE, MAP_GRID_RANGE, MOMENTUM_MAX, PARAM_RANGE, SEARCH_GRID_RANGE
+
+BOX = SearchBox()
+"""The library's search box: its λ, μ ranges and grid are the defaults of ``--lam-range``, ``--mu-range``, ``--grid``."""
+_PARAM_TEXT = f"[{PARAM_RANGE[0]:g}, {PARAM_RANGE[1]:g}]"
 
 _CONSTANTS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
 _FOR_POTENTIAL = {"k": "V1", "c": "V2", "d": "V2", "kappa": "V3"}
@@ -24,32 +35,49 @@ def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
+def _pair(value: tuple[float, float]) -> str:
+    """A range default as the flag takes it (``0.02,50``)."""
+    return f"{value[0]:g},{value[1]:g}"
+
+
 def add_body_arguments(p) -> None:
     """Flags that define the body and the spins (s3, p_θ)."""
     g = p.add_argument_group("body (default: J = J3 = 1, V3 kappa = 1, V_rho a = b = 1)")
     g.add_argument("--scene", metavar="FILE", help="take the constants (and s3, p_theta) from a scene JSON or built-in scene")
     g.add_argument("--potential", choices=("V1", "V2", "V3"), default=None, help="in-plane potential (default V3)")
-    g.add_argument("--k", type=body_constant("--k"), default=None, help="V1 stiffness k in [1e-6, 1e6]")
-    g.add_argument("--c", type=body_constant("--c"), default=None, help="V2 constant c in [1e-6, 1e6]")
-    g.add_argument("--d", type=body_constant("--d"), default=None, help="V2 constant d in [1e-6, 1e6]")
-    g.add_argument("--kappa", type=body_constant("--kappa"), default=None, help="V3 constant kappa in [1e-6, 1e6]")
-    g.add_argument("--a", type=body_constant("--a"), default=None, help="thickness potential a in [1e-6, 1e6]")
-    g.add_argument("--b", type=body_constant("--b"), default=None, help="thickness potential b in [1e-6, 1e6]")
-    g.add_argument("--J", type=body_constant("--J"), default=None, help="in-plane inertia J in [1e-6, 1e6]")
-    g.add_argument("--J3", type=body_constant("--J3"), default=None, help="thickness inertia J3 in [1e-6, 1e6]")
+    g.add_argument("--k", type=body_constant("--k"), default=None, help=f"V1 stiffness k in {_PARAM_TEXT}")
+    g.add_argument("--c", type=body_constant("--c"), default=None, help=f"V2 constant c in {_PARAM_TEXT}")
+    g.add_argument("--d", type=body_constant("--d"), default=None, help=f"V2 constant d in {_PARAM_TEXT}")
+    g.add_argument("--kappa", type=body_constant("--kappa"), default=None, help=f"V3 constant kappa in {_PARAM_TEXT}")
+    g.add_argument("--a", type=body_constant("--a"), default=None, help=f"thickness potential a in {_PARAM_TEXT}")
+    g.add_argument("--b", type=body_constant("--b"), default=None, help=f"thickness potential b in {_PARAM_TEXT}")
+    g.add_argument("--J", type=body_constant("--J"), default=None, help=f"in-plane inertia J in {_PARAM_TEXT}")
+    g.add_argument("--J3", type=body_constant("--J3"), default=None, help=f"thickness inertia J3 in {_PARAM_TEXT}")
     p.add_argument("--s3", type=momentum("--s3"), default=None, help="spin component s3 (conserved with |s|)")
     p.add_argument("--p-theta", dest="p_theta", type=momentum("--p-theta"), default=None, help="material momentum p_theta")
 
 
 def add_box_arguments(p) -> None:
-    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(0.02, 50.0), metavar="LO,HI", help="search range of lambda (default 0.02,50)")
-    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.02, 50.0), metavar="LO,HI", help="search range of mu (default 0.02,50)")
-    p.add_argument("--grid", type=int_at_least("--grid", 8, 2001), default=121, metavar="N", help="grid points per axis of the root search, in [8, 2001] (default 121)")
+    lo, hi = SEARCH_GRID_RANGE
+    p.add_argument("--lam-range", type=float_range("--lam-range"), default=BOX.lam, metavar="LO,HI", help=f"search range of lambda (default {_pair(BOX.lam)})")
+    p.add_argument("--mu-range", type=float_range("--mu-range"), default=BOX.mu, metavar="LO,HI", help=f"search range of mu (default {_pair(BOX.mu)})")
+    p.add_argument("--grid", type=int_at_least("--grid", lo, hi), default=BOX.n, metavar="N",
+                   help=f"grid points per axis of the root search, in [{lo}, {hi}] (default {BOX.n})")
+
+
+def add_map_arguments(p, *, grid_range: tuple[int, int], grid_name: str = "--grid") -> None:
+    """The shape grid of a stability map (``flatbody stability-map``, ``flatbody sweep stability-map``):
+    ``--lam-range``, ``--mu-range``, ``--grid`` with the defaults of :mod:`analysis.families` and ``grid_range``
+    (:data:`~flatbody_env.physics.validation.MAP_GRID_RANGE` or ``SWEEP_GRID_RANGE``)."""
+    lo, hi = grid_range
+    p.add_argument("--lam-range", type=float_range("--lam-range"), default=MAP_LAM_RANGE, metavar="LO,HI",
+                   help=f"lambda range (default {_pair(MAP_LAM_RANGE)})")
+    p.add_argument("--mu-range", type=float_range("--mu-range"), default=MAP_MU_RANGE, metavar="LO,HI",
+                   help=f"mu range (default {_pair(MAP_MU_RANGE)}); only mu < lambda is used")
+    p.add_argument("--grid", type=int_at_least(grid_name, lo, hi), default=MAP_GRID, metavar="N", help=f"grid points per axis, in [{lo}, {hi}] (default {MAP_GRID})")
 
 
 def _box(args):
-    from analysis.stationary import SearchBox
-
     return SearchBox(lam=args.lam_range, mu=args.mu_range, n=args.grid)
 
 
@@ -233,11 +261,14 @@ def register(sub) -> None:
     p = sub.add_parser("family", help="follow stationary ellipses over a parameter (continuation, folds, stability)")
     add_body_arguments(p)
     add_box_arguments(p)
-    p.add_argument("--vary", default="s3", help="s3, p_theta or a constant (k, c, d, kappa, a, b, J, J3); default s3")
-    p.add_argument("--from", dest="start", type=number("--from", low=-1e6, high=1e6), default=0.05, help="start of the range (default 0.05)")
-    p.add_argument("--to", dest="stop", type=number("--to", low=-1e6, high=1e6), default=4.0, help="end of the range (default 4)")
-    p.add_argument("--seeds", type=int_at_least("--seeds", 2, 200), default=5, help="parameter values at which all solutions are sought, in [2, 200] (default 5)")
-    p.add_argument("--step", type=positive_float("--step", 1e6), default=None, help="largest continuation step (default range/60)")
+    p.add_argument("--vary", default=PARAMETERS[0], help=f"{PARAMETERS[0]}, {PARAMETERS[1]} or a constant ({', '.join(PARAMETERS[2:])}); default {PARAMETERS[0]}")
+    start, stop = DEFAULT_FAMILY_RANGE
+    p.add_argument("--from", dest="start", type=momentum("--from"), default=start, help=f"start of the range (default {start:g})")
+    p.add_argument("--to", dest="stop", type=momentum("--to"), default=stop, help=f"end of the range (default {stop:g})")
+    lo, hi = FAMILY_SEEDS_RANGE
+    p.add_argument("--seeds", type=int_at_least("--seeds", lo, hi), default=DEFAULT_SEEDS,
+                   help=f"parameter values at which all solutions are sought, in [{lo}, {hi}] (default {DEFAULT_SEEDS})")
+    p.add_argument("--step", type=positive_float("--step", MOMENTUM_MAX), default=None, help="largest continuation step (default range/60)")
     p.add_argument("--out", type=output_file("--out", (".csv",)), metavar="FILE.csv", help="write the family table (CSV)")
     p.add_argument("--plot", type=output_file("--plot", (".png",)), metavar="FILE.png", help="draw the family chart coloured by stability (PNG)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -245,9 +276,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("stability-map", help="stability of the stationary ellipses over a grid of shapes (lambda, mu)")
     add_body_arguments(p)
-    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(1.02, 3.0), metavar="LO,HI", help="lambda range (default 1.02,3)")
-    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.3, 3.0), metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
-    p.add_argument("--grid", type=int_at_least("--grid", 4, 400), default=30, metavar="N", help="grid points per axis, in [4, 400] (default 30)")
+    add_map_arguments(p, grid_range=MAP_GRID_RANGE)
     p.add_argument("--out", type=output_file("--out", (".csv",)), metavar="FILE.csv", help="write the table (CSV)")
     p.add_argument("--plot", type=output_file("--plot", (".png",)), metavar="FILE.png", help="draw the map (PNG)")
     p.add_argument("--json", action="store_true", help="print JSON rows")

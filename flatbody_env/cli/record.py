@@ -15,7 +15,7 @@ from pathlib import Path
 
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
 from flatbody_env.physics import validation
-from flatbody_env.physics.validation import MAX_SAMPLES
+from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
 from flatbody_env.output import atomic_write, save_figure
 
 
@@ -35,7 +35,8 @@ RECORDING_BYTES_PER_STEP = 2048
 
 def check_space(path: str, steps: int, files: int = 1) -> None:
     """Refuse up front (``OSError`` ENOSPC / EFBIG: one line, exit 1) a recording the disk or the
-    file-size limit cannot hold: rerun's file writer cannot be stopped cleanly once a write fails."""
+    file-size limit cannot hold, before any work; a disk that fills during the run is one line too
+    (:mod:`flatbody_env.recording.sink`), but only once the run has got that far."""
     import errno
     import os
     import resource
@@ -108,7 +109,8 @@ def _record_agent(args) -> int:
         agent = Agent(args.agent or None)
     if args.out:
         check_space(args.out, 1000)
-    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})")
+    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})",
+                 env_id=agent.env_id)
     print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
     if args.verify:
@@ -494,7 +496,7 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
+    p.add_argument("--samples", type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
     p.add_argument("--tensor-every", type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")

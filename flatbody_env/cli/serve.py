@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from flatbody_env.cli.args import int_at_least, positive_float
 from flatbody_env.physics import validation
@@ -111,8 +112,14 @@ def _serve_until_stopped(run) -> bool:
 
 
 def _bench(args) -> int:
-    from flatbody_env.service.benchmark import run
+    from flatbody_env.service.benchmark import plot, run
 
+    if args.plot_only:
+        table = Path(args.out_dir) / "service_benchmark.json"
+        if not table.exists():
+            raise ValueError(f"out_dir: no {table} to plot (run without --plot-only first)")
+        print(f"wrote {plot(table, Path(args.out_dir) / 'service_benchmark.png')}")
+        return 0
     result = run(out_dir=args.out_dir, clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
     print(result.table())
     print(f"wrote {result.paths['json']}, {result.paths['csv']}, {result.paths['png']}")
@@ -147,4 +154,5 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--seconds", type=positive_float("seconds", validation.MAX_SECONDS), default=20.0, help="time per endpoint and client count, at most (default 20)")
     p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=default_workers(), help="the service's worker processes")
     p.add_argument("--out-dir", default="bench", help="where to write service_benchmark.json/.csv/.png")
+    p.add_argument("--plot-only", action="store_true", help="redraw service_benchmark.png from the saved service_benchmark.json in --out-dir")
     p.set_defaults(handler=_bench)

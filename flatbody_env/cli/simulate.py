@@ -8,7 +8,8 @@ import sys
 
 from flatbody_env.answers import methods_answer, scenes_answer, simulate_trajectory
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
-from flatbody_env.physics.validation import MAX_SAMPLES
+from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
+from flatbody_env.simulation import DEFAULT_SAMPLES
 
 
 def _simulate(args) -> int:
@@ -121,8 +122,8 @@ def register(sub) -> None:
     p.add_argument("--times", type=times_list, metavar="t1,t2,...",
                    help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
                    "it is also in the JSON's 'initial_state'); default: an even grid")
-    p.add_argument("--samples", type=int_at_least("samples", 2, MAX_SAMPLES), default=None, metavar="N",
-                   help=f"number of evenly spaced output times in [0, t_end] (default 101, at most {MAX_SAMPLES})")
+    p.add_argument("--samples", type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES), default=None, metavar="N",
+                   help=f"number of evenly spaced output times in [0, t_end] (default {DEFAULT_SAMPLES}, at most {MAX_SAMPLES})")
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
     p.add_argument("--out", type=output_file("--out"), metavar="FILE", help="write the JSON here instead of stdout (replaced atomically)")
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")

@@ -66,8 +66,8 @@ def _stability_map(args) -> int:
     from flatbody_env.sweep.tasks import MAX_GRID, default_chunk
 
     body, _, _ = resolve_body(args, need_spins=False)
-    if not 4 <= args.grid <= MAX_GRID:
-        raise ValueError(f"--grid: must be an integer in [4, {MAX_GRID}], got {args.grid}")
+    if not validation.SWEEP_GRID_RANGE[0] <= args.grid <= MAX_GRID:
+        raise ValueError(f"--grid: must be an integer in [{validation.SWEEP_GRID_RANGE[0]}, {MAX_GRID}], got {args.grid}")
     chunk = args.chunk or default_chunk(args.grid)
     if chunk > args.grid:
         raise ValueError(f"--chunk: must be an integer in [1, {args.grid}] (the grid), got {chunk}")
@@ -124,7 +124,7 @@ def parse_body(text: str) -> tuple[str, dict]:
 
 
 def _family(args) -> int:
-    from analysis.families import PARAMETERS
+    from analysis.families import DEFAULT_P_THETA, DEFAULT_S3, PARAMETERS
     from flatbody_env.cli.analysis import _box, resolve_body
 
     if args.bodies:
@@ -136,11 +136,12 @@ def _family(args) -> int:
         if v not in PARAMETERS:
             raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {v!r}")
     ranges = [list(r) for r in args.ranges]
-    if not 2 <= args.seeds <= 200:
-        raise ValueError(f"--seeds: must be an integer in [2, 200], got {args.seeds}")
+    lo, hi = validation.FAMILY_SEEDS_RANGE
+    if not lo <= args.seeds <= hi:
+        raise ValueError(f"--seeds: must be an integer in [{lo}, {hi}], got {args.seeds}")
     box = _box(args)
     spec = {"kind": "family", "bodies": [list(b) for b in bodies], "vary": list(args.vary), "ranges": ranges,
-            "s3": 2.0 if args.s3 is None else args.s3, "p_theta": 0.5 if args.p_theta is None else args.p_theta,
+            "s3": DEFAULT_S3 if args.s3 is None else args.s3, "p_theta": DEFAULT_P_THETA if args.p_theta is None else args.p_theta,
             "seeds": args.seeds, "step": args.step, "box": {"lam": list(box.lam), "mu": list(box.mu), "n": box.n}}
     for name in ("s3", "p_theta"):
         if not math.isfinite(spec[name]):
@@ -255,7 +256,9 @@ def _engine_arguments(p) -> None:
 
 
 def register(sub) -> None:
-    from flatbody_env.cli.analysis import add_body_arguments, add_box_arguments
+    from analysis.families import DEFAULT_FAMILY_RANGE, DEFAULT_SEEDS
+    from agents.evaluate import EVAL_SEED
+    from flatbody_env.cli.analysis import add_body_arguments, add_box_arguments, add_map_arguments
 
     sweep = sub.add_parser("sweep", help="run a study as many tasks on Dask (local processes or a cluster), resumable")
     kinds = sweep.add_subparsers(dest="sweep_kind", metavar="KIND", parser_class=sub._parser_class)
@@ -263,9 +266,7 @@ def register(sub) -> None:
 
     p = kinds.add_parser("stability-map", help="the shape stability map (flatbody stability-map), the grid split into chunks")
     add_body_arguments(p)
-    p.add_argument("--lam-range", type=float_range("--lam-range"), default=(1.02, 3.0), metavar="LO,HI", help="lambda range (default 1.02,3)")
-    p.add_argument("--mu-range", type=float_range("--mu-range"), default=(0.3, 3.0), metavar="LO,HI", help="mu range (default 0.3,3); only mu < lambda is used")
-    p.add_argument("--grid", type=int_at_least("grid", *validation.SWEEP_GRID_RANGE), default=30, metavar="N", help="grid points per axis, in [4, 20000] (default 30)")
+    add_map_arguments(p, grid_range=validation.SWEEP_GRID_RANGE, grid_name="grid")
     p.add_argument("--chunk", type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]), default=None, metavar="ROWS",
                    help="lambda rows per task (default: about 512 grid points per task, at least one row)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
@@ -287,8 +288,11 @@ def register(sub) -> None:
     add_box_arguments(p)
     p.add_argument("--bodies", nargs="+", metavar="BODY", help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags")
     p.add_argument("--vary", nargs="+", default=["s3"], metavar="PARAM", help="parameters to vary (s3, p_theta or a constant); default s3")
-    p.add_argument("--ranges", nargs="+", type=float_range("--ranges", low=-1e6, high=1e6), default=[(0.05, 4.0)], metavar="LO,HI", help="parameter ranges (default 0.05,4)")
-    p.add_argument("--seeds", type=int_at_least("seeds", 2, 200), default=5, help="parameter values at which all solutions are sought (default 5)")
+    start, stop = DEFAULT_FAMILY_RANGE
+    p.add_argument("--ranges", nargs="+", type=float_range("--ranges", low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX),
+                   default=[DEFAULT_FAMILY_RANGE], metavar="LO,HI", help=f"parameter ranges (default {start:g},{stop:g})")
+    p.add_argument("--seeds", type=int_at_least("seeds", *validation.FAMILY_SEEDS_RANGE), default=DEFAULT_SEEDS,
+                   help=f"parameter values at which all solutions are sought (default {DEFAULT_SEEDS})")
     p.add_argument("--step", type=positive_float("step", validation.STRETCH_RANGE[1]), default=None, help="largest continuation step (default range/60)")
     _engine_arguments(p)
     p.set_defaults(handler=_family)
@@ -303,8 +307,8 @@ def register(sub) -> None:
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="evaluation episodes per seed (default 100)")
-    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0, validation.MAX_SEED), default=10_000, metavar="S",
-                   help="evaluation episode i is reset with seed S + i (default 10000, held apart from training)")
+    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0, validation.MAX_SEED), default=EVAL_SEED, metavar="S",
+                   help=f"evaluation episode i is reset with seed S + i (default {EVAL_SEED}, held apart from training)")
     _engine_arguments(p)
     p.set_defaults(handler=_seeds)
 

@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.batch_solve import DOP853_KIND, env_step_body
+from flatbody_env.integrators.batch_solve import DOP853_KIND, NO_BUDGET, env_step_body
 from flatbody_env.integrators.dop853_tableau import ERROR_E3, ERROR_E5, ERROR_J, STAGE_C, STAGE_J, STAGE_L
 from flatbody_env.integrators.jit import retarget
 from flatbody_env.physics.equations import rhs_iso
@@ -211,9 +211,11 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
     """One env step of DOP853 (first step guess dt) for N lanes: the fused step on blocks of
     :data:`BLOCK` lanes copied into the flat block arrays ``YB``, ``UB``, ``OB`` (the last block
     padded with its first lane), then the lanes it cannot accept redone by :func:`dop853_redo_lanes`
-    (module docstring). ``energy_tol`` < inf hands every lane to the scalar kernel."""
+    (module docstring). ``energy_tol`` < inf hands every lane to the scalar kernel, and so does a budget
+    of RHS evaluations per lane (``counters[3]``, :data:`FUSED_MAX_NFEV`) that the fused attempts could
+    exceed; a lane the scalar kernel takes keeps that budget (the ``budget`` status past it)."""
     n = Y.shape[1]
-    check_energy = energy_tol < np.inf
+    check_energy = energy_tol < np.inf or (counters.size > 3 and counters[3] < FUSED_MAX_NFEV)
     if check_energy:
         for k in range(n):
             scalar_lane(k, DOP853_KIND, NO_COEFFS, Y, U, P, dt, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, yl, ul, out1, K1, ynew, ytmp,
@@ -260,6 +262,12 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
 
 MAX_ROUNDS = 64
 """Fused attempts per block of redone lanes before the lanes still unfinished go to the scalar kernel."""
+FUSED_MAX_NFEV = 1 + 12 * (MAX_ROUNDS + 1)
+"""The most RHS evaluations (the scalar kernel's count) a lane takes in the fused attempts: the first step
+and :data:`MAX_ROUNDS` redone ones. With a smaller budget per lane every lane goes to the scalar kernel,
+which checks the budget before every step; with this budget or more the fused attempts stay within it and
+a lane handed to the scalar kernel runs with it from its start. Either way every lane's state, status and
+count are the scalar kernel's with the same budget, bit for bit."""
 
 
 def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
@@ -407,7 +415,7 @@ class DOP853Batch:
         self.work = (np.empty(self.n), np.empty(Sz), np.empty(4 * B), np.empty(Sz), np.empty(12 * Sz), np.empty(Sz), np.empty(B), np.empty(B),
                      np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(B), np.empty(self.n, np.int64), np.empty((9, B)),
                      np.empty(N), np.empty(4), np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4),
-                     np.zeros(3, np.int64))
+                     np.zeros(4, np.int64))  # counters: [nfev, steps, rejected, budget of nfev per lane]
 
     def __getstate__(self):
         return {"n": self.n}
@@ -416,14 +424,16 @@ class DOP853Batch:
         self.n = state["n"]
         self._alloc()
 
-    def __call__(self, Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV) -> None:
+    def __call__(self, Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev: int = NO_BUDGET) -> None:
+        """``max_nfev``: each lane's budget of RHS evaluations in this step (``budget`` status past it)."""
         if P[0] != P[1]:
             raise ValueError("P: the fused batch step needs J1 = J2")
         if Y.shape[1] != self.n:
             self.n = Y.shape[1]
             self._alloc()
+        self.work[-1][3] = max_nfev
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c",
+__all__ = ["BLOCK", "DOP853Batch", "FUSED_MAX_NFEV", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c",
            "dop853_lanes", "dop853_redo_lanes", "rhs_lanes"]

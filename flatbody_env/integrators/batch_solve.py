@@ -79,7 +79,8 @@ def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_
 def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
                   y, u, out, K, ynew, ytmp, vel, force, f, counters):
     """Body ``b``'s environment step: column b of Y (11, N) and U (4, N) → column b of OUT, STATUS[b],
-    NFEV[b]; the env step of :func:`~.twopolar_kernels.env_step_into`."""
+    NFEV[b]; the env step of :func:`~.twopolar_kernels.env_step_into`. ``counters`` (3,) or (4,): the
+    first three are reset here; a fourth entry is the step's budget of RHS evaluations (DOP853)."""
     for i in range(N):
         y[i] = Y[i, b]
     for i in range(4):
@@ -114,8 +115,13 @@ def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nf
                        y, f, K, ynew, ytmp, vel, force, counters, fail)
 
 
+NO_BUDGET = 2**62
+"""``max_nfev`` of the batch env steps when none is given: no budget of evaluations (the DOP853 kernel's
+step limit, :data:`~.twopolar_kernels.DOP853_MAX_STEPS`, still applies)."""
+
+
 @njit
-def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
     """:func:`batch_env_step` in one thread (the environment's compiled loop over bodies)."""
     y = np.empty(N)
     u = np.empty(4)
@@ -126,15 +132,18 @@ def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, 
     vel = np.empty(7)
     force = np.empty(4)
     f = np.empty(N)
-    counters = np.zeros(3, np.int64)
+    counters = np.zeros(4, np.int64)
+    counters[3] = max_nfev  # each body's budget of RHS evaluations in this step (the DOP853 kernel checks it before every step)
     for b in range(Y.shape[1]):
         env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, y, u, out, K, ynew, ytmp, vel, force, f, counters)
 
 
 @njit(parallel=True)
-def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
+def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
     """One environment step of N bodies: Y, OUT (11, N), U (4, N), STATUS, NFEV (N,) int64; parallel
-    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to :func:`batch_env_step_serial`."""
+    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to :func:`batch_env_step_serial`.
+    ``max_nfev``: each body's budget of RHS evaluations in the step (DOP853; past it the body's status is
+    the ``budget`` failure, as the scalar env step's)."""
     n = Y.shape[1]
     for c in numba.prange((n + CHUNK - 1) // CHUNK):
         y = np.empty(N)
@@ -146,7 +155,8 @@ def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, ST
         vel = np.empty(7)
         force = np.empty(4)
         f = np.empty(N)
-        counters = np.zeros(3, np.int64)  # (3,): the env steps keep no nfev budget
+        counters = np.zeros(4, np.int64)
+        counters[3] = max_nfev  # each body's budget of RHS evaluations in this step
         for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
             env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
                           y, u, out, K, ynew, ytmp, vel, force, f, counters)
@@ -163,6 +173,6 @@ def batch_energy(Y0, P, H):
             H[b] = energy_kernel(Y0[b], P, vel, force)
 
 
-__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "RK4_KIND", "SPLIT_KIND", "STRANG", "batch_energy", "batch_env_step",
+__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "NO_BUDGET", "RK4_KIND", "SPLIT_KIND", "STRANG", "batch_energy", "batch_env_step",
            "batch_env_step_serial", "batch_solve",
            "env_step_body", "solve_body"]

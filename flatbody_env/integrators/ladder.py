@@ -73,7 +73,9 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,7 +85,7 @@ from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, kinetic_kernel, velocities_from_momenta
 from flatbody_env.physics.kinematics import material_rotation
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, potential_kernel
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances
+from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error
 
 GAP_MIN = 1e-2
 """Smallest guaranteed |λ − μ| for which a chart model (``planar``, ``two-polar``) is chosen."""
@@ -278,13 +280,36 @@ def _times(times) -> np.ndarray:
     return times
 
 
-def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, name: str):
-    from flatbody_env.integrators.failure import raise_for
+def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, name: str, *, spent: tuple[int, float] = (0, 0.0)):
+    """One small system through ``times`` within the run's budgets, ``tol.max_nfev`` and ``tol.max_wall_time``,
+    less what the run has ``spent`` already (RHS evaluations, seconds): the compiled DOP853's budget of
+    evaluations checked before every step, and the wall clock through the timed probe of
+    :func:`~.compiled_methods._run_within_budget` (the result bit for bit that of one call). Out of budget:
+    ``IntegrationError(kind="budget")``."""
+    from flatbody_env.integrators.compiled_methods import _run_within_budget
+    from flatbody_env.integrators.failure import KINDS, raise_for
 
+    nfev_left = tol.max_nfev - int(spent[0])
+    seconds_left = tol.max_wall_time - float(spent[1])
+    if nfev_left < 1 or seconds_left <= 0.0:
+        raise budget_error(t=float(times[0]), method=name, tol=tol, used=f"{int(spent[0])} RHS evaluations, {spent[1]:.3g} s before this part")
+    budget = tol if spent == (0, 0.0) else dataclasses.replace(tol, max_nfev=nfev_left, max_wall_time=seconds_left)
     X = np.empty((x0.size, times.size))
-    counters = np.zeros(3, np.int64)
+    counters = np.zeros(4, np.int64)  # [nfev, accepted, rejected, budget of nfev]
     fail = np.zeros(1)
-    st = solve(np.ascontiguousarray(x0, dtype=np.float64), times, template, u, P, float(tol.rtol), float(tol.atol), check_gap, X, counters, fail)
+    x0 = np.ascontiguousarray(x0, dtype=np.float64)
+    rtol, atol = float(tol.rtol), float(tol.atol)
+
+    def run(limit: int) -> int:  # from the first time, within ``limit`` RHS evaluations
+        counters[:] = (0, 0, 0, limit)
+        fail[:] = 0.0
+        return solve(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail)
+
+    start = time.perf_counter()
+    st, wall = _run_within_budget(run, counters, budget)
+    if KINDS[st] == "budget":
+        used = f"{int(spent[0] + counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {spent[1] + time.perf_counter() - start:.3g} s"
+        raise budget_error(t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else ""))
     raise_for(st, t=fail[0], method=name)
     return X, counters
 
@@ -325,10 +350,10 @@ def _template(y0: np.ndarray) -> np.ndarray:
     return t
 
 
-def _thickness(y0, times, u, P, tol, name):
+def _thickness(y0, times, u, P, tol, name, *, spent: tuple[int, float] = (0, 0.0)):
     from flatbody_env.integrators import ladder_kernels as _lk
 
-    return _small(_lk.dop853_thickness, np.array([y0[9], y0[6]]), times, _template(y0), u, P, tol, False, name)
+    return _small(_lk.dop853_thickness, np.array([y0[9], y0[6]]), times, _template(y0), u, P, tol, False, name, spent=spent)
 
 
 class PlanarModel:
@@ -353,8 +378,9 @@ class PlanarModel:
         P = kernel_params(body)
         x0 = np.array([y0[7], y0[8], y0[4], y0[5], y0[10], 0.0])
         check_gap = bool(y0[2] != y0[3])
+        start = time.perf_counter()
         Xp, cp = _small(_lk.dop853_inplane, x0, times, _template(y0), uu, P, tol, check_gap, name)
-        Xr, cr = _thickness(y0, times, uu, P, tol, name)
+        Xr, cr = _thickness(y0, times, uu, P, tol, name, spent=(int(cp[0]), time.perf_counter() - start))  # one budget for both
         Y = np.repeat(_template(y0)[:, None], times.size, axis=1)
         Y[7], Y[8], Y[4], Y[5], Y[10] = Xp[0], Xp[1], Xp[2], Xp[3], Xp[4]
         Y[9], Y[6] = Xr[0], Xr[1]

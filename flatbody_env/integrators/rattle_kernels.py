@@ -17,29 +17,22 @@ conserves the spatial angular momentum and p_θ exactly. Suzuki's 5-stage compos
 (:data:`~.compositions.SUZUKI4`) raises it to order 4, Kahan–Li's 9-stage one
 (:data:`~.compositions.KAHAN_LI6`) to order 6; forces are re-used across stages.
 
-Forces. V is a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (docs/physics.md §7):
-F_φ1 = −2V_tr φ1 − 2V_det(|φ2|²φ1 − (φ1·φ2)φ2), symmetrically F_φ2, F_ψ = (f_ϱ − V_ϱ′(ϱ)) ψ/ϱ.
-V_ϱ′ comes from :func:`flatbody_env.physics.potentials.potential_kernel` (in-plane kind 0); the invariant
-gradient (V_tr, V_det) from :func:`invariant_gradient_kernel` (V1; V2 with c = d; V3 — tested against
-the potentials' ``invariant_gradient`` methods). V2 with c ≠ d is no function of the invariants
-(erratum E9) and is refused by the method layer.
-
-What is stated here and not called from the physics layer, and why: the physics layer states the
-regular formulation as numpy code on a :class:`~flatbody_env.physics.body.Body`
-(:mod:`flatbody_env.physics.regular`: ``_in_plane_gradient``, ``regular_energy``, the multiplier
-system of ``regular_rhs``) and (V_tr, V_det) as methods of the potential dataclasses, none of them a
-plain-float kernel that :func:`~.jit.retarget` can compile; :func:`forces`, :func:`stretches`,
-:func:`regular_energy_kernel`, :func:`invariant_gradient_kernel` and the multiplier solve in
-:func:`rattle_step` are their allocation-free forms on q (9,) (plain-float kernels in the physics
-layer, called by its numpy forms, would let this module call them instead). The only physics kernel
-that exists for them, :func:`~flatbody_env.physics.potentials.potential_kernel`, is called.
+Forces and energy are the physics layer's plain-float kernels, compiled here by
+:func:`~.jit.retarget` (no formula is restated): :func:`forces` is
+:func:`flatbody_env.physics.regular.regular_forces_kernel` (F = −∂V/∂q + f_ϱ ψ/ϱ with V a function of
+tr, det and ϱ, docs/physics.md §7; (V_tr, V_det) from
+:func:`flatbody_env.physics.potentials.invariant_gradient_kernel`: V1, V2 with c = d, V3);
+:func:`regular_energy_kernel` (H, docs/physics.md §7), :func:`invariant_gradient_kernel`, :func:`stretches`
+(:func:`flatbody_env.physics.kinematics.stretches_kernel`) and :func:`column_dot` are the compiled twins
+of the physics kernels. V2 with c ≠ d is no function of the invariants (erratum E9) and
+is refused by the method layer. Stated here: the RATTLE step itself (the position update, the Newton
+solve for Λ, the 2×2 multiplier system for μ), the compositions and the chart following.
 
 Chart following. The paper's state needs the two-polar decomposition Φ = R D U(θ)⁻¹ chosen by
-continuity (docs/physics.md §7). :func:`decompose_kernel` continues it for the Kirchhoff–Love Φ by the
-rule of :func:`flatbody_env.physics.kinematics.decompose` (the four discrete candidates, the nearest to
-the reference, ``keep_order``) but by a different algorithm, on purpose: the closed-form 2×2
-eigen-decomposition of φᵀφ instead of LAPACK's SVD, allocation-free and never raising inside the step
-loop; the two agree to round-off, not bit for bit. After every step the
+continuity (docs/physics.md §7). :func:`decompose_kernel` (compiled
+:func:`flatbody_env.physics.kinematics.decompose_kernel`: the rule of
+:func:`~flatbody_env.physics.kinematics.decompose` in closed form, never raising inside the step loop;
+equal to it to round-off, not bit for bit) continues it for the Kirchhoff–Love Φ. After every step the
 decomposition is continued from the previous one; when the chart frame jumps by more than
 :data:`~flatbody_env.physics.regular.MAX_CHART_JUMP` (near λ = μ it turns by ±π/2 within a tiny time) the
 step is re-walked on the cubic Hermite interpolant of Φ with adaptive sub-intervals. At output
@@ -68,74 +61,24 @@ import math
 
 import numpy as np
 
-from flatbody_env.physics.potentials import KIND_V1, KIND_V2, KIND_V3
+from flatbody_env.physics import kinematics as _kinematics
+from flatbody_env.physics import potentials as _potentials
+from flatbody_env.physics import regular as _regular
 from flatbody_env.physics.regular import MAX_CHART_JUMP
 from flatbody_env.integrators.failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
-from flatbody_env.integrators.jit import njit, potential_kernel
+from flatbody_env.integrators.jit import njit, retarget
 from flatbody_env.integrators.compositions import SUZUKI4
 
 
 NZ = 18
 NEWTON_MAX = 30
 
-
-@njit
-def invariant_gradient_kernel(kind, c1, tr, det):
-    """(∂V/∂tr, ∂V/∂det) of the in-plane potential (docs/physics.md §7): V1 = k/2·tr, V2 (c = d) = c·tr(1 + 1/det),
-    V3 = κ(det^{−1/2} + tr/2)."""
-    if kind == KIND_V1:
-        return 0.5 * c1, 0.0
-    if kind == KIND_V2:
-        return c1 * (1.0 + 1.0 / det), -c1 * tr / (det * det)
-    if kind == KIND_V3:
-        return 0.5 * c1, -0.5 * c1 * det**-1.5
-    return 0.0, 0.0
-
-
-@njit
-def _dot3(z, a, b):
-    return z[a] * z[b] + z[a + 1] * z[b + 1] + z[a + 2] * z[b + 2]
-
-
-@njit
-def forces(q, P, f_rho, F):
-    """F = −∂V/∂q (+ the dilatation force along ψ) at q (9,) into F (9,); returns det φᵀφ."""
-    n11 = _dot3(q, 0, 0)
-    n22 = _dot3(q, 3, 3)
-    n12 = _dot3(q, 0, 3)
-    tr = n11 + n22
-    det = n11 * n22 - n12 * n12
-    vt, vd = invariant_gradient_kernel(P[3], P[4], tr, det)
-    rho = math.sqrt(_dot3(q, 6, 6))
-    v, gl, gm, gr = potential_kernel(0.0, 0.0, 0.0, P[6], P[7], 1.0, 1.0, rho)
-    for i in range(3):
-        F[i] = -2.0 * vt * q[i] - 2.0 * vd * (n22 * q[i] - n12 * q[3 + i])
-        F[3 + i] = -2.0 * vt * q[3 + i] - 2.0 * vd * (n11 * q[3 + i] - n12 * q[i])
-        F[6 + i] = (f_rho - gr) * q[6 + i] / rho
-    return det
-
-
-@njit
-def stretches(z):
-    """(λ, μ, ϱ) with λ ≥ μ from the invariants of z."""
-    n11 = _dot3(z, 0, 0)
-    n22 = _dot3(z, 3, 3)
-    n12 = _dot3(z, 0, 3)
-    half = 0.5 * (n11 + n22)
-    disc = math.sqrt(0.25 * (n11 - n22) ** 2 + n12 * n12)
-    lam = math.sqrt(half + disc)
-    det = n11 * n22 - n12 * n12
-    mu = math.sqrt(det) / lam if det > 0.0 else 0.0
-    return lam, mu, math.sqrt(_dot3(z, 6, 6))
-
-
-@njit
-def regular_energy_kernel(z, P):
-    """H = ½ Σ J_A |Φ̇_A|² + V (docs/physics.md §7) of z (18,)."""
-    T = 0.5 * (P[0] * _dot3(z, 9, 9) + P[1] * _dot3(z, 12, 12) + P[2] * _dot3(z, 15, 15))
-    lam, mu, rho = stretches(z)
-    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], lam, mu, rho)
-    return T + v
+column_dot = retarget(_kinematics.column_dot)
+decompose_kernel = retarget(_kinematics.decompose_kernel)
+invariant_gradient_kernel = retarget(_potentials.invariant_gradient_kernel)
+forces = retarget(_regular.regular_forces_kernel)
+stretches = retarget(_kinematics.stretches_kernel)
+regular_energy_kernel = retarget(_regular.regular_energy_kernel)
 
 
 @njit
@@ -150,7 +93,7 @@ def rattle_step(z, h, P, f_rho, F, qt, Fn):
         qt[i] = z[i] + h * z[9 + i] + c * F[i] / J1
         qt[3 + i] = z[3 + i] + h * z[12 + i] + c * F[3 + i] / J2
         qt[6 + i] = z[6 + i] + h * z[15 + i] + c * F[6 + i] / J3
-    scale = _dot3(z, 6, 6) + _dot3(z, 0, 0) + _dot3(z, 3, 3)
+    scale = column_dot(z, 6, 6) + column_dot(z, 0, 0) + column_dot(z, 3, 3)
     L1 = 0.0
     L2 = 0.0
     converged = False
@@ -200,12 +143,12 @@ def rattle_step(z, h, P, f_rho, F, qt, Fn):
         z[9 + i] += k * F[i] / J1
         z[12 + i] += k * F[3 + i] / J2
         z[15 + i] += k * F[6 + i] / J3
-    pp = _dot3(z, 6, 6)
-    a11 = pp / J1 + _dot3(z, 0, 0) / J3
-    a22 = pp / J2 + _dot3(z, 3, 3) / J3
-    a12 = _dot3(z, 0, 3) / J3
-    r1 = _dot3(z, 6, 9) + _dot3(z, 0, 15)
-    r2 = _dot3(z, 6, 12) + _dot3(z, 3, 15)
+    pp = column_dot(z, 6, 6)
+    a11 = pp / J1 + column_dot(z, 0, 0) / J3
+    a22 = pp / J2 + column_dot(z, 3, 3) / J3
+    a12 = column_dot(z, 0, 3) / J3
+    r1 = column_dot(z, 6, 9) + column_dot(z, 0, 15)
+    r2 = column_dot(z, 6, 12) + column_dot(z, 3, 15)
     dA = a11 * a22 - a12 * a12
     m1 = (a22 * r1 - a12 * r2) / dA
     m2 = (a11 * r2 - a12 * r1) / dA
@@ -230,85 +173,6 @@ def composed_step(z, h, coeffs, P, f_rho, F, qt, Fn):
 
 
 # --------------------------------------------------------------------------------------------- chart
-@njit
-def decompose_kernel(Phi9, ref, keep_order, out):
-    """:func:`flatbody_env.physics.kinematics.decompose` with a reference, in closed form (module docstring: not
-    the SVD, so equal to it to round-off only).
-
-    Phi9: q (9,) = (φ1, φ2, ψ); ref, out (13,) = (R row-major (9), λ, μ, ϱ, θ). The candidate
-    nearest ``ref`` (score ‖R − R_ref‖_F + |θ − θ_ref| + |λ − λ_ref| + |μ − μ_ref|) among the
-    quarter/half-turn ambiguities is written to ``out``. Returns the frame jump
-    |θ − θ_ref| + ‖R − R_ref‖_F.
-    """
-    n11 = _dot3(Phi9, 0, 0)
-    n22 = _dot3(Phi9, 3, 3)
-    n12 = _dot3(Phi9, 0, 3)
-    half = 0.5 * (n11 + n22)
-    disc = math.sqrt(0.25 * (n11 - n22) ** 2 + n12 * n12)
-    lam = math.sqrt(half + disc)
-    det = n11 * n22 - n12 * n12
-    mu = math.sqrt(max(det, 0.0)) / lam
-    th = 0.5 * math.atan2(2.0 * n12, n11 - n22)
-    c = math.cos(th)
-    s = math.sin(th)
-    w1 = np.empty(3)
-    w2 = np.empty(3)
-    for i in range(3):
-        w1[i] = (Phi9[i] * c + Phi9[3 + i] * s) / lam
-        w2[i] = (-Phi9[i] * s + Phi9[3 + i] * c) / mu
-    nrm = np.empty(3)
-    nrm[0] = w1[1] * w2[2] - w1[2] * w2[1]
-    nrm[1] = w1[2] * w2[0] - w1[0] * w2[2]
-    nrm[2] = w1[0] * w2[1] - w1[1] * w2[0]
-    rho = Phi9[6] * nrm[0] + Phi9[7] * nrm[1] + Phi9[8] * nrm[2]
-    best = np.inf
-    bjump = np.inf
-    cols = np.empty((3, 3))
-    for swap in range(2):
-        for hlf in range(2):
-            if swap == 0:
-                lc = lam
-                mc = mu
-                tc = th
-                sg = -1.0 if hlf else 1.0
-                for i in range(3):
-                    cols[i, 0] = sg * w1[i]
-                    cols[i, 1] = sg * w2[i]
-                    cols[i, 2] = nrm[i]
-            else:
-                lc = mu
-                mc = lam
-                tc = th + 0.5 * math.pi
-                sg = -1.0 if hlf else 1.0
-                for i in range(3):
-                    cols[i, 0] = sg * w2[i]
-                    cols[i, 1] = -sg * w1[i]
-                    cols[i, 2] = nrm[i]
-            if hlf:
-                tc += math.pi
-            if keep_order and (lc - mc) * (ref[9] - ref[10]) < 0.0:
-                continue
-            tc = tc + 2.0 * math.pi * np.round((ref[12] - tc) / (2.0 * math.pi))
-            dR = 0.0
-            for i in range(3):
-                for j in range(3):
-                    d = cols[i, j] - ref[3 * i + j]
-                    dR += d * d
-            dR = math.sqrt(dR)
-            score = dR + abs(tc - ref[12]) + abs(lc - ref[9]) + abs(mc - ref[10])
-            if score < best:
-                best = score
-                bjump = abs(tc - ref[12]) + dR
-                for i in range(3):
-                    for j in range(3):
-                        out[3 * i + j] = cols[i, j]
-                out[9] = lc
-                out[10] = mc
-                out[11] = rho
-                out[12] = tc
-    return bjump
-
-
 @njit
 def _hermite(z0, z1, h, s, q):
     s2 = s * s

@@ -65,6 +65,7 @@ class CompiledEnvStep:
         self.rtol = float(tol.rtol)
         self.atol = float(tol.atol)
         self.energy_tol = float(tol.energy_tol)
+        self.max_nfev = int(tol.max_nfev)  # each body's budget of RHS evaluations per env step in a batch (DOP853)
         self._load()
 
     def _load(self) -> None:
@@ -103,9 +104,9 @@ class CompiledEnvStep:
 
     def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV) -> None:
         if self._fused is not None and self.h == dt:
-            self._fused(Y, U, self.P, dt, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV)
+            self._fused(Y, U, self.P, dt, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV, self.max_nfev)
             return
-        self._batch(Y, U, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV)
+        self._batch(Y, U, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV, self.max_nfev)
 
     def describe(self, status: int, lane: int | None = None) -> str:
         return f"{KINDS[status]}: {failure_reason(status)}"

@@ -16,7 +16,13 @@ function                      formula (equation of [1]; correction in [2])
 :func:`green_rate`            Ġ = U (ϑD² − D²ϑ + 2DḊ) U⁻¹, eq. (51) (+ the Ḋ term)
 :func:`cauchy_rate`           Ċ = R (W D⁻² − D⁻² W − 2D⁻³Ḋ) R⁻¹, eq. (51) with E7
 :func:`decompose`             Φ → (R, λ, μ, ϱ, θ), inverse of eq. (23) (docs/physics.md §7)
+:func:`stretches_kernel`      λ ≥ μ, ϱ from the invariants of ΦᵀΦ, eqs. (34)–(35) (a plain-float kernel)
+:func:`decompose_kernel`      :func:`decompose` with a reference, in closed form (a plain-float kernel)
 ============================  ==========================================================
+
+:func:`column_dot`, :func:`stretches_kernel` and :func:`decompose_kernel` are plain-float kernels on the packed columns
+q = (φ1, φ2, ψ) (9,) of Φ — no numpy calls beyond ``np.empty``, so that the compiled integrators
+compile this very code (:func:`flatbody_env.integrators.jit.retarget`).
 
 W(ω) is eq. (25) of [1], [[0, ω3, −ω2], [−ω3, 0, ω1], [ω2, −ω1, 0]] = −hat(ω), and
 ϑ = U⁻¹U̇ = θ̇ [[0, −1, 0], [1, 0, 0], [0, 0, 0]] (eq. (26)).
@@ -29,6 +35,7 @@ References
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -249,3 +256,115 @@ def decompose(
             if score < best_score:
                 best, best_score = Decomposition(R=Rc, lam=lc, mu=mc, rho=rho, theta=float(tc)), score
     return best
+
+
+def column_dot(z, a, b):
+    """z[a:a+3] · z[b:b+3], the dot product of two packed columns (plain-float kernel)."""
+    return z[a] * z[b] + z[a + 1] * z[b + 1] + z[a + 2] * z[b + 2]
+
+
+def stretches_kernel(z):
+    """(λ, μ, ϱ) with λ ≥ μ of q = z[:9]: the eigenvalues of φᵀφ from tr and det, and ϱ = |ψ| (plain-float kernel).
+
+    λ², μ² = tr/2 ± √((|φ1|² − |φ2|²)²/4 + (φ1·φ2)²) (eqs. (34)–(35) of [1]); μ = √det/λ.
+    """
+    n11 = column_dot(z, 0, 0)
+    n22 = column_dot(z, 3, 3)
+    n12 = column_dot(z, 0, 3)
+    half = 0.5 * (n11 + n22)
+    disc = math.sqrt(0.25 * (n11 - n22) ** 2 + n12 * n12)
+    lam = math.sqrt(half + disc)
+    det = n11 * n22 - n12 * n12
+    mu = math.sqrt(det) / lam if det > 0.0 else 0.0
+    return lam, mu, math.sqrt(column_dot(z, 6, 6))
+
+
+def decompose_kernel(Phi9, ref, keep_order, out):
+    """:func:`decompose` with a reference, in closed form (plain-float kernel, allocation-free but for 3-vectors).
+
+    The rule of :func:`decompose` (its four discrete candidates (R·Q, μ, λ, θ + π/2) and
+    (R·diag(−1, −1, 1), λ, μ, θ + π), the nearest 2π copy of θ, the one nearest the reference,
+    ``keep_order``) by another algorithm, on purpose: the closed-form eigen-decomposition of the
+    2×2 φᵀφ (θ = ½ atan2(2φ1·φ2, |φ1|² − |φ2|²), λ² + μ² = tr, λ²μ² = det) instead of LAPACK's
+    SVD, so that it never raises inside an integrator's step loop; the two agree to round-off,
+    not bit for bit. It does not check the Kirchhoff–Love condition (eq. (21) of [1]).
+
+    Parameters
+    ----------
+    Phi9 : array of shape (9,)
+        q = (φ1, φ2, ψ), the columns of Φ (eq. (23) of [1]).
+    ref : array of shape (13,)
+        The reference decomposition (R row-major (9), λ, μ, ϱ, θ).
+    keep_order : bool
+        Keep the sign of λ − μ of ``ref``.
+    out : array of shape (13,), output
+        The candidate nearest ``ref`` (score ‖R − R_ref‖_F + |θ − θ_ref| + |λ − λ_ref| + |μ − μ_ref|).
+
+    Returns
+    -------
+    float
+        The frame jump |θ − θ_ref| + ‖R − R_ref‖_F.
+    """
+    lam, mu, _ = stretches_kernel(Phi9)
+    n11 = column_dot(Phi9, 0, 0)
+    n22 = column_dot(Phi9, 3, 3)
+    n12 = column_dot(Phi9, 0, 3)
+    th = 0.5 * math.atan2(2.0 * n12, n11 - n22)
+    c = math.cos(th)
+    s = math.sin(th)
+    w1 = np.empty(3)
+    w2 = np.empty(3)
+    for i in range(3):
+        w1[i] = (Phi9[i] * c + Phi9[3 + i] * s) / lam
+        w2[i] = (-Phi9[i] * s + Phi9[3 + i] * c) / mu
+    nrm = np.empty(3)
+    nrm[0] = w1[1] * w2[2] - w1[2] * w2[1]
+    nrm[1] = w1[2] * w2[0] - w1[0] * w2[2]
+    nrm[2] = w1[0] * w2[1] - w1[1] * w2[0]
+    rho = Phi9[6] * nrm[0] + Phi9[7] * nrm[1] + Phi9[8] * nrm[2]
+    best = np.inf
+    bjump = np.inf
+    cols = np.empty((3, 3))
+    for swap in range(2):
+        for hlf in range(2):
+            if swap == 0:
+                lc = lam
+                mc = mu
+                tc = th
+                sg = -1.0 if hlf else 1.0
+                for i in range(3):
+                    cols[i, 0] = sg * w1[i]
+                    cols[i, 1] = sg * w2[i]
+                    cols[i, 2] = nrm[i]
+            else:
+                lc = mu
+                mc = lam
+                tc = th + 0.5 * math.pi
+                sg = -1.0 if hlf else 1.0
+                for i in range(3):
+                    cols[i, 0] = sg * w2[i]
+                    cols[i, 1] = -sg * w1[i]
+                    cols[i, 2] = nrm[i]
+            if hlf:
+                tc += math.pi
+            if keep_order and (lc - mc) * (ref[9] - ref[10]) < 0.0:
+                continue
+            tc = tc + 2.0 * math.pi * np.round((ref[12] - tc) / (2.0 * math.pi))
+            dR = 0.0
+            for i in range(3):
+                for j in range(3):
+                    d = cols[i, j] - ref[3 * i + j]
+                    dR += d * d
+            dR = math.sqrt(dR)
+            score = dR + abs(tc - ref[12]) + abs(lc - ref[9]) + abs(mc - ref[10])
+            if score < best:
+                best = score
+                bjump = abs(tc - ref[12]) + dR
+                for i in range(3):
+                    for j in range(3):
+                        out[3 * i + j] = cols[i, j]
+                out[9] = lc
+                out[10] = mc
+                out[11] = rho
+                out[12] = tc
+    return bjump

@@ -9,7 +9,9 @@ unless the user supplies a full :class:`CustomPotential` ``V(λ, μ, ϱ)`` with 
 Each built-in potential is a frozen dataclass whose fields carry the paper's symbols, and
 also exists as a branch of the scalar kernel :func:`potential_kernel` (plain float
 arithmetic, no numpy) so that compiled integrators can inline it. The kernel selects the
-in-plane potential by an integer code (:data:`KIND_V1`, …) with two constants ``c1, c2``.
+in-plane potential by an integer code (:data:`KIND_V1`, …) with two constants ``c1, c2``;
+:func:`invariant_gradient_kernel` is its gradient in the invariants (tr, det) of the regular
+formulation, which the potentials' ``invariant_gradient`` methods call.
 
 Barriers (erratum E10 of [2]): V1 has none at λμ → 0, so the plate can collapse to a
 segment in finite time; V2, V3 and V_ϱ have barriers.
@@ -96,6 +98,41 @@ def potential_kernel(kind, c1, c2, a, b, lam, mu, rho):
     return v, gl, gm, gr
 
 
+def invariant_gradient_kernel(kind, c1, tr, det):
+    """(∂V/∂tr, ∂V/∂det) of the built-in in-plane potential as a function of the invariants, scalar kernel.
+
+    With tr = λ² + μ² and det = λ²μ² (docs/physics.md §7) eqs. (37)–(39) of [1] read
+
+    .. math::
+        V_1 = \\tfrac{k}{2}\\,\\mathrm{tr}, \\quad
+        V_2\\big|_{c=d} = c\\,\\mathrm{tr}\\left(1 + \\frac{1}{\\det}\\right), \\quad
+        V_3 = \\kappa\\left(\\det^{-1/2} + \\frac{\\mathrm{tr}}{2}\\right).
+
+    V2 with c ≠ d is no function of the invariants (erratum E9 of [2]): its callers refuse it.
+
+    Parameters
+    ----------
+    kind : int or float
+        :data:`KIND_V1` (``c1 = k``), :data:`KIND_V2` (``c1 = c = d``), :data:`KIND_V3`
+        (``c1 = κ``); any other value gives (0, 0).
+    c1 : float
+        The potential's first constant.
+    tr, det : float
+        The invariants, ``det > 0``.
+
+    Returns
+    -------
+    dV_dtr, dV_ddet : float
+    """
+    if kind == KIND_V1:
+        return 0.5 * c1, 0.0
+    if kind == KIND_V2:
+        return c1 * (1.0 + 1.0 / det), -c1 * tr / (det * det)
+    if kind == KIND_V3:
+        return 0.5 * c1, -0.5 * c1 * det**-1.5
+    return 0.0, 0.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class V1:
     """Harmonic in-plane potential, eq. (37) of [1]: V = k/2 (λ² + μ²). No collapse barrier (E10)."""
@@ -118,8 +155,8 @@ class V1:
         return np.array([[self.k, 0.0], [0.0, self.k]])
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """(∂V/∂tr, ∂V/∂det) with tr = λ²+μ², det = λ²μ² (docs/physics.md §7): V1 = k/2·tr."""
-        return (0.5 * self.k, 0.0)
+        """(∂V/∂tr, ∂V/∂det) with tr = λ²+μ², det = λ²μ² (docs/physics.md §7): V1 = k/2·tr (:func:`invariant_gradient_kernel`)."""
+        return invariant_gradient_kernel(KIND_V1, float(self.k), tr, det)
 
     lower_bound = 0.0
 
@@ -150,10 +187,10 @@ class V2:
         return np.array([[self.c * (2.0 + 6.0 / lam**4), 0.0], [0.0, self.d * (2.0 + 6.0 / mu**4)]])
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """V2 with c = d is c·tr·(1 + 1/det) (docs/physics.md §7); with c ≠ d it is no function of invariants."""
+        """V2 with c = d is c·tr·(1 + 1/det) (docs/physics.md §7, :func:`invariant_gradient_kernel`); with c ≠ d it is no function of invariants."""
         if self.c != self.d:
             return None
-        return (self.c * (1.0 + 1.0 / det), -self.c * tr / (det * det))
+        return invariant_gradient_kernel(KIND_V2, float(self.c), tr, det)
 
     @property
     def lower_bound(self) -> float:
@@ -187,8 +224,8 @@ class V3:
         )
 
     def invariant_gradient(self, tr: float, det: float) -> tuple[float, float] | None:
-        """V3 = κ(det^{-1/2} + tr/2) (docs/physics.md §7)."""
-        return (0.5 * self.kappa, -0.5 * self.kappa * det**-1.5)
+        """V3 = κ(det^{-1/2} + tr/2) (docs/physics.md §7, :func:`invariant_gradient_kernel`)."""
+        return invariant_gradient_kernel(KIND_V3, float(self.kappa), tr, det)
 
     @property
     def lower_bound(self) -> float:

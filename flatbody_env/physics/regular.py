@@ -50,11 +50,15 @@ References
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.hamiltonian import mass_matrix, velocities_from_momenta
-from flatbody_env.physics.kinematics import Decomposition, configuration, configuration_rate, decompose, material_rotation
+from flatbody_env.physics.kinematics import (Decomposition, column_dot, configuration, configuration_rate, decompose, material_rotation,
+                                            stretches_kernel)
+from flatbody_env.physics.potentials import invariant_gradient_kernel, potential_kernel
 
 REGULAR_SIZE = 18
 
@@ -271,6 +275,65 @@ def regular_rhs(
     out[12:15] = (F2 + L2 * psi) / J2
     out[15:18] = (Fp + L1 * phi1 + L2 * phi2) / J3
     return out
+
+
+# --------------------------------------------------------------------------------------------- kernels
+# Plain-float kernels on q = (φ1, φ2, ψ) (9,) or z (18,) with the kernel parameters P (9,) (layout in
+# :mod:`flatbody_env.physics.body`), for built-in potentials that are functions of the invariants (V1,
+# V2 with c = d, V3): the compiled integrators compile this code (:func:`flatbody_env.integrators.jit.retarget`).
+
+
+def regular_forces_kernel(q, P, f_rho, F):
+    """F = −∂V/∂q plus the dilatation force f_ϱ along ψ, at q (9,), into F (9,) (plain-float kernel).
+
+    With V a function of tr = |φ1|² + |φ2|², det = |φ1|²|φ2|² − (φ1·φ2)² and ϱ = |ψ| (docs/physics.md §7;
+    V_λμ of eqs. (37)–(39), V_ϱ of eq. (40) of [1])
+
+    .. math::
+        F_{\\varphi_1} = -2V_{tr}\\varphi_1 - 2V_{det}(|\\varphi_2|^2\\varphi_1 - (\\varphi_1\\cdot\\varphi_2)\\varphi_2),
+        \\quad F_\\psi = (f_\\varrho - V_\\varrho'(\\varrho))\\,\\psi/\\varrho,
+
+    and F_φ2 symmetrically; (V_tr, V_det) from
+    :func:`~flatbody_env.physics.potentials.invariant_gradient_kernel`, V_ϱ′ from
+    :func:`~flatbody_env.physics.potentials.potential_kernel`.
+
+    Parameters
+    ----------
+    q : array of shape (9,)
+        (φ1, φ2, ψ), the columns of Φ (a regular state's first 9 entries).
+    P : array of shape (9,)
+        Kernel parameters; the potential's kind and c1 (P[3], P[4]) and a, b (P[6], P[7]) are read.
+    f_rho : float
+        The dilatation force f_ϱ.
+    F : array of shape (9,), output
+        The force on (φ1, φ2, ψ).
+
+    Returns
+    -------
+    float
+        det (> 0 inside the domain λμ > 0).
+    """
+    n11 = column_dot(q, 0, 0)
+    n22 = column_dot(q, 3, 3)
+    n12 = column_dot(q, 0, 3)
+    tr = n11 + n22
+    det = n11 * n22 - n12 * n12
+    vt, vd = invariant_gradient_kernel(P[3], P[4], tr, det)
+    rho = math.sqrt(column_dot(q, 6, 6))
+    v, gl, gm, gr = potential_kernel(0.0, 0.0, 0.0, P[6], P[7], 1.0, 1.0, rho)
+    for i in range(3):
+        F[i] = -2.0 * vt * q[i] - 2.0 * vd * (n22 * q[i] - n12 * q[3 + i])
+        F[3 + i] = -2.0 * vt * q[3 + i] - 2.0 * vd * (n11 * q[3 + i] - n12 * q[i])
+        F[6 + i] = (f_rho - gr) * q[6 + i] / rho
+    return det
+
+
+def regular_energy_kernel(z, P):
+    """H = ½ Σ J_A |Φ̇_A|² + V of z (18,) (docs/physics.md §7; eq. (41) of [1]), plain-float kernel."""
+    T = 0.5 * (P[0] * column_dot(z, 9, 9) + P[1] * column_dot(z, 12, 12) + P[2] * column_dot(z, 15, 15))
+    lam, mu, rho = stretches_kernel(z)
+    v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], lam, mu, rho)
+    return T + v
 
 
 def regular_energy(z: np.ndarray, body: Body, lambda_is_larger: bool = True) -> float:

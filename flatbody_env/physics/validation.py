@@ -19,7 +19,7 @@ J, J1, J2, J3, k, c, d, κ, a, b             :data:`PARAM_RANGE` = [1e-6, 1e6]
 λ, μ, ϱ                                     :data:`STRETCH_RANGE` = [1e-6, 1e6]
 s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ, θ            within ± :data:`MOMENTUM_MAX` = ±1e6
 t_end                                       (0, :data:`T_END_MAX`] = (0, 1e6]
-output times (``times=``, ``--samples``)     at most :data:`MAX_SAMPLES` = 100 000
+output times (``times=``, ``--samples``)     at most :data:`MAX_SAMPLES` = 100 000 (an even grid: at least :data:`MIN_SAMPLES` = 2)
 rtol, atol                                  :data:`TOL_RANGE` = [1e-16, 1]
 fixed step h                                [:data:`STEP_MIN`, :data:`T_END_MAX`] = [1e-6, 1e6]
 ==========================================  ==========================================
@@ -49,6 +49,8 @@ T_END_MAX = 1e6
 """Largest final time t_end (and fixed step h)."""
 MAX_SAMPLES = 100_000
 """Most output times one integration may return (``times=``, ``--samples``, grids)."""
+MIN_SAMPLES = 2
+"""Fewest points of an even grid of output times (``samples``, ``--samples``): t = 0 and t_end."""
 TOL_RANGE = (1e-16, 1.0)
 """Allowed range of rtol and atol."""
 MAX_JSON_BYTES = 256 * 1024 * 1024
@@ -83,8 +85,14 @@ MAX_COUNT = 10**9
 """Upper bound of any other count a user can give (the default of :func:`count`)."""
 MAX_SECONDS = 86_400.0
 """Largest wall-clock budget in seconds (``max_wall_time``, ``--max-seconds``, ``--max-run-s``)."""
+SEARCH_GRID_RANGE = (8, 2001)
+"""Grid points per axis of the root search for stationary ellipses (``SearchBox.n`` of :mod:`analysis.stationary`, ``--grid``)."""
+FAMILY_SEEDS_RANGE = (2, 200)
+"""Parameter values at which a family's solutions are all sought (``seeds`` of :func:`analysis.families.follow_family`, ``--seeds``)."""
 SWEEP_GRID_RANGE = (4, 20_000)
 """Grid points per axis of ``flatbody sweep stability-map`` (:data:`flatbody_env.sweep.tasks.MAX_GRID`; rows are stored in chunks)."""
+MAP_GRID_RANGE = (SWEEP_GRID_RANGE[0], 400)
+"""Grid points per axis of the serial ``flatbody stability-map`` (one process; larger maps: ``flatbody sweep stability-map``)."""
 
 
 def count(where: str, value: Any, *, low: int = 1, high: int = MAX_COUNT) -> int:
@@ -316,8 +324,9 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "MAX_BATCH", "MAX_COUNT", "MAX_EPISODES",
-           "MAX_EPISODE_STEPS", "MAX_REPEATS", "MAX_SECONDS", "MAX_SEED", "MAX_TIMESTEPS", "MAX_WORKERS", "STEP_MIN", "SWEEP_GRID_RANGE",
+__all__ = ["ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "FAMILY_SEEDS_RANGE", "MAX_BATCH", "MAX_COUNT",
+           "MAP_GRID_RANGE", "MAX_EPISODES", "MAX_EPISODE_STEPS", "MAX_REPEATS", "MAX_SECONDS", "MAX_SEED", "MAX_TIMESTEPS", "MAX_WORKERS", "MIN_SAMPLES",
+           "SEARCH_GRID_RANGE", "STEP_MIN", "SWEEP_GRID_RANGE",
            "count", "finite_result", "fixed_step", "sqlite_file",
            "MAX_JSON_BYTES", "MAX_SAMPLES", "MOMENTUM_MAX", "PARAM_RANGE", "STRETCH_RANGE", "TOL_RANGE", "T_END_MAX", "float_array",
            "integer", "keys", "mapping", "number", "parse_json", "read_json", "string"]

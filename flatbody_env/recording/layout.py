@@ -172,16 +172,14 @@ def camera(view: str, extent: float):
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[1.4 * d, -1.9 * d, 1.6 * d], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0])
 
 
-def _series_view(name: str, contents: list[str], *, axis: tuple[float, float] | None, legend: bool, t_range: tuple[float, float] | None):
+def _series_view(name: str, contents: list[str], *, axis: tuple[float, float] | None, legend: bool, t_range: tuple[float, float] | None, end: float | None):
     import rerun as rr
     import rerun.blueprint as rrb
 
     axis_y = rrb.ScalarAxis(range=axis, zoom_lock=False) if axis is not None else None
     axis_x = None
-    if t_range is not None:  # the whole run, and room on the right for the last tick label
-        t0, t1 = t_range
-        end = t1 + TIME_MARGIN * max(t1 - t0, 1e-9)
-        axis_x = rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.absolute(seconds=t0), end=rr.TimeRangeBoundary.absolute(seconds=end)))
+    if t_range is not None and end is not None:  # the whole run, and room on the right for the last tick label
+        axis_x = rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.absolute(seconds=t_range[0]), end=rr.TimeRangeBoundary.absolute(seconds=end)))
     return rrb.TimeSeriesView(
         name=name, origin="/series", contents=contents, plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend), axis_y=axis_y, axis_x=axis_x
     )
@@ -195,8 +193,24 @@ LEGEND_ROW = 0.075
 """Head room above the data per legend entry (a fraction of the data's span): the legend, in the top
 right corner, sits over empty space instead of over the curves' ends."""
 
+FLAT_PAD = 0.06
+"""A flat view's axis reaches this fraction of its half-width beyond its end ticks."""
+
 FLAT_NOTE = " (flat: constant to 1e-8)"
 """Appended to the title of a panel whose values are constant to :data:`FLAT_RTOL` (:func:`y_axis`)."""
+
+SHAPE_TITLE = "λ (red), μ (green), ϱ (blue)"
+"""Title of the semi-axes' view: it names the colours, so the view needs no legend and its whole height
+is data (:func:`y_axis`): at 1600 × 1000 a step of 0.1 is then ≥ 20 px for a spread up to ≈ 2, the
+height at which rerun labels the 0.1 ticks (it labels powers of ten only: with the head room of a
+six-entry legend the view had labels at 1 and 2 alone)."""
+
+SHAPE_TARGETS = "; targets λ*, μ*, ϱ*: wide faint bands"
+"""Added to :data:`SHAPE_TITLE` in an episode."""
+
+BOTTOM_ROW_SHARE = 1.3
+"""Height of the row of time plots relative to the row of 3-D views and text."""
+
 
 def _shape_paths(episode: bool) -> tuple[str, ...]:
     return ("/series/lambda", "/series/mu", "/series/rho") + (("/series/target/lambda", "/series/target/mu", "/series/target/rho") if episode else ())
@@ -209,7 +223,7 @@ def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
     value shown, ``"spin"`` |s| (for s₃, p_θ), ``"angle"`` π, ``"relative"`` 1 (a relative drift),
     ``"energy"`` the largest |H| (the energy balance), ``"power"`` the largest |H| per unit time,
     ``"unit"`` 1 (actions in [−1, 1])."""
-    views = [("λ, μ, ϱ" + (" vs target λ*, μ*, ϱ* (wide bands)" if episode else ""), _shape_paths(episode), "self")]
+    views = [(SHAPE_TITLE + (SHAPE_TARGETS if episode else ""), _shape_paths(episode), "self")]
     if episode:
         views += [
             ("reward terms", ("/series/reward",), "self"),
@@ -243,14 +257,55 @@ def _members(paths: tuple[str, ...], ranges: dict[str, tuple[float, float, int]]
     return out
 
 
-def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, float, int]], t_range: tuple[float, float] | None = None):
+def time_axis_end(t_range: tuple[float, float]) -> float:
+    """The right end of every time axis: the last time plus :data:`TIME_MARGIN` of the run (room for
+    the last tick label)."""
+    t0, t1 = (float(v) for v in t_range)
+    return t0 + max(t1 - t0, 1e-9) * (1.0 + TIME_MARGIN)
+
+
+LIVE_ROOM = (0.25, 0.5)
+"""A recording sent in several blocks: room added to an axis that no longer holds the data, a fraction
+of its span (y axes, time axis), so that a later block seldom changes the axes (:func:`grow_axes`)."""
+
+
+def grow_axes(needed: list[tuple], sent: list[tuple] | None, t0: float = 0.0) -> list[tuple] | None:
+    """The axes of the next blueprint of a recording sent in several blocks, or None when ``sent`` (the
+    axes of the last one sent) still fits ``needed`` (:func:`series_axes` of all values so far).
+
+    The axes fit when every view has the same title (flat or not) and legend, its y range holds the
+    needed one and its time axis reaches the needed end. Otherwise every axis is built again from the
+    needed one with room: a y range that is not flat grows by :data:`LIVE_ROOM` of its span on each
+    side (flat ranges are fixed to ±10 % of their scale and are taken as they are), the time axis by
+    LIVE_ROOM of the run. ``t0``: the run's first time."""
+    def holds(outer, inner):
+        return inner is None or (outer is not None and outer[0] <= inner[0] and inner[1] <= outer[1])
+
+    if sent is not None and len(sent) == len(needed) and all(
+        s[0] == n[0] and s[2] == n[2] and holds(s[1], n[1]) and (n[3] is None or (s[3] is not None and s[3] >= n[3])) for s, n in zip(sent, needed)
+    ):
+        return None
+    out = []
+    for name, axis, legend, end in needed:
+        if axis is not None and not name.endswith(FLAT_NOTE):
+            room = LIVE_ROOM[0] * (axis[1] - axis[0])
+            axis = (axis[0] - room, axis[1] + room)
+        if end is not None:
+            end = end + LIVE_ROOM[1] * (end - t0)
+        out.append((name, axis, legend, end))
+    return out
+
+
+def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, float, int]], t_range: tuple[float, float] | None = None,
+           *, legend: bool = True):
     """(y range, flat, legend entries) of a time-series view from the logged values' ranges.
 
     ``ranges``: entity path → (min, max, number of series in it). The view's values are *flat* when
     their spread is at most :data:`FLAT_RTOL` × the view's scale (``rule``, see :func:`series_views`):
-    round-off then sits on a fixed axis of ±10 % of the scale around the value (drawn as a flat line,
+    round-off then sits on a fixed axis of ±10 % of the scale around the value, plus :data:`FLAT_PAD` (drawn as a flat line,
     ticks labelled with a few digits) and the title says so. Otherwise the axis holds the data with 5 %
-    margins and head room above for the legend (:data:`LEGEND_ROW` per entry). None when nothing is logged.
+    margins and head room above for the legend (:data:`LEGEND_ROW` per entry; none when ``legend`` is
+    False: the title names the colours). None when nothing is logged.
     """
     members = _members(paths, ranges)
     if not members:
@@ -279,8 +334,11 @@ def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, flo
         half = nice_range(0.1 * big) if big > 0 else 1.0
         step = half / 5.0
         c = round(0.5 * (lo + hi) / step) * step
-        return (c - half, c + half), True, entries
+        pad = FLAT_PAD * half  # the end ticks (c ± half) sit inside the view: their labels are not cut by its edges
+        return (c - half - pad, c + half + pad), True, entries
     span = hi - lo
+    if not legend:
+        entries = 0
     top = hi + span * (0.05 + (LEGEND_ROW * entries + 0.05 if entries > 1 else 0.0))
     return (lo - 0.05 * span, top), False, entries
 
@@ -305,7 +363,25 @@ def view_specs(*, episode: bool, ranges: dict | None = None, t_range: tuple[floa
     return specs
 
 
-def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None, t_range: tuple[float, float] | None = None):
+def series_axes(*, episode: bool, ranges: dict | None, t_range: tuple[float, float] | None) -> list[tuple]:
+    """(name, y range, legend shown, time axis end) of every time-series view :func:`blueprint` draws,
+    in layout order, from the logged values' ``ranges`` and the run's ``t_range``."""
+    out = []
+    for cls, name, _ in view_specs(episode=episode, ranges=ranges, t_range=t_range):
+        if cls != "TimeSeries":
+            continue
+        base = name[: -len(FLAT_NOTE)] if name.endswith(FLAT_NOTE) else name
+        sp, rule = {n: (p, r) for n, p, r in series_views(episode=episode)}[base]
+        legend = not base.startswith(SHAPE_TITLE)
+        axis, entries = None, len(sp)
+        if ranges:
+            axis, _, entries = y_axis(sp, rule, ranges, t_range, legend=legend)
+        end = None if t_range is None else time_axis_end(t_range)
+        out.append((name, axis, legend and entries > 1, end))
+    return out
+
+
+def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None, t_range: tuple[float, float] | None = None, axes: list[tuple] | None = None):
     """The default blueprint of a recording.
 
     Parameters
@@ -320,11 +396,17 @@ def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None,
         y axis (:func:`y_axis`: round-off drawn flat, room for the legend). None: axes follow the data.
     t_range : (float, float), optional
         The run's first and last ``sim_time``: every time axis shows the whole run.
+    axes : list, optional
+        The time-series views' axes when not :func:`series_axes` of ``ranges`` (a recording of several
+        blocks: :func:`grow_axes`).
     """
     import rerun.blueprint as rrb
 
     series = {name: (paths, rule) for name, paths, rule in series_views(episode=episode)}
     specs = view_specs(episode=episode, ranges=ranges, t_range=t_range)
+    if axes is None:
+        axes = series_axes(episode=episode, ranges=ranges, t_range=t_range)
+    axes = {name: (axis, legend, end) for name, axis, legend, end in axes}
 
     def view(cls: str, name: str, paths: tuple[str, ...]):
         if cls == "3D":
@@ -338,12 +420,10 @@ def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None,
         if cls == "TextDocument":
             return rrb.TextDocumentView(name=name, origin=paths[0])
         base = name[: -len(FLAT_NOTE)] if name.endswith(FLAT_NOTE) else name
-        sp, rule = series[base]
+        sp, _ = series[base]
         contents = [c for p in sp for c in (p, p + "/**")]
-        axis, entries = None, len(sp)
-        if ranges:
-            axis, _, entries = y_axis(sp, rule, ranges, t_range)
-        return _series_view(name, contents, axis=axis, legend=entries > 1, t_range=t_range)
+        axis, legend, end = axes[name]
+        return _series_view(name, contents, axis=axis, legend=legend, t_range=t_range, end=end)
 
     views = [view(*s) for s in specs]
     top_row = rrb.Horizontal(
@@ -359,7 +439,7 @@ def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None,
         right = rrb.Tabs(*rest[k:], active_tab=0)
     bottom_row = rrb.Horizontal(shape, middle, right, column_shares=[1, 1, 1])
     return rrb.Blueprint(
-        rrb.Vertical(top_row, bottom_row, row_shares=[1, 1]),
+        rrb.Vertical(top_row, bottom_row, row_shares=[1, BOTTOM_ROW_SHARE]),
         rrb.TimePanel(state="collapsed", timeline="sim_time"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

@@ -187,9 +187,23 @@ class BlueprintInfo:
 _PANEL_STATES = {1: "hidden", 2: "collapsed", 3: "expanded"}
 
 
+def _chunk_time(chunk) -> int:
+    """When a chunk was made: the first 64 bits of its id (a TUID: nanoseconds since the epoch)."""
+    text = str(chunk.id)
+    try:
+        return int(text.removeprefix("chunk_")[:16], 16)
+    except ValueError:
+        return -1
+
+
 def read_blueprint(path: str | Path) -> BlueprintInfo:
     """Read the default blueprint stored in a recording: views (class, name, origin, contents,
-    properties) and the state of the time, blueprint and selection panels."""
+    properties) and the state of the time, blueprint and selection panels.
+
+    A recording sent in several blocks holds several blueprints, each sent as the default (the file
+    opened with the first block's, then one built from all values after a later block): the last sent
+    is the one the viewer shows, and the one read here (the latest chunk id; rerun's chunk ids start
+    with the time they were made)."""
     import rerun.chunk as rrc
 
     path = Path(path)
@@ -197,8 +211,11 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
         raise ValueError(f"path: no file {str(path)!r}")
     reader = rrc.RrdReader(path)
     props: dict[str, dict[str, Any]] = {}
-    for bp in reader.blueprints():
-        for chunk in reader.stream(store=bp):
+    stores = [(bp, list(reader.stream(store=bp))) for bp in reader.blueprints()]
+    if stores:
+        stores = [max(stores, key=lambda s: max((_chunk_time(c) for c in s[1]), default=-1))]
+    for bp, chunks in stores:
+        for chunk in chunks:
             rb = chunk.to_record_batch()
             for i, f in enumerate(rb.schema):
                 md = f.metadata or {}

@@ -81,8 +81,10 @@ from flatbody_env.recording.layout import (
     axis_labels,
     blueprint,
     description_markdown,
+    grow_axes,
     material_line_colors,
     rgba,
+    series_axes,
     series_style,
     tensor_text,
 )
@@ -449,7 +451,9 @@ class Recorder:
         self._ranges: dict[str, tuple[float, float, int]] = {}
         self._t_range: tuple[float, float] | None = None
         self._blocks = 0
+        self._layout_key: list | None = None  # the axes of the last blueprint sent after a later block (_update_layout)
         self._saved = False
+        self._sink = None  # the file: flatbody_env.recording.sink.FileSink, opened with the first block
         self._work = 0.0
         self._last: tuple[float, np.ndarray] | None = None  # (t, state) of the last step sent: the start of the next step's work
         self._rr = rr
@@ -625,6 +629,8 @@ class Recorder:
         self._extend(t, Y, R, step=step, energy=energy, **episode)
         if not final and not self._saved:
             self._save()
+        if self._sink is not None:
+            self._sink.check()  # a failed write (disk full) stops the run here: OutputError, one line
 
     def extend(
         self,
@@ -709,6 +715,7 @@ class Recorder:
         self._send_block(block)
         if episode is not None:
             self._send_episode(block, **episode)
+        self._update_layout()
 
     def note(self, text: str, *, step: int, t: float, level: str = "WARN") -> None:
         """Log one event (e.g. an integrator failure) as a ``TextLog`` on ``/events``."""
@@ -727,6 +734,22 @@ class Recorder:
         offsets = np.arange(0, values.size + 1, per, dtype=np.int32)
         return [rr.ComponentColumn(rr.Scalars.descriptor_scalars(), rr.components.ScalarBatch(values), offsets=offsets)]
 
+    def _update_layout(self) -> None:
+        """A recording of several blocks: its file was opened with the first block, before the values of
+        the later ones were known. After each later block, send a default blueprint built from all values
+        logged so far (the flat rule and fixed axes of a one-block recording, the whole run on the time
+        axes) — only when the axes sent last no longer hold the data, with room to grow
+        (:func:`~flatbody_env.recording.layout.grow_axes`), so a long recording sends a few."""
+        if not self._saved or self._blocks < 2:
+            return
+        needed = series_axes(episode=self.episode, ranges=self._ranges, t_range=self._t_range)
+        axes = grow_axes(needed, self._layout_key, self._t_range[0])
+        if axes is None:
+            return
+        self._layout_key = axes
+        bp = blueprint(episode=self.episode, extent=self._extent, ranges=self._ranges, t_range=self._t_range, axes=axes)
+        self.rec.send_blueprint(bp, make_active=True, make_default=True)
+
     def _note(self, path: str, values: np.ndarray, per: int = 1) -> None:
         """Keep the range of what ``path`` shows (the blueprint of a one-block recording is built from it)."""
         v = np.asarray(values, dtype=np.float64)
@@ -742,7 +765,11 @@ class Recorder:
         follow the data."""
         one = final and self._blocks == 1
         bp = blueprint(episode=self.episode, extent=self._extent, ranges=self._ranges if one else None, t_range=self._t_range if one else None)
-        self.rec.save(self.path, default_blueprint=bp)
+        from flatbody_env.recording.sink import FileSink
+
+        # rerun's file sink writes into a pipe that our thread copies to a temporary file, renamed at close:
+        # a failed write (disk full) is an OSError in our code, never a hang in rerun's flush (see sink.py)
+        self._sink = FileSink(self.rec, self.path, bp)
         self._saved = True
 
     def _send_block(self, block: _Block) -> None:
@@ -882,9 +909,17 @@ class Recorder:
                 self.flush(final=True)
                 if not self._saved:
                     self._save(final=True)
-            finally:
+            except BaseException:
                 self._closed = True
-                self.rec.flush()
+                if self._sink is not None:
+                    self._sink.abandon()  # the temporary file is removed; rerun is stopped
+                else:
+                    self.rec.disconnect()
+                raise
+            self._closed = True
+            if self._sink is not None:
+                self._sink.close()  # footer, copy, rename: OutputError (one line) if a write failed
+            else:
                 self.rec.disconnect()
         return self.path
 

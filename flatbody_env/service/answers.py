@@ -88,22 +88,39 @@ def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None
     limits = limits or LIMITS
     scene = build_scene(p["scene"])
     t_end = p.get("t_end") or scene.t_end
-    times = p.get("times")
-    samples = len(times) if times else (p.get("samples") or 101)
+    samples = _sample_count(p)
     check_integration_cost(t_end=t_end, samples=samples, step=p.get("step"), in_job=in_job, limits=limits)
-    return scene, simulate_trajectory(
-        scene,
-        t_end=p.get("t_end"),
-        times=times,
-        samples=p.get("samples"),
-        method=p["method"],
-        rtol=p["rtol"],
-        atol=p["atol"],
-        step=p.get("step"),
-        model=p["model"],
-        with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
-        max_wall_time=limits.job_seconds if in_job else limits.request_seconds,
-    )
+    try:
+        return scene, simulate_trajectory(
+            scene,
+            t_end=p.get("t_end"),
+            times=p.get("times"),
+            samples=p.get("samples"),
+            method=p["method"],
+            rtol=p["rtol"],
+            atol=p["atol"],
+            step=p.get("step"),
+            model=p["model"],
+            with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
+            max_wall_time=limits.job_seconds if in_job else limits.request_seconds,
+        )
+    except ValueError as exc:  # a method's refusal of the scene's body (J1 = J2, V2 with c = d, ...) names the request's field
+        if str(exc).split(":", 1)[0].split(".", 1)[0] in _SCENE_FIELDS:
+            raise _prefixed("scene", exc) from None
+        raise
+
+
+def _sample_count(p: Mapping[str, Any]) -> int:
+    """How many output times request ``p`` asks for: its ``times``, its ``samples``, else the library's
+    :data:`~flatbody_env.simulation.DEFAULT_SAMPLES` (the cost check counts them before the integration)."""
+    from flatbody_env.simulation import DEFAULT_SAMPLES
+
+    times = p.get("times")
+    return len(times) if times else (p.get("samples") or DEFAULT_SAMPLES)
+
+
+_SCENE_FIELDS = ("params", "potential", "thickness", "state", "spin_convention")
+"""Fields of a scene that an integrator's refusal may name (a request names them under ``scene.``)."""
 
 
 def simulate(p: Mapping[str, Any]) -> dict[str, Any]:
@@ -172,8 +189,7 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
         if "scene" in params:
             scene = build_scene(params["scene"])
             t_end = params.get("t_end") or scene.t_end
-            times = params.get("times")
-            samples = len(times) if times else (params.get("samples") or 101)
+            samples = _sample_count(params)
             check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True, limits=LIMITS)
             from flatbody_env.integrators import get_method
 
@@ -240,6 +256,8 @@ def error_data(exc: BaseException) -> dict[str, Any]:
     if isinstance(exc, ValueError):
         text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         field = text.split(":", 1)[0] if ":" in text and " " not in text.split(":", 1)[0] else None
+        if field and field.startswith("-"):  # a check shared with the CLI names its flag (--spin): name the request's field
+            text = field.lstrip("-").replace("-", "_") + text[len(field):]
         return {"kind": "validation", "detail": text, "field": field.lstrip("-").replace("-", "_") if field else None}
     # Anything else is a computation that cannot be done for these inputs (a singular matrix, an
     # overflow, ...): the caller gets one line, never a traceback.

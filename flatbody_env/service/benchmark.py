@@ -6,7 +6,8 @@ a worker process is busy with it. Then, for each endpoint (``GET /health``, ``PO
 the default body, a short ``POST /simulate``) and each number of concurrent clients, a real HTTP
 client (httpx, one connection per client) sends at most ``requests`` requests for at most
 ``seconds`` seconds. Reported: p50 and p99 latency, requests/s and the number of errors (any answer
-other than 200 counts). Output: ``service_benchmark.json``, ``.csv`` and ``.png``.
+other than 200 counts). Output: the tables ``service_benchmark.json`` and ``.csv``, and the chart
+``.png`` drawn from the saved JSON (:func:`plot`; ``flatbody bench service --plot-only`` redraws it).
 """
 
 from __future__ import annotations
@@ -188,42 +189,75 @@ def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32),
 
 
 def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:
+    """Save the table (``service_benchmark.json``, everything; ``.csv``, one row per endpoint and client
+    count), then draw the chart from the saved JSON (:func:`plot`)."""
     paths = {"json": str(out / "service_benchmark.json"), "csv": str(out / "service_benchmark.csv"), "png": str(out / "service_benchmark.png")}
     atomic_write(paths["json"], json.dumps({"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
                                             "rows": [asdict(r) for r in result.rows]}, indent=2) + "\n")
     fields = list(LoadRow.__dataclass_fields__)
     write_csv(paths["csv"], fields, [[asdict(r)[f] for f in fields] for r in result.rows])
+    plot(paths["json"], paths["png"])
+    return paths
+
+
+def load(json_path: str | Path) -> ServiceBenchmark:
+    """A saved ``service_benchmark.json`` read back (``paths`` empty)."""
+    data = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    return ServiceBenchmark(rows=[LoadRow(**r) for r in data["rows"]], workers=int(data["workers"]), cpus=int(data["cpus"]),
+                            long_job=dict(data["long_job"]))
+
+
+def plot(json_path: str | Path, png_path: str | Path) -> Path:
+    """The chart of a saved ``service_benchmark.json``: latency (p50, p99) and requests/s over the number
+    of concurrent clients, one colour per endpoint; a caption says what was measured."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    for name in ENDPOINTS:
-        sel = [r for r in result.rows if r.endpoint == name]
+    from flatbody_env.chart_text import add_caption
+
+    result = load(json_path)
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.6))
+    names = list(dict.fromkeys([*ENDPOINTS, *(r.endpoint for r in result.rows)]))
+    for k, name in enumerate(names):
+        sel = sorted((r for r in result.rows if r.endpoint == name), key=lambda r: r.clients)
         if not sel:
             continue
         x = [r.clients for r in sel]
-        line = ax1.plot(x, [r.p50_ms for r in sel], "o-", label=f"{name} p50")[0]
-        ax1.plot(x, [r.p99_ms for r in sel], "s--", color=line.get_color(), label=f"{name} p99")
-        ax2.plot(x, [r.requests_per_s for r in sel], "o-", color=line.get_color(), label=name)
+        color = f"C{k}"
+        ax1.plot(x, [r.p50_ms for r in sel], "o-", color=color, label=f"{name}, p50")
+        ax1.plot(x, [r.p99_ms for r in sel], "s--", color=color, label=f"{name}, p99")
+        ax2.plot(x, [r.requests_per_s for r in sel], "o-", color=color, label=name)
+    clients = sorted({r.clients for r in result.rows})
     for ax in (ax1, ax2):
         ax.set_xscale("log", base=2)
-        ax.set_yscale("log")
-        ax.set_xlabel("concurrent clients")
-        ax.grid(True, which="both", alpha=0.3)
-    ax1.set_ylabel("latency (ms)")
-    ax1.set_title("latency (p50 solid, p99 dashed)")
-    ax2.set_ylabel("requests / s")
-    ax2.set_title("throughput")
-    ax1.legend(fontsize=7)
-    ax2.legend(fontsize=7)
-    fig.suptitle(f"flatbody serve, {result.workers} worker process(es), {result.cpus} CPU(s), while a {result.long_job['kind']} job runs",
-                 fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, paths["png"], dpi=100)
+        ax.set_xticks(clients, [str(c) for c in clients])
+        ax.minorticks_off()
+        ax.set_xlabel("concurrent clients (one connection each)")
+        ax.grid(True, alpha=0.3)
+    ax1.set_yscale("log")
+    ax1.set_ylabel("latency per request (ms, log scale)")
+    ax1.set_title("latency: p50 (solid), p99 (dashed)", fontsize=10)
+    ax2.set_ylim(0, 1.3 * max([r.requests_per_s for r in result.rows], default=1.0))
+    ax2.set_ylabel("requests / s (answered)")
+    ax2.set_title("throughput", fontsize=10)
+    ax1.legend(fontsize=7, loc="upper left", ncol=1)
+    ax2.legend(fontsize=7, loc="upper right")
+    errors = result.errors
+    fig.suptitle(f"flatbody serve: {result.workers} worker process(es) on {result.cpus} CPU(s), "
+                 f"while a {result.long_job['kind']} job runs", fontsize=10)
+    requests = max((r.requests for r in result.rows), default=0)
+    bottom = add_caption(fig, f"p50 / p99: the median and the 99th percentile of the time from sending a request to reading "
+                              f"its answer, at most {requests} requests per point; requests/s: answered requests over the "
+                              f"time taken.\nThe load generator runs on the same machine as the service; "
+                              f"{errors} error(s) (any answer other than 200).")
+    fig.tight_layout(rect=(0, bottom, 1, 0.95))
+    png_path = Path(png_path)
+    png_path.parent.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, png_path, dpi=100)
     plt.close(fig)
-    return paths
+    return png_path
 
 
-__all__ = ["ENDPOINTS", "LONG_JOB", "LoadRow", "ServiceBenchmark", "run", "start_service"]
+__all__ = ["ENDPOINTS", "LONG_JOB", "LoadRow", "ServiceBenchmark", "load", "plot", "run", "start_service"]

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.service.store import JobStore, MissingDatabase
-from flatbody_env.output import atomic_path, atomic_write
+from flatbody_env.output import OutputError, atomic_path, atomic_write
 
 Progress = Callable[..., None]
 """``progress(fraction, stage=None)``: record the job's progress (0 … 1) and what it is doing."""
@@ -188,9 +188,13 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
     scene, traj = _integrate(p, report, 0.02, 0.5, with_rotation=True)
     report.step(0.5, 0.98, f"writing recording.rrd ({traj.t.size} samples)")
     target = out / "recording.rrd"
-    # a failed or killed job leaves no half-written recording.rrd (the runner removes the temporary file of a killed one)
-    with reporting_bars(report), atomic_path(target) as tmp, killed_past_file_size_limit():
-        record_trajectory(traj, scene.body, tmp, title=p.get("title"), tensor_every=p["tensor_every"])
+    # a failed or killed job leaves no half-written recording.rrd (the runner removes the temporary file of a killed one);
+    # a write that fails (disk full, file-size limit) is an OutputError here, never a hang (flatbody_env.recording.sink)
+    try:
+        with reporting_bars(report), atomic_path(target) as tmp:
+            record_trajectory(traj, scene.body, tmp, title=p.get("title"), tensor_every=p["tensor_every"])
+    except OutputError as exc:  # the job's error names its file, not the service's folders
+        raise OutputError(str(exc).replace(repr(str(target)), repr(target.name))) from None
     path = target
     return {
         "recording": path.name,
@@ -201,26 +205,6 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
         "model": traj.model,
         "open_with": f"rerun {path.name}",
     }, [path.name]
-
-
-@contextmanager
-def killed_past_file_size_limit() -> Iterator[None]:
-    """While inside, a write past ``RLIMIT_FSIZE`` kills this worker process (SIGXFSZ's default action).
-
-    Python ignores SIGXFSZ, so a write past the limit fails with EFBIG: an ``OSError`` where Python
-    writes. rerun writes its file from its own threads, and when that write fails its flush waits
-    forever (the job would sit ``running``). Killed instead, the worker's job is marked failed by the
-    runner with one line (:func:`exit_reason`) and its temporary files removed.
-    """
-    try:
-        saved = signal.signal(signal.SIGXFSZ, signal.SIG_DFL)
-    except (AttributeError, ValueError):  # no SIGXFSZ here, or not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGXFSZ, saved)
 
 
 def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
@@ -489,5 +473,5 @@ def _stop_process(proc) -> None:
         proc.join(timeout=3)
 
 
-__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "exit_reason", "killed_past_file_size_limit",
+__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "exit_reason",
            "process_context", "remove_partial_files", "reporting_bars", "reporting_integration", "run_job"]

@@ -3,8 +3,13 @@
 The request models state every bound the service checks (HTTP 422 naming the field and the allowed
 range, as the OpenAPI document says): the ranges of the package's one validator set
 (:mod:`flatbody_env.physics.validation`: constants, stretches, spins and momenta, t_end,
-tolerances), the service's limits (:mod:`flatbody_env.service.limits`: output times, grids,
-stored strings and arrays) and the shapes of bodies and scenes. What a schema cannot say (a
+tolerances, grids, seeds), the service's limits (:mod:`flatbody_env.service.limits`: output times, grids,
+stored strings and arrays) and the shapes of bodies and scenes. Every bound, default and range in
+a description is read from those modules and from the library's named defaults
+(:func:`~flatbody_env.physics.body.default_body`, :class:`~flatbody_env.integrators.base.Tolerances`,
+:data:`~flatbody_env.simulation.DEFAULT_SAMPLES`, :class:`analysis.stationary.SearchBox`,
+:data:`analysis.families.PARAMETERS` and the family and map defaults beside it,
+:data:`agents.evaluate.EVAL_SEED`), never written again here. What a schema cannot say (a
 trajectory's arrays as long as its ``t``, output times increasing, λ ≠ μ, J1 = J2 for the
 analysis, from < to) is checked by the same validators when the request is computed (422 too).
 The answers are the ``flatbody`` command's ``--json`` answers; the answer models document their
@@ -19,10 +24,27 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_serializer
 
-from flatbody_env.physics.validation import MOMENTUM_MAX, PARAM_RANGE, STRETCH_RANGE, TOL_RANGE
+from agents.evaluate import EVAL_SEED
+from analysis.families import (DEFAULT_FAMILY_RANGE, DEFAULT_P_THETA, DEFAULT_S3, DEFAULT_SEEDS, MAP_GRID, MAP_LAM_RANGE, MAP_MU_RANGE,
+                               PARAMETERS)
+from analysis.stationary import SearchBox
+from flatbody_env.integrators.base import Tolerances
+from flatbody_env.physics.body import default_body
+from flatbody_env.physics.validation import (FAMILY_SEEDS_RANGE, MAX_SAMPLES, MAX_SEED, MIN_SAMPLES, MOMENTUM_MAX, PARAM_RANGE,
+                                             SEARCH_GRID_RANGE, STRETCH_RANGE, SWEEP_GRID_RANGE, TOL_RANGE)
 from flatbody_env.service.limits import DEFAULT_LIMITS
+from flatbody_env.simulation import DEFAULT_SAMPLES
 
 L = DEFAULT_LIMITS
+BOX = SearchBox()
+"""The library's search box (its λ, μ ranges and grid are the defaults of the ellipse and family requests)."""
+TOLERANCES = Tolerances()
+"""The library's default tolerances (rtol, atol of every integration request)."""
+
+_PARAM_TEXT = f"[{PARAM_RANGE[0]:g}, {PARAM_RANGE[1]:g}]"
+_MOMENTUM_TEXT = f"±{MOMENTUM_MAX:g}"
+_TOL_TEXT = f"[{TOL_RANGE[0]:g}, {TOL_RANGE[1]:g}]"
+_SEARCH_TEXT = f"{STRETCH_RANGE[0]:g} <= LO < HI <= {STRETCH_RANGE[1]:g}"
 
 Finite = Annotated[float, Field(allow_inf_nan=False, strict=True)]
 """A finite number (NaN and ±inf are refused; so are strings and booleans)."""
@@ -53,11 +75,15 @@ Flag = Annotated[bool, Field(strict=True)]
 Name = Annotated[str, Field(max_length=64)]
 """A short name (a scene's, a method's)."""
 
-DEFAULT_BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}
-"""The default body of ``flatbody ellipses`` (J = J3 = 1, V3 with κ = 1, V_ϱ with a = b = 1)."""
+DEFAULT_BODY = default_body().to_dict()
+"""The default body of ``flatbody ellipses`` (:func:`~flatbody_env.physics.body.default_body`)."""
 
-FAMILY_PARAMETERS = ("s3", "p_theta", "k", "c", "d", "kappa", "a", "b", "J", "J3")
-"""What a family may vary (``flatbody family --vary``)."""
+FAMILY_PARAMETERS = PARAMETERS
+"""What a family may vary (``flatbody family --vary``, :data:`analysis.families.PARAMETERS`)."""
+
+RECORD_JOB_SAMPLES = 401
+"""Recorded time steps of a ``record`` job when the request gives none (fewer than ``flatbody record``'s 1001: a job's
+recording is downloaded)."""
 
 
 def _builtin_scene_names() -> tuple[str, ...]:
@@ -151,13 +177,13 @@ class BodySpec(_Strict):
     ``params`` is ``{"J", "J3"}`` (the analysis needs J1 = J2) or ``{"J1", "J2", "J3"}``; ``potential``
     is ``{"name": "V1", "k"}``, ``{"name": "V2", "c", "d"}`` or ``{"name": "V3", "kappa"}``
     (eqs. (37)-(39) of the paper); ``thickness`` is ``{"a", "b"}`` (eq. (40)) or null. Every constant
-    lies in [1e-6, 1e6].
+    lies in :data:`~flatbody_env.physics.validation.PARAM_RANGE`.
     """
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [DEFAULT_BODY]})
 
-    params: InertiaSpec = Field(description='inertia: {"J", "J3"} (isotropic) or {"J1", "J2", "J3"}, each in [1e-6, 1e6]')
-    potential: PotentialSpec = Field(description='{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in [1e-6, 1e6]}')
+    params: InertiaSpec = Field(description=f'inertia: {{"J", "J3"}} (isotropic) or {{"J1", "J2", "J3"}}, each in {_PARAM_TEXT}')
+    potential: PotentialSpec = Field(description=f'{{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in {_PARAM_TEXT}}}')
     thickness: Union[ThicknessSpec, None] = Field(default=None, description='thickness potential V_rho {"a", "b"}, or null')
     spin_convention: Literal["corrected", "paper"] = "corrected"
 
@@ -175,7 +201,8 @@ class AnalysisBodySpec(BodySpec):
 
 
 class StateSpec(_Strict):
-    """A state (a scene's ``state``): λ, μ, ϱ in [1e-6, 1e6], every other entry within ±1e6 (λ ≠ μ)."""
+    """A state (a scene's ``state``): λ, μ, ϱ in :data:`~flatbody_env.physics.validation.STRETCH_RANGE`, every other
+    entry within ± :data:`~flatbody_env.physics.validation.MOMENTUM_MAX` (λ ≠ μ)."""
 
     s1: Momentum
     s2: Momentum
@@ -222,6 +249,8 @@ JobScene = Annotated[Union[Annotated[SceneName, Tag("scene-name")], Annotated[Jo
 
 
 SearchRange = tuple[Stretch, Stretch]
+SearchGrid = Count(SEARCH_GRID_RANGE[0], min(L.sync_grid, SEARCH_GRID_RANGE[1]))
+"""Grid points per axis of a root search: :data:`~flatbody_env.physics.validation.SEARCH_GRID_RANGE` within the request limit."""
 STEP_MIN_REQUEST = L.sync_t_end / L.sync_steps
 """Smallest fixed step of a request: ``t_end / step`` stays within the request's step limit for any t_end."""
 STEP_MIN_JOB = L.job_t_end / L.job_steps
@@ -231,16 +260,17 @@ STEP_MIN_JOB = L.job_t_end / L.job_steps
 class SpinsRequest(_Strict):
     """A body and the spins (s3, p_θ) of ``flatbody ellipses`` / ``flatbody stability``."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"body": DEFAULT_BODY, "s3": 2.0, "p_theta": 0.5}]})
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"body": DEFAULT_BODY, "s3": DEFAULT_S3,
+                                                                                "p_theta": DEFAULT_P_THETA}]})
 
     body: AnalysisBodySpec
-    s3: Momentum = Field(description="spin component s3 (conserved with |s|), within ±1e6")
-    p_theta: Momentum = Field(description="material momentum p_theta, within ±1e6")
+    s3: Momentum = Field(description=f"spin component s3 (conserved with |s|), within {_MOMENTUM_TEXT}")
+    p_theta: Momentum = Field(description=f"material momentum p_theta, within {_MOMENTUM_TEXT}")
     branch: Literal["N", "A", "all"] = Field("N", description="N: s1 = s2 = 0 (paper); A: in-plane axis (needs spin)")
-    spin: Union[Momentum, None] = Field(None, description="spin about the in-plane axis for branch A, within ±1e6")
-    lam_range: SearchRange = Field((0.02, 50.0), description="search range of lambda [LO, HI], 1e-6 <= LO < HI <= 1e6")
-    mu_range: SearchRange = Field((0.02, 50.0), description="search range of mu [LO, HI], 1e-6 <= LO < HI <= 1e6")
-    grid: Count(8, L.sync_grid) = Field(121, description="grid points per axis of the root search")
+    spin: Union[Momentum, None] = Field(None, description=f"spin about the in-plane axis for branch A, within {_MOMENTUM_TEXT}")
+    lam_range: SearchRange = Field(BOX.lam, description=f"search range of lambda [LO, HI], {_SEARCH_TEXT}")
+    mu_range: SearchRange = Field(BOX.mu, description=f"search range of mu [LO, HI], {_SEARCH_TEXT}")
+    grid: SearchGrid = Field(BOX.n, description="grid points per axis of the root search")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -258,10 +288,11 @@ class SimulateRequest(_Strict):
         None, description="final time (default: the scene's t_end)")
     times: Union[list[Annotated[float, Field(ge=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
         None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
-    samples: Union[Count(2, L.sync_samples), None] = Field(None, description="number of evenly spaced output times (default 101)")
+    samples: Union[Count(MIN_SAMPLES, L.sync_samples), None] = Field(
+        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})")
     method: Name = Field("auto", description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
-    rtol: Tolerance = Field(1e-10, description="relative tolerance (adaptive methods), in [1e-16, 1]")
-    atol: Tolerance = Field(1e-10, description="absolute tolerance (adaptive methods), in [1e-16, 1]")
+    rtol: Tolerance = Field(TOLERANCES.rtol, description=f"relative tolerance (adaptive methods), in {_TOL_TEXT}")
+    atol: Tolerance = Field(TOLERANCES.atol, description=f"absolute tolerance (adaptive methods), in {_TOL_TEXT}")
     step: Union[Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
         None, description="step size (fixed-step methods)")
     model: Literal["auto", "two-polar", "regular"] = "auto"
@@ -306,10 +337,11 @@ class SimulateJobParams(_Strict):
         None, description="final time (default: the scene's t_end)")
     times: Union[list[Annotated[float, Field(ge=0, le=L.job_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
         None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
-    samples: Union[Count(2, L.job_samples), None] = Field(None, description="number of evenly spaced output times (default 101)")
+    samples: Union[Count(MIN_SAMPLES, L.job_samples), None] = Field(
+        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})")
     method: Name = Field("auto", description="integrator (GET /methods) or auto")
-    rtol: Tolerance = 1e-10
-    atol: Tolerance = 1e-10
+    rtol: Tolerance = TOLERANCES.rtol
+    atol: Tolerance = TOLERANCES.atol
     step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
     model: Literal["auto", "two-polar", "regular"] = "auto"
     with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
@@ -322,13 +354,13 @@ class RecordJobParams(_Strict):
     t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
         None, description="final time (default: the scene's t_end)")
     method: Name = "auto"
-    rtol: Tolerance = 1e-10
-    atol: Tolerance = 1e-10
+    rtol: Tolerance = TOLERANCES.rtol
+    atol: Tolerance = TOLERANCES.atol
     step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
     model: Literal["auto", "two-polar", "regular"] = "auto"
-    samples: Count(2, L.job_samples) = Field(401, description="recorded time steps")
+    samples: Count(MIN_SAMPLES, L.job_samples) = Field(RECORD_JOB_SAMPLES, description="recorded time steps")
     title: Union[Annotated[str, Field(max_length=200)], None] = Field(None, description="recording title")
-    tensor_every: Count(1, 10_000) = Field(1, description="log the tensors every N-th step")
+    tensor_every: Count(1, MAX_SAMPLES) = Field(1, description="log the tensors every N-th step")
 
 
 class FamilyJobParams(_Strict):
@@ -336,16 +368,17 @@ class FamilyJobParams(_Strict):
 
     body: AnalysisBodySpec = Field(default_factory=lambda: AnalysisBodySpec(**DEFAULT_BODY))
     vary: Literal[FAMILY_PARAMETERS] = "s3"  # type: ignore[valid-type]
-    start: Momentum = Field(0.05, alias="from", description="start of the range (within ±1e6)")
-    stop: Momentum = Field(4.0, alias="to", description="end of the range (within ±1e6; greater than from)")
-    s3: Union[Momentum, None] = Field(None, description="s3 held fixed (default 2)")
-    p_theta: Union[Momentum, None] = Field(None, description="p_theta held fixed (default 0.5)")
-    seeds: Count(2, L.job_family_seeds) = Field(5, description="parameter values at which all solutions are sought")
+    start: Momentum = Field(DEFAULT_FAMILY_RANGE[0], alias="from", description=f"start of the range (within {_MOMENTUM_TEXT})")
+    stop: Momentum = Field(DEFAULT_FAMILY_RANGE[1], alias="to", description=f"end of the range (within {_MOMENTUM_TEXT}; greater than from)")
+    s3: Union[Momentum, None] = Field(None, description=f"s3 held fixed (default {DEFAULT_S3:g})")
+    p_theta: Union[Momentum, None] = Field(None, description=f"p_theta held fixed (default {DEFAULT_P_THETA:g})")
+    seeds: Count(FAMILY_SEEDS_RANGE[0], min(L.job_family_seeds, FAMILY_SEEDS_RANGE[1])) = Field(
+        DEFAULT_SEEDS, description="parameter values at which all solutions are sought")
     step: Union[Annotated[float, Field(gt=0, le=2 * MOMENTUM_MAX, allow_inf_nan=False, strict=True)], None] = Field(
         None, description="largest continuation step (default range/60)")
-    lam_range: SearchRange = (0.02, 50.0)
-    mu_range: SearchRange = (0.02, 50.0)
-    grid: Count(8, L.sync_grid) = 121
+    lam_range: SearchRange = BOX.lam
+    mu_range: SearchRange = BOX.mu
+    grid: SearchGrid = BOX.n
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -357,9 +390,9 @@ class StabilityMapJobParams(_Strict):
     """A ``stability-map`` job (``flatbody stability-map``): artifacts ``stability-map.png`` and ``.csv``."""
 
     body: AnalysisBodySpec = Field(default_factory=lambda: AnalysisBodySpec(**DEFAULT_BODY))
-    lam_range: SearchRange = (1.02, 3.0)
-    mu_range: SearchRange = (0.3, 3.0)
-    grid: Count(4, L.job_map_grid) = Field(30, description="grid points per axis")
+    lam_range: SearchRange = MAP_LAM_RANGE
+    mu_range: SearchRange = MAP_MU_RANGE
+    grid: Count(SWEEP_GRID_RANGE[0], L.job_map_grid) = Field(MAP_GRID, description="grid points per axis")
 
     @field_validator("lam_range", "mu_range")
     @classmethod
@@ -374,7 +407,7 @@ class EvaluateJobParams(_Strict):
     """
 
     episodes: Count(1, L.job_episodes) = 20
-    seed: Count(0, 2**31 - 1) = 10_000
+    seed: Count(0, MAX_SEED) = EVAL_SEED
     baselines: Flag = Field(True, description="also evaluate the zero, random and heuristic baselines")
 
 

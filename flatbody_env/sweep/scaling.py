@@ -284,7 +284,15 @@ def plot_scaling(json_path: str | Path, png_path: str | Path) -> Path:
     ax2.set_title(f"overhead {o * 1e3:.1f} ms/task, connect {t0:.2f} s, {c * 1e3:.2f} ms/point")
     ax2.legend(fontsize=8)
     ax2.grid(alpha=0.3, which="both")
-    fig.tight_layout()
+    from flatbody_env.chart_text import add_caption
+
+    bottom = add_caption(fig, f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
+                              f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
+                              "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
+                              "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
+                              "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
+                              "crosses the serial one, the cluster pays off (the break-even grid).")
+    fig.tight_layout(rect=(0, bottom, 1, 1))
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)
     save_figure(fig, png_path, dpi=110)

@@ -33,14 +33,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from agents.evaluate import EVAL_SEED  # the first evaluation seed of a seeds sweep (re-exported)
+from flatbody_env.physics.validation import SWEEP_GRID_RANGE
+
 KINDS = ("stability-map", "failure-study", "family", "seeds")
 SERIAL_ONLY = ("work-precision", "chart", "bench")
 """Timing studies: they stay serial (concurrent runs on shared cores skew wall time)."""
-MAX_GRID = 20_000
-"""Largest stability-map grid per axis (the serial command stops at 400)."""
-EVAL_SEED = 10_000
-"""First evaluation episode seed of a seeds sweep (``flatbody evaluate``'s default; training
-episodes are seeded from the training seed, far below)."""
+MAX_GRID = SWEEP_GRID_RANGE[1]
+"""Largest stability-map grid per axis (:data:`~flatbody_env.physics.validation.SWEEP_GRID_RANGE`; the serial
+command stops at :data:`~flatbody_env.physics.validation.MAP_GRID_RANGE`)."""
 
 
 @dataclass(frozen=True, kw_only=True)

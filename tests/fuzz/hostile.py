@@ -2,7 +2,8 @@
 
 Used by ``tests/fuzz/test_fuzz.py`` (hypothesis) and by the probe (``python tests/fuzz/hostile.py
 [N]``), which runs every case in-process under a per-case time limit and prints the tally:
-clean exits 0/1/2, tracebacks (an exception escaping ``main``), hangs (past the limit), NaN in
+clean exits 0/1/2, tracebacks (an exception escaping ``main``), internal errors (an unexpected exception
+``main`` printed as ``flatbody: internal error (...)``), hangs (past the limit), NaN in
 a successful JSON output, and error messages longer than a few lines.
 """
 
@@ -148,6 +149,8 @@ def run_case(argv: list[str], limit: float = 30.0) -> dict:
             nan = True
     if "Traceback" in text_err and outcome == "exit":
         outcome = "traceback"
+    elif "internal error" in text_err and outcome == "exit":  # an exception main caught and printed as one line: still a bug
+        outcome = "internal-error"
     return {"argv": argv, "outcome": outcome, "code": code, "nan": nan, "err_lines": len(text_err.strip().splitlines()), "err": text_err[-300:]}
 
 
@@ -160,6 +163,7 @@ def probe(folder: Path, limit: float = 30.0) -> dict:
         "exit_2": sum(r["outcome"] == "exit" and r["code"] == 2 for r in rows),
         "other_exit": sum(r["outcome"] == "exit" and r["code"] not in (0, 1, 2) for r in rows),
         "tracebacks": sum(r["outcome"] == "traceback" for r in rows),
+        "internal_errors": sum(r["outcome"] == "internal-error" for r in rows),
         "hangs": sum(r["outcome"] == "hang" for r in rows),
         "nan_outputs": sum(r["nan"] for r in rows),
         "long_errors": sum(r["err_lines"] > 3 for r in rows),

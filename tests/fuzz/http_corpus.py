@@ -144,7 +144,7 @@ def endpoints(trajectory: dict | None = None) -> list[Endpoint]:
                  {**simulate_fields(10_000, 5e-4, 20001, "params."), "kind": enum("simulate", "record", "family", "stability-map", "evaluate"),
                   "params": ("obj",)}),
         Endpoint("job-record", "POST", "/jobs", {"kind": "record", "params": {"scene": "default", "t_end": 1.0, "samples": 11}},
-                 {"params.samples": integer(2, 20001), "params.tensor_every": integer(1, 10_000), "params.title": text(200, nullable=True),
+                 {"params.samples": integer(2, 20001), "params.tensor_every": integer(1, 100_000), "params.title": text(200, nullable=True),
                   "params.t_end": num(0, 10_000, gt=True, nullable=True)}),
         Endpoint("job-family", "POST", "/jobs", {"kind": "family", "params": {"body": BODY, "vary": "s3", "from": 0.5, "to": 1.0, "seeds": 2, "grid": 8}},
                  {"params.from": c(MOMENTUM), "params.to": c(MOMENTUM), "params.seeds": integer(2, 200), "params.grid": integer(8, 401),
@@ -153,7 +153,7 @@ def endpoints(trajectory: dict | None = None) -> list[Endpoint]:
         Endpoint("job-map", "POST", "/jobs", {"kind": "stability-map", "params": {"body": BODY, "grid": 4}},
                  {"params.grid": integer(4, 200), "params.lam_range": numbers(2, 1e-6, 1e6, exact=2), "params.body.thickness.a": c(CONST)}),
         Endpoint("job-evaluate", "POST", "/jobs", {"kind": "evaluate", "params": {"episodes": 1, "baselines": False}},
-                 {"params.episodes": integer(1, 1000), "params.seed": integer(0, 2**31 - 1), "params.baselines": boolean()}),
+                 {"params.episodes": integer(1, 1000), "params.seed": integer(0, 2**32 - 1), "params.baselines": boolean()}),
     ]
     if trajectory is not None:
         out.append(Endpoint("invariants", "POST", "/invariants", trajectory,

@@ -276,3 +276,59 @@ def test_a_demo_that_fails_midway_leaves_no_recording(tmp_path):
     with pytest.raises(RuntimeError, match="policy failed"):
         rollout(failing, seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path)
     assert path.read_bytes() == b"previous" and [p.name for p in tmp_path.iterdir()] == ["demo.rrd"]
+
+
+def _check_series_axes(path, is_episode, *, t_factor):
+    """Every time-series view of ``path``'s blueprint holds its values, is flat (and says so) exactly
+    when they are round-off, and shows the whole run with room on the right (end in t_end × t_factor)."""
+    bp = read_blueprint(path)
+    data = read_recording(path)
+    titles = {name: (paths, rule) for name, paths, rule in series_views(episode=is_episode)}
+    t_end = max(float(np.max(data[e].sim_time)) for e in data.entities if e.startswith("/series/"))
+    seen_flat = []
+    for view in bp.views:
+        if view.view_class != "TimeSeries":
+            continue
+        flat = view.name.endswith(FLAT_NOTE)
+        paths, _ = titles[view.name.removesuffix(FLAT_NOTE)]
+        values = np.concatenate(
+            [np.asarray(data[e].components["Scalars:scalars"], dtype=float).ravel() for p in paths for e in data.entities if e == p or e.startswith(p + "/")]
+        )
+        values = values[np.isfinite(values)]
+        lo, hi = np.asarray(view.properties["ScalarAxis:range"], dtype=float).ravel()
+        assert lo <= values.min() and values.max() <= hi, view.name
+        spread = np.ptp(values)
+        if flat:
+            seen_flat.append(view.name)
+            assert (hi - lo) >= 1e6 * spread, view.name
+        else:
+            assert spread > FLAT_RTOL * max(np.abs(values).max(), 1.0) and spread >= 0.3 * (hi - lo), view.name
+        window = view.properties["TimeAxis:view_range"]
+        assert window["start"] == 0 and t_factor[0] * t_end * 1e9 <= window["end"] <= t_factor[1] * t_end * 1e9, (view.name, window)
+    return bp, seen_flat
+
+
+def test_a_recording_of_several_blocks_keeps_the_flat_rule_and_the_whole_run(episode, scene, traj, tmp_path):
+    """A recording longer than one block (the wrapper's episodes beyond 1024 steps; a live ``Recorder``
+    in blocks) gets, like a one-block recording, a blueprint built from all its values: round-off drawn
+    flat with the title saying so, fixed axes holding the data, the whole run on the time axis. The
+    file is opened with the first block's blueprint; later blocks send a new one only when the axes
+    change, so a 40-block recording holds a few, and the last one (the viewer's) is read back."""
+    import rerun.chunk as rrc
+
+    from flatbody_env.recording.writer import Recorder
+
+    _check_series_axes(episode, True, t_factor=(1.03, 1.65))  # 25 steps in blocks of 10
+    path = tmp_path / "live.rrd"
+    t, y, R = traj.t, traj.y, traj.rotation
+    n = 2000
+    times = np.linspace(0.0, 4.0 * t[-1], n)  # the scene's trajectory played four times: 2000 steps, 40 blocks of 50
+    idx = np.arange(n) % t.size
+    with Recorder(path, scene.body, block=50) as rec:
+        for k in range(n):
+            rec.append(float(times[k]), y[:, idx[k]], R[idx[k]], energy=float(traj.energy[idx[k]]))
+    bp, flat = _check_series_axes(path, False, t_factor=(1.03, 1.65))
+    assert any(name.startswith("conserved: drift") for name in flat), flat  # H, |s|², p_θ: round-off, drawn flat
+    assert any(name.startswith("p_θ") for name in flat), flat
+    sent = len(rrc.RrdReader(path).blueprints())
+    assert 2 <= sent <= 12, sent

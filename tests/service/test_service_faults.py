@@ -94,9 +94,9 @@ def test_full_disk_is_503(tmp_path):
 def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
     """A recording that goes over ``RLIMIT_FSIZE`` ends ``failed`` with one line, at once, and leaves no file.
 
-    rerun writes the file from its own threads; Python ignores SIGXFSZ, so the write fails with EFBIG there and
-    rerun's flush waits forever: the job sat ``running``. The worker takes SIGXFSZ's default action while rerun
-    writes (it is killed), and the runner fails the job and removes its temporary file."""
+    rerun's own file sink would wait for ever once a write failed (the job sat ``running``); the recorder copies
+    rerun's stream to the file itself (flatbody_env.recording.sink), so the write fails with EFBIG in our code and
+    the job fails with one line naming its file and the limit."""
     data = tmp_path / "data"
     proc, url = start_service(data, workers=1, preexec_fn=_limit_files(300_000))
     try:
@@ -113,6 +113,7 @@ def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
             assert job["status"] == "failed", job
             error = job["error"]
             assert "\n" not in error and "Traceback" not in error and "file-size limit" in error, error
+            assert "'recording.rrd'" in error and str(data) not in error, error
             folder = data / "jobs" / job_id
             left = sorted(p.name for p in folder.iterdir()) if folder.exists() else []
             assert left == [], left  # no recording.rrd, no truncated temporary file

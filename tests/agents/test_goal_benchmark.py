@@ -1,0 +1,75 @@
+"""``flatbody bench time-to-goal`` (agents/goal_benchmark.py): the goal and LQR criteria, the files and the docs table,
+checked on made-up curves (the race itself is a benchmark, run by hand: docs/agents.md)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from agents.goal_benchmark import GoalBenchmark, _curve, _Reached, load, markdown, plot, run, write
+
+
+def test_criteria_and_curves():
+    reached = _Reached(0.99, 0.002, 0.0018)
+    pts = [(50_000, 2.0, 1.0, 0.0025), (100_000, 4.0, 0.95, 0.0010), (150_000, 6.0, 1.0, 0.0019), (200_000, 8.0, 1.0, 0.0017)]
+    assert not reached(0, 0, pts[:2])  # success 95 % does not count
+    assert not reached(0, 0, pts[:3])  # the goal, not yet the LQR
+    assert reached(0, 0, pts)
+    c = _curve("rsl-ppo", pts, reached)
+    assert (c.goal_s, c.goal_timesteps, c.lqr_s, c.lqr_timesteps) == (6.0, 150_000, 8.0, 200_000)
+    missed = _curve("sb3-ppo", pts[:1], reached)
+    assert missed.goal_s is None and missed.lqr_s is None
+
+
+def test_files_and_table(tmp_path):
+    reached = _Reached(0.99, 0.002, 0.0018)
+    sb3 = _curve("sb3-ppo", [(100_000, 10.0, 1.0, 0.0019), (200_000, 20.0, 1.0, 0.0017)], reached)
+    rsl = _curve("rsl-ppo", [(100_000, 4.0, 1.0, 0.0015)], reached)
+    b = GoalBenchmark(sb3, rsl, 0.0018, 1.0, 20, 50_000, 0.99, 0.002, 0)
+    assert b.ratio == pytest.approx(0.4) and b.ratio_lqr == pytest.approx(0.2)
+    write(b, tmp_path)
+    data = json.loads((tmp_path / "time_to_goal.json").read_text())
+    assert data["ratio"] == pytest.approx(0.4) and data["rsl"]["lqr_timesteps"] == 100_000
+    assert len((tmp_path / "time_to_goal.csv").read_text().splitlines()) == 4
+    assert (tmp_path / "time_to_goal.png").stat().st_size > 1000
+    assert load(tmp_path / "time_to_goal.json") == b
+    table = markdown(b)
+    assert "| rsl-ppo | 4.0 s (100000 steps) | 4.0 s (100000 steps) |" in table and "**0.40** (goal ≤ 0.5: met)" in table
+    slow = GoalBenchmark(sb3, _curve("rsl-ppo", [(100_000, 15.0, 1.0, 0.0025)], reached), 0.0018, 1.0, 20, 50_000, 0.99, 0.002, 0)
+    assert slow.ratio is None and "not reached" in markdown(slow)
+
+
+@pytest.mark.parametrize("kw, field", [({"max_timesteps": 0}, "max_timesteps"), ({"episodes": 1.5}, "episodes"),
+                                       ({"success_goal": 1.5}, "success_goal"), ({"distance_goal": 0.0}, "distance_goal")])
+def test_bad_settings_name_the_field(kw, field, tmp_path):
+    with pytest.raises(ValueError, match=field):
+        run(out_dir=tmp_path, **kw)
+
+
+def test_the_committed_chart_explains_itself_and_nothing_overlaps(tmp_path, monkeypatch):
+    """docs/img/time_to_goal.png redrawn from its saved JSON: a caption that explains LQR and the goal, a clean layout."""
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flatbody_env.chart_text import all_text, caption_text, layout_problems
+
+    saved = Path(__file__).resolve().parents[2] / "docs" / "img" / "time_to_goal.json"
+    monkeypatch.setattr(plt, "close", lambda *a, **k: None)
+    before = set(plt.get_fignums())
+    plot(saved, tmp_path / "c.png")
+    (num,) = sorted(set(plt.get_fignums()) - before)
+    fig = plt.figure(num)
+    try:
+        text = all_text(fig)
+        assert caption_text(fig) and "linear-quadratic regulator" in text and "Goal: success" in text and "gSDE" in text
+        assert layout_problems(fig) == []
+        b = load(saved)
+        assert b.rsl.points and b.sb3.points and b.lqr_final_distance > 0
+    finally:
+        monkeypatch.undo()
+        plt.close(fig)
