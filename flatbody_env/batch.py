@@ -12,8 +12,9 @@ need not hold 0: the state at t = 0 is ``y0``), the energy tolerance of
 :func:`~flatbody_env.simulation.default_energy_tol`:
 ``FIXED_STEP_ENERGY_TOL · max(1, |H₀|)`` for fixed-step methods and
 ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H₀|)`` for DOP853, the work budget ``max_nfev``
-per body and ``max_wall_time`` for the batch (on the CPU). The model ladder is not consulted: every body
-runs the full two-polar equations.
+per body and ``max_wall_time`` for the batch (on the GPU through launches of bounded work with the clock read
+between them: :func:`_launches_within_wall_time`). The model ladder is not consulted: every body runs the full
+two-polar equations.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ class BatchTrajectory:
         What integrated it and where.
     wall_time : float
         Seconds spent integrating (compilation included on first use).
+    extra : dict
+        ``"launches"``: kernel launches of a ``device="cuda"`` run (the wall-clock budget's probes included).
     """
 
     t: np.ndarray
@@ -178,12 +181,15 @@ def simulate_batch(
     max_nfev : int
         Work budget per body: right-hand-side evaluations.
     max_wall_time : float
-        Seconds for the whole batch (``device="cpu"``; (0, 86 400]). DOP853-numba: a timed probe on the
-        first bodies measures the evaluations per second, and every body then gets the budget of
-        evaluations that the time left allows (at most ``max_nfev``): a body past it ends with the
-        ``budget`` status, the others bit for bit as without this budget. Fixed-step methods: a run whose
-        predicted time exceeds it is refused before it starts (``IntegrationError``, ``kind="budget"``).
-        The GPU (``device="cuda"``) has ``max_nfev`` only.
+        Seconds for the whole batch ((0, 86 400]). DOP853-numba: a timed probe on the first bodies measures
+        the evaluations per second, and every body then gets the budget of evaluations that the time left
+        allows (at most ``max_nfev``): a body past it ends with the ``budget`` status, the others bit for bit
+        as without this budget. On the GPU (``device="cuda"``) the kernel cannot read the clock either: the
+        integration is a series of launches, each with a per-body budget of evaluations sized to the time
+        left, the clock read between them, and only the bodies still out of budget launched again
+        (:func:`_launches_within_wall_time`; ``extra["launches"]`` counts them). Fixed-step methods: a run
+        whose predicted time (a timed probe of a few hundred steps) exceeds it is refused before it starts
+        (``IntegrationError``, ``kind="budget"``), on either device.
     device : {"cpu", "cuda"}
         Where to run: the compiled CPU kernels (parallel over bodies) or a CUDA GPU.
 
@@ -245,6 +251,7 @@ def simulate_batch(
     else:
         etol = np.full(n, tol.energy_tol)
     u = np.zeros(4)
+    extra: dict[str, Any] = {}
     start = time.perf_counter()
     if grid.size == 1:  # only t = 0 asked for: the initial states
         OUT, STATUS = Y0[:, None, :].copy(), np.zeros(n, np.int64)
@@ -265,12 +272,29 @@ def simulate_batch(
             _refuse_fixed_over_wall_time(run, n, NFEV, grid, h, spec.stages, method, tol)
             run(n, tol.max_nfev)
     else:
-        OUT, STATUS, NFEV, TFAIL = cuda.solve(method, Y0, grid, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol,
-                                              max_nfev=tol.max_nfev)
+        OUT = np.empty((n, grid.size, STATE_SIZE))
+        STATUS = np.zeros(n, np.int64)
+        NFEV = np.zeros(n, np.int64)
+        TFAIL = np.empty(n)
+        launches = [0]
+
+        def launch(idx, budget: int, span=grid) -> None:  # bodies ``idx`` through ``span`` in one kernel launch, ``budget`` evaluations each
+            o, s, nf, tf = cuda.solve(method, Y0[idx], span, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol[idx], max_nfev=budget)
+            OUT[idx, :span.size] = o
+            STATUS[idx], NFEV[idx], TFAIL[idx] = s, nf, tf
+            launches[0] += 1
+
+        if spec.info.adaptive:
+            _launches_within_wall_time(launch, n, STATUS, tol)
+        else:
+            _refuse_fixed_over_wall_time(lambda m, budget, span=grid: launch(slice(0, m), budget, span), n, NFEV, grid, h, spec.stages,
+                                         method, tol, probe_bodies=n)
+            launch(slice(0, n), tol.max_nfev)
+        extra["launches"] = launches[0]
     wall = time.perf_counter() - start
     keep = slice(1, None) if prepended else slice(None)
     return BatchTrajectory(t=times_arr.copy(), state=OUT[:, keep], status=STATUS, nfev=NFEV, t_fail=TFAIL, y0=Y0, method=method,
-                           device=device, wall_time=wall)
+                           device=device, wall_time=wall, extra=extra)
 
 
 _PROBE_NFEV = 5_000
@@ -309,16 +333,61 @@ def _solve_within_wall_time(run, n: int, NFEV: np.ndarray, STATUS: np.ndarray, t
     run(n, int(min(tol.max_nfev, max(1.0, rate * left / n))))
 
 
-def _refuse_fixed_over_wall_time(run, n: int, NFEV: np.ndarray, grid: np.ndarray, h: float, stages: int, method: str, tol: Tolerances) -> None:
+GPU_GROWTH = 8
+"""On the GPU, how many times the previous launch's evaluations per body one launch of :func:`_launches_within_wall_time`
+may be given."""
+
+
+def _launches_within_wall_time(launch, n: int, STATUS: np.ndarray, tol: Tolerances) -> None:
+    """DOP853 on the GPU within ``tol.max_wall_time``. A kernel cannot read the clock, so the integration is a series of
+    launches, each with a per-body budget of evaluations, and the host checks the clock between them.
+    ``launch(idx, budget)`` integrates bodies ``idx`` from t = 0 with ``budget`` evaluations each (one thread per body).
+    The first launch gives every body :data:`_PROBE_NFEV` evaluations and is run twice (the first may compile the kernel)
+    to measure the seconds per evaluation of a launch; each later launch re-runs only the bodies still at the ``budget``
+    status, with at most :data:`GPU_GROWTH` times the previous budget, at most ``max_nfev``, and at most what the time
+    left allows at the measured rate. When the time left cannot take them further than the last launch did, those bodies
+    keep the ``budget`` status. Every launch starts from t = 0 with the same code, so a body that finishes is bit for bit
+    that of one launch with ``max_nfev`` (re-running costs at most 1 / (GPU_GROWTH − 1) of the last launch's work)."""
+    everyone = np.arange(n)
+    if tol.max_nfev <= 2 * _PROBE_NFEV:
+        launch(everyone, tol.max_nfev)
+        return
+    from flatbody_env.integrators.failure import KINDS
+
+    budget_code = KINDS.index("budget")
+    start = time.perf_counter()
+    idx, budget, measured = everyone, _PROBE_NFEV, False
+    while True:
+        t0 = time.perf_counter()
+        launch(idx, budget)
+        took = time.perf_counter() - t0
+        idx = idx[STATUS[idx] == budget_code]
+        if idx.size == 0 or budget >= tol.max_nfev:
+            return
+        if not measured:  # the first launch may have compiled the kernel: measure the second, with the same budget
+            measured = True
+            continue
+        per_eval = max(took, 1e-9) / budget  # seconds per evaluation of every body of the launch at once
+        left = tol.max_wall_time - (time.perf_counter() - start)
+        following = int(min(tol.max_nfev, GPU_GROWTH * budget, left / per_eval))
+        if following <= budget:
+            return
+        budget = following
+
+
+def _refuse_fixed_over_wall_time(run, n: int, NFEV: np.ndarray, grid: np.ndarray, h: float, stages: int, method: str, tol: Tolerances,
+                                 *, probe_bodies: int | None = None) -> None:
     """Fixed-step work is known up front: time a few hundred steps of the first bodies (twice: the first call
-    may load the kernel) and refuse the batch whose predicted time exceeds ``tol.max_wall_time``."""
+    may load the kernel) and refuse the batch whose predicted time exceeds ``tol.max_wall_time``. ``probe_bodies``:
+    how many bodies the probe runs (default: enough to keep the CPU's threads busy; on the GPU all of them, which
+    run at once)."""
     from flatbody_env.integrators.base import budget_error
 
     spans = np.diff(grid)
     total = n * stages * float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
     if total <= 4 * _PROBE_NFEV:
         return
-    m = _probe_bodies(n)
+    m = _probe_bodies(n) if probe_bodies is None else min(n, probe_bodies)
     span = np.array([grid[0], grid[0] + min(256 * h, grid[-1] - grid[0])])
     run(m, tol.max_nfev, span)
     t0 = time.perf_counter()

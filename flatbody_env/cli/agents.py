@@ -19,8 +19,8 @@ def _train_rsl(args) -> int:
     """``train --algo rsl-ppo``: rsl_rl's PPO on the torch vector env (agents/rsl.py)."""
     from agents.rsl import ALGO, train_rsl
 
-    if args.study is not None or args.resume or args.hyperparams_file:
-        raise ValueError("--algo rsl-ppo: --study, --resume and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)")
+    if args.study is not None or args.resume or args.hyperparams_file or args.trained_agent:
+        raise ValueError("--algo rsl-ppo: --study, --resume, --trained-agent and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)")
     from agents.numpy_policy import remember_run
 
     command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None

@@ -195,6 +195,10 @@ def _record_info(args) -> int:
 
 
 def _record_shots(args) -> int:
+    if args.frames is not None:
+        return _frame_shot(args)
+    if args.file is None:
+        raise ValueError("file: name a recording (RUN.rrd), or give --frames for the env's rgb_array frames")
     from flatbody_env.recording.viewer import screenshots
 
     shots = screenshots(args.file, args.times, args.out, size=args.size, views=args.views, prefix=args.prefix, colors=args.colors)
@@ -204,6 +208,38 @@ def _record_shots(args) -> int:
     for r in reports:
         print(f"viewer report: {r}", file=sys.stderr)
     return 0
+
+
+def _frame_shot(args) -> int:
+    """``record-shots --frames 0,120``: FlatBody-v0's rgb_array frames after 0 and 120 seeded random actions,
+    side by side (:func:`flatbody_env.env.rendering.frame_strip`), written to OUT/PREFIX.png."""
+    from PIL import Image
+
+    from flatbody_env.env.rendering import frame_strip
+    from flatbody_env.output import atomic_path
+    from flatbody_env.recording.viewer import _compact_png
+
+    if args.file is not None:
+        raise ValueError("file: --frames draws the env's rgb_array frames; give a recording or --frames, not both")
+    strip = frame_strip(args.frames, seed=args.seed)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{args.prefix or 'frame-rgb_array'}.png"
+    with atomic_path(path) as tmp:
+        Image.fromarray(strip).save(tmp, format="PNG", optimize=True)
+    _compact_png(path, args.colors)
+    print(f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v0, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)")
+    return 0
+
+
+def _step_list(text: str) -> list[int]:
+    try:
+        values = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"frames: expected comma-separated step counts, got {text!r}") from None
+    if not values or values[0] < 0 or any(b <= a for a, b in zip(values, values[1:])) or values[-1] > validation.MAX_EPISODE_STEPS:
+        raise argparse.ArgumentTypeError(f"frames: expected increasing step counts in [0, {validation.MAX_EPISODE_STEPS}], got {text!r}")
+    return values
 
 
 def _float_list(text: str) -> list[float]:
@@ -523,14 +559,19 @@ def register(sub) -> None:
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
-    p = sub.add_parser("record-shots", help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times")
-    p.add_argument("file", metavar="RUN.rrd")
+    p = sub.add_parser("record-shots", help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times; "
+                                             "with --frames, the env's rgb_array frames side by side")
+    p.add_argument("file", metavar="RUN.rrd", nargs="?", default=None, help="the recording (not with --frames)")
     p.add_argument("--times", type=_float_list, default=[0.0, 5.0, 10.0], metavar="T1,T2,...", help="sim_time values in seconds (default 0,5,10)")
     p.add_argument("--out", default="shots", metavar="DIR", help="folder of the PNGs (default shots)")
     p.add_argument("--size", type=_size, default=(1600, 1000), metavar="WxH", help="window size (default 1600x1000)")
     p.add_argument("--views", action="store_true", help="also save each visible view on its own")
     p.add_argument("--prefix", default=None, help="file-name prefix (default: the recording's stem)")
     p.add_argument("--colors", type=int_at_least("colors", 0, 256), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
+    p.add_argument("--frames", type=_step_list, default=None, metavar="K1,K2,...",
+                   help="instead of a recording: FlatBody-v0's rgb_array frames after K1, K2, ... seeded random actions, side by side, "
+                        "in OUT/PREFIX.png (default prefix frame-rgb_array)")
+    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="with --frames: the episode's seed (default 7)")
     p.set_defaults(handler=_record_shots)
 
 

@@ -57,6 +57,7 @@ from flatbody_env.env.sampling import (
 )
 from flatbody_env.env.targets import REJECT, UNSURE
 from flatbody_env.integrators.twopolar_kernels import env_step_into
+from flatbody_env.physics.validation import ENV_STEP_MAX_NFEV
 
 STREAM_EPISODE, STREAM_CLOCK = 0, 1
 """Philox streams (counter word 3): a reset's draws, the staggered clock."""
@@ -180,7 +181,8 @@ def step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg
     action ``A[b]`` is clipped and scaled, the integrator advances it, :func:`~flatbody_env.env.kernels.post_step` keeps or
     rejects the new state, observes and scores; its clock advances and truncates at ``max_steps``; in SAME_STEP mode
     (``same_step``) a body whose episode ended is reset at once (its last observation into ``FINAL[b]``), else its
-    reset is marked pending. Work: ``u`` (4,), ``u2`` (4, 1), ``a2`` (1, 4), ``K`` (13, 11), ``counters`` (3,) int64,
+    reset is marked pending. Work: ``u`` (4,), ``u2`` (4, 1), ``a2`` (1, 4), ``K`` (13, 11), ``counters`` (4,) int64 (the
+    last entry: the step's budget of RHS evaluations, :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`, set by the caller),
     ``terms`` (6,), ``sc`` (4,), ``tg`` (6,), ``pot`` (7, 4), ``table_code`` (1,) int64, ``cand`` (10,), ``uu`` (12,),
     the others (11,), ``vel`` (7,), ``force`` (4,). Returns 0 or an error code (:data:`ERR_ACTION`: the body is left
     untouched)."""
@@ -240,7 +242,8 @@ def step_lanes(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcfg,
     :func:`flatbody_env.integrators.cuda.env_step` with ``task=``)."""
     y, u, out, ynew, ytmp, f, yout = np.empty(11), np.empty(4), np.empty(11), np.empty(11), np.empty(11), np.empty(11), np.empty(11)
     u2, a2, K = np.empty((4, 1)), np.zeros((1, 4)), np.empty((13, 11))
-    vel, force, counters = np.empty(7), np.empty(4), np.zeros(3, np.int64)
+    vel, force, counters = np.empty(7), np.empty(4), np.zeros(4, np.int64)
+    counters[3] = ENV_STEP_MAX_NFEV  # each body's budget of RHS evaluations per step, as FlatBodyVectorEnv's (DOP853 checks it)
     terms, sc, tg, pot, table_code, cand, uu = np.empty(6), np.empty(4), np.empty(6), np.empty((7, 4)), np.zeros(1, np.int64), \
         np.empty(10), np.empty(12)
     for b in range(Y.shape[1]):
@@ -293,7 +296,8 @@ def _step_kernel(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcf
         vel = cuda.local.array(7, float64)
         force = cuda.local.array(4, float64)
         f = cuda.local.array(11, float64)
-        counters = cuda.local.array(3, int64)
+        counters = cuda.local.array(4, int64)
+        counters[3] = ENV_STEP_MAX_NFEV  # the launch's work: at most this many RHS evaluations per body (a kernel has no clock)
         yout = cuda.local.array(11, float64)
         a2 = cuda.local.array((1, 4), float64)
         for i in range(4):

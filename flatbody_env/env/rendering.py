@@ -309,3 +309,45 @@ def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_w
     alpha, colors = _scale_bar()
     _blend(frame, alpha, colors, SIZE - alpha.shape[1] - 6, SIZE - 16 - alpha.shape[0])
     return frame
+
+
+FRAME_GAP = 8
+"""White pixels between the frames of :func:`frame_strip`."""
+
+
+def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v0", gap: int = FRAME_GAP) -> np.ndarray:
+    """The ``rgb_array`` frames of one episode side by side, as ``env.render()`` returns them: the env
+    reset with ``seed``, then seeded random actions (``env.action_space.seed(seed)``), a frame after
+    each number of actions in ``steps`` (increasing, ≥ 0), ``gap`` white pixels between two frames.
+    Shape (256, k·256 + (k−1)·gap, 3), uint8. The picture of the frame in docs/recording.md is
+    ``frame_strip()`` (``flatbody record-shots --frames 0,120``)."""
+    import gymnasium as gym
+
+    import flatbody_env  # noqa: F401  (registers the ids)
+
+    steps = [int(s) for s in steps]
+    if not steps or steps[0] < 0 or any(b <= a for a, b in zip(steps, steps[1:])):
+        raise ValueError(f"frames: expected increasing step counts ≥ 0, got {steps!r}")
+    if gap < 0:
+        raise ValueError(f"gap: must be ≥ 0, got {gap!r}")
+    env = gym.make(env_id, render_mode="rgb_array")
+    try:
+        env.reset(seed=seed)
+        env.action_space.seed(seed)
+        frames, done = [], 0
+        for want in steps:
+            while done < want:
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                done += 1
+                if terminated or truncated:
+                    raise ValueError(f"frames: the episode (seed {seed}) ended after {done} actions, before {want}")
+            frames.append(np.array(env.render(), dtype=np.uint8))
+    finally:
+        env.close()
+    height = max(f.shape[0] for f in frames)
+    out = np.full((height, sum(f.shape[1] for f in frames) + gap * (len(frames) - 1), 3), 255, dtype=np.uint8)
+    x = 0
+    for f in frames:
+        out[: f.shape[0], x : x + f.shape[1]] = f
+        x += f.shape[1] + gap
+    return out

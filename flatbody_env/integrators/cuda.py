@@ -131,8 +131,9 @@ def _dop853_initial_step_device(y, f, t0, t_bound, u, P, rtol, atol, vel, force,
     return dop853_initial_step_into(y, f, t0, t_bound, u, P, rtol, atol, vel, force, work, y1, counters)
 
 
-def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV):
-    """One thread per body: :func:`~.batch_solve.env_step_body` with local work arrays."""
+def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, max_nfev, OUT, STATUS, NFEV):
+    """One thread per body: :func:`~.batch_solve.env_step_body` with local work arrays; ``max_nfev`` is each body's budget of
+    RHS evaluations in the step (DOP853 checks it before every step, as :func:`~.batch_solve.batch_env_step`)."""
     b = cuda.grid(1)
     if b < Y.shape[1]:
         y = cuda.local.array(11, float64)
@@ -144,7 +145,8 @@ def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, 
         vel = cuda.local.array(7, float64)
         force = cuda.local.array(4, float64)
         f = cuda.local.array(11, float64)
-        counters = cuda.local.array(3, int64)
+        counters = cuda.local.array(4, int64)
+        counters[3] = max_nfev
         env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
                       y, u, out, K, ynew, ytmp, vel, force, f, counters)
 
@@ -194,12 +196,16 @@ def _method(method: str) -> tuple[int, np.ndarray]:
 
 
 def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=np.inf, OUT=None, STATUS=None, NFEV=None,
-             threads_per_block=THREADS_PER_BLOCK, task=None):
+             threads_per_block=THREADS_PER_BLOCK, task=None, max_nfev=_bs.NO_BUDGET):
     """One environment step of N bodies on the GPU, one kernel launch.
 
     ``Y`` (11, N), ``U`` (4, N), ``P`` (9,) host or device arrays; outputs ``OUT`` (11, N), ``STATUS``,
     ``NFEV`` (N,) int64 are allocated on the device when not given. Returns (OUT, STATUS, NFEV) as
-    given/allocated (device arrays unless host arrays were passed in, which are then filled).
+    given/allocated (device arrays unless host arrays were passed in, which are then filled). ``max_nfev``: each
+    body's budget of RHS evaluations in this step (DOP853; a body past it gets the ``budget`` status and keeps its
+    state, as in :func:`~.batch_solve.batch_env_step`); the launch's work is bounded by it, since a kernel cannot
+    read the clock. The env's step (``task=``) always has the env's budget,
+    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`.
 
     With ``task`` (a :class:`flatbody_env.env.device.DeviceBatch` on CUDA) the same single launch is the whole env step:
     ``U`` is then the actions (N, n) (clipped and scaled on the device), ``Y`` the batch's states, advanced in place, and
@@ -221,7 +227,8 @@ def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=n
     if NFEV is None:
         NFEV = cuda.device_array(n, np.int64)
     blocks, threads = _blocks(n, threads_per_block)
-    kernel[blocks, threads](kind, coeffs, Y, U, P, float(dt), float(h), float(rtol), float(atol), float(energy_tol), OUT, STATUS, NFEV)
+    kernel[blocks, threads](kind, coeffs, Y, U, P, float(dt), float(h), float(rtol), float(atol), float(energy_tol), int(max_nfev), OUT, STATUS,
+                            NFEV)
     return OUT, STATUS, NFEV
 
 

@@ -20,6 +20,8 @@ one colour per variable, its target drawn in the same colour as a faint wide ban
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from flatbody_env.env.rendering import COLORS
@@ -305,7 +307,8 @@ def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, flo
     round-off then sits on a fixed axis of ±10 % of the scale around the value, plus :data:`FLAT_PAD` (drawn as a flat line,
     ticks labelled with a few digits) and the title says so. Otherwise the axis holds the data with 5 %
     margins and head room above for the legend (:data:`LEGEND_ROW` per entry; none when ``legend`` is
-    False: the title names the colours). None when nothing is logged.
+    False: the title names the colours), the lower margin widened to keep a labelled tick off the lower
+    edge (:func:`_clear_bottom`). None when nothing is logged.
     """
     members = _members(paths, ranges)
     if not members:
@@ -340,7 +343,27 @@ def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, flo
     if not legend:
         entries = 0
     top = hi + span * (0.05 + (LEGEND_ROW * entries + 0.05 if entries > 1 else 0.0))
-    return (lo - 0.05 * span, top), False, entries
+    return (_clear_bottom(lo - 0.05 * span, top), top), False, entries
+
+
+BOTTOM_CLEAR = 0.03
+"""Least room (a fraction of the axis) between a view's lower edge and the lowest labelled tick above it."""
+
+
+def _clear_bottom(bottom: float, top: float) -> float:
+    """``bottom``, lowered where a tick that rerun labels (powers of ten, at most ~25 over the axis) sits
+    less than :data:`BOTTOM_CLEAR` of the axis above it: rerun centres a y label on its tick, so a tick at
+    the lower edge put its label on the time axis's labels (0.6 in the demo's λ, μ, ϱ view)."""
+    span = top - bottom
+    if not (span > 0 and np.isfinite(span)):
+        return bottom
+    step = 10.0 ** math.floor(math.log10(span))
+    while span / step <= 25.0:
+        tick = math.ceil(bottom / step - 1e-9) * step
+        if tick - bottom < BOTTOM_CLEAR * (top - bottom):
+            bottom = tick - BOTTOM_CLEAR * (top - tick) / (1.0 - BOTTOM_CLEAR)
+        step /= 10.0
+    return bottom
 
 
 def view_specs(*, episode: bool, ranges: dict | None = None, t_range: tuple[float, float] | None = None) -> list[tuple[str, str, tuple[str, ...]]]:

@@ -198,7 +198,8 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
     except LimitExceeded as exc:
         raise LimitExceeded(f"params.{exc.field}", str(exc).split(": ", 1)[1]) from None
     except ValueError as exc:
-        raise ValueError(f"params.{exc}") from None
+        text = _first_line(exc)
+        raise ValueError(f"params.{text}" if _field_of(text) else f"params: {text}") from None
     return {}
 
 
@@ -238,15 +239,41 @@ ANSWERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
 """Request-path computations by endpoint name."""
 
 
-def error_data(exc: BaseException) -> dict[str, Any]:
-    """An exception as the service's error answer (:class:`~flatbody_env.service.models.ErrorAnswer`)."""
+INPUT_FIELDS = {"simulate": "scene", "ellipses": "body", "stability": "body", "invariants": "trajectory", "invariants-json": "trajectory",
+                "check-job": "params"}
+"""The request field an endpoint computes with, named by a refusal that no narrower field explains: a failed integration
+(the scene's trajectory), a computation that fails for these inputs. An HTTP 4xx always names a field."""
+
+
+def _first_line(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def _field_of(text: str) -> str | None:
+    """The dotted field a one-line message starts with (``body.params.J: ...``), or None."""
+    head = text.split(":", 1)[0]
+    return head if ":" in text and head and " " not in head else None
+
+
+def error_data(exc: BaseException, *, endpoint: str | None = None) -> dict[str, Any]:
+    """An exception as the service's error answer (:class:`~flatbody_env.service.models.ErrorAnswer`), one line naming the
+    field: the exception's own, else that of ``endpoint`` (:data:`INPUT_FIELDS`). A used-up integration budget names
+    ``t_end`` (the horizon the work did not reach; a job has larger budgets)."""
     from flatbody_env.integrators import IntegrationError
 
     if isinstance(exc, RequestInvalid):
         return dict(exc.data)
+    where = INPUT_FIELDS.get(endpoint or "")
     if isinstance(exc, IntegrationError):
         # a used-up work budget is a request over the limits (413); any other failure is the integration's (422)
-        return {"kind": "too-large" if exc.kind == "budget" else "integration", "detail": str(exc),
+        budget = exc.kind == "budget"
+        field = ("t_end" if budget else where) if where else None
+        text = _first_line(exc)
+        if field == "t_end":
+            text = f"t_end: not reached within this request's budget ({text}); send it as a job (POST /jobs with kind simulate or record)"
+        elif field:
+            text = f"{field}: {text}"
+        return {"kind": "too-large" if budget else "integration", "detail": text, "field": field,
                 "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason, "method": exc.method or None}
     if isinstance(exc, LimitExceeded):
         return {"kind": "too-large", "detail": str(exc), "field": exc.field}
@@ -254,14 +281,18 @@ def error_data(exc: BaseException) -> dict[str, Any]:
         text = " ".join(str(exc).split())[:200] or type(exc).__name__
         return {"kind": "unavailable", "detail": f"the service could not write the job's files ({text})", "status": 503}
     if isinstance(exc, ValueError):
-        text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        field = text.split(":", 1)[0] if ":" in text and " " not in text.split(":", 1)[0] else None
+        text = _first_line(exc)
+        field = _field_of(text)
         if field and field.startswith("-"):  # a check shared with the CLI names its flag (--spin): name the request's field
             text = field.lstrip("-").replace("-", "_") + text[len(field):]
-        return {"kind": "validation", "detail": text, "field": field.lstrip("-").replace("-", "_") if field else None}
+            field = field.lstrip("-").replace("-", "_")
+        if field is None and where:  # a numerical failure (numpy's LinAlgError is a ValueError), not a check of a field
+            field, text = where, f"{where}: the computation failed for these inputs ({type(exc).__name__}: {text[:200]})"
+        return {"kind": "validation", "detail": text, "field": field}
     # Anything else is a computation that cannot be done for these inputs (a singular matrix, an
     # overflow, ...): the caller gets one line, never a traceback.
-    return {"kind": "validation", "detail": f"the computation failed for these inputs ({type(exc).__name__}: {str(exc)[:200]})"}
+    text = f"the computation failed for these inputs ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})"
+    return {"kind": "validation", "detail": f"{where}: {text}" if where else text, "field": where}
 
 
 def outcome(name: str, payload: Mapping[str, Any]) -> tuple[bool, Any]:
@@ -269,7 +300,7 @@ def outcome(name: str, payload: Mapping[str, Any]) -> tuple[bool, Any]:
     try:
         return True, ANSWERS[name](payload)
     except Exception as exc:  # noqa: BLE001 - every failure becomes one line for the caller
-        return False, error_data(exc)
+        return False, error_data(exc, endpoint=name)
 
 
 def outcome_json(name: str, payload: Any) -> tuple[bool, Any]:
@@ -283,7 +314,7 @@ def outcome_json(name: str, payload: Any) -> tuple[bool, Any]:
     try:
         return True, finite_json(data).encode("utf-8")
     except (TypeError, ValueError, RecursionError) as exc:
-        return False, error_data(exc)
+        return False, error_data(exc, endpoint=name)
 
 
 def warm_up() -> bool:
@@ -294,5 +325,5 @@ def warm_up() -> bool:
     return True
 
 
-__all__ = ["ANSWERS", "LIMITS", "RequestInvalid", "build_body", "build_scene", "ellipses", "error_data", "invariants", "invariants_json",
+__all__ = ["ANSWERS", "INPUT_FIELDS", "LIMITS", "RequestInvalid", "build_body", "build_scene", "ellipses", "error_data", "invariants", "invariants_json",
            "methods", "outcome", "outcome_json", "scenes", "simulate", "stability", "trajectory", "warm_up"]

@@ -51,6 +51,26 @@ from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
 from flatbody_env.service.store import JobStore, QueueFull
 
 PAGE_DIR = Path(__file__).with_name("page")
+PALETTE_MARK = "<!-- palette -->"
+"""Where :func:`page_html` puts the colours into ``index.html``."""
+
+
+def palette_css() -> str:
+    """The page's colours as CSS custom properties ``--color-NAME: #rrggbb`` on ``:root``, from
+    :data:`flatbody_env.env.rendering.COLORS` — the palette of the recordings and the ``rgb_array``
+    frames, so that λ, μ, ϱ, s₃, H … have one colour on the page, in the viewer and in the frames.
+    ``page.css`` and ``page.js`` read these properties and name no colour of a variable themselves."""
+    from flatbody_env.env.rendering import COLORS
+
+    names = "".join(f" --color-{name}: #{r:02x}{g:02x}{b:02x};" for name, (r, g, b) in COLORS.items())
+    return f'<style id="palette">:root {{{names} }}</style>'
+
+
+def page_html() -> str:
+    """The page (``page/index.html``) with :func:`palette_css` in its head."""
+    return (PAGE_DIR / "index.html").read_text(encoding="utf-8").replace(PALETTE_MARK, palette_css(), 1)
+
+
 DOCS_ASSETS = "/docs-assets"
 """Where the service serves Swagger UI's and ReDoc's scripts for ``/docs`` and ``/redoc`` (fastapi-offline)."""
 
@@ -464,7 +484,7 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
     # -- the page ----------------------------------------------------------------------------------
     @app.get("/", include_in_schema=False)
     async def page() -> Response:
-        return HTMLResponse((PAGE_DIR / "index.html").read_text(encoding="utf-8"))
+        return HTMLResponse(page_html())
 
     @app.get("/favicon.ico", include_in_schema=False)
     async def favicon() -> Response:
@@ -513,5 +533,5 @@ def app_from_environment() -> FastAPI:
     return create_app(os.environ.get("FLATBODY_DATA_DIR", "flatbody-data"), workers=int(os.environ.get("FLATBODY_WORKERS", "2")))
 
 
-__all__ = ["AnswerResponse", "BodyLimit", "HostCheck", "LOOPBACK_HOSTS", "PAGE_DIR", "ServerFault", "Service", "app_from_environment",
-           "create_app"]
+__all__ = ["AnswerResponse", "BodyLimit", "HostCheck", "LOOPBACK_HOSTS", "PAGE_DIR", "PALETTE_MARK", "ServerFault", "Service", "app_from_environment",
+           "create_app", "page_html", "palette_css"]

@@ -132,6 +132,10 @@ class Inertia(_Strict):
 
 
 def _inertia_tag(value: Any) -> str:
+    """The union member of ``params``: a JSON object (validation) or a model instance (serialization; pydantic calls
+    the discriminator on what it serializes too, so an :class:`Inertia` must be named as such)."""
+    if isinstance(value, (Inertia, IsotropicInertia)):
+        return "three-moments" if isinstance(value, Inertia) else "isotropic"
     return "three-moments" if isinstance(value, dict) and ("J1" in value or "J2" in value) else "isotropic"
 
 

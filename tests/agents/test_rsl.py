@@ -221,3 +221,29 @@ def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_
     o_one = same[1].step(torch.ones(6, 4))[0]["policy"]
     o_zero = RslVecEnv(FlatBodyTorchVectorEnv(6), None, seed=5).step(torch.zeros(6, 4))[0]["policy"]
     assert torch.equal(o_big, o_one) and not torch.equal(o_one, o_zero)
+
+
+def test_from_scratch_curve_evaluates_the_policy_it_ships_and_the_chart_reads_the_table(tmp_path):
+    """The curve's last point is the saved agent's held-out evaluation (the run stops at the evaluation past the budget),
+    and the chart is drawn from the saved CSV alone."""
+    import csv
+
+    from agents.evaluate import Agent, run_episodes
+    from agents.rsl import CURVE_HEADER, from_scratch_curve, plot_curve
+
+    table = tmp_path / "curve.csv"
+    rows = from_scratch_curve(tmp_path / "run", table, budget_s=1e-3, eval_every_s=1e-3, episodes=2, eval_seed=10_000,
+                              overrides=["n_envs=8", "num_steps_per_env=8"])
+    assert len(rows) == 1 and rows[0][0] == 64  # stopped after the first iteration
+    with open(table, newline="") as fh:
+        saved = list(csv.reader(fh))
+    assert tuple(saved[0]) == CURVE_HEADER and len(saved) == 2
+    cfg = yaml.safe_load((tmp_path / "run" / "config.yml").read_text())
+    assert cfg["hyperparams"]["residual"] is None and cfg["hyperparams"]["hidden_dims"] == [128, 128]
+    recs = run_episodes(Agent(tmp_path / "run"), episodes=2, seed=10_000)
+    assert float(saved[1][3]) == pytest.approx(np.mean([r["final_distance"] for r in recs]), rel=1e-4)
+    png = tmp_path / "curve.png"
+    plot_curve(table, png, budget_s=1e-3, episodes=2)
+    assert png.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="budget_s"):
+        from_scratch_curve(tmp_path / "bad", table, budget_s=0)

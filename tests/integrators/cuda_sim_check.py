@@ -10,6 +10,7 @@ import types
 import numpy as np
 
 from flatbody_env import load_scene, simulate_batch
+from flatbody_env.integrators import IntegrationError
 from flatbody_env.integrators import batch_solve as bs
 from flatbody_env.integrators import cuda
 from flatbody_env.integrators.compiled_methods import kernel_params
@@ -106,7 +107,50 @@ def main() -> dict:
     report["simulate_batch"] = {"diff": _diff(on_cpu.state, on_gpu.state), "device": on_gpu.device,
                                 "status_equal": bool(np.array_equal(on_cpu.status, on_gpu.status))}
     report["device_functions"] = _device_functions()
+    report["env_step_budget"] = _env_step_budget(body, Y0, P)
+    report["wall_time"] = _wall_time(body, Y0)
     return report
+
+
+def _env_step_budget(body, Y0, P) -> dict:
+    """A DOP853 env step with a budget of 30 RHS evaluations per body: the budget status and the kept states on both targets."""
+    n = Y0.shape[0]
+    Ys, U = np.ascontiguousarray(Y0.T), np.zeros((4, n))
+    O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    bs.batch_env_step(bs.DOP853_KIND, bs.STRANG, Ys, U, P, 0.5, 0.0, 1e-11, 1e-11, np.inf, O1, S1, N1, 30)
+    d_OUT, d_ST, d_NF = cuda.env_step("DOP853-numba", cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P), 0.5,
+                                      rtol=1e-11, atol=1e-11, max_nfev=30, threads_per_block=2)
+    unbounded = cuda.env_step("DOP853-numba", cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P), 0.5, rtol=1e-11,
+                              atol=1e-11, threads_per_block=2)[2].copy_to_host()
+    return {"status_cpu": S1.tolist(), "status_cuda": d_ST.copy_to_host().tolist(), "diff": _diff(O1, d_OUT.copy_to_host()),
+            "nfev_equal": bool(np.array_equal(N1, d_NF.copy_to_host())), "nfev_unbounded": unbounded.tolist()}
+
+
+def _wall_time(body, Y0) -> dict:
+    """``simulate_batch(device="cuda", max_wall_time=...)``: launches of bounded work with the clock read between them (the
+    probe shortened to 100 evaluations, the simulator being slow): a batch that finishes equals the CPU's bit for bit;
+    a horizon far beyond the time ends every body with the ``budget`` status, soon after the time is up."""
+    import time
+
+    from flatbody_env import batch
+
+    batch._PROBE_NFEV = 100
+    y = Y0[:3]
+    cpu = simulate_batch(body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6)
+    gpu = simulate_batch(body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6, max_wall_time=600.0, device="cuda")
+    t0 = time.perf_counter()
+    out = simulate_batch(body, y, times=[1e4], method="DOP853-numba", max_nfev=10**7, max_wall_time=2.0, device="cuda")
+    took = time.perf_counter() - t0
+    try:  # fixed steps know their work: a timed launch of 256 steps predicts far more than 2 s, refused up front
+        simulate_batch(body, y, times=[1e4], method="RK4", step=0.01, max_nfev=10**8, max_wall_time=2.0, device="cuda")
+        refused = ""
+    except IntegrationError as exc:
+        refused = f"{exc.kind}: {exc}"
+    return {"fixed_refused": refused,
+            "finished": {"diff": _diff(cpu.state, gpu.state), "status_cpu": cpu.status.tolist(), "status_cuda": gpu.status.tolist(),
+                         "nfev_equal": bool(np.array_equal(cpu.nfev, gpu.nfev)), "launches": gpu.extra["launches"]},
+            "over": {"status": out.status.tolist(), "seconds": took, "launches": out.extra["launches"], "nfev": out.nfev.tolist(),
+                     "all_nan": bool(np.isnan(out.state).all()), "t_fail": out.t_fail.tolist()}}
 
 
 if __name__ == "__main__":

@@ -61,6 +61,28 @@ def test_simulate_batch_on_cuda_equals_cpu(report):
     assert r["device"] == "cuda" and r["status_equal"] and r["diff"] <= 1e-14
 
 
+def test_cuda_env_step_has_a_budget_of_evaluations(report):
+    """A kernel cannot read the clock: an env step's launch is bounded by each body's budget of RHS evaluations, as on the CPU."""
+    r = report["env_step_budget"]
+    assert set(r["status_cpu"]) == {8} and r["status_cuda"] == r["status_cpu"]  # 8 = "budget"
+    assert r["nfev_equal"] and r["diff"] == 0.0
+    assert max(r["nfev_unbounded"]) > 30  # without the budget the same step takes more
+
+
+def test_simulate_batch_on_cuda_honours_the_wall_clock_budget(report):
+    """Launches of bounded work, the clock read between them: a batch that finishes in time is the CPU's bit for bit, and a
+    horizon far beyond the time ends every body with the ``budget`` status soon after the time is up (2 s; a launch is sized
+    to the time left, the simulator's speed measured as the GPU's would be)."""
+    done, over = report["wall_time"]["finished"], report["wall_time"]["over"]
+    assert done["status_cuda"] == done["status_cpu"] == [0, 0, 0]
+    assert done["diff"] == 0.0 and done["nfev_equal"]
+    assert done["launches"] >= 2  # the probe's 100 evaluations were not enough: re-launched with a larger budget
+    assert over["status"] == [8, 8, 8] and over["all_nan"]
+    assert over["launches"] >= 3 and max(over["nfev"]) < 10**7
+    assert over["seconds"] < 2.0 + 6.0, over  # the last launch is predicted to fit the time left; slack for a loaded machine
+    assert report["wall_time"]["fixed_refused"].startswith("budget: "), report["wall_time"]  # RK4 over the time: refused up front
+
+
 def test_every_device_function_is_retargeted(report):
     """The kernels reach only device functions (:func:`flatbody_env.integrators.jit.retarget` on the CUDA target): no CPU
     dispatcher or plain-Python function is left in the globals their code reads (the simulator would run one silently)."""

@@ -1,4 +1,4 @@
-"""The recording commands: ``record``, ``record-env``, ``record-info``, ``bench recording``."""
+"""The recording commands: ``record``, ``record-env``, ``record-info``, ``record-shots --frames``, ``bench recording``."""
 
 from __future__ import annotations
 
@@ -98,6 +98,36 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     assert main(["bench", "recording", "--steps", "20", "--sizes", "20", "--repeats", "1", "--block", "8", "--frames", "4",
                  "--episode-repeats", "1", "--out-dir", str(out), "--docs", str(tmp_path / "plain.md")]) == 2
     assert "docs:" in capsys.readouterr().err
+
+
+def test_record_shots_frames_writes_the_documented_picture_of_the_rgb_array_frames(tmp_path, capsys):
+    """``record-shots --frames 0,120`` (docs/recording.md's picture): two 256 px frames of FlatBody-v0, seed 7,
+    8 white pixels apart, exactly as ``env.render()`` returns them."""
+    from PIL import Image
+
+    assert main(["record-shots", "--frames", "0,3", "--seed", "7", "--out", str(tmp_path / "img")]) == 0
+    path = tmp_path / "img" / "frame-rgb_array.png"
+    assert f"wrote {path}" in capsys.readouterr().out
+    with Image.open(path) as img:
+        assert img.format == "PNG" and img.size == (2 * 256 + 8, 256)
+        strip = np.asarray(img.convert("RGB"))
+    env = gym.make("FlatBody-v0", render_mode="rgb_array")
+    env.reset(seed=7)
+    env.action_space.seed(7)
+    first = env.render()
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    np.testing.assert_array_equal(strip[:, :256], first)
+    np.testing.assert_array_equal(strip[:, 264:], env.render())
+    assert (strip[:, 256:264] == 255).all() and not np.array_equal(strip[:, :256], strip[:, 264:])
+    # a recording and --frames together, or neither: one line, exit 2
+    assert main(["record-shots", str(tmp_path / "x.rrd"), "--frames", "0,1", "--out", str(tmp_path)]) == 2
+    assert main(["record-shots", "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit) as exc:
+        main(["record-shots", "--frames", "5,3"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("file:") == 2 and "frames:" in err
 
 
 def test_record_shots_bad_input_is_one_line(tmp_path, capsys):

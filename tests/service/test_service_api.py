@@ -163,6 +163,30 @@ def test_anisotropic_body_is_refused_by_the_analysis(client):
     assert_error(client.post("/ellipses", json={"body": body, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic")
 
 
+@pytest.mark.filterwarnings("error::UserWarning")
+def test_three_moment_bodies_serialize_without_pydantic_warnings(client):
+    """``{"J1", "J2", "J3"}`` is serialized as what it is: pydantic calls the ``params`` union's discriminator on the
+    model instance too, and a discriminator that read dicts only sent an ``Inertia`` to the isotropic member's
+    serializer (a ``PydanticSerializationUnexpectedValue`` warning on every such request)."""
+    import warnings
+
+    from pydantic import TypeAdapter
+
+    from flatbody_env.service import models
+
+    three = {**DEFAULT_BODY, "params": {"J1": 1.2, "J2": 0.8, "J3": 1.0}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dumped = models.SpinsRequest.model_validate({"body": three, "s3": 2, "p_theta": 0.5}).model_dump(by_alias=True)
+        assert dumped["body"]["params"] == three["params"]
+        job = TypeAdapter(models.JobRequest).validate_python({"kind": "family", "params": {"body": three}})
+        assert job.params.model_dump(by_alias=True)["body"]["params"] == three["params"]
+        iso = models.SpinsRequest.model_validate({"body": DEFAULT_BODY, "s3": 2, "p_theta": 0.5}).model_dump(by_alias=True)
+        assert iso["body"]["params"] == DEFAULT_BODY["params"]
+        # the request end to end (a warning raised in the endpoint would be a 503, not the analysis' 422)
+        assert_error(client.post("/stability", json={"body": three, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic")
+
+
 @pytest.mark.parametrize("change, field", [
     ({"s3": "two"}, "s3"),
     ({"p_theta": None}, "p_theta"),
@@ -206,7 +230,7 @@ def test_costly_simulations_are_413_naming_the_limit(client, req, field):
 
 def test_integration_failure_is_422_with_when_and_why(client, capsys):
     req = {"scene": "small-rho-bounce", "method": "RK4", "step": 0.5, "t_end": 5.0, "samples": 5}
-    data = assert_error(client.post("/simulate", json=req), 422)
+    data = assert_error(client.post("/simulate", json=req), 422, "scene")  # the scene whose trajectory failed
     assert data["kind"] == "integration" and data["method"] == "RK4"
     assert data["when"] > 0 and "energy" in data["why"]
     # the command says the same (exit 1, one line)
@@ -416,6 +440,28 @@ def test_the_page_and_its_files_are_served(client):
     assert client.get("/docs").status_code == 200
 
 
+def test_the_page_colours_each_variable_as_the_recordings_do(client):
+    """One colour per variable: the page's palette is the recordings' and the frames' (rendering.COLORS), set
+    by the service as CSS properties; page.js and the ellipse's CSS take theirs from it and name none."""
+    import re
+
+    from flatbody_env.env.rendering import COLORS
+
+    page = client.get("/").text
+    served = dict(re.findall(r"--color-(\w+): (#[0-9a-f]{6});", page))
+    assert served == {name: "#%02x%02x%02x" % rgb for name, rgb in COLORS.items()}
+    assert served["lambda"] == "#d62728" and served["mu"] == "#2ca02c"  # λ red, μ green (ϱ blue)
+    js = client.get("/page/page.js").text
+    assert not re.search(r"#[0-9a-fA-F]{6}\b|rgba?\(", js), "page.js names a colour of its own"
+    used = set(re.findall(r'color: "(\w+)"', js))
+    assert used == {"lambda", "mu", "rho", "s3", "energy"} and used <= set(COLORS)
+    css = client.get("/page/page.css").text
+    rules = re.findall(r"svg\.ellipse \.(?:now|axis-line) \{[^}]*\}", css)
+    assert len(rules) == 2, rules
+    for rule in rules:
+        assert "#" not in rule and "rgb" not in rule and "var(--color-" in rule, rule
+
+
 def test_docs_pages_load_their_scripts_from_the_service(client):
     """/docs (Swagger UI) and /redoc name no outside address: their scripts come from the service."""
     import re
@@ -460,3 +506,21 @@ def test_a_used_up_integration_budget_is_413_with_when_and_why():
     assert budget["kind"] == "too-large" and budget["when"] == 12.5 and "budget" in budget["why"]
     other = error_data(IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"))
     assert other["kind"] == "integration" and other["method"] == "RK4"
+    # an answer names the field: the horizon the budget did not reach, the scene whose integration failed
+    budget = error_data(IntegrationError("wall-clock budget of 60 s used up", t=12.5, method="DOP853", kind="budget"), endpoint="simulate")
+    assert budget["field"] == "t_end" and budget["detail"].startswith("t_end: not reached") and "POST /jobs" in budget["detail"]
+    other = error_data(IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"), endpoint="simulate")
+    assert other["field"] == "scene" and other["detail"].startswith("scene: ")
+
+
+@pytest.mark.parametrize("endpoint, field", [("simulate", "scene"), ("ellipses", "body"), ("stability", "body"),
+                                             ("invariants-json", "trajectory"), ("check-job", "params")])
+def test_a_computation_that_fails_names_its_input(endpoint, field):
+    """No 4xx without a field: a failure no narrower field explains names what the endpoint computes with."""
+    from flatbody_env.service.answers import error_data
+
+    for exc in (ZeroDivisionError("float division by zero"), ValueError("singular matrix")):
+        data = error_data(exc, endpoint=endpoint)
+        assert data["field"] == field and data["detail"].startswith(f"{field}: ") and "\n" not in data["detail"], data
+    named = error_data(ValueError("body.params.J: must lie in [1e-06, 1e+06]"), endpoint="ellipses")
+    assert named["field"] == "body.params.J"  # a message that names its field keeps it

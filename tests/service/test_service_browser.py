@@ -167,6 +167,12 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     card = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=simulate]"))
     lines = card.find_elements(By.CSS_SELECTOR, "svg.chart path.line")
     assert {p.get_attribute("data-name") for p in lines} == {"λ", "μ", "ϱ", "s₃", "H"}
+    # each variable in the colour the recordings and the rgb_array frames give it: λ red, μ green, ϱ blue, ...
+    from flatbody_env.env.rendering import COLORS
+
+    palette = {"λ": "lambda", "μ": "mu", "ϱ": "rho", "s₃": "s3", "H": "energy"}
+    drawn = {p.get_attribute("data-name"): browser.execute_script("return getComputedStyle(arguments[0]).stroke", p) for p in lines}
+    assert drawn == {name: "rgb(%d, %d, %d)" % COLORS[key] for name, key in palette.items()}, drawn
     assert all(len(p.get_attribute("d")) > 100 for p in lines)
     assert card.find_element(By.CSS_SELECTOR, "svg.chart").size["width"] > 400
     assert card.find_element(By.CSS_SELECTOR, "svg.ellipse ellipse.now").get_attribute("rx")

@@ -5,8 +5,10 @@ no answer is a 500, every status code, header and content type is one the docume
 answer matches its declared schema, requests that break the schema are refused (4xx, 413 included),
 unsupported methods get 405 with ``Allow``, and schema-valid requests are accepted unless what refused
 them is beyond a schema (``cross_field.CROSS_FIELD``, each entry with a witness request tested in
-``test_cross_field.py``; a failed or over-budget integration). Jobs that a generated request queues are
-cancelled at once (the job endpoints are exercised, not the work).
+``test_cross_field.py``; a failed integration, naming ``scene``, or one over its budget, naming ``t_end``; a
+computation that fails, naming the endpoint's input) — every such refusal names its field, save a request
+over the computing-time limit (``request``). Jobs that a generated request queues are cancelled at once (the
+job endpoints are exercised, not the work).
 
 The cases come from schemathesis' public strategies (``APIOperation.as_strategy``) driven by a plain
 hypothesis test, not from its pytest plugin: the plugin reaches into pytest's private attributes and
@@ -34,18 +36,30 @@ EXAMPLES_PER_OPERATION = 25
 from .cross_field import CROSS_FIELD, CROSS_FIELD_PREFIXES  # noqa: E402  (each entry shown a real refusal: test_cross_field.py)
 
 
+INPUT_FIELDS = ("scene", "body", "trajectory", "params")
+"""What a computation that fails names (``answers.INPUT_FIELDS``): the scene whose integration failed, the body of a failed
+analysis, the trajectory of ``POST /invariants``, a job's ``params``."""
+
+
 def _computed_refusal(response) -> bool:
-    """A schema-valid request refused by what the schema cannot state (:data:`CROSS_FIELD`) or by the computation
-    itself: an integration that failed (422 ``integration``), ran out of its budget or time (413 without a field
-    bound), or found no answer for these inputs."""
+    """A schema-valid request refused by what the schema cannot state (:data:`CROSS_FIELD`) or by the computation itself.
+    Every such refusal names its field; the only one without a single field at fault is a request that took longer than
+    the request time limit (413, ``field`` ``"request"``: ``request: took longer than ... s; send it as a job``)."""
     if response.status_code not in (413, 422):
         return False
     data = response.json()
-    if data.get("kind") == "integration" or (data.get("kind") == "too-large" and data.get("field") in (None, "request")):
+    field, detail, kind = data.get("field"), data.get("detail", ""), data.get("kind")
+    if not field or not detail.startswith(f"{field}:"):
+        return False  # an HTTP 4xx names the field at fault, and its line starts with it
+    if kind == "integration":  # a failed integration: the scene, with the time and the reason
+        return field in INPUT_FIELDS and data.get("why") is not None
+    if kind == "too-large" and field == "request":
+        return detail.startswith("request: took longer than")
+    if kind == "too-large" and field == "t_end" and data.get("why") is not None:  # the integration's budget ran out before t_end
         return True
-    if data.get("field") in CROSS_FIELD or str(data.get("field", "")).startswith(CROSS_FIELD_PREFIXES):
+    if field in INPUT_FIELDS and "the computation failed" in detail:
         return True
-    return "the computation failed" in data.get("detail", "") or data.get("field") is None
+    return field in CROSS_FIELD or field.startswith(CROSS_FIELD_PREFIXES)
 
 
 @pytest.fixture(scope="module")

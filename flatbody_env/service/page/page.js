@@ -546,9 +546,14 @@ function ticks(lo, hi, n = 5) {
   return out;
 }
 
-const COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e"];
+/** The colour of a variable (`lambda`, `mu`, `rho`, `s3`, `energy`, …): the CSS property --color-NAME that the service
+ *  sets from the recordings' palette (flatbody_env.env.rendering.COLORS), so the page, the rerun views and the
+ *  rgb_array frames draw each variable in one colour. */
+function varColor(name) {
+  return getComputedStyle(document.documentElement).getPropertyValue(`--color-${name}`).trim() || "#444";
+}
 
-/** A line chart of series [{name, values}] against t, with axes, ticks, a legend and a time marker. */
+/** A line chart of series [{name, values, color}] (color: a variable's name, see varColor) against t, with axes, ticks, a legend and a time marker. */
 function lineChart(t, series, { title, ylabel, note }) {
   const W = 640, H = 230, L = 64, R = 12, T = 28, B = 40;
   let lo = Infinity, hi = -Infinity;
@@ -580,10 +585,10 @@ function lineChart(t, series, { title, ylabel, note }) {
     const step = Math.max(1, Math.floor(t.length / 2000));
     let d = "";
     for (let i = 0; i < t.length; i += step) d += `${i ? "L" : "M"}${x(t[i]).toFixed(1)},${y(s.values[i]).toFixed(1)}`;
-    root.append(svg("path", { d, class: "line", stroke: s.color || COLORS[k], "data-name": s.name }));
+    root.append(svg("path", { d, class: "line", stroke: varColor(s.color), "data-name": s.name }));
     if (series.length > 1) {
       const lx = W - R - 70 * (series.length - k);
-      root.append(svg("line", { x1: lx, x2: lx + 18, y1: 14, y2: 14, stroke: s.color || COLORS[k], "stroke-width": 2.5 }));
+      root.append(svg("line", { x1: lx, x2: lx + 18, y1: 14, y2: 14, stroke: varColor(s.color), "stroke-width": 2.5 }));
       root.append(svg("text", { x: lx + 22, y: 18, class: "legend" }, s.name));
     }
   });
@@ -625,10 +630,10 @@ function showTrajectory(job) {
   let drift = 0;
   for (const h of traj.energy) drift = Math.max(drift, Math.abs(h - H0));
   const charts = [
-    lineChart(t, [{ name: "λ", values: st.lambda }, { name: "μ", values: st.mu }, { name: "ϱ", values: st.rho }],
+    lineChart(t, [{ name: "λ", values: st.lambda, color: "lambda" }, { name: "μ", values: st.mu, color: "mu" }, { name: "ϱ", values: st.rho, color: "rho" }],
               { title: "shape: the stretches λ, μ and the thickness ϱ", ylabel: "λ, μ, ϱ (dimensionless)" }),
-    lineChart(t, [{ name: "s₃", values: st.s3, color: COLORS[3] }], { title: "spin s₃", ylabel: "s₃ (dimensionless)" }),
-    lineChart(t, [{ name: "H", values: traj.energy, color: COLORS[4] }],
+    lineChart(t, [{ name: "s₃", values: st.s3, color: "s3" }], { title: "spin s₃", ylabel: "s₃ (dimensionless)" }),
+    lineChart(t, [{ name: "H", values: traj.energy, color: "energy" }],
               { title: "energy H", ylabel: "H (dimensionless)", note: `H(0) = ${fmt(H0, 10)}; largest |H(t) − H(0)| = ${fmt(drift, 3)}` +
                 (drift < ZERO_TOL ? " (within round-off)" : "") }),
   ];

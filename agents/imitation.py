@@ -1,0 +1,393 @@
+"""Plan, then imitate: cross-entropy plans of open-loop residuals, cloned into a residual agent's policy.
+
+Used for ``FlatBodySlow-v0`` (docs/agents.md), where the LQR fails on the slowest targets and PPO alone
+found only part of the strategy that reaches them (tumbling the body, s1, s2 ≠ 0, moves the slow
+in-plane shape through the centrifugal terms; zero at linear order, so the LQR never uses it). Three
+steps, each a command:
+
+1. :func:`plan` (``python -m agents.imitation plan``): for each seeded training episode, a cross-entropy
+   search over an open-loop residual u(t) — piecewise constant on ``knots`` equal intervals of the
+   episode, every action component — executed exactly as the agent's own residual is
+   (:class:`agents.heuristic.ResidualAction` of the run folder it will be cloned into: the LQR plus the
+   gated residual). The cost of a plan is 10·max(d_T − ``reach``, 0) + 0.05·mean ‖u‖² (d_T the task
+   distance on the last step, 10 if the episode ended early): reach within ``reach`` of the target,
+   then spend as little residual as possible; an episode the LQR alone ends within ``reach`` costs 0
+   with the zero plan, the least possible, and is not searched. All seeds × samples of a chunk run as one batch of :class:`FlatBodyVectorEnv` (every
+   sample of a seed is reset with that seed: the same target and start).
+2. :func:`clone` (``python -m agents.imitation clone``): the successful plans are replayed, their
+   (observation, residual) pairs recorded, and the policy mean of an SB3 PPO run (its weights as the
+   start, its ``vecnormalize.pkl`` observation statistics) is fitted to them by least squares (Adam,
+   minibatches). The result is a run folder (``config.yml``, ``vecnormalize.pkl``, ``model.zip``).
+3. PPO fine-tunes it on the task (``flatbody train --trained-agent`` or ``python -m agents.curriculum
+   --trained-agent``): the clone alone is worse than its start (an open-loop plan is a function of time,
+   the policy of the state), but it starts PPO where the nonlinear strategy is used.
+
+A second round plans *corrections* of the fine-tuned run's own policy (``on_policy``: the executed
+residual is clip(policy(obs) + u(t), −1, 1), u = 0 being the run alone), clones them into that run and
+fine-tunes again (expert iteration).
+
+Plans are saved as ``.npz`` without pickles (:class:`Plans`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from flatbody_env.physics import validation
+
+REACH_COST = 10.0
+"""Weight of the final distance beyond ``reach`` in a plan's cost."""
+EFFORT_COST = 0.05
+"""Weight of the residual's mean squared size in a plan's cost."""
+ENDED_DISTANCE = 10.0
+"""The final distance charged to an episode that ended before its last step (left the domain, failed)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanSettings:
+    """The cross-entropy search of :func:`plan`.
+
+    knots : int
+        Piecewise-constant intervals of the open-loop residual over the episode.
+    samples : int
+        Plans drawn per seed and iteration.
+    iterations : int
+        Cross-entropy iterations.
+    elite : int
+        Best plans per seed whose mean and spread the next draws use (smoothed 0.7 new / 0.3 old).
+    init_std : float
+        Initial spread of every knot (the mean starts at 0: the LQR alone).
+    reach : float
+        Final distance below which a plan only spends less (the cost's knee; ≤ the task's tolerance).
+    chunk : int
+        Seeds planned in one batch (``chunk × samples`` bodies).
+    seed : int
+        Seed of the draws.
+    """
+
+    knots: int = 16
+    samples: int = 64
+    iterations: int = 40
+    elite: int = 8
+    init_std: float = 0.5
+    reach: float = 0.02
+    chunk: int = 32
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        validation.integer("knots", self.knots, low=1, high=400)
+        validation.integer("samples", self.samples, low=2, high=4096)
+        validation.integer("iterations", self.iterations, low=1, high=10_000)
+        validation.integer("elite", self.elite, low=1, high=self.samples)
+        validation.number("init_std", self.init_std, low=0.0, high=10.0)
+        validation.number("reach", self.reach, low=0.0, high=10.0)
+        validation.integer("chunk", self.chunk, low=1, high=4096)
+        validation.integer("seed", self.seed, low=0, high=validation.MAX_SEED)
+        if self.chunk * self.samples > 1 << 17:
+            raise ValueError(f"chunk, samples: at most {1 << 17} bodies in one batch, got {self.chunk} x {self.samples}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Plans:
+    """Plans of :func:`plan`: ``seeds`` (S,), ``final_distance`` (S,) of each best plan, ``knots`` (S, K, n)
+    (the residual's value on each of the K intervals, n action components), the ``env_id`` and the run
+    folder whose residual form executed them (``model``)."""
+
+    env_id: str
+    model: str
+    seeds: np.ndarray
+    final_distance: np.ndarray
+    knots: np.ndarray
+    on_policy: bool = False
+    """The plans correct ``model``'s own policy (executed residual: policy + plan) instead of replacing it."""
+
+    def save(self, path: str | Path) -> None:
+        from flatbody_env.output import atomic_path
+
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, env_id=np.str_(self.env_id), model=np.str_(self.model), seeds=self.seeds,
+                         final_distance=self.final_distance, knots=self.knots, on_policy=np.bool_(self.on_policy))
+
+    @classmethod
+    def load(cls, path: str | Path) -> Plans:
+        try:
+            with np.load(path, allow_pickle=False) as d:
+                return cls(env_id=str(d["env_id"]), model=str(d["model"]), seeds=d["seeds"].astype(np.int64),
+                           final_distance=d["final_distance"].astype(np.float64), knots=d["knots"].astype(np.float64),
+                           on_policy=bool(d["on_policy"]) if "on_policy" in d.files else False)
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"plans: cannot read {str(path)[:80]!r} as plans ({type(exc).__name__}: {str(exc)[:80]})") from None
+
+    def __add__(self, other: Plans) -> Plans:
+        if ((self.env_id, self.model, self.on_policy) != (other.env_id, other.model, other.on_policy)
+                or self.knots.shape[1:] != other.knots.shape[1:]):
+            raise ValueError("plans: can only join plans of the same task, run folder, kind and shape")
+        return Plans(env_id=self.env_id, model=self.model, seeds=np.concatenate([self.seeds, other.seeds]),
+                     final_distance=np.concatenate([self.final_distance, other.final_distance]),
+                     knots=np.concatenate([self.knots, other.knots]), on_policy=self.on_policy)
+
+
+def _residual_agent(model: str | Path):
+    """The run folder's :class:`agents.evaluate.Agent` (for its task and residual form); refuses a run
+    without an LQR/passivity residual in additive mode (the plan is an additive residual)."""
+    from agents.evaluate import Agent
+
+    agent = Agent(model)
+    if agent._base is None or agent._base.mode != "additive":
+        raise ValueError(f"model: {str(model)[:80]!r} is not an additive residual agent (residual_mode: additive)")
+    return agent
+
+
+def rollout(venv, residual, seeds: np.ndarray, knots: np.ndarray, *, record: bool = False, policy=None):
+    """Run one episode per row of ``knots`` (B, K, n) from the seeds (B,) under the LQR plus the open-loop
+    residual (plus ``policy(obs)``, the agent's own residual, when given: the plan corrects it); returns the
+    final distances (B,), the mean squared plan (B,) and, with ``record``, the observations (T, B, obs) and
+    executed residuals (T, B, n) of every step."""
+    steps = venv.max_episode_steps
+    b, k = knots.shape[:2]
+    obs, _ = venv.reset(seed=[int(s) for s in seeds])
+    alive = np.ones(b, dtype=bool)
+    final = np.full(b, ENDED_DISTANCE)
+    effort = np.zeros(b)
+    seen_o, seen_a = [], []
+    for t in range(steps):
+        u = knots[:, t * k // steps, :]
+        effort += np.sum(u * u, axis=1)
+        if policy is not None:
+            u = np.clip(policy(obs) + u, -1.0, 1.0)
+        if record:
+            seen_o.append(obs.copy())
+            seen_a.append(u.copy())
+        obs, _, term, trunc, info = venv.step(residual(obs, u))
+        ended = alive & (term | trunc)
+        final = np.where(ended, np.where(term, ENDED_DISTANCE, info["distance"]), final)
+        alive &= ~(term | trunc)
+    recorded = (np.array(seen_o), np.array(seen_a)) if record else None
+    return final, effort / steps, recorded
+
+
+def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_policy: bool = False, progress: bool = True) -> Plans:
+    """Cross-entropy plans (module docstring, step 1) for the seeded episodes of ``model``'s task.
+
+    Parameters
+    ----------
+    model : str or Path
+        A run folder of an additive residual agent: its task (``env_id``, keywords) and residual form
+        (:class:`agents.heuristic.ResidualAction`) execute the plans.
+    seeds : sequence of int
+        Episode seeds (keep them apart from the evaluation seeds).
+    settings : PlanSettings, optional
+    on_policy : bool
+        Plan corrections of ``model``'s own policy (executed residual: clip(policy + plan, −1, 1)) — a
+        second round after a fine-tuned run — instead of residuals that replace it.
+
+    Returns
+    -------
+    Plans
+        The best plan of every seed (by cost) and its final distance.
+    """
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+    from flatbody_env.progress import progress_bar
+
+    s = settings or PlanSettings()
+    agent = _residual_agent(model)
+    seeds = np.asarray([validation.integer("seeds", int(x), low=0, high=validation.MAX_SEED) for x in seeds], dtype=np.int64)
+    if seeds.size == 0:
+        raise ValueError("seeds: give at least one seed")
+    probe = FlatBodyVectorEnv(num_envs=1, **agent.env_kwargs)
+    n = probe.single_action_space.shape[0]
+    probe.close()
+    policy = agent.policy_actions if on_policy else None
+    # The zero plan (the LQR alone, or the run alone with on_policy) first, for every seed: where it ends
+    # within ``reach`` its cost is 0, the least any plan can cost, so that seed is not searched.
+    venv = FlatBodyVectorEnv(num_envs=seeds.size, autoreset_mode="SameStep", **agent.env_kwargs)
+    zero_d, _, _ = rollout(venv, agent._base, seeds, np.zeros((seeds.size, s.knots, n)), policy=policy)
+    venv.close()
+    final_d, final_u = zero_d.copy(), np.zeros((seeds.size, s.knots, n))
+    todo = np.flatnonzero(zero_d > s.reach)
+    rng = np.random.default_rng(s.seed)
+    bar = progress_bar(total=int(np.ceil(todo.size / s.chunk)) * s.iterations, desc="plans", unit="iteration", enabled=progress)
+    for lo in range(0, todo.size, s.chunk):
+        rows_todo = todo[lo:lo + s.chunk]
+        chunk = seeds[rows_todo]
+        m = chunk.size
+        venv = FlatBodyVectorEnv(num_envs=m * s.samples, autoreset_mode="SameStep", **agent.env_kwargs)
+        mean = np.zeros((m, s.knots, n))
+        std = np.full((m, s.knots, n), s.init_std)
+        best_cost = REACH_COST * (zero_d[rows_todo] - s.reach)
+        best_d, best_u = zero_d[rows_todo].copy(), np.zeros((m, s.knots, n))
+        batch_seeds = np.repeat(chunk, s.samples)
+        for _ in range(s.iterations):
+            u = np.clip(mean[:, None] + std[:, None] * rng.standard_normal((m, s.samples, s.knots, n)), -1.0, 1.0)
+            u[:, 0] = best_u  # the best so far stays in the draw
+            d, effort, _ = rollout(venv, agent._base, batch_seeds, u.reshape(m * s.samples, s.knots, n), policy=policy)
+            cost = (REACH_COST * np.maximum(d - s.reach, 0.0) + EFFORT_COST * effort).reshape(m, s.samples)
+            order = np.argsort(cost, axis=1)[:, : s.elite]
+            elite = np.take_along_axis(u, order[:, :, None, None], axis=1)
+            mean = 0.7 * elite.mean(axis=1) + 0.3 * mean
+            std = np.maximum(0.7 * elite.std(axis=1) + 0.3 * std, 0.02)
+            rows = np.arange(m)
+            c0, d0 = cost[rows, order[:, 0]], d.reshape(m, s.samples)[rows, order[:, 0]]
+            better = c0 < best_cost
+            best_cost[better], best_d[better] = c0[better], d0[better]
+            best_u[better] = u[rows, order[:, 0]][better]
+            bar.update(1)
+        venv.close()
+        final_d[rows_todo], final_u[rows_todo] = best_d, best_u
+    bar.close()
+    return Plans(env_id=agent.env_id, model=str(model), seeds=seeds, final_distance=final_d, knots=final_u, on_policy=on_policy)
+
+
+def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float | None = None, epochs: int = 20,
+          batch_size: int = 1024, learning_rate: float = 3e-4, seed: int = 0, progress: bool = True) -> dict:
+    """Fit ``model``'s policy mean to the successful plans (module docstring, step 2); write the run folder ``out``.
+
+    Parameters
+    ----------
+    plans : Plans
+        Plans made for ``model``'s residual form (:func:`plan`).
+    model : str or Path
+        The SB3 PPO run folder to start from (weights, ``vecnormalize.pkl``, ``config.yml``).
+    out : str or Path
+        The new run folder (refused if it holds a run, as ``flatbody train`` refuses).
+    tolerance : float, optional
+        Plans whose final distance is at most this are cloned (default: the task's success tolerance).
+
+    Returns
+    -------
+    dict
+        ``plans`` (cloned), ``pairs`` (observation, residual), ``replayed_success`` (the replayed plans
+        that end within the tolerance: 1.0 unless the environment changed), ``mse_start`` and ``mse_end``
+        (the policy mean's squared error against the residuals before and after the fit).
+    """
+    import torch
+    from stable_baselines3 import PPO
+
+    from agents.train import check_out
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+    from flatbody_env.progress import progress_bar
+
+    validation.integer("epochs", epochs, low=1, high=10_000)
+    validation.integer("batch_size", batch_size, low=1, high=1 << 20)
+    validation.number("learning_rate", learning_rate, low=1e-8, high=1.0)
+    agent = _residual_agent(model)
+    folder = Path(model)
+    if agent.algo != "ppo" or not (folder / "vecnormalize.pkl").is_file():
+        raise ValueError(f"model: {str(model)[:80]!r} is not a PPO run with normalised observations (vecnormalize.pkl)")
+    if plans.env_id != agent.env_id:
+        raise ValueError(f"plans: made for {plans.env_id}, the model is a {agent.env_id} run")
+    tol = agent._base.task.success_tolerance if tolerance is None else validation.number("tolerance", tolerance, low=0.0, high=10.0)
+    keep = plans.final_distance <= tol
+    if not keep.any():
+        raise ValueError(f"plans: none ends within {tol:g}; nothing to clone")
+    out = check_out(out, force=False)
+    venv = FlatBodyVectorEnv(num_envs=int(keep.sum()), autoreset_mode="SameStep", **agent.env_kwargs)
+    if plans.on_policy and Path(plans.model).resolve() != folder.resolve():
+        raise ValueError(f"plans: corrections of {plans.model!r}'s policy replay only on that run, not {str(model)[:80]!r}")
+    final, _, (obs, act) = rollout(venv, agent._base, plans.seeds[keep], plans.knots[keep], record=True,
+                                   policy=agent.policy_actions if plans.on_policy else None)
+    venv.close()
+    obs = obs.reshape(-1, obs.shape[-1]).astype(np.float32)
+    act = act.reshape(-1, act.shape[-1]).astype(np.float32)
+
+    import pickle
+
+    from agents.numpy_policy import check_trusted
+
+    check_trusted(folder, "model.zip and vecnormalize.pkl (pickle-based SB3 files)")
+    torch.manual_seed(seed)
+    ppo = PPO.load(str(folder / "model.zip"), device="cpu")
+    with (folder / "vecnormalize.pkl").open("rb") as fh:
+        vn = pickle.load(fh)
+    x = torch.as_tensor(vn.normalize_obs(obs), dtype=torch.float32)
+    y = torch.as_tensor(act)
+    pol = ppo.policy
+
+    def mean_action(xb):
+        return pol.action_net(pol.mlp_extractor.forward_actor(pol.extract_features(xb, pol.pi_features_extractor)))
+
+    with torch.no_grad():
+        mse_start = float(((mean_action(x) - y) ** 2).mean())
+    params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
+    opt = torch.optim.Adam(params, lr=learning_rate)
+    for _ in progress_bar(range(epochs), desc="clone", unit="epoch", enabled=progress):
+        perm = torch.randperm(len(x))
+        for i in range(0, len(x), batch_size):
+            b = perm[i:i + batch_size]
+            loss = ((mean_action(x[b]) - y[b]) ** 2).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    with torch.no_grad():
+        mse_end = float(((mean_action(x) - y) ** 2).mean())
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("config.yml", "vecnormalize.pkl"):
+        shutil.copy(folder / name, out / name)
+    ppo.save(str(out / "model.zip"))
+    from agents.numpy_policy import remember_run
+
+    remember_run(out)
+    return {"plans": int(keep.sum()), "pairs": int(len(x)), "replayed_success": float(np.mean(final <= tol)),
+            "mse_start": mse_start, "mse_end": mse_end}
+
+
+def _seed_range(text: str) -> list[int]:
+    """``LO:HI`` (HI excluded) → the seeds."""
+    try:
+        lo, hi = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds: expected LO:HI, got {text!r}") from None
+    if not 0 <= lo < hi <= validation.MAX_SEED or hi - lo > 100_000:
+        raise argparse.ArgumentTypeError(f"seeds: need 0 <= LO < HI, at most 100000 seeds, got {text!r}")
+    return list(range(lo, hi))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agents.imitation", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="step", required=True)
+    p = sub.add_parser("plan", help="cross-entropy plans for seeded episodes of a residual agent's task")
+    p.add_argument("--model", required=True, help="run folder of an additive residual agent (its task and residual)")
+    p.add_argument("--seeds", required=True, type=_seed_range, help="LO:HI, training seeds (HI excluded)")
+    p.add_argument("--out", required=True, help="plans file (.npz)")
+    for name, default in ((f, PlanSettings.__dataclass_fields__[f].default) for f in ("knots", "samples", "iterations", "elite", "chunk", "seed")):
+        p.add_argument(f"--{name}", type=int, default=default)
+    p.add_argument("--init-std", type=float, default=PlanSettings.init_std)
+    p.add_argument("--reach", type=float, default=PlanSettings.reach)
+    p.add_argument("--on-policy", action="store_true", help="plan corrections of the run's own policy (a second round)")
+    c = sub.add_parser("clone", help="fit a PPO run's policy to the successful plans")
+    c.add_argument("--plans", required=True, nargs="+", help="plans files (joined)")
+    c.add_argument("--model", required=True, help="the PPO run folder to start from")
+    c.add_argument("--out", required=True, help="the new run folder")
+    c.add_argument("--epochs", type=int, default=20)
+    args = ap.parse_args(argv)
+    try:
+        if args.step == "plan":
+            settings = PlanSettings(knots=args.knots, samples=args.samples, iterations=args.iterations, elite=args.elite,
+                                    init_std=args.init_std, reach=args.reach, chunk=args.chunk, seed=args.seed)
+            plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
+            plans.save(args.out)
+            tol = _residual_agent(args.model)._base.task.success_tolerance
+            print(f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
+                  f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}")
+        else:
+            plans = Plans.load(args.plans[0])
+            for f in args.plans[1:]:
+                plans = plans + Plans.load(f)
+            res = clone(plans, args.model, args.out, epochs=args.epochs)
+            print(f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
+                  f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}")
+    except ValueError as exc:
+        print(f"python -m agents.imitation: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
