@@ -1,4 +1,4 @@
-"""``flatbody bench time-to-goal``: wall time until the residual agent is good, SB3's PPO against rsl_rl's PPO.
+"""``flatbody bench train --to-goal``: wall time until the residual agent is good, SB3's PPO against rsl_rl's PPO.
 
 Both trainers run one after the other in the same process, each with its default configuration for
 ``FlatBody-v0`` (SB3: the shipped entry of ``agents/hyperparams/ppo.yml``, 32 envs, gSDE; rsl_rl:
@@ -244,7 +244,7 @@ def plot(json_path: Path, png_path: Path) -> None:
     ax_d.set_ylabel("mean final distance")
     ax_s.set_ylabel("success rate")
     ax_d.legend(fontsize=8)
-    fig.suptitle("flatbody bench time-to-goal (same run)", fontsize=10)
+    fig.suptitle("flatbody bench train --to-goal (same run)", fontsize=10)
     bottom = add_caption(fig, CAPTION.format(episodes=bench.episodes, eval_seed=bench.eval_seed, success=bench.success_goal,
                                              distance=bench.distance_goal), fontsize=7)
     fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
@@ -253,7 +253,7 @@ def plot(json_path: Path, png_path: Path) -> None:
 
 
 def markdown(bench: GoalBenchmark) -> str:
-    """The docs' table of this run (``flatbody bench time-to-goal --docs docs/agents.md`` writes it there)."""
+    """The docs' table of this run (``flatbody bench train --to-goal --docs docs/agents.md`` writes it there)."""
 
     def at(w: float | None, t: int | None) -> str:
         return f"{w:.1f} s ({t} steps)" if w is not None else "not reached"

@@ -17,7 +17,10 @@ LQR residual and the policy's tensors on one torch device, and no hand-written P
   ``noise_hold_steps`` rollout steps (temporally correlated exploration, as SB3's gSDE); ``normalize_reward``
   divides the training rewards by the running std of the discounted returns (SB3's ``VecNormalize``).
 * :func:`live_policy` — the training actor as a batch policy of :func:`agents.evaluate.run_episodes` (the
-  evaluations of ``flatbody bench time-to-goal``, through ``train_rsl``'s ``callback``).
+  evaluations of ``flatbody bench train --to-goal``, through ``train_rsl``'s ``callback``).
+* ``residual: null`` (:data:`FROM_SCRATCH`): no LQR — the policy's output clipped to [−1, 1] is the control;
+  :func:`from_scratch_curve` trains it for a wall-time budget and writes its held-out success and final distance
+  against wall time, :func:`plot_curve` draws that table (docs/agents.md, "From scratch").
 * :func:`export_sb3` — the trained actor as an SB3 ``PPO`` ``model.zip`` (same MLP; rsl_rl's observation
   normaliser folded into the first layer, exactly), so ``flatbody evaluate`` and ``demo`` run it unchanged
   (``config.yml`` says ``algo: ppo``, the format of the model file, and ``trainer: rsl-ppo``).

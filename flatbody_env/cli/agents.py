@@ -288,6 +288,8 @@ def register(sub) -> None:
 
 
 def _bench_train(args) -> int:
+    if args.to_goal:
+        return _bench_time_to_goal(args)
     from agents.benchmark import run
 
     b = run(timesteps=args.timesteps, repeats=args.repeats, seed=args.seed, out_dir=args.out_dir, overrides=args.hyperparams or [])
@@ -330,21 +332,20 @@ def _bench_time_to_goal(args) -> int:
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1; share in env + LQR")
+    p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1, share in env + LQR; "
+                             "--to-goal: wall time to a good agent, SB3 vs rsl_rl")
     p.add_argument("--timesteps", type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS), default=64_000, help="environment steps per run")
     p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="runs per environment; the fastest is kept")
     p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of both runs")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
     p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")
-    p.set_defaults(handler=_bench_train)
-    p = bench_sub.add_parser("time-to-goal", help="wall time to a good residual agent: SB3's PPO vs rsl_rl's PPO (rsl-ppo), same run")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="training seed of both runs")
+    p.add_argument("--to-goal", action="store_true",
+                   help="instead: wall time to a good residual agent, SB3's PPO vs rsl_rl's PPO (rsl-ppo) in the same run "
+                        "(time_to_goal.json/.csv/.png; with --docs the <!-- bench:time-to-goal --> table)")
     p.add_argument("--max-timesteps", type=int_at_least("max_timesteps", 1, validation.MAX_TIMESTEPS), default=3_000_000,
-                   help="stop a trainer here if it has not reached the goal")
+                   help="--to-goal: stop a trainer here if it has not reached the goal")
     p.add_argument("--eval-every", type=int_at_least("eval_every", 1, validation.MAX_TIMESTEPS), default=50_000,
-                   help="environment steps between evaluations (rounded up to whole rollouts)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1, 10_000), default=20, help="held-out episodes per evaluation (seeds 50000...)")
-    p.add_argument("--out-dir", default="bench", help="where to write time_to_goal.json/.csv/.png")
-    p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:time-to-goal --> markers in FILE.md")
-    p.set_defaults(handler=_bench_time_to_goal)
+                   help="--to-goal: environment steps between evaluations (rounded up to whole rollouts)")
+    p.add_argument("--episodes", type=int_at_least("episodes", 1, 10_000), default=20, help="--to-goal: held-out episodes per evaluation (seeds 50000...)")
+    p.set_defaults(handler=_bench_train)

@@ -1,4 +1,4 @@
-"""``flatbody bench time-to-goal`` (agents/goal_benchmark.py): the goal and LQR criteria, the files and the docs table,
+"""``flatbody bench train --to-goal`` (agents/goal_benchmark.py): the goal and LQR criteria, the files and the docs table,
 checked on made-up curves (the race itself is a benchmark, run by hand: docs/agents.md)."""
 
 from __future__ import annotations
@@ -73,3 +73,14 @@ def test_the_committed_chart_explains_itself_and_nothing_overlaps(tmp_path, monk
     finally:
         monkeypatch.undo()
         plt.close(fig)
+
+
+@pytest.mark.slow
+def test_bench_train_to_goal_writes_its_files(tmp_path):
+    """``flatbody bench train --to-goal`` end to end on a tiny budget: both trainers, the three files."""
+    from flatbody_env.cli.main import main
+
+    assert main(["bench", "train", "--to-goal", "--max-timesteps", "64", "--eval-every", "64", "--episodes", "1",
+                 "--out-dir", str(tmp_path)]) == 0
+    for name in ("time_to_goal.json", "time_to_goal.csv", "time_to_goal.png"):
+        assert (tmp_path / name).stat().st_size > 0

@@ -187,25 +187,24 @@ def test_residual_policy_beats_the_lqr_on_held_out_seeds(tmp_path):
 def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_path):
     """``--hyperparams residual=null``: the policy's clipped action is the executed control (no LQR anywhere), and the
     exported agent, the live policy and the adapter agree on it."""
-    from agents.evaluate import Agent
-    from agents.rsl import live_policy
-    from flatbody_env.cli.main import main
-
-    out = tmp_path / "scratch"
-    assert main(["train", "--algo", "rsl-ppo", "--num-envs", "8", "--n-timesteps", "64", "--device", "cpu", "--seed", "2", "--out", str(out),
-                 "--hyperparams", "residual=null", "num_steps_per_env=8", "init_std=0.5", "--no-progress"]) == 0
-    cfg = yaml.safe_load((out / "config.yml").read_text())
-    assert cfg["hyperparams"]["residual"] is None and cfg["hyperparams"]["init_std"] == 0.5
-    agent = Agent(out)
-    assert agent.residual is None and agent._base is None
-    obs = _observations(n=6, steps=2)[-1].numpy()
     import contextlib
     import io
 
     from rsl_rl.runners import OnPolicyRunner
 
-    actor = torch.load(out / "rsl_model.pt", weights_only=False)
+    from agents.evaluate import Agent
+    from agents.rsl import live_policy
+    from flatbody_env.cli.main import main
 
+    out = tmp_path / "scratch"
+    assert main(["train", "--algo", "rsl-ppo", "--num-envs", "8", "--n-timesteps", "64", "--device", "cpu", "--seed", "2",
+                 "--out", str(out), "--hyperparams", "residual=null", "num_steps_per_env=8", "init_std=0.5", "--no-progress"]) == 0
+    cfg = yaml.safe_load((out / "config.yml").read_text())
+    assert cfg["hyperparams"]["residual"] is None and cfg["hyperparams"]["init_std"] == 0.5
+    agent = Agent(out)
+    assert agent.residual is None and agent._base is None
+    obs = _observations(n=6, steps=2)[-1].numpy()
+    actor = torch.load(out / "rsl_model.pt", weights_only=False)
     venv = RslVecEnv(FlatBodyTorchVectorEnv(6), None, seed=0)
     hp = {**DEFAULTS, "residual": None, "num_steps_per_env": 8, "init_std": 0.5}
     with contextlib.redirect_stdout(io.StringIO()):
@@ -247,3 +246,23 @@ def test_from_scratch_curve_evaluates_the_policy_it_ships_and_the_chart_reads_th
     assert png.stat().st_size > 10_000
     with pytest.raises(ValueError, match="budget_s"):
         from_scratch_curve(tmp_path / "bad", table, budget_s=0)
+
+
+def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tmp_path, monkeypatch):
+    """docs/img/from_scratch.png is drawn from docs/img/from_scratch.csv alone; its caption says what the lines are."""
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+
+    from agents.rsl import plot_curve
+    from flatbody_env.chart_text import caption_text, layout_problems
+
+    table = Path(__file__).resolve().parents[2] / "docs" / "img" / "from_scratch.csv"
+    kept = []
+    monkeypatch.setattr(plt, "close", lambda fig=None: kept.append(fig))
+    plot_curve(table, tmp_path / "c.png", note="Seed 0.")
+    fig = kept[0]
+    assert layout_problems(fig) == []
+    text = caption_text(fig)
+    assert "held-out" in text and "goal" in text and "no LQR" in text
+    assert len(fig.axes[0].lines[0].get_xdata()) == len(table.read_text().splitlines()) - 1

@@ -102,8 +102,6 @@ CASES = {
                          _files("bt/train_benchmark.json", "bt/train_benchmark.png"), False),
     ("targets-table",): (["--n-lambda", "4", "--n-aspect", "4", "--workers", "1", "--no-progress", "--out", "{tmp}/t.npz"], _files("t.npz"), False),
     ("lqr-table",): (["--n-lambda", "2", "--n-w", "2", "--workers", "1", "--out", "{tmp}/k.npz"], _files("k.npz"), False),
-    ("bench", "time-to-goal"): (["--max-timesteps", "64", "--eval-every", "64", "--episodes", "1", "--out-dir", "{tmp}/btg"],
-                                _files("btg/time_to_goal.json", "btg/time_to_goal.csv", "btg/time_to_goal.png"), True),
     ("bench", "integrators"): (["--quick", "--repeats", "1", "--max-run-s", "0.2", "--no-compile", "--out", "{tmp}/bi"],
                                _files("bi/bench_integrators.json", "bi/bench_integrators.png"), True),
     ("bench", "service"): (["--clients", "1", "--requests", "2", "--seconds", "2", "--workers", "1", "--out-dir", "{tmp}/bs"],
