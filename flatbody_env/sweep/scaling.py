@@ -85,10 +85,11 @@ def break_even_grid(cost_per_point: float, workers: int, *, t0: float, overhead:
 
 
 def _spec(grid: int, chunk: int) -> dict[str, Any]:
+    from analysis.families import MAP_LAM_RANGE, MAP_MU_RANGE
     from flatbody_env.scene import load_scene
 
-    return {"kind": "stability-map", "body": load_scene("default").body.to_dict(), "lam_range": [1.02, 3.0], "mu_range": [0.3, 3.0],
-            "grid": grid, "chunk": chunk}
+    return {"kind": "stability-map", "body": load_scene("default").body.to_dict(), "lam_range": list(MAP_LAM_RANGE),
+            "mu_range": list(MAP_MU_RANGE), "grid": grid, "chunk": chunk}
 
 
 def _timed_cluster_run(tasks: list[Task], workers: int) -> dict[str, float]:
