@@ -13,8 +13,8 @@ beside the model::
 
 Training uses :class:`agents.vec_env.FlatBodySB3VecEnv` (the natively batched env) wrapped in
 ``VecMonitor`` and ``VecNormalize``; nothing integrator-specific is passed: the env's default
-integrator runs. ``torch.set_num_threads(1)`` by default (``--threads N``; docs/agents.md: on a loaded
-2-core machine two threads made half the runs 8-12 times slower, and none faster).
+integrator runs. ``torch.set_num_threads(1)`` by default (``--threads N``; more threads made no run faster and
+many slower on a loaded machine: measured figures in docs/agents.md, "One torch thread").
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """``flatbody bench integrators``: same-run speed and accuracy figures of the integrators.
 
 Not a timed test: it prints figures and writes them to JSON/CSV (+ PNG). Everything is measured
-side by side in one process (ratios are the reliable part on a shared 2-core machine).
+side by side in one process (ratios are the reliable part on a shared machine; the figures: the
+tables of docs/integrators.md).
 
 1. *regular* scene, t = 100: wall time (min of repeats) of each method against its final-state
    error; the wall time at the target error (1e-9) by log-log interpolation between the two

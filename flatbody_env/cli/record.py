@@ -30,7 +30,8 @@ def _rrd_path(text: str) -> str:
 
 
 RECORDING_BYTES_PER_STEP = 2048
-"""Upper estimate of a recording's size per logged step (measured: ~0.9 KB with every tensor view)."""
+"""Upper estimate of a recording's size per logged step, every tensor view included (the measured size:
+``record_trajectory``'s MB in the table of ``flatbody bench recording``, docs/recording.md)."""
 
 
 def check_space(path: str, steps: int, files: int = 1) -> None:

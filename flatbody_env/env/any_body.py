@@ -11,8 +11,8 @@ observation (:data:`BODY_OBSERVATION_NAMES`), so that one policy can serve every
 thickness ϱ* = (a/b)^{1/3} (eq. (54)) follows from them.
 
 Measured for bodies of these ranges (12 bodies × 40 shapes): 50–70 % of the shapes give a stable
-ellipse and 5–50 % of those pass the filter, so a reset tries about 5–30 shapes and costs 15–60 ms
-(a Riccati solve per stable shape).
+ellipse and 5–50 % of those pass the filter, so a reset tries about 5–30 shapes, with a Riccati solve
+per stable shape (the reset's cost: docs/tasks.md, ``FlatBodyAnyBody-v0``).
 
 References
 ----------

@@ -3,8 +3,9 @@
 Single environments (``gym.make``, so each carries the same PassiveEnvChecker, OrderEnforcing and
 TimeLimit wrappers): ``FlatBody-v0`` against gymnasium's ``Pendulum-v1`` and ``Acrobot-v1`` — the
 figure of merit is the ratio of ``env.step`` rates (resets are timed apart and reported, since
-``FlatBody-v0``'s reset samples a reachable target and costs milliseconds) measured in the same run (the machine is noisy;
-absolute µs vary up to 1.8× with load). Batched: ``FlatBodyVectorEnv`` against gymnasium's
+``FlatBody-v0``'s reset samples a reachable target) measured in the same run (the machine is noisy; absolute
+times vary with load, the ratios are the reliable part; the figures: docs/env.md, "Benchmark").
+Batched: ``FlatBodyVectorEnv`` against gymnasium's
 ``CartPoleVectorEnv`` at N = 1024 in env-steps per second (the vector env as constructed by default and
 with one thread per core, timed in alternation with CartPole), plus the batched env's episode error
 against a tight reference (scipy DOP853, rtol = atol = 1e-13, restarted every step with the same

@@ -32,7 +32,8 @@ Regenerate (after a change to the physics, the default body or the limits)::
 
     flatbody targets-table            # writes flatbody_env/env/data/settling_rates_v1.npz
 
-(:func:`build_table`; ~10 min on 2 cores). Bump :data:`TABLE_VERSION` when the file's layout changes.
+(:func:`build_table`; its run time: docs/env.md, "Resets without a Riccati solve"). Bump
+:data:`TABLE_VERSION` when the file's layout changes.
 """
 
 from __future__ import annotations

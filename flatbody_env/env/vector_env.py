@@ -13,9 +13,9 @@ through its public API (:meth:`~flatbody_env.env.env.FlatBodyEnv.draw_episodes`,
 Batches can be split across threads (``num_threads``; None: one per available core, at least
 :data:`LANES_PER_THREAD` bodies each; default 1): the compiled stepper and bookkeeping release the
 GIL, each thread advances and scores its own slice of bodies with its own work arrays, and the result
-does not depend on the split (each body's arithmetic is its own; tested). On the 2-core machine the
-benchmarks run on, two threads gained 0–10 % at N = 1024 with both cores free and lost up to 35 %
-with another process busy on the second core, so one thread is the default.
+does not depend on the split (each body's arithmetic is its own; tested). One thread is the default:
+more threads gained little with the cores free and lost with another process busy (measured by
+``flatbody bench env``, its 2-thread row; docs/env.md, "Batched" and "Benchmark").
 
 It truncates by itself after ``max_episode_steps`` and autoresets in Gymnasium's default
 NEXT_STEP mode (the step after a body's episode ended resets that body: its action is ignored,

@@ -4,7 +4,8 @@ The rule follows the work-precision chart (``flatbody chart``, docs/integrators.
 the built-in scenes at final-state errors of 1e-6 and 1e-9:
 
 * **two-polar chart** (the scene provably keeps clear of λ = μ): ``DOP853-numba``, the compiled
-  port of scipy's DOP853 — the same steps and errors as scipy's DOP853 at ≈130× less time, and
+  port of scipy's DOP853 — the same steps and errors as scipy's DOP853 in far less time (the
+  speed-ups: ``flatbody bench integrators``, docs/integrators.md, the ``method="auto"`` table), and
   the fastest method at both targets on ``regular``, ``small-rho-bounce`` and ``long-horizon``.
   It reads rtol/atol exactly as scipy does. With a ``CustomPotential`` (Python code, which the
   compiled methods refuse) scipy's ``DOP853``.

@@ -5,7 +5,7 @@ Registered methods (``flatbody methods``)
 =====================  ========  =====  =========  =================================================
 name                   adaptive  order  chart      algorithm
 =====================  ========  =====  =========  =================================================
-``DOP853-numba``       yes       8      two-polar  port of scipy's DOP853 (same steps, ~100× faster)
+``DOP853-numba``       yes       8      two-polar  port of scipy's DOP853 (same steps)
 ``RK4``                no        4      two-polar  classical Runge–Kutta
 ``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (docs/physics.md §10), J1 = J2
 ``splitting-suzuki4``  no        4      two-polar  Suzuki 5-stage composition of Strang
@@ -14,6 +14,8 @@ name                   adaptive  order  chart      algorithm
 ``RATTLE-suzuki4``     no        4      regular    Suzuki 5-stage composition of RATTLE
 ``RATTLE-kahanli6``    no        6      regular    Kahan–Li 9-stage composition of RATTLE
 =====================  ========  =====  =========  =================================================
+
+Their speed against scipy's methods is measured by ``flatbody bench integrators`` (docs/integrators.md).
 
 Fixed-step methods need ``Tolerances(step=h)`` (``simulate(..., step=h)``, ``--step H``); each
 output interval is cut into ⌈Δt/h⌉ equal steps. Adaptive ``DOP853-numba`` reads rtol/atol and
@@ -105,10 +107,11 @@ def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol
 
 
 _PROBE_NFEV = 5_000
-"""Right-hand-side evaluations of a timing probe of the wall-clock budget (a few ms compiled)."""
+"""Right-hand-side evaluations of a timing probe of the wall-clock budget (short against any budget when compiled)."""
 _COMPILED_RATE = 2e5
 """Evaluations per second below which a probe is taken to have included loading the kernel (compiled
-kernels run 10⁶–10⁷ per second), so a second probe measures the rate."""
+kernels run far faster: the per-step costs of ``flatbody bench integrators``, docs/integrators.md), so a
+second probe measures the rate."""
 
 
 def _run_within_budget(run, counters: np.ndarray, tol: Tolerances) -> tuple[int, bool]:

@@ -2,8 +2,9 @@
 
 The compiled DOP853 kernels use scipy's coefficient module ``scipy/integrate/_ivp/dop853_coefficients.py``
 (a numpy-only file). Importing it the usual way runs ``scipy.integrate``'s package ``__init__``,
-which pulls in ``scipy.special`` and the quadrature modules: ≈0.5 s of every process start that
-only steps the compiled methods (an env episode, ``flatbody demo``). :data:`dop` is that same
+which pulls in ``scipy.special`` and the quadrature modules: a sizeable share of every process start
+that only steps the compiled methods (an env episode, ``flatbody demo``; the import's cost: docs/integrators.md,
+measured by ``python -X importtime -c "import scipy.integrate"``). :data:`dop` is that same
 file executed on its own; when ``scipy.integrate`` is already imported (or the file cannot be
 found) the ordinary import is used. Either way it is scipy's text, not a copy.
 

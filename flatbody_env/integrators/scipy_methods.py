@@ -98,7 +98,7 @@ class _Budget:
 
 def _solve(fun, span, z0, *, tol: Tolerances, name: str, **kwargs):
     """``solve_ivp`` under the work budget of ``tol`` (``IntegrationError(kind="budget")`` past it)."""
-    from scipy.integrate import solve_ivp  # here, not at import: scipy.integrate costs ~0.5 s to import
+    from scipy.integrate import solve_ivp  # here, not at import: scipy.integrate is slow to import (docs/integrators.md)
 
     wrapped = _Budget(fun, tol)
     try:

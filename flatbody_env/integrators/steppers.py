@@ -7,7 +7,7 @@
   compiled call per env step (and one per batch of N), no Python per sub-step. For
   ``DOP853-numba`` with the first step guessed as dt (the env's default) and J1 = J2 the batch runs
   the fused SIMD structure-of-arrays step of :mod:`.batch_kernels` (bit for bit the scalar kernel's
-  result, ~4× faster per body);
+  result, faster per body: the figures of ``flatbody bench env`` and where a body-step goes, docs/env.md);
 * a :class:`CompiledRotationEnvStep` for the same methods when R must be carried (rendering,
   recording): the same compiled stepping code on z = (y, vec(R)) (:mod:`.rotation_kernels`), the
   paper state bit for bit the one without R;

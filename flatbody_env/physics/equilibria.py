@@ -132,7 +132,7 @@ def equilibrium_thickness(body: Body, lam: float, mu: float) -> float:
     lo, hi = 1e-3, 1e3
     if g(lo) * g(hi) > 0:
         raise ValueError("thickness: the potential has no equilibrium thickness (∂V/∂ϱ = 0) in [1e-3, 1e3]")
-    from scipy.optimize import brentq  # imported here: scipy.optimize costs ~0.5 s at import, most users never need it
+    from scipy.optimize import brentq  # imported here: scipy.optimize is slow to import; most users never need it
 
     return float(brentq(g, lo, hi, xtol=1e-15, rtol=1e-15))
 

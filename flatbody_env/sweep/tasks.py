@@ -177,8 +177,8 @@ def execute(task: Task) -> Outcome:
 # ---------------------------------------------------------------------------------------------
 # plans: specification → tasks
 TASK_POINTS = 512
-"""Grid points a stability-map task holds by default: ~2.5 s at the ~5 ms per point measured by
-``flatbody bench sweep``, against a scheduler overhead of a few ms per task."""
+"""Grid points a stability-map task holds by default: enough that a task's cost dwarfs the scheduler
+overhead per task (both measured by ``flatbody bench sweep``; docs/scaling.md, "Measured scaling")."""
 
 
 def default_chunk(grid: int) -> int:
