@@ -167,6 +167,12 @@ class Agent:
             except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
                 raise ValueError(f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
 
+    @property
+    def residual_action(self):
+        """The executed action's form (:class:`agents.heuristic.ResidualAction`: the LQR or the passivity law
+        plus this policy's residual), or None for a policy that acts alone."""
+        return self._base
+
     def policy_actions(self, obs: np.ndarray) -> np.ndarray:
         """The trained policy's deterministic actions (N, n) for raw observations (N, 16), before any residual."""
         if self.policy is not None:

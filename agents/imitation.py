@@ -134,13 +134,13 @@ class Plans:
                      knots=np.concatenate([self.knots, other.knots]), on_policy=self.on_policy)
 
 
-def _residual_agent(model: str | Path):
+def _residual_agent(model: str | Path, backend: str = "auto"):
     """The run folder's :class:`agents.evaluate.Agent` (for its task and residual form); refuses a run
     without an LQR/passivity residual in additive mode (the plan is an additive residual)."""
     from agents.evaluate import Agent
 
-    agent = Agent(model)
-    if agent._base is None or agent._base.mode != "additive":
+    agent = Agent(model, backend=backend)
+    if agent.residual_action is None or agent.residual_action.mode != "additive":
         raise ValueError(f"model: {str(model)[:80]!r} is not an additive residual agent (residual_mode: additive)")
     return agent
 
@@ -201,14 +201,12 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
     seeds = np.asarray([validation.integer("seeds", int(x), low=0, high=validation.MAX_SEED) for x in seeds], dtype=np.int64)
     if seeds.size == 0:
         raise ValueError("seeds: give at least one seed")
-    probe = FlatBodyVectorEnv(num_envs=1, **agent.env_kwargs)
-    n = probe.single_action_space.shape[0]
-    probe.close()
     policy = agent.policy_actions if on_policy else None
     # The zero plan (the LQR alone, or the run alone with on_policy) first, for every seed: where it ends
     # within ``reach`` its cost is 0, the least any plan can cost, so that seed is not searched.
     venv = FlatBodyVectorEnv(num_envs=seeds.size, autoreset_mode="SameStep", **agent.env_kwargs)
-    zero_d, _, _ = rollout(venv, agent._base, seeds, np.zeros((seeds.size, s.knots, n)), policy=policy)
+    n = venv.single_action_space.shape[0]
+    zero_d, _, _ = rollout(venv, agent.residual_action, seeds, np.zeros((seeds.size, s.knots, n)), policy=policy)
     venv.close()
     final_d, final_u = zero_d.copy(), np.zeros((seeds.size, s.knots, n))
     todo = np.flatnonzero(zero_d > s.reach)
@@ -227,7 +225,7 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
         for _ in range(s.iterations):
             u = np.clip(mean[:, None] + std[:, None] * rng.standard_normal((m, s.samples, s.knots, n)), -1.0, 1.0)
             u[:, 0] = best_u  # the best so far stays in the draw
-            d, effort, _ = rollout(venv, agent._base, batch_seeds, u.reshape(m * s.samples, s.knots, n), policy=policy)
+            d, effort, _ = rollout(venv, agent.residual_action, batch_seeds, u.reshape(m * s.samples, s.knots, n), policy=policy)
             cost = (REACH_COST * np.maximum(d - s.reach, 0.0) + EFFORT_COST * effort).reshape(m, s.samples)
             order = np.argsort(cost, axis=1)[:, : s.elite]
             elite = np.take_along_axis(u, order[:, :, None, None], axis=1)
@@ -268,7 +266,6 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
         (the policy mean's squared error against the residuals before and after the fit).
     """
     import torch
-    from stable_baselines3 import PPO
 
     from agents.train import check_out
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
@@ -277,13 +274,13 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
     validation.integer("epochs", epochs, low=1, high=10_000)
     validation.integer("batch_size", batch_size, low=1, high=1 << 20)
     validation.number("learning_rate", learning_rate, low=1e-8, high=1.0)
-    agent = _residual_agent(model)
     folder = Path(model)
-    if agent.algo != "ppo" or not (folder / "vecnormalize.pkl").is_file():
+    agent = _residual_agent(model, backend="sb3")  # SB3's own model and VecNormalize (pickles: a trusted folder only)
+    if agent.algo != "ppo" or agent.vecnormalize is None:
         raise ValueError(f"model: {str(model)[:80]!r} is not a PPO run with normalised observations (vecnormalize.pkl)")
     if plans.env_id != agent.env_id:
         raise ValueError(f"plans: made for {plans.env_id}, the model is a {agent.env_id} run")
-    tol = agent._base.task.success_tolerance if tolerance is None else validation.number("tolerance", tolerance, low=0.0, high=10.0)
+    tol = agent.residual_action.task.success_tolerance if tolerance is None else validation.number("tolerance", tolerance, low=0.0, high=10.0)
     keep = plans.final_distance <= tol
     if not keep.any():
         raise ValueError(f"plans: none ends within {tol:g}; nothing to clone")
@@ -291,22 +288,15 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
     venv = FlatBodyVectorEnv(num_envs=int(keep.sum()), autoreset_mode="SameStep", **agent.env_kwargs)
     if plans.on_policy and Path(plans.model).resolve() != folder.resolve():
         raise ValueError(f"plans: corrections of {plans.model!r}'s policy replay only on that run, not {str(model)[:80]!r}")
-    final, _, (obs, act) = rollout(venv, agent._base, plans.seeds[keep], plans.knots[keep], record=True,
+    final, _, (obs, act) = rollout(venv, agent.residual_action, plans.seeds[keep], plans.knots[keep], record=True,
                                    policy=agent.policy_actions if plans.on_policy else None)
     venv.close()
     obs = obs.reshape(-1, obs.shape[-1]).astype(np.float32)
     act = act.reshape(-1, act.shape[-1]).astype(np.float32)
 
-    import pickle
-
-    from agents.numpy_policy import check_trusted
-
-    check_trusted(folder, "model.zip and vecnormalize.pkl (pickle-based SB3 files)")
     torch.manual_seed(seed)
-    ppo = PPO.load(str(folder / "model.zip"), device="cpu")
-    with (folder / "vecnormalize.pkl").open("rb") as fh:
-        vn = pickle.load(fh)
-    x = torch.as_tensor(vn.normalize_obs(obs), dtype=torch.float32)
+    ppo = agent.model
+    x = torch.as_tensor(agent.vecnormalize.normalize_obs(obs), dtype=torch.float32)
     y = torch.as_tensor(act)
     pol = ppo.policy
 
@@ -373,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
                                     init_std=args.init_std, reach=args.reach, chunk=args.chunk, seed=args.seed)
             plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
             plans.save(args.out)
-            tol = _residual_agent(args.model)._base.task.success_tolerance
+            tol = _residual_agent(args.model).residual_action.task.success_tolerance
             print(f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
                   f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}")
         else:

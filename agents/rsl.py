@@ -193,7 +193,9 @@ class RslVecEnv(_vec_env_base()):
         if reward_gamma is not None and not (0.0 < reward_gamma <= 1.0):
             raise ValueError(f"gamma: must be in (0, 1] for the reward normalisation, got {reward_gamma!r}")
         self._disc = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
-        self._ret_stats = [0.0, 1.0, 1e-4]  # mean, variance, count of the discounted returns (SB3's VecNormalize)
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        self._ret_rms = RunningMeanStd(shape=())  # the discounted returns' running statistics, as SB3's VecNormalize keeps them
         self.episodes: list[tuple[float, float, bool]] = []
         """(return, final distance, success) of every finished episode, in order."""
 
@@ -216,14 +218,6 @@ class RslVecEnv(_vec_env_base()):
     def get_observations(self):
         return self._obs_dict(self._obs)
 
-    def _update_return_stats(self, x) -> None:
-        """Running mean and variance of the discounted returns (parallel Welford, as SB3's ``RunningMeanStd``)."""
-        mean, var, count = self._ret_stats
-        bmean, bvar, n = float(x.mean()), float(x.var(unbiased=False)), x.numel()
-        delta, tot = bmean - mean, count + n
-        m2 = var * count + bvar * n + delta * delta * count * n / tot
-        self._ret_stats = [mean + delta * n / tot, m2 / tot, tot]
-
     def step(self, actions):
         import torch
 
@@ -235,9 +229,9 @@ class RslVecEnv(_vec_env_base()):
         extras: dict[str, Any] = {"time_outs": truncated.to(torch.float32)}
         if self.reward_gamma is not None:  # the training signal only: episodes are logged with the raw rewards
             self._disc = self._disc * self.reward_gamma + rewards.double()
-            self._update_return_stats(self._disc)
+            self._ret_rms.update(self._disc.cpu().numpy())
             self._disc[dones] = 0.0
-            rewards = (rewards.double() / math.sqrt(self._ret_stats[1] + 1e-8)).clamp(-10.0, 10.0).to(rewards.dtype)
+            rewards = (rewards.double() / math.sqrt(float(self._ret_rms.var) + 1e-8)).clamp(-10.0, 10.0).to(rewards.dtype)
         if bool(dones.any()):
             d = info["distance"][dones]
             s = info["is_success"][dones]

@@ -176,22 +176,32 @@ def _algo_class(algo: str):
     return {"ppo": PPO, "sac": SAC}[algo]
 
 
-def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_kwargs: dict[str, Any], seed: int):
-    """The model and (normalised) env of a fine-tuning run (:func:`train`'s ``trained_agent``)."""
+def _load_saved(cls, model_path: Path, vn_path: Path | None, env, norm, what: str, custom_objects: dict[str, Any] | None = None):
+    """A saved model on ``env`` (wrapped in its saved VecNormalize statistics when the run normalises, in training
+    mode): the one loading of a resumed checkpoint and of a fine-tuned run. ``what`` starts the error message."""
     from stable_baselines3.common.vec_env import VecNormalize
 
+    if norm:
+        if vn_path is None or not vn_path.is_file():
+            raise ValueError(f"{what} has no VecNormalize statistics beside it (this run normalises)")
+        env = VecNormalize.load(str(vn_path), env)
+        env.training = True
+    return cls.load(str(model_path), env=env, device="cpu", custom_objects=custom_objects), env
+
+
+def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_kwargs: dict[str, Any], seed: int):
+    """The model and (normalised) env of a fine-tuning run (:func:`train`'s ``trained_agent``): the run's weights,
+    optimiser state and statistics; this run's rollout and update settings (not its network)."""
     from agents.numpy_policy import check_trusted
 
     if not (folder / "model.zip").is_file():
         raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no model.zip")
     check_trusted(folder, "model.zip")
-    if norm:
-        if not (folder / "vecnormalize.pkl").is_file():
-            raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no vecnormalize.pkl (this run normalises)")
-        env = VecNormalize.load(str(folder / "vecnormalize.pkl"), env)
-        env.training, env.norm_reward, env.gamma = True, bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
     keep = {k: v for k, v in algo_kwargs.items() if k != "policy_kwargs"}  # the network is the loaded one's
-    model = cls.load(str(folder / "model.zip"), env=env, device="cpu", custom_objects=keep)
+    model, env = _load_saved(cls, folder / "model.zip", folder / "vecnormalize.pkl", env, norm,
+                             f"trained_agent: {str(folder)[:80]!r}", custom_objects=keep)
+    if norm:
+        env.norm_reward, env.gamma = bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
     model.set_random_seed(seed)
     return model, env
 
@@ -421,12 +431,7 @@ def train(
     cls = _algo_class(algo)
     if resume:
         model_path, vn_path, rb_path, start = found
-        if norm:
-            if vn_path is None:
-                raise ValueError(f"resume: checkpoint {model_path.name} has no VecNormalize statistics beside it")
-            env = VecNormalize.load(str(vn_path), env)
-            env.training = True
-        model = cls.load(str(model_path), env=env, device="cpu")
+        model, env = _load_saved(cls, model_path, vn_path, env, norm, f"resume: checkpoint {model_path.name}")
         if rb_path is not None and hasattr(model, "load_replay_buffer"):
             model.load_replay_buffer(str(rb_path))
         resumed_from = start

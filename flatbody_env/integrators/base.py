@@ -113,7 +113,7 @@ class Tolerances:
             raise ValueError(f"energy_tol: must be a number > 0 or inf (allowed range (0, inf]), got {self.energy_tol!r}")
         object.__setattr__(self, "energy_tol", float(self.energy_tol))
         object.__setattr__(self, "max_nfev", v.integer("max_nfev", self.max_nfev, low=1, high=10**12))
-        object.__setattr__(self, "max_wall_time", v.number("max_wall_time", self.max_wall_time, positive=True))
+        object.__setattr__(self, "max_wall_time", v.number("max_wall_time", self.max_wall_time, positive=True, high=v.MAX_SECONDS))
 
 
 def check_step(info: "MethodInfo", tol: Tolerances) -> float:

@@ -309,6 +309,8 @@ def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
 
 
 def _range_text(positive: bool, low: float | None, high: float | None) -> str:
+    if positive and low is None and high is not None:
+        return f" (allowed range (0, {high:g}])"
     if low is not None or high is not None:
         lo = "-inf" if low is None else f"{low:g}"
         hi = "inf" if high is None else f"{high:g}"

@@ -111,7 +111,7 @@ class FileSink:
                 self._thread = threading.Thread(target=self._copy, name=f"flatbody-rrd-{self.path.name}", daemon=True)
                 self._thread.start()
                 rec.save(fifo, default_blueprint=blueprint)
-            else:  # pragma: no cover - platforms without FIFOs
+            else:  # platforms without FIFOs
                 self._stream = rec.binary_stream()
                 if blueprint is not None:
                     rec.send_blueprint(blueprint, make_active=False, make_default=True)
@@ -208,7 +208,7 @@ class FileSink:
             try:
                 self.rec.flush()
                 self.rec.disconnect()
-                if self._stream is not None:  # pragma: no cover - platforms without FIFOs
+                if self._stream is not None:  # platforms without FIFOs
                     data = self._stream.read(flush=True)
                     try:
                         self._out.write(data or b"")

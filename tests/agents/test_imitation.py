@@ -39,7 +39,7 @@ def test_plans_are_what_the_single_environment_does_under_them(on_policy):
             u = knots[t * 4 // 400][None, :]
             if on_policy:
                 u = np.clip(agent.policy_actions(obs[None, :]) + u, -1, 1)
-            obs, _, term, trunc, info = env.step(agent._base(obs[None, :], u)[0])
+            obs, _, term, trunc, info = env.step(agent.residual_action(obs[None, :], u)[0])
             if term or trunc:
                 break
         assert t == 399 and trunc
@@ -55,9 +55,9 @@ def test_plan_never_costs_more_than_the_lqr_alone():
     agent = _residual_agent(SLOW)
     seeds = np.array([0, 2])
     venv = FlatBodyVectorEnv(num_envs=2, autoreset_mode="SameStep", **agent.env_kwargs)
-    lqr_d, _, _ = rollout(venv, agent._base, seeds, np.zeros((2, 4, 4)))
+    lqr_d, _, _ = rollout(venv, agent.residual_action, seeds, np.zeros((2, 4, 4)))
     plans = plan(SLOW, seeds, PlanSettings(samples=16, iterations=6, elite=4, chunk=2, knots=4), progress=False)
-    d_best, effort_best, _ = rollout(venv, agent._base, plans.seeds, plans.knots)
+    d_best, effort_best, _ = rollout(venv, agent.residual_action, plans.seeds, plans.knots)
     cost = REACH_COST * np.maximum(d_best - 0.02, 0) + EFFORT_COST * effort_best
     assert np.all(cost <= REACH_COST * np.maximum(lqr_d - 0.02, 0) + 1e-12)
     missed = lqr_d > 0.05
@@ -87,7 +87,7 @@ def test_clone_fits_the_plans_and_writes_a_run_that_loads(tmp_path):
     assert res["plans"] == 2 and res["pairs"] == 800
     assert res["mse_end"] < res["mse_start"]
     agent = Agent(tmp_path / "bc", backend="sb3")
-    assert agent.env_id == "FlatBodySlow-v0" and agent._base.mode == "additive"
+    assert agent.env_id == "FlatBodySlow-v0" and agent.residual_action.mode == "additive"
     with pytest.raises(ValueError, match="out|holds"):
         clone(plans, SLOW, tmp_path / "bc", epochs=1, progress=False)  # an existing run is not overwritten
     with pytest.raises(ValueError, match="plans"):

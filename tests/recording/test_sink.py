@@ -88,3 +88,17 @@ def test_record_env_on_a_disk_that_fills_is_one_line(tmp_path):
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert str(target) in lines[0] and "file-size limit" in lines[0], lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_without_fifos_the_stream_is_written_at_close(run, tmp_path, monkeypatch):
+    """Where ``os.mkfifo`` does not exist, rerun's binary stream is read once at close: the same verified file."""
+    scene, traj = run
+    monkeypatch.delattr(os, "mkfifo")
+    path = tmp_path / "run.rrd"
+    with Recorder(path, scene.body, block=8) as rec:
+        for k in range(traj.t.size):
+            rec.append(traj.t[k], traj.y[:, k], traj.rotation[k], energy=traj.energy[k])
+        assert not path.exists()
+    assert "verified" in verify_recording(path)
+    assert read_recording(path)["/world/body"].step.size == traj.t.size
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.rrd"]
