@@ -516,14 +516,16 @@ CURVE_HEADER = ("timesteps", "wall_s", "success", "final_distance")
 
 
 def from_scratch_curve(out: str | Path, csv_path: str | Path, *, seed: int = 0, overrides: list[str] | None = None, budget_s: float = 600.0,
-                       eval_every_s: float = 30.0, episodes: int = 100, eval_seed: int = 10_000, force: bool = False):
+                       eval_every_s: float = 30.0, episodes: int = 100, eval_seed: int = 10_000, device: str = "cpu",
+                       force: bool = False):
     """Train rsl-ppo with :data:`FROM_SCRATCH` (then ``overrides``) for ``budget_s`` seconds of training wall time and write the curve.
 
     After the first iteration that ends ``eval_every_s`` or more after the previous evaluation, and at the end, the
     deterministic policy (:func:`live_policy`, no residual) runs ``episodes`` held-out episodes (seeds ``eval_seed`` …);
     the evaluation time is left out of the wall time (``train_rsl``'s ``callback``). The training stops at the first
     evaluation at or past ``budget_s``, so the run folder ``out`` holds the last evaluated policy. ``csv_path``: one row
-    per evaluation (:data:`CURVE_HEADER`), rewritten after each. Returns the rows.
+    per evaluation (:data:`CURVE_HEADER`), rewritten after each. ``device``: the torch device of env and policy
+    (``"cuda"``: the torch env and the policy on the GPU, the evaluations' policy too). Returns the rows.
     """
     from agents.evaluate import run_episodes
     from flatbody_env.output import write_csv
@@ -537,14 +539,14 @@ def from_scratch_curve(out: str | Path, csv_path: str | Path, *, seed: int = 0, 
         if row["time_s"] < min(due[0], budget_s):
             return False
         due[0] = row["time_s"] + eval_every_s
-        recs = run_episodes(live_policy(runner.alg.actor, None), episodes=episodes, seed=eval_seed)
+        recs = run_episodes(live_policy(runner.alg.actor, None, device), episodes=episodes, seed=eval_seed)
         rows.append((int(row["timesteps"]), round(float(row["time_s"]), 2), float(np.mean([r["success"] for r in recs])),
                      float(np.mean([r["final_distance"] for r in recs]))))
         write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
         return row["time_s"] >= budget_s
 
     train_rsl(out, seed=seed, n_timesteps=10**12, progress=False, overrides=[*FROM_SCRATCH, *(overrides or [])], callback=callback,
-              force=force)
+              device=device, force=force)
     return rows
 
 

@@ -30,6 +30,16 @@ def _methods(text: str) -> list[str]:
     return names
 
 
+def _backends(text: str) -> list[str]:
+    import argparse
+
+    allowed = ("cpu-serial", "cpu-parallel", "cuda")
+    names = [p.strip() for p in text.split(",") if p.strip()]
+    if not names or any(n not in allowed for n in names):
+        raise argparse.ArgumentTypeError(f"backends: expected names from {', '.join(allowed)}, got {text[:60]!r}")
+    return names
+
+
 def _cmd(args) -> int:
     import json
 
@@ -42,7 +52,7 @@ def _cmd(args) -> int:
         print(f"{what:<9} {row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  "
               f"({row['device_name']})", flush=True)
 
-    result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, progress=show)
+    result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, only=args.backends, progress=show)
     names = sorted({r["backend"] for r in result["rows"]})
     devices = {r["backend"]: r["device_name"] for r in result["rows"]}
     result["rows"] += run_env(names, devices, sizes=args.sizes, steps=args.steps, repeats=args.repeats, progress=show)
@@ -63,6 +73,8 @@ def register_bench(bench_sub) -> None:
                    help="JSON of the rows; the chart goes beside it (FILE.png)")
     p.add_argument("--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies")
     p.add_argument("--methods", type=_methods, default=["RK4", "DOP853-numba"], metavar="NAME,...", help="batch methods to time")
+    p.add_argument("--backends", type=_backends, default=None, metavar="NAME,...",
+                   help="time only these (cpu-serial, cpu-parallel, cuda; default: every one here), e.g. cuda alone at large N")
     p.add_argument("--steps", type=int_at_least("steps", 1, 100000), default=10, help="env steps per timed block")
     p.add_argument("--repeats", type=int_at_least("repeats", 1, 100), default=3, help="timed blocks; the best is kept")
     p.set_defaults(handler=_cmd)

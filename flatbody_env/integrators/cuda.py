@@ -11,7 +11,11 @@ Only the target glue is written here: the two kernels (one thread per body) that
 arrays from ``cuda.local.array`` and their body from ``cuda.grid(1)``, and the device side of
 :func:`~.twopolar_kernels.dop853_initial_step` (its CPU wrapper allocates one array with
 ``np.empty``; on the device that array is a local one). Module-level coefficient arrays
-(``_A``, ``STRANG``, ``_KEEP_*``) become constant memory unchanged.
+(``_A``, ``STRANG``, ``_KEEP_*``) become constant memory unchanged. Device code reads ``np`` as
+:data:`DEVICE_NUMPY`: numpy with its scalar ufuncs (``np.sqrt``, ``np.abs``, …) replaced by their
+``math`` twins, which numba-cuda lowers (numba-cuda 0.30.4 has no CUDA lowering of ``np.sqrt`` on a
+scalar: ``KeyError: <ufunc 'sqrt'>`` on a real GPU, while its simulator runs numpy itself). The task's
+kernels keep calling numpy ufuncs, so that the same source also scores N bodies on arrays.
 
 * :func:`env_step` — one environment step of N bodies, **one launch per step**: ``Y``, ``OUT``
   (11, N), ``U`` (4, N) structure-of-arrays (coalesced: thread b reads column b), ``STATUS`` (N,)
@@ -34,7 +38,9 @@ compares them with the CPU kernels in a subprocess.
 from __future__ import annotations
 
 import functools
+import math
 import os
+import types
 
 import numpy as np
 from numba import float64, int64
@@ -108,12 +114,33 @@ def device_name() -> str:
 
 
 # --------------------------------------------------------------------------------------------- device twins
+_SCALAR_UFUNCS = {"sqrt": math.sqrt, "abs": math.fabs, "absolute": math.fabs, "fabs": math.fabs, "exp": math.exp, "log": math.log,
+                  "sin": math.sin, "cos": math.cos, "tan": math.tan, "arctan": math.atan, "arctan2": math.atan2, "hypot": math.hypot,
+                  "tanh": math.tanh, "floor": math.floor, "ceil": math.ceil, "isfinite": math.isfinite, "isnan": math.isnan,
+                  "isinf": math.isinf, "copysign": math.copysign}
+
+
+def _device_numpy() -> types.ModuleType:
+    """numpy as device code reads it (module docstring): every attribute of numpy, except the scalar ufuncs of
+    :data:`_SCALAR_UFUNCS`, which are their ``math`` twins (the same IEEE results on float64)."""
+    module = types.ModuleType("numpy_on_the_device", "numpy with its scalar ufuncs as math functions (device code)")
+    module.__dict__.update({k: getattr(np, k) for k in dir(np) if not k.startswith("_")})
+    module.__dict__.update(_SCALAR_UFUNCS)
+    return module
+
+
+DEVICE_NUMPY = _device_numpy()
+"""The ``np`` of device code (:func:`device_twin`, :func:`kernel`)."""
+
+
 @functools.lru_cache(maxsize=1)
 def _target() -> tuple[Target, dict]:
-    """The CUDA target of :func:`~.jit.retarget` and the globals re-bound on it: the kernels' ``cuda``, and the
-    device side of the initial step (its CPU wrapper allocates) wherever a device function calls it."""
+    """The CUDA target of :func:`~.jit.retarget` and the globals re-bound on it: the kernels' ``cuda``, ``np`` as
+    :data:`DEVICE_NUMPY`, and the device side of the initial step (its CPU wrapper allocates) wherever a device
+    function calls it."""
     module = require()
-    return Target("cuda", module.jit(device=True), share_compiled=False), dict(cuda=module, dop853_initial_step=_dop853_initial_step_device)
+    return Target("cuda", module.jit(device=True), share_compiled=False), dict(cuda=module, np=DEVICE_NUMPY,
+                                                                                dop853_initial_step=_dop853_initial_step_device)
 
 
 def device_twin(func):

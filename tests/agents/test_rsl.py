@@ -248,6 +248,28 @@ def test_from_scratch_curve_evaluates_the_policy_it_ships_and_the_chart_reads_th
         from_scratch_curve(tmp_path / "bad", table, budget_s=0)
 
 
+@pytest.mark.gpu
+def test_from_scratch_curve_trains_on_the_gpu_and_the_agent_runs_on_the_cpu(tmp_path):
+    """On a CUDA GPU: env and policy on the device, the curve's point equals the saved agent's evaluation on the CPU."""
+    import csv
+
+    import torch
+
+    from agents.evaluate import Agent, run_episodes
+    from agents.rsl import from_scratch_curve
+
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA GPU here")
+    table = tmp_path / "curve.csv"
+    rows = from_scratch_curve(tmp_path / "run", table, budget_s=1e-3, eval_every_s=1e-3, episodes=4, eval_seed=10_000,
+                              overrides=["n_envs=64", "num_steps_per_env=8"], device="cuda")
+    assert len(rows) == 1 and rows[0][0] == 512
+    with open(table, newline="") as fh:
+        saved = list(csv.reader(fh))
+    recs = run_episodes(Agent(tmp_path / "run"), episodes=4, seed=10_000)
+    assert float(saved[1][3]) == pytest.approx(np.mean([r["final_distance"] for r in recs]), rel=1e-3)
+
+
 def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tmp_path, monkeypatch):
     """docs/img/from_scratch.png is drawn from docs/img/from_scratch.csv alone; its caption says what the lines are."""
     from pathlib import Path

@@ -65,3 +65,18 @@ def test_compiled_fixed_step_refuses_a_run_predicted_past_the_wall_clock_budget(
     assert main(["simulate", "--scene", "default", "--t-end", "1e4", "--method", "RK4", "--step", "0.01", "--max-seconds", "0.2",
                  "--samples", "3"]) == 1
     assert "predicted" in capsys.readouterr().err
+
+
+def test_bench_gpu_backends_are_checked(tmp_path, capsys):
+    """``--backends`` names backends; one not here (CUDA on a machine without a GPU) is one line, exit 2."""
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "gpu", "--backends", "gpu", "--out", str(tmp_path / "g.json")])
+    assert exc.value.code == 2 and "backends" in capsys.readouterr().err
+    from flatbody_env.integrators import cuda
+
+    if cuda.is_available():
+        pytest.skip("a CUDA GPU is here")
+    assert main(["bench", "gpu", "--backends", "cuda", "--sizes", "8", "--out", str(tmp_path / "g.json")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "backends: none of cuda is here" in err
+    assert not (tmp_path / "g.json").exists()

@@ -41,25 +41,33 @@ def _diff(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _device_functions() -> dict:
-    """The device functions the two kernels reach, walked through the globals their code reads: how many, and any
-    function left un-retargeted (a CPU dispatcher or plain Python, which the simulator would run silently)."""
+    """The device functions the integrators' and the env's kernels reach, walked through the globals their code reads:
+    how many, any function left un-retargeted (a CPU dispatcher or plain Python, which the simulator would run silently),
+    and any numpy ufunc their code reads through a module (numba-cuda cannot lower ``np.sqrt`` on a scalar; the simulator
+    runs numpy itself, so only this check sees it without a GPU)."""
     from numba.core.dispatcher import Dispatcher
 
+    from flatbody_env.env import device
     from flatbody_env.integrators.jit import _names
 
     seen: set[int] = set()
     left: list[str] = []
+    ufuncs: set[str] = set()
     todo = [kernel.py_func for kernel in cuda._kernels()]
+    todo += [cuda.kernel(k).py_func for k in (device._step_kernel, device._reset_kernel, device._restart_kernel)]
     while todo:
         fn = todo.pop()
         for name in _names(fn.__code__):
             value = fn.__globals__.get(name)
+            if isinstance(value, types.ModuleType):
+                ufuncs.update(f"{fn.__name__}: {name}.{attr}" for attr in fn.__code__.co_names
+                              if isinstance(getattr(value, attr, None), np.ufunc))
             if isinstance(value, (Dispatcher, types.FunctionType)):
                 left.append(f"{fn.__name__}.{name}")
             elif hasattr(value, "py_func") and id(value) not in seen:
                 seen.add(id(value))
                 todo.append(value.py_func)
-    return {"count": len(seen), "not_retargeted": sorted(left)}
+    return {"count": len(seen), "not_retargeted": sorted(left), "numpy_ufuncs": sorted(ufuncs)}
 
 
 def main() -> dict:
