@@ -379,7 +379,8 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
     """
     import yaml
 
-    from agents.train import ENV_ID, TrainResult, apply_overrides, check_out, git_hash
+    from agents.train import ENV_ID, TrainResult, apply_overrides, check_out
+    from flatbody_env.provenance import git_hash
     from flatbody_env.output import atomic_path, atomic_write
 
     env_id = env_id or ENV_ID

@@ -26,7 +26,6 @@ import platform
 import re
 import shlex
 import shutil
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -37,6 +36,7 @@ import numpy as np
 import yaml
 
 from flatbody_env.output import atomic_path, atomic_write
+from flatbody_env.provenance import git_hash
 
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
@@ -74,16 +74,6 @@ def apply_overrides(hp: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
                 raise ValueError(f"hyperparams: {key!r} reaches into a non-mapping")
         node[parts[-1]] = value
     return hp
-
-
-def git_hash(where: Path | None = None) -> str:
-    """``git rev-parse HEAD`` of the source tree ("unknown" outside a repository)."""
-    cwd = where or Path(__file__).resolve().parent
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
 
 
 def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:

@@ -48,6 +48,23 @@ def body(request) -> Body:
     return BODIES[request.param]
 
 
+def random_lanes(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """N generic states in structure-of-arrays layout, Y (11, N), and controls U (4, N): the lanes of the batched
+    kernels' tests (each test then makes some lanes hard)."""
+    rng = np.random.default_rng(seed)
+    Y = np.empty((11, n))
+    Y[0:3] = rng.uniform(-0.3, 0.3, (3, n))
+    Y[2] += 1.2
+    Y[3] = 1.8
+    Y[4:7] = rng.uniform(-0.5, 0.5, (3, n))
+    Y[7] = rng.uniform(1.2, 1.8, n)
+    Y[8] = rng.uniform(0.6, 1.0, n)
+    Y[9] = rng.uniform(0.8, 1.2, n)
+    Y[10] = rng.uniform(-3, 3, n)
+    U = rng.uniform(-0.5, 0.5, (4, n))
+    return Y, U
+
+
 def random_state(rng: np.random.Generator) -> np.ndarray:
     """A generic packed state away from λ = μ and the boundaries."""
     lam = rng.uniform(1.1, 2.0)

@@ -19,13 +19,13 @@ IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 
 
 def _train(out):
-    from agents.benchmark import plot
+    from flatbody_env.bench.train import plot
 
     plot(IMG / "train_benchmark.csv", out)
 
 
 def _env(out):
-    from flatbody_env.env.benchmark import plot
+    from flatbody_env.bench.env import plot
 
     plot(IMG / "env_benchmark.csv", out)
 
@@ -73,19 +73,19 @@ def _tasks(out):
 
 
 def _recording(out):
-    from flatbody_env.cli.record import _bench_chart
+    from flatbody_env.bench.recording import plot
 
-    _bench_chart(json.loads((IMG / "recording.json").read_text(encoding="utf-8")), out)
+    plot(IMG / "recording.json", out)
 
 
 def _scaling(out):
-    from flatbody_env.sweep.scaling import plot_scaling
+    from flatbody_env.bench.sweep import plot
 
-    plot_scaling(IMG / "scaling.json", out)
+    plot(IMG / "scaling.json", out)
 
 
 def _service(out):
-    from flatbody_env.service.benchmark import plot
+    from flatbody_env.bench.service import plot
 
     plot(IMG / "service_benchmark.json", out)
 
@@ -191,7 +191,7 @@ def test_caption_is_found_and_clean_layout_passes():
 
 
 def _small_scaling_table(path: Path) -> Path:
-    """A scaling.json of a 2-task run, in the layout ``write_scaling`` saves."""
+    """A scaling.json of a 2-task run, in the layout ``flatbody bench sweep`` saves."""
     rep = {"grid": 8, "chunk": 4, "tasks": 2, "points": 64, "serial_s": 0.2, "task_cost_mean_s": 0.1, "task_cost_max_s": 0.12,
            "cost_per_point_s": 0.003, "task_costs_s": [0.08, 0.12],
            "local": [{"workers": 1, "startup_s": 0.01, "run_s": 0.21, "speedup": 0.95, "speedup_end_to_end": 0.9},
@@ -215,8 +215,8 @@ def _small_service_table(path: Path) -> Path:
 
 
 def test_scaling_chart_is_drawn_from_its_saved_table(drawn, tmp_path):
-    """``plot_scaling`` reads only the saved JSON: a small table gives a chart whose numbers come from it."""
-    from flatbody_env.sweep.scaling import plot_scaling
+    """``bench.sweep.plot`` reads only the saved JSON: a small table gives a chart whose numbers come from it."""
+    from flatbody_env.bench.sweep import plot as plot_scaling
 
     table = _small_scaling_table(tmp_path / "scaling.json")
     fig = drawn(lambda out: plot_scaling(table, out), tmp_path / "scaling.png")
@@ -229,8 +229,8 @@ def test_scaling_chart_is_drawn_from_its_saved_table(drawn, tmp_path):
 
 
 def test_service_chart_is_drawn_from_its_saved_table(drawn, tmp_path):
-    """``service.benchmark.plot`` reads only the saved JSON (``flatbody bench service --plot-only``)."""
-    from flatbody_env.service.benchmark import plot
+    """``bench.service.plot`` reads only the saved JSON (``flatbody bench service --plot-only``)."""
+    from flatbody_env.bench.service import plot
 
     table = _small_service_table(tmp_path / "service_benchmark.json")
     fig = drawn(lambda out: plot(table, out), tmp_path / "service.png")

@@ -290,9 +290,10 @@ def register(sub) -> None:
 def _bench_train(args) -> int:
     if args.to_goal:
         return _bench_time_to_goal(args)
-    from agents.benchmark import run
+    from flatbody_env.bench.train import run
 
-    b = run(timesteps=args.timesteps, repeats=args.repeats, seed=args.seed, out_dir=args.out_dir, overrides=args.hyperparams or [])
+    b = run(timesteps=args.timesteps, repeats=args.repeats, seed=args.seed, out_dir=args.out_dir, overrides=args.hyperparams or [],
+            docs=args.docs or None)
     for r in (b.flatbody, b.pendulum):
         print(f"{r.env_id:<12} {r.timesteps} steps  wall {r.wall_s:7.1f} s  in env {r.env_s:6.1f} s ({r.env_share:.0%})")
     print(f"PPO wall time FlatBody-v0 / Pendulum-v1: {b.ratio_wall:.2f} (target <= 1.0)")
@@ -300,18 +301,15 @@ def _bench_train(args) -> int:
     print(f"LQR action per body-step (batch, gains stored): {b.lqr_us_per_body_step:.3f} us (target <= 1)")
     print(f"wrote {args.out_dir}/train_benchmark.json, .csv, .png")
     if args.docs:
-        from agents.benchmark import markdown
-        from flatbody_env.output import replace_marked_block
-
-        replace_marked_block(args.docs, "train", markdown(b))
         print(f"updated the table in {args.docs}")
     return 0
 
 
 def _bench_time_to_goal(args) -> int:
-    from agents.goal_benchmark import markdown, run
+    from flatbody_env.bench.time_to_goal import run
 
-    b = run(seed=args.seed, max_timesteps=args.max_timesteps, eval_every=args.eval_every, episodes=args.episodes, out_dir=args.out_dir)
+    b = run(seed=args.seed, max_timesteps=args.max_timesteps, eval_every=args.eval_every, episodes=args.episodes, out_dir=args.out_dir,
+            docs=args.docs or None)
     for c in (b.sb3, b.rsl):
         reached = f"{c.goal_s:.1f} s ({c.goal_timesteps} steps)" if c.goal_s is not None else "not reached"
         t, w, s, d = c.points[-1]
@@ -324,9 +322,6 @@ def _bench_time_to_goal(args) -> int:
         print(f"rsl-ppo / sb3-ppo wall time to beat the LQR: {b.ratio_lqr:.2f}")
     print(f"wrote {args.out_dir}/time_to_goal.json, .csv, .png")
     if args.docs:
-        from flatbody_env.output import replace_marked_block
-
-        replace_marked_block(args.docs, "time-to-goal", markdown(b))
         print(f"updated the table in {args.docs}")
     return 0
 

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-from pathlib import Path
 
 from flatbody_env.output import check_output_path
 from flatbody_env.physics import validation
@@ -136,23 +134,6 @@ def output_file(name: str, suffixes: tuple[str, ...] = ()):
             check_output_path(name, text, suffixes)
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
-        return text
-
-    return parse
-
-
-def output_dir(name: str):
-    """argparse type: a folder a command writes into (created if missing; must not be a file)."""
-
-    def parse(text: str) -> str:
-        p = Path(text)
-        if p.exists() and not p.is_dir():
-            raise argparse.ArgumentTypeError(f"{name}: {text[:60]!r} exists and is not a directory")
-        anchor = p
-        while not anchor.exists():
-            anchor = anchor.parent
-        if not os.access(anchor, os.W_OK | os.X_OK):
-            raise argparse.ArgumentTypeError(f"{name}: {str(anchor)[:60]!r} is not writable")
         return text
 
     return parse

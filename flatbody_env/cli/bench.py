@@ -1,4 +1,4 @@
-"""``flatbody bench env``: the environment's step rates (the measurement lives in :mod:`flatbody_env.env.benchmark`);
+"""``flatbody bench env``: the environment's step rates (the measurement lives in :mod:`flatbody_env.bench.env`);
 ``flatbody targets-table``: regenerate the task's settling-rate table (:mod:`flatbody_env.env.targets`)."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from flatbody_env.physics import validation
 
 
 def _cmd(args) -> int:
-    from flatbody_env.env.benchmark import run
+    from flatbody_env.bench.env import report, run
+    from flatbody_env.bench.harness import write_report
 
-    bench = run(steps=args.steps, batch=args.batch, batch_steps=args.batch_steps, repeats=args.repeats, out_dir=args.out_dir,
-                episode_steps=args.episode_steps)
+    bench = run(steps=args.steps, batch=args.batch, batch_steps=args.batch_steps, repeats=args.repeats, episode_steps=args.episode_steps)
     print(f"integrator: {bench.integrator}")
     for r in bench.single:
         print(f"{r.name:<28} {r.us_per_env_step:10.2f} µs/step  {r.env_steps_per_s:14,.0f} steps/s  (reset {r.ms_per_reset:.3f} ms)")
@@ -25,12 +25,9 @@ def _cmd(args) -> int:
     print(f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included; "
           f"with num_threads=None, {bench.threads} thread{'s' if bench.threads > 1 else ''}: {bench.ratio_batched_threads_vs_cartpole:.2f})")
     print(f"batched episode error vs tight reference:   {bench.episode_error:.2e} (target <= 1e-8)")
+    write_report(report(bench), args.out_dir, docs=args.docs or None)
     print(f"wrote {Path(args.out_dir) / 'env_benchmark.json'}, .csv, .png")
     if args.docs:
-        from flatbody_env.env.benchmark import markdown
-        from flatbody_env.output import replace_marked_block
-
-        replace_marked_block(args.docs, "env", markdown(bench))
         print(f"updated the tables in {args.docs}")
     return 0
 

@@ -1,5 +1,5 @@
 """``flatbody bench gpu``: body-steps/s of the batched dynamics, then of the whole env step, against N on every backend
-here (the measurement lives in :mod:`flatbody_env.integrators.batch_bench`)."""
+here (the measurement lives in :mod:`flatbody_env.bench.gpu`)."""
 
 from __future__ import annotations
 
@@ -41,11 +41,8 @@ def _backends(text: str) -> list[str]:
 
 
 def _cmd(args) -> int:
-    import json
-
-    from flatbody_env.env.device_bench import run as run_env
-    from flatbody_env.integrators.batch_bench import WHAT, plot, run
-    from flatbody_env.output import atomic_write
+    from flatbody_env.bench.gpu import WHAT, report, run
+    from flatbody_env.bench.harness import write_report
 
     def show(row):
         what = "dynamics" if row["what"] == WHAT else "whole env"
@@ -53,16 +50,11 @@ def _cmd(args) -> int:
               f"({row['device_name']})", flush=True)
 
     result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, only=args.backends, progress=show)
-    names = sorted({r["backend"] for r in result["rows"]})
-    devices = {r["backend"]: r["device_name"] for r in result["rows"]}
-    result["rows"] += run_env(names, devices, sizes=args.sizes, steps=args.steps, repeats=args.repeats, progress=show)
     for note in result["left_out"]:
         print(f"left out: {note}")
     out = Path(args.out)
-    png = out.with_suffix(".png")
-    atomic_write(out, json.dumps(result, indent=2) + "\n")
-    atomic_write(png, lambda tmp: plot(result, tmp))
-    print(f"wrote {out} and {png}")
+    paths = write_report(report(result, out.stem), out.parent)
+    print(f"wrote {', '.join(str(p) for p in paths)}")
     return 0
 
 
@@ -70,7 +62,7 @@ def register_bench(bench_sub) -> None:
     p = bench_sub.add_parser("gpu", help="batched dynamics and the whole env step: body-steps/s against N on the CPU (serial, parallel) "
                                          "and a CUDA GPU when present")
     p.add_argument("--out", required=True, type=output_file("out", (".json",)), metavar="FILE.json",
-                   help="JSON of the rows; the chart goes beside it (FILE.png)")
+                   help="JSON of the rows; the table (FILE.csv) and the chart (FILE.png) go beside it")
     p.add_argument("--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies")
     p.add_argument("--methods", type=_methods, default=["RK4", "DOP853-numba"], metavar="NAME,...", help="batch methods to time")
     p.add_argument("--backends", type=_backends, default=None, metavar="NAME,...",

@@ -12,7 +12,7 @@
 * ``flatbody failure-study [--quick] [--studies gap rho horizon] [--out DIR]`` —
   :mod:`analysis.failure_study` → ``DIR/failure_study.csv``, ``failure_study.png``.
 * ``flatbody bench integrators [--quick] [--no-compile] [--out DIR]`` —
-  :mod:`analysis.integrator_bench` → prints the figures, writes ``bench_integrators.json``,
+  :mod:`flatbody_env.bench.integrators` → prints the figures, writes ``bench_integrators.json``,
   ``bench_integrators.csv``, ``bench_integrators.png``.
 
 Every command can redraw its PNG from the saved tables with ``--plot-only``.
@@ -27,7 +27,6 @@ from pathlib import Path
 from flatbody_env.answers import failure_rows
 from flatbody_env.cli.args import int_at_least, positive_float
 from flatbody_env.physics import validation
-from flatbody_env.output import atomic_open, atomic_write
 
 DEFAULT_OUT = "runs/integrators"
 
@@ -152,56 +151,22 @@ def _failure(args) -> int:
 
 
 def _bench(args) -> int:
-    import csv
-    import json
-
-    from analysis.integrator_bench import bench_integrators, format_report
     from analysis.integrator_plots import plot_bench
+    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.integrators import NAME, describe, measure, report, write_docs
 
     out = Path(args.out)
-    json_path, csv_path, png_path = out / "bench_integrators.json", out / "bench_integrators.csv", out / "bench_integrators.png"
-    if not args.plot_only:
-        rep = bench_integrators(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
-        print(format_report(rep))
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write(json_path, json.dumps(rep.as_dict(), indent=2) + "\n")
-        with atomic_open(csv_path) as fh:
-            w = csv.writer(fh)
-            w.writerow(["section", "case", "method", "setting_or_path", "figure", "value"])
-            for a in rep.regular["at_target"]:
-                w.writerow(["regular", f"t={rep.regular['t_end']:g}", a["method"], f"error={rep.regular['target_error']:g}", "wall_time_s", a["wall_time"]])
-                w.writerow(["regular", f"t={rep.regular['t_end']:g}", a["method"], f"error={rep.regular['target_error']:g}", "speedup_vs_scipy_DOP853", a["speedup"]])
-            for s in rep.regular["same_rtol"]:
-                w.writerow(["regular", "same rtol", "DOP853-numba", s["setting"], "ratio_vs_scipy_DOP853", s["ratio"]])
-            for c in rep.close_approach:
-                for a in c["at_target"]:
-                    w.writerow(["close-approach", f"delta={c['delta']:g}", a["method"], f"error={c['target_error']:g}", "wall_time_s", a["wall_time"]])
-                w.writerow(["close-approach", f"delta={c['delta']:g}", c["cheapest_regular"], "", "cheapest_two_polar_over_regular", c["regular_vs_cheapest_two_polar"]])
-            for x in rep.long_horizon:
-                w.writerow(["long-horizon", f"t={x['t_end']:g}", x["method"], x["setting"], "energy_error", x["energy_error"]])
-            for x in rep.short_step:
-                w.writerow(["short-step", "dt=0.05", x["method"], x["path"], "us_per_step", x["us_per_step"]])
-                if x["path"] == "env":
-                    w.writerow(["short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"]])
-            for x in rep.auto:
-                w.writerow(["auto", f"{x['scene']} t={x['t_end']:g}", x["method"], x["model"], "wall_time_s", x["auto_s"]])
-                w.writerow(["auto", f"{x['scene']} t={x['t_end']:g}", "DOP853", "scipy (former default)", "wall_time_s", x.get("scipy_s")])
-            for x in rep.compile_times:
-                w.writerow(["compile", "", x["method"], "first call", "seconds", x["first_call_s"]])
-                w.writerow(["compile", "", x["method"], "cached", "seconds", x["cached_s"]])
-    elif not json_path.exists():
-        raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
-    plot_bench(json_path, png_path)
-    print(f"wrote {png_path}" if args.plot_only else f"wrote {json_path}, {csv_path}, {png_path}")
+    json_path = out / f"{NAME}.json"
+    if args.plot_only:
+        if not json_path.exists():
+            raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
+        print(f"wrote {plot_bench(json_path, out / f'{NAME}.png')}")
+    else:
+        rep = measure(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
+        print(describe(rep))
+        print("wrote " + ", ".join(map(str, write_report(report(rep), out))))
     if args.docs:
-        from analysis.integrator_bench import docs_tables
-        from flatbody_env.output import replace_marked_block
-
-        for name, table in docs_tables(json.loads(json_path.read_text(encoding="utf-8"))).items():
-            try:
-                replace_marked_block(args.docs, name, table)
-            except ValueError:
-                continue  # the page does not show this table
+        for name in write_docs(json_path, args.docs):
             print(f"regenerated the {name} table in {args.docs}")
     return 0
 

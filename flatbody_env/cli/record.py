@@ -8,7 +8,6 @@ the handlers only.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -16,7 +15,6 @@ from pathlib import Path
 from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
 from flatbody_env.physics import validation
 from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
-from flatbody_env.output import atomic_write, save_figure
 
 
 
@@ -263,259 +261,18 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _record_bench(args) -> int:
-    import platform
-    import tempfile
+def _bench(args) -> int:
+    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.recording import describe, measure, report
 
-    import numpy as np
-
-    from flatbody_env.recording.reader import sdk_version
-    from flatbody_env.recording.writer import Recorder, record_trajectory
-    from flatbody_env.scene import load_scene
-    from flatbody_env.simulation import simulate
-
-    scene = load_scene(args.scene)
-    sizes = sorted({*args.sizes, args.steps})
-    out_dir = Path(args.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rows = []
-    live = None
-    first_call = None
-    with tempfile.TemporaryDirectory() as tmp:
-        # the process's first recording pays for importing rerun: timed apart, not in the medians
-        warm = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, 1000), with_rotation=True)
-        start = time.perf_counter()
-        record_trajectory(warm, scene.body, Path(tmp) / "warm-up.rrd")
-        first_call = {"steps": 1000, "seconds": time.perf_counter() - start}
-        for n in sizes:
-            traj = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, n), with_rotation=True)
-            times = []
-            size_bytes = 0
-            for r in range(args.repeats):
-                path = Path(tmp) / f"bench-{n}-{r}.rrd"
-                start = time.perf_counter()
-                record_trajectory(traj, scene.body, path)
-                times.append(time.perf_counter() - start)
-                size_bytes = path.stat().st_size
-                path.unlink()
-            rows.append(
-                {
-                    "steps": n,
-                    "median_s": float(np.median(times)),
-                    "min_s": float(np.min(times)),
-                    "max_s": float(np.max(times)),
-                    "us_per_step": float(np.median(times)) / n * 1e6,
-                    "file_bytes": size_bytes,
-                }
-            )
-            print(f"whole trajectory, {n:>6} steps: median {np.median(times):.3f} s (min {np.min(times):.3f}, max {np.max(times):.3f}) over {args.repeats} runs, {size_bytes / 1e6:.1f} MB")
-            if n == args.steps:
-                Y, R, E = traj.y, traj.rotation, traj.energy
-                path = Path(tmp) / "bench-live.rrd"
-                start = time.perf_counter()
-                with Recorder(path, scene.body, block=args.block) as rec:
-                    for k in range(n):
-                        rec.append(traj.t[k], Y[:, k], R[k], energy=E[k])
-                live_s = time.perf_counter() - start
-                live = {"steps": n, "block": args.block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
-                print(f"live Recorder.append, {n} steps in blocks of {args.block}: {live_s:.3f} s ({live_s / n * 1e6:.1f} µs/step)")
-    episode = _episode_bench(args.episode_repeats)
-    print(f"recorded env episode (400 steps, random policy): {episode['compiled_method']} carrying R {episode['compiled_s']:.3f} s, "
-          f"the former path (scipy DOP853 stepping R) {episode['former_s']:.3f} s: {episode['speedup']:.1f}x faster (same run)")
-    print(f"  its stepping alone (nothing recorded): {episode['stepping_compiled_s']:.3f} s vs {episode['stepping_former_s']:.3f} s: "
-          f"{episode['stepping_speedup']:.1f}x; the rest of a recorded episode is the recorder")
-    print(f"free scene trajectory with R (scene {scene.name}, t = {scene.t_end:g}, 1001 samples): method auto ({episode['scene_auto_method']}) "
-          f"{episode['scene_auto_s'] * 1e3:.1f} ms, scipy DOP853 {episode['scene_scipy_s'] * 1e3:.1f} ms: {episode['scene_speedup']:.1f}x")
-    frame = _frame_bench(scene, args.frames)
-    print(f"rgb_array frame ({frame['frames']} frames of scene {scene.name}): median {frame['median_ms']:.3f} ms, mean {frame['mean_ms']:.3f} ms — "
-          + ("within" if frame["within_budget"] else "OVER") + " the 1 ms budget")
-    target = next(r for r in rows if r["steps"] == args.steps)
-    result = {
-        "benchmark": "recording",
-        "what": "record_trajectory(traj, body, path): whole trajectory to a finished .rrd (send_columns), wall time",
-        "scene": scene.name,
-        "steps": args.steps,
-        "median_s": target["median_s"],
-        "budget_s": 1.0,
-        "within_budget": target["median_s"] <= 1.0,
-        "repeats": args.repeats,
-        "sizes": rows,
-        "live": live,
-        "frame": frame,
-        "episode": episode,
-        "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
-        "rerun_sdk": sdk_version(),
-        "python": platform.python_version(),
-        "machine": platform.machine(),
-        "cpus": __import__("os").cpu_count(),
-    }
-    json_path = out_dir / "recording.json"
-    atomic_write(json_path, json.dumps(result, indent=2) + "\n")
-    png_path = out_dir / "recording.png"
-    _bench_chart(result, png_path)
-    print(f"first call of the process ({first_call['steps']} steps, includes importing rerun): {first_call['seconds']:.3f} s")
-    verdict = "within" if result["within_budget"] else "OVER"
-    print(f"logging a {args.steps}-step trajectory: {target['median_s']:.3f} s (median of {args.repeats}) — {verdict} the 1 s budget")
-    print(f"wrote {json_path} and {png_path}")
+    result = measure(scene=args.scene, steps=args.steps, sizes=args.sizes, repeats=args.repeats, block=args.block, frames=args.frames,
+                     episode_repeats=args.episode_repeats)
+    print(describe(result))
+    paths = write_report(report(result), args.out_dir, docs=args.docs)
+    print("wrote " + ", ".join(map(str, paths[:3])))
     if args.docs:
-        from flatbody_env.output import replace_marked_block
-
-        replace_marked_block(args.docs, "recording", recording_table(result))
         print(f"regenerated the table in {args.docs}")
     return 0
-
-
-def recording_table(result: dict) -> str:
-    """The Markdown table of docs/recording.md, from a ``recording.json`` result."""
-    sizes = {r["steps"]: r for r in result["sizes"]}
-    target = sizes[result["steps"]]
-    others = [r for n, r in sorted(sizes.items()) if n != result["steps"]]
-    ep, fr, lv, fc = result["episode"], result["frame"], result["live"], result["first_call"]
-    lines = [
-        "| what | result |",
-        "|---|---|",
-        f"| recorded env episode, 400 steps ({ep['compiled_method']} carrying R, compiled) | **{ep['compiled_s']:.3f} s** "
-        f"(median of {ep['repeats']}) |",
-        f"| the same episode on the former path (scipy DOP853 integrating R) | {ep['former_s']:.3f} s: "
-        f"**{ep['speedup']:.1f}× slower** (same run) |",
-        f"| its stepping alone (the env carrying R, nothing recorded): compiled vs the former path | {ep['stepping_compiled_s'] * 1e3:.0f} ms vs "
-        f"{ep['stepping_former_s'] * 1e3:.0f} ms: **{ep['stepping_speedup']:.0f}×** |",
-        f"| free scene with R, {ep['scene_samples']} samples: `simulate` method auto ({ep['scene_auto_method']}) vs scipy DOP853 | "
-        f"{ep['scene_auto_s'] * 1e3:.1f} ms vs {ep['scene_scipy_s'] * 1e3:.0f} ms ({ep['scene_speedup']:.0f}×) |",
-        f"| `record_trajectory`, {result['steps']} steps (budget ≤ 1 s) | **{target['median_s']:.2f} s** (min {target['min_s']:.2f} s; "
-        f"{target['file_bytes'] / 1e6:.1f} MB) |",
-    ]
-    if others:
-        counts = " / ".join(str(r["steps"]) for r in others)
-        medians = " / ".join(f"{r['median_s']:.3f}" for r in others)
-        lines.append(f"| `record_trajectory`, {counts} steps | {medians} s |")
-    if lv:
-        lines.append(f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
-                     f"({lv['us_per_step']:.0f} µs per step) |")
-    lines.append(f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |")
-    lines.append(f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
-                 f"({fr['mean_ms']:.2f} ms mean) |")
-    return "\n".join(lines)
-
-
-def _episode_bench(repeats: int) -> dict:
-    """A recorded FlatBody-v0 episode on the compiled path that carries R against the former path
-    (the whole episode re-run on scipy's DOP853 at the env's tolerance), same run; and a free
-    scene's trajectory with R by ``simulate``'s default (auto) against scipy's DOP853."""
-    import tempfile
-
-    import gymnasium as gym
-    import numpy as np
-
-    import flatbody_env  # noqa: F401  (registers FlatBody-v0)
-    from flatbody_env.recording.wrapper import RerunRecorder
-    from flatbody_env.scene import load_scene
-    from flatbody_env.simulation import simulate
-
-    def episode(path, **kwargs):
-        env = gym.make("FlatBody-v0", track_rotation=True, **kwargs)
-        env = RerunRecorder(env, str(path)) if path is not None else env
-        rng = np.random.default_rng(0)
-        start = time.perf_counter()
-        env.reset(seed=0)
-        done = False
-        while not done:
-            _, _, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
-            done = term or trunc
-        env.close()
-        return time.perf_counter() - start, info["integrator"]["method"]
-
-    fast, slow, fast_steps, slow_steps = [], [], [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        episode(Path(tmp) / "warm.rrd")  # compiled kernels loaded, rerun imported
-        for r in range(repeats):
-            s, method = episode(Path(tmp) / f"fast-{r}.rrd")
-            fast.append(s)
-            s, _ = episode(Path(tmp) / f"slow-{r}.rrd", integrator="DOP853")
-            slow.append(s)
-            fast_steps.append(episode(None)[0])  # the same episode carrying R, nothing recorded
-            slow_steps.append(episode(None, integrator="DOP853")[0])
-    scene = load_scene("default")
-    times = np.linspace(0.0, scene.t_end, 1001)
-    auto = simulate(scene, t_end=scene.t_end, times=times, with_rotation=True)
-    auto_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True).wall_time for _ in range(repeats))
-    scipy_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time for _ in range(max(1, repeats // 2)))
-    return {
-        "compiled_method": method, "compiled_s": float(np.median(fast)), "former_s": float(np.median(slow)),
-        "speedup": float(np.median(slow) / np.median(fast)), "repeats": repeats,
-        "stepping_compiled_s": float(np.median(fast_steps)), "stepping_former_s": float(np.median(slow_steps)),
-        "stepping_speedup": float(np.median(slow_steps) / np.median(fast_steps)),
-        "scene": scene.name, "scene_samples": int(times.size), "scene_auto_method": auto.method, "scene_auto_s": float(auto_s),
-        "scene_scipy_s": float(scipy_s), "scene_speedup": float(scipy_s / auto_s),
-    }
-
-
-def _frame_bench(scene, frames: int) -> dict:
-    """Time ``render_frame`` (the env's ``rgb_array`` frame) on the states of a simulated trajectory."""
-    import numpy as np
-
-    from flatbody_env.env.rendering import render_frame
-    from flatbody_env.simulation import simulate
-
-    traj = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, frames), with_rotation=True)
-    target = {"lambda": float(traj.state["lambda"][0]), "mu": float(traj.state["mu"][0])}
-    Y, R, t = traj.y, traj.rotation, traj.t
-    for k in range(min(20, frames)):  # warm-up (font and legend caches)
-        render_frame(Y[:, k], R[k], target, t[k])
-    times = np.empty(frames)
-    for k in range(frames):
-        start = time.perf_counter()
-        render_frame(Y[:, k], R[k], target, t[k])
-        times[k] = time.perf_counter() - start
-    median_ms = float(np.median(times)) * 1e3
-    return {
-        "frames": frames,
-        "median_ms": median_ms,
-        "mean_ms": float(times.mean()) * 1e3,
-        "p90_ms": float(np.percentile(times, 90)) * 1e3,
-        "budget_ms": 1.0,
-        "within_budget": median_ms <= 1.0,
-    }
-
-
-RECORDING_CAPTION = (
-    "record_trajectory: a whole simulated trajectory written at once (rerun's send_columns: one call per series);\n"
-    "live Recorder.append: the same steps logged while they are simulated, in blocks. .rrd: rerun's recording file.\n"
-    "Points: median of {repeats} repeats; error bars: the fastest and the slowest. Steps: time samples of the trajectory."
-)
-"""The recording benchmark chart's caption (``{repeats}`` filled in)."""
-
-
-def _bench_chart(result: dict, path: Path) -> None:
-    """The chart of ``recording.json``'s ``result`` (drawn from the saved table, never from a fresh run)."""
-    import matplotlib
-
-    from flatbody_env.chart_text import add_caption
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    steps = [r["steps"] for r in result["sizes"]]
-    med = [r["median_s"] for r in result["sizes"]]
-    lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
-    hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
-    fig, ax = plt.subplots(figsize=(6, 4.7))
-    ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
-    if result.get("live"):
-        lv = result["live"]
-        ax.plot([lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})")
-    ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("steps")
-    ax.set_ylabel("wall time to a finished .rrd [s]")
-    ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    bottom = add_caption(fig, RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
 
 
 def _int_list(text: str) -> list[int]:
@@ -589,4 +346,4 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--episode-repeats", type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS), default=3,
                    help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)")
     p.add_argument("--docs", metavar="FILE.md", help="also regenerate the table between <!-- bench:recording --> markers in FILE.md")
-    p.set_defaults(handler=_record_bench)
+    p.set_defaults(handler=_bench)

@@ -112,17 +112,19 @@ def _serve_until_stopped(run) -> bool:
 
 
 def _bench(args) -> int:
-    from flatbody_env.service.benchmark import plot, run
+    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.service import NAME, measure, plot, report
 
+    out = Path(args.out_dir)
     if args.plot_only:
-        table = Path(args.out_dir) / "service_benchmark.json"
+        table = out / f"{NAME}.json"
         if not table.exists():
             raise ValueError(f"out_dir: no {table} to plot (run without --plot-only first)")
-        print(f"wrote {plot(table, Path(args.out_dir) / 'service_benchmark.png')}")
+        print(f"wrote {plot(table, out / f'{NAME}.png')}")
         return 0
-    result = run(out_dir=args.out_dir, clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
+    result = measure(clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
     print(result.table())
-    print(f"wrote {result.paths['json']}, {result.paths['csv']}, {result.paths['png']}")
+    print("wrote " + ", ".join(map(str, write_report(report(result), out))))
     return 0 if result.errors == 0 else 1
 
 

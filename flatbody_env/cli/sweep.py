@@ -7,7 +7,7 @@
   continues a killed sweep. ``sweep work-precision`` says why timing studies stay serial.
 * ``flatbody tune --algo ppo|sac --trials N ...`` — Optuna search (:mod:`agents.tune`).
 * ``flatbody bench sweep`` — speed-up over workers, scheduler overhead per task, extrapolation
-  (:mod:`flatbody_env.sweep.scaling`).
+  (:mod:`flatbody_env.bench.sweep`).
 """
 
 from __future__ import annotations
@@ -227,19 +227,20 @@ def _tune(args) -> int:
 
 
 def _bench_sweep(args) -> int:
-    from flatbody_env.sweep.scaling import format_scaling, plot_scaling, scaling_benchmark, write_scaling
+    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.sweep import NAME, describe, measure, plot, report
 
     out = Path(args.out)
-    json_path = out / "scaling.json"
-    if not args.plot_only:
-        rep = scaling_benchmark(grid=args.grid, workers=tuple(args.workers), sim_workers=args.sim_workers,
-                                chunk=args.chunk, noop_tasks=args.noop_tasks, extrapolate=(8, 32, 128))
-        print(format_scaling(rep))
-        write_scaling(rep, out)
-    elif not json_path.exists():
-        raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
-    png = plot_scaling(json_path, out / "scaling.png")
-    print(f"wrote {png}" if args.plot_only else f"wrote {json_path}, {out / 'scaling.csv'}, {png}")
+    if args.plot_only:
+        json_path = out / f"{NAME}.json"
+        if not json_path.exists():
+            raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
+        print(f"wrote {plot(json_path, out / f'{NAME}.png')}")
+        return 0
+    rep = measure(grid=args.grid, workers=tuple(args.workers), sim_workers=args.sim_workers, chunk=args.chunk,
+                  noop_tasks=args.noop_tasks, extrapolate=(8, 32, 128))
+    print(describe(rep))
+    print("wrote " + ", ".join(map(str, write_report(report(rep), out))))
     return 0
 
 

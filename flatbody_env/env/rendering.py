@@ -172,11 +172,6 @@ def _blend(frame: np.ndarray, alpha: np.ndarray, color, x: int, y: int) -> None:
     region[:] = (region * (1.0 - a) + c * a + 0.5).astype(np.uint8)
 
 
-def _text_mask(text: str) -> np.ndarray:
-    """Boolean mask (h, w) of ``text`` (coverage above one half)."""
-    return _text_alpha(text) > 0.5
-
-
 def plate_fill(rho: float) -> tuple[int, int, int]:
     """The plate's fill for the thickness ϱ: the palette's tone at ϱ = 1, darker for a thicker plate."""
     k = float(np.clip(0.5 + 0.5 * math.tanh(1.5 * (rho - 1.0)), 0.0, 1.0))

@@ -5,5 +5,6 @@ Run it with ``flatbody serve`` (:mod:`flatbody_env.cli.serve`); build the app wi
 errors), :mod:`~flatbody_env.service.models` (JSON bodies), :mod:`~flatbody_env.service.answers`
 (the command's answers), :mod:`~flatbody_env.service.jobs` (worker processes),
 :mod:`~flatbody_env.service.store` (SQLite), :mod:`~flatbody_env.service.limits` (bounds),
-:mod:`~flatbody_env.service.benchmark` (``flatbody bench service``); the page lives in ``page/``.
+:mod:`~flatbody_env.service.launch` (``flatbody serve`` in a subprocess on loopback); the page lives in ``page/``.
+Its load benchmark (``flatbody bench service``) is :mod:`flatbody_env.bench.service`.
 """

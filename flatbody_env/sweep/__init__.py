@@ -3,7 +3,8 @@
 The app layer's sweep engine (it calls :mod:`analysis` and :mod:`agents`): :mod:`.tasks` (each
 task a pure function of its key), :mod:`.store` (results by key in SQLite), :mod:`.cluster` (the
 embedded or remote Dask cluster), :mod:`.runner` (run, store, resume), :mod:`.report` (the serial
-commands' JSON form), :mod:`.scaling` (the scaling benchmark). The command is ``flatbody sweep``.
+commands' JSON form). The command is ``flatbody sweep``; its scaling benchmark (``flatbody bench sweep``)
+is :mod:`flatbody_env.bench.sweep`.
 """
 
 from flatbody_env.sweep.runner import SweepReport, run_sweep

@@ -307,22 +307,3 @@ def test_record_agent_episode(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         raise SystemExit(main(["record", "--agent", "--scene", "default", "--out", str(out)]))
     assert info.value.code == 2
-
-
-@pytest.mark.parametrize("env_id", ["FlatBody-v0", "Pendulum-v1"])
-def test_train_benchmark_monitors_each_stack_once(env_id):
-    """``flatbody bench train`` compares like with like: each stack runs under one ``VecMonitor`` and no
-    per-env ``Monitor`` (SB3 warns when both wrap an env, and each step would be counted twice)."""
-    import warnings
-
-    from agents.benchmark import _run
-    from agents.train import load_hyperparams
-
-    hp = {**load_hyperparams("ppo", "FlatBody-v0"), "n_envs": 2, "n_steps": 32, "batch_size": 32}
-    if env_id != "FlatBody-v0":
-        hp = {k: v for k, v in hp.items() if k not in ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")}
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        timing = _run(env_id, hp, 64, 0)
-    assert not [w for w in caught if "Monitor" in str(w.message)], [str(w.message) for w in caught]
-    assert timing.timesteps >= 64 and 0.0 < timing.env_s < timing.wall_s

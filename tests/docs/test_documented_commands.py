@@ -26,7 +26,7 @@ by an HTML comment on the line just before its fence, ``<!-- doctest: WORDS -->`
   about 10 s, or several seconds spent on commands that a default block already runs. Runs under
   ``pytest -m slow``.
 * ``service``: needs a running service. The test starts the real one (``flatbody serve`` on a free
-  loopback port, :func:`flatbody_env.service.benchmark.start_service`) and rewrites the documented
+  loopback port, :func:`flatbody_env.service.launch.start_service`) and rewrites the documented
   ``localhost:8000`` / ``127.0.0.1:8000`` to it.
 * ``serve``: every line starts the service (``flatbody serve ...``). The test starts them all at
   once, each in a folder of its own on a free port (``--port`` rewritten or added; an absolute
@@ -322,7 +322,7 @@ def _free_port() -> int:
 
 @pytest.fixture(scope="module")
 def service_url(tmp_path_factory):
-    from flatbody_env.service.benchmark import start_service
+    from flatbody_env.service.launch import start_service
 
     proc, url = start_service(tmp_path_factory.mktemp("doc-service") / "data", workers=1)
     try:

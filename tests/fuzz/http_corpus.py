@@ -389,8 +389,8 @@ def judge(case: Case, status: int | None, headers: dict[str, str] | None, text: 
 # -- running ------------------------------------------------------------------------------------------------
 def start_service(data_dir: Path, log_path: Path, *, workers: int = 1, env: dict[str, str] | None = None, timeout: float = 90.0):
     """``flatbody serve`` on a free loopback port with the corpus' small limits and its log in ``log_path``:
-    ``(process, url)`` once /health answers (:func:`flatbody_env.service.benchmark.start_service`)."""
-    from flatbody_env.service.benchmark import start_service as start
+    ``(process, url)`` once /health answers (:func:`flatbody_env.service.launch.start_service`)."""
+    from flatbody_env.service.launch import start_service as start
 
     return start(data_dir, workers=workers, timeout=timeout, env={**SMALL_LIMITS, **(env or {})}, log_path=log_path)
 

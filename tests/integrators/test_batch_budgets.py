@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import random_lanes
 
 from flatbody_env.integrators import IntegrationError, Tolerances
 from flatbody_env.integrators import batch_solve as bs
@@ -29,18 +30,8 @@ TINY = 500
 
 
 def _lanes(n=40, seed=3):
-    rng = np.random.default_rng(seed)
-    Y = np.empty((11, n))
-    Y[0:3] = rng.uniform(-0.3, 0.3, (3, n))
-    Y[2] += 1.2
-    Y[3] = 1.8
-    Y[4:7] = rng.uniform(-0.5, 0.5, (3, n))
-    Y[7] = rng.uniform(1.2, 1.8, n)
-    Y[8] = rng.uniform(0.6, 1.0, n)
-    Y[9] = rng.uniform(0.8, 1.2, n)
-    Y[10] = rng.uniform(-3, 3, n)
+    Y, U = random_lanes(n, seed)
     Y[4:7, :8] *= 60.0  # fast lanes: many steps in one env step
-    U = rng.uniform(-0.5, 0.5, (4, n))
     return np.ascontiguousarray(Y), np.ascontiguousarray(U)
 
 

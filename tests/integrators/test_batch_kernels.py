@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import random_lanes
 
 from flatbody_env.integrators import batch_kernels
 from flatbody_env.integrators.batch_kernels import DOP853Batch
@@ -13,17 +14,7 @@ from flatbody_env.physics.body import default_body
 
 
 def _lanes(n, seed):
-    rng = np.random.default_rng(seed)
-    Y = np.empty((11, n))
-    Y[0:3] = rng.uniform(-0.3, 0.3, (3, n))
-    Y[2] += 1.2
-    Y[3] = 1.8
-    Y[4:7] = rng.uniform(-0.5, 0.5, (3, n))
-    Y[7] = rng.uniform(1.2, 1.8, n)
-    Y[8] = rng.uniform(0.6, 1.0, n)
-    Y[9] = rng.uniform(0.8, 1.2, n)
-    Y[10] = rng.uniform(-3, 3, n)
-    U = rng.uniform(-0.5, 0.5, (4, n))
+    Y, U = random_lanes(n, seed)
     # hard lanes: a fast approach to lambda = mu (rejections / chart singularity) and huge momenta
     Y[7, 0], Y[8, 0], Y[4, 0], Y[5, 0] = 1.001, 0.999, -3.0, 3.0
     Y[4, 1] = 40.0

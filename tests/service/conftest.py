@@ -39,7 +39,7 @@ def wait_job(get, job_id: str, timeout: float = 180.0) -> dict:
 @pytest.fixture
 def live_service(tmp_path):
     """``flatbody serve`` in a subprocess on a free loopback port: ``(process, url, data_dir)``; stopped afterwards."""
-    from flatbody_env.service.benchmark import start_service
+    from flatbody_env.service.launch import start_service
 
     data_dir = tmp_path / "data"
     proc, url = start_service(data_dir, workers=1)

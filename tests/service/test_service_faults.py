@@ -12,7 +12,7 @@ import time
 import httpx
 import pytest
 
-from flatbody_env.service.benchmark import start_service
+from flatbody_env.service.launch import start_service
 
 
 def _stop(proc) -> None:

@@ -16,7 +16,7 @@ import time
 import httpx
 import pytest
 
-from flatbody_env.service.benchmark import start_service
+from flatbody_env.service.launch import start_service
 from flatbody_env.service.limits import DEFAULT_LIMITS
 
 HEALTH_MS = 100.0

@@ -9,7 +9,7 @@ import time
 
 import httpx
 
-from flatbody_env.service.benchmark import start_service
+from flatbody_env.service.launch import start_service
 from flatbody_env.service.store import RESTART_REASON
 from service.conftest import wait_job
 

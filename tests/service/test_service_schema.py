@@ -64,7 +64,7 @@ def _computed_refusal(response) -> bool:
 
 @pytest.fixture(scope="module")
 def api_schema(tmp_path_factory):
-    from flatbody_env.service.benchmark import start_service
+    from flatbody_env.service.launch import start_service
 
     proc, url = start_service(tmp_path_factory.mktemp("schema-data"), workers=2)
     try:

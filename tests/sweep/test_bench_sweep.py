@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from flatbody_env.sweep.scaling import break_even_grid
+from flatbody_env.bench.sweep import break_even_grid
 
 
 @pytest.mark.slow  # a benchmark run (flatbody bench sweep); the sweep paths it times are tested by default

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from flatbody_env.sweep.scaling import break_even_grid, makespan, model_time
+from flatbody_env.bench.sweep import break_even_grid, makespan, model_time
 from flatbody_env.sweep.tasks import Task, default_chunk, execute, parse_seeds, plan, seed_of
 
 BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}

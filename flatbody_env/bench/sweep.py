@@ -1,4 +1,4 @@
-"""The scaling benchmark of the sweep engine (``flatbody bench sweep``).
+"""``flatbody bench sweep``: how the sweep engine scales over workers.
 
 Measured side by side in one run, on the stability map of the default body:
 
@@ -22,22 +22,28 @@ Measured side by side in one run, on the stability map of the default body:
    serial map costs c·G² and the cluster t₀ + (G/r)·o + c·G²/W; the cluster pays off above the
    positive root G* of c·G²(1 − 1/W) = t₀ + (G/r)·o (reported for the embedded 2-process cluster
    with its start-up, and for running clusters of 8/32/128 workers).
+
+Output (:func:`report`): ``scaling.json`` (everything), ``scaling.csv`` (one figure per row) and the
+chart ``scaling.png`` drawn from the saved JSON (:func:`plot`; ``--plot-only`` redraws it).
 """
 
 from __future__ import annotations
 
-import csv
 import heapq
 import json
 import math
 import os
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
+from flatbody_env.bench.harness import Report
+from flatbody_env.output import save_figure
+from flatbody_env.provenance import machine
 from flatbody_env.sweep.tasks import Task, execute, plan
-from flatbody_env.output import atomic_open, atomic_write, save_figure
+
+NAME = "scaling"
+"""The files' stem: ``scaling.json``, ``.csv``, ``.png``."""
 
 
 def _noop(x: int) -> int:
@@ -113,9 +119,9 @@ def _timed_cluster_run(tasks: list[Task], workers: int) -> dict[str, float]:
     return {"startup_s": startup, "run_s": run}
 
 
-def scaling_benchmark(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2), sim_workers: int = 4,
-                      noop_tasks: int = 400, extrapolate: tuple[int, ...] = (8, 32, 128)) -> dict[str, Any]:
-    """Run the benchmark (module docstring); returns a JSON-able report."""
+def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2), sim_workers: int = 4,
+            noop_tasks: int = 400, extrapolate: tuple[int, ...] = (8, 32, 128)) -> dict[str, Any]:
+    """Run the benchmark (module docstring); returns a JSON-able report, with the machine it ran on."""
     from distributed import Client, LocalCluster, wait
 
     spec = _spec(grid, chunk)
@@ -186,14 +192,15 @@ def scaling_benchmark(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...
         "extrapolated": extra,
         "break_even_local_2": None if local2 is None else break_even_grid(per_point, 2, t0=local2["startup_s"], overhead=overhead,
                                                                           rows_per_task=chunk),
-        "machine": {"cpu_count": os.cpu_count(), "python": platform.python_version(), "load_avg_1min": os.getloadavg()[0]},
+        "machine": machine(),
     }
 
 
-def format_scaling(rep: dict[str, Any]) -> str:
+def describe(rep: dict[str, Any]) -> str:
     """The report as a few lines of text."""
+    load = rep["machine"]["load_avg_1min"]
     lines = [f"stability map {rep['grid']} x {rep['grid']} ({rep['tasks']} tasks of {rep['chunk']} lambda rows), "
-             f"{rep['machine']['cpu_count']} cores (load {rep['machine']['load_avg_1min']:.1f})",
+             f"{rep['machine']['cpu_count']} cores (load {'?' if load is None else f'{load:.1f}'})",
              f"  serial (no Dask): {rep['serial_s']:.2f} s; task cost mean {rep['task_cost_mean_s'] * 1e3:.0f} ms, "
              f"max {rep['task_cost_max_s'] * 1e3:.0f} ms; {rep['cost_per_point_s'] * 1e3:.2f} ms per grid point"]
     for x in rep["local"]:
@@ -213,34 +220,26 @@ def format_scaling(rep: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def write_scaling(rep: dict[str, Any], out: str | Path) -> tuple[Path, Path]:
-    """``OUT/scaling.json`` (everything) and ``OUT/scaling.csv`` (one figure per row)."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    jp, cp = out / "scaling.json", out / "scaling.csv"
-    atomic_write(jp, json.dumps(rep, indent=2) + "\n")
-    with atomic_open(cp) as fh:
-        w = csv.writer(fh)
-        w.writerow(["section", "workers", "figure", "value"])
-        w.writerow(["serial", 0, "wall_s", rep["serial_s"]])
-        w.writerow(["serial", 0, "task_cost_mean_s", rep["task_cost_mean_s"]])
-        w.writerow(["serial", 0, "cost_per_point_s", rep["cost_per_point_s"]])
-        for x in rep["local"]:
-            for k in ("startup_s", "run_s", "speedup", "speedup_end_to_end"):
-                w.writerow(["local", x["workers"], k, x[k]])
-        w.writerow(["scheduler", rep["simulated"]["workers"], "overhead_per_task_s", rep["overhead_per_task_s"]])
-        w.writerow(["scheduler", rep["simulated"]["workers"], "connect_s", rep["connect_s"]])
-        for k in ("wall_s", "model_s", "ideal_s", "speedup"):
-            w.writerow(["simulated", rep["simulated"]["workers"], k, rep["simulated"][k]])
-        for x in rep["extrapolated"]:
-            for k in ("predicted_s", "predicted_speedup", "predicted_big_s", "predicted_big_speedup", "break_even_grid"):
-                w.writerow(["model", x["workers"], k, x[k]])
-        if rep["break_even_local_2"] is not None:
-            w.writerow(["local", 2, "break_even_grid", rep["break_even_local_2"]])
-    return jp, cp
+def report(rep: dict[str, Any]) -> Report:
+    """The files of a run (:func:`flatbody_env.bench.harness.write_report`): the JSON holds everything, the CSV one
+    figure per row (section, workers, figure, value), the PNG is :func:`plot` of the saved JSON."""
+    rows: list[list[Any]] = [["serial", 0, "wall_s", rep["serial_s"]], ["serial", 0, "task_cost_mean_s", rep["task_cost_mean_s"]],
+                             ["serial", 0, "cost_per_point_s", rep["cost_per_point_s"]]]
+    for x in rep["local"]:
+        rows += [["local", x["workers"], k, x[k]] for k in ("startup_s", "run_s", "speedup", "speedup_end_to_end")]
+    sim = rep["simulated"]
+    rows += [["scheduler", sim["workers"], "overhead_per_task_s", rep["overhead_per_task_s"]],
+             ["scheduler", sim["workers"], "connect_s", rep["connect_s"]]]
+    rows += [["simulated", sim["workers"], k, sim[k]] for k in ("wall_s", "model_s", "ideal_s", "speedup")]
+    for x in rep["extrapolated"]:
+        rows += [["model", x["workers"], k, x[k]]
+                 for k in ("predicted_s", "predicted_speedup", "predicted_big_s", "predicted_big_speedup", "break_even_grid")]
+    if rep["break_even_local_2"] is not None:
+        rows.append(["local", 2, "break_even_grid", rep["break_even_local_2"]])
+    return Report(name=NAME, record=rep, header=["section", "workers", "figure", "value"], rows=rows, chart=plot, chart_from="json")
 
 
-def plot_scaling(json_path: str | Path, png_path: str | Path) -> Path:
+def plot(json_path: str | Path, png_path: str | Path) -> Path:
     """Two panels: speed-up over workers (measured, simulated, modelled) and time over grid size
     (serial vs clusters; the crossings are the break-even grid sizes)."""
     import matplotlib
@@ -301,4 +300,4 @@ def plot_scaling(json_path: str | Path, png_path: str | Path) -> Path:
     return png_path
 
 
-__all__ = ["break_even_grid", "format_scaling", "makespan", "model_time", "plot_scaling", "scaling_benchmark", "write_scaling"]
+__all__ = ["NAME", "break_even_grid", "describe", "makespan", "measure", "model_time", "plot", "report"]

@@ -2,54 +2,82 @@
 
 Both runs use the shipped PPO configuration (``agents/hyperparams/ppo.yml``: the same network,
 n_envs, n_steps, batch size, epochs, gSDE, VecNormalize, one torch thread) for the same number of
-environment steps, one after the other in the same process. ``FlatBody-v0`` runs exactly as
-training does (:func:`agents.train.make_vec_env`: the native batch, the residual on the LQR);
-``Pendulum-v1`` runs as a ``DummyVecEnv`` of ``gym.make`` envs (seeded as SB3's ``make_vec_env``
-seeds them) without the FlatBody-only keys (residual, env_kwargs), under the same single
+environment steps, in alternation in the same process (:func:`~flatbody_env.bench.harness.alternate`).
+``FlatBody-v0`` runs exactly as training does (:func:`agents.train.make_vec_env`: the native batch, the
+residual on the LQR); ``Pendulum-v1`` runs as a ``DummyVecEnv`` of ``gym.make`` envs (seeded as SB3's
+``make_vec_env`` seeds them) without the FlatBody-only keys (residual, env_kwargs), under the same single
 ``VecMonitor`` as FlatBody's stack (``make_vec_env``'s per-env ``Monitor`` on top of it would count
 every step twice and charge Pendulum for it). A timing wrapper directly around each environment
 stack (below ``VecMonitor``/``VecNormalize``) measures the share of the wall time spent in the
 environment and, for FlatBody, in the LQR the actions are built on. Each figure is the best of
-``repeats`` runs. Writes ``train_benchmark.json``, ``.csv`` and ``.png``.
+``repeats`` runs. Writes ``train_benchmark.json``, ``.csv`` and ``.png`` (and the ``<!-- bench:train -->``
+docs block when asked).
 """
 
 from __future__ import annotations
 
 import csv
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
+from flatbody_env.bench.harness import Report, alternate, best_of, write_report
+from flatbody_env.output import save_figure
 
-from flatbody_env.output import atomic_write, save_figure, write_csv
+FLATBODY_ONLY = ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")
+"""The PPO settings that only FlatBody-v0 takes (left out of the Pendulum-v1 run)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrainTiming:
+    """One PPO run.
+
+    Attributes
+    ----------
+    env_id : str
+    timesteps : int
+        Environment steps PPO took.
+    wall_s : float
+        Wall time of ``learn``.
+    env_s : float
+        Seconds inside the environment stack (for FlatBody: the env and the LQR of the residual).
+    """
+
     env_id: str
     timesteps: int
     wall_s: float
     env_s: float
-    """Seconds inside the environment stack (for FlatBody: the env and the LQR of the residual)."""
 
     @property
     def env_share(self) -> float:
+        """Share of the wall time inside the environment stack."""
         return self.env_s / self.wall_s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrainBenchmark:
+    """The two runs and the figures of the docs' table.
+
+    Attributes
+    ----------
+    flatbody, pendulum : TrainTiming
+        The fastest run of each.
+    ratio_wall : float
+        FlatBody wall time / Pendulum wall time (target ≤ 1.0).
+    flatbody_env_share : float
+        Share of FlatBody's wall time in the environment + LQR (target ≤ 0.15).
+    pendulum_env_share : float
+    lqr_us_per_body_step : float
+        The LQR's vectorised action (batch of ``n_envs``, gains stored) per body-step, in µs.
+    n_envs : int
+    """
+
     flatbody: TrainTiming
     pendulum: TrainTiming
     ratio_wall: float
-    """FlatBody wall time / Pendulum wall time (target ≤ 1.0)."""
     flatbody_env_share: float
-    """Share of FlatBody's wall time in the environment + LQR (target ≤ 0.15)."""
     pendulum_env_share: float
     lqr_us_per_body_step: float
-    """The LQR's vectorised action (batch of n_envs, gains stored) per body-step."""
     n_envs: int = 32
 
 
@@ -117,11 +145,11 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
     model.learn(total_timesteps=timesteps, progress_bar=False)
     wall = time.perf_counter() - t
     venv.close()
-    return TrainTiming(env_id, int(model.num_timesteps), wall, float(clock.spent))
+    return TrainTiming(env_id=env_id, timesteps=int(model.num_timesteps), wall_s=wall, env_s=float(clock.spent))
 
 
 def lqr_us_per_body_step(n_envs: int = 32, steps: int = 400, seed: int = 0) -> float:
-    """µs per body-step of the LQR's vectorised action on observations of the batched env (gains stored)."""
+    """µs per body-step of the LQR's vectorised action on observations of the batched env (gains stored), best of 3."""
     from agents.heuristic import HeuristicController
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
@@ -131,48 +159,57 @@ def lqr_us_per_body_step(n_envs: int = 32, steps: int = 400, seed: int = 0) -> f
     ctl.act(obs)
     observations = []
     for _ in range(steps):
-        a = ctl.act(obs)
-        obs, *_ = env.step(a)
+        obs, *_ = env.step(ctl.act(obs))
         observations.append(obs)
-    best = np.inf
-    for _ in range(3):
-        t = time.perf_counter()
+
+    def act_all() -> None:
         for o in observations:
             ctl.act(o)
-        best = min(best, (time.perf_counter() - t) / (steps * n_envs))
-    return best * 1e6
+
+    return best_of(act_all, 3, warm=False) / (steps * n_envs) * 1e6
 
 
-def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: str | Path = ".", overrides: list[str] | None = None) -> TrainBenchmark:
-    """Measure and write ``train_benchmark.json``, ``.csv``, ``.png`` into ``out_dir`` (module docstring);
-    ``overrides`` (``key=value``) change the PPO settings of both runs."""
+def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: str | Path = ".", overrides: list[str] | None = None,
+        docs: str | Path | None = None) -> TrainBenchmark:
+    """Measure and write ``train_benchmark.json``, ``.csv``, ``.png`` into ``out_dir`` (module docstring).
+
+    Parameters
+    ----------
+    overrides : list of str, optional
+        ``key=value`` changes of the PPO settings of both runs.
+    docs : path, optional
+        A Markdown page whose ``<!-- bench:train -->`` block gets this run's table.
+    """
     from agents.train import apply_overrides, load_hyperparams
 
     hp = apply_overrides(load_hyperparams("ppo"), overrides or [])
-    hp_pendulum = {k: v for k, v in hp.items() if k not in ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")}
-    best: dict[str, TrainTiming] = {}
-    for _ in range(repeats):
-        for env_id, h in (("FlatBody-v0", hp), ("Pendulum-v1", hp_pendulum)):
-            r = _run(env_id, h, timesteps, seed)
-            if env_id not in best or r.wall_s < best[env_id].wall_s:
-                best[env_id] = r
-    fb, pd = best["FlatBody-v0"], best["Pendulum-v1"]
+    settings = {"FlatBody-v0": hp, "Pendulum-v1": {k: v for k, v in hp.items() if k not in FLATBODY_ONLY}}
+    runs: dict[str, list[TrainTiming]] = {env_id: [] for env_id in settings}
+
+    def case(env_id: str):
+        def once() -> float:
+            runs[env_id].append(_run(env_id, settings[env_id], timesteps, seed))
+            return runs[env_id][-1].wall_s
+
+        return once
+
+    alternate({env_id: case(env_id) for env_id in settings}, repeats, warm=False)
+    fb, pd = (min(runs[env_id], key=lambda r: r.wall_s) for env_id in settings)
+    n_envs = int(hp.get("n_envs", 32))
     bench = TrainBenchmark(flatbody=fb, pendulum=pd, ratio_wall=fb.wall_s / pd.wall_s, flatbody_env_share=fb.env_share,
-                           pendulum_env_share=pd.env_share, lqr_us_per_body_step=lqr_us_per_body_step(int(hp.get("n_envs", 32))),
-                           n_envs=int(hp.get("n_envs", 32)))
-    write(bench, Path(out_dir))
+                           pendulum_env_share=pd.env_share, lqr_us_per_body_step=lqr_us_per_body_step(n_envs), n_envs=n_envs)
+    write_report(report(bench), out_dir, docs=docs)
     return bench
 
 
-def write(bench: TrainBenchmark, out_dir: Path) -> None:
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(out_dir / "train_benchmark.json", json.dumps(asdict(bench), indent=2) + "\n")
-    write_csv(out_dir / "train_benchmark.csv", ["env_id", "timesteps", "wall_s", "env_s", "env_share"],
-              [[r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"] for r in (bench.flatbody, bench.pendulum)])
-    plot(out_dir / "train_benchmark.csv", out_dir / "train_benchmark.png")
+def report(bench: TrainBenchmark) -> Report:
+    """``train_benchmark``'s files: the record, one CSV row per run, the chart drawn from the CSV, the docs block ``train``."""
+    return Report(name="train_benchmark", record=asdict(bench), header=["env_id", "timesteps", "wall_s", "env_s", "env_share"],
+                  rows=[[r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"] for r in (bench.flatbody, bench.pendulum)],
+                  chart=plot, chart_from="csv", markdown=markdown(bench), block="train")
 
 
-TRAIN_CAPTION = (
+CAPTION = (
     "environment: time spent inside the environment stack's step/reset; for FlatBody-v0 it includes the LQR\n"
     "(linear-quadratic regulator: the baseline controller whose action the agent's output is added to, as in training).\n"
     "PPO: Proximal Policy Optimization (stable-baselines3, agents/hyperparams/ppo.yml): the rest of the wall time,\n"
@@ -191,7 +228,8 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
     from flatbody_env.chart_text import add_caption
 
-    rows = list(csv.DictReader(open(csv_path)))
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
     names = [r["env_id"] for r in rows]
     env = [float(r["env_s"]) for r in rows]
     rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]
@@ -203,7 +241,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
     ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest)))
     ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
     ax.set_title("flatbody bench train (same run)")
-    bottom = add_caption(fig, TRAIN_CAPTION, fontsize=7)
+    bottom = add_caption(fig, CAPTION, fontsize=7)
     fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, bottom))
     fig.tight_layout(rect=(0, bottom + 0.06, 1, 1))
     save_figure(fig, png_path, dpi=120)
@@ -213,7 +251,10 @@ def plot(csv_path: Path, png_path: Path) -> None:
 def markdown(bench: TrainBenchmark) -> str:
     """The docs' table of this run (``flatbody bench train --docs docs/agents.md`` writes it there)."""
     fb, pd = bench.flatbody, bench.pendulum
-    ok = lambda x, bound: "met" if x <= bound else "missed"  # noqa: E731
+
+    def ok(x: float, bound: float) -> str:
+        return "met" if x <= bound else "missed"
+
     return "\n".join([
         f"| same PPO settings, {fb.timesteps} env steps | wall time (s) | in the environment (+ LQR) |", "|---|---|---|",
         f"| FlatBody-v0 (residual on the LQR) | {fb.wall_s:.1f} | {fb.env_s:.1f} s ({fb.env_share:.0%}) |",
@@ -225,4 +266,4 @@ def markdown(bench: TrainBenchmark) -> str:
     ]) + "\n"
 
 
-__all__ = ["TrainBenchmark", "markdown", "TrainTiming", "lqr_us_per_body_step", "run"]
+__all__ = ["TrainBenchmark", "TrainTiming", "lqr_us_per_body_step", "markdown", "plot", "report", "run"]

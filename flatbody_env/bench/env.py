@@ -2,34 +2,39 @@
 
 Single environments (``gym.make``, so each carries the same PassiveEnvChecker, OrderEnforcing and
 TimeLimit wrappers): ``FlatBody-v0`` against gymnasium's ``Pendulum-v1`` and ``Acrobot-v1`` — the
-figure of merit is the ratio of ``env.step`` rates (resets are timed apart and reported, since
-``FlatBody-v0``'s reset samples a reachable target) measured in the same run (the machine is noisy; absolute
-times vary with load, the ratios are the reliable part; the figures: docs/env.md, "Benchmark").
-Batched: ``FlatBodyVectorEnv`` against gymnasium's
-``CartPoleVectorEnv`` at N = 1024 in env-steps per second (the vector env as constructed by default and
-with one thread per core, timed in alternation with CartPole), plus the batched env's episode error
-against a tight reference (scipy DOP853, rtol = atol = 1e-13, restarted every step with the same
-actions). Each rate is the best of ``repeats`` timed blocks. The batched FlatBody figure includes
-resets: a timed block is one whole episode of every body at the registered length plus the step that
-autoresets them (CartPole's random-action episodes end and autoreset within its blocks). Writes JSON,
-CSV and a PNG chart.
+figure of merit is the ratio of ``env.step`` rates, the three timed in alternation (resets are timed
+apart and reported, since ``FlatBody-v0``'s reset samples a reachable target; the machine is noisy,
+absolute times vary with load, the ratios are the reliable part; the figures: docs/env.md, "Benchmark").
+Batched: ``FlatBodyVectorEnv`` against gymnasium's ``CartPoleVectorEnv`` at N = 1024 in env-steps per
+second (the vector env as constructed by default and with one thread per core, timed in alternation
+with CartPole), plus the batched env's episode error against a tight reference (scipy DOP853,
+rtol = atol = 1e-13, restarted every step with the same actions). Each rate is the best of ``repeats``
+timed blocks (:mod:`.harness`). The batched FlatBody figure includes resets: a timed block is one whole
+episode of every body at the registered length plus the step that autoresets them (CartPole's
+random-action episodes end and autoreset within its blocks). :func:`report` gives the JSON, CSV, PNG
+chart and the ``<!-- bench:env -->`` docs block.
 """
 
 from __future__ import annotations
 
 import csv
-import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.output import atomic_write, save_figure, write_csv
+from flatbody_env.bench.harness import Report, alternate
+from flatbody_env.output import save_figure
+
+SINGLE = ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1")
+"""The single environments, timed in alternation."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StepRate:
+    """One row: the step rate of an environment (``batch`` bodies per step)."""
+
     name: str
     batch: int
     us_per_env_step: float
@@ -37,8 +42,10 @@ class StepRate:
     ms_per_reset: float | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EnvBenchmark:
+    """The rates and ratios of one run (the JSON record)."""
+
     single: list[StepRate]
     batched: list[StepRate]
     ratio_vs_pendulum: float
@@ -54,58 +61,53 @@ class EnvBenchmark:
     """Threads that ``num_threads=None`` gave (one per available core, at most one per 256 bodies)."""
 
 
-def _time_single(env_id: str, steps: int, repeats: int, **kwargs) -> tuple[float, float]:
-    """(seconds per ``env.step``, seconds per ``env.reset``); resets are timed apart, not in the step rate."""
+def _time_single(env_ids, steps: int, repeats: int, progress) -> dict[str, tuple[float, float]]:
+    """``{env_id: (seconds per env.step, seconds per env.reset)}``, the envs timed in alternation; resets are
+    timed apart, not in the step rate."""
     import gymnasium as gym
 
-    env = gym.make(env_id, **kwargs)
-    env.reset(seed=0)
-    action = env.action_space.sample()
-    if isinstance(action, np.ndarray):
-        action = np.zeros_like(action)
-    best = np.inf
-    resets = []
-    for _ in range(repeats):
-        spent = 0.0
-        for _ in range(steps):
-            start = time.perf_counter()
-            _, _, term, trunc, _ = env.step(action)
-            spent += time.perf_counter() - start
-            if term or trunc:
+    envs = {env_id: gym.make(env_id) for env_id in env_ids}
+    resets: dict[str, list[float]] = {env_id: [] for env_id in env_ids}
+
+    def block(env_id):
+        env = envs[env_id]
+        env.reset(seed=0)
+        action = env.action_space.sample()
+        if isinstance(action, np.ndarray):
+            action = np.zeros_like(action)
+
+        def run() -> float:
+            spent = 0.0
+            for _ in range(steps):
                 start = time.perf_counter()
-                env.reset()
-                resets.append(time.perf_counter() - start)
-        best = min(best, spent / steps)
-    if not resets:
-        for k in range(3):
-            start = time.perf_counter()
-            env.reset(seed=k)
-            resets.append(time.perf_counter() - start)
-    env.close()
-    return best, float(np.median(resets))
+                _, _, term, trunc, _ = env.step(action)
+                spent += time.perf_counter() - start
+                if term or trunc:
+                    start = time.perf_counter()
+                    env.reset()
+                    resets[env_id].append(time.perf_counter() - start)
+            return spent
+
+        return run
+
+    best = alternate({env_id: block(env_id) for env_id in env_ids}, repeats, warm=False, progress=progress)
+    out = {}
+    for env_id, env in envs.items():
+        if not resets[env_id]:
+            for k in range(3):
+                start = time.perf_counter()
+                env.reset(seed=k)
+                resets[env_id].append(time.perf_counter() - start)
+        env.close()
+        out[env_id] = (best[env_id] / steps, float(np.median(resets[env_id])))
+    return out
 
 
-def _episode_block(env, actions) -> float:
-    """Seconds per env-step of one whole episode cycle: ``max_episode_steps`` steps from an autoreset
-    plus the step that autoresets every body (resets included at the default episode length)."""
-    steps = env.max_episode_steps + 1
-    start = time.perf_counter()
-    for _ in range(steps):
-        env.step(actions)
-    return (time.perf_counter() - start) / (steps * env.num_envs)
-
-
-def _cartpole_block(env, actions, steps: int) -> float:
-    start = time.perf_counter()
-    for _ in range(steps):
-        env.step(actions)
-    return (time.perf_counter() - start) / (steps * env.num_envs)
-
-
-def _time_batched_side_by_side(n: int, episode_steps: int, cartpole_steps: int, rounds: int, progress) -> tuple[float, float, float, int]:
+def _time_batched(n: int, episode_steps: int, cartpole_steps: int, rounds: int, progress) -> tuple[float, float, float, int]:
     """(s per env-step of FlatBodyVectorEnv as constructed by default (one thread), with ``num_threads=None``
-    (one per available core), of CartPoleVectorEnv; the thread count of the second). The three are timed
-    in alternation, ``rounds`` blocks each (best kept), so that the machine's load falls on all of them alike."""
+    (one per available core), of CartPoleVectorEnv; the thread count of the second), timed in alternation.
+    A FlatBody block is ``max_episode_steps + 1`` steps: one whole episode from an autoreset plus the step
+    that autoresets every body (the untimed warm-up round compiles and ends at an autoreset)."""
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
@@ -116,29 +118,32 @@ def _time_batched_side_by_side(n: int, episode_steps: int, cartpole_steps: int, 
     cp = CartPoleVectorEnv(num_envs=n)
     actions = rng.uniform(-1, 1, size=fb.action_space.shape).astype(np.float32)
     cp_actions = cp.action_space.sample()
-    for env in (fb, fbt):
+    blocks = {"fb": (fb, actions, fb.max_episode_steps + 1), "fbt": (fbt, actions, fbt.max_episode_steps + 1),
+              "cp": (cp, cp_actions, cartpole_steps)}
+    for env, _, _ in blocks.values():
         env.reset(seed=0)
-        _episode_block(env, actions)  # warm up (compiles) and end at an autoreset
-    cp.reset(seed=0)
-    _cartpole_block(cp, cp_actions, cartpole_steps)
-    best = [np.inf, np.inf, np.inf]
-    for _ in range(rounds):
-        best[0] = min(best[0], _episode_block(fb, actions))
-        best[1] = min(best[1], _episode_block(fbt, actions))
-        best[2] = min(best[2], _cartpole_block(cp, cp_actions, cartpole_steps))
-        progress()
+
+    def block(env, a, steps):
+        def run() -> None:
+            for _ in range(steps):
+                env.step(a)
+
+        return run
+
+    best = alternate({key: block(*b) for key, b in blocks.items()}, rounds, progress=progress)
+    per_step = {key: best[key] / (steps * env.num_envs) for key, (env, _, steps) in blocks.items()}
     threads = fbt.num_threads
-    for env in (fb, fbt, cp):
+    for env, _, _ in blocks.values():
         env.close()
-    return best[0], best[1], best[2], threads
+    return per_step["fb"], per_step["fbt"], per_step["cp"], threads
 
 
 def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwargs) -> float:
     """Max |y − y_ref| over an episode of the batched env with random actions (reference: tight scipy)."""
-    from flatbody_env.physics.body import default_body
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
     from flatbody_env.integrators import Tolerances
     from flatbody_env.integrators.steppers import make_env_step
-    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+    from flatbody_env.physics.body import default_body
 
     env = FlatBodyVectorEnv(num_envs=num_envs, max_episode_steps=steps + 1, **env_kwargs)
     env.reset(seed=seed)
@@ -162,41 +167,38 @@ def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwa
     return worst
 
 
-def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats: int = 5, out_dir: str | Path = ".", progress: bool = True,
+def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats: int = 5, progress: bool = True,
         episode_steps: int | None = None) -> EnvBenchmark:
-    """Measure and write ``env_benchmark.json``, ``.csv`` and ``.png`` into ``out_dir``; ``episode_steps``
-    (default: the registered 400) is the batched env's episode length."""
-    from flatbody_env.env.registration import MAX_EPISODE_STEPS
-
-    episode_steps = episode_steps or MAX_EPISODE_STEPS
-    import gymnasium as gym
-
+    """Measure (module docstring); ``episode_steps`` (default: the registered 400) is the batched env's episode length."""
     from flatbody_env.env.env import DEFAULT_INTEGRATOR
+    from flatbody_env.env.registration import MAX_EPISODE_STEPS
     from flatbody_env.progress import progress_bar
 
-    tasks = ["FlatBody-v0", "Pendulum-v1", "Acrobot-v1", "batched FlatBody vs CartPole", "episode error"]
+    episode_steps = episode_steps or MAX_EPISODE_STEPS
+    tasks = ["single envs", "batched FlatBody vs CartPole", "episode error"]
     bar = progress_bar(tasks, desc="bench env", unit="task", enabled=progress)
-    single: list[StepRate] = []
     results = {}
     for task in bar:
         bar.set_postfix_str(task)
-        if task in ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1"):
-            s, r = _time_single(task, steps, repeats)
-            single.append(StepRate(task, 1, s * 1e6, 1.0 / s, r * 1e3))
+        if task == "single envs":
+            results["single"] = _time_single(SINGLE, steps, repeats, lambda k: bar.set_postfix_str(f"{task} ({k}/{repeats})"))
         elif task == "batched FlatBody vs CartPole":
             rounds = max(2, repeats // 2 + 1)
-            results["fb"], results["fbt"], results["cp"], results["threads"] = _time_batched_side_by_side(
-                batch, episode_steps, batch_steps * 10, rounds, lambda: bar.set_postfix_str(task))
+            results["fb"], results["fbt"], results["cp"], results["threads"] = _time_batched(
+                batch, episode_steps, batch_steps * 10, rounds, lambda k: bar.set_postfix_str(f"{task} ({k}/{rounds})"))
         else:
             results["err"] = episode_error()
+    single = [StepRate(name=name, batch=1, us_per_env_step=s * 1e6, env_steps_per_s=1.0 / s, ms_per_reset=r * 1e3)
+              for name, (s, r) in results["single"].items()]
     t = results["threads"]
     batched = [
-        StepRate(f"FlatBodyVectorEnv (N={batch})", batch, results["fb"] * 1e6, 1.0 / results["fb"]),
-        StepRate(f"FlatBodyVectorEnv (N={batch}, {t} thread{'s' if t > 1 else ''})", batch, results["fbt"] * 1e6, 1.0 / results["fbt"]),
-        StepRate(f"CartPoleVectorEnv (N={batch})", batch, results["cp"] * 1e6, 1.0 / results["cp"]),
+        StepRate(name=f"FlatBodyVectorEnv (N={batch})", batch=batch, us_per_env_step=results["fb"] * 1e6, env_steps_per_s=1.0 / results["fb"]),
+        StepRate(name=f"FlatBodyVectorEnv (N={batch}, {t} thread{'s' if t > 1 else ''})", batch=batch, us_per_env_step=results["fbt"] * 1e6,
+                 env_steps_per_s=1.0 / results["fbt"]),
+        StepRate(name=f"CartPoleVectorEnv (N={batch})", batch=batch, us_per_env_step=results["cp"] * 1e6, env_steps_per_s=1.0 / results["cp"]),
     ]
     by = {r.name: r for r in single}
-    bench = EnvBenchmark(
+    return EnvBenchmark(
         single=single,
         batched=batched,
         ratio_vs_pendulum=by["Pendulum-v1"].us_per_env_step / by["FlatBody-v0"].us_per_env_step,
@@ -208,17 +210,13 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
         integrator=DEFAULT_INTEGRATOR,
         reset_ratio_vs_pendulum=by["FlatBody-v0"].ms_per_reset / by["Pendulum-v1"].ms_per_reset,
     )
-    write(bench, Path(out_dir))
-    del gym
-    return bench
 
 
-def write(bench: EnvBenchmark, out_dir: Path) -> None:
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(out_dir / "env_benchmark.json", json.dumps(asdict(bench), indent=2) + "\n")
-    write_csv(out_dir / "env_benchmark.csv", ["name", "batch", "us_per_env_step", "env_steps_per_s"],
-              [[r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"] for r in bench.single + bench.batched])
-    plot(out_dir / "env_benchmark.csv", out_dir / "env_benchmark.png")
+def report(bench: EnvBenchmark) -> Report:
+    """``env_benchmark.json``, ``.csv``, ``.png`` (drawn from the CSV) and the ``<!-- bench:env -->`` block."""
+    return Report(name="env_benchmark", record=asdict(bench), header=["name", "batch", "us_per_env_step", "env_steps_per_s"],
+                  rows=[[r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"] for r in bench.single + bench.batched],
+                  chart=plot, chart_from="csv", markdown=markdown(bench), block="env")
 
 
 ENV_CAPTION = (
@@ -238,7 +236,8 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
     from flatbody_env.chart_text import add_caption
 
-    rows = list(csv.DictReader(open(csv_path)))
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
     names = [r["name"] for r in rows]
     rates = [float(r["env_steps_per_s"]) for r in rows]
     colours = ["tab:blue" if "FlatBody" in n else "tab:gray" for n in names]
@@ -275,3 +274,6 @@ def markdown(bench: EnvBenchmark) -> str:
              f"| the same with `num_threads=None` ({bench.threads} thread{'s' if bench.threads > 1 else ''}) | {bench.ratio_batched_threads_vs_cartpole:.2f} | — |",
              f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |"]
     return "\n".join(rows) + "\n"
+
+
+__all__ = ["ENV_CAPTION", "EnvBenchmark", "SINGLE", "StepRate", "episode_error", "markdown", "plot", "report", "run"]

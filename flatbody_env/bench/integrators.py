@@ -13,32 +13,39 @@ tables of docs/integrators.md).
    cheapest two-polar time / the cheapest regular-chart time (methods that fail are left out).
 3. *long horizon*, t = 1e4: the energy error max|H − H₀| (101 samples) per method/setting.
 4. *one short step* dt = 0.05: µs per call through ``integrate`` (all methods) and through the
-   compiled environment stepper (compiled methods; single and batched over 1024 bodies).
+   compiled environment stepper (compiled methods; single and batched over 1024 bodies), best of
+   repeated blocks (:func:`flatbody_env.bench.harness.best_of`).
 5. *compile time*: first call with an empty numba cache and the cached call, in fresh processes.
 
-Public names: :func:`bench_integrators` → :class:`BenchReport` (``.as_dict()``); uses the physics
-and integrator layers only.
+:func:`measure` → :class:`BenchReport`; :func:`describe` prints it, :func:`report` hands it to
+:func:`flatbody_env.bench.harness.write_report` (``bench_integrators.json``, ``.csv``, and ``.png`` drawn
+from the saved JSON by :func:`analysis.integrator_plots.plot_bench`); :func:`write_docs` rewrites the
+``<!-- bench:integrators-* -->`` tables of a docs page (:func:`docs_tables`) from the saved JSON.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
-from flatbody_env.integrators import Tolerances, get_method
-from flatbody_env.scene import load_scene
-from flatbody_env.physics.state import pack
-
 from analysis.failure_study import gap_scene
 from analysis.work_precision import timed_run
+from flatbody_env.bench.harness import Report, best_of
+from flatbody_env.integrators import Tolerances, get_method
+from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
+from flatbody_env.physics.state import pack
+from flatbody_env.scene import load_scene
+
+NAME = "bench_integrators"
+"""The file stem of the saved figures."""
 
 TARGET_REGULAR = 1e-9
 TARGET_CLOSE = 1e-8
@@ -58,9 +65,19 @@ LONG_RUNS = (
 )
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class BenchReport:
-    """All figures of one bench run (see the module docstring)."""
+    """All figures of one bench run (see the module docstring).
+
+    Attributes
+    ----------
+    machine : dict
+        Where it ran (:func:`flatbody_env.provenance.machine`), the platform and whether the run was quick.
+    regular, close_approach, long_horizon, short_step, compile_times
+        Sections 1–5.
+    auto : list
+        Per built-in scene: simulate's default (method="auto") against scipy DOP853 (the former default), same run.
+    """
 
     machine: dict
     regular: dict
@@ -69,9 +86,9 @@ class BenchReport:
     short_step: list
     compile_times: list = field(default_factory=list)
     auto: list = field(default_factory=list)
-    """Per built-in scene: simulate's default (method="auto") against scipy DOP853 (the former default), same run."""
 
     def as_dict(self) -> dict:
+        """The record as saved in ``bench_integrators.json``."""
         return asdict(self)
 
 
@@ -191,12 +208,12 @@ def _short_step(bar, n_batch=1024):
         meth = get_method(m)
         tol = Tolerances(rtol=1e-8, atol=1e-10) if meth.info.adaptive else Tolerances(step=dt)
         n = 30 if not meth.info.compiled else 300
-        best = math.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
+
+        def calls(meth=meth, tol=tol, n=n):
             for _ in range(n):
                 meth.integrate(sc.body, y, times, tol=tol)
-            best = min(best, (time.perf_counter() - t0) / n)
+
+        best = best_of(calls, 3, warm=False) / n
         out.append({"method": m, "path": "integrate", "us_per_step": best * 1e6})
         bar.update(1)
     for m in ENV_METHODS:
@@ -205,21 +222,17 @@ def _short_step(bar, n_batch=1024):
         o = np.empty_like(x)
         h = 0.0 if not st.fixed_step else dt
         n = 20000
-        best = math.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
+
+        def steps(st=st, x=x, o=o, h=h, n=n):
             for _ in range(n):
                 st.step(x, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
-            best = min(best, (time.perf_counter() - t0) / n)
+
+        best = best_of(steps, 3, warm=False) / n
         X = np.repeat(x[:, None], n_batch, axis=1)
         U = np.zeros((4, n_batch))
         O = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
-        bbest = math.inf
-        for _ in range(5):
-            t0 = time.perf_counter()
-            st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S)
-            bbest = min(bbest, (time.perf_counter() - t0) / n_batch)
+        bbest = best_of(lambda st=st, h=h: st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), 5, warm=False) / n_batch
         out.append({"method": m, "path": "env", "us_per_step": best * 1e6, "batch_us_per_body_step": bbest * 1e6, "batch_size": n_batch})
         bar.update(1)
     return out
@@ -241,8 +254,6 @@ print(json.dumps(out))
 
 def compile_times(names=None) -> list[dict]:
     """First-call time with an empty numba cache and with the cache filled, each in a fresh process."""
-    import json
-
     from flatbody_env.integrators.compiled_methods import ENV_METHODS
 
     names = list(names or ENV_METHODS)
@@ -263,8 +274,6 @@ def compile_times(names=None) -> list[dict]:
 def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
     """``simulate(scene)`` (method="auto": the rung, then the fastest method meeting rtol = atol = 1e-10)
     against ``simulate(scene, method="DOP853")`` on every built-in scene, t = min(t_end, t_cap)."""
-    import numpy as np
-
     from flatbody_env.integrators import IntegrationError
     from flatbody_env.scene import builtin_scenes
     from flatbody_env.simulation import simulate
@@ -288,15 +297,32 @@ def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
     return rows
 
 
-def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
+def measure(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
                       with_compile: bool = True) -> BenchReport:
+    """Run sections 1–5 (see the module docstring) in one process.
+
+    Parameters
+    ----------
+    quick : bool
+        Shorter horizons, one close-approach case, 1 repeat.
+    repeats : int
+        Timing repeats (the minimum is taken).
+    max_run_s : float
+        Stop a method's sweep once one run takes longer.
+    progress : bool
+        Show a progress bar on stderr.
+    with_compile : bool
+        Also measure the compile times (two fresh processes).
+    """
+    import platform
+
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
     from flatbody_env.progress import progress_bar
+    from flatbody_env.provenance import machine
+    from flatbody_env.scene import builtin_scenes
 
     warm_up()  # compile time is measured separately (in fresh processes)
     deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
-    from flatbody_env.scene import builtin_scenes
-
     total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS) + len(builtin_scenes())
     bar = progress_bar(total=total, desc="bench integrators", unit="task", enabled=progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
@@ -306,17 +332,11 @@ def bench_integrators(*, quick: bool = False, repeats: int = 3, max_run_s: float
     auto = _auto(1 if quick else repeats, bar, 20.0 if quick else 100.0)
     bar.close()
     comp = compile_times() if with_compile else []
-    import platform
-
-    import numba
-
-    machine = {"python": platform.python_version(), "numba": numba.__version__, "cpu_count": os.cpu_count(), "platform": platform.platform(),
-               "quick": quick}
-    return BenchReport(machine=machine, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp,
+    return BenchReport(machine={**machine(), "platform": platform.platform(), "quick": quick}, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp,
                        auto=auto)
 
 
-def format_report(rep: BenchReport) -> str:
+def describe(rep: BenchReport) -> str:
     """The printed summary."""
     L = []
     r = rep.regular
@@ -403,4 +423,64 @@ def docs_tables(rep: dict) -> dict[str, str]:
     return tables
 
 
-__all__ = ["BenchReport", "bench_integrators", "compile_times", "docs_tables", "format_report", "wall_at"]
+
+CSV_HEADER = ("section", "case", "method", "setting_or_path", "figure", "value")
+"""The columns of ``bench_integrators.csv``: one figure a row."""
+
+
+def csv_rows(rep: dict) -> list[tuple]:
+    """The rows of ``bench_integrators.csv`` (:data:`CSV_HEADER`) from a report as saved."""
+    rows = []
+    r = rep["regular"]
+    for a in r["at_target"]:
+        rows.append(("regular", f"t={r['t_end']:g}", a["method"], f"error={r['target_error']:g}", "wall_time_s", a["wall_time"]))
+        rows.append(("regular", f"t={r['t_end']:g}", a["method"], f"error={r['target_error']:g}", "speedup_vs_scipy_DOP853", a["speedup"]))
+    for s in r["same_rtol"]:
+        rows.append(("regular", "same rtol", "DOP853-numba", s["setting"], "ratio_vs_scipy_DOP853", s["ratio"]))
+    for c in rep["close_approach"]:
+        for a in c["at_target"]:
+            rows.append(("close-approach", f"delta={c['delta']:g}", a["method"], f"error={c['target_error']:g}", "wall_time_s", a["wall_time"]))
+        rows.append(("close-approach", f"delta={c['delta']:g}", c["cheapest_regular"], "", "cheapest_two_polar_over_regular",
+                     c["regular_vs_cheapest_two_polar"]))
+    for x in rep["long_horizon"]:
+        rows.append(("long-horizon", f"t={x['t_end']:g}", x["method"], x["setting"], "energy_error", x["energy_error"]))
+    for x in rep["short_step"]:
+        rows.append(("short-step", "dt=0.05", x["method"], x["path"], "us_per_step", x["us_per_step"]))
+        if x["path"] == "env":
+            rows.append(("short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"]))
+    for x in rep["auto"]:
+        rows.append(("auto", f"{x['scene']} t={x['t_end']:g}", x["method"], x["model"], "wall_time_s", x["auto_s"]))
+        rows.append(("auto", f"{x['scene']} t={x['t_end']:g}", "DOP853", "scipy (former default)", "wall_time_s", x.get("scipy_s")))
+    for x in rep["compile_times"]:
+        rows.append(("compile", "", x["method"], "first call", "seconds", x["first_call_s"]))
+        rows.append(("compile", "", x["method"], "cached", "seconds", x["cached_s"]))
+    return rows
+
+
+def report(rep: BenchReport) -> Report:
+    """``rep`` for :func:`flatbody_env.bench.harness.write_report`: ``bench_integrators.json``, ``.csv`` and
+    ``.png`` (:func:`analysis.integrator_plots.plot_bench`, from the saved JSON). Its docs tables are
+    several blocks: :func:`write_docs`."""
+    from analysis.integrator_plots import plot_bench
+
+    record = rep.as_dict()
+    return Report(name=NAME, record=record, header=CSV_HEADER, rows=csv_rows(record), chart=plot_bench)
+
+
+def write_docs(json_path: str | os.PathLike, docs: str | os.PathLike) -> list[str]:
+    """Rewrite the ``<!-- bench:integrators-* -->`` tables (:func:`docs_tables`) of the page ``docs`` from
+    the saved ``json_path``; a table the page does not show is skipped. Returns the names of the tables rewritten."""
+    from flatbody_env.output import replace_marked_block
+
+    done = []
+    for name, table in docs_tables(json.loads(Path(json_path).read_text(encoding="utf-8"))).items():
+        try:
+            replace_marked_block(docs, name, table)
+        except ValueError:
+            continue  # the page does not show this table
+        done.append(name)
+    return done
+
+
+__all__ = ["CSV_HEADER", "NAME", "BenchReport", "compile_times", "csv_rows", "describe", "docs_tables", "measure", "report", "wall_at",
+           "write_docs"]

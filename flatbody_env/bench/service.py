@@ -1,13 +1,14 @@
-"""``flatbody bench service``: latency and throughput of the HTTP service under load (a benchmark, not a test).
+"""``flatbody bench service``: latency and throughput of the HTTP service under load.
 
 The service is started as ``flatbody serve`` in a subprocess on a free loopback port with a fresh
-data dir; a long job (a large ``stability-map``) is queued first so that the figures are taken while
-a worker process is busy with it. Then, for each endpoint (``GET /health``, ``POST /ellipses`` with
-the default body, a short ``POST /simulate``) and each number of concurrent clients, a real HTTP
-client (httpx, one connection per client) sends at most ``requests`` requests for at most
-``seconds`` seconds. Reported: p50 and p99 latency, requests/s and the number of errors (any answer
-other than 200 counts). Output: the tables ``service_benchmark.json`` and ``.csv``, and the chart
-``.png`` drawn from the saved JSON (:func:`plot`; ``flatbody bench service --plot-only`` redraws it).
+data dir (:func:`flatbody_env.service.launch.start_service`); a long job (a large ``stability-map``)
+is queued first so that the figures are taken while a worker process is busy with it. Then, for each
+endpoint (``GET /health``, ``POST /ellipses`` with the default body, a short ``POST /simulate``) and
+each number of concurrent clients, a real HTTP client (httpx, one connection per client) sends at
+most ``requests`` requests for at most ``seconds`` seconds. Reported: p50 and p99 latency,
+requests/s and the number of errors (any answer other than 200 counts). Output
+(:func:`report`): ``service_benchmark.json`` and ``.csv``, and the chart ``.png`` drawn from the
+saved JSON (:func:`plot`; ``flatbody bench service --plot-only`` redraws it).
 """
 
 from __future__ import annotations
@@ -15,17 +16,17 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import socket
 import subprocess
-import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from flatbody_env.output import atomic_write, save_figure, write_csv
+
+from flatbody_env.bench.harness import Report
+from flatbody_env.output import save_figure
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
     "GET /health": ("GET", "/health", None),
@@ -37,6 +38,9 @@ ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
 
 LONG_JOB = {"kind": "stability-map", "params": {"grid": 200}}
 """The job that keeps one worker busy during the measurement."""
+
+NAME = "service_benchmark"
+"""The files' stem: ``service_benchmark.json``, ``.csv``, ``.png``."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -55,19 +59,20 @@ class LoadRow:
 
 @dataclass(frozen=True, kw_only=True)
 class ServiceBenchmark:
-    """All rows, the state of the long job during the run, and where the files went."""
+    """All rows and the state of the long job during the run."""
 
     rows: list[LoadRow]
     workers: int
     cpus: int
     long_job: dict[str, Any]
-    paths: dict[str, str] = field(default_factory=dict)
 
     @property
     def errors(self) -> int:
+        """Answers other than 200, over all rows."""
         return sum(r.errors for r in self.rows)
 
     def table(self) -> str:
+        """The rows as a text table, under a line naming the service and the long job's status."""
         lines = [f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
                  f"status at the end: {self.long_job['status_at_end']}",
                  f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}"]
@@ -75,49 +80,6 @@ class ServiceBenchmark:
             lines.append(f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
                          f"{r.requests_per_s:>9.1f}")
         return "\n".join(lines)
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0, env: dict[str, str] | None = None,
-                  preexec_fn=None, log_path: str | Path | None = None) -> tuple[subprocess.Popen, str]:
-    """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers.
-
-    ``env`` adds variables to the service's environment (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS``); ``preexec_fn`` runs
-    in the child before it starts (e.g. a ``resource.setrlimit``); ``log_path``: the service's stdout and stderr go
-    to that file (kept, e.g. to look for tracebacks) instead of a pipe."""
-    import httpx
-
-    port = port or _free_port()
-    cmd = [sys.executable, "-m", "flatbody_env.cli", "serve", "--host", "127.0.0.1", "--port", str(port), "--workers", str(workers),
-           "--data-dir", str(data_dir), "--log-level", "warning"]
-    import os
-
-    if log_path is None:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
-                                preexec_fn=preexec_fn)
-    else:
-        with open(log_path, "w", encoding="utf-8") as log:  # the child keeps its own copy of the descriptor
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})},
-                                    preexec_fn=preexec_fn)
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            said = proc.stderr.read() if proc.stderr else Path(log_path).read_text()
-            raise RuntimeError(f"flatbody serve exited with code {proc.returncode}: {said[-2000:]}")
-        try:
-            if httpx.get(url + "/health", timeout=1.0).status_code == 200:
-                return proc, url
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.1)
-    proc.kill()
-    raise RuntimeError(f"flatbody serve did not answer /health within {timeout:g} s")
 
 
 async def _load(url: str, name: str, clients: int, requests: int, seconds: float) -> LoadRow:
@@ -151,15 +113,14 @@ async def _load(url: str, name: str, clients: int, requests: int, seconds: float
                    p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)), requests_per_s=len(latencies) / elapsed)
 
 
-def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, seconds: float = 20.0,
-        workers: int = 2) -> ServiceBenchmark:
-    """Measure (module docstring) and write ``service_benchmark.json``/``.csv``/``.png`` in ``out_dir``."""
+def measure(*, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, seconds: float = 20.0, workers: int = 2) -> ServiceBenchmark:
+    """Start the service, queue the long job and load each endpoint at each client count (module docstring)."""
     import httpx
+
+    from flatbody_env.service.launch import start_service
 
     if not (isinstance(seconds, (int, float)) and 0 < seconds <= 600):
         raise ValueError(f"seconds: must be a number in (0, 600], got {seconds!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     rows: list[LoadRow] = []
     with tempfile.TemporaryDirectory(prefix="flatbody-bench-service-") as data_dir:
         proc, url = start_service(data_dir, workers=workers)
@@ -182,26 +143,22 @@ def run(*, out_dir: str | Path = "bench", clients: tuple[int, ...] = (1, 8, 32),
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-    result = ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
-                              long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
-                                        "status_at_end": status_at_end})
-    return replace(result, paths=_write(result, out))
+    return ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
+                            long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
+                                      "status_at_end": status_at_end})
 
 
-def _write(result: ServiceBenchmark, out: Path) -> dict[str, str]:
-    """Save the table (``service_benchmark.json``, everything; ``.csv``, one row per endpoint and client
-    count), then draw the chart from the saved JSON (:func:`plot`)."""
-    paths = {"json": str(out / "service_benchmark.json"), "csv": str(out / "service_benchmark.csv"), "png": str(out / "service_benchmark.png")}
-    atomic_write(paths["json"], json.dumps({"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
-                                            "rows": [asdict(r) for r in result.rows]}, indent=2) + "\n")
+def report(result: ServiceBenchmark) -> Report:
+    """The files of a run (:func:`flatbody_env.bench.harness.write_report`): the JSON holds everything, the CSV one
+    row per endpoint and client count, the PNG is :func:`plot` of the saved JSON."""
     fields = list(LoadRow.__dataclass_fields__)
-    write_csv(paths["csv"], fields, [[asdict(r)[f] for f in fields] for r in result.rows])
-    plot(paths["json"], paths["png"])
-    return paths
+    return Report(name=NAME, record={"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
+                                     "rows": [asdict(r) for r in result.rows]},
+                  header=fields, rows=[[asdict(r)[f] for f in fields] for r in result.rows], chart=plot, chart_from="json")
 
 
 def load(json_path: str | Path) -> ServiceBenchmark:
-    """A saved ``service_benchmark.json`` read back (``paths`` empty)."""
+    """A saved ``service_benchmark.json`` read back."""
     data = json.loads(Path(json_path).read_text(encoding="utf-8"))
     return ServiceBenchmark(rows=[LoadRow(**r) for r in data["rows"]], workers=int(data["workers"]), cpus=int(data["cpus"]),
                             long_job=dict(data["long_job"]))
@@ -260,4 +217,4 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     return png_path
 
 
-__all__ = ["ENDPOINTS", "LONG_JOB", "LoadRow", "ServiceBenchmark", "load", "plot", "run", "start_service"]
+__all__ = ["ENDPOINTS", "LONG_JOB", "NAME", "LoadRow", "ServiceBenchmark", "load", "measure", "plot", "report"]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from analysis.integrator_bench import docs_tables
+from flatbody_env.bench.integrators import docs_tables
 from flatbody_env.output import replace_marked_block
 
 REPORT = Path(__file__).resolve().parents[2] / "docs" / "img" / "bench_integrators.json"
@@ -31,3 +31,18 @@ def test_tables_come_from_the_saved_report_and_replace_only_their_block(tmp_path
     assert "stale" not in text and text.startswith("a\n<!-- bench:integrators-long -->\n| method and setting") and text.endswith("-->\nb\n")
     with pytest.raises(ValueError, match="^docs:"):
         replace_marked_block(page, "integrators-close", "x")
+
+
+def test_csv_rows_and_docs_come_from_the_saved_report(tmp_path):
+    """``bench_integrators.csv`` holds one figure a row; ``--docs`` rewrites the blocks the page shows and skips the rest."""
+    from flatbody_env.bench.integrators import CSV_HEADER, csv_rows, write_docs
+
+    rep = json.loads(REPORT.read_text())
+    rows = csv_rows(rep)
+    assert all(len(r) == len(CSV_HEADER) for r in rows)
+    assert {r[0] for r in rows} >= {"regular", "close-approach", "long-horizon", "short-step"}
+    assert sum(r[0] == "long-horizon" for r in rows) == len(rep["long_horizon"])
+    page = tmp_path / "p.md"
+    page.write_text("<!-- bench:integrators-long -->\nstale\n<!-- /bench:integrators-long -->\n")
+    assert write_docs(REPORT, page) == ["integrators-long"]
+    assert "stale" not in page.read_text() and "| method and setting |" in page.read_text()

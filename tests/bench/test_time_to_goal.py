@@ -1,4 +1,4 @@
-"""``flatbody bench train --to-goal`` (agents/goal_benchmark.py): the goal and LQR criteria, the files and the docs table,
+"""``flatbody bench train --to-goal`` (flatbody_env/bench/time_to_goal.py): the goal and LQR criteria, the files and the docs table,
 checked on made-up curves (the race itself is a benchmark, run by hand: docs/agents.md)."""
 
 from __future__ import annotations
@@ -7,7 +7,8 @@ import json
 
 import pytest
 
-from agents.goal_benchmark import GoalBenchmark, _curve, _Reached, load, markdown, plot, run, write
+from flatbody_env.bench.harness import write_report
+from flatbody_env.bench.time_to_goal import GoalBenchmark, _curve, _Reached, load, markdown, plot, report, run
 
 
 def test_criteria_and_curves():
@@ -26,17 +27,20 @@ def test_files_and_table(tmp_path):
     reached = _Reached(0.99, 0.002, 0.0018)
     sb3 = _curve("sb3-ppo", [(100_000, 10.0, 1.0, 0.0019), (200_000, 20.0, 1.0, 0.0017)], reached)
     rsl = _curve("rsl-ppo", [(100_000, 4.0, 1.0, 0.0015)], reached)
-    b = GoalBenchmark(sb3, rsl, 0.0018, 1.0, 20, 50_000, 0.99, 0.002, 0)
+    settings = {"lqr_final_distance": 0.0018, "lqr_success": 1.0, "episodes": 20, "eval_seed": 50_000, "success_goal": 0.99,
+                "distance_goal": 0.002, "seed": 0}
+    b = GoalBenchmark(sb3=sb3, rsl=rsl, **settings)
     assert b.ratio == pytest.approx(0.4) and b.ratio_lqr == pytest.approx(0.2)
-    write(b, tmp_path)
+    assert report(b).block == "time-to-goal"
+    write_report(report(b), tmp_path)
     data = json.loads((tmp_path / "time_to_goal.json").read_text())
-    assert data["ratio"] == pytest.approx(0.4) and data["rsl"]["lqr_timesteps"] == 100_000
+    assert data["ratio"] == pytest.approx(0.4) and data["rsl"]["lqr_timesteps"] == 100_000 and data["machine"]["cpu"]
     assert len((tmp_path / "time_to_goal.csv").read_text().splitlines()) == 4
     assert (tmp_path / "time_to_goal.png").stat().st_size > 1000
     assert load(tmp_path / "time_to_goal.json") == b
     table = markdown(b)
     assert "| rsl-ppo | 4.0 s (100000 steps) | 4.0 s (100000 steps) |" in table and "**0.40** (goal ≤ 0.5: met)" in table
-    slow = GoalBenchmark(sb3, _curve("rsl-ppo", [(100_000, 15.0, 1.0, 0.0025)], reached), 0.0018, 1.0, 20, 50_000, 0.99, 0.002, 0)
+    slow = GoalBenchmark(sb3=sb3, rsl=_curve("rsl-ppo", [(100_000, 15.0, 1.0, 0.0025)], reached), **settings)
     assert slow.ratio is None and "not reached" in markdown(slow)
 
 

@@ -8,8 +8,9 @@ is evaluated on ``episodes`` held-out episodes (seeds ``eval_seed`` …, apart f
 ``flatbody evaluate``'s) — the time spent evaluating is left out of the wall time. A trainer reaches the goal
 at the first evaluation with success ≥ ``success_goal`` and mean final distance ≤ ``distance_goal``, and beats
 the LQR at the first with success ≥ ``success_goal`` and a mean final distance below the LQR's on the same
-episodes; it stops when it has done both, or at ``max_timesteps``. Writes ``time_to_goal.json``, ``.csv`` (one row per evaluation) and ``.png``
-(success and final distance against wall time; the LQR's final distance on the same seeds as a line).
+episodes; it stops when it has done both, or at ``max_timesteps``. Writes ``time_to_goal.json``, ``.csv`` (one
+row per evaluation) and ``.png`` (success and final distance against wall time; the LQR's final distance on the
+same seeds as a line), and the ``<!-- bench:time-to-goal -->`` docs block when asked.
 """
 
 from __future__ import annotations
@@ -22,26 +23,55 @@ from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.output import atomic_write, save_figure, write_csv
+from flatbody_env.bench.harness import Report, write_report
+from flatbody_env.output import save_figure
 
 TRAINERS = ("sb3-ppo", "rsl-ppo")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Curve:
+    """One trainer's evaluations.
+
+    Attributes
+    ----------
+    trainer : str
+        One of :data:`TRAINERS`.
+    points : list of (int, float, float, float)
+        (timesteps, wall s without the evaluations, success rate, mean final distance) per evaluation.
+    goal_s : float or None
+        Wall time of the first evaluation at the goal (None: not reached).
+    goal_timesteps : int or None
+    lqr_s : float or None
+        Wall time of the first evaluation that beats the LQR (None: not reached).
+    lqr_timesteps : int or None
+    """
+
     trainer: str
     points: list[tuple[int, float, float, float]] = field(default_factory=list)
-    """(timesteps, wall s without the evaluations, success rate, mean final distance) per evaluation."""
     goal_s: float | None = None
-    """Wall time of the first evaluation at the goal (None: not reached)."""
     goal_timesteps: int | None = None
     lqr_s: float | None = None
-    """Wall time of the first evaluation that beats the LQR (None: not reached)."""
     lqr_timesteps: int | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GoalBenchmark:
+    """Both curves, the LQR on the same episodes and the settings of the race.
+
+    Attributes
+    ----------
+    sb3, rsl : Curve
+    lqr_final_distance, lqr_success : float
+        The LQR's mean final distance and success rate on the evaluation episodes.
+    episodes, eval_seed : int
+        The evaluation episodes (seeds ``eval_seed`` …).
+    success_goal, distance_goal : float
+        The goal.
+    seed : int
+        The training seed.
+    """
+
     sb3: Curve
     rsl: Curve
     lqr_final_distance: float
@@ -164,12 +194,14 @@ def _rsl_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 def _curve(name: str, points, reached) -> Curve:
     hit = next((p for p in points if reached.goal(p[2], p[3])), None)
     lqr = next((p for p in points if reached.lqr(p[2], p[3])), None)
-    return Curve(name, points, hit[1] if hit else None, hit[0] if hit else None, lqr[1] if lqr else None, lqr[0] if lqr else None)
+    return Curve(trainer=name, points=points, goal_s=hit[1] if hit else None, goal_timesteps=hit[0] if hit else None,
+                 lqr_s=lqr[1] if lqr else None, lqr_timesteps=lqr[0] if lqr else None)
 
 
 def run(*, seed: int = 0, max_timesteps: int = 3_000_000, eval_every: int = 50_000, episodes: int = 20, eval_seed: int = 50_000,
-        success_goal: float = 0.99, distance_goal: float = 0.002, out_dir: str | Path = ".") -> GoalBenchmark:
-    """Race both trainers to the goal and write the files into ``out_dir`` (module docstring)."""
+        success_goal: float = 0.99, distance_goal: float = 0.002, out_dir: str | Path = ".", docs: str | Path | None = None) -> GoalBenchmark:
+    """Race both trainers to the goal and write the files into ``out_dir`` (module docstring); with ``docs`` (a Markdown
+    page) also its ``<!-- bench:time-to-goal -->`` block."""
     from agents.evaluate import run_episodes
 
     for name, v, low in (("max_timesteps", max_timesteps, 1), ("eval_every", eval_every, 1), ("episodes", episodes, 1), ("seed", seed, 0),
@@ -187,17 +219,19 @@ def run(*, seed: int = 0, max_timesteps: int = 3_000_000, eval_every: int = 50_0
 
     sb3 = _sb3_curve(seed, max_timesteps, eval_every, episodes, eval_seed, goal)
     rsl = _rsl_curve(seed, max_timesteps, eval_every, episodes, eval_seed, goal)
-    bench = GoalBenchmark(sb3, rsl, lqr_d, lqr_s, episodes, eval_seed, success_goal, distance_goal, seed)
-    write(bench, Path(out_dir))
+    bench = GoalBenchmark(sb3=sb3, rsl=rsl, lqr_final_distance=lqr_d, lqr_success=lqr_s, episodes=episodes, eval_seed=eval_seed,
+                          success_goal=success_goal, distance_goal=distance_goal, seed=seed)
+    write_report(report(bench), out_dir, docs=docs)
     return bench
 
 
-def write(bench: GoalBenchmark, out_dir: Path) -> None:
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write(out_dir / "time_to_goal.json", json.dumps({**asdict(bench), "ratio": bench.ratio, "ratio_lqr": bench.ratio_lqr}, indent=2) + "\n")
-    rows = [[c.trainer, t, f"{w:.2f}", f"{s:.3f}", f"{d:.6f}"] for c in (bench.sb3, bench.rsl) for t, w, s, d in c.points]
-    write_csv(out_dir / "time_to_goal.csv", ["trainer", "timesteps", "wall_s", "success", "final_distance"], rows)
-    plot(out_dir / "time_to_goal.json", out_dir / "time_to_goal.png")
+def report(bench: GoalBenchmark) -> Report:
+    """``time_to_goal``'s files: the record (with both ratios), one CSV row per evaluation, the chart drawn from the JSON,
+    the docs block ``time-to-goal``."""
+    return Report(name="time_to_goal", record={**asdict(bench), "ratio": bench.ratio, "ratio_lqr": bench.ratio_lqr},
+                  header=["trainer", "timesteps", "wall_s", "success", "final_distance"],
+                  rows=[[c.trainer, t, f"{w:.2f}", f"{s:.3f}", f"{d:.6f}"] for c in (bench.sb3, bench.rsl) for t, w, s, d in c.points],
+                  chart=plot, chart_from="json", markdown=markdown(bench), block="time-to-goal")
 
 
 CAPTION = (
@@ -213,7 +247,7 @@ def load(json_path: str | Path) -> GoalBenchmark:
     """A :class:`GoalBenchmark` from its saved ``time_to_goal.json``."""
     data = json.loads(Path(json_path).read_text(encoding="utf-8"))
     curves = {k: Curve(**{**data[k], "points": [tuple(p) for p in data[k]["points"]]}) for k in ("sb3", "rsl")}
-    return GoalBenchmark(**{k: v for k, v in data.items() if k not in ("ratio", "ratio_lqr", "sb3", "rsl")}, **curves)
+    return GoalBenchmark(**{k: v for k, v in data.items() if k not in ("ratio", "ratio_lqr", "machine", "sb3", "rsl")}, **curves)
 
 
 def plot(json_path: Path, png_path: Path) -> None:
@@ -279,4 +313,4 @@ def markdown(bench: GoalBenchmark) -> str:
     ]) + "\n"
 
 
-__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "markdown", "plot", "run", "write"]
+__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "markdown", "plot", "report", "run"]

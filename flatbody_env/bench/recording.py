@@ -1,0 +1,318 @@
+"""``flatbody bench recording``: the time to log a trajectory to a finished ``.rrd`` and to draw a frame.
+
+Not a timed test: it prints figures and writes ``recording.json``, ``recording.csv`` (the
+``record_trajectory`` sizes) and ``recording.png`` (drawn from the saved JSON by :func:`plot`);
+with a docs page, also its ``<!-- bench:recording -->`` table (:func:`markdown`).
+
+* ``record_trajectory``: a whole simulated trajectory of N steps to a finished file, median, min and
+  max of the repeats per size; the process's first recording (importing rerun) is timed apart.
+* live ``Recorder.append``: the same steps logged one by one, sent in blocks.
+* a recorded FlatBody-v0 episode on the compiled path that carries R against the former path (scipy's
+  DOP853), with and without the recorder, in alternation, medians; a free scene's trajectory with R by
+  ``simulate``'s default against scipy's DOP853.
+* ``render_frame`` (the env's ``rgb_array`` frame): median, mean and 90th percentile per frame.
+
+:func:`measure` → the result (the JSON record); :func:`describe` prints it, :func:`report` hands it to
+:func:`flatbody_env.bench.harness.write_report`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from flatbody_env.bench.harness import Report
+
+NAME = "recording"
+"""The file stem of the saved figures, and the docs block's name."""
+
+BUDGET_S = 1.0
+"""The budget of a ``--steps`` trajectory (10 000 steps by default) to a finished ``.rrd``, in seconds."""
+
+FRAME_BUDGET_MS = 1.0
+"""The budget of one ``rgb_array`` frame, in milliseconds."""
+
+CSV_HEADER = ("steps", "median_s", "min_s", "max_s", "us_per_step", "file_bytes")
+"""The columns of ``recording.csv``: ``record_trajectory`` per size."""
+
+
+def measure(*, scene: str, steps: int, sizes: Sequence[int], repeats: int, block: int, frames: int, episode_repeats: int) -> dict:
+    """Measure the recording paths (see the module docstring).
+
+    Parameters
+    ----------
+    scene : str
+        Built-in scene that supplies the trajectory.
+    steps : int
+        The size judged against :data:`BUDGET_S` (also the live recorder's size).
+    sizes : sequence of int
+        Further sizes for the scaling chart.
+    repeats : int
+        Runs per size (median reported).
+    block : int
+        Block size of the live-recorder measurement.
+    frames : int
+        ``rgb_array`` frames timed.
+    episode_repeats : int
+        Recorded env episodes per path (median).
+
+    Returns
+    -------
+    dict
+        The record saved as ``recording.json``.
+    """
+    import platform
+    import tempfile
+
+    import numpy as np
+
+    from flatbody_env.recording.reader import sdk_version
+    from flatbody_env.recording.writer import Recorder, record_trajectory
+    from flatbody_env.scene import load_scene
+    from flatbody_env.simulation import simulate
+
+    sc = load_scene(scene)
+    rows = []
+    live = None
+    with tempfile.TemporaryDirectory() as tmp:
+        # the process's first recording pays for importing rerun: timed apart, not in the medians
+        warm = simulate(sc, t_end=sc.t_end, times=np.linspace(0.0, sc.t_end, 1000), with_rotation=True)
+        start = time.perf_counter()
+        record_trajectory(warm, sc.body, Path(tmp) / "warm-up.rrd")
+        first_call = {"steps": 1000, "seconds": time.perf_counter() - start}
+        for n in sorted({*sizes, steps}):
+            traj = simulate(sc, t_end=sc.t_end, times=np.linspace(0.0, sc.t_end, n), with_rotation=True)
+            times = []
+            size_bytes = 0
+            for r in range(repeats):
+                path = Path(tmp) / f"bench-{n}-{r}.rrd"
+                start = time.perf_counter()
+                record_trajectory(traj, sc.body, path)
+                times.append(time.perf_counter() - start)
+                size_bytes = path.stat().st_size
+                path.unlink()
+            rows.append({"steps": n, "median_s": float(np.median(times)), "min_s": float(np.min(times)), "max_s": float(np.max(times)),
+                         "us_per_step": float(np.median(times)) / n * 1e6, "file_bytes": size_bytes})
+            if n == steps:
+                Y, R, E = traj.y, traj.rotation, traj.energy
+                start = time.perf_counter()
+                with Recorder(Path(tmp) / "bench-live.rrd", sc.body, block=block) as rec:
+                    for k in range(n):
+                        rec.append(traj.t[k], Y[:, k], R[k], energy=E[k])
+                live_s = time.perf_counter() - start
+                live = {"steps": n, "block": block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
+    episode = _episode(episode_repeats)
+    frame = _frame(sc, frames)
+    target = next(r for r in rows if r["steps"] == steps)
+    return {
+        "benchmark": "recording",
+        "what": "record_trajectory(traj, body, path): whole trajectory to a finished .rrd (send_columns), wall time",
+        "scene": sc.name,
+        "steps": steps,
+        "median_s": target["median_s"],
+        "budget_s": BUDGET_S,
+        "within_budget": target["median_s"] <= BUDGET_S,
+        "repeats": repeats,
+        "sizes": rows,
+        "live": live,
+        "frame": frame,
+        "episode": episode,
+        "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
+        "rerun_sdk": sdk_version(),
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpus": os.cpu_count(),
+    }
+
+
+def _episode(repeats: int) -> dict:
+    """A recorded FlatBody-v0 episode on the compiled path that carries R against the former path
+    (the whole episode re-run on scipy's DOP853 at the env's tolerance), same run; and a free
+    scene's trajectory with R by ``simulate``'s default (auto) against scipy's DOP853."""
+    import tempfile
+
+    import gymnasium as gym
+    import numpy as np
+
+    import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+    from flatbody_env.recording.wrapper import RerunRecorder
+    from flatbody_env.scene import load_scene
+    from flatbody_env.simulation import simulate
+
+    def episode(path, **kwargs):
+        env = gym.make("FlatBody-v0", track_rotation=True, **kwargs)
+        env = RerunRecorder(env, str(path)) if path is not None else env
+        rng = np.random.default_rng(0)
+        start = time.perf_counter()
+        env.reset(seed=0)
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+            done = term or trunc
+        env.close()
+        return time.perf_counter() - start, info["integrator"]["method"]
+
+    fast, slow, fast_steps, slow_steps = [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        episode(Path(tmp) / "warm.rrd")  # compiled kernels loaded, rerun imported
+        for r in range(repeats):
+            s, method = episode(Path(tmp) / f"fast-{r}.rrd")
+            fast.append(s)
+            s, _ = episode(Path(tmp) / f"slow-{r}.rrd", integrator="DOP853")
+            slow.append(s)
+            fast_steps.append(episode(None)[0])  # the same episode carrying R, nothing recorded
+            slow_steps.append(episode(None, integrator="DOP853")[0])
+    scene = load_scene("default")
+    times = np.linspace(0.0, scene.t_end, 1001)
+    auto = simulate(scene, t_end=scene.t_end, times=times, with_rotation=True)
+    auto_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True).wall_time for _ in range(repeats))
+    scipy_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time for _ in range(max(1, repeats // 2)))
+    return {
+        "compiled_method": method, "compiled_s": float(np.median(fast)), "former_s": float(np.median(slow)),
+        "speedup": float(np.median(slow) / np.median(fast)), "repeats": repeats,
+        "stepping_compiled_s": float(np.median(fast_steps)), "stepping_former_s": float(np.median(slow_steps)),
+        "stepping_speedup": float(np.median(slow_steps) / np.median(fast_steps)),
+        "scene": scene.name, "scene_samples": int(times.size), "scene_auto_method": auto.method, "scene_auto_s": float(auto_s),
+        "scene_scipy_s": float(scipy_s), "scene_speedup": float(scipy_s / auto_s),
+    }
+
+
+def _frame(scene, frames: int) -> dict:
+    """Time ``render_frame`` (the env's ``rgb_array`` frame) on the states of a simulated trajectory."""
+    import numpy as np
+
+    from flatbody_env.env.rendering import render_frame
+    from flatbody_env.simulation import simulate
+
+    traj = simulate(scene, t_end=scene.t_end, times=np.linspace(0.0, scene.t_end, frames), with_rotation=True)
+    target = {"lambda": float(traj.state["lambda"][0]), "mu": float(traj.state["mu"][0])}
+    Y, R, t = traj.y, traj.rotation, traj.t
+    for k in range(min(20, frames)):  # warm-up (font and legend caches)
+        render_frame(Y[:, k], R[k], target, t[k])
+    times = np.empty(frames)
+    for k in range(frames):
+        start = time.perf_counter()
+        render_frame(Y[:, k], R[k], target, t[k])
+        times[k] = time.perf_counter() - start
+    median_ms = float(np.median(times)) * 1e3
+    return {
+        "frames": frames,
+        "median_ms": median_ms,
+        "mean_ms": float(times.mean()) * 1e3,
+        "p90_ms": float(np.percentile(times, 90)) * 1e3,
+        "budget_ms": FRAME_BUDGET_MS,
+        "within_budget": median_ms <= FRAME_BUDGET_MS,
+    }
+
+
+def describe(result: dict) -> str:
+    """The printed summary of a :func:`measure` result."""
+    lines = [f"whole trajectory, {r['steps']:>6} steps: median {r['median_s']:.3f} s (min {r['min_s']:.3f}, max {r['max_s']:.3f}) "
+             f"over {result['repeats']} runs, {r['file_bytes'] / 1e6:.1f} MB" for r in result["sizes"]]
+    lv, ep, fr, fc = result["live"], result["episode"], result["frame"], result["first_call"]
+    if lv:
+        lines.append(f"live Recorder.append, {lv['steps']} steps in blocks of {lv['block']}: {lv['seconds']:.3f} s ({lv['us_per_step']:.1f} µs/step)")
+    lines += [
+        f"recorded env episode (400 steps, random policy): {ep['compiled_method']} carrying R {ep['compiled_s']:.3f} s, "
+        f"the former path (scipy DOP853 stepping R) {ep['former_s']:.3f} s: {ep['speedup']:.1f}x faster (same run)",
+        f"  its stepping alone (nothing recorded): {ep['stepping_compiled_s']:.3f} s vs {ep['stepping_former_s']:.3f} s: "
+        f"{ep['stepping_speedup']:.1f}x; the rest of a recorded episode is the recorder",
+        f"free scene trajectory with R (scene {ep['scene']}, {ep['scene_samples']} samples): method auto ({ep['scene_auto_method']}) "
+        f"{ep['scene_auto_s'] * 1e3:.1f} ms, scipy DOP853 {ep['scene_scipy_s'] * 1e3:.1f} ms: {ep['scene_speedup']:.1f}x",
+        f"rgb_array frame ({fr['frames']} frames of scene {result['scene']}): median {fr['median_ms']:.3f} ms, mean {fr['mean_ms']:.3f} ms — "
+        + ("within" if fr["within_budget"] else "OVER") + f" the {fr['budget_ms']:g} ms budget",
+        f"first call of the process ({fc['steps']} steps, includes importing rerun): {fc['seconds']:.3f} s",
+        f"logging a {result['steps']}-step trajectory: {result['median_s']:.3f} s (median of {result['repeats']}) — "
+        + ("within" if result["within_budget"] else "OVER") + f" the {result['budget_s']:g} s budget",
+    ]
+    return "\n".join(lines)
+
+
+def markdown(result: dict) -> str:
+    """The Markdown table of docs/recording.md, from a ``recording.json`` result."""
+    sizes = {r["steps"]: r for r in result["sizes"]}
+    target = sizes[result["steps"]]
+    others = [r for n, r in sorted(sizes.items()) if n != result["steps"]]
+    ep, fr, lv, fc = result["episode"], result["frame"], result["live"], result["first_call"]
+    lines = [
+        "| what | result |",
+        "|---|---|",
+        f"| recorded env episode, 400 steps ({ep['compiled_method']} carrying R, compiled) | **{ep['compiled_s']:.3f} s** "
+        f"(median of {ep['repeats']}) |",
+        f"| the same episode on the former path (scipy DOP853 integrating R) | {ep['former_s']:.3f} s: "
+        f"**{ep['speedup']:.1f}× slower** (same run) |",
+        f"| its stepping alone (the env carrying R, nothing recorded): compiled vs the former path | {ep['stepping_compiled_s'] * 1e3:.0f} ms vs "
+        f"{ep['stepping_former_s'] * 1e3:.0f} ms: **{ep['stepping_speedup']:.0f}×** |",
+        f"| free scene with R, {ep['scene_samples']} samples: `simulate` method auto ({ep['scene_auto_method']}) vs scipy DOP853 | "
+        f"{ep['scene_auto_s'] * 1e3:.1f} ms vs {ep['scene_scipy_s'] * 1e3:.0f} ms ({ep['scene_speedup']:.0f}×) |",
+        f"| `record_trajectory`, {result['steps']} steps (budget ≤ 1 s) | **{target['median_s']:.2f} s** (min {target['min_s']:.2f} s; "
+        f"{target['file_bytes'] / 1e6:.1f} MB) |",
+    ]
+    if others:
+        counts = " / ".join(str(r["steps"]) for r in others)
+        medians = " / ".join(f"{r['median_s']:.3f}" for r in others)
+        lines.append(f"| `record_trajectory`, {counts} steps | {medians} s |")
+    if lv:
+        lines.append(f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
+                     f"({lv['us_per_step']:.0f} µs per step) |")
+    lines.append(f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |")
+    lines.append(f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
+                 f"({fr['mean_ms']:.2f} ms mean) |")
+    return "\n".join(lines)
+
+
+RECORDING_CAPTION = (
+    "record_trajectory: a whole simulated trajectory written at once (rerun's send_columns: one call per series);\n"
+    "live Recorder.append: the same steps logged while they are simulated, in blocks. .rrd: rerun's recording file.\n"
+    "Points: median of {repeats} repeats; error bars: the fastest and the slowest. Steps: time samples of the trajectory."
+)
+"""The chart's caption (``{repeats}`` filled in)."""
+
+
+def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
+    """Draw the chart of a saved ``recording.json`` (never from a fresh run) to ``png_path``."""
+    import json
+
+    import matplotlib
+
+    from flatbody_env.chart_text import add_caption
+    from flatbody_env.output import save_figure
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    result = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    steps = [r["steps"] for r in result["sizes"]]
+    med = [r["median_s"] for r in result["sizes"]]
+    lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
+    hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
+    fig, ax = plt.subplots(figsize=(6, 4.7))
+    ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
+    if result.get("live"):
+        lv = result["live"]
+        ax.plot([lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})")
+    ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("steps")
+    ax.set_ylabel("wall time to a finished .rrd [s]")
+    ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    bottom = add_caption(fig, RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+    save_figure(fig, png_path, dpi=120)
+    plt.close(fig)
+    return Path(png_path)
+
+
+def report(result: dict) -> Report:
+    """``result`` for :func:`flatbody_env.bench.harness.write_report`: ``recording.json``, ``recording.csv``
+    (the sizes), ``recording.png`` (:func:`plot`) and the ``<!-- bench:recording -->`` table (:func:`markdown`)."""
+    return Report(name=NAME, record=result, header=CSV_HEADER, rows=[[r[c] for c in CSV_HEADER] for r in result["sizes"]], chart=plot,
+                  markdown=markdown(result))
+
+
+__all__ = ["BUDGET_S", "CSV_HEADER", "FRAME_BUDGET_MS", "NAME", "RECORDING_CAPTION", "describe", "markdown", "measure", "plot", "report"]
