@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import sys
 
-from flatbody_env.cli.args import int_at_least
+from flatbody_env.cli.args import int_at_least, output_dir
 from flatbody_env.physics import validation
 
 
@@ -333,7 +333,7 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="runs per environment; the fastest is kept")
     p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of both runs")
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
-    p.add_argument("--out-dir", default="bench", help="where to write train_benchmark.json/.csv/.png")
+    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", help="where to write train_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")
     p.add_argument("--to-goal", action="store_true",
                    help="instead: wall time to a good residual agent, SB3's PPO vs rsl_rl's PPO (rsl-ppo) in the same run "

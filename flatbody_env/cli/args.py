@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+from pathlib import Path
 
 from flatbody_env.output import check_output_path
 from flatbody_env.physics import validation
@@ -134,6 +136,26 @@ def output_file(name: str, suffixes: tuple[str, ...] = ()):
             check_output_path(name, text, suffixes)
         except ValueError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    return parse
+
+
+def output_dir(name: str):
+    """argparse type: a folder a command writes into (created if missing; must not be a file; the nearest existing
+    folder must be writable): checked before a long measurement starts, not after it."""
+
+    def parse(text: str) -> str:
+        p = Path(text)
+        if not text or "\0" in text:
+            raise argparse.ArgumentTypeError(f"{name}: expected a folder path, got {text[:60]!r}")
+        if p.exists() and not p.is_dir():
+            raise argparse.ArgumentTypeError(f"{name}: {text[:60]!r} exists and is not a directory")
+        anchor = p.absolute()
+        while not anchor.exists():
+            anchor = anchor.parent
+        if not anchor.is_dir() or not os.access(anchor, os.W_OK | os.X_OK):
+            raise argparse.ArgumentTypeError(f"{name}: {str(anchor)[:60]!r} is not a writable directory")
         return text
 
     return parse

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from flatbody_env.cli.args import int_at_least
+from flatbody_env.cli.args import int_at_least, output_dir
 from flatbody_env.physics import validation
 
 
@@ -40,7 +40,7 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--episode-steps", type=int_at_least("episode_steps", 1, validation.MAX_EPISODE_STEPS), default=None,
                    help="episode length of the batched FlatBody timing (default: the registered 400)")
     p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=5, help="timed blocks; the best is kept")
-    p.add_argument("--out-dir", default="bench", help="where to write env_benchmark.json/.csv/.png")
+    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", help="where to write env_benchmark.json/.csv/.png")
     p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the tables between <!-- bench:env --> markers in FILE.md")
     p.set_defaults(handler=_cmd)
 

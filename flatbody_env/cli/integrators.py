@@ -25,7 +25,7 @@ import math
 from pathlib import Path
 
 from flatbody_env.answers import failure_rows
-from flatbody_env.cli.args import int_at_least, positive_float
+from flatbody_env.cli.args import int_at_least, positive_float, output_dir
 from flatbody_env.physics import validation
 
 DEFAULT_OUT = "runs/integrators"
@@ -207,7 +207,7 @@ def register_bench(bsub) -> None:
     b.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=3, help="timing repeats (minimum taken; default 3)")
     b.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
     b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
-    b.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
+    b.add_argument("--out", type=output_dir("out"), default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
     b.add_argument("--docs", metavar="FILE.md", help="also regenerate the tables between <!-- bench:integrators-* --> markers in FILE.md")
     b.set_defaults(handler=_bench)

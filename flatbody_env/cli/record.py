@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg
+from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg, output_dir
 from flatbody_env.physics import validation
 from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
 
@@ -342,7 +342,7 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--block", type=int_at_least("block", 1, validation.MAX_SAMPLES), default=256, help="block size of the live-recorder measurement")
     p.add_argument("--frames", type=int_at_least("frames", 2, validation.MAX_SAMPLES), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
-    p.add_argument("--out-dir", default="bench", metavar="DIR", help="where recording.json and recording.png go (default bench)")
+    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", metavar="DIR", help="where recording.json, .csv and .png go (default bench)")
     p.add_argument("--episode-repeats", type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS), default=3,
                    help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)")
     p.add_argument("--docs", metavar="FILE.md", help="also regenerate the table between <!-- bench:recording --> markers in FILE.md")

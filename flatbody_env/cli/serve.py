@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from flatbody_env.cli.args import int_at_least, positive_float
+from flatbody_env.cli.args import int_at_least, positive_float, output_dir
 from flatbody_env.physics import validation
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
@@ -155,6 +155,6 @@ def register_bench(bench_sub) -> None:
     p.add_argument("--requests", type=int_at_least("requests", 1, 1_000_000), default=200, help="requests per endpoint and client count, at most (default 200)")
     p.add_argument("--seconds", type=positive_float("seconds", validation.MAX_SECONDS), default=20.0, help="time per endpoint and client count, at most (default 20)")
     p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=default_workers(), help="the service's worker processes")
-    p.add_argument("--out-dir", default="bench", help="where to write service_benchmark.json/.csv/.png")
+    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", help="where to write service_benchmark.json/.csv/.png")
     p.add_argument("--plot-only", action="store_true", help="redraw service_benchmark.png from the saved service_benchmark.json in --out-dir")
     p.set_defaults(handler=_bench)

@@ -18,7 +18,7 @@ import math
 import sys
 from pathlib import Path
 
-from flatbody_env.cli.args import float_range, int_at_least, positive_float
+from flatbody_env.cli.args import float_range, int_at_least, positive_float, output_dir
 from flatbody_env.physics import validation
 
 
@@ -347,6 +347,6 @@ def register_bench(bsub) -> None:
     b.add_argument("--sim-workers", type=int_at_least("sim_workers", 1, validation.MAX_WORKERS), default=4, metavar="N",
                    help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)")
     b.add_argument("--noop-tasks", type=int_at_least("noop_tasks", 10, 1_000_000), default=400, metavar="N", help="empty tasks timing the scheduler overhead (default 400)")
-    b.add_argument("--out", default="runs/sweep-bench", metavar="DIR", help="output folder (default runs/sweep-bench)")
+    b.add_argument("--out", type=output_dir("out"), default="runs/sweep-bench", metavar="DIR", help="output folder (default runs/sweep-bench)")
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
     b.set_defaults(handler=_bench_sweep)

@@ -80,3 +80,17 @@ def test_bench_gpu_backends_are_checked(tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "backends: none of cuda is here" in err
     assert not (tmp_path / "g.json").exists()
+
+
+@pytest.mark.parametrize("argv", [["bench", "env", "--out-dir"], ["bench", "train", "--out-dir"], ["bench", "recording", "--out-dir"],
+                                  ["bench", "service", "--out-dir"], ["bench", "sweep", "--out"], ["bench", "integrators", "--out"]])
+def test_bench_output_folders_are_checked_before_measuring(argv, tmp_path, capsys):
+    """A benchmark's output folder that cannot be one (an existing file, a read-only parent) is refused while the
+    arguments are read (exit 2, one line naming the flag), not after minutes of measuring."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(SystemExit) as exc:
+        main(argv + [str(afile)])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and len(err.strip().splitlines()) == 1 and "is not a directory" in err
+    assert afile.read_text() == "x"
