@@ -211,10 +211,18 @@ def in_bounds(value: Any, spec: tuple) -> bool:
         _, max_items, lo, hi, min_items, exact, _ = spec
         if not isinstance(value, list) or not min_items <= len(value) <= max_items or (exact and len(value) != exact):
             return False
-        return all(not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(float(v)) and lo <= v <= hi for v in value)
+        return all(not isinstance(v, bool) and isinstance(v, (int, float)) and lo <= v <= hi and _finite(v) for v in value)
     if kind == "dict":
         return isinstance(value, dict) and len(value) <= spec[1]
     return True  # obj / any: structure the oracle does not judge (a wrong one is refused, a right one may be accepted)
+
+
+def _finite(v: int | float) -> bool:
+    """A JSON number that is a finite float64 (an integer beyond float range is not)."""
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
 
 
 # -- cases --------------------------------------------------------------------------------------------------
