@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import subprocess
 import tempfile
 import time
 from dataclasses import asdict, dataclass
@@ -117,7 +116,7 @@ def measure(*, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, secon
     """Start the service, queue the long job and load each endpoint at each client count (module docstring)."""
     import httpx
 
-    from flatbody_env.service.launch import start_service
+    from flatbody_env.service.launch import start_service, stop_service
 
     if not (isinstance(seconds, (int, float)) and 0 < seconds <= 600):
         raise ValueError(f"seconds: must be a number in (0, 600], got {seconds!r}")
@@ -137,12 +136,7 @@ def measure(*, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, secon
             status_at_end = httpx.get(f"{url}/jobs/{job_id}", timeout=30.0).json()["status"]
             httpx.delete(f"{url}/jobs/{job_id}", timeout=30.0)
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_service(proc)
     return ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
                             long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
                                       "status_at_end": status_at_end})

@@ -68,4 +68,17 @@ def start_service(data_dir: str | Path, *, workers: int, port: int | None = None
     raise RuntimeError(f"flatbody serve did not answer /health within {timeout:g} s")
 
 
-__all__ = ["start_service"]
+def stop_service(proc: subprocess.Popen, *, timeout: float = 30.0) -> None:
+    """Stop a service that :func:`start_service` started: SIGTERM (uvicorn's graceful shutdown, which also ends the
+    job workers), then SIGKILL if it has not exited within ``timeout`` seconds. A process that already ended is left."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+__all__ = ["start_service", "stop_service"]

@@ -84,6 +84,8 @@ from pathlib import Path
 
 import pytest
 
+from flatbody_env.service.launch import stop_service
+
 REPO = Path(__file__).resolve().parents[2]
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 BIN = Path(sys.executable).parent
@@ -328,17 +330,7 @@ def service_url(tmp_path_factory):
     try:
         yield url
     finally:
-        _stop(proc)
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop_service(proc)
 
 
 def _run_serve_lines(block: Block, cwd: Path) -> None:
@@ -381,7 +373,7 @@ def _run_serve_lines(block: Block, cwd: Path) -> None:
             time.sleep(0.1)
     finally:
         for *_, proc, _ in started:
-            _stop(proc)
+            stop_service(proc)
     for line, argv, _, _, log in started:
         if "0.0.0.0" in argv:
             assert "reachable from other machines" in log.read_text(), f"{block.id}: `{line}` did not say so in its log"

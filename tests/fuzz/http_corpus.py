@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
 import sys
 import time
 from collections import Counter
@@ -30,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.service.models import BUILTIN_SCENES  # noqa: E402 - the names GET /scenes lists
+from flatbody_env.service.launch import stop_service  # noqa: E402
 
 BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V1", "k": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}
 SCENE = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0},
@@ -401,15 +401,6 @@ def start_service(data_dir: Path, log_path: Path, *, workers: int = 1, env: dict
     from flatbody_env.service.launch import start_service as start
 
     return start(data_dir, workers=workers, timeout=timeout, env={**SMALL_LIMITS, **(env or {})}, log_path=log_path)
-
-
-def stop_service(proc) -> None:
-    proc.terminate()
-    try:
-        proc.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
 
 
 def send(http, case: Case, timeout: float):

@@ -39,17 +39,11 @@ def wait_job(get, job_id: str, timeout: float = 180.0) -> dict:
 @pytest.fixture
 def live_service(tmp_path):
     """``flatbody serve`` in a subprocess on a free loopback port: ``(process, url, data_dir)``; stopped afterwards."""
-    from flatbody_env.service.launch import start_service
+    from flatbody_env.service.launch import start_service, stop_service
 
     data_dir = tmp_path / "data"
     proc, url = start_service(data_dir, workers=1)
     try:
         yield proc, url, data_dir
     finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except Exception:
-                proc.kill()
-                proc.wait()
+        stop_service(proc)

@@ -12,16 +12,7 @@ import time
 import httpx
 import pytest
 
-from flatbody_env.service.launch import start_service
-
-
-def _stop(proc) -> None:
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+from flatbody_env.service.launch import start_service, stop_service
 
 
 def _is_fault(r: httpx.Response) -> None:
@@ -53,7 +44,7 @@ def test_missing_or_corrupt_database_is_503(tmp_path, damage):
             assert http.post("/ellipses", json={"body": {"params": {"J": 1, "J3": 1}, "potential": {"name": "V1", "k": 1}},
                                                 "s3": 2, "p_theta": 0.5}).status_code == 200
     finally:
-        _stop(proc)
+        stop_service(proc)
     if damage == "corrupt":  # a service started on a corrupt database refuses with one line
         run = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "serve", "--port", "0", "--data-dir", str(data)],
                              capture_output=True, text=True, timeout=60)
@@ -88,7 +79,7 @@ def test_full_disk_is_503(tmp_path):
             assert http.get("/health").status_code == 200
             assert http.get("/jobs", params={"limit": 5}).status_code in (200, 503)
     finally:
-        _stop(proc)
+        stop_service(proc)
 
 
 def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
@@ -121,4 +112,4 @@ def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
             assert r.status_code == 409 and r.json()["kind"] == "conflict"
             assert http.get("/health").status_code == 200
     finally:
-        _stop(proc)
+        stop_service(proc)

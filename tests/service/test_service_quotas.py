@@ -16,7 +16,7 @@ import time
 import httpx
 import pytest
 
-from flatbody_env.service.launch import start_service
+from flatbody_env.service.launch import start_service, stop_service
 from flatbody_env.service.limits import DEFAULT_LIMITS
 
 HEALTH_MS = 100.0
@@ -36,12 +36,7 @@ def small_service(tmp_path_factory):
     try:
         yield url
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except Exception:
-            proc.kill()
-            proc.wait()
+        stop_service(proc)
 
 
 class HealthProbe:

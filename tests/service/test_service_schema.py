@@ -64,7 +64,7 @@ def _computed_refusal(response) -> bool:
 
 @pytest.fixture(scope="module")
 def api_schema(tmp_path_factory):
-    from flatbody_env.service.launch import start_service
+    from flatbody_env.service.launch import start_service, stop_service
 
     proc, url = start_service(tmp_path_factory.mktemp("schema-data"), workers=2)
     try:
@@ -74,8 +74,7 @@ def api_schema(tmp_path_factory):
         checks.negative_data_rejection.expected_statuses = [*checks.negative_data_rejection.expected_statuses, "413"]
         yield schema
     finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+        stop_service(proc)
 
 
 def _call(case) -> None:
