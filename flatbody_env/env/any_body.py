@@ -22,13 +22,13 @@ References
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
 from flatbody_env.env.task import DEFAULT_LIMITS, Episode, ReachStationaryEllipse, target_row
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.potentials import V3, ThicknessPotential
 
@@ -71,9 +71,7 @@ class ReachAnyBody(ReachStationaryEllipse):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("inertia_range", "kappa_range", "thickness_range"):
-            lo, hi = getattr(self, name)
-            if not (0.01 <= lo <= hi <= 100.0 and math.isfinite(hi)):
-                raise ValueError(f"{name}: must be (lo, hi) with 0.01 <= lo <= hi <= 100, got {(lo, hi)!r}")
+            validation.interval(name, getattr(self, name), low=0.01, high=100.0, strict=False)
 
     def ranges(self) -> np.ndarray:
         """(5, 2) ranges of (J, J3, κ, a, b)."""

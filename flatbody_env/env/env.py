@@ -205,20 +205,13 @@ class FlatBodyEnv(gym.Env):
         for name, value in (("torque_limit", torque_limit), ("force_limit", force_limit), ("momentum_bound", momentum_bound)):
             validation.number(name, value, low=validation.PARAM_RANGE[0], high=validation.MOMENTUM_MAX)
         for name, pair in (("stretch_bounds", stretch_bounds), ("rho_bounds", rho_bounds)):
-            if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
-                raise ValueError(f"{name}: must be (lo, hi) with 0 < lo < hi <= {validation.STRETCH_RANGE[1]:g}, got {pair!r:.60}")
-            lo, hi = (validation.number(f"{name}[{i}]", x, low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1]) for i, x in enumerate(pair))
-            if not lo < hi:
-                raise ValueError(f"{name}: must be (lo, hi) with 0 < lo < hi, got {(lo, hi)!r}")
+            validation.interval(name, pair, low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1])
         validation.number("gap_min", gap_min, low=0.0, high=0.5)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode: must be None or 'rgb_array', got {render_mode!r}")
-        if not isinstance(track_rotation, (bool, np.bool_)):
-            raise ValueError(f"track_rotation: must be true or false, got {track_rotation!r:.60}")
+        if render_mode is not None:
+            validation.string("render_mode", render_mode, choices=self.metadata["render_modes"])
+        validation.boolean("track_rotation", track_rotation)
         self.dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
-        if not isinstance(integrator, str):
-            raise ValueError(f"integrator: must be a method name (see 'flatbody methods'), got {integrator!r:.60}")
-        self.integrator = integrator
+        self.integrator = validation.string("integrator", integrator)
         info = get_method(integrator).info  # ValueError for an unknown name
         self.render_mode = render_mode
         self.track_rotation = bool(track_rotation or render_mode is not None)
@@ -516,9 +509,13 @@ class FlatBodyEnv(gym.Env):
 
     def _set_controls(self, action) -> None:
         """Clip and scale ``action`` into ``self._a``, ``self._u`` (the step's controls)."""
-        a = np.asarray(action, dtype=np.float64)
-        if a.size != self._a.size or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row, self._u_col):
-            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r}")
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            a = None
+        if a is None or a.size != self._a.size or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row,
+                                                                                   self._u_col):
+            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r:.80}")
 
     def step(self, action):
         if self._target is None and self._target_shape is None:

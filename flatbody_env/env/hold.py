@@ -52,6 +52,7 @@ import numpy as np
 
 from flatbody_env.env.sampling import BALL_DRAWS, HYPERBOLIC, START_BALL, ball_state_kernel
 from flatbody_env.env.task import DEFAULT_LIMITS, Episode, ReachStationaryEllipse, target_row
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equilibria import StationaryEllipse
 
@@ -79,13 +80,11 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("min_growth_rate", "max_growth_rate", "w_alive"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name}: must be a finite number >= 0, got {value!r}")
+            validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
         if self.max_growth_rate < self.min_growth_rate:
             raise ValueError(f"max_growth_rate: must be >= min_growth_rate ({self.min_growth_rate}), got {self.max_growth_rate!r}")
-        lo, hi = self.start_radius
-        if not (0.0 <= lo <= hi < 1.0):
+        lo, hi = validation.interval("start_radius", self.start_radius, low=0.0, high=1.0, strict=False)
+        if hi >= 1.0:
             raise ValueError(f"start_radius: must be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance), got {(lo, hi)!r}")
         if self.success_tolerance <= 0:
             raise ValueError(f"success_tolerance: must be > 0 for a task that ends outside it, got {self.success_tolerance!r}")

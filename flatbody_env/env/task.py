@@ -103,10 +103,14 @@ import numpy as np
 
 from flatbody_env.env import targets as _targets
 from flatbody_env.env.sampling import initial_state_kernel
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
 
+INITIAL_NOISE_MAX = 5.0
+"""Largest ``initial_noise``: offsets d ∈ [−n, n] scale the stretches by e^d (e^5 ≈ 148), far outside any target's
+neighbourhood; beyond it e^d overflows long before a start could lie in the domain."""
 _TABLE_FOR: dict = {}
 """(id(body), limits, control, ranges) → (body, the settling-rate table or None): whether it applies, decided once."""
 CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
@@ -151,8 +155,7 @@ class Episode:
 
 def control_mask(control: str) -> np.ndarray:
     """Which of (τ1, τ2, τ3, f_ϱ) an action drives, shape (4,) bool."""
-    if control not in CONTROLS:
-        raise ValueError(f"control: must be one of {', '.join(CONTROLS)}, got {control!r}")
+    validation.string("control", control, choices=CONTROLS)
     torque = "torque" in control
     dil = "dilatation" in control
     return np.array([torque, torque, torque, dil])
@@ -203,16 +206,14 @@ class ReachStationaryEllipse:
     (:mod:`flatbody_env.env.targets`: the same targets, without a Riccati solve per draw); False: always solve."""
 
     def __post_init__(self) -> None:
-        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "initial_noise", "min_settling_rate"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"{name}: must be a finite number >= 0, got {value!r}")
+        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "min_settling_rate"):
+            validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
+        validation.number("initial_noise", self.initial_noise, low=0.0, high=INITIAL_NOISE_MAX)
         for name in ("target_lambda", "target_aspect"):
-            lo, hi = getattr(self, name)
-            if not (0 < lo <= hi and math.isfinite(hi)):
-                raise ValueError(f"{name}: must be a range (lo, hi) with 0 < lo <= hi, got {(lo, hi)!r}")
+            validation.interval(name, getattr(self, name), low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1], strict=False)
         if self.target_aspect[0] <= 1.0:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
+        validation.boolean("settling_table", self.settling_table)
 
     # --- what the environment asks --------------------------------------------------------------
     @property

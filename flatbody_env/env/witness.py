@@ -61,7 +61,6 @@ References
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -70,6 +69,7 @@ import numpy as np
 
 from flatbody_env.env.sampling import BALL_DRAWS, START_NONE, ball_state_kernel
 from flatbody_env.env.task import DEFAULT_LIMITS, Episode, ReachStationaryEllipse, control_mask, target_row
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 
 REVERSAL = np.array([-1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0])
@@ -101,20 +101,17 @@ class ReachWithWitness(ReachStationaryEllipse):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name, upper in (("witness_radius", 1.0), ("witness_amplitude", 1.0), ("start_distance", math.inf)):
-            lo, hi = getattr(self, name)
-            if not (0.0 <= lo <= hi <= upper):
-                raise ValueError(f"{name}: must be (lo, hi) with 0 <= lo <= hi <= {upper:g}, got {(lo, hi)!r}")
+        for name, upper in (("witness_radius", 1.0), ("witness_amplitude", 1.0), ("start_distance", validation.PARAM_RANGE[1])):
+            validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False)
         for name in ("witness_steps", "max_witness_attempts"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name}: must be an integer >= 1, got {value!r}")
-        lo, hi = self.witness_half_period
-        if not (isinstance(lo, int) and isinstance(hi, int) and 1 <= lo <= hi):
+            validation.integer(name, getattr(self, name), low=1, high=validation.MAX_EPISODE_STEPS)
+        pair = self.witness_half_period
+        if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
+            raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {pair!r:.60}")
+        lo, hi = (validation.integer(f"witness_half_period[{i}]", x, low=1, high=validation.MAX_EPISODE_STEPS) for i, x in enumerate(pair))
+        if lo > hi:
             raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {(lo, hi)!r}")
-        value = self.min_uncontrolled_offset
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise ValueError(f"min_uncontrolled_offset: must be a finite number >= 0, got {value!r}")
+        validation.number("min_uncontrolled_offset", self.min_uncontrolled_offset, low=0.0, high=validation.PARAM_RANGE[1])
 
     def sampler_settings(self) -> tuple[float, ...]:
         """The episode sampler draws the targets only (:data:`~flatbody_env.env.sampling.START_NONE`)."""

@@ -182,6 +182,24 @@ def integer(where: str, value: Any, *, low: int | None = None, high: int | None 
     return x
 
 
+def interval(where: str, value: Any, *, low: float, high: float, strict: bool = True) -> tuple[float, float]:
+    """``value`` as a range (lo, hi) of two finite numbers within [low, high], lo < hi (lo <= hi unless ``strict``)."""
+    order = "<" if strict else "<="
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
+        raise ValueError(f"{where}: must be (lo, hi) with {low:g} <= lo {order} hi <= {high:g}, got {_short(value)}")
+    lo, hi = (number(f"{where}[{i}]", x, low=low, high=high) for i, x in enumerate(value))
+    if not (lo < hi if strict else lo <= hi):
+        raise ValueError(f"{where}: must be (lo, hi) with lo {order} hi, got {(lo, hi)!r}")
+    return lo, hi
+
+
+def boolean(where: str, value: Any) -> bool:
+    """``value`` if it is ``True`` or ``False`` (a numpy bool too), else a ``ValueError`` naming ``where``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{where}: must be true or false, got {_short(value)}")
+    return bool(value)
+
+
 def float_array(where: str, value: Any, *, shape: tuple[int | None, ...], finite: bool = True) -> np.ndarray:
     """``value`` (nested JSON lists or an array) as a float64 array of ``shape`` (None: any length).
 
@@ -326,7 +344,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "FAMILY_SEEDS_RANGE", "MAX_BATCH", "MAX_COUNT",
+__all__ = ["boolean", "interval", "ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "FAMILY_SEEDS_RANGE", "MAX_BATCH", "MAX_COUNT",
            "MAP_GRID_RANGE", "MAX_EPISODES", "MAX_EPISODE_STEPS", "MAX_REPEATS", "MAX_SECONDS", "MAX_SEED", "MAX_TIMESTEPS", "MAX_WORKERS", "MIN_SAMPLES",
            "SEARCH_GRID_RANGE", "STEP_MIN", "SWEEP_GRID_RANGE",
            "count", "finite_result", "fixed_step", "sqlite_file",
