@@ -200,9 +200,17 @@ class FlatBodyVectorEnv(VectorEnv):
         """The N targets (λ*, μ*, ϱ*, s3*) (N, 4) (a copy)."""
         return self._T.copy()
 
+    def _actions(self, actions) -> np.ndarray:
+        """``actions`` as an (N, n) float64 array, or a ``ValueError`` naming ``actions`` (not numbers, wrong shape)."""
+        shape = (self.num_envs,) + self.single_action_space.shape
+        try:
+            return np.asarray(actions, dtype=np.float64).reshape(shape)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"actions: must be {shape} finite numbers in [-1, 1], got {actions!r:.80}") from None
+
     def controls(self, actions) -> np.ndarray:
         """The controls u = (τ1, τ2, τ3, f_ϱ) (N, 4) that ``actions`` (N, n) apply (clipped and scaled)."""
-        A = np.asarray(actions, dtype=np.float64).reshape((self.num_envs,) + self.single_action_space.shape)
+        A = self._actions(actions)
         A_out, U = np.empty_like(A), np.empty((4, self.num_envs))
         if not self._kernels.controls_batch(A, self.single_env.mask.astype(np.uint8), self.limits, A_out, U):
             raise ValueError("actions: must be finite numbers in [-1, 1]")
@@ -374,7 +382,7 @@ class FlatBodyVectorEnv(VectorEnv):
         return obs, info
 
     def step(self, actions):
-        A = np.asarray(actions, dtype=np.float64).reshape((self.num_envs,) + self.single_action_space.shape)
+        A = self._actions(actions)
         k = self._kernels
         p = self.single_env
         if not k.controls_batch(A, self._mask_u8, self.limits, self._A, self._U):

@@ -116,6 +116,23 @@ def test_hostile_actions_are_refused_or_step_finitely(envs, env_id, action):
     assert np.all(np.isfinite(obs)) and math.isfinite(float(reward))
 
 
+@FAST
+@given(actions=hostile)
+def test_hostile_vector_actions_are_refused_or_step_finitely(actions):
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    env = FlatBodyVectorEnv(num_envs=2)
+    env.reset(seed=0)
+    try:
+        obs, reward, term, trunc, info = env.step(actions)
+    except ValueError as exc:
+        assert str(exc).startswith("actions: "), (repr(actions)[:80], str(exc)[:200])
+        return
+    finally:
+        env.close()
+    assert np.all(np.isfinite(obs)) and np.all(np.isfinite(reward))
+
+
 def test_the_keywords_cover_the_signature_and_the_task_fields():
     """The drawn keywords are all of them: a keyword added to the env or a task is drawn too."""
     assert {"dt", "integrator", "stretch_bounds", "gap_min", "render_mode", "body"} <= set(keywords("FlatBody-v0"))

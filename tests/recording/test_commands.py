@@ -71,6 +71,7 @@ def test_record_env_command_on_flatbody_v0(tmp_path, capsys):
     assert data["/series/reward/total"].step.size == 20
 
 
+@pytest.mark.slow  # the command itself runs in the smoke test (tests/cli/test_smoke.py)
 def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     """``flatbody bench recording`` runs to the end (it once died after its timing runs) and writes its files."""
     import json

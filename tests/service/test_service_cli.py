@@ -55,6 +55,7 @@ def test_one_service_per_data_dir(fake_uvicorn, capsys, tmp_path):
     assert cli(["serve", "--data-dir", str(tmp_path)]) == 0
 
 
+@pytest.mark.slow  # the command itself runs in the smoke test (tests/cli/test_smoke.py)
 def test_bench_service_writes_its_figures(tmp_path, capsys):
     assert cli(["bench", "service", "--clients", "1,2", "--requests", "4", "--seconds", "5", "--workers", "1", "--out-dir", str(tmp_path)]) == 0
     data = json.loads((tmp_path / "service_benchmark.json").read_text())

@@ -109,6 +109,7 @@ def test_record_on_a_disk_that_fills_mid_run_is_one_line(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run.rrd"]
 
 
+@pytest.mark.slow
 def test_killed_tune_worker_trial_is_marked_failed_by_the_heartbeat(tmp_path):
     """SIGKILL a worker mid-trial: Optuna's heartbeat (database storage) marks its trial FAIL, and the
     failed_trial_callback says so; nothing stays RUNNING."""

@@ -72,6 +72,7 @@ def _count(db_path) -> int:
         return 0
 
 
+@pytest.mark.slow  # resuming is also tested after Ctrl-C (test_sweep_interrupt.py)
 def test_killed_sweep_resumes_without_duplicate_or_loss(cli, spawn, tmp_path):
     args = ["--grid", "40", "--chunk", "1"]
     out = tmp_path / "map"
