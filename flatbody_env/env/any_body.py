@@ -71,7 +71,7 @@ class ReachAnyBody(ReachStationaryEllipse):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("inertia_range", "kappa_range", "thickness_range"):
-            validation.interval(name, getattr(self, name), low=0.01, high=100.0, strict=False)
+            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=0.01, high=100.0, strict=False))
 
     def ranges(self) -> np.ndarray:
         """(5, 2) ranges of (J, J3, κ, a, b)."""

@@ -212,7 +212,7 @@ class FlatBodyEnv(gym.Env):
         validation.boolean("track_rotation", track_rotation)
         self.dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
         self.integrator = validation.string("integrator", integrator)
-        info = get_method(integrator).info  # ValueError for an unknown name
+        info = get_method(integrator, where="integrator").info  # ValueError naming integrator for an unknown name
         self.render_mode = render_mode
         self.track_rotation = bool(track_rotation or render_mode is not None)
         if not info.adaptive and step is None:

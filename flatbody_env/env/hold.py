@@ -84,6 +84,7 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
         if self.max_growth_rate < self.min_growth_rate:
             raise ValueError(f"max_growth_rate: must be >= min_growth_rate ({self.min_growth_rate}), got {self.max_growth_rate!r}")
         lo, hi = validation.interval("start_radius", self.start_radius, low=0.0, high=1.0, strict=False)
+        object.__setattr__(self, "start_radius", (lo, hi))
         if hi >= 1.0:
             raise ValueError(f"start_radius: must be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance), got {(lo, hi)!r}")
         if self.success_tolerance <= 0:

@@ -209,8 +209,9 @@ class ReachStationaryEllipse:
         for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "min_settling_rate"):
             validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
         validation.number("initial_noise", self.initial_noise, low=0.0, high=INITIAL_NOISE_MAX)
-        for name in ("target_lambda", "target_aspect"):
-            validation.interval(name, getattr(self, name), low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1], strict=False)
+        for name in ("target_lambda", "target_aspect"):  # kept as a tuple of floats whatever pair was given (an array too)
+            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=validation.STRETCH_RANGE[0],
+                                                               high=validation.STRETCH_RANGE[1], strict=False))
         if self.target_aspect[0] <= 1.0:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
         validation.boolean("settling_table", self.settling_table)

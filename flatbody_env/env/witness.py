@@ -102,7 +102,7 @@ class ReachWithWitness(ReachStationaryEllipse):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name, upper in (("witness_radius", 1.0), ("witness_amplitude", 1.0), ("start_distance", validation.PARAM_RANGE[1])):
-            validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False)
+            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False))
         for name in ("witness_steps", "max_witness_attempts"):
             validation.integer(name, getattr(self, name), low=1, high=validation.MAX_EPISODE_STEPS)
         pair = self.witness_half_period
@@ -111,6 +111,7 @@ class ReachWithWitness(ReachStationaryEllipse):
         lo, hi = (validation.integer(f"witness_half_period[{i}]", x, low=1, high=validation.MAX_EPISODE_STEPS) for i, x in enumerate(pair))
         if lo > hi:
             raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {(lo, hi)!r}")
+        object.__setattr__(self, "witness_half_period", (lo, hi))
         validation.number("min_uncontrolled_offset", self.min_uncontrolled_offset, low=0.0, high=validation.PARAM_RANGE[1])
 
     def sampler_settings(self) -> tuple[float, ...]:

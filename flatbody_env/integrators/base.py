@@ -163,12 +163,13 @@ def register_method(method: Method) -> Method:
     return method
 
 
-def get_method(name: str) -> Method:
+def get_method(name: str, *, where: str = "method") -> Method:
+    """The registered method ``name``; a ``ValueError`` naming ``where`` (the caller's argument) and the allowed names."""
     from flatbody_env.integrators import _load_all
 
     _load_all()
-    if name not in _REGISTRY:
-        raise ValueError(f"method: unknown method {name!r} (allowed: {', '.join(sorted(_REGISTRY))})")
+    if not isinstance(name, str) or name not in _REGISTRY:
+        raise ValueError(f"{where}: unknown method {name!r:.60} (allowed: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name]
 
 
