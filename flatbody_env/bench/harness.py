@@ -132,4 +132,14 @@ def write_report(report: Report, out_dir: str | os.PathLike, *, docs: str | os.P
     return paths
 
 
-__all__ = ["Report", "alternate", "best_of", "write_report"]
+def redraw(out_dir: str | os.PathLike, name: str, chart: Callable[[Path, Path], object], *, where: str = "out_dir") -> Path:
+    """Redraw ``NAME.png`` from the saved ``NAME.json`` in ``out_dir`` (``--plot-only``); a ``ValueError`` naming ``where``
+    when no saved run is there. Returns the PNG's path."""
+    saved, png = Path(out_dir) / f"{name}.json", Path(out_dir) / f"{name}.png"
+    if not saved.exists():
+        raise ValueError(f"{where}: no {saved} to plot (run without --plot-only first)")
+    chart(saved, png)
+    return png
+
+
+__all__ = ["Report", "alternate", "best_of", "redraw", "write_report"]

@@ -152,15 +152,13 @@ def _failure(args) -> int:
 
 def _bench(args) -> int:
     from analysis.integrator_plots import plot_bench
-    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.harness import redraw, write_report
     from flatbody_env.bench.integrators import NAME, describe, measure, report, write_docs
 
     out = Path(args.out)
     json_path = out / f"{NAME}.json"
     if args.plot_only:
-        if not json_path.exists():
-            raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
-        print(f"wrote {plot_bench(json_path, out / f'{NAME}.png')}")
+        print(f"wrote {redraw(out, NAME, plot_bench, where='out')}")
     else:
         rep = measure(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
         print(describe(rep))

@@ -112,15 +112,12 @@ def _serve_until_stopped(run) -> bool:
 
 
 def _bench(args) -> int:
-    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.harness import redraw, write_report
     from flatbody_env.bench.service import NAME, measure, plot, report
 
     out = Path(args.out_dir)
     if args.plot_only:
-        table = out / f"{NAME}.json"
-        if not table.exists():
-            raise ValueError(f"out_dir: no {table} to plot (run without --plot-only first)")
-        print(f"wrote {plot(table, out / f'{NAME}.png')}")
+        print(f"wrote {redraw(out, NAME, plot)}")
         return 0
     result = measure(clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
     print(result.table())

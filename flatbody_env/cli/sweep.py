@@ -227,15 +227,12 @@ def _tune(args) -> int:
 
 
 def _bench_sweep(args) -> int:
-    from flatbody_env.bench.harness import write_report
+    from flatbody_env.bench.harness import redraw, write_report
     from flatbody_env.bench.sweep import NAME, describe, measure, plot, report
 
     out = Path(args.out)
     if args.plot_only:
-        json_path = out / f"{NAME}.json"
-        if not json_path.exists():
-            raise ValueError(f"out: no {json_path} to plot (run without --plot-only first)")
-        print(f"wrote {plot(json_path, out / f'{NAME}.png')}")
+        print(f"wrote {redraw(out, NAME, plot, where='out')}")
         return 0
     rep = measure(grid=args.grid, workers=tuple(args.workers), sim_workers=args.sim_workers, chunk=args.chunk,
                   noop_tasks=args.noop_tasks, extrapolate=(8, 32, 128))

@@ -72,3 +72,14 @@ def test_write_report_refuses_a_docs_page_without_a_block_text(tmp_path):
     assert not (tmp_path / "out").exists()  # refused before anything is written
     with pytest.raises(ValueError, match="chart_from"):
         Report(name="x", record={}, header=["a"], rows=[], chart_from="png")
+
+
+def test_redraw_draws_from_the_saved_record_or_names_the_folder(tmp_path):
+    from flatbody_env.bench.harness import redraw
+
+    with pytest.raises(ValueError, match="out_dir: no .*demo.json to plot"):
+        redraw(tmp_path, "demo", lambda saved, png: None)
+    (tmp_path / "demo.json").write_text('{"rows": [1]}')
+    seen = []
+    png = redraw(tmp_path, "demo", lambda saved, png: seen.append((json.loads(saved.read_text()), png)))
+    assert png == tmp_path / "demo.png" and seen == [({"rows": [1]}, png)]
