@@ -40,6 +40,8 @@ from flatbody_env.provenance import cpu_name
 
 WHAT = "env step, dynamics only"
 WHAT_ENV = "env step, whole (controls, dynamics, observation, rewards, termination, autoresets)"
+BACKENDS = ("cpu-serial", "cpu-parallel", "cuda")
+"""Every backend a row can come from (module docstring); those present here: :func:`backends`."""
 ENV_BACKENDS = ("cpu-serial", "cuda")
 """The backends with whole-env rows."""
 ROW_KEYS = ("what", "backend", "method", "n", "steps_per_s", "device_name")
@@ -65,7 +67,7 @@ def backends() -> tuple[list[str], list[str]]:
     """(backends to time here, notes on the ones left out)."""
     from flatbody_env.integrators import cuda
 
-    names, notes = ["cpu-serial", "cpu-parallel"], []
+    names, notes = [b for b in BACKENDS if b != "cuda"], []
     if cuda.simulated():
         notes.append("cuda: numba's CUDA simulator is on (NUMBA_ENABLE_CUDASIM); it is never timed")
     else:
@@ -131,7 +133,7 @@ def measure(backend: str, method: str, n: int, *, steps: int, repeats: int) -> f
 
         block = _ping_pong(step, dev.to_device(Y), dev.device_array_like(Y), steps, dev.synchronize)
     else:
-        raise ValueError(f"backend: unknown {backend!r} (allowed: cpu-serial, cpu-parallel, cuda)")
+        raise ValueError(f"backend: unknown {backend!r} (allowed: {', '.join(BACKENDS)})")
     return n * steps / best_of(block, repeats, warm=False)
 
 
@@ -177,7 +179,7 @@ def measure_env(backend: str, n: int, *, steps: int, repeats: int) -> tuple[str,
             dev.synchronize()
 
         return batch.method, n * steps / best_of(block, repeats, warm=False)
-    raise ValueError(f"backend: no whole-env row for {backend!r} (allowed: cpu-serial, cuda)")
+    raise ValueError(f"backend: no whole-env row for {backend!r} (allowed: {', '.join(ENV_BACKENDS)})")
 
 
 def run(*, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeats: int = 3, only=None, progress=None) -> dict:
@@ -253,5 +255,5 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
     plt.close(fig)
 
 
-__all__ = ["DEFAULT_METHODS", "DEFAULT_SIZES", "ENV_BACKENDS", "ROW_KEYS", "WHAT", "WHAT_ENV", "backends", "measure", "measure_env", "plot",
+__all__ = ["BACKENDS", "DEFAULT_METHODS", "DEFAULT_SIZES", "ENV_BACKENDS", "ROW_KEYS", "WHAT", "WHAT_ENV", "backends", "measure", "measure_env", "plot",
            "report", "run"]

@@ -33,7 +33,8 @@ def _methods(text: str) -> list[str]:
 def _backends(text: str) -> list[str]:
     import argparse
 
-    allowed = ("cpu-serial", "cpu-parallel", "cuda")
+    from flatbody_env.bench.gpu import BACKENDS as allowed
+
     names = [p.strip() for p in text.split(",") if p.strip()]
     if not names or any(n not in allowed for n in names):
         raise argparse.ArgumentTypeError(f"backends: expected names from {', '.join(allowed)}, got {text[:60]!r}")
