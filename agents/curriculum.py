@@ -51,9 +51,20 @@ def _inner(venv):
     return v
 
 
-def curriculum_callback(env_id: str, key: str, stages: list[float], *, seed: int, env_kwargs: dict[str, Any] | None = None,
-                        advance_at: float = 0.8, min_steps: int = 100_000, max_steps: int = 500_000, window: int = 2,
-                        train_env_kwargs: dict[str, Any] | None = None, log_std_per_action: list[float] | None = None):
+def curriculum_callback(
+    env_id: str,
+    key: str,
+    stages: list[float],
+    *,
+    seed: int,
+    env_kwargs: dict[str, Any] | None = None,
+    advance_at: float = 0.8,
+    min_steps: int = 100_000,
+    max_steps: int = 500_000,
+    window: int = 2,
+    train_env_kwargs: dict[str, Any] | None = None,
+    log_std_per_action: list[float] | None = None,
+):
     from gymnasium.vector import AutoresetMode
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -83,8 +94,13 @@ def curriculum_callback(env_id: str, key: str, stages: list[float], *, seed: int
             self.stage, self.stage_start = stage, int(self.model.num_timesteps)
             self.recent.clear()
             self.current = []
-            self.history.append({"stage": stage, "value": float(stages[stage]), "from_step": int(self.model.num_timesteps)})
-            print(f"curriculum: stage {stage} ({key}={stages[stage]}) from step {self.model.num_timesteps}", file=sys.stderr)
+            self.history.append(
+                {"stage": stage, "value": float(stages[stage]), "from_step": int(self.model.num_timesteps)}
+            )
+            print(
+                f"curriculum: stage {stage} ({key}={stages[stage]}) from step {self.model.num_timesteps}",
+                file=sys.stderr,
+            )
 
         def _on_training_start(self) -> None:
             if log_std_per_action:  # exploration per action component (gSDE: columns of the log_std matrix)
@@ -110,8 +126,11 @@ def curriculum_callback(env_id: str, key: str, stages: list[float], *, seed: int
             self.logger.record("curriculum/value", float(stages[self.stage]))
             self.logger.record("curriculum/success", rate)
             trained = int(self.model.num_timesteps) - self.stage_start
-            if self.stage < len(stages) - 1 and trained >= min_steps and (
-                    (len(self.recent) == window and rate >= advance_at) or trained >= max_steps):
+            if (
+                self.stage < len(stages) - 1
+                and trained >= min_steps
+                and ((len(self.recent) == window and rate >= advance_at) or trained >= max_steps)
+            ):
                 self.history[-1]["success_at_end"] = rate
                 self._switch(self.stage + 1)
 
@@ -131,15 +150,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--min-stage-steps", type=int, default=100_000)
     ap.add_argument("--max-stage-steps", type=int, default=500_000)
     ap.add_argument("--window", type=int, default=2, help="rollouts whose finished episodes decide the success rate")
-    ap.add_argument("--train-env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
-                    help="task keywords of the training environments only (reward shaping, e.g. w_tumble=0); "
-                         "the model is evaluated on the task's own")
-    ap.add_argument("--log-std-per-action", help="comma-separated initial log std of each action component "
-                    "(overrides policy_kwargs.log_std_init per component)")
+    ap.add_argument(
+        "--train-env-kwargs",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="task keywords of the training environments only (reward shaping, e.g. w_tumble=0); "
+        "the model is evaluated on the task's own",
+    )
+    ap.add_argument(
+        "--log-std-per-action",
+        help="comma-separated initial log std of each action component "
+        "(overrides policy_kwargs.log_std_init per component)",
+    )
     ap.add_argument("--n-timesteps", type=int)
     ap.add_argument("--hyperparams", nargs="*", default=[])
     ap.add_argument("--force", action="store_true")
-    ap.add_argument("--trained-agent", metavar="RUN", help="fine-tune this run's model (flatbody train --trained-agent)")
+    ap.add_argument(
+        "--trained-agent", metavar="RUN", help="fine-tune this run's model (flatbody train --trained-agent)"
+    )
     args = ap.parse_args(argv)
     stages = [float(s) for s in args.stages.split(",")]
     from agents.train import apply_overrides, load_hyperparams
@@ -147,18 +176,47 @@ def main(argv: list[str] | None = None) -> int:
     hp = apply_overrides(load_hyperparams("ppo", args.env), args.hyperparams)
     per_action = [float(x) for x in args.log_std_per_action.split(",")] if args.log_std_per_action else None
     train_kw = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.train_env_kwargs)}
-    cb = curriculum_callback(args.env, args.key, stages, seed=args.seed, env_kwargs=hp.get("env_kwargs"),
-                             advance_at=args.advance_at, min_steps=args.min_stage_steps, max_steps=args.max_stage_steps,
-                             window=args.window, train_env_kwargs=train_kw, log_std_per_action=per_action)
+    cb = curriculum_callback(
+        args.env,
+        args.key,
+        stages,
+        seed=args.seed,
+        env_kwargs=hp.get("env_kwargs"),
+        advance_at=args.advance_at,
+        min_steps=args.min_stage_steps,
+        max_steps=args.max_stage_steps,
+        window=args.window,
+        train_env_kwargs=train_kw,
+        log_std_per_action=per_action,
+    )
     command = ["python", "-m", "agents.curriculum", *(argv if argv is not None else sys.argv[1:])]
-    res = train("ppo", args.out, seed=args.seed, n_timesteps=args.n_timesteps, overrides=args.hyperparams, env_id=args.env,
-                progress=False, command=command, extra_callbacks=[cb], force=args.force, checkpoint_freq=0,
-                trained_agent=args.trained_agent)
+    res = train(
+        "ppo",
+        args.out,
+        seed=args.seed,
+        n_timesteps=args.n_timesteps,
+        overrides=args.hyperparams,
+        env_id=args.env,
+        progress=False,
+        command=command,
+        extra_callbacks=[cb],
+        force=args.force,
+        checkpoint_freq=0,
+        trained_agent=args.trained_agent,
+    )
     cfg_file = Path(res.out) / "config.yml"
     cfg = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
-    cfg["curriculum"] = {"key": args.key, "stages": stages, "advance_at": args.advance_at, "min_stage_steps": args.min_stage_steps,
-                         "max_stage_steps": args.max_stage_steps, "window": args.window,
-                         "train_env_kwargs": train_kw, "log_std_per_action": per_action, "history": cb.history}
+    cfg["curriculum"] = {
+        "key": args.key,
+        "stages": stages,
+        "advance_at": args.advance_at,
+        "min_stage_steps": args.min_stage_steps,
+        "max_stage_steps": args.max_stage_steps,
+        "window": args.window,
+        "train_env_kwargs": train_kw,
+        "log_std_per_action": per_action,
+        "history": cb.history,
+    }
     atomic_write(cfg_file, yaml.safe_dump(cfg, sort_keys=False))
     print(f"trained {res.timesteps} steps in {res.wall_time_s:.0f} s; stages: {cb.history}", file=sys.stderr)
     return 0

@@ -126,8 +126,15 @@ def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> 
     return "\n".join(lines)
 
 
-def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None = "demo.rrd", backend: str = "auto",
-             docs: str | Path | None = None, command: str = "flatbody demo") -> int:
+def run_demo(
+    *,
+    model: str | Path | None = None,
+    seed: int = 7,
+    out: str | None = "demo.rrd",
+    backend: str = "auto",
+    docs: str | Path | None = None,
+    command: str = "flatbody demo",
+) -> int:
     """Run the demo; returns the exit code (0 also when the agent misses: the summary says so).
 
     With ``docs`` (a Markdown page) the printed summary also replaces the transcript between the
@@ -140,8 +147,14 @@ def run_demo(*, model: str | Path | None = None, seed: int = 7, out: str | None 
     from agents.evaluate import Agent
 
     agent = Agent(model, backend=backend)
-    ep = rollout(agent, seed=seed, env_kwargs=agent.env_kwargs, record_to=out or None, title=f"flatbody demo (seed {seed})",
-                 env_id=agent.env_id)
+    ep = rollout(
+        agent,
+        seed=seed,
+        env_kwargs=agent.env_kwargs,
+        record_to=out or None,
+        title=f"flatbody demo (seed {seed})",
+        env_id=agent.env_id,
+    )
     label = "the shipped agent" if model is None else f"agent {agent.path}"
     lines = [format_demo(ep, seed=seed, label=label)]
     if ep["path"] is not None:

@@ -33,7 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from agents.numpy_policy import MODELS_DIR, shipped_model_dir  # where shipped agents live (numpy_policy: no import back)
+from agents.numpy_policy import (
+    MODELS_DIR,
+    shipped_model_dir,
+)  # where shipped agents live (numpy_policy: no import back)
 
 EVAL_SEED = 10_000
 """First evaluation episode seed (episode i is reset with seed ``EVAL_SEED + i``): the default of
@@ -49,8 +52,18 @@ GROWTH_FLOOR = 1e-4
 spectrally stable target has eigenvalues within ~1e-6 of the imaginary axis)."""
 CANNOT_BE_BUILT = "cannot be built"
 """The ``status`` of a baseline that does not exist for a task (its ``reason`` says why)."""
-METRICS = ("success_rate", "final_distance", "final_distance_median", "reach_rate", "time_to_reach", "energy_change",
-           "abs_energy_change", "action_effort", "return", "failure_rate")
+METRICS = (
+    "success_rate",
+    "final_distance",
+    "final_distance_median",
+    "reach_rate",
+    "time_to_reach",
+    "energy_change",
+    "abs_energy_change",
+    "action_effort",
+    "return",
+    "failure_rate",
+)
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Observations (N, 16) (or (N, 21) with the body's constants) → actions (N, n)."""
@@ -137,14 +150,23 @@ class Agent:
         self.residual = hp.get("residual") or None
         from flatbody_env.physics import validation
 
-        self.residual_scale = validation.number("config.yml.hyperparams.residual_scale", hp.get("residual_scale", 1.0), low=0.0, high=1e6)
-        self.residual_gate = validation.number("config.yml.hyperparams.residual_gate", hp.get("residual_gate", 0.0), low=0.0, high=1e6)
+        self.residual_scale = validation.number(
+            "config.yml.hyperparams.residual_scale", hp.get("residual_scale", 1.0), low=0.0, high=1e6
+        )
+        self.residual_gate = validation.number(
+            "config.yml.hyperparams.residual_gate", hp.get("residual_gate", 0.0), low=0.0, high=1e6
+        )
         self._base = None
         if self.residual in ("heuristic", "passivity"):
             from agents.heuristic import ResidualAction
 
-            self._base = ResidualAction(self.env_kwargs, self.residual_scale, self.residual_gate,
-                                        str(hp.get("residual_mode", "additive")), self.residual)
+            self._base = ResidualAction(
+                self.env_kwargs,
+                self.residual_scale,
+                self.residual_gate,
+                str(hp.get("residual_mode", "additive")),
+                self.residual,
+            )
 
     def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
         import pickle
@@ -165,7 +187,9 @@ class Agent:
                     self.vecnormalize = pickle.load(fh)
                 self.vecnormalize.training = False
             except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
-                raise ValueError(f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+                raise ValueError(
+                    f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+                ) from None
 
     @property
     def residual_action(self):
@@ -212,8 +236,17 @@ def env_kwargs_for(env_id: str, env_kwargs: dict[str, Any] | None = None) -> dic
     return {**task_spec(env_id).kwargs, **(env_kwargs or {})}
 
 
-def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None, env_id: str = "FlatBody-v0",
-                 batch: int = 50, progress: bool = False, label: str = "") -> list[dict[str, Any]]:
+def run_episodes(
+    policy: Policy | str,
+    *,
+    episodes: int,
+    seed: int,
+    env_kwargs: dict[str, Any] | None = None,
+    env_id: str = "FlatBody-v0",
+    batch: int = 50,
+    progress: bool = False,
+    label: str = "",
+) -> list[dict[str, Any]]:
     """Roll out ``episodes`` seeded episodes of ``env_id`` (batched ``batch`` at a time); one record per episode.
 
     ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`WITNESS`); ``env_kwargs``
@@ -292,17 +325,19 @@ def run_episodes(policy: Policy | str, *, episodes: int, seed: int, env_kwargs: 
                 bar.update(int(act.sum()))
         env.close()
         for i in range(n):
-            records.append({
-                "seed": seed + start + i,
-                "success": bool(success[i]),
-                "final_distance": float(final_d[i]),
-                "time_to_reach": None if math.isnan(reach[i]) else float(reach[i]),
-                "energy_change": float(e_end[i] - e0[i]),
-                "action_effort": float(effort[i] / max(length[i], 1)),
-                "return": float(ret[i]),
-                "length": int(length[i]),
-                "failed": bool(failed[i]),
-            })
+            records.append(
+                {
+                    "seed": seed + start + i,
+                    "success": bool(success[i]),
+                    "final_distance": float(final_d[i]),
+                    "time_to_reach": None if math.isnan(reach[i]) else float(reach[i]),
+                    "energy_change": float(e_end[i] - e0[i]),
+                    "action_effort": float(effort[i] / max(length[i], 1)),
+                    "return": float(ret[i]),
+                    "length": int(length[i]),
+                    "failed": bool(failed[i]),
+                }
+            )
     if bar is not None:
         bar.close()
     return records
@@ -312,7 +347,9 @@ def _witness_policy(env, step_index: list[int]) -> Policy:
     """Each body's witness (``env.witnesses``, drawn at the reset) replayed open loop: step k plays row k."""
     witnesses = env.witnesses
     if any(w is None for w in witnesses):
-        raise ValueError("baseline: witness needs a task whose starts come with a witness (FlatBodyTorque-v0, FlatBodyDilatation-v0)")
+        raise ValueError(
+            "baseline: witness needs a task whose starts come with a witness (FlatBodyTorque-v0, FlatBodyDilatation-v0)"
+        )
     W = np.stack(witnesses)
     return lambda obs: W[:, min(step_index[0], W.shape[1] - 1)].astype(np.float32)
 
@@ -354,8 +391,15 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: int = EVAL_SEED, baselines: bool = True,
-                 progress: bool = False, backend: str = "auto") -> dict[str, Any]:
+def evaluate_all(
+    model: str | Path | None = None,
+    *,
+    episodes: int = 100,
+    seed: int = EVAL_SEED,
+    baselines: bool = True,
+    progress: bool = False,
+    backend: str = "auto",
+) -> dict[str, Any]:
     """The evaluation report of an agent on its task (``FlatBody-v0`` for the shipped one):
     ``{"agent": {...}, "baselines": {"zero", "random", "heuristic", "passivity"}, ...}``;
     ``policy_backend`` says how the agent's policy ran (``numpy`` or ``sb3``, :class:`Agent`)."""
@@ -368,13 +412,25 @@ def evaluate_all(model: str | Path | None = None, *, episodes: int = 100, seed: 
         "seed": seed,
         "model": str(agent.path),
         "policy_backend": agent.backend,
-        "agent": summarize(run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=env_kwargs, env_id=env_id, progress=progress,
-                                        label="agent")),
+        "agent": summarize(
+            run_episodes(
+                agent,
+                episodes=episodes,
+                seed=seed,
+                env_kwargs=env_kwargs,
+                env_id=env_id,
+                progress=progress,
+                label="agent",
+            )
+        ),
     }
     if baselines:
-        report["baselines"] = {name: _summary_or_status(name, episodes=episodes, seed=seed, env_kwargs=env_kwargs, env_id=env_id,
-                                                        progress=progress)[0]
-                               for name in baselines_for(env_id)}
+        report["baselines"] = {
+            name: _summary_or_status(
+                name, episodes=episodes, seed=seed, env_kwargs=env_kwargs, env_id=env_id, progress=progress
+            )[0]
+            for name in baselines_for(env_id)
+        }
     return report
 
 
@@ -388,8 +444,17 @@ def _summary_or_status(name: str, **kwargs) -> tuple[dict[str, Any], list[dict[s
     return summarize(records), records
 
 
-def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = EVAL_SEED, model: str | Path | None = None, baselines: bool = True,
-                  with_agents: bool = True, progress: bool = False, backend: str = "auto") -> dict[str, Any]:
+def evaluate_task(
+    env_id: str,
+    *,
+    episodes: int = 100,
+    seed: int = EVAL_SEED,
+    model: str | Path | None = None,
+    baselines: bool = True,
+    with_agents: bool = True,
+    progress: bool = False,
+    backend: str = "auto",
+) -> dict[str, Any]:
     """The reference report of one registered task: every baseline (:func:`baselines_for`) and agent — the one
     in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes`` seeded episodes,
     with each episode's target features (:func:`target_features`) and per-episode results.
@@ -401,9 +466,17 @@ def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = EVAL_SEED, mo
     from flatbody_env.env.registration import task_spec
 
     spec = task_spec(env_id)
-    report: dict[str, Any] = {"env_id": env_id, "episodes": episodes, "seed": seed, "max_episode_steps": spec.max_episode_steps,
-                              "dt": float(spec.kwargs.get("dt", 0.05)), "env_kwargs": dict(spec.kwargs), "summary": spec.summary,
-                              "targets": target_features(env_id, episodes=episodes, seed=seed), "policies": {}}
+    report: dict[str, Any] = {
+        "env_id": env_id,
+        "episodes": episodes,
+        "seed": seed,
+        "max_episode_steps": spec.max_episode_steps,
+        "dt": float(spec.kwargs.get("dt", 0.05)),
+        "env_kwargs": dict(spec.kwargs),
+        "summary": spec.summary,
+        "targets": target_features(env_id, episodes=episodes, seed=seed),
+        "policies": {},
+    }
     policies = report["policies"]
     columns = ("success", "final_distance", "return", "length")
     if baselines:
@@ -416,9 +489,22 @@ def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = EVAL_SEED, mo
     found = {"agent": Path(model)} if model is not None else (shipped_agents(env_id) if with_agents else {})
     for name, folder in found.items():
         agent = Agent(folder, backend=backend)
-        records = run_episodes(agent, episodes=episodes, seed=seed, env_kwargs=agent.env_kwargs, env_id=env_id, progress=progress, label=name)
-        policies[name] = {"kind": "agent", "model": str(folder), "policy_backend": agent.backend, "summary": summarize(records),
-                          "episodes": {c: [r[c] for r in records] for c in columns}}
+        records = run_episodes(
+            agent,
+            episodes=episodes,
+            seed=seed,
+            env_kwargs=agent.env_kwargs,
+            env_id=env_id,
+            progress=progress,
+            label=name,
+        )
+        policies[name] = {
+            "kind": "agent",
+            "model": str(folder),
+            "policy_backend": agent.backend,
+            "summary": summarize(records),
+            "episodes": {c: [r[c] for r in records] for c in columns},
+        }
     agents_found = [k for k, v in policies.items() if v["kind"] == "agent"]
     if agents_found:
         report["agent"] = policies[agents_found[0]]["summary"]
@@ -427,7 +513,9 @@ def evaluate_task(env_id: str, *, episodes: int = 100, seed: int = EVAL_SEED, mo
     return report
 
 
-def target_features(env_id: str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None) -> dict[str, list]:
+def target_features(
+    env_id: str, *, episodes: int, seed: int, env_kwargs: dict[str, Any] | None = None
+) -> dict[str, list]:
     """Each seeded episode's target: its settling rate r under the task's controls
     (:func:`flatbody_env.physics.controllability.settling_rate`; 0 where the controls stabilise no target
     at linear order) and its instability growth rate γ = max(0, max Re eig A) of the linearisation
@@ -456,11 +544,17 @@ def target_features(env_id: str, *, episodes: int, seed: int, env_kwargs: dict[s
 def format_table(report: dict[str, Any]) -> str:
     """A Markdown table of the report (one row per policy; a baseline that cannot be built says why)."""
     rows = ([("agent", report["agent"])] if "agent" in report else []) + list((report.get("baselines") or {}).items())
-    head = ("| policy | success rate (95 % interval) | final distance (mean) | final distance (median) | time to reach (mean, s) "
-            "| ΔH (mean) | action effort ‖a‖² | return |")
+    head = (
+        "| policy | success rate (95 % interval) | final distance (mean) | final distance (median) | time to reach (mean, s) "
+        "| ΔH (mean) | action effort ‖a‖² | return |"
+    )
     env_id = report.get("env_id", "FlatBody-v0")
-    lines = [f"{env_id}, {report['episodes']} episodes, seeds {report['seed']}..{report['seed'] + report['episodes'] - 1}", "",
-             head, "|" + "---|" * 8]
+    lines = [
+        f"{env_id}, {report['episodes']} episodes, seeds {report['seed']}..{report['seed'] + report['episodes'] - 1}",
+        "",
+        head,
+        "|" + "---|" * 8,
+    ]
     for name, s in rows:
         if s.get("status"):
             lines.append(f"| {name} | {s['status']}: {s['reason']} | | | | | | |")

@@ -145,19 +145,23 @@ class PassivityController:
         yt = np.array([0.0, 0.0, target[3], y[3], 0.0, 0.0, 0.0, target[0], target[1], target[2], y[10]])
         kinetic_kernel(yt, P, self._vel_t, self._force)
         w3_star = self._vel_t[2]
-        return np.array([
-            -g.k_omega * w1,
-            -g.k_omega * w2,
-            -g.k_s3 * (w3 - w3_star + g.c_s3 * (y[2] - target[3])),
-            -g.k_rho * (y[9] - target[2]) - g.d_rho * rho_dot,
-        ])
+        return np.array(
+            [
+                -g.k_omega * w1,
+                -g.k_omega * w2,
+                -g.k_s3 * (w3 - w3_star + g.c_s3 * (y[2] - target[3])),
+                -g.k_rho * (y[9] - target[2]) - g.d_rho * rho_dot,
+            ]
+        )
 
     def action(self, obs: np.ndarray) -> np.ndarray:
         """Normalised action in [−1, 1]ⁿ for one observation (16,), or (21,) with the body's constants
         (``FlatBodyAnyBody-v0``: the body of those constants)."""
         obs = np.asarray(obs)
         y, target = state_from_observation(obs[:OBSERVATION_SIZE])
-        u = self.control(y, target, None if obs.shape[-1] == OBSERVATION_SIZE else _body_of(obs[OBSERVATION_SIZE:]).kernel_params())
+        u = self.control(
+            y, target, None if obs.shape[-1] == OBSERVATION_SIZE else _body_of(obs[OBSERVATION_SIZE:]).kernel_params()
+        )
         if not self.mask.any():
             return np.zeros(1, dtype=np.float32)
         a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
@@ -214,12 +218,22 @@ def _gain_rows(args):
     out = []
     for lam, w, sign in rows:
         t = stationary_from_shape(body, lam, 1.0 / (w * lam), branch="circulation", sign=sign)
-        out.append(lqr_gain(body, target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta), limits, np.ones(4, bool), LQRWeights(**weights)))
+        out.append(
+            lqr_gain(
+                body, target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta), limits, np.ones(4, bool), LQRWeights(**weights)
+            )
+        )
     return out
 
 
-def build_gain_table(body: Body | None = None, limits=DEFAULT_LIMITS, weights: LQRWeights | None = None, workers: int = 2,
-                     grid_lambda=GAIN_GRID_LAMBDA, grid_w=GAIN_GRID_W) -> dict:
+def build_gain_table(
+    body: Body | None = None,
+    limits=DEFAULT_LIMITS,
+    weights: LQRWeights | None = None,
+    workers: int = 2,
+    grid_lambda=GAIN_GRID_LAMBDA,
+    grid_w=GAIN_GRID_W,
+) -> dict:
     """Exact LQR gains on the (sign of p_θ, w, λ*) grid (:data:`GAIN_GRID_LAMBDA`, :data:`GAIN_GRID_W`); ``flatbody lqr-table``."""
     from concurrent.futures import ProcessPoolExecutor
     from dataclasses import asdict
@@ -230,12 +244,21 @@ def build_gain_table(body: Body | None = None, limits=DEFAULT_LIMITS, weights: L
     weights = weights or LQRWeights()
     lambdas, ws = np.linspace(*grid_lambda), np.linspace(*grid_w)
     nodes = [(float(lam), float(w), sign) for sign in (1.0, -1.0) for w in ws for lam in lambdas]
-    jobs = [(body.to_dict(), [float(x) for x in limits], asdict(weights), nodes[k:k + 64]) for k in range(0, len(nodes), 64)]
+    jobs = [
+        (body.to_dict(), [float(x) for x in limits], asdict(weights), nodes[k : k + 64])
+        for k in range(0, len(nodes), 64)
+    ]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         gains = [K for part in pool.map(_gain_rows, jobs) for K in part]
     K = np.array(gains).reshape(2, len(ws), len(lambdas), 4, 9)
-    meta = {"version": GAIN_TABLE_VERSION, "body": json.loads(json.dumps(body.to_dict())), "limits": [float(x) for x in limits],
-            "weights": asdict(weights), "control": "torque+dilatation", "regenerate": "flatbody lqr-table"}
+    meta = {
+        "version": GAIN_TABLE_VERSION,
+        "body": json.loads(json.dumps(body.to_dict())),
+        "limits": [float(x) for x in limits],
+        "weights": asdict(weights),
+        "control": "torque+dilatation",
+        "regenerate": "flatbody lqr-table",
+    }
     return {"lambdas": lambdas, "ws": ws, "K": K, "meta": meta}
 
 
@@ -243,7 +266,13 @@ def save_gain_table(table: dict, path: str | Path = GAIN_TABLE_PATH) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez_compressed(tmp, lambdas=table["lambdas"], ws=table["ws"], K=table["K"], meta=np.array(json.dumps(table["meta"], sort_keys=True)))
+    np.savez_compressed(
+        tmp,
+        lambdas=table["lambdas"],
+        ws=table["ws"],
+        K=table["K"],
+        meta=np.array(json.dumps(table["meta"], sort_keys=True)),
+    )
     tmp.replace(path)
 
 
@@ -286,7 +315,9 @@ class HeuristicController:
         Always solve the Riccati equation (no table).
     """
 
-    def __init__(self, body: Body, control: str, limits: np.ndarray, weights: LQRWeights | None = None, *, exact: bool = False) -> None:
+    def __init__(
+        self, body: Body, control: str, limits: np.ndarray, weights: LQRWeights | None = None, *, exact: bool = False
+    ) -> None:
         from dataclasses import asdict
 
         self.body = body
@@ -297,8 +328,12 @@ class HeuristicController:
         table = None if exact else shipped_gain_table()
         if table is not None:
             m = table["meta"]
-            applies = (bool(self.mask.all()) and m["limits"] == [float(x) for x in self.limits] and m["weights"] == asdict(self.weights)
-                       and m["body"] == json.loads(json.dumps(body.to_dict())))
+            applies = (
+                bool(self.mask.all())
+                and m["limits"] == [float(x) for x in self.limits]
+                and m["weights"] == asdict(self.weights)
+                and m["body"] == json.loads(json.dumps(body.to_dict()))
+            )
             table = table if applies else None
         self._table = table
         self._keys = np.zeros((0, 5))
@@ -338,15 +373,26 @@ class HeuristicController:
             x = (lam - L[0]) / (L[1] - L[0])
             y = (w - W[0]) / (W[1] - W[0])
             # the table holds the circulation family (|s3*| < |p_θ|) only: targets of the rotation branch solve exactly
-            inside = (x >= 0) & (x <= len(L) - 1) & (y >= 0) & (y <= len(W) - 1 + 1e-6) & (p_theta != 0) & (np.abs(targets[:, 3]) < np.abs(p_theta))
+            inside = (
+                (x >= 0)
+                & (x <= len(L) - 1)
+                & (y >= 0)
+                & (y <= len(W) - 1 + 1e-6)
+                & (p_theta != 0)
+                & (np.abs(targets[:, 3]) < np.abs(p_theta))
+            )
             i = np.clip(np.floor(x).astype(np.int64), 0, len(L) - 2)
             j = np.clip(np.floor(y).astype(np.int64), 0, len(W) - 2)
             fx = (x - i)[:, None, None]
             fy = (y - j)[:, None, None]
             s = (p_theta < 0).astype(np.int64)
             T = t["K"]
-            Ki = ((1 - fx) * (1 - fy) * T[s, j, i] + fx * (1 - fy) * T[s, j, i + 1]
-                  + (1 - fx) * fy * T[s, j + 1, i] + fx * fy * T[s, j + 1, i + 1])
+            Ki = (
+                (1 - fx) * (1 - fy) * T[s, j, i]
+                + fx * (1 - fy) * T[s, j, i + 1]
+                + (1 - fx) * fy * T[s, j + 1, i]
+                + fx * fy * T[s, j + 1, i + 1]
+            )
             K[inside] = Ki[inside]
             todo = ~inside
         for r in np.flatnonzero(todo):
@@ -388,7 +434,7 @@ class HeuristicController:
             self._keys[changed] = keys[changed]
         dx = obs[:, _REDUCED_OBS]  # x − x*, x* = (0, 0, s3*, 0, 0, 0, λ*, μ*, ϱ*) from the target entries
         dx[:, 2] -= obs[:, OBS_TARGET.start + 3]
-        dx[:, 6:9] -= obs[:, OBS_TARGET.start:OBS_TARGET.start + 3]
+        dx[:, 6:9] -= obs[:, OBS_TARGET.start : OBS_TARGET.start + 3]
         a = np.matmul(self._minus_K, dx[:, :, None])[:, :, 0]
         np.clip(a, -1.0, 1.0, out=a)
         return a.astype(np.float32)
@@ -447,7 +493,9 @@ class ResidualAction:
     Reads physical (unnormalised) observations (N, 16) (or (N, 21) with the body's constants).
     """
 
-    def __init__(self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic") -> None:
+    def __init__(
+        self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic"
+    ) -> None:
         from flatbody_env.env.env import FlatBodyEnv
 
         if not (math.isfinite(scale) and scale >= 0):
@@ -479,7 +527,9 @@ class ResidualAction:
         return np.clip(base + a, -1.0, 1.0).astype(np.float32)
 
 
-def residual_vec_env(venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic"):
+def residual_vec_env(
+    venv, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic"
+):
     """Wrap an SB3 VecEnv over ``FlatBody-v0`` so that actions are residuals on the heuristic.
 
     The executed action is :class:`ResidualAction` (residual policy learning: the agent starts

@@ -90,7 +90,9 @@ class PlanSettings:
         validation.integer("chunk", self.chunk, low=1, high=4096)
         validation.integer("seed", self.seed, low=0, high=validation.MAX_SEED)
         if self.chunk * self.samples > 1 << 17:
-            raise ValueError(f"chunk, samples: at most {1 << 17} bodies in one batch, got {self.chunk} x {self.samples}")
+            raise ValueError(
+                f"chunk, samples: at most {1 << 17} bodies in one batch, got {self.chunk} x {self.samples}"
+            )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,26 +114,48 @@ class Plans:
 
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, env_id=np.str_(self.env_id), model=np.str_(self.model), seeds=self.seeds,
-                         final_distance=self.final_distance, knots=self.knots, on_policy=np.bool_(self.on_policy))
+                np.savez(
+                    fh,
+                    env_id=np.str_(self.env_id),
+                    model=np.str_(self.model),
+                    seeds=self.seeds,
+                    final_distance=self.final_distance,
+                    knots=self.knots,
+                    on_policy=np.bool_(self.on_policy),
+                )
 
     @classmethod
     def load(cls, path: str | Path) -> Plans:
         try:
             with np.load(path, allow_pickle=False) as d:
-                return cls(env_id=str(d["env_id"]), model=str(d["model"]), seeds=d["seeds"].astype(np.int64),
-                           final_distance=d["final_distance"].astype(np.float64), knots=d["knots"].astype(np.float64),
-                           on_policy=bool(d["on_policy"]) if "on_policy" in d.files else False)
+                return cls(
+                    env_id=str(d["env_id"]),
+                    model=str(d["model"]),
+                    seeds=d["seeds"].astype(np.int64),
+                    final_distance=d["final_distance"].astype(np.float64),
+                    knots=d["knots"].astype(np.float64),
+                    on_policy=bool(d["on_policy"]) if "on_policy" in d.files else False,
+                )
         except (OSError, KeyError, ValueError) as exc:
-            raise ValueError(f"plans: cannot read {str(path)[:80]!r} as plans ({type(exc).__name__}: {str(exc)[:80]})") from None
+            raise ValueError(
+                f"plans: cannot read {str(path)[:80]!r} as plans ({type(exc).__name__}: {str(exc)[:80]})"
+            ) from None
 
     def __add__(self, other: Plans) -> Plans:
-        if ((self.env_id, self.model, self.on_policy) != (other.env_id, other.model, other.on_policy)
-                or self.knots.shape[1:] != other.knots.shape[1:]):
+        if (self.env_id, self.model, self.on_policy) != (
+            other.env_id,
+            other.model,
+            other.on_policy,
+        ) or self.knots.shape[1:] != other.knots.shape[1:]:
             raise ValueError("plans: can only join plans of the same task, run folder, kind and shape")
-        return Plans(env_id=self.env_id, model=self.model, seeds=np.concatenate([self.seeds, other.seeds]),
-                     final_distance=np.concatenate([self.final_distance, other.final_distance]),
-                     knots=np.concatenate([self.knots, other.knots]), on_policy=self.on_policy)
+        return Plans(
+            env_id=self.env_id,
+            model=self.model,
+            seeds=np.concatenate([self.seeds, other.seeds]),
+            final_distance=np.concatenate([self.final_distance, other.final_distance]),
+            knots=np.concatenate([self.knots, other.knots]),
+            on_policy=self.on_policy,
+        )
 
 
 def _residual_agent(model: str | Path, backend: str = "auto"):
@@ -173,7 +197,9 @@ def rollout(venv, residual, seeds: np.ndarray, knots: np.ndarray, *, record: boo
     return final, effort / steps, recorded
 
 
-def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_policy: bool = False, progress: bool = True) -> Plans:
+def plan(
+    model: str | Path, seeds, settings: PlanSettings | None = None, *, on_policy: bool = False, progress: bool = True
+) -> Plans:
     """Cross-entropy plans (module docstring, step 1) for the seeded episodes of ``model``'s task.
 
     Parameters
@@ -198,7 +224,9 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
 
     s = settings or PlanSettings()
     agent = _residual_agent(model)
-    seeds = np.asarray([validation.integer("seeds", int(x), low=0, high=validation.MAX_SEED) for x in seeds], dtype=np.int64)
+    seeds = np.asarray(
+        [validation.integer("seeds", int(x), low=0, high=validation.MAX_SEED) for x in seeds], dtype=np.int64
+    )
     if seeds.size == 0:
         raise ValueError("seeds: give at least one seed")
     policy = agent.policy_actions if on_policy else None
@@ -211,9 +239,11 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
     final_d, final_u = zero_d.copy(), np.zeros((seeds.size, s.knots, n))
     todo = np.flatnonzero(zero_d > s.reach)
     rng = np.random.default_rng(s.seed)
-    bar = progress_bar(total=int(np.ceil(todo.size / s.chunk)) * s.iterations, desc="plans", unit="iteration", enabled=progress)
+    bar = progress_bar(
+        total=int(np.ceil(todo.size / s.chunk)) * s.iterations, desc="plans", unit="iteration", enabled=progress
+    )
     for lo in range(0, todo.size, s.chunk):
-        rows_todo = todo[lo:lo + s.chunk]
+        rows_todo = todo[lo : lo + s.chunk]
         chunk = seeds[rows_todo]
         m = chunk.size
         venv = FlatBodyVectorEnv(num_envs=m * s.samples, autoreset_mode="SameStep", **agent.env_kwargs)
@@ -225,7 +255,9 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
         for _ in range(s.iterations):
             u = np.clip(mean[:, None] + std[:, None] * rng.standard_normal((m, s.samples, s.knots, n)), -1.0, 1.0)
             u[:, 0] = best_u  # the best so far stays in the draw
-            d, effort, _ = rollout(venv, agent.residual_action, batch_seeds, u.reshape(m * s.samples, s.knots, n), policy=policy)
+            d, effort, _ = rollout(
+                venv, agent.residual_action, batch_seeds, u.reshape(m * s.samples, s.knots, n), policy=policy
+            )
             cost = (REACH_COST * np.maximum(d - s.reach, 0.0) + EFFORT_COST * effort).reshape(m, s.samples)
             order = np.argsort(cost, axis=1)[:, : s.elite]
             elite = np.take_along_axis(u, order[:, :, None, None], axis=1)
@@ -240,11 +272,23 @@ def plan(model: str | Path, seeds, settings: PlanSettings | None = None, *, on_p
         venv.close()
         final_d[rows_todo], final_u[rows_todo] = best_d, best_u
     bar.close()
-    return Plans(env_id=agent.env_id, model=str(model), seeds=seeds, final_distance=final_d, knots=final_u, on_policy=on_policy)
+    return Plans(
+        env_id=agent.env_id, model=str(model), seeds=seeds, final_distance=final_d, knots=final_u, on_policy=on_policy
+    )
 
 
-def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float | None = None, epochs: int = 20,
-          batch_size: int = 1024, learning_rate: float = 3e-4, seed: int = 0, progress: bool = True) -> dict:
+def clone(
+    plans: Plans,
+    model: str | Path,
+    out: str | Path,
+    *,
+    tolerance: float | None = None,
+    epochs: int = 20,
+    batch_size: int = 1024,
+    learning_rate: float = 3e-4,
+    seed: int = 0,
+    progress: bool = True,
+) -> dict:
     """Fit ``model``'s policy mean to the successful plans (module docstring, step 2); write the run folder ``out``.
 
     Parameters
@@ -280,16 +324,28 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
         raise ValueError(f"model: {str(model)[:80]!r} is not a PPO run with normalised observations (vecnormalize.pkl)")
     if plans.env_id != agent.env_id:
         raise ValueError(f"plans: made for {plans.env_id}, the model is a {agent.env_id} run")
-    tol = agent.residual_action.task.success_tolerance if tolerance is None else validation.number("tolerance", tolerance, low=0.0, high=10.0)
+    tol = (
+        agent.residual_action.task.success_tolerance
+        if tolerance is None
+        else validation.number("tolerance", tolerance, low=0.0, high=10.0)
+    )
     keep = plans.final_distance <= tol
     if not keep.any():
         raise ValueError(f"plans: none ends within {tol:g}; nothing to clone")
     out = check_out(out, force=False)
     venv = FlatBodyVectorEnv(num_envs=int(keep.sum()), autoreset_mode="SameStep", **agent.env_kwargs)
     if plans.on_policy and Path(plans.model).resolve() != folder.resolve():
-        raise ValueError(f"plans: corrections of {plans.model!r}'s policy replay only on that run, not {str(model)[:80]!r}")
-    final, _, (obs, act) = rollout(venv, agent.residual_action, plans.seeds[keep], plans.knots[keep], record=True,
-                                   policy=agent.policy_actions if plans.on_policy else None)
+        raise ValueError(
+            f"plans: corrections of {plans.model!r}'s policy replay only on that run, not {str(model)[:80]!r}"
+        )
+    final, _, (obs, act) = rollout(
+        venv,
+        agent.residual_action,
+        plans.seeds[keep],
+        plans.knots[keep],
+        record=True,
+        policy=agent.policy_actions if plans.on_policy else None,
+    )
     venv.close()
     obs = obs.reshape(-1, obs.shape[-1]).astype(np.float32)
     act = act.reshape(-1, act.shape[-1]).astype(np.float32)
@@ -310,7 +366,7 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
     for _ in progress_bar(range(epochs), desc="clone", unit="epoch", enabled=progress):
         perm = torch.randperm(len(x))
         for i in range(0, len(x), batch_size):
-            b = perm[i:i + batch_size]
+            b = perm[i : i + batch_size]
             loss = ((mean_action(x[b]) - y[b]) ** 2).mean()
             opt.zero_grad()
             loss.backward()
@@ -324,8 +380,13 @@ def clone(plans: Plans, model: str | Path, out: str | Path, *, tolerance: float 
     from agents.numpy_policy import remember_run
 
     remember_run(out)
-    return {"plans": int(keep.sum()), "pairs": int(len(x)), "replayed_success": float(np.mean(final <= tol)),
-            "mse_start": mse_start, "mse_end": mse_end}
+    return {
+        "plans": int(keep.sum()),
+        "pairs": int(len(x)),
+        "replayed_success": float(np.mean(final <= tol)),
+        "mse_start": mse_start,
+        "mse_end": mse_end,
+    }
 
 
 def _seed_range(text: str) -> list[int]:
@@ -346,7 +407,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", required=True, help="run folder of an additive residual agent (its task and residual)")
     p.add_argument("--seeds", required=True, type=_seed_range, help="LO:HI, training seeds (HI excluded)")
     p.add_argument("--out", required=True, help="plans file (.npz)")
-    for name, default in ((f, PlanSettings.__dataclass_fields__[f].default) for f in ("knots", "samples", "iterations", "elite", "chunk", "seed")):
+    for name, default in (
+        (f, PlanSettings.__dataclass_fields__[f].default)
+        for f in ("knots", "samples", "iterations", "elite", "chunk", "seed")
+    ):
         p.add_argument(f"--{name}", type=int, default=default)
     p.add_argument("--init-std", type=float, default=PlanSettings.init_std)
     p.add_argument("--reach", type=float, default=PlanSettings.reach)
@@ -359,20 +423,32 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         if args.step == "plan":
-            settings = PlanSettings(knots=args.knots, samples=args.samples, iterations=args.iterations, elite=args.elite,
-                                    init_std=args.init_std, reach=args.reach, chunk=args.chunk, seed=args.seed)
+            settings = PlanSettings(
+                knots=args.knots,
+                samples=args.samples,
+                iterations=args.iterations,
+                elite=args.elite,
+                init_std=args.init_std,
+                reach=args.reach,
+                chunk=args.chunk,
+                seed=args.seed,
+            )
             plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
             plans.save(args.out)
             tol = _residual_agent(args.model).residual_action.task.success_tolerance
-            print(f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
-                  f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}")
+            print(
+                f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
+                f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}"
+            )
         else:
             plans = Plans.load(args.plans[0])
             for f in args.plans[1:]:
                 plans = plans + Plans.load(f)
             res = clone(plans, args.model, args.out, epochs=args.epochs)
-            print(f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
-                  f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}")
+            print(
+                f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
+                f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
+            )
     except ValueError as exc:
         print(f"python -m agents.imitation: {exc}", file=sys.stderr)
         return 2

@@ -84,7 +84,9 @@ class trust_policy:
 def _trust_file() -> Path:
     import os
 
-    base = os.environ.get("FLATBODY_CONFIG_HOME") or os.path.join(os.environ.get("XDG_CONFIG_HOME") or os.path.expanduser("~/.config"), "flatbody")
+    base = os.environ.get("FLATBODY_CONFIG_HOME") or os.path.join(
+        os.environ.get("XDG_CONFIG_HOME") or os.path.expanduser("~/.config"), "flatbody"
+    )
     return Path(base) / "trusted-runs.txt"
 
 
@@ -95,7 +97,11 @@ def trusted_roots() -> list[Path]:
     import os
 
     roots = [MODELS_DIR.resolve()]
-    roots += [Path(x).expanduser().resolve() for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep) if x.strip()]
+    roots += [
+        Path(x).expanduser().resolve()
+        for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep)
+        if x.strip()
+    ]
     try:
         text = _trust_file().read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError):
@@ -128,9 +134,11 @@ def check_trusted(folder: str | Path, what: str) -> None:
     """Refuse (``ValueError`` naming ``model``) to unpickle ``what`` from an untrusted folder while
     :func:`require_trust` is on."""
     if _TRUST["required"] and not trusted(folder):
-        raise ValueError(f"model: loading {what} from {str(folder)[:80]!r} unpickles it, which can run arbitrary code, and the folder is "
-                         "neither the shipped agent nor one of your runs (flatbody train, sweep); pass --trust if you trust its source "
-                         "(docs/reliability.md, Trust model)")
+        raise ValueError(
+            f"model: loading {what} from {str(folder)[:80]!r} unpickles it, which can run arbitrary code, and the folder is "
+            "neither the shipped agent nor one of your runs (flatbody train, sweep); pass --trust if you trust its source "
+            "(docs/reliability.md, Trust model)"
+        )
 
 
 def sha256(path: Path) -> str:
@@ -173,16 +181,22 @@ def read_run_config(folder: Path) -> dict:
             raise ValueError("not a regular file of at most 1 MiB")
         config = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
-        raise ValueError(f"config.yml: cannot read {str(cfg_file)[:80]!r} ({' '.join(str(exc).split())[:120]})") from None
+        raise ValueError(
+            f"config.yml: cannot read {str(cfg_file)[:80]!r} ({' '.join(str(exc).split())[:120]})"
+        ) from None
     if config is None:
         return {}
     if not isinstance(config, dict):
-        raise ValueError(f"config.yml: {str(cfg_file)[:80]!r} must hold a mapping (algo, env_id, hyperparams), got a {type(config).__name__}")
+        raise ValueError(
+            f"config.yml: {str(cfg_file)[:80]!r} must hold a mapping (algo, env_id, hyperparams), got a {type(config).__name__}"
+        )
     hp = config.get("hyperparams")
     if hp is not None and not isinstance(hp, dict):
         raise ValueError(f"config.yml.hyperparams: must be a mapping, got a {type(hp).__name__}")
     if hp and hp.get("env_kwargs") is not None and not isinstance(hp["env_kwargs"], dict):
-        raise ValueError(f"config.yml.hyperparams.env_kwargs: must be a mapping, got a {type(hp['env_kwargs']).__name__}")
+        raise ValueError(
+            f"config.yml.hyperparams.env_kwargs: must be a mapping, got a {type(hp['env_kwargs']).__name__}"
+        )
     for key in ("algo", "env_id"):
         if config.get(key) is not None and not isinstance(config[key], str):
             raise ValueError(f"config.yml.{key}: must be a string, got {config[key]!r:.60}")
@@ -197,7 +211,9 @@ def load_sb3(cls, model_file: Path):
             raise ValueError("the file is empty")
         return cls.load(str(model_file), device="cpu")
     except Exception as exc:  # noqa: BLE001 - zipfile.BadZipFile, KeyError, pickle errors, RuntimeError of torch.load
-        raise ValueError(f"model: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+        raise ValueError(
+            f"model: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -269,6 +285,7 @@ def export_policy(path: str | Path | None = None) -> Path:
         trunk, head = policy.mlp_extractor.policy_net, policy.action_net
     names = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
     layers, activations = [], set()
+
     def flat(module):  # nested Sequentials (SB3 builds some MLPs that way) in order
         if isinstance(module, torch.nn.Sequential):
             return [leaf for child in module for leaf in flat(child)]
@@ -276,11 +293,15 @@ def export_policy(path: str | Path | None = None) -> Path:
 
     for module in flat(trunk) + flat(head):
         if isinstance(module, torch.nn.Linear):
-            layers.append((module.weight.detach().double().numpy().copy(), module.bias.detach().double().numpy().copy()))
+            layers.append(
+                (module.weight.detach().double().numpy().copy(), module.bias.detach().double().numpy().copy())
+            )
         elif type(module) in names:
             activations.add(names[type(module)])
         else:
-            raise ValueError(f"model: cannot export a policy layer of type {type(module).__name__} (linear, tanh, relu only)")
+            raise ValueError(
+                f"model: cannot export a policy layer of type {type(module).__name__} (linear, tanh, relu only)"
+            )
     if len(activations) > 1:
         raise ValueError(f"model: mixed activations {sorted(activations)} are not supported")
     if type(policy.features_extractor).__name__ != "FlattenExtractor":
@@ -340,9 +361,13 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
         if not isinstance(meta, dict):
             raise ValueError("meta is not an object")
     except Exception as exc:  # noqa: BLE001 - truncated, not an npz, pickled arrays, bad JSON: an error, never a fall-back
-        raise DamagedPolicyError(f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}") from None
+        raise DamagedPolicyError(
+            f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}"
+        ) from None
     if meta.get("format") != FORMAT_VERSION:
-        raise StalePolicyError(f"policy: {file} has format {meta.get('format')!r}, this version reads {FORMAT_VERSION}; {redo}")
+        raise StalePolicyError(
+            f"policy: {file} has format {meta.get('format')!r}, this version reads {FORMAT_VERSION}; {redo}"
+        )
     now = _sources(folder)
     if meta.get("sources") != now:
         changed = [k for k in now if (meta.get("sources") or {}).get(k) != now[k]]
@@ -350,7 +375,9 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
     try:
         return _policy_from(arrays, meta)
     except (KeyError, TypeError, ValueError) as exc:
-        raise DamagedPolicyError(f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}") from None
+        raise DamagedPolicyError(
+            f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}"
+        ) from None
 
 
 def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
@@ -370,8 +397,11 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     if arrays["low"].shape != (width,) or arrays["high"].shape != (width,):
         raise ValueError("action bounds do not match the last layer")
     has_norm = "obs_mean" in arrays
-    if has_norm and (arrays["obs_mean"].shape != (arrays["W0"].shape[1],) or arrays["obs_scale"].shape != arrays["obs_mean"].shape
-                     or np.any(arrays["obs_scale"] <= 0)):
+    if has_norm and (
+        arrays["obs_mean"].shape != (arrays["W0"].shape[1],)
+        or arrays["obs_scale"].shape != arrays["obs_mean"].shape
+        or np.any(arrays["obs_scale"] <= 0)
+    ):
         raise ValueError("normalisation statistics do not match the first layer")
     return NumpyPolicy(
         weights=tuple(arrays[f"W{k}"] for k in range(n)),
@@ -387,5 +417,22 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     )
 
 
-__all__ = ["DamagedPolicyError", "check_trusted", "trust_policy", "load_sb3", "read_run_config", "remember_run", "require_trust", "trusted", "trusted_roots",
-           "FORMAT_VERSION", "NumpyPolicy", "POLICY_FILE", "StalePolicyError", "export_policy", "load_policy", "model_folder", "sha256"]
+__all__ = [
+    "DamagedPolicyError",
+    "check_trusted",
+    "trust_policy",
+    "load_sb3",
+    "read_run_config",
+    "remember_run",
+    "require_trust",
+    "trusted",
+    "trusted_roots",
+    "FORMAT_VERSION",
+    "NumpyPolicy",
+    "POLICY_FILE",
+    "StalePolicyError",
+    "export_policy",
+    "load_policy",
+    "model_folder",
+    "sha256",
+]

@@ -56,8 +56,10 @@ def load_reports(folder: str | Path = REFERENCE_DIR) -> list[dict[str, Any]]:
     folder = Path(folder)
     files = sorted(folder.glob("*.json")) if folder.is_dir() else []
     if not files:
-        raise ValueError(f"--from: no saved task reports (*.json) in {str(folder)!r}; write them with "
-                         "'flatbody evaluate --env all --out-dir DIR'")
+        raise ValueError(
+            f"--from: no saved task reports (*.json) in {str(folder)!r}; write them with "
+            "'flatbody evaluate --env all --out-dir DIR'"
+        )
     reports = []
     for f in files:
         data = json.loads(f.read_text(encoding="utf-8"))
@@ -68,7 +70,13 @@ def load_reports(folder: str | Path = REFERENCE_DIR) -> list[dict[str, Any]]:
     return sorted(reports, key=lambda r: (order.get(r["env_id"], len(order)), r["env_id"]))
 
 
-POLICY_LABELS = {"zero": "zero", "random": "random", "passivity": "passivity", "heuristic": "LQR", "witness": "witness (open loop)"}
+POLICY_LABELS = {
+    "zero": "zero",
+    "random": "random",
+    "passivity": "passivity",
+    "heuristic": "LQR",
+    "witness": "witness (open loop)",
+}
 """Row labels of the baselines; agents are labelled ``agent (<algo>)``."""
 
 
@@ -80,8 +88,10 @@ def _label(name: str, entry: dict[str, Any]) -> str:
 
 def markdown(reports: list[dict[str, Any]]) -> str:
     """The reference table: one row per task and policy (module docstring)."""
-    head = ("| task | policy | success (95 % interval) | final distance (mean) | final distance (median) | return (mean) "
-            "| episode length (median, s) |")
+    head = (
+        "| task | policy | success (95 % interval) | final distance (mean) | final distance (median) | return (mean) "
+        "| episode length (median, s) |"
+    )
     lines = [head, "|" + "---|" * 7]
     for rep in reports:
         dt = rep.get("dt", 0.05)
@@ -89,15 +99,21 @@ def markdown(reports: list[dict[str, Any]]) -> str:
             label = _label(name, entry)
             s = entry["summary"]
             if s.get("status"):
-                lines.append(f"| {rep['env_id']} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |")
+                lines.append(
+                    f"| {rep['env_id']} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |"
+                )
                 continue
             lo, hi = s["success_ci95"]
-            lines.append(f"| {rep['env_id']} | {label} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {s['final_distance']:.4f} | "
-                         f"{s['final_distance_median']:.4f} | {s['return']:.1f} | {s['length_median'] * dt:.2f} |")
+            lines.append(
+                f"| {rep['env_id']} | {label} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {s['final_distance']:.4f} | "
+                f"{s['final_distance_median']:.4f} | {s['return']:.1f} | {s['length_median'] * dt:.2f} |"
+            )
     first = reports[0] if reports else {"episodes": 0, "seed": 0}
     lines.append("")
-    lines.append(f"{first['episodes']} seeded episodes per task (episode i reset with seed {first['seed']} + i; the same targets and "
-                 "starts for every policy); regenerate with `flatbody evaluate --env all --out-dir agents/data/reference --docs docs/tasks.md`.")
+    lines.append(
+        f"{first['episodes']} seeded episodes per task (episode i reset with seed {first['seed']} + i; the same targets and "
+        "starts for every policy); regenerate with `flatbody evaluate --env all --out-dir agents/data/reference --docs docs/tasks.md`."
+    )
     return "\n".join(lines)
 
 
@@ -108,5 +124,14 @@ def update_docs(path: str | Path, folder: str | Path = REFERENCE_DIR) -> None:
     replace_marked_block(path, DOCS_BLOCK, markdown(load_reports(folder)))
 
 
-__all__ = ["DOCS_BLOCK", "POLICY_LABELS", "REFERENCE_DIR", "REPORT_VERSION", "load_reports", "markdown", "report_path", "save_report",
-           "update_docs"]
+__all__ = [
+    "DOCS_BLOCK",
+    "POLICY_LABELS",
+    "REFERENCE_DIR",
+    "REPORT_VERSION",
+    "load_reports",
+    "markdown",
+    "report_path",
+    "save_report",
+    "update_docs",
+]

@@ -25,8 +25,20 @@ import numpy as np
 from agents.reference import POLICY_LABELS, REFERENCE_DIR, load_reports
 
 PANELS = (
-    (("FlatBody-v0", "FlatBodySlow-v0"), "settling_rate", "target settling rate r (1/s)", "reach: success against r", "center right"),
-    (("FlatBodyHoldUnstable-v0",), "growth_rate", "target growth rate γ (1/s)", "hold an unstable ellipse: success against γ", "center right"),
+    (
+        ("FlatBody-v0", "FlatBodySlow-v0"),
+        "settling_rate",
+        "target settling rate r (1/s)",
+        "reach: success against r",
+        "center right",
+    ),
+    (
+        ("FlatBodyHoldUnstable-v0",),
+        "growth_rate",
+        "target growth rate γ (1/s)",
+        "hold an unstable ellipse: success against γ",
+        "center right",
+    ),
 )
 """(tasks, target feature, x label, title, legend place) of each panel."""
 COLOURS = {"heuristic": "#1f77b4", "passivity": "#2ca02c", "zero": "#7f7f7f", "random": "#bcbd22", "witness": "#9467bd"}
@@ -92,8 +104,18 @@ def plot_task_success(png_path: str | Path, folder: str | Path = REFERENCE_DIR, 
                 ys = [p[1] for p in pts]
                 err = [[p[1] - p[2] for p in pts], [p[3] - p[1] for p in pts]]
                 label = f"{_label(name, entry)}, {env_id}"
-                ax.errorbar(xs, ys, yerr=err, color=colour, marker=MARKERS.get(env_id, "o"), ms=5, lw=1.4, capsize=3,
-                            ls="-" if env_id != "FlatBody-v0" else ":", label=label)
+                ax.errorbar(
+                    xs,
+                    ys,
+                    yerr=err,
+                    color=colour,
+                    marker=MARKERS.get(env_id, "o"),
+                    ms=5,
+                    lw=1.4,
+                    capsize=3,
+                    ls="-" if env_id != "FlatBody-v0" else ":",
+                    label=label,
+                )
         ax.set_xlabel(xlabel)
         ax.set_ylabel(f"success rate ({bins} bins of equal count, 95 % interval)")
         ax.set_ylim(-0.03, 1.03)
@@ -101,7 +123,9 @@ def plot_task_success(png_path: str | Path, folder: str | Path = REFERENCE_DIR, 
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc=legend)
     first = next(iter(reports.values()))
-    fig.suptitle(f"Reference scores, {first['episodes']} seeded episodes per task (seeds {first['seed']}…)", fontsize=10)
+    fig.suptitle(
+        f"Reference scores, {first['episodes']} seeded episodes per task (seeds {first['seed']}…)", fontsize=10
+    )
     bottom = add_caption(fig, TASKS_CAPTION, fontsize=7.5)
     fig.tight_layout(rect=(0, bottom, 1, 1))
     out = save_figure(fig, png_path, dpi=110)

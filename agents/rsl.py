@@ -59,15 +59,15 @@ DEFAULTS: dict[str, Any] = {
     "residual_scale": 1.0,
     "env_kwargs": {},
     # rsl_rl's runner and PPO (its names), but for noise_hold_steps, learn_std and normalize_reward
-    "num_steps_per_env": 64,       # 256 x 64 = 16,384 transitions per update
-    "stagger": True,               # init_at_random_ep_len: the bodies' episode clocks start spread over an episode
+    "num_steps_per_env": 64,  # 256 x 64 = 16,384 transitions per update
+    "stagger": True,  # init_at_random_ep_len: the bodies' episode clocks start spread over an episode
     "hidden_dims": [64, 64],
     "activation": "tanh",
-    "init_std": 1.5,               # wide exploration: the executed gain factor 1 + clip(a) spans [0, 2]
+    "init_std": 1.5,  # wide exploration: the executed gain factor 1 + clip(a) spans [0, 2]
     "learn_std": True,
-    "noise_hold_steps": 4,         # the exploration noise held for 4 rollout steps (HeldGaussianDistribution; SB3's gSDE)
+    "noise_hold_steps": 4,  # the exploration noise held for 4 rollout steps (HeldGaussianDistribution; SB3's gSDE)
     "obs_normalization": True,
-    "normalize_reward": True,      # rewards / std of the discounted returns (SB3's VecNormalize norm_reward), training only
+    "normalize_reward": True,  # rewards / std of the discounted returns (SB3's VecNormalize norm_reward), training only
     "num_learning_epochs": 5,
     "num_mini_batches": 8,
     "clip_param": 0.1,
@@ -76,15 +76,25 @@ DEFAULTS: dict[str, Any] = {
     "lam": 0.95,
     "value_loss_coef": 1.0,
     "entropy_coef": 0.0,
-    "learning_rate": 3.0e-4,       # the start: the adaptive schedule raises it to rsl_rl's cap 1e-2 within a few iterations
+    "learning_rate": 3.0e-4,  # the start: the adaptive schedule raises it to rsl_rl's cap 1e-2 within a few iterations
     "max_grad_norm": 1.0,
     "schedule": "adaptive",
     "desired_kl": 0.01,
 }
 """Default hyperparameters (docs/agents.md, "rsl_rl": how they were chosen — with them the residual policy beats the LQR
 on held-out seeds in 10^6 steps); ``--hyperparams KEY=VALUE`` overrides."""
-_FLOAT_KEYS = ("residual_scale", "init_std", "clip_param", "gamma", "lam", "value_loss_coef", "entropy_coef", "learning_rate",
-               "max_grad_norm", "desired_kl")
+_FLOAT_KEYS = (
+    "residual_scale",
+    "init_std",
+    "clip_param",
+    "gamma",
+    "lam",
+    "value_loss_coef",
+    "entropy_coef",
+    "learning_rate",
+    "max_grad_norm",
+    "desired_kl",
+)
 
 
 # --- the LQR residual on the device ---------------------------------------------------------------------------
@@ -113,7 +123,9 @@ class TorchResidual:
         if not (math.isfinite(scale) and scale >= 0):
             raise ValueError(f"residual_scale: must be a finite number >= 0, got {scale!r}")
         if gate:
-            raise ValueError("residual_gate: not supported by rsl-ppo (use residual_mode=gain, which keeps the target an equilibrium)")
+            raise ValueError(
+                "residual_gate: not supported by rsl-ppo (use residual_mode=gain, which keeps the target an equilibrium)"
+            )
         proto = FlatBodyEnv(**(env_kwargs or {}))
         self.controller = HeuristicController(proto.body, proto.control, proto.limits)
         if not self.controller.mask.all():
@@ -147,7 +159,7 @@ class TorchResidual:
         dx = o[:, self._red_cols]
         t0 = self._t0
         dx[:, 2] -= o[:, t0 + 3]
-        dx[:, 6:9] -= o[:, t0:t0 + 3]
+        dx[:, 6:9] -= o[:, t0 : t0 + 3]
         a = torch.bmm(self._minus_K, dx[:, :, None])[:, :, 0].clamp_(-1.0, 1.0)
         return a.to(torch.float32)
 
@@ -175,8 +187,14 @@ class RslVecEnv(_vec_env_base()):
     episodes that ended in the step, ``/episode/final_distance`` and ``/episode/success``.
     """
 
-    def __init__(self, env, residual: TorchResidual | None = None, seed: int | None = None, progress: list | None = None,
-                 reward_gamma: float | None = None) -> None:
+    def __init__(
+        self,
+        env,
+        residual: TorchResidual | None = None,
+        seed: int | None = None,
+        progress: list | None = None,
+        reward_gamma: float | None = None,
+    ) -> None:
         import torch
 
         self.env = env
@@ -195,7 +213,9 @@ class RslVecEnv(_vec_env_base()):
         self._disc = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
         from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-        self._ret_rms = RunningMeanStd(shape=())  # the discounted returns' running statistics, as SB3's VecNormalize keeps them
+        self._ret_rms = RunningMeanStd(
+            shape=()
+        )  # the discounted returns' running statistics, as SB3's VecNormalize keeps them
         self.episodes: list[tuple[float, float, bool]] = []
         """(return, final distance, success) of every finished episode, in order."""
 
@@ -221,7 +241,11 @@ class RslVecEnv(_vec_env_base()):
     def step(self, actions):
         import torch
 
-        a = self.residual(self._obs, actions) if self.residual is not None else actions.clamp(-1.0, 1.0).to(torch.float32)
+        a = (
+            self.residual(self._obs, actions)
+            if self.residual is not None
+            else actions.clamp(-1.0, 1.0).to(torch.float32)
+        )
         obs, rewards, terminated, truncated, info = self.env.step(a)
         self._obs = obs
         dones = terminated | truncated
@@ -231,7 +255,9 @@ class RslVecEnv(_vec_env_base()):
             self._disc = self._disc * self.reward_gamma + rewards.double()
             self._ret_rms.update(self._disc.cpu().numpy())
             self._disc[dones] = 0.0
-            rewards = (rewards.double() / math.sqrt(float(self._ret_rms.var) + 1e-8)).clamp(-10.0, 10.0).to(rewards.dtype)
+            rewards = (
+                (rewards.double() / math.sqrt(float(self._ret_rms.var) + 1e-8)).clamp(-10.0, 10.0).to(rewards.dtype)
+            )
         if bool(dones.any()):
             d = info["distance"][dones]
             s = info["is_success"][dones]
@@ -314,8 +340,14 @@ def export_sb3(actor, critic, path: Path, hp: dict[str, Any], seed: int) -> None
     acts = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}
     hidden = [int(h) for h in hp["hidden_dims"]]
     venv = DummyVecEnv([lambda: FlatBodyEnv(**(hp.get("env_kwargs") or {}))])
-    model = PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=0,
-                policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}, "activation_fn": acts[hp["activation"]]})
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        seed=seed,
+        device="cpu",
+        verbose=0,
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}, "activation_fn": acts[hp["activation"]]},
+    )
     pol = model.policy
 
     def linears(module):
@@ -350,26 +382,61 @@ def export_sb3(actor, critic, path: Path, hp: dict[str, Any], seed: int) -> None
 # --- the trainer -----------------------------------------------------------------------------------------------
 def runner_config(hp: dict[str, Any]) -> dict[str, Any]:
     """rsl_rl's ``OnPolicyRunner`` configuration from the hyperparameters."""
-    net = {"class_name": "MLPModel", "hidden_dims": list(hp["hidden_dims"]), "activation": hp["activation"],
-           "obs_normalization": bool(hp["obs_normalization"])}
-    alg_keys = ("num_learning_epochs", "num_mini_batches", "clip_param", "gamma", "lam", "value_loss_coef", "entropy_coef",
-                "learning_rate", "max_grad_norm", "schedule", "desired_kl", "use_clipped_value_loss")
+    net = {
+        "class_name": "MLPModel",
+        "hidden_dims": list(hp["hidden_dims"]),
+        "activation": hp["activation"],
+        "obs_normalization": bool(hp["obs_normalization"]),
+    }
+    alg_keys = (
+        "num_learning_epochs",
+        "num_mini_batches",
+        "clip_param",
+        "gamma",
+        "lam",
+        "value_loss_coef",
+        "entropy_coef",
+        "learning_rate",
+        "max_grad_norm",
+        "schedule",
+        "desired_kl",
+        "use_clipped_value_loss",
+    )
     return {
         "num_steps_per_env": int(hp["num_steps_per_env"]),
         "save_interval": 10**9,
         "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "actor": {**net, "distribution_cfg": {"class_name": "agents.rsl:HeldGaussianDistribution", "init_std": float(hp["init_std"]),
-                                                  "std_type": "scalar", "learn_std": bool(hp["learn_std"]),
-                                                  "hold_steps": hp["noise_hold_steps"]}},
+        "actor": {
+            **net,
+            "distribution_cfg": {
+                "class_name": "agents.rsl:HeldGaussianDistribution",
+                "init_std": float(hp["init_std"]),
+                "std_type": "scalar",
+                "learn_std": bool(hp["learn_std"]),
+                "hold_steps": hp["noise_hold_steps"],
+            },
+        },
         "critic": dict(net),
         "algorithm": {"class_name": "PPO", **{k: hp[k] for k in alg_keys}},
         "check_for_nan": True,
     }
 
 
-def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None, n_envs: int | None = None, device: str = "cpu",
-              overrides: list[str] | None = None, env_id: str | None = None, threads: int = 1, progress: bool = True,
-              command: list[str] | None = None, force: bool = False, callback=None):
+def train_rsl(
+    out: str | Path,
+    *,
+    seed: int = 0,
+    n_timesteps: int | None = None,
+    n_envs: int | None = None,
+    device: str = "cpu",
+    overrides: list[str] | None = None,
+    env_id: str | None = None,
+    threads: int = 1,
+    progress: bool = True,
+    command: list[str] | None = None,
+    force: bool = False,
+    callback=None,
+):
     """Train rsl_rl's PPO on ``FlatBody-v0`` with the LQR residual and write the run folder ``out`` (module docstring).
 
     ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps. ``callback``
@@ -422,15 +489,24 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     np.random.seed(seed)
-    env = FlatBodyTorchVectorEnv(nenv, device=device, **(hp.get("env_kwargs") or {}))  # cuda: raises until the device env exists
+    env = FlatBodyTorchVectorEnv(
+        nenv, device=device, **(hp.get("env_kwargs") or {})
+    )  # cuda: raises until the device env exists
     residual = None
     if hp.get("residual"):
         if hp["residual"] != "heuristic":
             raise ValueError(f"residual: must be 'heuristic' or empty, got {hp['residual']!r}")
-        residual = TorchResidual(hp.get("env_kwargs"), float(hp["residual_scale"]), str(hp["residual_mode"]), env.device)
+        residual = TorchResidual(
+            hp.get("env_kwargs"), float(hp["residual_scale"]), str(hp["residual_mode"]), env.device
+        )
     venv = RslVecEnv(env, residual, seed=seed, reward_gamma=float(hp["gamma"]) if hp["normalize_reward"] else None)
-    cfg = {"env_id": env_id, "algo": "ppo", "seed": seed, "hyperparams": hp,
-           "trainer": {"name": ALGO, "library": "rsl_rl", "version": version("rsl-rl-lib"), "device": device}}
+    cfg = {
+        "env_id": env_id,
+        "algo": "ppo",
+        "seed": seed,
+        "hyperparams": hp,
+        "trainer": {"name": ALGO, "library": "rsl_rl", "version": version("rsl-rl-lib"), "device": device},
+    }
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
     import contextlib
@@ -450,13 +526,20 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
         ti = time.perf_counter()
         runner.learn(1, init_at_random_ep_len=bool(hp["stagger"]) and it == 0)
         new = venv.episodes[seen:]
-        rows.append({"iteration": it + 1, "timesteps": (it + 1) * nenv * steps, "time_s": round(time.perf_counter() - t0, 3),
-                     "fps": round(nenv * steps / (time.perf_counter() - ti), 1), "episodes": len(new),
-                     "ep_rew_mean": float(np.mean([e[0] for e in new])) if new else "",
-                     "final_distance_mean": float(np.mean([e[1] for e in new])) if new else "",
-                     "success_rate": float(np.mean([e[2] for e in new])) if new else "",
-                     "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
-                     "learning_rate": float(runner.alg.learning_rate)})
+        rows.append(
+            {
+                "iteration": it + 1,
+                "timesteps": (it + 1) * nenv * steps,
+                "time_s": round(time.perf_counter() - t0, 3),
+                "fps": round(nenv * steps / (time.perf_counter() - ti), 1),
+                "episodes": len(new),
+                "ep_rew_mean": float(np.mean([e[0] for e in new])) if new else "",
+                "final_distance_mean": float(np.mean([e[1] for e in new])) if new else "",
+                "success_rate": float(np.mean([e[2] for e in new])) if new else "",
+                "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
+                "learning_rate": float(runner.alg.learning_rate),
+            }
+        )
         if bar is not None:
             bar.update(nenv * steps)
         if callback is not None:
@@ -474,8 +557,15 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
             w.writeheader()
             w.writerows(rows)
     with atomic_path(out / "rsl_model.pt") as tmp:
-        torch.save({"actor": runner.alg.actor.state_dict(), "critic": runner.alg.critic.state_dict(), "iterations": len(rows),
-                    "runner_cfg": runner_config(hp)}, str(tmp))
+        torch.save(
+            {
+                "actor": runner.alg.actor.state_dict(),
+                "critic": runner.alg.critic.state_dict(),
+                "iterations": len(rows),
+                "runner_cfg": runner_config(hp),
+            },
+            str(tmp),
+        )
     with atomic_path(out / "model.zip") as tmp:
         export_sb3(runner.alg.actor, runner.alg.critic, Path(str(tmp)), hp, seed)
     import gymnasium
@@ -495,8 +585,14 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
         "wall_time_s": round(wall, 1),
         "resumed_from": None,
         "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "versions": {"python": platform.python_version(), "numpy": np.__version__, "gymnasium": gymnasium.__version__,
-                     "rsl_rl": version("rsl-rl-lib"), "stable_baselines3": stable_baselines3.__version__, "torch": torch.__version__},
+        "versions": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "gymnasium": gymnasium.__version__,
+            "rsl_rl": version("rsl-rl-lib"),
+            "stable_baselines3": stable_baselines3.__version__,
+            "torch": torch.__version__,
+        },
         "cpu_count": os.cpu_count(),
     }
     del rsl_rl
@@ -508,7 +604,6 @@ def train_rsl(out: str | Path, *, seed: int = 0, n_timesteps: int | None = None,
     return TrainResult(out=out, timesteps=len(rows) * nenv * steps, wall_time_s=wall, resumed_from=None)
 
 
-
 # --- from scratch (no LQR prior): success and final distance against wall time -------------------------------
 FROM_SCRATCH: list[str] = ["residual=null", "init_std=0.5", "hidden_dims=[128,128]"]
 """``--hyperparams`` of the from-scratch agent (docs/agents.md, "From scratch": how they were chosen): no LQR, the
@@ -516,9 +611,19 @@ policy's clipped output is the control."""
 CURVE_HEADER = ("timesteps", "wall_s", "success", "final_distance")
 
 
-def from_scratch_curve(out: str | Path, csv_path: str | Path, *, seed: int = 0, overrides: list[str] | None = None, budget_s: float = 600.0,
-                       eval_every_s: float = 30.0, episodes: int = 100, eval_seed: int = 10_000, device: str = "cpu",
-                       force: bool = False):
+def from_scratch_curve(
+    out: str | Path,
+    csv_path: str | Path,
+    *,
+    seed: int = 0,
+    overrides: list[str] | None = None,
+    budget_s: float = 600.0,
+    eval_every_s: float = 30.0,
+    episodes: int = 100,
+    eval_seed: int = 10_000,
+    device: str = "cpu",
+    force: bool = False,
+):
     """Train rsl-ppo with :data:`FROM_SCRATCH` (then ``overrides``) for ``budget_s`` seconds of training wall time and write the curve.
 
     After the first iteration that ends ``eval_every_s`` or more after the previous evaluation, and at the end, the
@@ -541,13 +646,27 @@ def from_scratch_curve(out: str | Path, csv_path: str | Path, *, seed: int = 0, 
             return False
         due[0] = row["time_s"] + eval_every_s
         recs = run_episodes(live_policy(runner.alg.actor, None, device), episodes=episodes, seed=eval_seed)
-        rows.append((int(row["timesteps"]), round(float(row["time_s"]), 2), float(np.mean([r["success"] for r in recs])),
-                     float(np.mean([r["final_distance"] for r in recs]))))
+        rows.append(
+            (
+                int(row["timesteps"]),
+                round(float(row["time_s"]), 2),
+                float(np.mean([r["success"] for r in recs])),
+                float(np.mean([r["final_distance"] for r in recs])),
+            )
+        )
         write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
         return row["time_s"] >= budget_s
 
-    train_rsl(out, seed=seed, n_timesteps=10**12, progress=False, overrides=[*FROM_SCRATCH, *(overrides or [])], callback=callback,
-              device=device, force=force)
+    train_rsl(
+        out,
+        seed=seed,
+        n_timesteps=10**12,
+        progress=False,
+        overrides=[*FROM_SCRATCH, *(overrides or [])],
+        callback=callback,
+        device=device,
+        force=force,
+    )
     return rows
 
 
@@ -558,8 +677,17 @@ SCRATCH_CAPTION = (
 )
 
 
-def plot_curve(csv_path: str | Path, png_path: str | Path, *, success_goal: float = 0.95, distance_goal: float = 0.01,
-               budget_s: float = 600.0, episodes: int = 100, note: str = "", title: str = "rsl-ppo from scratch (no LQR prior)") -> None:
+def plot_curve(
+    csv_path: str | Path,
+    png_path: str | Path,
+    *,
+    success_goal: float = 0.95,
+    distance_goal: float = 0.01,
+    budget_s: float = 600.0,
+    episodes: int = 100,
+    note: str = "",
+    title: str = "rsl-ppo from scratch (no LQR prior)",
+) -> None:
     """Success and mean final distance against wall time, drawn from the saved curve ``csv_path`` (:func:`from_scratch_curve`)."""
     import matplotlib
 
@@ -573,7 +701,9 @@ def plot_curve(csv_path: str | Path, png_path: str | Path, *, success_goal: floa
         data = list(csv.DictReader(fh))
     w = [float(r["wall_s"]) for r in data]
     fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
-    ax_d.plot(w, [float(r["final_distance"]) for r in data], "o-", ms=3, color="tab:orange", label="rsl-ppo, from scratch")
+    ax_d.plot(
+        w, [float(r["final_distance"]) for r in data], "o-", ms=3, color="tab:orange", label="rsl-ppo, from scratch"
+    )
     ax_s.plot(w, [float(r["success"]) for r in data], "o-", ms=3, color="tab:orange")
     ax_d.axhline(distance_goal, color="gray", ls=":", lw=1, label="goal")
     ax_s.axhline(success_goal, color="gray", ls=":", lw=1)
@@ -586,11 +716,31 @@ def plot_curve(csv_path: str | Path, png_path: str | Path, *, success_goal: floa
     ax_s.set_ylim(-0.02, 1.02)
     ax_d.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    bottom = add_caption(fig, SCRATCH_CAPTION.format(episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s,
-                                                     note=note), fontsize=7)
+    bottom = add_caption(
+        fig,
+        SCRATCH_CAPTION.format(
+            episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s, note=note
+        ),
+        fontsize=7,
+    )
     fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
     save_figure(fig, png_path, dpi=120)
     plt.close(fig)
 
-__all__ = ["ALGO", "CURVE_HEADER", "DEFAULTS", "FROM_SCRATCH", "HeldGaussianDistribution", "RSL_RL_VERSION", "RslVecEnv", "TorchResidual",
-           "export_sb3", "from_scratch_curve", "live_policy", "plot_curve", "runner_config", "train_rsl"]
+
+__all__ = [
+    "ALGO",
+    "CURVE_HEADER",
+    "DEFAULTS",
+    "FROM_SCRATCH",
+    "HeldGaussianDistribution",
+    "RSL_RL_VERSION",
+    "RslVecEnv",
+    "TorchResidual",
+    "export_sb3",
+    "from_scratch_curve",
+    "live_policy",
+    "plot_curve",
+    "runner_config",
+    "train_rsl",
+]

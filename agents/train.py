@@ -41,7 +41,19 @@ from flatbody_env.provenance import git_hash
 ENV_ID = "FlatBody-v0"
 ALGOS = ("ppo", "sac")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-_META_KEYS = ("n_timesteps", "n_envs", "policy", "normalize", "env_kwargs", "residual", "residual_scale", "residual_gate", "residual_mode", "success_bonus", "precision_bonus")
+_META_KEYS = (
+    "n_timesteps",
+    "n_envs",
+    "policy",
+    "normalize",
+    "env_kwargs",
+    "residual",
+    "residual_scale",
+    "residual_gate",
+    "residual_mode",
+    "success_bonus",
+    "precision_bonus",
+)
 _ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 
 
@@ -84,7 +96,12 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
     if isinstance(act, str):
         if act not in _ACTIVATIONS:
             raise ValueError(f"policy_kwargs.activation_fn: must be one of {', '.join(_ACTIVATIONS)}, got {act!r}")
-        kw["activation_fn"] = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU, "leaky_relu": torch.nn.LeakyReLU}[act]
+        kw["activation_fn"] = {
+            "tanh": torch.nn.Tanh,
+            "relu": torch.nn.ReLU,
+            "elu": torch.nn.ELU,
+            "leaky_relu": torch.nn.LeakyReLU,
+        }[act]
     return kw
 
 
@@ -101,9 +118,18 @@ def algo_kwargs_of(hp: dict[str, Any]) -> dict[str, Any]:
     return algo_kwargs
 
 
-def make_vec_env(n_envs: int, seed: int | None, env_kwargs: dict[str, Any] | None = None, residual: str | None = None,
-                 success_bonus: float = 0.0, residual_scale: float = 1.0, residual_gate: float = 0.0,
-                 precision_bonus: float = 0.0, residual_mode: str = "additive", env_id: str = ENV_ID):
+def make_vec_env(
+    n_envs: int,
+    seed: int | None,
+    env_kwargs: dict[str, Any] | None = None,
+    residual: str | None = None,
+    success_bonus: float = 0.0,
+    residual_scale: float = 1.0,
+    residual_gate: float = 0.0,
+    precision_bonus: float = 0.0,
+    residual_mode: str = "additive",
+    env_id: str = ENV_ID,
+):
     """``VecMonitor(FlatBodySB3VecEnv(n_envs, seed))`` (the natively batched env) of the task ``env_id``
     (any registered flatbody id, docs/tasks.md: its registered keywords updated by ``env_kwargs``).
 
@@ -166,7 +192,9 @@ def _algo_class(algo: str):
     return {"ppo": PPO, "sac": SAC}[algo]
 
 
-def _load_saved(cls, model_path: Path, vn_path: Path | None, env, norm, what: str, custom_objects: dict[str, Any] | None = None):
+def _load_saved(
+    cls, model_path: Path, vn_path: Path | None, env, norm, what: str, custom_objects: dict[str, Any] | None = None
+):
     """A saved model on ``env`` (wrapped in its saved VecNormalize statistics when the run normalises, in training
     mode): the one loading of a resumed checkpoint and of a fine-tuned run. ``what`` starts the error message."""
     from stable_baselines3.common.vec_env import VecNormalize
@@ -188,8 +216,15 @@ def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_k
         raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no model.zip")
     check_trusted(folder, "model.zip")
     keep = {k: v for k, v in algo_kwargs.items() if k != "policy_kwargs"}  # the network is the loaded one's
-    model, env = _load_saved(cls, folder / "model.zip", folder / "vecnormalize.pkl", env, norm,
-                             f"trained_agent: {str(folder)[:80]!r}", custom_objects=keep)
+    model, env = _load_saved(
+        cls,
+        folder / "model.zip",
+        folder / "vecnormalize.pkl",
+        env,
+        norm,
+        f"trained_agent: {str(folder)[:80]!r}",
+        custom_objects=keep,
+    )
     if norm:
         env.norm_reward, env.gamma = bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
     model.set_random_seed(seed)
@@ -287,12 +322,16 @@ def check_out(out: str | Path, *, force: bool = False) -> Path:
     shipped = Path(__file__).resolve().parent / "models"
     if not force:
         if out.resolve().is_relative_to(shipped):
-            raise ValueError(f"out: {str(out)!r} is the shipped agent's folder; --force overwrites it "
-                             "(or give another --out, e.g. runs/ppo)")
+            raise ValueError(
+                f"out: {str(out)!r} is the shipped agent's folder; --force overwrites it "
+                "(or give another --out, e.g. runs/ppo)"
+            )
         held = [name for name in ("model.zip", "config.yml", "run.json", "checkpoints") if (out / name).exists()]
         if held:
-            raise ValueError(f"out: {str(out)!r} already holds a training run ({', '.join(held)}); --force overwrites it "
-                             "(--resume continues it)")
+            raise ValueError(
+                f"out: {str(out)!r} already holds a training run ({', '.join(held)}); --force overwrites it "
+                "(--resume continues it)"
+            )
     return out
 
 
@@ -406,18 +445,32 @@ def train(
     algo_kwargs = algo_kwargs_of(hp)
     unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
     start = found[3] if resume else 0
-    planned = start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)  # what SB3 will train
+    planned = (
+        start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
+    )  # what SB3 will train
     if planned > total and notes:
         what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
-        print(f"flatbody: note: n_timesteps {total} rounds up to {planned} ({algo.upper()} trains whole {what} = "
-              f"{nenv} x {unit // nenv} = {unit} steps)", file=sys.stderr)
+        print(
+            f"flatbody: note: n_timesteps {total} rounds up to {planned} ({algo.upper()} trains whole {what} = "
+            f"{nenv} x {unit // nenv} = {unit} steps)",
+            file=sys.stderr,
+        )
 
     if force and not resume and ckpt_dir.exists():
         shutil.rmtree(ckpt_dir)  # an old run's checkpoints would be what a later --resume continues
     out.mkdir(parents=True, exist_ok=True)
-    env = make_vec_env(nenv, seed, hp.get("env_kwargs"), hp.get("residual"), float(hp.get("success_bonus", 0.0)), float(hp.get("residual_scale", 1.0)),
-                         float(hp.get("residual_gate", 0.0)), float(hp.get("precision_bonus", 0.0)),
-                         str(hp.get("residual_mode", "additive")), env_id=env_id)
+    env = make_vec_env(
+        nenv,
+        seed,
+        hp.get("env_kwargs"),
+        hp.get("residual"),
+        float(hp.get("success_bonus", 0.0)),
+        float(hp.get("residual_scale", 1.0)),
+        float(hp.get("residual_gate", 0.0)),
+        float(hp.get("precision_bonus", 0.0)),
+        str(hp.get("residual_mode", "additive")),
+        env_id=env_id,
+    )
     cls = _algo_class(algo)
     if resume:
         model_path, vn_path, rb_path, start = found
@@ -458,8 +511,10 @@ def train(
         steps = int(model.num_timesteps)
         if checkpoint_freq and checkpoint_freq > 0 and steps > start:
             kept = _save_checkpoint(model, env, ckpt_dir, bool(norm), algo)
-            raise KeyboardInterrupt(f"training stopped at {steps} steps; checkpoint {kept}: "
-                                    f"flatbody train --algo {algo} --out {out} --resume continues") from None
+            raise KeyboardInterrupt(
+                f"training stopped at {steps} steps; checkpoint {kept}: "
+                f"flatbody train --algo {algo} --out {out} --resume continues"
+            ) from None
         why = "no step trained yet" if steps <= start else "--checkpoint-freq 0"
         raise KeyboardInterrupt(f"training stopped at {steps} steps; no checkpoint saved ({why})") from None
     wall = time.perf_counter() - t0

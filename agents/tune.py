@@ -105,7 +105,14 @@ class TuneConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
             raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {self.algo!r}")
-        for name, low in (("trials", 1), ("n_timesteps", 1), ("evaluations", 1), ("eval_episodes", 1), ("seed", 0), ("startup_trials", 0)):
+        for name, low in (
+            ("trials", 1),
+            ("n_timesteps", 1),
+            ("evaluations", 1),
+            ("eval_episodes", 1),
+            ("seed", 0),
+            ("startup_trials", 0),
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < low:
                 raise ValueError(f"{name}: must be an integer >= {low}, got {v!r}")
@@ -140,7 +147,10 @@ def load_search_space(algo: str, env_id: str = ENV_ID, path: str | Path | None =
                 raise ValueError(f"{where}: a categorical needs a non-empty list of choices")
         else:
             lo, hi = spec.get("low"), spec.get("high")
-            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (lo, hi)) or not lo < hi:
+            if (
+                not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (lo, hi))
+                or not lo < hi
+            ):
                 raise ValueError(f"{where}: needs finite low < high, got low={lo!r}, high={hi!r}")
             if spec.get("log") and lo <= 0:
                 raise ValueError(f"{where}: a log scale needs low > 0, got {lo!r}")
@@ -152,9 +162,13 @@ def sample(trial, space: dict[str, dict[str, Any]]) -> dict[str, Any]:
     params: dict[str, Any] = {}
     for name, spec in space.items():
         if spec["type"] == "float":
-            params[name] = trial.suggest_float(name, float(spec["low"]), float(spec["high"]), log=bool(spec.get("log", False)))
+            params[name] = trial.suggest_float(
+                name, float(spec["low"]), float(spec["high"]), log=bool(spec.get("log", False))
+            )
         elif spec["type"] == "int":
-            params[name] = trial.suggest_int(name, int(spec["low"]), int(spec["high"]), log=bool(spec.get("log", False)))
+            params[name] = trial.suggest_int(
+                name, int(spec["low"]), int(spec["high"]), log=bool(spec.get("log", False))
+            )
         else:
             params[name] = trial.suggest_categorical(name, spec["choices"])
     return params
@@ -164,8 +178,10 @@ def as_overrides(params: dict[str, Any]) -> list[str]:
     """``key=value`` overrides for :func:`agents.train.apply_overrides`, each value written as YAML
     that reads back to the same value (``3e-05`` would read back as a string: YAML 1.1 floats need
     a dot, so the YAML writer's ``3.0e-05`` is used)."""
-    return [f"{k}={yaml.safe_dump(v, default_flow_style=True).removesuffix(chr(10) + '...' + chr(10)).strip()}"
-            for k, v in params.items()]
+    return [
+        f"{k}={yaml.safe_dump(v, default_flow_style=True).removesuffix(chr(10) + '...' + chr(10)).strip()}"
+        for k, v in params.items()
+    ]
 
 
 def open_storage(url: str):
@@ -179,24 +195,33 @@ def open_storage(url: str):
     if not isinstance(url, str) or not url:
         raise ValueError(f"storage: expected a journal file path or a database URL, got {url!r}")
     if url.startswith("journal:"):
-        url = url[len("journal:"):]
+        url = url[len("journal:") :]
     elif "://" in url:
         engine: dict[str, Any] = {"pool_pre_ping": True}
         if url.startswith("sqlite:///"):
             from flatbody_env.physics import validation
 
-            db = Path(url[len("sqlite:///"):])
-            validation.sqlite_file("storage", db, ("studies",))  # a directory, corrupt or foreign file: one line, exit 2
+            db = Path(url[len("sqlite:///") :])
+            validation.sqlite_file(
+                "storage", db, ("studies",)
+            )  # a directory, corrupt or foreign file: one line, exit 2
             db.parent.mkdir(parents=True, exist_ok=True)
             engine["connect_args"] = {"timeout": 60}
         try:
             # Optuna's heartbeat: a killed worker's RUNNING trial is marked FAIL after GRACE_PERIOD
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                return optuna.storages.RDBStorage(url, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_INTERVAL, grace_period=GRACE_PERIOD,
-                                                  heartbeat_stale_trial_callback=on_failed_trial)
+                return optuna.storages.RDBStorage(
+                    url,
+                    engine_kwargs=engine,
+                    heartbeat_interval=HEARTBEAT_INTERVAL,
+                    grace_period=GRACE_PERIOD,
+                    heartbeat_stale_trial_callback=on_failed_trial,
+                )
         except Exception as exc:  # sqlalchemy's errors: a bad URL, an unreachable server, a missing driver
-            raise ValueError(f"storage: cannot open {url.split('@')[-1]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
+            raise ValueError(
+                f"storage: cannot open {url.split('@')[-1]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})"
+            ) from None
     path = Path(url)
     path.parent.mkdir(parents=True, exist_ok=True)
     return JournalStorage(JournalFileBackend(str(path)))
@@ -205,8 +230,10 @@ def open_storage(url: str):
 def on_failed_trial(study, trial) -> None:
     """Optuna's ``heartbeat_stale_trial_callback`` (``failed_trial_callback`` before Optuna 4.9): a trial whose
     worker stopped beating (killed) was marked FAIL."""
-    sys.stderr.write(f"flatbody tune: trial {trial.number} of study {study.study_name!r} lost its worker (no heartbeat for "
-                     f"{GRACE_PERIOD} s); marked FAIL\n")
+    sys.stderr.write(
+        f"flatbody tune: trial {trial.number} of study {study.study_name!r} lost its worker (no heartbeat for "
+        f"{GRACE_PERIOD} s); marked FAIL\n"
+    )
 
 
 def _fail_stale(study) -> None:
@@ -246,10 +273,22 @@ def _study(cfg: TuneConfig, worker: int = 0):
 
     sampler = optuna.samplers.TPESampler(seed=cfg.seed + worker, n_startup_trials=cfg.startup_trials)
     pruner = optuna.pruners.MedianPruner(n_startup_trials=cfg.startup_trials, n_warmup_steps=cfg.evaluations // 3)
-    study = optuna.create_study(study_name=cfg.study, storage=open_storage(cfg.storage), sampler=sampler, pruner=pruner,
-                                direction="minimize", load_if_exists=True)
-    fixed = {"algo": cfg.algo, "overrides": list(cfg.overrides), "hyperparams_file": cfg.hyperparams_file,
-             "n_envs": cfg.n_envs, "tune_n_timesteps": cfg.n_timesteps, "env_id": ENV_ID}
+    study = optuna.create_study(
+        study_name=cfg.study,
+        storage=open_storage(cfg.storage),
+        sampler=sampler,
+        pruner=pruner,
+        direction="minimize",
+        load_if_exists=True,
+    )
+    fixed = {
+        "algo": cfg.algo,
+        "overrides": list(cfg.overrides),
+        "hyperparams_file": cfg.hyperparams_file,
+        "n_envs": cfg.n_envs,
+        "tune_n_timesteps": cfg.n_timesteps,
+        "env_id": ENV_ID,
+    }
     stored = study.user_attrs
     if "algo" in stored and stored["algo"] != cfg.algo:
         raise ValueError(f"study: {cfg.study!r} searches {stored['algo']}, not {cfg.algo}")
@@ -311,10 +350,22 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
     every = max(1, cfg.n_timesteps // cfg.evaluations)
     callback = _pruning_callback(trial, out, every, cfg.eval_episodes)
-    train(cfg.algo, out, seed=cfg.seed, n_timesteps=cfg.n_timesteps, n_envs=cfg.n_envs,
-          overrides=[*cfg.overrides, *as_overrides(params)], hyperparams_file=cfg.hyperparams_file, checkpoint_freq=0,
-          threads=1, progress=False, extra_callbacks=[callback], force=True, notes=False,
-          command=["flatbody", "tune", f"--algo={cfg.algo}", f"--study={cfg.study}", f"--trial={trial.number}"])
+    train(
+        cfg.algo,
+        out,
+        seed=cfg.seed,
+        n_timesteps=cfg.n_timesteps,
+        n_envs=cfg.n_envs,
+        overrides=[*cfg.overrides, *as_overrides(params)],
+        hyperparams_file=cfg.hyperparams_file,
+        checkpoint_freq=0,
+        threads=1,
+        progress=False,
+        extra_callbacks=[callback],
+        force=True,
+        notes=False,
+        command=["flatbody", "tune", f"--algo={cfg.algo}", f"--study={cfg.study}", f"--trial={trial.number}"],
+    )
     if callback.pruned:
         raise optuna.TrialPruned(f"pruned at evaluation {callback.step - 1}")
     final = _evaluate(out, callback.model, cfg.eval_episodes)
@@ -363,9 +414,15 @@ def tune_worker(cfg: TuneConfig, worker: int = 0, n_trials: int | None = None) -
     # states=None counts running trials too: a worker stops as soon as the study holds cfg.trials
     # trials in any state, so workers finishing at the same instant are the only way to overshoot
     with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*mini-batch.*", category=UserWarning)  # sampled batch sizes vs rollout size
-        study.optimize(lambda t: objective(t, cfg, space), n_trials=min(left, n_trials or left),
-                       callbacks=[optuna.study.MaxTrialsCallback(cfg.trials, states=None)], catch=(ValueError, RuntimeError))
+        warnings.filterwarnings(
+            "ignore", message=".*mini-batch.*", category=UserWarning
+        )  # sampled batch sizes vs rollout size
+        study.optimize(
+            lambda t: objective(t, cfg, space),
+            n_trials=min(left, n_trials or left),
+            callbacks=[optuna.study.MaxTrialsCallback(cfg.trials, states=None)],
+            catch=(ValueError, RuntimeError),
+        )
     return len({t.number for t in study.get_trials(deepcopy=False)} - before)
 
 
@@ -378,9 +435,17 @@ def summary(study_name: str, storage: str) -> dict[str, Any]:
     except KeyError:
         raise ValueError(f"study: no study {study_name!r} in {storage}") from None
     _fail_stale(study)
-    trials = [{"number": t.number, "state": t.state.name, "value": t.value, "params": t.params,
-               "success_rate": t.user_attrs.get("success_rate"), "evaluations": len(t.intermediate_values)}
-              for t in study.get_trials(deepcopy=False)]
+    trials = [
+        {
+            "number": t.number,
+            "state": t.state.name,
+            "value": t.value,
+            "params": t.params,
+            "success_rate": t.user_attrs.get("success_rate"),
+            "evaluations": len(t.intermediate_values),
+        }
+        for t in study.get_trials(deepcopy=False)
+    ]
     done = [t for t in trials if t["state"] == "COMPLETE"]
     best = min(done, key=lambda t: t["value"]) if done else None
     return {"study": study_name, "algo": study.user_attrs.get("algo"), "trials": trials, "best": best}
@@ -402,8 +467,25 @@ def trial_overrides(study_name: str, storage: str, trial_id: int) -> tuple[str, 
     if not t.params:
         raise ValueError(f"trial_id: trial {trial_id} has no parameters (state {t.state.name})")
     attrs = study.user_attrs
-    return attrs["algo"], [*attrs.get("overrides", []), *as_overrides(t.params)], attrs.get("hyperparams_file"), attrs.get("n_envs")
+    return (
+        attrs["algo"],
+        [*attrs.get("overrides", []), *as_overrides(t.params)],
+        attrs.get("hyperparams_file"),
+        attrs.get("n_envs"),
+    )
 
 
-__all__ = ["DEFAULT_STORAGE", "TUNE_EVAL_SEED", "TuneConfig", "as_overrides", "load_search_space", "objective", "open_storage",
-           "prepare", "sample", "summary", "trial_overrides", "tune_worker"]
+__all__ = [
+    "DEFAULT_STORAGE",
+    "TUNE_EVAL_SEED",
+    "TuneConfig",
+    "as_overrides",
+    "load_search_space",
+    "objective",
+    "open_storage",
+    "prepare",
+    "sample",
+    "summary",
+    "trial_overrides",
+    "tune_worker",
+]

@@ -74,7 +74,10 @@ class FlatBodySB3VecEnv(VecEnv):
         setattr(self.venv.single_env, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-        return [getattr(self.venv.single_env, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+        return [
+            getattr(self.venv.single_env, method_name)(*method_args, **method_kwargs)
+            for _ in self._get_indices(indices)
+        ]
 
     def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]

@@ -5,10 +5,24 @@
 _LAZY = {
     "families": ("Family", "FamilyEvent", "FamilyPoint", "follow_family", "shape_stability_grid", "stability_grid"),
     "invariants": ("DriftRow", "InvariantReport", "invariants_along"),
-    "stability": ("StabilityResult", "ZeroMode", "analyse_stability", "reduced_jacobian", "sample_stable_target",
-                  "stability_of", "stability_of_shape", "steady_rotation_stability"),
-    "stationary": ("SearchBox", "StationaryEllipse", "spins_for_shape", "stationary_ellipses", "steady_rotations",
-                   "v1_closed_form"),
+    "stability": (
+        "StabilityResult",
+        "ZeroMode",
+        "analyse_stability",
+        "reduced_jacobian",
+        "sample_stable_target",
+        "stability_of",
+        "stability_of_shape",
+        "steady_rotation_stability",
+    ),
+    "stationary": (
+        "SearchBox",
+        "StationaryEllipse",
+        "spins_for_shape",
+        "stationary_ellipses",
+        "steady_rotations",
+        "v1_closed_form",
+    ),
     "verification": ("verify_bounded", "verify_growth", "verify_stationary"),
 }
 _WHERE = {name: module for module, names in _LAZY.items() for name in names}

@@ -124,7 +124,9 @@ def relative_gap_min(Z: np.ndarray, times: np.ndarray) -> float:
 def _run(study, method, scene, t_end, ref, floor, pname, pval, mname, mval, repeats) -> FailurePoint:
     info = get_method(method).info
     # the energy tolerances of simulate(): failures must be detected, not returned as states
-    energy_tol = default_energy_tol(hamiltonian(pack(scene.state), scene.body), ADAPTIVE["rtol"], ADAPTIVE["atol"], adaptive=info.adaptive)
+    energy_tol = default_energy_tol(
+        hamiltonian(pack(scene.state), scene.body), ADAPTIVE["rtol"], ADAPTIVE["atol"], adaptive=info.adaptive
+    )
     if info.adaptive:
         tol = Tolerances(**ADAPTIVE, energy_tol=energy_tol)
     else:
@@ -141,9 +143,21 @@ def _run(study, method, scene, t_end, ref, floor, pname, pval, mname, mval, repe
         dH = float(np.max(np.abs(H - H[0])))
         nfev = sol.nfev
     return FailurePoint(
-        study=study, method=method, chart=info.chart, parameter_name=pname, parameter=pval, measured_name=mname,
-        measured=mval, setting=setting, error=err, energy_error=dH, reference_floor=floor, wall_time=wall, nfev=nfev,
-        status=status, reason=reason,
+        study=study,
+        method=method,
+        chart=info.chart,
+        parameter_name=pname,
+        parameter=pval,
+        measured_name=mname,
+        measured=mval,
+        setting=setting,
+        error=err,
+        energy_error=dH,
+        reference_floor=floor,
+        wall_time=wall,
+        nfev=nfev,
+        status=status,
+        reason=reason,
     )
 
 
@@ -193,7 +207,13 @@ def planned_runs(studies=STUDIES, methods=DEFAULT_METHODS, *, quick: bool = Fals
 
 
 def failure_study(
-    studies=STUDIES, methods=DEFAULT_METHODS, *, quick: bool = False, repeats: int = 1, max_run_s: float = 10.0, progress: bool = True
+    studies=STUDIES,
+    methods=DEFAULT_METHODS,
+    *,
+    quick: bool = False,
+    repeats: int = 1,
+    max_run_s: float = 10.0,
+    progress: bool = True,
 ) -> list[FailurePoint]:
     """Run the studies; a method's sweep along an axis stops once a run exceeds ``max_run_s``
     (or, on the horizon axis, once the next run is predicted to). The progress bar counts the
@@ -203,7 +223,9 @@ def failure_study(
 
     warm_up()  # load (or compile) the kernels before anything is timed
     axes = _axes(quick)
-    bar = progress_bar(total=planned_runs(studies, methods, quick=quick), desc="failure study", unit="run", enabled=progress)
+    bar = progress_bar(
+        total=planned_runs(studies, methods, quick=quick), desc="failure study", unit="run", enabled=progress
+    )
     out: list[FailurePoint] = []
     for study in studies:
         pname, values, make_ref, mname, t_fixed = axes[study]
@@ -234,4 +256,13 @@ def failure_study(
     return out
 
 
-__all__ = ["DEFAULT_METHODS", "FailurePoint", "STUDIES", "failure_study", "gap_scene", "planned_runs", "relative_gap_min", "rho_scene"]
+__all__ = [
+    "DEFAULT_METHODS",
+    "FailurePoint",
+    "STUDIES",
+    "failure_study",
+    "gap_scene",
+    "planned_runs",
+    "relative_gap_min",
+    "rho_scene",
+]

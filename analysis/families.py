@@ -39,7 +39,14 @@ from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPo
 from flatbody_env.physics.validation import FAMILY_SEEDS_RANGE
 
 from analysis.stability import analyse_stability, stability_of_shape
-from analysis.stationary import DEFAULT_TOL, SearchBox, build_ellipse, check_isotropic, equilibrium_equations, stationary_ellipses
+from analysis.stationary import (
+    DEFAULT_TOL,
+    SearchBox,
+    build_ellipse,
+    check_isotropic,
+    equilibrium_equations,
+    stationary_ellipses,
+)
 
 SPIN_PARAMETERS = ("s3", "p_theta")
 BODY_PARAMETERS = ("k", "c", "d", "kappa", "a", "b", "J", "J3")
@@ -68,8 +75,23 @@ GAP_MIN = 1e-3
 outside the two-polar chart; for symmetric V the ellipses tend to it as s3 → p_θ, docs/physics.md §7–§8)."""
 
 CSV_COLUMNS = (
-    "branch", "event", "param_name", "param", "lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot",
-    "energy", "residual", "max_real_part", "classification", "nonlinear", "kind",
+    "branch",
+    "event",
+    "param_name",
+    "param",
+    "lambda",
+    "mu",
+    "rho",
+    "s3",
+    "p_theta",
+    "omega3",
+    "theta_dot",
+    "energy",
+    "residual",
+    "max_real_part",
+    "classification",
+    "nonlinear",
+    "kind",
 )
 
 
@@ -135,14 +157,18 @@ def body_with(body: Body, name: str, value: float) -> Body:
     if name in ("a", "b"):
         if th is None:
             raise ValueError(f"param: the body has no thickness potential, cannot vary {name!r}")
-        return replace(body, thickness=ThicknessPotential(a=value if name == "a" else th.a, b=value if name == "b" else th.b))
+        return replace(
+            body, thickness=ThicknessPotential(a=value if name == "a" else th.a, b=value if name == "b" else th.b)
+        )
     if name == "k" and isinstance(pot, V1):
         return replace(body, potential=V1(k=value))
     if name in ("c", "d") and isinstance(pot, V2):
         return replace(body, potential=V2(c=value if name == "c" else pot.c, d=value if name == "d" else pot.d))
     if name == "kappa" and isinstance(pot, V3):
         return replace(body, potential=V3(kappa=value))
-    raise ValueError(f"param: {name!r} is not a constant of this body ({body.describe()}); allowed: {', '.join(_allowed(body))}")
+    raise ValueError(
+        f"param: {name!r} is not a constant of this body ({body.describe()}); allowed: {', '.join(_allowed(body))}"
+    )
 
 
 def _allowed(body: Body) -> list[str]:
@@ -217,9 +243,20 @@ class _Problem:
             return None
         st = analyse_stability(b, ell)
         return FamilyPoint(
-            param=p, lam=ell.lam, mu=ell.mu, rho=ell.rho, s3=s3, p_theta=pt, omega3=ell.omega3, theta_dot=ell.theta_dot,
-            energy=ell.energy, residual=ell.residual, max_real_part=st.max_real_part, classification=st.classification,
-            nonlinear=st.nonlinear, kind=ell.kind,
+            param=p,
+            lam=ell.lam,
+            mu=ell.mu,
+            rho=ell.rho,
+            s3=s3,
+            p_theta=pt,
+            omega3=ell.omega3,
+            theta_dot=ell.theta_dot,
+            energy=ell.energy,
+            residual=ell.residual,
+            max_real_part=st.max_real_part,
+            classification=st.classification,
+            nonlinear=st.nonlinear,
+            kind=ell.kind,
         )
 
 
@@ -281,8 +318,18 @@ def _solve_at(prob: _Problem, z0: np.ndarray, p: float) -> np.ndarray | None:
     return sol.x
 
 
-def _trace(prob: _Problem, X0: np.ndarray, direction: float, p_lo: float, p_hi: float, box: SearchBox,
-           h0: float, h_max: float, max_points: int, tol: float) -> list[np.ndarray]:
+def _trace(
+    prob: _Problem,
+    X0: np.ndarray,
+    direction: float,
+    p_lo: float,
+    p_hi: float,
+    box: SearchBox,
+    h0: float,
+    h_max: float,
+    max_points: int,
+    tol: float,
+) -> list[np.ndarray]:
     pts = [X0]
     X = X0
     T = _tangent(prob, X, None, direction)
@@ -466,7 +513,9 @@ def follow_family(
     for ps in iterator:
         b = prob.body(float(ps))
         s3_p, pt_p = prob.spins(float(ps))
-        for ell in stationary_ellipses(b, s3_p, pt_p, box=box, tol=tol, method="numeric" if prob.coupled else "auto", rho=rho):
+        for ell in stationary_ellipses(
+            b, s3_p, pt_p, box=box, tol=tol, method="numeric" if prob.coupled else "auto", rho=rho
+        ):
             z = np.array([ell.lam, ell.mu, ell.rho] if prob.coupled else [ell.lam, ell.mu])
             if _on_branch(prob, traced, z, float(ps)):
                 continue
@@ -487,17 +536,39 @@ def follow_family(
             if d0 * d1 < 0:
                 Xf = _refine_fold(prob, pts[k - 1], pts[k], pts[k + 1])
                 if Xf is not None:
-                    events.append(FamilyEvent(kind="fold", branch=bi, param=float(Xf[-1]), lam=float(Xf[0]), mu=float(Xf[1]),
-                                              detail="turning point in the parameter: two stationary ellipses merge"))
+                    events.append(
+                        FamilyEvent(
+                            kind="fold",
+                            branch=bi,
+                            param=float(Xf[-1]),
+                            lam=float(Xf[0]),
+                            mu=float(Xf[1]),
+                            detail="turning point in the parameter: two stationary ellipses merge",
+                        )
+                    )
         for k in range(len(pts) - 1):
             if fam[k].classification != fam[k + 1].classification:
                 a, c = fam[k], fam[k + 1]
                 Xs = _refine_change(prob, pts[k], pts[k + 1], a.classification)
-                events.append(FamilyEvent(kind="stability-change", branch=bi, param=float(Xs[-1]),
-                                          lam=float(Xs[0]), mu=float(Xs[1]),
-                                          detail=f"{a.classification} -> {c.classification}"))
-    return Family(param_name=param, param_range=(float(start), float(stop)), s3=float(s3), p_theta=float(p_theta), body=body,
-                  branches=tuple(branches), events=tuple(events))
+                events.append(
+                    FamilyEvent(
+                        kind="stability-change",
+                        branch=bi,
+                        param=float(Xs[-1]),
+                        lam=float(Xs[0]),
+                        mu=float(Xs[1]),
+                        detail=f"{a.classification} -> {c.classification}",
+                    )
+                )
+    return Family(
+        param_name=param,
+        param_range=(float(start), float(stop)),
+        s3=float(s3),
+        p_theta=float(p_theta),
+        body=body,
+        branches=tuple(branches),
+        events=tuple(events),
+    )
 
 
 def _on_branch(prob: _Problem, traced: list[list[np.ndarray]], z: np.ndarray, p: float) -> bool:
@@ -522,14 +593,36 @@ def stability_grid(body: Body, s3_values, p_theta_values, *, box: SearchBox | No
         for pt in p_theta_values:
             for ell in stationary_ellipses(body, float(s3), float(pt), box=box):
                 st = analyse_stability(body, ell)
-                rows.append({"s3": float(s3), "p_theta": float(pt), "lambda": ell.lam, "mu": ell.mu, "rho": ell.rho,
-                             "kind": ell.kind, "classification": st.classification, "nonlinear": st.nonlinear,
-                             "max_real_part": st.max_real_part})
+                rows.append(
+                    {
+                        "s3": float(s3),
+                        "p_theta": float(pt),
+                        "lambda": ell.lam,
+                        "mu": ell.mu,
+                        "rho": ell.rho,
+                        "kind": ell.kind,
+                        "classification": st.classification,
+                        "nonlinear": st.nonlinear,
+                        "max_real_part": st.max_real_part,
+                    }
+                )
     return rows
 
 
-SHAPE_COLUMNS = ("lambda", "mu", "rho", "s3", "p_theta", "omega3", "theta_dot", "energy", "kind", "classification",
-                 "nonlinear", "max_real_part")
+SHAPE_COLUMNS = (
+    "lambda",
+    "mu",
+    "rho",
+    "s3",
+    "p_theta",
+    "omega3",
+    "theta_dot",
+    "energy",
+    "kind",
+    "classification",
+    "nonlinear",
+    "max_real_part",
+)
 
 
 def shape_stability_grid(body: Body, lam_values, mu_values, *, progress: bool = False) -> list[dict[str, Any]]:
@@ -546,9 +639,22 @@ def shape_stability_grid(body: Body, lam_values, mu_values, *, progress: bool = 
                 continue
             for st in stability_of_shape(body, float(lam), float(mu)):
                 e = st.ellipse
-                rows.append({"lambda": e.lam, "mu": e.mu, "rho": e.rho, "s3": e.s3, "p_theta": e.p_theta, "omega3": e.omega3,
-                             "theta_dot": e.theta_dot, "energy": e.energy, "kind": e.kind, "classification": st.classification,
-                             "nonlinear": st.nonlinear, "max_real_part": st.max_real_part})
+                rows.append(
+                    {
+                        "lambda": e.lam,
+                        "mu": e.mu,
+                        "rho": e.rho,
+                        "s3": e.s3,
+                        "p_theta": e.p_theta,
+                        "omega3": e.omega3,
+                        "theta_dot": e.theta_dot,
+                        "energy": e.energy,
+                        "kind": e.kind,
+                        "classification": st.classification,
+                        "nonlinear": st.nonlinear,
+                        "max_real_part": st.max_real_part,
+                    }
+                )
     return rows
 
 
@@ -568,15 +674,40 @@ def family_rows(family: Family) -> list[dict[str, Any]]:
     rows = []
     for bi, branch in enumerate(family.branches):
         for fp in branch:
-            rows.append({"branch": bi, "event": "", "param_name": family.param_name, "param": fp.param, "lambda": fp.lam,
-                         "mu": fp.mu, "rho": fp.rho, "s3": fp.s3, "p_theta": fp.p_theta, "omega3": fp.omega3,
-                         "theta_dot": fp.theta_dot, "energy": fp.energy, "residual": fp.residual,
-                         "max_real_part": fp.max_real_part, "classification": fp.classification,
-                         "nonlinear": fp.nonlinear, "kind": fp.kind})
+            rows.append(
+                {
+                    "branch": bi,
+                    "event": "",
+                    "param_name": family.param_name,
+                    "param": fp.param,
+                    "lambda": fp.lam,
+                    "mu": fp.mu,
+                    "rho": fp.rho,
+                    "s3": fp.s3,
+                    "p_theta": fp.p_theta,
+                    "omega3": fp.omega3,
+                    "theta_dot": fp.theta_dot,
+                    "energy": fp.energy,
+                    "residual": fp.residual,
+                    "max_real_part": fp.max_real_part,
+                    "classification": fp.classification,
+                    "nonlinear": fp.nonlinear,
+                    "kind": fp.kind,
+                }
+            )
     for ev in family.events:
         row = dict.fromkeys(CSV_COLUMNS, "")
-        row.update({"branch": ev.branch, "event": ev.kind, "param_name": family.param_name, "param": ev.param,
-                    "lambda": ev.lam, "mu": ev.mu, "classification": ev.detail})
+        row.update(
+            {
+                "branch": ev.branch,
+                "event": ev.kind,
+                "param_name": family.param_name,
+                "param": ev.param,
+                "lambda": ev.lam,
+                "mu": ev.mu,
+                "classification": ev.detail,
+            }
+        )
         rows.append(row)
     return rows
 

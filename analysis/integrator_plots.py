@@ -20,12 +20,21 @@ from flatbody_env.chart_text import add_caption
 from flatbody_env.output import save_figure
 
 _STYLE = {
-    "RK23": ("#bbbbbb", "v"), "RK45": ("#999999", "^"), "DOP853": ("#000000", "o"), "Radau": ("#8c564b", "s"),
-    "BDF": ("#c49c94", "s"), "LSODA": ("#7f7f7f", "D"),
+    "RK23": ("#bbbbbb", "v"),
+    "RK45": ("#999999", "^"),
+    "DOP853": ("#000000", "o"),
+    "Radau": ("#8c564b", "s"),
+    "BDF": ("#c49c94", "s"),
+    "LSODA": ("#7f7f7f", "D"),
     "DOP853-regular": ("#17becf", "o"),
-    "DOP853-numba": ("#d62728", "o"), "RK4": ("#ff7f0e", "s"),
-    "splitting-strang": ("#aec7e8", "^"), "splitting-suzuki4": ("#1f77b4", "^"), "splitting-yoshida4": ("#9467bd", "v"),
-    "RATTLE": ("#98df8a", "D"), "RATTLE-suzuki4": ("#2ca02c", "D"), "RATTLE-kahanli6": ("#006400", "P"),
+    "DOP853-numba": ("#d62728", "o"),
+    "RK4": ("#ff7f0e", "s"),
+    "splitting-strang": ("#aec7e8", "^"),
+    "splitting-suzuki4": ("#1f77b4", "^"),
+    "splitting-yoshida4": ("#9467bd", "v"),
+    "RATTLE": ("#98df8a", "D"),
+    "RATTLE-suzuki4": ("#2ca02c", "D"),
+    "RATTLE-kahanli6": ("#006400", "P"),
 }
 
 
@@ -71,8 +80,15 @@ def plot_work_precision(csv_path, png_path, references_json=None) -> Path:
                 color, marker = _style(m)
                 if ok:
                     ok.sort(key=lambda r: r["error"])
-                    ax.plot([r["error"] for r in ok], [r[ykey] for r in ok], marker=marker, color=color, ms=4, lw=1.2,
-                            label=m if j == 0 and i == 0 else None)
+                    ax.plot(
+                        [r["error"] for r in ok],
+                        [r[ykey] for r in ok],
+                        marker=marker,
+                        color=color,
+                        ms=4,
+                        lw=1.2,
+                        label=m if j == 0 and i == 0 else None,
+                    )
                 bad = [r for r in pts if r["status"] not in ("ok", "skipped")]
                 if bad and ykey == "wall_time":
                     ax.plot([1.0] * len(bad), [r[ykey] for r in bad], ls="none", marker="x", color=color, ms=6)
@@ -93,8 +109,10 @@ def plot_work_precision(csv_path, png_path, references_json=None) -> Path:
             ax.set_xlim(left=1e-15, right=3.0)
     bottom = add_caption(fig, WORK_PRECISION_CAPTION, fontsize=8)
     fig.legend(loc="lower center", ncol=min(7, len(methods)), fontsize=8, frameon=False, bbox_to_anchor=(0.5, bottom))
-    fig.suptitle("Work-precision: x = error vs reference (grey: below the reference's agreement floor), "
-                 "x at 1 = failed run", fontsize=10)
+    fig.suptitle(
+        "Work-precision: x = error vs reference (grey: below the reference's agreement floor), x at 1 = failed run",
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0, bottom + 0.06, 1, 0.96))
     return _save(plt, fig, png_path)
 
@@ -115,8 +133,15 @@ def plot_failure_study(csv_path, png_path) -> Path:
                 color, marker = _style(m)
                 ok = [r for r in pts if r["status"] == "ok"]
                 if ok:
-                    ax.plot([r["measured"] for r in ok], [r[key] for r in ok], marker=marker, color=color, ms=4, lw=1.2,
-                            label=m if i == 0 and j == 0 else None)
+                    ax.plot(
+                        [r["measured"] for r in ok],
+                        [r[key] for r in ok],
+                        marker=marker,
+                        color=color,
+                        ms=4,
+                        lw=1.2,
+                        label=m if i == 0 and j == 0 else None,
+                    )
                 bad = [r for r in pts if r["status"] != "ok"]
                 if bad and key == "error":
                     ax.plot([r["measured"] for r in bad], [1.0] * len(bad), ls="none", marker="x", color=color, ms=7)
@@ -210,11 +235,15 @@ def plot_bench(json_path, png_path) -> Path:
             if r.get("wall_time"):
                 labels.append(f"δ={case['delta']:g} {r['method']}")
                 vals.append(r["wall_time"] * 1e3)
-    axes[1].barh(labels, vals, color=[_style(lbl.split(' ', 1)[1])[0] for lbl in labels])
+    axes[1].barh(labels, vals, color=[_style(lbl.split(" ", 1)[1])[0] for lbl in labels])
     axes[1].set_xscale("log")
     target = ca[0].get("target_error") if ca else None
-    axes[1].set_xlabel("wall time [ms]" + (f" to final-state error {target:g}" if target else "") + " (lower is better)")
-    axes[1].set_title("close approach, t = " + (f"{ca[0]['t_end']:g}" if ca else "?") + ": wall time at equal error", fontsize=9)
+    axes[1].set_xlabel(
+        "wall time [ms]" + (f" to final-state error {target:g}" if target else "") + " (lower is better)"
+    )
+    axes[1].set_title(
+        "close approach, t = " + (f"{ca[0]['t_end']:g}" if ca else "?") + ": wall time at equal error", fontsize=9
+    )
     axes[1].tick_params(axis="y", labelsize=7)
     st = data["short_step"]
     labels = [r["method"] + (" (env)" if r["path"] == "env" else " (integrate)") for r in st]

@@ -99,8 +99,12 @@ class InvariantReport:
                 for r in self.drift
             ],
             "rates": {
-                "dG_dt_norm_mean": None if self.G_rate is None else float(np.mean(np.linalg.norm(self.G_rate, axis=(1, 2)))),
-                "dC_dt_norm_mean": None if self.C_rate is None else float(np.mean(np.linalg.norm(self.C_rate, axis=(1, 2)))),
+                "dG_dt_norm_mean": None
+                if self.G_rate is None
+                else float(np.mean(np.linalg.norm(self.G_rate, axis=(1, 2)))),
+                "dC_dt_norm_mean": None
+                if self.C_rate is None
+                else float(np.mean(np.linalg.norm(self.C_rate, axis=(1, 2)))),
             },
         }
 
@@ -199,8 +203,14 @@ def format_drift_table(report: InvariantReport) -> str:
     if report.G_rate is not None:
         g = report.series["dG/dt"]
         lines.append("")
-        lines.append(f"|dG/dt| in [{g.min():.4g}, {g.max():.4g}]" + (
-            f", |dC/dt| in [{report.series['dC/dt'].min():.4g}, {report.series['dC/dt'].max():.4g}]" if report.C_rate is not None else ""))
+        lines.append(
+            f"|dG/dt| in [{g.min():.4g}, {g.max():.4g}]"
+            + (
+                f", |dC/dt| in [{report.series['dC/dt'].min():.4g}, {report.series['dC/dt'].max():.4g}]"
+                if report.C_rate is not None
+                else ""
+            )
+        )
     return "\n".join(lines)
 
 

@@ -150,7 +150,11 @@ def applicable_rungs(scene: Scene) -> list[str]:
 
 def _reference(scene: Scene, times: np.ndarray, rungs: list[str]) -> tuple[np.ndarray, str, str, float]:
     y0 = pack(scene.state)
-    best = get_method(REFERENCE[0]).integrate(scene.body, y0, times, tol=Tolerances(rtol=REFERENCE[1], atol=REFERENCE[1] * 1e-2)).Y[:, -1]
+    best = (
+        get_method(REFERENCE[0])
+        .integrate(scene.body, y0, times, tol=Tolerances(rtol=REFERENCE[1], atol=REFERENCE[1] * 1e-2))
+        .Y[:, -1]
+    )
     best_txt = f"{REFERENCE[0]} rtol={REFERENCE[1]:g}"
     exact = [r for r in ("stationary", "planar-V1") if r in rungs]
     if exact:
@@ -182,21 +186,54 @@ def ladder_study(scenes=None, *, quick: bool = False, repeats: int = 3, max_run_
         choice = explain_model(pack(sc.state), sc.body)
         rungs = applicable_rungs(sc)
         ref, ref_txt, cross_txt, floor = _reference(sc, times, rungs)
-        records.append(LadderScene(scene=name, chosen=choice.rung, invariant=choice.invariant, t_end=T, reference=ref_txt,
-                                   cross_check=cross_txt, floor=floor))
+        records.append(
+            LadderScene(
+                scene=name,
+                chosen=choice.rung,
+                invariant=choice.invariant,
+                t_end=T,
+                reference=ref_txt,
+                cross_check=cross_txt,
+                floor=floor,
+            )
+        )
         for rung, model in [(r, m) for r in rungs for m in _models(r)]:
             settings = [None] if rung == "stationary" else (steps if rung == "regular" else rtols)
             over = False
             for value in settings:
                 tol, text = _tol(rung, value)
                 if over:
-                    points.append(LadderPoint(scene=name, chosen=choice.rung, rung=rung, method=model.info.name, setting=text, t_end=T,
-                                              error=math.nan, wall_time=math.nan, nfev=0, status="skipped"))
+                    points.append(
+                        LadderPoint(
+                            scene=name,
+                            chosen=choice.rung,
+                            rung=rung,
+                            method=model.info.name,
+                            setting=text,
+                            t_end=T,
+                            error=math.nan,
+                            wall_time=math.nan,
+                            nfev=0,
+                            status="skipped",
+                        )
+                    )
                     continue
                 sol, wall, status = _timed(model, sc, times, tol, repeats)
                 err = float(np.max(np.abs(sol.Y[:, -1] - ref))) if sol is not None else math.nan
-                points.append(LadderPoint(scene=name, chosen=choice.rung, rung=rung, method=model.info.name, setting=text, t_end=T,
-                                          error=err, wall_time=wall, nfev=int(sol.nfev) if sol is not None else 0, status=status))
+                points.append(
+                    LadderPoint(
+                        scene=name,
+                        chosen=choice.rung,
+                        rung=rung,
+                        method=model.info.name,
+                        setting=text,
+                        t_end=T,
+                        error=err,
+                        wall_time=wall,
+                        nfev=int(sol.nfev) if sol is not None else 0,
+                        status=status,
+                    )
+                )
                 if log is not None:
                     log(f"{name:<20} {model.info.name:<18} {text:<12} error {err:9.2e}  {wall * 1e3:9.3f} ms  {status}")
                 over = wall > max_run_s
@@ -206,15 +243,38 @@ def ladder_study(scenes=None, *, quick: bool = False, repeats: int = 3, max_run_
             label = f"{HORIZON_SCENE} t={T:.0e}"
             times = np.array([0.0, T])
             ref = rung_model("stationary").integrate(sc.body, pack(sc.state), times, tol=Tolerances()).Y[:, -1]
-            records.append(LadderScene(scene=label, chosen="stationary", invariant="stationary ellipse", t_end=T,
-                                       reference="stationary (exact)", cross_check="", floor=math.nan))
-            for rung, tol, text in (("stationary", Tolerances(), "exact"),
-                                    ("two-polar", Tolerances(rtol=HORIZON_RTOL, atol=HORIZON_RTOL), f"rtol={HORIZON_RTOL:g}")):
+            records.append(
+                LadderScene(
+                    scene=label,
+                    chosen="stationary",
+                    invariant="stationary ellipse",
+                    t_end=T,
+                    reference="stationary (exact)",
+                    cross_check="",
+                    floor=math.nan,
+                )
+            )
+            for rung, tol, text in (
+                ("stationary", Tolerances(), "exact"),
+                ("two-polar", Tolerances(rtol=HORIZON_RTOL, atol=HORIZON_RTOL), f"rtol={HORIZON_RTOL:g}"),
+            ):
                 model = _models(rung)[0]
                 sol, wall, status = _timed(model, sc, times, tol, repeats)
                 err = float(np.max(np.abs(sol.Y[:, -1] - ref))) if sol is not None else math.nan
-                points.append(LadderPoint(scene=label, chosen="stationary", rung=rung, method=model.info.name, setting=text, t_end=T,
-                                          error=err, wall_time=wall, nfev=int(sol.nfev) if sol is not None else 0, status=status))
+                points.append(
+                    LadderPoint(
+                        scene=label,
+                        chosen="stationary",
+                        rung=rung,
+                        method=model.info.name,
+                        setting=text,
+                        t_end=T,
+                        error=err,
+                        wall_time=wall,
+                        nfev=int(sol.nfev) if sol is not None else 0,
+                        status=status,
+                    )
+                )
                 if log is not None:
                     log(f"{label:<20} {rung:<11} {text:<12} error {err:9.2e}  {wall * 1e3:9.3f} ms  {status}")
     return points, records
@@ -238,7 +298,9 @@ def speedups(points, target: float = TARGET_ERROR) -> list[dict]:
         for method in dict.fromkeys(p.method for p in sub):
             pts = [p for p in sub if p.method == method]
             good = [p for p in pts if p.error <= target]
-            best[method] = (min(good, key=lambda p: p.wall_time), True) if good else (min(pts, key=lambda p: p.error), False)
+            best[method] = (
+                (min(good, key=lambda p: p.wall_time), True) if good else (min(pts, key=lambda p: p.error), False)
+            )
         full = [p for p, ok in best.values() if ok and p.rung in ("two-polar", "regular")]
         full_time = min((p.wall_time for p in full), default=math.nan)
         default = best.get(DEFAULT_METHOD)
@@ -253,14 +315,22 @@ def speedups(points, target: float = TARGET_ERROR) -> list[dict]:
             no_default = ""
         for method, (p, reached) in best.items():
             missed = f"this row did not reach {target:g}"
-            out.append({
-                "scene": sc, "chosen": p.chosen, "rung": p.rung, "method": method, "setting": p.setting, "error": p.error,
-                "wall_time": p.wall_time, "reached_target": reached,
-                "speedup_vs_full": full_time / p.wall_time if reached else math.nan,
-                "speedup_vs_default": default_time / p.wall_time if reached else math.nan,
-                "why_no_full": "" if reached and full else (no_full or missed),
-                "why_no_default": "" if reached and not no_default else (no_default or missed),
-            })
+            out.append(
+                {
+                    "scene": sc,
+                    "chosen": p.chosen,
+                    "rung": p.rung,
+                    "method": method,
+                    "setting": p.setting,
+                    "error": p.error,
+                    "wall_time": p.wall_time,
+                    "reached_target": reached,
+                    "speedup_vs_full": full_time / p.wall_time if reached else math.nan,
+                    "speedup_vs_default": default_time / p.wall_time if reached else math.nan,
+                    "why_no_full": "" if reached and full else (no_full or missed),
+                    "why_no_default": "" if reached and not no_default else (no_default or missed),
+                }
+            )
     return out
 
 
@@ -304,4 +374,13 @@ def read_csv(path) -> list[dict]:
     return out
 
 
-__all__ = ["LadderPoint", "LadderScene", "applicable_rungs", "ladder_study", "read_csv", "speedups", "write_csv", "write_scenes"]
+__all__ = [
+    "LadderPoint",
+    "LadderScene",
+    "applicable_rungs",
+    "ladder_study",
+    "read_csv",
+    "speedups",
+    "write_csv",
+    "write_scenes",
+]

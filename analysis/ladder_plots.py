@@ -25,8 +25,14 @@ RUNG_STYLE = {
 }
 _DASHED = ("DOP853",)
 """Methods drawn dotted with open markers (scipy, ``simulate``'s default)."""
-_LABELS = {"DOP853": "two-polar (scipy DOP853, simulate's default)", "two-polar": "two-polar (DOP853-numba)", "regular": "regular (RATTLE-kahanli6)", "planar": "planar (2 small DOP853)",
-           "planar-V1": "planar-V1 (exact in-plane)", "stationary": "stationary (exact)"}
+_LABELS = {
+    "DOP853": "two-polar (scipy DOP853, simulate's default)",
+    "two-polar": "two-polar (DOP853-numba)",
+    "regular": "regular (RATTLE-kahanli6)",
+    "planar": "planar (2 small DOP853)",
+    "planar-V1": "planar-V1 (exact in-plane)",
+    "stationary": "stationary (exact)",
+}
 CAPTION = (
     "Rung: one model of the same body, simplest first. stationary: the closed-form motion of a stationary ellipse; "
     "planar-V1: closed form in the plane (potential V1) + compiled DOP853 for the thickness ϱ;\n"
@@ -49,8 +55,16 @@ def _horizon_panel(ax, rows) -> None:
             color, marker = RUNG_STYLE[rung]
             ax.plot([r["t_end"] for r in pts], [r["wall_time"] for r in pts], marker=marker, color=color, lw=1.5)
             for r in pts:
-                ax.annotate(f"{r['error']:.0e}", (r["t_end"], r["wall_time"]), fontsize=7, xytext=offset,
-                            textcoords="offset points", ha=ha, va=va, color=color)
+                ax.annotate(
+                    f"{r['error']:.0e}",
+                    (r["t_end"], r["wall_time"]),
+                    fontsize=7,
+                    xytext=offset,
+                    textcoords="offset points",
+                    ha=ha,
+                    va=va,
+                    color=color,
+                )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.margins(x=0.15, y=0.12)
@@ -74,7 +88,11 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
         ax = axes[k // ncol, k % ncol]
         sub = [r for r in rows if r["scene"] == name]
         chosen = scenes[name]["chosen"] if name in scenes else sub[0]["chosen"]
-        series = [(rung, method) for rung in RUNG_STYLE for method in dict.fromkeys(r["method"] for r in sub if r["rung"] == rung)]
+        series = [
+            (rung, method)
+            for rung in RUNG_STYLE
+            for method in dict.fromkeys(r["method"] for r in sub if r["rung"] == rung)
+        ]
         for rung, method in series:
             pts = [r for r in sub if r["rung"] == rung and r["method"] == method]
             color, marker = RUNG_STYLE[rung]
@@ -82,9 +100,17 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
             key = _LABELS.get(method, _LABELS[rung])
             ok = sorted([r for r in pts if r["status"] == "ok" and math.isfinite(r["error"])], key=lambda r: r["error"])
             if ok:
-                ax.plot([max(r["error"], 1e-16) for r in ok], [r["wall_time"] for r in ok], marker=marker, color=color,
-                        lw=3.0 if rung == chosen and not dashed else 1.2, ms=9 if rung == "stationary" else 5,
-                        label=key if key not in seen else None, ls=":" if dashed else "-", mfc="none" if dashed else color)
+                ax.plot(
+                    [max(r["error"], 1e-16) for r in ok],
+                    [r["wall_time"] for r in ok],
+                    marker=marker,
+                    color=color,
+                    lw=3.0 if rung == chosen and not dashed else 1.2,
+                    ms=9 if rung == "stationary" else 5,
+                    label=key if key not in seen else None,
+                    ls=":" if dashed else "-",
+                    mfc="none" if dashed else color,
+                )
                 seen.add(key)
             bad = [r for r in pts if r["status"] not in ("ok", "skipped")]
             if bad:
@@ -110,8 +136,11 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
         axes[k // ncol, k % ncol].axis("off")
     bottom = add_caption(fig, CAPTION, fontsize=8)
     fig.legend(loc="lower center", ncol=6, fontsize=9, frameon=False, bbox_to_anchor=(0.5, bottom))
-    fig.suptitle("A ladder of models: error against cost per rung (thick: the rung model='auto' picks; grey: below the "
-                 "reference's agreement floor; x at the right: failed)", fontsize=10)
+    fig.suptitle(
+        "A ladder of models: error against cost per rung (thick: the rung model='auto' picks; grey: below the "
+        "reference's agreement floor; x at the right: failed)",
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0, bottom + 0.035, 1, 0.96))
     return _save(plt, fig, png_path)
 

@@ -142,8 +142,15 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
                 lam = [float(r["lambda"]) for r in pts]
                 mu = [float(r["mu"]) for r in pts]
                 label = LABELS[c] + (" + energy-Casimir" if certified and c == "elliptic" else "")
-                ax.scatter(lam, mu, s=14, marker="s", label=label,
-                           facecolors=colour if certified or c != "elliptic" else "none", edgecolors=colour)
+                ax.scatter(
+                    lam,
+                    mu,
+                    s=14,
+                    marker="s",
+                    label=label,
+                    facecolors=colour if certified or c != "elliptic" else "none",
+                    edgecolors=colour,
+                )
         ax.set_title("rigid-like |s3| > |p_θ|" if kind == "rigid" else "circulating |p_θ| > |s3|", fontsize=10)
         ax.set_xlabel("λ")
         ax.grid(alpha=0.3)

@@ -45,7 +45,15 @@ from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import kinetic_kernel
 from flatbody_env.physics.state import STATE_NAMES
 
-from analysis.stationary import DEFAULT_TOL, SearchBox, StationaryEllipse, check_isotropic, spins_for_shape, stationary_ellipses, steady_rotations
+from analysis.stationary import (
+    DEFAULT_TOL,
+    SearchBox,
+    StationaryEllipse,
+    check_isotropic,
+    spins_for_shape,
+    stationary_ellipses,
+    steady_rotations,
+)
 
 REDUCED_NAMES: tuple[str, ...] = STATE_NAMES[:10]
 """The reduced state (θ is cyclic for J1 = J2 and dropped)."""
@@ -287,7 +295,9 @@ def analyse_stability(body: Body, ellipse: StationaryEllipse) -> StabilityResult
             geo = int(np.sum(sv < 1e-6 * norm))
             if geo < cluster.size:
                 jordan = True
-                notes.append(f"eigenvalue {lam0:.6g} has algebraic multiplicity {cluster.size} but geometric {geo} (Jordan block)")
+                notes.append(
+                    f"eigenvalue {lam0:.6g} has algebraic multiplicity {cluster.size} but geometric {geo} (Jordan block)"
+                )
     if max_re > tol_re:
         classification = "hyperbolic"
         k = int(np.argmax(w.real))
@@ -296,7 +306,9 @@ def analyse_stability(body: Body, ellipse: StationaryEllipse) -> StabilityResult
     elif unexplained > 0 or jordan:
         classification = "degenerate"
         if unexplained > 0:
-            notes.append(f"{unexplained} zero eigenvalue(s) beyond those of |s|^2 and p_theta: linear theory inconclusive")
+            notes.append(
+                f"{unexplained} zero eigenvalue(s) beyond those of |s|^2 and p_theta: linear theory inconclusive"
+            )
         else:
             notes.append("linear theory inconclusive (non-semisimple eigenvalue)")
     else:
@@ -310,8 +322,11 @@ def analyse_stability(body: Body, ellipse: StationaryEllipse) -> StabilityResult
     else:
         nonlinear = "inconclusive"
         if classification == "elliptic":
-            notes.append("spectrally stable; energy-Casimir test " + ("indefinite" if ec == "indefinite" else "not applicable")
-                         + ": nonlinear stability not decided by linear theory")
+            notes.append(
+                "spectrally stable; energy-Casimir test "
+                + ("indefinite" if ec == "indefinite" else "not applicable")
+                + ": nonlinear stability not decided by linear theory"
+            )
     return StabilityResult(
         ellipse=ellipse,
         eigenvalues=tuple(complex(e) for e in w),

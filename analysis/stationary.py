@@ -116,7 +116,11 @@ def check_isotropic(body: Body) -> float:
 
 
 def _finite(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) or not math.isfinite(float(value)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float, np.floating, np.integer))
+        or not math.isfinite(float(value))
+    ):
         raise ValueError(f"{name}: must be a finite number, got {value!r}")
     return float(value)
 
@@ -266,7 +270,9 @@ def _grid(lo: float, hi: float, n: int) -> np.ndarray:
     return np.geomspace(lo, hi, n)
 
 
-def _sign_change_seeds(F: tuple[np.ndarray, ...], coords: tuple[np.ndarray, ...], valid: np.ndarray) -> list[np.ndarray]:
+def _sign_change_seeds(
+    F: tuple[np.ndarray, ...], coords: tuple[np.ndarray, ...], valid: np.ndarray
+) -> list[np.ndarray]:
     """Centres of grid cells in which every equation takes both signs (cells marked valid)."""
     nd = len(coords)
     ok = valid.copy()
@@ -381,7 +387,9 @@ def solve_branch(
     coupled = _rho_coupled(body, branch)
     notes: list[str] = []
     if branch == "N" and params[0] == params[1] and symmetric:
-        notes.append("s3 = p_theta: sigma_- = 0, the stationary figure is a circle lambda = mu (outside the two-polar chart)")
+        notes.append(
+            "s3 = p_theta: sigma_- = 0, the stationary figure is a circle lambda = mu (outside the two-polar chart)"
+        )
     if branch != "N" and body.thickness is None and body.potential.kind != KIND_CUSTOM:
         notes.append("no thickness potential: the centrifugal force on rho is unbalanced, branch A does not exist")
         return SolveReport(solutions=(), notes=tuple(notes))
@@ -518,7 +526,13 @@ def steady_rotations(
 # inverse problem
 # --------------------------------------------------------------------------------------------
 def spins_for_shape(
-    body: Body, lam: float, mu: float, *, rho: float | None = None, include_reversed: bool = False, tol: float = DEFAULT_TOL
+    body: Body,
+    lam: float,
+    mu: float,
+    *,
+    rho: float | None = None,
+    include_reversed: bool = False,
+    tol: float = DEFAULT_TOL,
 ) -> list[StationaryEllipse]:
     """The (s3, p_θ) that make the shape (λ, μ) a stationary ellipse (docs/physics.md §8), as full solutions.
 

@@ -86,7 +86,9 @@ def _scene(body: Body, y: np.ndarray, name: str) -> Scene:
     return Scene(name=name, body=body, state={n: float(v) for n, v in zip(STATE_NAMES, y)})
 
 
-def _run(body: Body, y0: np.ndarray, t_end: float, samples: int, rtol: float, atol: float, with_rotation: bool) -> Trajectory:
+def _run(
+    body: Body, y0: np.ndarray, t_end: float, samples: int, rtol: float, atol: float, with_rotation: bool
+) -> Trajectory:
     return simulate(
         _scene(body, y0, "analysis-verification"),
         t_end=t_end,
@@ -149,7 +151,9 @@ def verify_growth(
 ) -> GrowthCheck:
     """Perturb along the most unstable eigenvector and compare the measured growth rate with max Re."""
     if result.classification != "hyperbolic":
-        raise ValueError(f"result.classification: verify_growth needs a hyperbolic ellipse, got {result.classification!r}")
+        raise ValueError(
+            f"result.classification: verify_growth needs a hyperbolic ellipse, got {result.classification!r}"
+        )
     gamma = result.max_real_part
     mode = result.unstable_mode()
     y_star = result.ellipse.y
@@ -204,7 +208,9 @@ def verify_bounded(
     max_ratio = float(np.max(d) / d[0])
     growth = float(np.max(d[-n3:]) / np.max(d[:n3]))
     passed = bool(max_ratio <= factor and growth <= 3.0)
-    return BoundednessCheck(eps=eps, t_end=t_end, max_ratio=max_ratio, growth_ratio=growth, passed=passed, factor=factor)
+    return BoundednessCheck(
+        eps=eps, t_end=t_end, max_ratio=max_ratio, growth_ratio=growth, passed=passed, factor=factor
+    )
 
 
 __all__ = [

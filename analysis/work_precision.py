@@ -113,7 +113,9 @@ def _setting_text(kw: dict) -> str:
 MAX_REPEATS = 200
 
 
-def timed_run(method: str, scene: Scene, times: np.ndarray, tol: Tolerances, *, repeats: int = 3, min_time: float = 0.2):
+def timed_run(
+    method: str, scene: Scene, times: np.ndarray, tol: Tolerances, *, repeats: int = 3, min_time: float = 0.2
+):
     """Run ``method`` ``repeats`` times, and more (up to :data:`MAX_REPEATS`) while less than ``min_time``
     seconds have been spent, so that the minimum of short runs is robust on a noisy machine; a single
     run longer than ``min_time`` is not repeated. Returns (Solution or None, min wall time, number of
@@ -149,8 +151,14 @@ def reference_state(scene: Scene, t_end: float) -> tuple[np.ndarray, ReferenceIn
     wall = time.perf_counter() - t0
     cross = get_method(CROSS_CHECK[0]).integrate(scene.body, y0, times, tol=Tolerances(**CROSS_CHECK[1])).Y[:, -1]
     info = ReferenceInfo(
-        scene=scene.name, t_end=t_end, error_kind="state", method=REFERENCE[0], setting=_setting_text(REFERENCE[1]),
-        cross_method=CROSS_CHECK[0], cross_setting=_setting_text(CROSS_CHECK[1]), agreement=float(np.max(np.abs(ref - cross))),
+        scene=scene.name,
+        t_end=t_end,
+        error_kind="state",
+        method=REFERENCE[0],
+        setting=_setting_text(REFERENCE[1]),
+        cross_method=CROSS_CHECK[0],
+        cross_setting=_setting_text(CROSS_CHECK[1]),
+        agreement=float(np.max(np.abs(ref - cross))),
         wall_time=wall,
     )
     return ref, info
@@ -174,7 +182,13 @@ def _predicted_wall(points, method: str, setting: str, t_end: float) -> float:
 
 
 def work_precision(
-    scenes=SCENES, methods=DEFAULT_METHODS, *, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True
+    scenes=SCENES,
+    methods=DEFAULT_METHODS,
+    *,
+    quick: bool = False,
+    repeats: int = 3,
+    max_run_s: float = 5.0,
+    progress: bool = True,
 ) -> tuple[list[WorkPrecisionPoint], list[ReferenceInfo]]:
     """Sweep every method over its settings on every scene.
 
@@ -208,8 +222,15 @@ def work_precision(
             if energy:
                 H0 = hamiltonian(pack(scene.state), scene.body)
                 info = ReferenceInfo(
-                    scene=sc_name, t_end=t_end, error_kind="energy", method="exact H(0)", setting="", cross_method="",
-                    cross_setting="", agreement=float(8 * np.finfo(float).eps * abs(H0)), wall_time=0.0,
+                    scene=sc_name,
+                    t_end=t_end,
+                    error_kind="energy",
+                    method="exact H(0)",
+                    setting="",
+                    cross_method="",
+                    cross_setting="",
+                    agreement=float(8 * np.finfo(float).eps * abs(H0)),
+                    wall_time=0.0,
                 )
                 ref_cache[sc_name] = (H0, info)
             else:
@@ -229,10 +250,22 @@ def work_precision(
             # the same method and setting on the regular scene, scaled by the horizon, says it would take too long
             points.append(
                 WorkPrecisionPoint(
-                    scene=sc_name, method=m, chart=info.chart, compiled=info.compiled, adaptive=info.adaptive, setting=setting,
-                    rtol=value if kind == "rtol" else math.nan, step=value if kind == "step" else math.nan, t_end=t_end,
-                    error=math.nan, error_kind="energy" if energy else "state", wall_time=math.nan, repeats=0, nfev=0,
-                    status="skipped", reason=f"predicted {predicted:.1f} s > budget {budget:g} s",
+                    scene=sc_name,
+                    method=m,
+                    chart=info.chart,
+                    compiled=info.compiled,
+                    adaptive=info.adaptive,
+                    setting=setting,
+                    rtol=value if kind == "rtol" else math.nan,
+                    step=value if kind == "step" else math.nan,
+                    t_end=t_end,
+                    error=math.nan,
+                    error_kind="energy" if energy else "state",
+                    wall_time=math.nan,
+                    repeats=0,
+                    nfev=0,
+                    status="skipped",
+                    reason=f"predicted {predicted:.1f} s > budget {budget:g} s",
                 )
             )
             stopped.add((sc_name, m))
@@ -250,11 +283,22 @@ def work_precision(
             nfev = sol.nfev
         points.append(
             WorkPrecisionPoint(
-                scene=sc_name, method=m, chart=info.chart, compiled=info.compiled, adaptive=info.adaptive,
+                scene=sc_name,
+                method=m,
+                chart=info.chart,
+                compiled=info.compiled,
+                adaptive=info.adaptive,
                 setting=f"{kind}={value:g}" if kind == "rtol" else f"h={value:g}",
-                rtol=value if kind == "rtol" else math.nan, step=value if kind == "step" else math.nan, t_end=t_end,
-                error=err, error_kind="energy" if energy else "state", wall_time=wall, repeats=runs, nfev=nfev,
-                status=status, reason=reason,
+                rtol=value if kind == "rtol" else math.nan,
+                step=value if kind == "step" else math.nan,
+                t_end=t_end,
+                error=err,
+                error_kind="energy" if energy else "state",
+                wall_time=wall,
+                repeats=runs,
+                nfev=nfev,
+                status=status,
+                reason=reason,
             )
         )
         if wall > budget:

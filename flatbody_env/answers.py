@@ -14,8 +14,21 @@ from pathlib import Path
 from flatbody_env.output import atomic_write, check_output_path
 
 
-def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="auto", rtol=1e-10, atol=1e-10,
-                        step=None, model="auto", with_rotation=False, max_nfev=None, max_wall_time=None):
+def simulate_trajectory(
+    scene,
+    *,
+    t_end=None,
+    times=None,
+    samples=None,
+    method="auto",
+    rtol=1e-10,
+    atol=1e-10,
+    step=None,
+    model="auto",
+    with_rotation=False,
+    max_nfev=None,
+    max_wall_time=None,
+):
     """The trajectory ``flatbody simulate`` prints (its JSON is ``traj.to_dict()``); the service calls this too.
 
     ``scene`` is a :class:`~flatbody_env.scene.Scene`; ``t_end`` defaults to the scene's; ``times``
@@ -32,8 +45,18 @@ def simulate_trajectory(scene, *, t_end=None, times=None, samples=None, method="
 
         times = np.linspace(0.0, t_end, samples)
     budget = {k: v for k, v in (("max_nfev", max_nfev), ("max_wall_time", max_wall_time)) if v is not None}
-    return simulate(scene, t_end=t_end, times=times, method=method, rtol=rtol, atol=atol, step=step, model=model,
-                    with_rotation=with_rotation, **budget)
+    return simulate(
+        scene,
+        t_end=t_end,
+        times=times,
+        method=method,
+        rtol=rtol,
+        atol=atol,
+        step=step,
+        model=model,
+        with_rotation=with_rotation,
+        **budget,
+    )
 
 
 def scenes_answer() -> dict:
@@ -61,7 +84,9 @@ def solutions(body, s3: float, pt: float, *, box=None, branch: str = "N", spin: 
     if branch in ("A", "all"):
         if spin is None:
             if branch == "A":
-                raise ValueError("--spin: required with --branch A (the spin s about the in-plane axis, finite and non-zero)")
+                raise ValueError(
+                    "--spin: required with --branch A (the spin s about the in-plane axis, finite and non-zero)"
+                )
         else:
             out += steady_rotations(body, spin, box=box)
     return out
@@ -72,7 +97,9 @@ def ellipses_answer(body, s3: float, p_theta: float, *, box=None, branch: str = 
     return {"solutions": [e.to_dict() for e in solutions(body, s3, p_theta, box=box, branch=branch, spin=spin)]}
 
 
-def stability_answer(body, s3: float, p_theta: float, *, box=None, branch: str = "N", spin: float | None = None) -> dict:
+def stability_answer(
+    body, s3: float, p_theta: float, *, box=None, branch: str = "N", spin: float | None = None
+) -> dict:
     """What ``flatbody stability --json`` prints: ``{"solutions": [StabilityResult.to_dict(), ...]}`` (the service's answer too)."""
     from analysis.stability import analyse_stability
 
@@ -83,21 +110,48 @@ def stability_answer(body, s3: float, p_theta: float, *, box=None, branch: str =
 def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> dict:
     """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row)."""
     return {
-        "param": fam.param_name, "range": list(fam.param_range), "s3": fam.s3, "p_theta": fam.p_theta,
-        "branches": len(fam.branches), "points": sum(len(b) for b in fam.branches),
-        "events": [{"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
-                   for e in fam.events],
-        "csv": csv, "plot": plot,
+        "param": fam.param_name,
+        "range": list(fam.param_range),
+        "s3": fam.s3,
+        "p_theta": fam.p_theta,
+        "branches": len(fam.branches),
+        "points": sum(len(b) for b in fam.branches),
+        "events": [
+            {"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
+            for e in fam.events
+        ],
+        "csv": csv,
+        "plot": plot,
     }
 
 
-def family_run(body, vary, start, stop, *, s3=None, p_theta=None, seeds=None, box=None, step=None, out=None, plot=None,
-                progress=False):
+def family_run(
+    body,
+    vary,
+    start,
+    stop,
+    *,
+    s3=None,
+    p_theta=None,
+    seeds=None,
+    box=None,
+    step=None,
+    out=None,
+    plot=None,
+    progress=False,
+):
     """Follow a family of stationary ellipses over ``vary`` (:func:`analysis.families.follow_family`); returns
     ``(family, family_summary)``, writing the CSV and the chart when ``out`` / ``plot`` are given. ``s3``,
     ``p_theta``, ``seeds`` None: the library's defaults (:data:`analysis.families.DEFAULT_S3`, ``DEFAULT_P_THETA``,
     ``DEFAULT_SEEDS``)."""
-    from analysis.families import DEFAULT_P_THETA, DEFAULT_S3, DEFAULT_SEEDS, PARAMETERS, follow_family, write_family_csv
+    from analysis.families import (
+        DEFAULT_P_THETA,
+        DEFAULT_S3,
+        DEFAULT_SEEDS,
+        PARAMETERS,
+        follow_family,
+        write_family_csv,
+    )
 
     if vary not in PARAMETERS:
         raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {vary!r}")
@@ -137,7 +191,9 @@ def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot
     if plot is not None:
         from analysis.plots import plot_shape_map
 
-        atomic_write(plot, lambda tmp: plot_shape_map(out, tmp, title=f"Stationary ellipses by shape, {body.describe()}"))
+        atomic_write(
+            plot, lambda tmp: plot_shape_map(out, tmp, title=f"Stationary ellipses by shape, {body.describe()}")
+        )
     return {"rows": rows}
 
 

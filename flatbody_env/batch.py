@@ -126,7 +126,9 @@ def _initial_states(y0: Any) -> np.ndarray:
             raise ValueError(f"y0[{i}].{STATE_NAMES[j]}: must lie in {rng}, got {col[i]!r}")
     same = np.flatnonzero(arr[:, 7] == arr[:, 8])
     if same.size:
-        raise ValueError(f"y0[{int(same[0])}].lambda: must differ from mu (lambda = mu is the singular set of the two-polar chart)")
+        raise ValueError(
+            f"y0[{int(same[0])}].lambda: must differ from mu (lambda = mu is the singular set of the two-polar chart)"
+        )
     return np.ascontiguousarray(arr)
 
 
@@ -219,11 +221,19 @@ def simulate_batch(
     grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
     n = Y0.shape[0]
     if n * grid.size * STATE_SIZE > MAX_OUTPUT_FLOATS:
-        raise ValueError(f"y0, times: N * T * 11 = {n} * {grid.size} * 11 floats exceeds the limit of {MAX_OUTPUT_FLOATS} "
-                         "(split the batch or ask for fewer times)")
+        raise ValueError(
+            f"y0, times: N * T * 11 = {n} * {grid.size} * 11 floats exceeds the limit of {MAX_OUTPUT_FLOATS} "
+            "(split the batch or ask for fewer times)"
+        )
     meth = get_method(method)
-    tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time,
-                     energy_tol=math.inf if energy_tol is None else energy_tol)
+    tol = Tolerances(
+        rtol=rtol,
+        atol=atol,
+        step=step,
+        max_nfev=max_nfev,
+        max_wall_time=max_wall_time,
+        energy_tol=math.inf if energy_tol is None else energy_tol,
+    )
     h = check_step(meth.info, tol)
     if device == "cuda":
         from flatbody_env.integrators import cuda
@@ -260,9 +270,26 @@ def simulate_batch(
         NFEV = np.zeros(n, np.int64)
         TFAIL = np.empty(n)
 
-        def run(m: int, budget: int, span=grid) -> None:  # the first m bodies through ``span``, ``budget`` evaluations each
-            bs.batch_solve(kind, coeffs, Y0[:m], span, u, P, h, tol.rtol, tol.atol, etol[:m], budget, OUT[:m, :span.size], STATUS[:m],
-                           NFEV[:m], TFAIL[:m])
+        def run(
+            m: int, budget: int, span=grid
+        ) -> None:  # the first m bodies through ``span``, ``budget`` evaluations each
+            bs.batch_solve(
+                kind,
+                coeffs,
+                Y0[:m],
+                span,
+                u,
+                P,
+                h,
+                tol.rtol,
+                tol.atol,
+                etol[:m],
+                budget,
+                OUT[:m, : span.size],
+                STATUS[:m],
+                NFEV[:m],
+                TFAIL[:m],
+            )
 
         if spec.info.adaptive:
             _solve_within_wall_time(run, n, NFEV, STATUS, tol)
@@ -276,23 +303,46 @@ def simulate_batch(
         TFAIL = np.empty(n)
         launches = [0]
 
-        def launch(idx, budget: int, span=grid) -> None:  # bodies ``idx`` through ``span`` in one kernel launch, ``budget`` evaluations each
-            o, s, nf, tf = cuda.solve(method, Y0[idx], span, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol[idx], max_nfev=budget)
-            OUT[idx, :span.size] = o
+        def launch(
+            idx, budget: int, span=grid
+        ) -> None:  # bodies ``idx`` through ``span`` in one kernel launch, ``budget`` evaluations each
+            o, s, nf, tf = cuda.solve(
+                method, Y0[idx], span, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol[idx], max_nfev=budget
+            )
+            OUT[idx, : span.size] = o
             STATUS[idx], NFEV[idx], TFAIL[idx] = s, nf, tf
             launches[0] += 1
 
         if spec.info.adaptive:
             _launches_within_wall_time(launch, n, STATUS, tol)
         else:
-            _refuse_fixed_over_wall_time(lambda m, budget, span=grid: launch(slice(0, m), budget, span), n, NFEV, grid, h, spec.stages,
-                                         method, tol, probe_bodies=n)
+            _refuse_fixed_over_wall_time(
+                lambda m, budget, span=grid: launch(slice(0, m), budget, span),
+                n,
+                NFEV,
+                grid,
+                h,
+                spec.stages,
+                method,
+                tol,
+                probe_bodies=n,
+            )
             launch(slice(0, n), tol.max_nfev)
         extra["launches"] = launches[0]
     wall = time.perf_counter() - start
     keep = slice(1, None) if prepended else slice(None)
-    return BatchTrajectory(t=times_arr.copy(), state=OUT[:, keep], status=STATUS, nfev=NFEV, t_fail=TFAIL, y0=Y0, method=method,
-                           device=device, wall_time=wall, extra=extra)
+    return BatchTrajectory(
+        t=times_arr.copy(),
+        state=OUT[:, keep],
+        status=STATUS,
+        nfev=NFEV,
+        t_fail=TFAIL,
+        y0=Y0,
+        method=method,
+        device=device,
+        wall_time=wall,
+        extra=extra,
+    )
 
 
 _PROBE_NFEV = 5_000
@@ -375,8 +425,18 @@ def _launches_within_wall_time(launch, n: int, STATUS: np.ndarray, tol: Toleranc
         budget = following
 
 
-def _refuse_fixed_over_wall_time(run, n: int, NFEV: np.ndarray, grid: np.ndarray, h: float, stages: int, method: str, tol: Tolerances,
-                                 *, probe_bodies: int | None = None) -> None:
+def _refuse_fixed_over_wall_time(
+    run,
+    n: int,
+    NFEV: np.ndarray,
+    grid: np.ndarray,
+    h: float,
+    stages: int,
+    method: str,
+    tol: Tolerances,
+    *,
+    probe_bodies: int | None = None,
+) -> None:
     """Fixed-step work is known up front: time a few hundred steps of the first bodies (twice: the first call
     may load the kernel) and refuse the batch whose predicted time exceeds ``tol.max_wall_time``. ``probe_bodies``:
     how many bodies the probe runs (default: enough to keep the CPU's threads busy; on the GPU all of them, which
@@ -394,8 +454,12 @@ def _refuse_fixed_over_wall_time(run, n: int, NFEV: np.ndarray, grid: np.ndarray
     run(m, tol.max_nfev, span)
     per_eval = (time.perf_counter() - t0) / max(1, int(NFEV[:m].sum()))
     if total * per_eval > tol.max_wall_time:
-        raise budget_error(t=float(grid[0]), method=method, tol=tol,
-                           used=f"~{total * per_eval:.3g} s predicted for {total:.6g} RHS evaluations of {n} bodies")
+        raise budget_error(
+            t=float(grid[0]),
+            method=method,
+            tol=tol,
+            used=f"~{total * per_eval:.3g} s predicted for {total:.6g} RHS evaluations of {n} bodies",
+        )
 
 
 __all__ = ["BATCH_METHODS", "BatchTrajectory", "DEVICES", "MAX_BODIES", "MAX_OUTPUT_FLOATS", "simulate_batch"]

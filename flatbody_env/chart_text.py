@@ -25,8 +25,17 @@ def caption_height(fig, text: str, fontsize: float = 7.5) -> float:
 def add_caption(fig, text: str, *, fontsize: float = 7.5, bottom: float = 0.0) -> float:
     """Write ``text`` (lines broken by the caller) at the bottom left of ``fig``, above ``bottom`` (a
     fraction of the figure's height); return the fraction of the height it takes, ``bottom`` included."""
-    fig.text(0.008, bottom + 3.0 / 72.0 / fig.get_figheight(), text, ha="left", va="bottom", fontsize=fontsize,
-             color="0.2", gid=CAPTION_GID, linespacing=1.25)
+    fig.text(
+        0.008,
+        bottom + 3.0 / 72.0 / fig.get_figheight(),
+        text,
+        ha="left",
+        va="bottom",
+        fontsize=fontsize,
+        color="0.2",
+        gid=CAPTION_GID,
+        linespacing=1.25,
+    )
     return bottom + caption_height(fig, text, fontsize)
 
 
@@ -87,8 +96,10 @@ def layout_problems(fig, *, tol: float = 1.0) -> list[str]:
     for t in texts:
         bb = t.get_window_extent(renderer)
         if bb.x0 < fbox.x0 - tol or bb.y0 < fbox.y0 - tol or bb.x1 > fbox.x1 + tol or bb.y1 > fbox.y1 + tol:
-            problems.append(f"text {name(t)} reaches outside the figure ({bb.x0:.0f}..{bb.x1:.0f} x {bb.y0:.0f}..{bb.y1:.0f} "
-                            f"of {fbox.width:.0f} x {fbox.height:.0f})")
+            problems.append(
+                f"text {name(t)} reaches outside the figure ({bb.x0:.0f}..{bb.x1:.0f} x {bb.y0:.0f}..{bb.y1:.0f} "
+                f"of {fbox.width:.0f} x {fbox.height:.0f})"
+            )
         if id(t) in in_legend:
             continue
         for lg in legends:
@@ -113,7 +124,12 @@ def layout_problems(fig, *, tol: float = 1.0) -> list[str]:
             r = line.get_markersize() * fig.dpi / 72.0 / 2.0
             xy = line.get_transform().transform(line.get_xydata())
             for t, bb in zip(notes, boxes):
-                hit = (xy[:, 0] + r > bb.x0 + tol) & (xy[:, 0] - r < bb.x1 - tol) & (xy[:, 1] + r > bb.y0 + tol) & (xy[:, 1] - r < bb.y1 - tol)
+                hit = (
+                    (xy[:, 0] + r > bb.x0 + tol)
+                    & (xy[:, 0] - r < bb.x1 - tol)
+                    & (xy[:, 1] + r > bb.y0 + tol)
+                    & (xy[:, 1] - r < bb.y1 - tol)
+                )
                 if hit.any():
                     problems.append(f"annotation {name(t)} covers a data marker")
     return problems

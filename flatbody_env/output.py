@@ -73,7 +73,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
-def atomic_write(path: str | os.PathLike, data: str | bytes | Callable[[Path], None], *, encoding: str = "utf-8") -> Path:
+def atomic_write(
+    path: str | os.PathLike, data: str | bytes | Callable[[Path], None], *, encoding: str = "utf-8"
+) -> Path:
     """Write ``data`` (text, bytes, or a function that writes a given temporary path) to ``path`` atomically.
 
     Returns
@@ -166,8 +168,18 @@ def replace_marked_block(path: str | os.PathLike, name: str, text: str, *, kind:
     first = re.search(rf"^[ \t]*{re.escape(begin)}[ \t]*$", page, re.M)
     last = re.compile(rf"^[ \t]*{re.escape(end)}[ \t]*$", re.M).search(page, first.end()) if first else None
     if last is None:
-        raise ValueError(f"docs: {str(target)!r} has no block {begin} … {end} (each marker on a line of its own) to regenerate")
-    return atomic_write(target, page[: first.end()] + "\n" + text.rstrip("\n") + "\n" + page[last.start():])
+        raise ValueError(
+            f"docs: {str(target)!r} has no block {begin} … {end} (each marker on a line of its own) to regenerate"
+        )
+    return atomic_write(target, page[: first.end()] + "\n" + text.rstrip("\n") + "\n" + page[last.start() :])
 
 
-__all__ = ["OutputError", "atomic_open", "atomic_path", "atomic_write", "replace_marked_block", "save_figure", "write_csv"]
+__all__ = [
+    "OutputError",
+    "atomic_open",
+    "atomic_path",
+    "atomic_write",
+    "replace_marked_block",
+    "save_figure",
+    "write_csv",
+]

@@ -70,8 +70,18 @@ class LineProgress:
         Seconds between lines (default :func:`interval_s`).
     """
 
-    def __init__(self, iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", unit: str = "it",
-                 initial: int = 0, enabled: bool = True, file: TextIO | None = None, interval: float | None = None) -> None:
+    def __init__(
+        self,
+        iterable: Iterable | None = None,
+        *,
+        total: int | None = None,
+        desc: str = "",
+        unit: str = "it",
+        initial: int = 0,
+        enabled: bool = True,
+        file: TextIO | None = None,
+        interval: float | None = None,
+    ) -> None:
         if total is None and iterable is not None and hasattr(iterable, "__len__"):
             total = len(iterable)  # type: ignore[arg-type]
         self.iterable = iterable
@@ -151,8 +161,17 @@ class LineProgress:
         self.lines += 1
 
 
-def progress_bar(iterable: Iterable | None = None, *, total: int | None = None, desc: str = "", unit: str = "it", initial: int = 0,
-                 enabled: bool = True, leave: bool = True, file: TextIO | None = None):
+def progress_bar(
+    iterable: Iterable | None = None,
+    *,
+    total: int | None = None,
+    desc: str = "",
+    unit: str = "it",
+    initial: int = 0,
+    enabled: bool = True,
+    leave: bool = True,
+    file: TextIO | None = None,
+):
     """A progress bar on stderr: tqdm on a terminal, :class:`LineProgress` lines otherwise.
 
     Parameters
@@ -184,7 +203,9 @@ def progress_bar(iterable: Iterable | None = None, *, total: int | None = None, 
     if tty and enabled:
         from tqdm.auto import tqdm
 
-        return tqdm(iterable, total=total, desc=desc, unit=unit, initial=initial, leave=leave, dynamic_ncols=True, file=out)
+        return tqdm(
+            iterable, total=total, desc=desc, unit=unit, initial=initial, leave=leave, dynamic_ncols=True, file=out
+        )
     return LineProgress(iterable, total=total, desc=desc, unit=unit, initial=initial, enabled=enabled, file=file)
 
 

@@ -30,8 +30,13 @@ def cpu_name() -> str:
 def git_hash(where: Path | None = None) -> str:
     """``git rev-parse HEAD`` of the source tree (``"unknown"`` outside a repository)."""
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=where or Path(__file__).resolve().parent, capture_output=True, text=True,
-                             timeout=10)
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=where or Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown"
@@ -46,8 +51,15 @@ def machine() -> dict[str, Any]:
         load = round(os.getloadavg()[0], 2)
     except OSError:
         load = None
-    return {"cpu": cpu_name(), "cpu_count": os.cpu_count(), "load_avg_1min": load, "python": platform.python_version(),
-            "numpy": numpy.__version__, "numba": numba.__version__, "git": git_hash()}
+    return {
+        "cpu": cpu_name(),
+        "cpu_count": os.cpu_count(),
+        "load_avg_1min": load,
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "numba": numba.__version__,
+        "git": git_hash(),
+    }
 
 
 __all__ = ["cpu_name", "git_hash", "machine"]

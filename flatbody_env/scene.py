@@ -61,7 +61,14 @@ class Scene:
             validate_state(state)
         except ValueError as exc:
             raise SceneError(str(exc)) from None
-        return Scene(name=self.name, body=self.body, state=state, description=self.description, t_end=self.t_end, source=self.source)
+        return Scene(
+            name=self.name,
+            body=self.body,
+            state=state,
+            description=self.description,
+            t_end=self.t_end,
+            source=self.source,
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (round-trips through :func:`load_scene`)."""
@@ -76,7 +83,9 @@ def scene_from_dict(data: Mapping[str, Any], *, default_name: str = "scene") -> 
     try:
         data = validation.mapping("scene", data)
         validation.keys("scene", data, _TOP_KEYS, ("params", "potential", "thickness", "state"))
-        body = Body.from_dict({k: data[k] for k in ("params", "potential", "thickness", "spin_convention") if k in data})
+        body = Body.from_dict(
+            {k: data[k] for k in ("params", "potential", "thickness", "spin_convention") if k in data}
+        )
         state = validation.mapping("state", data["state"])
         validate_state(state)
         t_end = validation.number("t_end", data["t_end"], positive=True) if "t_end" in data else 20.0
@@ -122,7 +131,9 @@ def load_scene(path_or_dict: str | Path | Mapping[str, Any]) -> Scene:
     if isinstance(path_or_dict, Mapping):
         return scene_from_dict(path_or_dict)
     if not isinstance(path_or_dict, (str, Path)):
-        raise SceneError(f"scene: expected a scene dict, a JSON path or a built-in name, got {type(path_or_dict).__name__}")
+        raise SceneError(
+            f"scene: expected a scene dict, a JSON path or a built-in name, got {type(path_or_dict).__name__}"
+        )
     path = Path(path_or_dict)
     try:
         exists = path.exists()
@@ -132,7 +143,9 @@ def load_scene(path_or_dict: str | Path | Mapping[str, Any]) -> Scene:
         scenes = builtin_scenes()
         if str(path_or_dict) in scenes:
             return scenes[str(path_or_dict)]
-        raise SceneError(f"scene: no file {str(path)!r} and no built-in scene of that name (built-in: {', '.join(scenes)})")
+        raise SceneError(
+            f"scene: no file {str(path)!r} and no built-in scene of that name (built-in: {', '.join(scenes)})"
+        )
     try:
         data = validation.read_json("scene", path)
     except ValueError as exc:

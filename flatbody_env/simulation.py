@@ -55,7 +55,16 @@ from flatbody_env.physics.state import STATE_NAMES, pack, unpack, validate_state
 from flatbody_env.scene import Scene, load_scene
 
 from flatbody_env.integrators.auto import AUTO, auto_method, integrate_auto
-from flatbody_env.integrators.ladder import GAP_MIN, LADDER_RUNGS, RUNGS, RungChoice, check_rung, choose_rung, rung_model, rung_reasons
+from flatbody_env.integrators.ladder import (
+    GAP_MIN,
+    LADDER_RUNGS,
+    RUNGS,
+    RungChoice,
+    check_rung,
+    choose_rung,
+    rung_model,
+    rung_reasons,
+)
 
 FIXED_STEP_ENERGY_TOL = 1e-3
 """Default relative energy tolerance of fixed-step methods (a blow-up detector, not an accuracy target)."""
@@ -78,6 +87,7 @@ def default_energy_tol(H0: float, rtol: float, atol: float, *, adaptive: bool = 
     """The default absolute energy tolerance of an integration starting at energy ``H0``:
     :func:`energy_tol_scale` · max(1, |H0|)."""
     return energy_tol_scale(rtol, atol, adaptive=adaptive) * max(1.0, abs(H0))
+
 
 MODELS = ("auto",) + RUNGS
 DEFAULT_SAMPLES = 101
@@ -103,12 +113,16 @@ def gap_lower_bound(state: Mapping[str, float] | np.ndarray, body: Body) -> floa
     return sigma_minus / math.sqrt(4.0 * body.inertia.J1 * avail)
 
 
-def choose_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> str:
+def choose_model(
+    state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True
+) -> str:
     """The rung ``model="auto"`` runs (:data:`MODELS`), per the rule in the module docstring."""
     return explain_model(state, body, u, ladder=ladder).rung
 
 
-def explain_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True) -> RungChoice:
+def explain_model(
+    state: Mapping[str, float] | np.ndarray, body: Body, u: np.ndarray | None = None, *, ladder: bool = True
+) -> RungChoice:
     """The rung ``model="auto"`` runs and why (:class:`~flatbody_env.integrators.ladder.RungChoice`);
     ``ladder=False`` chooses between the two full models only."""
     y = pack(state, validate=False) if isinstance(state, Mapping) else np.asarray(state, float)
@@ -118,11 +132,18 @@ def explain_model(state: Mapping[str, float] | np.ndarray, body: Body, u: np.nda
             return low
     bound = gap_lower_bound(y, body) if u is None or not np.any(u) else 0.0
     if bound >= GAP_MIN:
-        return RungChoice(rung="two-polar", invariant=f"J1 = J2 and the energy bound keeps |lambda - mu| >= {bound:.3g} >= {GAP_MIN:g}",
-                          measured={"gap_lower_bound": float(bound)})
+        return RungChoice(
+            rung="two-polar",
+            invariant=f"J1 = J2 and the energy bound keeps |lambda - mu| >= {bound:.3g} >= {GAP_MIN:g}",
+            measured={"gap_lower_bound": float(bound)},
+        )
     why = "; ".join(f"{r}: {t}" for r, t in rung_reasons(y, body, u).items() if t)
-    return RungChoice(rung="regular", invariant=f"no lower rung holds (two-polar: |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} guaranteed"
-                      + (f"; {why})" if why else ")"), measured={"gap_lower_bound": float(bound)})
+    return RungChoice(
+        rung="regular",
+        invariant=f"no lower rung holds (two-polar: |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} guaranteed"
+        + (f"; {why})" if why else ")"),
+        measured={"gap_lower_bound": float(bound)},
+    )
 
 
 @dataclass
@@ -216,7 +237,14 @@ class Trajectory:
             out["rotation"] = self.rotation.tolist()
         if self.initial_state is not None:
             out["initial_state"] = {name: float(self.initial_state[name]) for name in STATE_NAMES}
-        meta = {"scene": self.scene, "method": self.method, "model": self.model, "nfev": self.nfev, "wall_time": self.wall_time, **self.extra}
+        meta = {
+            "scene": self.scene,
+            "method": self.method,
+            "model": self.model,
+            "nfev": self.nfev,
+            "wall_time": self.wall_time,
+            **self.extra,
+        }
         if self.initial_energy is not None:
             meta["initial_energy"] = self.initial_energy
         out["meta"] = meta
@@ -253,12 +281,18 @@ class Trajectory:
         for name in ("lambda", "mu", "rho"):  # the documented range (docs/reliability.md), as for a scene's state
             bad = np.flatnonzero((state[name] < lo) | (state[name] > hi))
             if bad.size:
-                raise ValueError(f"{where}.state.{name}: must lie in [{lo:g}, {hi:g}], got {float(state[name][bad[0]])!r} at t = {t[bad[0]]:g}")
+                raise ValueError(
+                    f"{where}.state.{name}: must lie in [{lo:g}, {hi:g}], got {float(state[name][bad[0]])!r} at t = {t[bad[0]]:g}"
+                )
         series = {}
         for key in ("energy", "casimir", "p_theta"):
             if key in data:
                 series[key] = validation.float_array(f"{where}.{key}", data[key], shape=(n,))
-        rotation = validation.float_array(f"{where}.rotation", data["rotation"], shape=(n, 3, 3)) if data.get("rotation") is not None else None
+        rotation = (
+            validation.float_array(f"{where}.rotation", data["rotation"], shape=(n, 3, 3))
+            if data.get("rotation") is not None
+            else None
+        )
         initial = None
         if data.get("initial_state") is not None:
             initial_map = validation.mapping(f"{where}.initial_state", data["initial_state"])
@@ -268,8 +302,16 @@ class Trajectory:
         text = {k: validation.string(f"{where}.meta.{k}", meta.get(k, "")) for k in ("scene", "method", "model")}
         nfev = validation.integer(f"{where}.meta.nfev", meta.get("nfev", 0), low=0)
         wall = validation.number(f"{where}.meta.wall_time", meta.get("wall_time", 0.0), low=0.0)
-        initial_energy = validation.number(f"{where}.meta.initial_energy", meta["initial_energy"]) if "initial_energy" in meta else None
-        extra = {k: v for k, v in meta.items() if k not in ("scene", "method", "model", "nfev", "wall_time", "initial_energy")}
+        initial_energy = (
+            validation.number(f"{where}.meta.initial_energy", meta["initial_energy"])
+            if "initial_energy" in meta
+            else None
+        )
+        extra = {
+            k: v
+            for k, v in meta.items()
+            if k not in ("scene", "method", "model", "nfev", "wall_time", "initial_energy")
+        }
         return cls(
             t=t,
             state=state,
@@ -398,22 +440,30 @@ def simulate(
         raise ValueError(f"with_rotation: must be true or false, got {with_rotation!r}")
     if step is not None:  # bounded work: a fixed step below the floor is an error, never replaced
         step = validation.fixed_step("step", step)
-    validation.number("max_wall_time", max_wall_time, positive=True, high=validation.MAX_SECONDS)  # before the automatic choice runs anything
+    validation.number(
+        "max_wall_time", max_wall_time, positive=True, high=validation.MAX_SECONDS
+    )  # before the automatic choice runs anything
     body = sc.body
     y0 = pack(sc.state)
     if method == AUTO:
         if step is not None:
-            raise ValueError("step: method='auto' runs adaptive methods (or chooses RATTLE's step itself); "
-                             "give step= only with a fixed-step method named by method=")
+            raise ValueError(
+                "step: method='auto' runs adaptive methods (or chooses RATTLE's step itself); "
+                "give step= only with a fixed-step method named by method="
+            )
         return _simulate_auto(sc, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time)
     try:
         meth = get_method(method)
     except ValueError as exc:
         raise ValueError(str(exc).replace("(allowed: ", "(allowed: auto, ", 1)) from None
-    if model in LADDER_RUNGS or (model == "auto" and meth.info.adaptive and meth.info.chart != "regular" and step is None):
+    if model in LADDER_RUNGS or (
+        model == "auto" and meth.info.adaptive and meth.info.chart != "regular" and step is None
+    ):
         low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
         if low is not None:
-            return _simulate_rung(sc, low, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time)
+            return _simulate_rung(
+                sc, low, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time
+            )
     chosen = model
     if model == "auto":
         choice = explain_model(y0, body, ladder=False)
@@ -421,20 +471,27 @@ def simulate(
         if body.spin_convention == "paper":
             chosen = "two-polar"
         if chosen != choice.rung:
-            choice = RungChoice(rung=chosen, invariant=f"method {method!r} runs in the {chosen} chart", measured=choice.measured)
+            choice = RungChoice(
+                rung=chosen, invariant=f"method {method!r} runs in the {chosen} chart", measured=choice.measured
+            )
     else:
         choice = RungChoice(rung=chosen, invariant=f"model={model!r} was asked for")
     if chosen != meth.info.chart:
         twin = _twin(method, chosen)
         if twin is None and model != "auto":
-            raise ValueError(f"method: {method!r} integrates the {meth.info.chart} chart, but model={chosen!r} was asked for")
+            raise ValueError(
+                f"method: {method!r} integrates the {meth.info.chart} chart, but model={chosen!r} was asked for"
+            )
         if twin is not None:
             meth = get_method(twin)
         # model="auto" and no twin: the method asked for by name runs in its own chart; near
         # lambda = mu its failure is detected and reported (IntegrationError), never hidden.
         if twin is None:
-            choice = RungChoice(rung=meth.info.chart, invariant=f"method {method!r} has no twin in the {chosen} chart and runs in its own",
-                                measured=choice.measured)
+            choice = RungChoice(
+                rung=meth.info.chart,
+                invariant=f"method {method!r} has no twin in the {chosen} chart and runs in its own",
+                measured=choice.measured,
+            )
     # rtol, atol, step, energy_tol and the budget are validated by Tolerances (one home)
     tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time)
     check_step(meth.info, tol)
@@ -456,7 +513,11 @@ def simulate(
     Y = sol.Y[:, keep]
     state = unpack(Y)
     energy = sol.stats.get("energy")
-    energy = np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])]) if energy is None else np.asarray(energy, float)[keep]
+    energy = (
+        np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])])
+        if energy is None
+        else np.asarray(energy, float)[keep]
+    )
     return Trajectory(
         t=np.asarray(sol.t, float)[keep],
         state=state,
@@ -479,24 +540,39 @@ def _adaptive_energy_tol(energy_tol, rtol, atol, H0) -> float:
     return float(energy_tol) if energy_tol is not None else default_energy_tol(H0, rtol, atol)
 
 
-def _simulate_auto(sc: Scene, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
+def _simulate_auto(
+    sc: Scene, y0, times_arr, model, rtol, atol, energy_tol, with_rotation, max_nfev, max_wall_time
+) -> Trajectory:
     """``method="auto"``: the rung (``model``) decides the model, :mod:`flatbody_env.integrators.auto` the method."""
     body = sc.body
     if model in LADDER_RUNGS or model == "auto":
         low = check_rung(model, y0, body) if model != "auto" else choose_rung(y0, body)
         if low is not None:
-            traj = _simulate_rung(sc, low, times_arr, rtol, atol, None, energy_tol, with_rotation, max_nfev, max_wall_time)
-            traj.extra.update({"method_requested": AUTO, "method_reason": f"auto: the {low.rung} rung's own solver ({traj.method})"})
+            traj = _simulate_rung(
+                sc, low, times_arr, rtol, atol, None, energy_tol, with_rotation, max_nfev, max_wall_time
+            )
+            traj.extra.update(
+                {"method_requested": AUTO, "method_reason": f"auto: the {low.rung} rung's own solver ({traj.method})"}
+            )
             return traj
     if model == "auto":
         choice = explain_model(y0, body, ladder=False)
         if body.spin_convention == "paper" and choice.rung != "two-polar":
-            choice = RungChoice(rung="two-polar", invariant="spin_convention 'paper' exists in the two-polar chart only", measured=choice.measured)
+            choice = RungChoice(
+                rung="two-polar",
+                invariant="spin_convention 'paper' exists in the two-polar chart only",
+                measured=choice.measured,
+            )
     else:
         choice = RungChoice(rung=model, invariant=f"model={model!r} was asked for")
     H0 = hamiltonian(y0, body)
-    tol = Tolerances(rtol=rtol, atol=atol, energy_tol=_adaptive_energy_tol(energy_tol, rtol, atol, H0), max_nfev=max_nfev,
-                     max_wall_time=max_wall_time)
+    tol = Tolerances(
+        rtol=rtol,
+        atol=atol,
+        energy_tol=_adaptive_energy_tol(energy_tol, rtol, atol, H0),
+        max_nfev=max_nfev,
+        max_wall_time=max_wall_time,
+    )
     prepended = times_arr[0] != 0.0
     grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
     keep = slice(1, None) if prepended else slice(None)
@@ -510,23 +586,41 @@ def _simulate_auto(sc: Scene, y0, times_arr, model, rtol, atol, energy_tol, with
     Y = sol.Y[:, keep]
     state = unpack(Y)
     energy = sol.stats.get("energy")
-    energy = np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])]) if energy is None else np.asarray(energy, float)[keep]
+    energy = (
+        np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])])
+        if energy is None
+        else np.asarray(energy, float)[keep]
+    )
     return Trajectory(
-        t=np.asarray(sol.t, float)[keep], state=state, energy=energy, casimir=casimir(state["s1"], state["s2"], state["s3"]),
-        p_theta=state["p_theta"].copy(), rotation=None if sol.rotation is None else sol.rotation[keep], method=name,
-        model=choice.rung, nfev=sol.nfev, wall_time=wall, scene=sc.name, initial_state=unpack(y0), initial_energy=float(H0),
+        t=np.asarray(sol.t, float)[keep],
+        state=state,
+        energy=energy,
+        casimir=casimir(state["s1"], state["s2"], state["s3"]),
+        p_theta=state["p_theta"].copy(),
+        rotation=None if sol.rotation is None else sol.rotation[keep],
+        method=name,
+        model=choice.rung,
+        nfev=sol.nfev,
+        wall_time=wall,
+        scene=sc.name,
+        initial_state=unpack(y0),
+        initial_energy=float(H0),
         extra={**choice.as_meta(), **meta},
     )
 
 
-def _simulate_rung(sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time) -> Trajectory:
+def _simulate_rung(
+    sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, energy_tol, with_rotation, max_nfev, max_wall_time
+) -> Trajectory:
     """Integrate on a rung below the full models (:mod:`flatbody_env.integrators.ladder`)."""
     model = rung_model(choice.rung)
     y0 = pack(sc.state)
     H0 = hamiltonian(y0, sc.body)
     if energy_tol is None:
         energy_tol = default_energy_tol(H0, rtol, atol)
-    tol = Tolerances(rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol), max_nfev=max_nfev, max_wall_time=max_wall_time)
+    tol = Tolerances(
+        rtol=rtol, atol=atol, step=step, energy_tol=float(energy_tol), max_nfev=max_nfev, max_wall_time=max_wall_time
+    )
     # rungs integrate from grid[0] = 0 as the full models do: a grid without 0 gets it prepended and its row dropped
     prepended = times_arr[0] != 0.0
     grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr
@@ -536,10 +630,20 @@ def _simulate_rung(sc: Scene, choice: RungChoice, times_arr, rtol, atol, step, e
     wall = time.perf_counter() - start
     state = unpack(sol.Y[:, keep])
     return Trajectory(
-        t=np.asarray(sol.t, float)[keep], state=state, energy=np.asarray(sol.stats["energy"], float)[keep],
-        casimir=casimir(state["s1"], state["s2"], state["s3"]), p_theta=state["p_theta"].copy(),
-        rotation=None if sol.rotation is None else sol.rotation[keep], method=model.info.name, model=choice.rung,
-        nfev=sol.nfev, wall_time=wall, scene=sc.name, extra=choice.as_meta(), initial_state=unpack(y0), initial_energy=float(H0),
+        t=np.asarray(sol.t, float)[keep],
+        state=state,
+        energy=np.asarray(sol.stats["energy"], float)[keep],
+        casimir=casimir(state["s1"], state["s2"], state["s3"]),
+        p_theta=state["p_theta"].copy(),
+        rotation=None if sol.rotation is None else sol.rotation[keep],
+        method=model.info.name,
+        model=choice.rung,
+        nfev=sol.nfev,
+        wall_time=wall,
+        scene=sc.name,
+        extra=choice.as_meta(),
+        initial_state=unpack(y0),
+        initial_energy=float(H0),
     )
 
 
@@ -554,4 +658,14 @@ def _twin(method: str, chart: str) -> str | None:
     return None
 
 
-__all__ = ["GAP_MIN", "MODELS", "Trajectory", "read_trajectory", "simulate", "choose_model", "explain_model", "gap_lower_bound", "IntegrationError"]
+__all__ = [
+    "GAP_MIN",
+    "MODELS",
+    "Trajectory",
+    "read_trajectory",
+    "simulate",
+    "choose_model",
+    "explain_model",
+    "gap_lower_bound",
+    "IntegrationError",
+]

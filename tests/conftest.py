@@ -18,7 +18,11 @@ def _custom() -> CustomPotential:
     # V = (λ² + μ²)/2 + 0.3 (λμ)⁻¹ + 0.2 λμϱ² (couples ϱ to the plane; symmetric in λ ↔ μ)
     return CustomPotential(
         value=lambda l, m, r: 0.5 * (l * l + m * m) + 0.3 / (l * m) + 0.2 * l * m * r * r,
-        gradient=lambda l, m, r: (l - 0.3 / (l * l * m) + 0.2 * m * r * r, m - 0.3 / (l * m * m) + 0.2 * l * r * r, 0.4 * l * m * r),
+        gradient=lambda l, m, r: (
+            l - 0.3 / (l * l * m) + 0.2 * m * r * r,
+            m - 0.3 / (l * m * m) + 0.2 * l * r * r,
+            0.4 * l * m * r,
+        ),
         label="test-custom",
     )
 
@@ -35,11 +39,21 @@ if _SCRIPTS not in os.environ.get("PATH", "").split(os.pathsep):
 
 BODIES = {
     "V1": Body(inertia=Inertia.isotropic(1.0, 0.7), potential=V1(k=1.3), thickness=ThicknessPotential(a=1.0, b=1.0)),
-    "V2": Body(inertia=Inertia.isotropic(0.9, 1.1), potential=V2(c=0.8, d=1.2), thickness=ThicknessPotential(a=0.5, b=2.0)),
-    "V3": Body(inertia=Inertia.isotropic(1.0, 1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1.0, b=1.0)),
-    "custom": Body(inertia=Inertia.isotropic(1.2, 0.8), potential=_custom(), thickness=ThicknessPotential(a=1.0, b=0.5)),
-    "V3-anisotropic": Body(inertia=Inertia(J1=1.3, J2=0.7, J3=0.5), potential=V3(kappa=0.9), thickness=ThicknessPotential(a=1.0, b=2.0)),
-    "V2-anisotropic": Body(inertia=Inertia(J1=0.6, J2=1.4, J3=1.0), potential=V2(c=1.0, d=0.5), thickness=ThicknessPotential(a=1.0, b=1.0)),
+    "V2": Body(
+        inertia=Inertia.isotropic(0.9, 1.1), potential=V2(c=0.8, d=1.2), thickness=ThicknessPotential(a=0.5, b=2.0)
+    ),
+    "V3": Body(
+        inertia=Inertia.isotropic(1.0, 1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1.0, b=1.0)
+    ),
+    "custom": Body(
+        inertia=Inertia.isotropic(1.2, 0.8), potential=_custom(), thickness=ThicknessPotential(a=1.0, b=0.5)
+    ),
+    "V3-anisotropic": Body(
+        inertia=Inertia(J1=1.3, J2=0.7, J3=0.5), potential=V3(kappa=0.9), thickness=ThicknessPotential(a=1.0, b=2.0)
+    ),
+    "V2-anisotropic": Body(
+        inertia=Inertia(J1=0.6, J2=1.4, J3=1.0), potential=V2(c=1.0, d=0.5), thickness=ThicknessPotential(a=1.0, b=1.0)
+    ),
 }
 
 

@@ -51,8 +51,22 @@ def printed_eqs_44_46(y: np.ndarray, J: float, J3: float) -> np.ndarray:
     s1, s2, s3, pt = y[0], y[1], y[2], y[3]
     lam, mu, rho = y[7], y[8], y[9]
     D2 = J * (lam**2 - mu**2) ** 2
-    ds1 = s2 / D2 * ((J * mu**2 * (3 * lam**2 - mu**2) + J3 * rho**2 * (lam**2 + mu**2)) / (J * lam**2 + J3 * rho**2) * s3 - 2 * lam * mu * pt)
-    ds2 = s1 / D2 * ((J * lam**2 * (lam**2 - 3 * mu**2) - J3 * rho**2 * (lam**2 + mu**2)) / (J * mu**2 + J3 * rho**2) * s3 + 2 * lam * mu * pt)
+    ds1 = (
+        s2
+        / D2
+        * (
+            (J * mu**2 * (3 * lam**2 - mu**2) + J3 * rho**2 * (lam**2 + mu**2)) / (J * lam**2 + J3 * rho**2) * s3
+            - 2 * lam * mu * pt
+        )
+    )
+    ds2 = (
+        s1
+        / D2
+        * (
+            (J * lam**2 * (lam**2 - 3 * mu**2) - J3 * rho**2 * (lam**2 + mu**2)) / (J * mu**2 + J3 * rho**2) * s3
+            + 2 * lam * mu * pt
+        )
+    )
     ds3 = J * (mu**2 - lam**2) * s1 * s2 / ((J * lam**2 + J3 * rho**2) * (J * mu**2 + J3 * rho**2))
     return np.array([ds1, ds2, ds3])
 
@@ -64,8 +78,16 @@ def printed_eqs_47_49(y: np.ndarray, J: float, J3: float, body: Body) -> np.ndar
     _, gl, gm, gr = body.potential_terms(lam, mu, rho)
     D3 = J * (lam**2 - mu**2) ** 3
     q = s3**2 + pt**2
-    dpl = -gl + J * lam * s2**2 / (J * lam**2 + J3 * rho**2) ** 2 + (lam * (lam**2 + 3 * mu**2) * q - 2 * mu * (mu**2 + 3 * lam**2) * s3 * pt) / D3
-    dpm = -gm + J * mu * s1**2 / (J * mu**2 + J3 * rho**2) ** 2 - (mu * (mu**2 + 3 * lam**2) * q - 2 * lam * (lam**2 + 3 * mu**2) * s3 * pt) / D3
+    dpl = (
+        -gl
+        + J * lam * s2**2 / (J * lam**2 + J3 * rho**2) ** 2
+        + (lam * (lam**2 + 3 * mu**2) * q - 2 * mu * (mu**2 + 3 * lam**2) * s3 * pt) / D3
+    )
+    dpm = (
+        -gm
+        + J * mu * s1**2 / (J * mu**2 + J3 * rho**2) ** 2
+        - (mu * (mu**2 + 3 * lam**2) * q - 2 * lam * (lam**2 + 3 * mu**2) * s3 * pt) / D3
+    )
     dpr = -gr + J3 * rho * s1**2 / (J * mu**2 + J3 * rho**2) ** 2 + J3 * rho * s2**2 / (J * lam**2 + J3 * rho**2) ** 2
     return np.array([dpl, dpm, dpr])
 

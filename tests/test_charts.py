@@ -100,7 +100,10 @@ CHARTS = {
     "ladder": (_ladder, ["Rung:", "auto:", "two-polar:", "planar-V1:", "floor"]),
     "family-v3-s3": (_family, ["Branch N", "plate's\nnormal", "Elliptic:", "hyperbolic:"]),
     "stability-map-default": (_shape_map, ["energy-Casimir:", "Lyapunov", "hollow", "rigid-like", "circulating"]),
-    "tasks_success": (_tasks, ["LQR: the linear-quadratic regulator", "passivity:", "r: how fast", "γ: the growth rate", "Wilson"]),
+    "tasks_success": (
+        _tasks,
+        ["LQR: the linear-quadratic regulator", "passivity:", "r: how fast", "γ: the growth rate", "Wilson"],
+    ),
     "recording": (_recording, ["send_columns", "Recorder.append", "error bars"]),
     "scaling": (_scaling, ["makespan", "Simulated nodes", "break-even", "o the scheduler overhead"]),
     "service_benchmark": (_service, ["p50 / p99", "99th percentile", "concurrent clients", "error(s)"]),
@@ -132,7 +135,9 @@ def drawn(monkeypatch):
 DEFAULT_CHARTS = {"train_benchmark", "bench_integrators", "ladder"}
 
 
-@pytest.mark.parametrize("name", [n if n in DEFAULT_CHARTS else pytest.param(n, marks=pytest.mark.slow) for n in CHARTS])
+@pytest.mark.parametrize(
+    "name", [n if n in DEFAULT_CHARTS else pytest.param(n, marks=pytest.mark.slow) for n in CHARTS]
+)
 def test_chart_explains_its_jargon_and_nothing_overlaps(name, drawn, tmp_path):
     fn, phrases = CHARTS[name]
     fig = drawn(fn, tmp_path / f"{name}.png")
@@ -169,9 +174,13 @@ def test_layout_problems_finds_the_defects():
         ax.text(1.0, 1.0, "on a marker", ha="center", va="center")
         fig.text(0.9, 0.5, "outside the figure, far to the right")
         problems = "\n".join(layout_problems(fig))
-        for phrase in ("'under the legend' lies under a legend", "'cut by the frame' is cut by its axes' frame",
-                       "'one' and 'two' overlap", "'on a marker' covers a data marker",
-                       "'outside the figure, far to the right' reaches outside the figure"):
+        for phrase in (
+            "'under the legend' lies under a legend",
+            "'cut by the frame' is cut by its axes' frame",
+            "'one' and 'two' overlap",
+            "'on a marker' covers a data marker",
+            "'outside the figure, far to the right' reaches outside the figure",
+        ):
             assert phrase in problems, problems
     finally:
         plt.close(fig)
@@ -192,25 +201,76 @@ def test_caption_is_found_and_clean_layout_passes():
 
 def _small_scaling_table(path: Path) -> Path:
     """A scaling.json of a 2-task run, in the layout ``flatbody bench sweep`` saves."""
-    rep = {"grid": 8, "chunk": 4, "tasks": 2, "points": 64, "serial_s": 0.2, "task_cost_mean_s": 0.1, "task_cost_max_s": 0.12,
-           "cost_per_point_s": 0.003, "task_costs_s": [0.08, 0.12],
-           "local": [{"workers": 1, "startup_s": 0.01, "run_s": 0.21, "speedup": 0.95, "speedup_end_to_end": 0.9},
-                     {"workers": 2, "startup_s": 0.5, "run_s": 0.13, "speedup": 1.5, "speedup_end_to_end": 0.3}],
-           "overhead_per_task_s": 0.002, "overhead_over_task_cost": 0.02, "connect_s": 0.01, "noop_tasks": 10,
-           "simulated": {"workers": 4, "wall_s": 0.13, "model_s": 0.13, "ideal_s": 0.05, "speedup": 1.5},
-           "extrapolated": [{"workers": 8, "grid": 8, "predicted_s": 0.13, "predicted_speedup": 1.5, "grid_big": 100,
-                             "predicted_big_s": 5.0, "predicted_big_speedup": 6.0, "break_even_grid": 3.0}],
-           "break_even_local_2": 20.0, "machine": {"cpu_count": 2, "python": "3", "load_avg_1min": 0.5}}
+    rep = {
+        "grid": 8,
+        "chunk": 4,
+        "tasks": 2,
+        "points": 64,
+        "serial_s": 0.2,
+        "task_cost_mean_s": 0.1,
+        "task_cost_max_s": 0.12,
+        "cost_per_point_s": 0.003,
+        "task_costs_s": [0.08, 0.12],
+        "local": [
+            {"workers": 1, "startup_s": 0.01, "run_s": 0.21, "speedup": 0.95, "speedup_end_to_end": 0.9},
+            {"workers": 2, "startup_s": 0.5, "run_s": 0.13, "speedup": 1.5, "speedup_end_to_end": 0.3},
+        ],
+        "overhead_per_task_s": 0.002,
+        "overhead_over_task_cost": 0.02,
+        "connect_s": 0.01,
+        "noop_tasks": 10,
+        "simulated": {"workers": 4, "wall_s": 0.13, "model_s": 0.13, "ideal_s": 0.05, "speedup": 1.5},
+        "extrapolated": [
+            {
+                "workers": 8,
+                "grid": 8,
+                "predicted_s": 0.13,
+                "predicted_speedup": 1.5,
+                "grid_big": 100,
+                "predicted_big_s": 5.0,
+                "predicted_big_speedup": 6.0,
+                "break_even_grid": 3.0,
+            }
+        ],
+        "break_even_local_2": 20.0,
+        "machine": {"cpu_count": 2, "python": "3", "load_avg_1min": 0.5},
+    }
     path.write_text(json.dumps(rep), encoding="utf-8")
     return path
 
 
 def _small_service_table(path: Path) -> Path:
     """A service_benchmark.json of two endpoints at 1 and 4 clients, in the layout the benchmark saves."""
-    rows = [{"endpoint": e, "clients": c, "requests": 20, "errors": 0, "seconds": 0.5, "p50_ms": p * c, "p99_ms": 4 * p * c,
-             "requests_per_s": 100.0 / p} for e, p in (("GET /health", 1.0), ("POST /simulate", 3.0)) for c in (1, 4)]
-    path.write_text(json.dumps({"workers": 1, "cpus": 2, "long_job": {"kind": "stability-map", "params": {"grid": 20},
-                                "status_at_start": "running", "status_at_end": "running"}, "rows": rows}), encoding="utf-8")
+    rows = [
+        {
+            "endpoint": e,
+            "clients": c,
+            "requests": 20,
+            "errors": 0,
+            "seconds": 0.5,
+            "p50_ms": p * c,
+            "p99_ms": 4 * p * c,
+            "requests_per_s": 100.0 / p,
+        }
+        for e, p in (("GET /health", 1.0), ("POST /simulate", 3.0))
+        for c in (1, 4)
+    ]
+    path.write_text(
+        json.dumps(
+            {
+                "workers": 1,
+                "cpus": 2,
+                "long_job": {
+                    "kind": "stability-map",
+                    "params": {"grid": 20},
+                    "status_at_start": "running",
+                    "status_at_end": "running",
+                },
+                "rows": rows,
+            }
+        ),
+        encoding="utf-8",
+    )
     return path
 
 

@@ -48,9 +48,17 @@ def test_readme_quick_start_is_two_commands_and_ci_runs_exactly_them():
     commands = _quick_start_commands()
     assert len(commands) == 2, commands
     install, tests = commands
-    assert install.startswith("python3 -m venv .venv && ") and "-c constraints.txt" in install and install.endswith("flatbody demo")
+    assert (
+        install.startswith("python3 -m venv .venv && ")
+        and "-c constraints.txt" in install
+        and install.endswith("flatbody demo")
+    )
     assert "pytest" in tests
-    ci = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    ci = [
+        line.strip()
+        for line in (ROOT / ".ci" / "run").read_text().splitlines()
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
     for command in commands:
         assert command in ci, f".ci/run does not run README's command {command!r}"
     assert ci.index(commands[0]) < ci.index(commands[1])
@@ -84,7 +92,9 @@ def test_ci_has_every_real_component_it_installs():
     import shutil
 
     if not os.environ.get("CI"):
-        pytest.skip("only CI promises these components (.ci/run installs them); elsewhere their tests skip with a reason")
+        pytest.skip(
+            "only CI promises these components (.ci/run installs them); elsewhere their tests skip with a reason"
+        )
     from flatbody_env.recording.viewer import viewer_unavailable
 
     assert viewer_unavailable() is None, viewer_unavailable()

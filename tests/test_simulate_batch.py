@@ -16,7 +16,13 @@ from flatbody_env.physics.potentials import CustomPotential, V2
 from flatbody_env.physics.state import STATE_NAMES, pack, unpack
 
 ROOT = Path(__file__).resolve().parents[1]
-SETTINGS = [("RK4", 0.01), ("splitting-strang", 0.01), ("splitting-suzuki4", 0.02), ("splitting-yoshida4", 0.02), ("DOP853-numba", None)]
+SETTINGS = [
+    ("RK4", 0.01),
+    ("splitting-strang", 0.01),
+    ("splitting-suzuki4", 0.02),
+    ("splitting-yoshida4", 0.02),
+    ("DOP853-numba", None),
+]
 
 
 def _states(scene, n, seed):
@@ -27,8 +33,15 @@ def _states(scene, n, seed):
 
 
 def _simulate_one(scene, y, times, method, step, **kw):
-    return simulate(Scene(name="row", body=scene.body, state=unpack(y)), t_end=float(times[-1]), times=times, method=method, step=step,
-                    model="two-polar", **kw)
+    return simulate(
+        Scene(name="row", body=scene.body, state=unpack(y)),
+        t_end=float(times[-1]),
+        times=times,
+        method=method,
+        step=step,
+        model="two-polar",
+        **kw,
+    )
 
 
 @pytest.mark.parametrize("method,step", SETTINGS, ids=[m for m, _ in SETTINGS])
@@ -138,7 +151,10 @@ def test_bad_input_names_the_field(kwargs, match):
 def test_bodies_the_kernels_cannot_run_are_refused():
     scene = load_scene("default")
     Y0 = _states(scene, 1, seed=5)
-    custom = Body(inertia=Inertia.isotropic(1.0, 1.0), potential=CustomPotential(value=lambda l, m, r: 0.5 * (l * l + m * m), gradient=lambda l, m, r: (l, m, 0.0)))
+    custom = Body(
+        inertia=Inertia.isotropic(1.0, 1.0),
+        potential=CustomPotential(value=lambda l, m, r: 0.5 * (l * l + m * m), gradient=lambda l, m, r: (l, m, 0.0)),
+    )
     with pytest.raises(ValueError, match="potential: RK4 is compiled and needs a built-in potential"):
         simulate_batch(custom, Y0, times=[1.0], method="RK4", step=0.1)
     aniso = Body(inertia=Inertia(J1=1.2, J2=0.8, J3=1.0), potential=V2(c=1.0, d=1.0))

@@ -23,7 +23,12 @@ def test_v1_closed_form_stationary_ellipse_stays_stationary():
     v = (sm**2 / (k * J)) ** 0.25
     state = dict(s1=0.0, s2=0.0, s3=s3, p_theta=pt, p_lambda=0.0, p_mu=0.0, p_rho=0.0, theta=0.4)
     state.update({"lambda": (u + v) / 2, "mu": (u - v) / 2, "rho": (a / b) ** (1 / 3)})
-    scene = {"params": {"J": J, "J3": 0.6}, "potential": {"name": "V1", "k": k}, "thickness": {"a": a, "b": b}, "state": state}
+    scene = {
+        "params": {"J": J, "J3": 0.6},
+        "potential": {"name": "V1", "k": k},
+        "thickness": {"a": a, "b": b},
+        "state": state,
+    }
     run = simulate(scene, t_end=50.0, rtol=1e-12, atol=1e-12)
     for name in ("lambda", "mu", "rho", "s1", "s2", "s3", "p_lambda", "p_mu", "p_rho"):
         assert np.ptp(run.state[name]) < 1e-9, name
@@ -59,7 +64,16 @@ def test_trajectory_shape_and_json():
 
 def test_builtin_scenes_load_and_round_trip():
     scenes = builtin_scenes()
-    assert {"default", "regular", "close-approach", "small-rho-bounce", "long-horizon", "stationary-v1", "anisotropic", "crossing"} <= set(scenes)
+    assert {
+        "default",
+        "regular",
+        "close-approach",
+        "small-rho-bounce",
+        "long-horizon",
+        "stationary-v1",
+        "anisotropic",
+        "crossing",
+    } <= set(scenes)
     for sc in scenes.values():
         again = load_scene(sc.to_dict())
         assert again.state == sc.state and again.body == sc.body
@@ -104,8 +118,14 @@ def test_missing_state_field():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"t_end": -1.0}, "t_end"), ({"t_end": 1.0, "rtol": 0.0}, "rtol"), ({"t_end": 1.0, "times": [0.5, 0.2]}, "times"),
-     ({"t_end": 1.0, "method": "nope"}, "method"), ({"t_end": 1.0, "model": "polar"}, "model"), ({"t_end": 1.0, "step": 0.1}, "step")],
+    [
+        ({"t_end": -1.0}, "t_end"),
+        ({"t_end": 1.0, "rtol": 0.0}, "rtol"),
+        ({"t_end": 1.0, "times": [0.5, 0.2]}, "times"),
+        ({"t_end": 1.0, "method": "nope"}, "method"),
+        ({"t_end": 1.0, "model": "polar"}, "model"),
+        ({"t_end": 1.0, "step": 0.1}, "step"),
+    ],
 )
 def test_bad_simulate_arguments(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -117,7 +137,12 @@ def test_collapse_is_reported_with_time_and_reason():
     mu0 = 0.5
     state = dict(s1=0.0, s2=0.0, s3=0.0, p_theta=0.0, p_lambda=0.0, p_mu=-1.0, p_rho=0.0, theta=0.0)
     state.update({"lambda": 1.0, "mu": mu0, "rho": 1.0})
-    scene = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V1", "k": 1.0}, "thickness": {"a": 1.0, "b": 1.0}, "state": state}
+    scene = {
+        "params": {"J": 1.0, "J3": 1.0},
+        "potential": {"name": "V1", "k": 1.0},
+        "thickness": {"a": 1.0, "b": 1.0},
+        "state": state,
+    }
     # scipy's DOP853 locates the collapse with an event at the exact time
     with pytest.raises(IntegrationError) as info:
         simulate(scene, t_end=5.0, model="two-polar", method="DOP853")
@@ -133,7 +158,9 @@ def test_collapse_is_reported_with_time_and_reason():
 def test_chart_failure_detected_not_returned():
     """A coarse tolerance on the close approach in the two-polar chart: crossing λ = μ is caught."""
     with pytest.raises(IntegrationError) as info:
-        simulate("close-approach", t_end=20.0, method="RK23", rtol=1e-2, atol=1e-2, model="two-polar", energy_tol=math.inf)
+        simulate(
+            "close-approach", t_end=20.0, method="RK23", rtol=1e-2, atol=1e-2, model="two-polar", energy_tol=math.inf
+        )
     assert info.value.kind in {"chart-singularity", "step-collapse", "non-finite"}
 
 
@@ -172,7 +199,11 @@ def test_cli_bad_scene_file(tmp_path):
     data["state"]["mu"] = -0.5
     path = tmp_path / "bad.json"
     path.write_text(json.dumps(data))
-    proc = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "simulate", str(path), "--t-end", "1"], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "flatbody_env.cli", "simulate", str(path), "--t-end", "1"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and "state.mu" in proc.stderr and "[1e-06, 1e+06]" in proc.stderr
 

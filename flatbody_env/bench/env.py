@@ -103,7 +103,9 @@ def _time_single(env_ids, steps: int, repeats: int, progress) -> dict[str, tuple
     return out
 
 
-def _time_batched(n: int, episode_steps: int, cartpole_steps: int, rounds: int, progress) -> tuple[float, float, float, int]:
+def _time_batched(
+    n: int, episode_steps: int, cartpole_steps: int, rounds: int, progress
+) -> tuple[float, float, float, int]:
     """(s per env-step of FlatBodyVectorEnv as constructed by default (one thread), with ``num_threads=None``
     (one per available core), of CartPoleVectorEnv; the thread count of the second), timed in alternation.
     A FlatBody block is ``max_episode_steps + 1`` steps: one whole episode from an autoreset plus the step
@@ -118,8 +120,11 @@ def _time_batched(n: int, episode_steps: int, cartpole_steps: int, rounds: int, 
     cp = CartPoleVectorEnv(num_envs=n)
     actions = rng.uniform(-1, 1, size=fb.action_space.shape).astype(np.float32)
     cp_actions = cp.action_space.sample()
-    blocks = {"fb": (fb, actions, fb.max_episode_steps + 1), "fbt": (fbt, actions, fbt.max_episode_steps + 1),
-              "cp": (cp, cp_actions, cartpole_steps)}
+    blocks = {
+        "fb": (fb, actions, fb.max_episode_steps + 1),
+        "fbt": (fbt, actions, fbt.max_episode_steps + 1),
+        "cp": (cp, cp_actions, cartpole_steps),
+    }
     for env, _, _ in blocks.values():
         env.reset(seed=0)
 
@@ -147,7 +152,9 @@ def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwa
 
     env = FlatBodyVectorEnv(num_envs=num_envs, max_episode_steps=steps + 1, **env_kwargs)
     env.reset(seed=seed)
-    ref = make_env_step("DOP853", env.body if env.body is not None else default_body(), Tolerances(rtol=1e-13, atol=1e-13))
+    ref = make_env_step(
+        "DOP853", env.body if env.body is not None else default_body(), Tolerances(rtol=1e-13, atol=1e-13)
+    )
     Yref = env.states
     rng = np.random.default_rng(seed)
     worst = 0.0
@@ -167,8 +174,15 @@ def episode_error(num_envs: int = 16, steps: int = 400, seed: int = 0, **env_kwa
     return worst
 
 
-def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats: int = 5, progress: bool = True,
-        episode_steps: int | None = None) -> EnvBenchmark:
+def run(
+    *,
+    steps: int = 2000,
+    batch: int = 1024,
+    batch_steps: int = 50,
+    repeats: int = 5,
+    progress: bool = True,
+    episode_steps: int | None = None,
+) -> EnvBenchmark:
     """Measure (module docstring); ``episode_steps`` (default: the registered 400) is the batched env's episode length."""
     from flatbody_env.env.env import DEFAULT_INTEGRATOR
     from flatbody_env.env.registration import MAX_EPISODE_STEPS
@@ -181,21 +195,40 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
     for task in bar:
         bar.set_postfix_str(task)
         if task == "single envs":
-            results["single"] = _time_single(SINGLE, steps, repeats, lambda k: bar.set_postfix_str(f"{task} ({k}/{repeats})"))
+            results["single"] = _time_single(
+                SINGLE, steps, repeats, lambda k: bar.set_postfix_str(f"{task} ({k}/{repeats})")
+            )
         elif task == "batched FlatBody vs CartPole":
             rounds = max(2, repeats // 2 + 1)
             results["fb"], results["fbt"], results["cp"], results["threads"] = _time_batched(
-                batch, episode_steps, batch_steps * 10, rounds, lambda k: bar.set_postfix_str(f"{task} ({k}/{rounds})"))
+                batch, episode_steps, batch_steps * 10, rounds, lambda k: bar.set_postfix_str(f"{task} ({k}/{rounds})")
+            )
         else:
             results["err"] = episode_error()
-    single = [StepRate(name=name, batch=1, us_per_env_step=s * 1e6, env_steps_per_s=1.0 / s, ms_per_reset=r * 1e3)
-              for name, (s, r) in results["single"].items()]
+    single = [
+        StepRate(name=name, batch=1, us_per_env_step=s * 1e6, env_steps_per_s=1.0 / s, ms_per_reset=r * 1e3)
+        for name, (s, r) in results["single"].items()
+    ]
     t = results["threads"]
     batched = [
-        StepRate(name=f"FlatBodyVectorEnv (N={batch})", batch=batch, us_per_env_step=results["fb"] * 1e6, env_steps_per_s=1.0 / results["fb"]),
-        StepRate(name=f"FlatBodyVectorEnv (N={batch}, {t} thread{'s' if t > 1 else ''})", batch=batch, us_per_env_step=results["fbt"] * 1e6,
-                 env_steps_per_s=1.0 / results["fbt"]),
-        StepRate(name=f"CartPoleVectorEnv (N={batch})", batch=batch, us_per_env_step=results["cp"] * 1e6, env_steps_per_s=1.0 / results["cp"]),
+        StepRate(
+            name=f"FlatBodyVectorEnv (N={batch})",
+            batch=batch,
+            us_per_env_step=results["fb"] * 1e6,
+            env_steps_per_s=1.0 / results["fb"],
+        ),
+        StepRate(
+            name=f"FlatBodyVectorEnv (N={batch}, {t} thread{'s' if t > 1 else ''})",
+            batch=batch,
+            us_per_env_step=results["fbt"] * 1e6,
+            env_steps_per_s=1.0 / results["fbt"],
+        ),
+        StepRate(
+            name=f"CartPoleVectorEnv (N={batch})",
+            batch=batch,
+            us_per_env_step=results["cp"] * 1e6,
+            env_steps_per_s=1.0 / results["cp"],
+        ),
     ]
     by = {r.name: r for r in single}
     return EnvBenchmark(
@@ -214,9 +247,19 @@ def run(*, steps: int = 2000, batch: int = 1024, batch_steps: int = 50, repeats:
 
 def report(bench: EnvBenchmark) -> Report:
     """``env_benchmark.json``, ``.csv``, ``.png`` (drawn from the CSV) and the ``<!-- bench:env -->`` block."""
-    return Report(name="env_benchmark", record=asdict(bench), header=["name", "batch", "us_per_env_step", "env_steps_per_s"],
-                  rows=[[r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"] for r in bench.single + bench.batched],
-                  chart=plot, chart_from="csv", markdown=markdown(bench), block="env")
+    return Report(
+        name="env_benchmark",
+        record=asdict(bench),
+        header=["name", "batch", "us_per_env_step", "env_steps_per_s"],
+        rows=[
+            [r.name, r.batch, f"{r.us_per_env_step:.6g}", f"{r.env_steps_per_s:.6g}"]
+            for r in bench.single + bench.batched
+        ],
+        chart=plot,
+        chart_from="csv",
+        markdown=markdown(bench),
+        block="env",
+    )
 
 
 ENV_CAPTION = (
@@ -265,14 +308,18 @@ def markdown(bench: EnvBenchmark) -> str:
         name = r.name[:-1] + note + ")" if note else r.name
         rows.append(f"| {name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | — |")
     ok = lambda x, bound, le=False: "met" if (x <= bound if le else x >= bound) else "missed"  # noqa: E731
-    rows += ["", "| ratio (same run) | measured | target |", "|---|---|---|",
-             f"| `FlatBody-v0` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
-             f"| `FlatBody-v0` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
-             f"| `FlatBody-v0` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
-             f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
-             f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
-             f"| the same with `num_threads=None` ({bench.threads} thread{'s' if bench.threads > 1 else ''}) | {bench.ratio_batched_threads_vs_cartpole:.2f} | — |",
-             f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |"]
+    rows += [
+        "",
+        "| ratio (same run) | measured | target |",
+        "|---|---|---|",
+        f"| `FlatBody-v0` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
+        f"| `FlatBody-v0` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
+        f"| `FlatBody-v0` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
+        f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
+        f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
+        f"| the same with `num_threads=None` ({bench.threads} thread{'s' if bench.threads > 1 else ''}) | {bench.ratio_batched_threads_vs_cartpole:.2f} | — |",
+        f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |",
+    ]
     return "\n".join(rows) + "\n"
 
 

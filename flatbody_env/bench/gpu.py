@@ -117,6 +117,7 @@ def measure(backend: str, method: str, n: int, *, steps: int, repeats: int) -> f
 
         block = _ping_pong(step, Y.copy(), np.empty_like(Y), steps)
     elif backend == "cpu-parallel":
+
         def step(A, B):
             bs.batch_env_step(kind, coeffs, A, U, P, DT, h, DOP853_TOL, DOP853_TOL, np.inf, B, status, nfev)
 
@@ -147,7 +148,10 @@ def measure_env(backend: str, n: int, *, steps: int, repeats: int) -> tuple[str,
 
         env = FlatBodyVectorEnv(num_envs=n, autoreset_mode=AutoresetMode.SAME_STEP)
         env.reset(seed=0, options={"stagger": True})
-        blocks = [rng.uniform(-1, 1, (steps + 1, n) + env.single_action_space.shape).astype(np.float32) for _ in range(repeats)]
+        blocks = [
+            rng.uniform(-1, 1, (steps + 1, n) + env.single_action_space.shape).astype(np.float32)
+            for _ in range(repeats)
+        ]
         env.step(blocks[0][0])  # compile / warm
         actions = iter(blocks)
 
@@ -182,7 +186,9 @@ def measure_env(backend: str, n: int, *, steps: int, repeats: int) -> tuple[str,
     raise ValueError(f"backend: no whole-env row for {backend!r} (allowed: {', '.join(ENV_BACKENDS)})")
 
 
-def run(*, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeats: int = 3, only=None, progress=None) -> dict:
+def run(
+    *, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeats: int = 3, only=None, progress=None
+) -> dict:
     """Every backend here (or those of ``only`` among them) × ``methods`` × ``sizes`` (dynamics only), then the
     whole env step on those of :data:`ENV_BACKENDS` × ``sizes``: ``{"rows", "settings", "left_out"}``;
     ``progress(row)`` is called after each row."""
@@ -202,7 +208,14 @@ def run(*, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeat
     rows = []
 
     def add(what, backend, method, n, rate):
-        row = {"what": what, "backend": backend, "method": method, "n": n, "steps_per_s": rate, "device_name": device_names[backend]}
+        row = {
+            "what": what,
+            "backend": backend,
+            "method": method,
+            "n": n,
+            "steps_per_s": rate,
+            "device_name": device_names[backend],
+        }
         rows.append(row)
         if progress is not None:
             progress(row)
@@ -215,14 +228,27 @@ def run(*, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeat
         for n in sizes:
             method, rate = measure_env(backend, int(n), steps=steps, repeats=repeats)
             add(WHAT_ENV, backend, method, int(n), rate)
-    settings = {"dt": DT, "rk4_step": RK4_STEP, "dop853_rtol": DOP853_TOL, "dop853_atol": DOP853_TOL, "steps": steps, "repeats": repeats,
-                "threads": int(numba.get_num_threads())}
+    settings = {
+        "dt": DT,
+        "rk4_step": RK4_STEP,
+        "dop853_rtol": DOP853_TOL,
+        "dop853_atol": DOP853_TOL,
+        "steps": steps,
+        "repeats": repeats,
+        "threads": int(numba.get_num_threads()),
+    }
     return {"rows": rows, "settings": settings, "left_out": notes}
 
 
 def report(result: dict, name: str) -> Report:
     """``NAME.json`` (``result``), ``NAME.csv`` (the rows) and ``NAME.png`` (drawn from the JSON)."""
-    return Report(name=name, record=result, header=list(ROW_KEYS), rows=[[r[k] for k in ROW_KEYS] for r in result["rows"]], chart=plot)
+    return Report(
+        name=name,
+        record=result,
+        header=list(ROW_KEYS),
+        rows=[[r[k] for k in ROW_KEYS] for r in result["rows"]],
+        chart=plot,
+    )
 
 
 def plot(json_path: str | Path, png_path: str | Path) -> None:
@@ -236,18 +262,28 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
     fig, ax = plt.subplots(figsize=(10, 4.8))
     keys = sorted({(r["what"], r["backend"], r["method"]) for r in result["rows"]})
     for what, backend, method in keys:
-        rows = sorted((r for r in result["rows"] if r["what"] == what and r["backend"] == backend and r["method"] == method), key=lambda r: r["n"])
+        rows = sorted(
+            (r for r in result["rows"] if r["what"] == what and r["backend"] == backend and r["method"] == method),
+            key=lambda r: r["n"],
+        )
         whole = what != WHAT
-        ax.plot([r["n"] for r in rows], [r["steps_per_s"] for r in rows], marker="s" if whole else "o",
-                linestyle=":" if whole else ("-" if method == "RK4" else "--"),
-                label=f"{'whole env, ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})")
+        ax.plot(
+            [r["n"] for r in rows],
+            [r["steps_per_s"] for r in rows],
+            marker="s" if whole else "o",
+            linestyle=":" if whole else ("-" if method == "RK4" else "--"),
+            label=f"{'whole env, ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})",
+        )
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set_xlabel("bodies N")
     ax.set_ylabel("body-steps / s")
-    ax.set_title(f"one env step of N bodies: dynamics alone (lines) and the whole env step (dotted), dt = {DT:g}\n"
-                 f"RK4 h = dt/4, DOP853 tol {DOP853_TOL:g}; best of {result['settings']['repeats']} blocks of "
-                 f"{result['settings']['steps']} steps", fontsize=9)
+    ax.set_title(
+        f"one env step of N bodies: dynamics alone (lines) and the whole env step (dotted), dt = {DT:g}\n"
+        f"RK4 h = dt/4, DOP853 tol {DOP853_TOL:g}; best of {result['settings']['repeats']} blocks of "
+        f"{result['settings']['steps']} steps",
+        fontsize=9,
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     fig.tight_layout()
@@ -255,5 +291,18 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
     plt.close(fig)
 
 
-__all__ = ["BACKENDS", "DEFAULT_METHODS", "DEFAULT_SIZES", "ENV_BACKENDS", "ROW_KEYS", "WHAT", "WHAT_ENV", "backends", "measure", "measure_env", "plot",
-           "report", "run"]
+__all__ = [
+    "BACKENDS",
+    "DEFAULT_METHODS",
+    "DEFAULT_SIZES",
+    "ENV_BACKENDS",
+    "ROW_KEYS",
+    "WHAT",
+    "WHAT_ENV",
+    "backends",
+    "measure",
+    "measure_env",
+    "plot",
+    "report",
+    "run",
+]

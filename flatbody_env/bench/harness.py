@@ -44,8 +44,13 @@ def best_of(fn: Callable[[], object], repeats: int, *, warm: bool = True) -> flo
     return best
 
 
-def alternate(cases: Mapping[str, Callable[[], float | None]], rounds: int, *, warm: bool = True,
-              progress: Callable[[int], object] | None = None) -> dict[str, float]:
+def alternate(
+    cases: Mapping[str, Callable[[], float | None]],
+    rounds: int,
+    *,
+    warm: bool = True,
+    progress: Callable[[int], object] | None = None,
+) -> dict[str, float]:
     """The least wall time in seconds of each case, the cases timed in turn within each of ``rounds`` rounds.
 
     Parameters
@@ -121,8 +126,10 @@ def write_report(report: Report, out_dir: str | os.PathLike, *, docs: str | os.P
     out.mkdir(parents=True, exist_ok=True)
     record = dict(report.record)
     record.setdefault("machine", machine())
-    paths = [atomic_write(out / f"{report.name}.json", json.dumps(record, indent=2, default=float) + "\n"),
-             write_csv(out / f"{report.name}.csv", report.header, report.rows)]
+    paths = [
+        atomic_write(out / f"{report.name}.json", json.dumps(record, indent=2, default=float) + "\n"),
+        write_csv(out / f"{report.name}.csv", report.header, report.rows),
+    ]
     if report.chart is not None:
         png = out / f"{report.name}.png"
         report.chart(paths[0] if report.chart_from == "json" else paths[1], png)
@@ -132,7 +139,9 @@ def write_report(report: Report, out_dir: str | os.PathLike, *, docs: str | os.P
     return paths
 
 
-def redraw(out_dir: str | os.PathLike, name: str, chart: Callable[[Path, Path], object], *, where: str = "out_dir") -> Path:
+def redraw(
+    out_dir: str | os.PathLike, name: str, chart: Callable[[Path, Path], object], *, where: str = "out_dir"
+) -> Path:
     """Redraw ``NAME.png`` from the saved ``NAME.json`` in ``out_dir`` (``--plot-only``); a ``ValueError`` naming ``where``
     when no saved run is there. Returns the PNG's path."""
     saved, png = Path(out_dir) / f"{name}.json", Path(out_dir) / f"{name}.png"

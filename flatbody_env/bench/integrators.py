@@ -51,7 +51,15 @@ TARGET_REGULAR = 1e-9
 TARGET_CLOSE = 1e-8
 RTOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
 STEPS = (0.2, 0.1, 0.05, 0.025, 0.0125, 0.00625, 0.003125)
-REGULAR_METHODS = ("DOP853", "DOP853-numba", "RK4", "splitting-suzuki4", "splitting-yoshida4", "RATTLE-suzuki4", "RATTLE-kahanli6")
+REGULAR_METHODS = (
+    "DOP853",
+    "DOP853-numba",
+    "RK4",
+    "splitting-suzuki4",
+    "splitting-yoshida4",
+    "RATTLE-suzuki4",
+    "RATTLE-kahanli6",
+)
 CLOSE_METHODS = ("RATTLE-suzuki4", "RATTLE-kahanli6", "DOP853-numba", "DOP853", "RK4", "splitting-suzuki4")
 LONG_RUNS = (
     ("DOP853", dict(rtol=1e-6, atol=1e-9)),
@@ -100,7 +108,15 @@ def _curve(method, scene, t_end, ref, repeats, max_run_s):
         tol = Tolerances(rtol=v, atol=1e-3 * v) if kind == "rtol" else Tolerances(step=v)
         sol, wall, runs, status, reason = timed_run(method, scene, np.array([0.0, t_end]), tol, repeats=repeats)
         err = float(np.max(np.abs(sol.Y[:, -1] - ref))) if sol is not None else math.nan
-        out.append({"setting": f"{kind}={v:g}", "error": err, "wall_time": wall, "nfev": sol.nfev if sol else 0, "status": status})
+        out.append(
+            {
+                "setting": f"{kind}={v:g}",
+                "error": err,
+                "wall_time": wall,
+                "nfev": sol.nfev if sol else 0,
+                "status": status,
+            }
+        )
         if wall > max_run_s:
             break
     return out
@@ -108,7 +124,11 @@ def _curve(method, scene, t_end, ref, repeats, max_run_s):
 
 def wall_at(curve, target):
     """Wall time at error ``target``: log-log interpolation between the bracketing settings (None if not bracketed)."""
-    pts = [(c["error"], c["wall_time"]) for c in curve if c["status"] == "ok" and c["error"] > 0 and math.isfinite(c["error"])]
+    pts = [
+        (c["error"], c["wall_time"])
+        for c in curve
+        if c["status"] == "ok" and c["error"] > 0 and math.isfinite(c["error"])
+    ]
     pts.sort(key=lambda p: -p[0])
     best = None
     for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
@@ -146,10 +166,26 @@ def _regular(repeats, max_run_s, t_end, bar):
     same = []
     for a, b in zip(curves["DOP853"], curves["DOP853-numba"]):
         if a["status"] == "ok" and b["status"] == "ok":
-            same.append({"setting": a["setting"], "scipy_s": a["wall_time"], "numba_s": b["wall_time"], "ratio": a["wall_time"] / b["wall_time"],
-                         "scipy_nfev": a["nfev"], "numba_nfev": b["nfev"], "scipy_error": a["error"], "numba_error": b["error"]})
-    return {"t_end": t_end, "target_error": TARGET_REGULAR, "reference_floor": floor, "curves": curves, "at_target": at,
-            "same_rtol": same}
+            same.append(
+                {
+                    "setting": a["setting"],
+                    "scipy_s": a["wall_time"],
+                    "numba_s": b["wall_time"],
+                    "ratio": a["wall_time"] / b["wall_time"],
+                    "scipy_nfev": a["nfev"],
+                    "numba_nfev": b["nfev"],
+                    "scipy_error": a["error"],
+                    "numba_error": b["error"],
+                }
+            )
+    return {
+        "t_end": t_end,
+        "target_error": TARGET_REGULAR,
+        "reference_floor": floor,
+        "curves": curves,
+        "at_target": at,
+        "same_rtol": same,
+    }
 
 
 def _close(repeats, max_run_s, bar, deltas):
@@ -157,22 +193,34 @@ def _close(repeats, max_run_s, bar, deltas):
     for delta in deltas:
         sc = gap_scene(delta)
         t_end = sc.t_end
-        ref, floor = _reference(sc, t_end, "DOP853-regular", dict(rtol=1e-12, atol=1e-12), "RATTLE-suzuki4", dict(step=0.002))
+        ref, floor = _reference(
+            sc, t_end, "DOP853-regular", dict(rtol=1e-12, atol=1e-12), "RATTLE-suzuki4", dict(step=0.002)
+        )
         curves = {}
         for m in CLOSE_METHODS:
             bar.set_postfix_str(f"close δ={delta:g} {m}")
             curves[m] = _curve(m, sc, t_end, ref, repeats, max_run_s)
             bar.update(1)
-        at = [{"method": m, "wall_time": wall_at(curves[m], TARGET_CLOSE), "chart": get_method(m).info.chart} for m in CLOSE_METHODS]
+        at = [
+            {"method": m, "wall_time": wall_at(curves[m], TARGET_CLOSE), "chart": get_method(m).info.chart}
+            for m in CLOSE_METHODS
+        ]
         regs = [(a["wall_time"], a["method"]) for a in at if a["chart"] == "regular" and a["wall_time"]]
         reg, reg_name = min(regs) if regs else (None, "")
         two = [a["wall_time"] for a in at if a["chart"] == "two-polar" and a["wall_time"]]
-        out.append({
-            "delta": delta, "t_end": t_end, "target_error": TARGET_CLOSE, "reference_floor": floor, "curves": curves, "at_target": at,
-            "cheapest_regular": reg_name,
-            "regular_vs_cheapest_two_polar": (min(two) / reg) if (two and reg) else None,
-            "two_polar_reaching_target": [a["method"] for a in at if a["chart"] == "two-polar" and a["wall_time"]],
-        })
+        out.append(
+            {
+                "delta": delta,
+                "t_end": t_end,
+                "target_error": TARGET_CLOSE,
+                "reference_floor": floor,
+                "curves": curves,
+                "at_target": at,
+                "cheapest_regular": reg_name,
+                "regular_vs_cheapest_two_polar": (min(two) / reg) if (two and reg) else None,
+                "two_polar_reaching_target": [a["method"] for a in at if a["chart"] == "two-polar" and a["wall_time"]],
+            }
+        )
     return out
 
 
@@ -186,9 +234,20 @@ def _long(bar, t_end):
         bar.set_postfix_str(f"long {m}")
         sol, wall, runs, status, reason = timed_run(m, sc, times, Tolerances(**kw), repeats=1)
         dH = float(np.max(np.abs(hamiltonian_series(sol.Y, sc.body) - H0))) if sol is not None else math.nan
-        out.append({"method": m, "setting": ", ".join(f"{k}={v:g}" for k, v in kw.items()), "t_end": t_end, "energy_error": dH,
-                    "energy_error_final": float(abs(hamiltonian_series(sol.Y[:, -1:], sc.body)[0] - H0)) if sol is not None else math.nan,
-                    "wall_time": wall, "nfev": sol.nfev if sol is not None else 0, "status": status})
+        out.append(
+            {
+                "method": m,
+                "setting": ", ".join(f"{k}={v:g}" for k, v in kw.items()),
+                "t_end": t_end,
+                "energy_error": dH,
+                "energy_error_final": float(abs(hamiltonian_series(sol.Y[:, -1:], sc.body)[0] - H0))
+                if sol is not None
+                else math.nan,
+                "wall_time": wall,
+                "nfev": sol.nfev if sol is not None else 0,
+                "status": status,
+            }
+        )
         bar.update(1)
     return out
 
@@ -232,8 +291,18 @@ def _short_step(bar, n_batch=1024):
         U = np.zeros((4, n_batch))
         O = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
-        bbest = best_of(lambda st=st, h=h: st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), 5, warm=False) / n_batch
-        out.append({"method": m, "path": "env", "us_per_step": best * 1e6, "batch_us_per_body_step": bbest * 1e6, "batch_size": n_batch})
+        bbest = (
+            best_of(lambda st=st, h=h: st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), 5, warm=False) / n_batch
+        )
+        out.append(
+            {
+                "method": m,
+                "path": "env",
+                "us_per_step": best * 1e6,
+                "batch_us_per_body_step": bbest * 1e6,
+                "batch_size": n_batch,
+            }
+        )
         bar.update(1)
     return out
 
@@ -262,7 +331,9 @@ def compile_times(names=None) -> list[dict]:
         env["NUMBA_CACHE_DIR"] = cache
         runs = []
         for _ in range(2):
-            res = subprocess.run([sys.executable, "-c", _COMPILE_SNIPPET, *names], env=env, capture_output=True, text=True, check=True)
+            res = subprocess.run(
+                [sys.executable, "-c", _COMPILE_SNIPPET, *names], env=env, capture_output=True, text=True, check=True
+            )
             runs.append(json.loads(res.stdout.strip().splitlines()[-1]))
     cold, warm = runs
     return [{"method": n, "first_call_s": cold[n], "cached_s": warm[n]} for n in names] + [
@@ -284,12 +355,27 @@ def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
         simulate(sc, t_end=t_end)  # compiled kernels loaded
         runs = [simulate(sc, t_end=t_end) for _ in range(repeats)]
         auto = min(runs, key=lambda r: r.wall_time)
-        row = {"scene": name, "t_end": t_end, "method": auto.method, "model": auto.model, "auto_s": auto.wall_time,
-               "reason": auto.extra.get("method_reason", ""), "auto_step": auto.extra.get("auto_step")}
+        row = {
+            "scene": name,
+            "t_end": t_end,
+            "method": auto.method,
+            "model": auto.model,
+            "auto_s": auto.wall_time,
+            "reason": auto.extra.get("method_reason", ""),
+            "auto_step": auto.extra.get("auto_step"),
+        }
         try:
-            ref = min((simulate(sc, t_end=t_end, method="DOP853") for _ in range(max(1, repeats - 1))), key=lambda r: r.wall_time)
-            row.update(scipy_method=ref.method, scipy_model=ref.model, scipy_s=ref.wall_time, speedup=ref.wall_time / max(auto.wall_time, 1e-9),
-                       max_difference=float(np.max(np.abs(auto.y - ref.y))))
+            ref = min(
+                (simulate(sc, t_end=t_end, method="DOP853") for _ in range(max(1, repeats - 1))),
+                key=lambda r: r.wall_time,
+            )
+            row.update(
+                scipy_method=ref.method,
+                scipy_model=ref.model,
+                scipy_s=ref.wall_time,
+                speedup=ref.wall_time / max(auto.wall_time, 1e-9),
+                max_difference=float(np.max(np.abs(auto.y - ref.y))),
+            )
         except IntegrationError as exc:
             row.update(scipy_method="DOP853", scipy_s=None, speedup=None, max_difference=None, scipy_failure=exc.kind)
         rows.append(row)
@@ -297,8 +383,9 @@ def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
     return rows
 
 
-def measure(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True,
-                      with_compile: bool = True) -> BenchReport:
+def measure(
+    *, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, progress: bool = True, with_compile: bool = True
+) -> BenchReport:
     """Run sections 1–5 (see the module docstring) in one process.
 
     Parameters
@@ -323,7 +410,14 @@ def measure(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, pr
 
     warm_up()  # compile time is measured separately (in fresh processes)
     deltas = (1e-3,) if quick else (1e-3, 1e-6, 1e-9)
-    total = len(REGULAR_METHODS) + len(deltas) * len(CLOSE_METHODS) + len(LONG_RUNS) + 4 + 2 * len(ENV_METHODS) + len(builtin_scenes())
+    total = (
+        len(REGULAR_METHODS)
+        + len(deltas) * len(CLOSE_METHODS)
+        + len(LONG_RUNS)
+        + 4
+        + 2 * len(ENV_METHODS)
+        + len(builtin_scenes())
+    )
     bar = progress_bar(total=total, desc="bench integrators", unit="task", enabled=progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
     close = _close(1 if quick else repeats, max_run_s, bar, deltas)
@@ -332,45 +426,70 @@ def measure(*, quick: bool = False, repeats: int = 3, max_run_s: float = 5.0, pr
     auto = _auto(1 if quick else repeats, bar, 20.0 if quick else 100.0)
     bar.close()
     comp = compile_times() if with_compile else []
-    return BenchReport(machine={**machine(), "platform": platform.platform(), "quick": quick}, regular=regular, close_approach=close, long_horizon=long_h, short_step=short, compile_times=comp,
-                       auto=auto)
+    return BenchReport(
+        machine={**machine(), "platform": platform.platform(), "quick": quick},
+        regular=regular,
+        close_approach=close,
+        long_horizon=long_h,
+        short_step=short,
+        compile_times=comp,
+        auto=auto,
+    )
 
 
 def describe(rep: BenchReport) -> str:
     """The printed summary."""
     L = []
     r = rep.regular
-    L.append(f"regular scene, t = {r['t_end']:g}: wall time at final error {r['target_error']:g} "
-             f"(reference floor {r['reference_floor']:.1e})")
+    L.append(
+        f"regular scene, t = {r['t_end']:g}: wall time at final error {r['target_error']:g} "
+        f"(reference floor {r['reference_floor']:.1e})"
+    )
     for a in r["at_target"]:
         w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  (not bracketed)"
         s = f"  {a['speedup']:7.1f}x vs scipy DOP853" if a.get("speedup") else ""
         L.append(f"  {a['method']:<20} {w}{s}")
     L.append("  same rtol, DOP853-numba vs scipy DOP853 (identical steps):")
     for s in r["same_rtol"]:
-        L.append(f"    {s['setting']:<11} scipy {s['scipy_s'] * 1e3:8.2f} ms  numba {s['numba_s'] * 1e3:7.3f} ms  ratio {s['ratio']:6.1f}x  "
-                 f"nfev {s['scipy_nfev']}/{s['numba_nfev']}  error {s['numba_error']:.1e}")
+        L.append(
+            f"    {s['setting']:<11} scipy {s['scipy_s'] * 1e3:8.2f} ms  numba {s['numba_s'] * 1e3:7.3f} ms  ratio {s['ratio']:6.1f}x  "
+            f"nfev {s['scipy_nfev']}/{s['numba_nfev']}  error {s['numba_error']:.1e}"
+        )
     for c in rep.close_approach:
-        L.append(f"close approach, s3 - p_theta = {c['delta']:g}, t = {c['t_end']:g}: wall time at error {c['target_error']:g} "
-                 f"(reference floor {c['reference_floor']:.1e})")
+        L.append(
+            f"close approach, s3 - p_theta = {c['delta']:g}, t = {c['t_end']:g}: wall time at error {c['target_error']:g} "
+            f"(reference floor {c['reference_floor']:.1e})"
+        )
         for a in c["at_target"]:
             w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  does not reach it (fails or not bracketed)"
             L.append(f"  {a['method']:<20} {a['chart']:<10} {w}")
         ratio = c["regular_vs_cheapest_two_polar"]
-        L.append(f"  cheapest two-polar / cheapest regular-chart ({c['cheapest_regular']}) = {ratio:.2f}x" if ratio
-                 else f"  no two-polar method reaches the target; {c['cheapest_regular']} does")
+        L.append(
+            f"  cheapest two-polar / cheapest regular-chart ({c['cheapest_regular']}) = {ratio:.2f}x"
+            if ratio
+            else f"  no two-polar method reaches the target; {c['cheapest_regular']} does"
+        )
     L.append("long horizon: energy error max|H - H0|")
     for x in rep.long_horizon:
-        L.append(f"  {x['method']:<20} {x['setting']:<22} t={x['t_end']:g}  {x['energy_error']:.2e}  ({x['wall_time']:.2f} s, {x['status']})")
+        L.append(
+            f"  {x['method']:<20} {x['setting']:<22} t={x['t_end']:g}  {x['energy_error']:.2e}  ({x['wall_time']:.2f} s, {x['status']})"
+        )
     L.append("one short step dt = 0.05 (us per call)")
     for x in rep.short_step:
-        extra = f"   batch of {x['batch_size']}: {x['batch_us_per_body_step']:.3f} us/body-step" if x["path"] == "env" else ""
+        extra = (
+            f"   batch of {x['batch_size']}: {x['batch_us_per_body_step']:.3f} us/body-step"
+            if x["path"] == "env"
+            else ""
+        )
         L.append(f"  {x['method']:<20} {x['path']:<10} {x['us_per_step']:10.2f}{extra}")
     if rep.auto:
         L.append("simulate's default (method auto) vs scipy DOP853, built-in scenes, rtol = atol = 1e-10 (same run)")
         for x in rep.auto:
-            vs = f"{x['scipy_s'] * 1e3:9.2f} ms  {x['speedup']:6.1f}x  diff {x['max_difference']:.1e}" if x.get("scipy_s") else \
-                f"scipy DOP853 fails ({x.get('scipy_failure')})"
+            vs = (
+                f"{x['scipy_s'] * 1e3:9.2f} ms  {x['speedup']:6.1f}x  diff {x['max_difference']:.1e}"
+                if x.get("scipy_s")
+                else f"scipy DOP853 fails ({x.get('scipy_failure')})"
+            )
             L.append(f"  {x['scene']:<20} {x['model']:<10} {x['method']:<18} {x['auto_s'] * 1e3:8.2f} ms | {vs}")
     if rep.compile_times:
         L.append("compile time (fresh processes): first call with empty numba cache / cached")
@@ -384,20 +503,29 @@ def docs_tables(rep: dict) -> dict[str, str]:
     (``flatbody bench integrators --docs docs/integrators.md`` rewrites each ``<!-- bench:NAME -->`` block)."""
     tables = {}
     r = rep["regular"]
-    lines = [f"| method | wall time at error {r['target_error']:g} (regular scene, t = {r['t_end']:g}) | vs scipy DOP853 |", "|---|---|---|"]
+    lines = [
+        f"| method | wall time at error {r['target_error']:g} (regular scene, t = {r['t_end']:g}) | vs scipy DOP853 |",
+        "|---|---|---|",
+    ]
     for a in r["at_target"]:
         w = f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "not bracketed"
-        lines.append(f"| {a['method']} | {w} | {a['speedup']:.1f}× |" if a.get("speedup") else f"| {a['method']} | {w} | – |")
+        lines.append(
+            f"| {a['method']} | {w} | {a['speedup']:.1f}× |" if a.get("speedup") else f"| {a['method']} | {w} | – |"
+        )
     tables["integrators-regular"] = "\n".join(lines)
-    lines = ["| s3 − p_θ | " + " | ".join(a["method"] for a in rep["close_approach"][0]["at_target"]) + " |",
-             "|---|" + "---|" * len(rep["close_approach"][0]["at_target"])]
+    lines = [
+        "| s3 − p_θ | " + " | ".join(a["method"] for a in rep["close_approach"][0]["at_target"]) + " |",
+        "|---|" + "---|" * len(rep["close_approach"][0]["at_target"]),
+    ]
     for c in rep["close_approach"]:
         cells = [f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "fails / not reached" for a in c["at_target"]]
         lines.append(f"| {c['delta']:g} | " + " | ".join(cells) + " |")
     tables["integrators-close"] = "\n".join(lines)
     lines = ["| method and setting | energy error | wall time |", "|---|---|---|"]
     for x in rep["long_horizon"]:
-        lines.append(f"| {x['method']}, {x['setting']} (t = {x['t_end']:g}) | {x['energy_error']:.1e} | {x['wall_time']:.2f} s |")
+        lines.append(
+            f"| {x['method']}, {x['setting']} (t = {x['t_end']:g}) | {x['energy_error']:.1e} | {x['wall_time']:.2f} s |"
+        )
     tables["integrators-long"] = "\n".join(lines)
     lines = ["| method | path | µs per step | batched, µs per body-step |", "|---|---|---|---|"]
     for x in rep["short_step"]:
@@ -405,15 +533,19 @@ def docs_tables(rep: dict) -> dict[str, str]:
         lines.append(f"| {x['method']} | {x['path']} | {x['us_per_step']:.1f} | {b} |")
     tables["integrators-short-step"] = "\n".join(lines)
     if rep.get("auto"):
-        lines = ["| scene | model (rung) | method auto runs | auto | scipy DOP853 (former default) | speed-up | max difference |",
-                 "|---|---|---|---|---|---|---|"]
+        lines = [
+            "| scene | model (rung) | method auto runs | auto | scipy DOP853 (former default) | speed-up | max difference |",
+            "|---|---|---|---|---|---|---|",
+        ]
         for x in rep["auto"]:
             step = f", h = {x['auto_step']:g}" if x.get("auto_step") else ""
             if x.get("scipy_s"):
                 vs = f"{x['scipy_s'] * 1e3:.1f} ms ({x['scipy_method']}) | **{x['speedup']:.0f}×** | {x['max_difference']:.0e}"
             else:
                 vs = f"fails ({x.get('scipy_failure')}) | – | –"
-            lines.append(f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}{step} | {x['auto_s'] * 1e3:.2f} ms | {vs} |")
+            lines.append(
+                f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}{step} | {x['auto_s'] * 1e3:.2f} ms | {vs} |"
+            )
         tables["integrators-auto"] = "\n".join(lines)
     if rep.get("compile_times"):
         lines = ["| method | first call, empty cache | cached |", "|---|---|---|"]
@@ -421,7 +553,6 @@ def docs_tables(rep: dict) -> dict[str, str]:
             lines.append(f"| {x['method']} | {x['first_call_s']:.2f} s | {x['cached_s']:.3f} s |")
         tables["integrators-compile"] = "\n".join(lines)
     return tables
-
 
 
 CSV_HEADER = ("section", "case", "method", "setting_or_path", "figure", "value")
@@ -433,24 +564,63 @@ def csv_rows(rep: dict) -> list[tuple]:
     rows = []
     r = rep["regular"]
     for a in r["at_target"]:
-        rows.append(("regular", f"t={r['t_end']:g}", a["method"], f"error={r['target_error']:g}", "wall_time_s", a["wall_time"]))
-        rows.append(("regular", f"t={r['t_end']:g}", a["method"], f"error={r['target_error']:g}", "speedup_vs_scipy_DOP853", a["speedup"]))
+        rows.append(
+            ("regular", f"t={r['t_end']:g}", a["method"], f"error={r['target_error']:g}", "wall_time_s", a["wall_time"])
+        )
+        rows.append(
+            (
+                "regular",
+                f"t={r['t_end']:g}",
+                a["method"],
+                f"error={r['target_error']:g}",
+                "speedup_vs_scipy_DOP853",
+                a["speedup"],
+            )
+        )
     for s in r["same_rtol"]:
         rows.append(("regular", "same rtol", "DOP853-numba", s["setting"], "ratio_vs_scipy_DOP853", s["ratio"]))
     for c in rep["close_approach"]:
         for a in c["at_target"]:
-            rows.append(("close-approach", f"delta={c['delta']:g}", a["method"], f"error={c['target_error']:g}", "wall_time_s", a["wall_time"]))
-        rows.append(("close-approach", f"delta={c['delta']:g}", c["cheapest_regular"], "", "cheapest_two_polar_over_regular",
-                     c["regular_vs_cheapest_two_polar"]))
+            rows.append(
+                (
+                    "close-approach",
+                    f"delta={c['delta']:g}",
+                    a["method"],
+                    f"error={c['target_error']:g}",
+                    "wall_time_s",
+                    a["wall_time"],
+                )
+            )
+        rows.append(
+            (
+                "close-approach",
+                f"delta={c['delta']:g}",
+                c["cheapest_regular"],
+                "",
+                "cheapest_two_polar_over_regular",
+                c["regular_vs_cheapest_two_polar"],
+            )
+        )
     for x in rep["long_horizon"]:
         rows.append(("long-horizon", f"t={x['t_end']:g}", x["method"], x["setting"], "energy_error", x["energy_error"]))
     for x in rep["short_step"]:
         rows.append(("short-step", "dt=0.05", x["method"], x["path"], "us_per_step", x["us_per_step"]))
         if x["path"] == "env":
-            rows.append(("short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"]))
+            rows.append(
+                ("short-step", "dt=0.05", x["method"], "batch", "us_per_body_step", x["batch_us_per_body_step"])
+            )
     for x in rep["auto"]:
         rows.append(("auto", f"{x['scene']} t={x['t_end']:g}", x["method"], x["model"], "wall_time_s", x["auto_s"]))
-        rows.append(("auto", f"{x['scene']} t={x['t_end']:g}", "DOP853", "scipy (former default)", "wall_time_s", x.get("scipy_s")))
+        rows.append(
+            (
+                "auto",
+                f"{x['scene']} t={x['t_end']:g}",
+                "DOP853",
+                "scipy (former default)",
+                "wall_time_s",
+                x.get("scipy_s"),
+            )
+        )
     for x in rep["compile_times"]:
         rows.append(("compile", "", x["method"], "first call", "seconds", x["first_call_s"]))
         rows.append(("compile", "", x["method"], "cached", "seconds", x["cached_s"]))
@@ -482,5 +652,16 @@ def write_docs(json_path: str | os.PathLike, docs: str | os.PathLike) -> list[st
     return done
 
 
-__all__ = ["CSV_HEADER", "NAME", "BenchReport", "compile_times", "csv_rows", "describe", "docs_tables", "measure", "report", "wall_at",
-           "write_docs"]
+__all__ = [
+    "CSV_HEADER",
+    "NAME",
+    "BenchReport",
+    "compile_times",
+    "csv_rows",
+    "describe",
+    "docs_tables",
+    "measure",
+    "report",
+    "wall_at",
+    "write_docs",
+]

@@ -38,7 +38,9 @@ CSV_HEADER = ("steps", "median_s", "min_s", "max_s", "us_per_step", "file_bytes"
 """The columns of ``recording.csv``: ``record_trajectory`` per size."""
 
 
-def measure(*, scene: str, steps: int, sizes: Sequence[int], repeats: int, block: int, frames: int, episode_repeats: int) -> dict:
+def measure(
+    *, scene: str, steps: int, sizes: Sequence[int], repeats: int, block: int, frames: int, episode_repeats: int
+) -> dict:
     """Measure the recording paths (see the module docstring).
 
     Parameters
@@ -93,8 +95,16 @@ def measure(*, scene: str, steps: int, sizes: Sequence[int], repeats: int, block
                 times.append(time.perf_counter() - start)
                 size_bytes = path.stat().st_size
                 path.unlink()
-            rows.append({"steps": n, "median_s": float(np.median(times)), "min_s": float(np.min(times)), "max_s": float(np.max(times)),
-                         "us_per_step": float(np.median(times)) / n * 1e6, "file_bytes": size_bytes})
+            rows.append(
+                {
+                    "steps": n,
+                    "median_s": float(np.median(times)),
+                    "min_s": float(np.min(times)),
+                    "max_s": float(np.max(times)),
+                    "us_per_step": float(np.median(times)) / n * 1e6,
+                    "file_bytes": size_bytes,
+                }
+            )
             if n == steps:
                 Y, R, E = traj.y, traj.rotation, traj.energy
                 start = time.perf_counter()
@@ -119,7 +129,10 @@ def measure(*, scene: str, steps: int, sizes: Sequence[int], repeats: int, block
         "live": live,
         "frame": frame,
         "episode": episode,
-        "first_call": {**first_call, "note": "the process's first recording: includes importing rerun and starting its batcher"},
+        "first_call": {
+            **first_call,
+            "note": "the process's first recording: includes importing rerun and starting its batcher",
+        },
         "rerun_sdk": sdk_version(),
         "python": platform.python_version(),
         "machine": platform.machine(),
@@ -168,14 +181,25 @@ def _episode(repeats: int) -> dict:
     times = np.linspace(0.0, scene.t_end, 1001)
     auto = simulate(scene, t_end=scene.t_end, times=times, with_rotation=True)
     auto_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True).wall_time for _ in range(repeats))
-    scipy_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time for _ in range(max(1, repeats // 2)))
+    scipy_s = min(
+        simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time
+        for _ in range(max(1, repeats // 2))
+    )
     return {
-        "compiled_method": method, "compiled_s": float(np.median(fast)), "former_s": float(np.median(slow)),
-        "speedup": float(np.median(slow) / np.median(fast)), "repeats": repeats,
-        "stepping_compiled_s": float(np.median(fast_steps)), "stepping_former_s": float(np.median(slow_steps)),
+        "compiled_method": method,
+        "compiled_s": float(np.median(fast)),
+        "former_s": float(np.median(slow)),
+        "speedup": float(np.median(slow) / np.median(fast)),
+        "repeats": repeats,
+        "stepping_compiled_s": float(np.median(fast_steps)),
+        "stepping_former_s": float(np.median(slow_steps)),
         "stepping_speedup": float(np.median(slow_steps) / np.median(fast_steps)),
-        "scene": scene.name, "scene_samples": int(times.size), "scene_auto_method": auto.method, "scene_auto_s": float(auto_s),
-        "scene_scipy_s": float(scipy_s), "scene_speedup": float(scipy_s / auto_s),
+        "scene": scene.name,
+        "scene_samples": int(times.size),
+        "scene_auto_method": auto.method,
+        "scene_auto_s": float(auto_s),
+        "scene_scipy_s": float(scipy_s),
+        "scene_speedup": float(scipy_s / auto_s),
     }
 
 
@@ -209,11 +233,16 @@ def _frame(scene, frames: int) -> dict:
 
 def describe(result: dict) -> str:
     """The printed summary of a :func:`measure` result."""
-    lines = [f"whole trajectory, {r['steps']:>6} steps: median {r['median_s']:.3f} s (min {r['min_s']:.3f}, max {r['max_s']:.3f}) "
-             f"over {result['repeats']} runs, {r['file_bytes'] / 1e6:.1f} MB" for r in result["sizes"]]
+    lines = [
+        f"whole trajectory, {r['steps']:>6} steps: median {r['median_s']:.3f} s (min {r['min_s']:.3f}, max {r['max_s']:.3f}) "
+        f"over {result['repeats']} runs, {r['file_bytes'] / 1e6:.1f} MB"
+        for r in result["sizes"]
+    ]
     lv, ep, fr, fc = result["live"], result["episode"], result["frame"], result["first_call"]
     if lv:
-        lines.append(f"live Recorder.append, {lv['steps']} steps in blocks of {lv['block']}: {lv['seconds']:.3f} s ({lv['us_per_step']:.1f} µs/step)")
+        lines.append(
+            f"live Recorder.append, {lv['steps']} steps in blocks of {lv['block']}: {lv['seconds']:.3f} s ({lv['us_per_step']:.1f} µs/step)"
+        )
     lines += [
         f"recorded env episode (400 steps, random policy): {ep['compiled_method']} carrying R {ep['compiled_s']:.3f} s, "
         f"the former path (scipy DOP853 stepping R) {ep['former_s']:.3f} s: {ep['speedup']:.1f}x faster (same run)",
@@ -222,10 +251,12 @@ def describe(result: dict) -> str:
         f"free scene trajectory with R (scene {ep['scene']}, {ep['scene_samples']} samples): method auto ({ep['scene_auto_method']}) "
         f"{ep['scene_auto_s'] * 1e3:.1f} ms, scipy DOP853 {ep['scene_scipy_s'] * 1e3:.1f} ms: {ep['scene_speedup']:.1f}x",
         f"rgb_array frame ({fr['frames']} frames of scene {result['scene']}): median {fr['median_ms']:.3f} ms, mean {fr['mean_ms']:.3f} ms — "
-        + ("within" if fr["within_budget"] else "OVER") + f" the {fr['budget_ms']:g} ms budget",
+        + ("within" if fr["within_budget"] else "OVER")
+        + f" the {fr['budget_ms']:g} ms budget",
         f"first call of the process ({fc['steps']} steps, includes importing rerun): {fc['seconds']:.3f} s",
         f"logging a {result['steps']}-step trajectory: {result['median_s']:.3f} s (median of {result['repeats']}) — "
-        + ("within" if result["within_budget"] else "OVER") + f" the {result['budget_s']:g} s budget",
+        + ("within" if result["within_budget"] else "OVER")
+        + f" the {result['budget_s']:g} s budget",
     ]
     return "\n".join(lines)
 
@@ -255,11 +286,17 @@ def markdown(result: dict) -> str:
         medians = " / ".join(f"{r['median_s']:.3f}" for r in others)
         lines.append(f"| `record_trajectory`, {counts} steps | {medians} s |")
     if lv:
-        lines.append(f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
-                     f"({lv['us_per_step']:.0f} µs per step) |")
-    lines.append(f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |")
-    lines.append(f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
-                 f"({fr['mean_ms']:.2f} ms mean) |")
+        lines.append(
+            f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
+            f"({lv['us_per_step']:.0f} µs per step) |"
+        )
+    lines.append(
+        f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |"
+    )
+    lines.append(
+        f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
+        f"({fr['mean_ms']:.2f} ms mean) |"
+    )
     return "\n".join(lines)
 
 
@@ -292,7 +329,9 @@ def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
     ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
     if result.get("live"):
         lv = result["live"]
-        ax.plot([lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})")
+        ax.plot(
+            [lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})"
+        )
     ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -311,8 +350,25 @@ def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
 def report(result: dict) -> Report:
     """``result`` for :func:`flatbody_env.bench.harness.write_report`: ``recording.json``, ``recording.csv``
     (the sizes), ``recording.png`` (:func:`plot`) and the ``<!-- bench:recording -->`` table (:func:`markdown`)."""
-    return Report(name=NAME, record=result, header=CSV_HEADER, rows=[[r[c] for c in CSV_HEADER] for r in result["sizes"]], chart=plot,
-                  markdown=markdown(result))
+    return Report(
+        name=NAME,
+        record=result,
+        header=CSV_HEADER,
+        rows=[[r[c] for c in CSV_HEADER] for r in result["sizes"]],
+        chart=plot,
+        markdown=markdown(result),
+    )
 
 
-__all__ = ["BUDGET_S", "CSV_HEADER", "FRAME_BUDGET_MS", "NAME", "RECORDING_CAPTION", "describe", "markdown", "measure", "plot", "report"]
+__all__ = [
+    "BUDGET_S",
+    "CSV_HEADER",
+    "FRAME_BUDGET_MS",
+    "NAME",
+    "RECORDING_CAPTION",
+    "describe",
+    "markdown",
+    "measure",
+    "plot",
+    "report",
+]

@@ -29,8 +29,19 @@ from flatbody_env.output import save_figure
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
     "GET /health": ("GET", "/health", None),
-    "POST /ellipses": ("POST", "/ellipses", {"body": {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0},
-                                                      "thickness": {"a": 1.0, "b": 1.0}}, "s3": 2.0, "p_theta": 0.5}),
+    "POST /ellipses": (
+        "POST",
+        "/ellipses",
+        {
+            "body": {
+                "params": {"J": 1.0, "J3": 1.0},
+                "potential": {"name": "V3", "kappa": 1.0},
+                "thickness": {"a": 1.0, "b": 1.0},
+            },
+            "s3": 2.0,
+            "p_theta": 0.5,
+        },
+    ),
     "POST /simulate": ("POST", "/simulate", {"scene": "default", "t_end": 1.0, "samples": 11}),
 }
 """What is measured: name → (HTTP method, path, JSON body)."""
@@ -72,12 +83,16 @@ class ServiceBenchmark:
 
     def table(self) -> str:
         """The rows as a text table, under a line naming the service and the long job's status."""
-        lines = [f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
-                 f"status at the end: {self.long_job['status_at_end']}",
-                 f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}"]
+        lines = [
+            f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
+            f"status at the end: {self.long_job['status_at_end']}",
+            f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}",
+        ]
         for r in self.rows:
-            lines.append(f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
-                         f"{r.requests_per_s:>9.1f}")
+            lines.append(
+                f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
+                f"{r.requests_per_s:>9.1f}"
+            )
         return "\n".join(lines)
 
 
@@ -108,11 +123,21 @@ async def _load(url: str, name: str, clients: int, requests: int, seconds: float
     await asyncio.gather(*(client() for _ in range(clients)))
     elapsed = time.perf_counter() - start
     lat = np.array(latencies) * 1e3
-    return LoadRow(endpoint=name, clients=clients, requests=len(latencies), errors=errors, seconds=elapsed,
-                   p50_ms=float(np.percentile(lat, 50)), p99_ms=float(np.percentile(lat, 99)), requests_per_s=len(latencies) / elapsed)
+    return LoadRow(
+        endpoint=name,
+        clients=clients,
+        requests=len(latencies),
+        errors=errors,
+        seconds=elapsed,
+        p50_ms=float(np.percentile(lat, 50)),
+        p99_ms=float(np.percentile(lat, 99)),
+        requests_per_s=len(latencies) / elapsed,
+    )
 
 
-def measure(*, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, seconds: float = 20.0, workers: int = 2) -> ServiceBenchmark:
+def measure(
+    *, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, seconds: float = 20.0, workers: int = 2
+) -> ServiceBenchmark:
     """Start the service, queue the long job and load each endpoint at each client count (module docstring)."""
     import httpx
 
@@ -137,25 +162,47 @@ def measure(*, clients: tuple[int, ...] = (1, 8, 32), requests: int = 200, secon
             httpx.delete(f"{url}/jobs/{job_id}", timeout=30.0)
         finally:
             stop_service(proc)
-    return ServiceBenchmark(rows=rows, workers=workers, cpus=os.cpu_count() or 1,
-                            long_job={"kind": LONG_JOB["kind"], "params": LONG_JOB["params"], "status_at_start": status_at_start,
-                                      "status_at_end": status_at_end})
+    return ServiceBenchmark(
+        rows=rows,
+        workers=workers,
+        cpus=os.cpu_count() or 1,
+        long_job={
+            "kind": LONG_JOB["kind"],
+            "params": LONG_JOB["params"],
+            "status_at_start": status_at_start,
+            "status_at_end": status_at_end,
+        },
+    )
 
 
 def report(result: ServiceBenchmark) -> Report:
     """The files of a run (:func:`flatbody_env.bench.harness.write_report`): the JSON holds everything, the CSV one
     row per endpoint and client count, the PNG is :func:`plot` of the saved JSON."""
     fields = list(LoadRow.__dataclass_fields__)
-    return Report(name=NAME, record={"workers": result.workers, "cpus": result.cpus, "long_job": result.long_job,
-                                     "rows": [asdict(r) for r in result.rows]},
-                  header=fields, rows=[[asdict(r)[f] for f in fields] for r in result.rows], chart=plot, chart_from="json")
+    return Report(
+        name=NAME,
+        record={
+            "workers": result.workers,
+            "cpus": result.cpus,
+            "long_job": result.long_job,
+            "rows": [asdict(r) for r in result.rows],
+        },
+        header=fields,
+        rows=[[asdict(r)[f] for f in fields] for r in result.rows],
+        chart=plot,
+        chart_from="json",
+    )
 
 
 def load(json_path: str | Path) -> ServiceBenchmark:
     """A saved ``service_benchmark.json`` read back."""
     data = json.loads(Path(json_path).read_text(encoding="utf-8"))
-    return ServiceBenchmark(rows=[LoadRow(**r) for r in data["rows"]], workers=int(data["workers"]), cpus=int(data["cpus"]),
-                            long_job=dict(data["long_job"]))
+    return ServiceBenchmark(
+        rows=[LoadRow(**r) for r in data["rows"]],
+        workers=int(data["workers"]),
+        cpus=int(data["cpus"]),
+        long_job=dict(data["long_job"]),
+    )
 
 
 def plot(json_path: str | Path, png_path: str | Path) -> Path:
@@ -196,13 +243,19 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     ax1.legend(fontsize=7, loc="upper left", ncol=1)
     ax2.legend(fontsize=7, loc="upper right")
     errors = result.errors
-    fig.suptitle(f"flatbody serve: {result.workers} worker process(es) on {result.cpus} CPU(s), "
-                 f"while a {result.long_job['kind']} job runs", fontsize=10)
+    fig.suptitle(
+        f"flatbody serve: {result.workers} worker process(es) on {result.cpus} CPU(s), "
+        f"while a {result.long_job['kind']} job runs",
+        fontsize=10,
+    )
     requests = max((r.requests for r in result.rows), default=0)
-    bottom = add_caption(fig, f"p50 / p99: the median and the 99th percentile of the time from sending a request to reading "
-                              f"its answer, at most {requests} requests per point; requests/s: answered requests over the "
-                              f"time taken.\nThe load generator runs on the same machine as the service; "
-                              f"{errors} error(s) (any answer other than 200).")
+    bottom = add_caption(
+        fig,
+        f"p50 / p99: the median and the 99th percentile of the time from sending a request to reading "
+        f"its answer, at most {requests} requests per point; requests/s: answered requests over the "
+        f"time taken.\nThe load generator runs on the same machine as the service; "
+        f"{errors} error(s) (any answer other than 200).",
+    )
     fig.tight_layout(rect=(0, bottom, 1, 0.95))
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)

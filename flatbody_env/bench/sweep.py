@@ -94,8 +94,14 @@ def _spec(grid: int, chunk: int) -> dict[str, Any]:
     from analysis.families import MAP_LAM_RANGE, MAP_MU_RANGE
     from flatbody_env.scene import load_scene
 
-    return {"kind": "stability-map", "body": load_scene("default").body.to_dict(), "lam_range": list(MAP_LAM_RANGE),
-            "mu_range": list(MAP_MU_RANGE), "grid": grid, "chunk": chunk}
+    return {
+        "kind": "stability-map",
+        "body": load_scene("default").body.to_dict(),
+        "lam_range": list(MAP_LAM_RANGE),
+        "mu_range": list(MAP_MU_RANGE),
+        "grid": grid,
+        "chunk": chunk,
+    }
 
 
 def _timed_cluster_run(tasks: list[Task], workers: int) -> dict[str, float]:
@@ -119,8 +125,15 @@ def _timed_cluster_run(tasks: list[Task], workers: int) -> dict[str, float]:
     return {"startup_s": startup, "run_s": run}
 
 
-def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2), sim_workers: int = 4,
-            noop_tasks: int = 400, extrapolate: tuple[int, ...] = (8, 32, 128)) -> dict[str, Any]:
+def measure(
+    *,
+    grid: int = 48,
+    chunk: int = 2,
+    workers: tuple[int, ...] = (1, 2),
+    sim_workers: int = 4,
+    noop_tasks: int = 400,
+    extrapolate: tuple[int, ...] = (8, 32, 128),
+) -> dict[str, Any]:
     """Run the benchmark (module docstring); returns a JSON-able report, with the machine it ran on."""
     from distributed import Client, LocalCluster, wait
 
@@ -138,7 +151,14 @@ def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2)
     local = []
     for w in workers:
         r = _timed_cluster_run(tasks, w)
-        local.append({"workers": w, **r, "speedup": serial / r["run_s"], "speedup_end_to_end": serial / (r["startup_s"] + r["run_s"])})
+        local.append(
+            {
+                "workers": w,
+                **r,
+                "speedup": serial / r["run_s"],
+                "speedup_end_to_end": serial / (r["startup_s"] + r["run_s"]),
+            }
+        )
 
     import logging
 
@@ -147,8 +167,14 @@ def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2)
     cluster = None
     try:
         with workers_leave_sigint():
-            cluster = LocalCluster(n_workers=sim_workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.ERROR, scheduler_kwargs=QUIET_SCHEDULER)
+            cluster = LocalCluster(
+                n_workers=sim_workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+                scheduler_kwargs=QUIET_SCHEDULER,
+            )
         t = time.perf_counter()
         client = Client(cluster.scheduler_address)  # as a user connects to a running cluster
         client.wait_for_workers(sim_workers)
@@ -171,27 +197,45 @@ def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2)
     big_costs = [per_point * chunk * big_grid] * math.ceil(big_grid / chunk)
     extra = []
     for w in extrapolate:
-        extra.append({
-            "workers": w,
-            "grid": grid, "predicted_s": model_time(costs, w, t0=connect, overhead=overhead),
-            "predicted_speedup": serial / model_time(costs, w, t0=connect, overhead=overhead),
-            "grid_big": big_grid, "predicted_big_s": model_time(big_costs, w, t0=connect, overhead=overhead),
-            "predicted_big_speedup": sum(big_costs) / model_time(big_costs, w, t0=connect, overhead=overhead),
-            "break_even_grid": break_even_grid(per_point, w, t0=connect, overhead=overhead, rows_per_task=chunk),
-        })
+        extra.append(
+            {
+                "workers": w,
+                "grid": grid,
+                "predicted_s": model_time(costs, w, t0=connect, overhead=overhead),
+                "predicted_speedup": serial / model_time(costs, w, t0=connect, overhead=overhead),
+                "grid_big": big_grid,
+                "predicted_big_s": model_time(big_costs, w, t0=connect, overhead=overhead),
+                "predicted_big_speedup": sum(big_costs) / model_time(big_costs, w, t0=connect, overhead=overhead),
+                "break_even_grid": break_even_grid(per_point, w, t0=connect, overhead=overhead, rows_per_task=chunk),
+            }
+        )
     local2 = next((x for x in local if x["workers"] == 2), None)
     return {
-        "grid": grid, "chunk": chunk, "tasks": len(tasks), "points": grid * grid,
-        "serial_s": serial, "task_cost_mean_s": sum(costs) / len(costs), "task_cost_max_s": max(costs),
-        "cost_per_point_s": per_point, "task_costs_s": costs,
+        "grid": grid,
+        "chunk": chunk,
+        "tasks": len(tasks),
+        "points": grid * grid,
+        "serial_s": serial,
+        "task_cost_mean_s": sum(costs) / len(costs),
+        "task_cost_max_s": max(costs),
+        "cost_per_point_s": per_point,
+        "task_costs_s": costs,
         "local": local,
-        "overhead_per_task_s": overhead, "overhead_over_task_cost": overhead / (sum(costs) / len(costs)),
-        "connect_s": connect, "noop_tasks": noop_tasks,
-        "simulated": {"workers": sim_workers, "wall_s": sim_wall, "model_s": sim_model, "ideal_s": sum(costs) / sim_workers,
-                      "speedup": sum(costs) / sim_wall},
+        "overhead_per_task_s": overhead,
+        "overhead_over_task_cost": overhead / (sum(costs) / len(costs)),
+        "connect_s": connect,
+        "noop_tasks": noop_tasks,
+        "simulated": {
+            "workers": sim_workers,
+            "wall_s": sim_wall,
+            "model_s": sim_model,
+            "ideal_s": sum(costs) / sim_workers,
+            "speedup": sum(costs) / sim_wall,
+        },
         "extrapolated": extra,
-        "break_even_local_2": None if local2 is None else break_even_grid(per_point, 2, t0=local2["startup_s"], overhead=overhead,
-                                                                          rows_per_task=chunk),
+        "break_even_local_2": None
+        if local2 is None
+        else break_even_grid(per_point, 2, t0=local2["startup_s"], overhead=overhead, rows_per_task=chunk),
         "machine": machine(),
     }
 
@@ -199,44 +243,70 @@ def measure(*, grid: int = 48, chunk: int = 2, workers: tuple[int, ...] = (1, 2)
 def describe(rep: dict[str, Any]) -> str:
     """The report as a few lines of text."""
     load = rep["machine"]["load_avg_1min"]
-    lines = [f"stability map {rep['grid']} x {rep['grid']} ({rep['tasks']} tasks of {rep['chunk']} lambda rows), "
-             f"{rep['machine']['cpu_count']} cores (load {'?' if load is None else f'{load:.1f}'})",
-             f"  serial (no Dask): {rep['serial_s']:.2f} s; task cost mean {rep['task_cost_mean_s'] * 1e3:.0f} ms, "
-             f"max {rep['task_cost_max_s'] * 1e3:.0f} ms; {rep['cost_per_point_s'] * 1e3:.2f} ms per grid point"]
+    lines = [
+        f"stability map {rep['grid']} x {rep['grid']} ({rep['tasks']} tasks of {rep['chunk']} lambda rows), "
+        f"{rep['machine']['cpu_count']} cores (load {'?' if load is None else f'{load:.1f}'})",
+        f"  serial (no Dask): {rep['serial_s']:.2f} s; task cost mean {rep['task_cost_mean_s'] * 1e3:.0f} ms, "
+        f"max {rep['task_cost_max_s'] * 1e3:.0f} ms; {rep['cost_per_point_s'] * 1e3:.2f} ms per grid point",
+    ]
     for x in rep["local"]:
-        lines.append(f"  {x['workers']} local worker(s): start-up {x['startup_s']:.2f} s, run {x['run_s']:.2f} s, "
-                     f"speed-up {x['speedup']:.2f}x ({x['speedup_end_to_end']:.2f}x with start-up)")
-    lines.append(f"  scheduler overhead: {rep['overhead_per_task_s'] * 1e3:.2f} ms per task "
-                 f"({rep['overhead_over_task_cost']:.1%} of a mean task); connecting to a running cluster {rep['connect_s']:.2f} s")
+        lines.append(
+            f"  {x['workers']} local worker(s): start-up {x['startup_s']:.2f} s, run {x['run_s']:.2f} s, "
+            f"speed-up {x['speedup']:.2f}x ({x['speedup_end_to_end']:.2f}x with start-up)"
+        )
+    lines.append(
+        f"  scheduler overhead: {rep['overhead_per_task_s'] * 1e3:.2f} ms per task "
+        f"({rep['overhead_over_task_cost']:.1%} of a mean task); connecting to a running cluster {rep['connect_s']:.2f} s"
+    )
     s = rep["simulated"]
-    lines.append(f"  simulated {s['workers']} nodes (tasks sleep their measured cost): {s['wall_s']:.2f} s measured, "
-                 f"{s['model_s']:.2f} s modelled, {s['ideal_s']:.2f} s ideal; speed-up {s['speedup']:.2f}x")
+    lines.append(
+        f"  simulated {s['workers']} nodes (tasks sleep their measured cost): {s['wall_s']:.2f} s measured, "
+        f"{s['model_s']:.2f} s modelled, {s['ideal_s']:.2f} s ideal; speed-up {s['speedup']:.2f}x"
+    )
     for x in rep["extrapolated"]:
-        lines.append(f"  {x['workers']:>3} workers (model): grid {x['grid']}: {x['predicted_s']:.2f} s ({x['predicted_speedup']:.1f}x); "
-                     f"grid {x['grid_big']}: {x['predicted_big_s']:.1f} s ({x['predicted_big_speedup']:.1f}x); "
-                     f"pays off above grid {x['break_even_grid']:.0f}")
+        lines.append(
+            f"  {x['workers']:>3} workers (model): grid {x['grid']}: {x['predicted_s']:.2f} s ({x['predicted_speedup']:.1f}x); "
+            f"grid {x['grid_big']}: {x['predicted_big_s']:.1f} s ({x['predicted_big_speedup']:.1f}x); "
+            f"pays off above grid {x['break_even_grid']:.0f}"
+        )
     if rep["break_even_local_2"] is not None:
-        lines.append(f"  embedded 2-process cluster (start-up included) pays off above grid {rep['break_even_local_2']:.0f}")
+        lines.append(
+            f"  embedded 2-process cluster (start-up included) pays off above grid {rep['break_even_local_2']:.0f}"
+        )
     return "\n".join(lines)
 
 
 def report(rep: dict[str, Any]) -> Report:
     """The files of a run (:func:`flatbody_env.bench.harness.write_report`): the JSON holds everything, the CSV one
     figure per row (section, workers, figure, value), the PNG is :func:`plot` of the saved JSON."""
-    rows: list[list[Any]] = [["serial", 0, "wall_s", rep["serial_s"]], ["serial", 0, "task_cost_mean_s", rep["task_cost_mean_s"]],
-                             ["serial", 0, "cost_per_point_s", rep["cost_per_point_s"]]]
+    rows: list[list[Any]] = [
+        ["serial", 0, "wall_s", rep["serial_s"]],
+        ["serial", 0, "task_cost_mean_s", rep["task_cost_mean_s"]],
+        ["serial", 0, "cost_per_point_s", rep["cost_per_point_s"]],
+    ]
     for x in rep["local"]:
         rows += [["local", x["workers"], k, x[k]] for k in ("startup_s", "run_s", "speedup", "speedup_end_to_end")]
     sim = rep["simulated"]
-    rows += [["scheduler", sim["workers"], "overhead_per_task_s", rep["overhead_per_task_s"]],
-             ["scheduler", sim["workers"], "connect_s", rep["connect_s"]]]
+    rows += [
+        ["scheduler", sim["workers"], "overhead_per_task_s", rep["overhead_per_task_s"]],
+        ["scheduler", sim["workers"], "connect_s", rep["connect_s"]],
+    ]
     rows += [["simulated", sim["workers"], k, sim[k]] for k in ("wall_s", "model_s", "ideal_s", "speedup")]
     for x in rep["extrapolated"]:
-        rows += [["model", x["workers"], k, x[k]]
-                 for k in ("predicted_s", "predicted_speedup", "predicted_big_s", "predicted_big_speedup", "break_even_grid")]
+        rows += [
+            ["model", x["workers"], k, x[k]]
+            for k in ("predicted_s", "predicted_speedup", "predicted_big_s", "predicted_big_speedup", "break_even_grid")
+        ]
     if rep["break_even_local_2"] is not None:
         rows.append(["local", 2, "break_even_grid", rep["break_even_local_2"]])
-    return Report(name=NAME, record=rep, header=["section", "workers", "figure", "value"], rows=rows, chart=plot, chart_from="json")
+    return Report(
+        name=NAME,
+        record=rep,
+        header=["section", "workers", "figure", "value"],
+        rows=rows,
+        chart=plot,
+        chart_from="json",
+    )
 
 
 def plot(json_path: str | Path, png_path: str | Path) -> Path:
@@ -251,15 +321,36 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     costs = rep["task_costs_s"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     ws = [1, 2, 4, 8, 16, 32, 64, 128]
-    ax1.plot(ws, [rep["serial_s"] / model_time(costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"]) for w in ws],
-             "-", color="0.5", label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)")
+    ax1.plot(
+        ws,
+        [rep["serial_s"] / model_time(costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"]) for w in ws],
+        "-",
+        color="0.5",
+        label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)",
+    )
     chunk, big = rep["chunk"], rep["extrapolated"][0]["grid_big"] if rep["extrapolated"] else 1000
     big_costs = [rep["cost_per_point_s"] * chunk * big] * math.ceil(big / chunk)
-    ax1.plot(ws, [sum(big_costs) / model_time(big_costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"]) for w in ws],
-             "--", color="C2", label=f"model, grid {big} ({len(big_costs)} tasks)")
+    ax1.plot(
+        ws,
+        [
+            sum(big_costs) / model_time(big_costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"])
+            for w in ws
+        ],
+        "--",
+        color="C2",
+        label=f"model, grid {big} ({len(big_costs)} tasks)",
+    )
     ax1.plot(ws, ws, ":", color="k", lw=0.8, label="ideal")
-    ax1.plot([x["workers"] for x in rep["local"]], [x["speedup"] for x in rep["local"]], "o", color="C0", label="measured, local processes")
-    ax1.plot([rep["simulated"]["workers"]], [rep["simulated"]["speedup"]], "s", color="C1", label="measured, simulated nodes")
+    ax1.plot(
+        [x["workers"] for x in rep["local"]],
+        [x["speedup"] for x in rep["local"]],
+        "o",
+        color="C0",
+        label="measured, local processes",
+    )
+    ax1.plot(
+        [rep["simulated"]["workers"]], [rep["simulated"]["speedup"]], "s", color="C1", label="measured, simulated nodes"
+    )
     ax1.set_xscale("log", base=2)
     ax1.set_yscale("log", base=2)
     ax1.set_xlabel("workers")
@@ -271,12 +362,25 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     c, o, t0 = rep["cost_per_point_s"], rep["overhead_per_task_s"], rep["connect_s"]
     ax2.plot(grids, [c * g * g for g in grids], "-", color="k", label="serial")
     for k, w in enumerate((2, 8, 32, 128)):
-        ax2.plot(grids, [t0 + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), w) for g in grids],
-                 "-", color=f"C{k}", label=f"{w} workers (running cluster)")
+        ax2.plot(
+            grids,
+            [t0 + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), w) for g in grids],
+            "-",
+            color=f"C{k}",
+            label=f"{w} workers (running cluster)",
+        )
     local2 = next((x for x in rep["local"] if x["workers"] == 2), None)
     if local2 is not None:
-        ax2.plot(grids, [local2["startup_s"] + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), 2)
-                         for g in grids], "--", color="C0", label=f"2 local processes (start-up {local2['startup_s']:.1f} s)")
+        ax2.plot(
+            grids,
+            [
+                local2["startup_s"] + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), 2)
+                for g in grids
+            ],
+            "--",
+            color="C0",
+            label=f"2 local processes (start-up {local2['startup_s']:.1f} s)",
+        )
     ax2.set_xscale("log")
     ax2.set_yscale("log")
     ax2.set_xlabel("grid points per axis")
@@ -286,12 +390,15 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     ax2.grid(alpha=0.3, which="both")
     from flatbody_env.chart_text import add_caption
 
-    bottom = add_caption(fig, f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
-                              f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
-                              "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
-                              "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
-                              "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
-                              "crosses the serial one, the cluster pays off (the break-even grid).")
+    bottom = add_caption(
+        fig,
+        f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
+        f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
+        "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
+        "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
+        "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
+        "crosses the serial one, the cluster pays off (the break-even grid).",
+    )
     fig.tight_layout(rect=(0, bottom, 1, 1))
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)

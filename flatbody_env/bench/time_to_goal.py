@@ -127,8 +127,12 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
     from agents.train import load_hyperparams, train
 
     hp = load_hyperparams("ppo")
-    base = ResidualAction(hp.get("env_kwargs") or {}, float(hp.get("residual_scale", 1.0)), float(hp.get("residual_gate", 0.0)),
-                          str(hp.get("residual_mode", "additive")))
+    base = ResidualAction(
+        hp.get("env_kwargs") or {},
+        float(hp.get("residual_scale", 1.0)),
+        float(hp.get("residual_gate", 0.0)),
+        str(hp.get("residual_mode", "additive")),
+    )
     points: list[tuple[int, float, float, float]] = []
 
     class Evaluate(BaseCallback):
@@ -163,8 +167,18 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 
     cb = Evaluate()
     with tempfile.TemporaryDirectory() as tmp:
-        train("ppo", Path(tmp) / "run", seed=seed, n_timesteps=max_timesteps, checkpoint_freq=0, threads=1, progress=False,
-              extra_callbacks=[cb], force=True, notes=False)
+        train(
+            "ppo",
+            Path(tmp) / "run",
+            seed=seed,
+            n_timesteps=max_timesteps,
+            checkpoint_freq=0,
+            threads=1,
+            progress=False,
+            extra_callbacks=[cb],
+            force=True,
+            notes=False,
+        )
     return _curve("sb3-ppo", points, goal)
 
 
@@ -172,7 +186,9 @@ def _rsl_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
     from agents.evaluate import run_episodes
     from agents.rsl import DEFAULTS, TorchResidual, live_policy, train_rsl
 
-    res = TorchResidual(DEFAULTS["env_kwargs"], float(DEFAULTS["residual_scale"]), str(DEFAULTS["residual_mode"]), "cpu")
+    res = TorchResidual(
+        DEFAULTS["env_kwargs"], float(DEFAULTS["residual_scale"]), str(DEFAULTS["residual_mode"]), "cpu"
+    )
     points: list[tuple[int, float, float, float]] = []
     next_at = [eval_every]
 
@@ -194,18 +210,39 @@ def _rsl_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 def _curve(name: str, points, reached) -> Curve:
     hit = next((p for p in points if reached.goal(p[2], p[3])), None)
     lqr = next((p for p in points if reached.lqr(p[2], p[3])), None)
-    return Curve(trainer=name, points=points, goal_s=hit[1] if hit else None, goal_timesteps=hit[0] if hit else None,
-                 lqr_s=lqr[1] if lqr else None, lqr_timesteps=lqr[0] if lqr else None)
+    return Curve(
+        trainer=name,
+        points=points,
+        goal_s=hit[1] if hit else None,
+        goal_timesteps=hit[0] if hit else None,
+        lqr_s=lqr[1] if lqr else None,
+        lqr_timesteps=lqr[0] if lqr else None,
+    )
 
 
-def run(*, seed: int = 0, max_timesteps: int = 3_000_000, eval_every: int = 50_000, episodes: int = 20, eval_seed: int = 50_000,
-        success_goal: float = 0.99, distance_goal: float = 0.002, out_dir: str | Path = ".", docs: str | Path | None = None) -> GoalBenchmark:
+def run(
+    *,
+    seed: int = 0,
+    max_timesteps: int = 3_000_000,
+    eval_every: int = 50_000,
+    episodes: int = 20,
+    eval_seed: int = 50_000,
+    success_goal: float = 0.99,
+    distance_goal: float = 0.002,
+    out_dir: str | Path = ".",
+    docs: str | Path | None = None,
+) -> GoalBenchmark:
     """Race both trainers to the goal and write the files into ``out_dir`` (module docstring); with ``docs`` (a Markdown
     page) also its ``<!-- bench:time-to-goal -->`` block."""
     from agents.evaluate import run_episodes
 
-    for name, v, low in (("max_timesteps", max_timesteps, 1), ("eval_every", eval_every, 1), ("episodes", episodes, 1), ("seed", seed, 0),
-                         ("eval_seed", eval_seed, 0)):
+    for name, v, low in (
+        ("max_timesteps", max_timesteps, 1),
+        ("eval_every", eval_every, 1),
+        ("episodes", episodes, 1),
+        ("seed", seed, 0),
+        ("eval_seed", eval_seed, 0),
+    ):
         if not isinstance(v, int) or isinstance(v, bool) or v < low:
             raise ValueError(f"{name}: must be an integer >= {low}, got {v!r}")
     if not 0.0 <= success_goal <= 1.0:
@@ -219,8 +256,17 @@ def run(*, seed: int = 0, max_timesteps: int = 3_000_000, eval_every: int = 50_0
 
     sb3 = _sb3_curve(seed, max_timesteps, eval_every, episodes, eval_seed, goal)
     rsl = _rsl_curve(seed, max_timesteps, eval_every, episodes, eval_seed, goal)
-    bench = GoalBenchmark(sb3=sb3, rsl=rsl, lqr_final_distance=lqr_d, lqr_success=lqr_s, episodes=episodes, eval_seed=eval_seed,
-                          success_goal=success_goal, distance_goal=distance_goal, seed=seed)
+    bench = GoalBenchmark(
+        sb3=sb3,
+        rsl=rsl,
+        lqr_final_distance=lqr_d,
+        lqr_success=lqr_s,
+        episodes=episodes,
+        eval_seed=eval_seed,
+        success_goal=success_goal,
+        distance_goal=distance_goal,
+        seed=seed,
+    )
     write_report(report(bench), out_dir, docs=docs)
     return bench
 
@@ -228,10 +274,20 @@ def run(*, seed: int = 0, max_timesteps: int = 3_000_000, eval_every: int = 50_0
 def report(bench: GoalBenchmark) -> Report:
     """``time_to_goal``'s files: the record (with both ratios), one CSV row per evaluation, the chart drawn from the JSON,
     the docs block ``time-to-goal``."""
-    return Report(name="time_to_goal", record={**asdict(bench), "ratio": bench.ratio, "ratio_lqr": bench.ratio_lqr},
-                  header=["trainer", "timesteps", "wall_s", "success", "final_distance"],
-                  rows=[[c.trainer, t, f"{w:.2f}", f"{s:.3f}", f"{d:.6f}"] for c in (bench.sb3, bench.rsl) for t, w, s, d in c.points],
-                  chart=plot, chart_from="json", markdown=markdown(bench), block="time-to-goal")
+    return Report(
+        name="time_to_goal",
+        record={**asdict(bench), "ratio": bench.ratio, "ratio_lqr": bench.ratio_lqr},
+        header=["trainer", "timesteps", "wall_s", "success", "final_distance"],
+        rows=[
+            [c.trainer, t, f"{w:.2f}", f"{s:.3f}", f"{d:.6f}"]
+            for c in (bench.sb3, bench.rsl)
+            for t, w, s, d in c.points
+        ],
+        chart=plot,
+        chart_from="json",
+        markdown=markdown(bench),
+        block="time-to-goal",
+    )
 
 
 CAPTION = (
@@ -247,7 +303,9 @@ def load(json_path: str | Path) -> GoalBenchmark:
     """A :class:`GoalBenchmark` from its saved ``time_to_goal.json``."""
     data = json.loads(Path(json_path).read_text(encoding="utf-8"))
     curves = {k: Curve(**{**data[k], "points": [tuple(p) for p in data[k]["points"]]}) for k in ("sb3", "rsl")}
-    return GoalBenchmark(**{k: v for k, v in data.items() if k not in ("ratio", "ratio_lqr", "machine", "sb3", "rsl")}, **curves)
+    return GoalBenchmark(
+        **{k: v for k, v in data.items() if k not in ("ratio", "ratio_lqr", "machine", "sb3", "rsl")}, **curves
+    )
 
 
 def plot(json_path: Path, png_path: Path) -> None:
@@ -279,8 +337,13 @@ def plot(json_path: Path, png_path: Path) -> None:
     ax_s.set_ylabel("success rate")
     ax_d.legend(fontsize=8)
     fig.suptitle("flatbody bench train --to-goal (same run)", fontsize=10)
-    bottom = add_caption(fig, CAPTION.format(episodes=bench.episodes, eval_seed=bench.eval_seed, success=bench.success_goal,
-                                             distance=bench.distance_goal), fontsize=7)
+    bottom = add_caption(
+        fig,
+        CAPTION.format(
+            episodes=bench.episodes, eval_seed=bench.eval_seed, success=bench.success_goal, distance=bench.distance_goal
+        ),
+        fontsize=7,
+    )
     fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
     save_figure(fig, png_path, dpi=120)
     plt.close(fig)
@@ -301,16 +364,24 @@ def markdown(bench: GoalBenchmark) -> str:
             return "— (not reached by both)"
         return f"**{r:.2f}**" + (f" (goal ≤ {bound}: {'met' if r <= bound else 'missed'})" if bound is not None else "")
 
-    return "\n".join([
-        f"| trainer (seed {bench.seed}) | to the goal | to beat the LQR | last evaluation: success / final distance |",
-        "|---|---|---|---|",
-        *(f"| {c.trainer} | {at(c.goal_s, c.goal_timesteps)} | {at(c.lqr_s, c.lqr_timesteps)} | {last(c)} |" for c in (bench.sb3, bench.rsl)),
-        f"| rsl-ppo / sb3-ppo wall time | {ratio(bench.ratio, 0.5)} | {ratio(bench.ratio_lqr, None)} | |",
-        "",
-        f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the LQR: success ≥ "
-        f"{bench.success_goal:.0%} and mean final distance below the LQR's ({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); "
-        f"both on {bench.episodes} held-out episodes (seeds {bench.eval_seed}…).",
-    ]) + "\n"
+    return (
+        "\n".join(
+            [
+                f"| trainer (seed {bench.seed}) | to the goal | to beat the LQR | last evaluation: success / final distance |",
+                "|---|---|---|---|",
+                *(
+                    f"| {c.trainer} | {at(c.goal_s, c.goal_timesteps)} | {at(c.lqr_s, c.lqr_timesteps)} | {last(c)} |"
+                    for c in (bench.sb3, bench.rsl)
+                ),
+                f"| rsl-ppo / sb3-ppo wall time | {ratio(bench.ratio, 0.5)} | {ratio(bench.ratio_lqr, None)} | |",
+                "",
+                f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the LQR: success ≥ "
+                f"{bench.success_goal:.0%} and mean final distance below the LQR's ({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); "
+                f"both on {bench.episodes} held-out episodes (seeds {bench.eval_seed}…).",
+            ]
+        )
+        + "\n"
+    )
 
 
 __all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "markdown", "plot", "report", "run"]

@@ -124,8 +124,13 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
         if hp.get("residual"):
             from agents.heuristic import residual_vec_env
 
-            inner = residual_vec_env(inner, hp.get("env_kwargs"), float(hp.get("residual_scale", 1.0)), float(hp.get("residual_gate", 0.0)),
-                                     str(hp.get("residual_mode", "additive")))
+            inner = residual_vec_env(
+                inner,
+                hp.get("env_kwargs"),
+                float(hp.get("residual_scale", 1.0)),
+                float(hp.get("residual_gate", 0.0)),
+                str(hp.get("residual_mode", "additive")),
+            )
         venv, clock = _timed(inner)  # the stack of agents.train.make_vec_env, with the clock inside VecMonitor
         venv = VecMonitor(venv)
     else:  # gym.make envs in SB3's DummyVecEnv, seeded as make_vec_env seeds them, monitored as FlatBody's stack is
@@ -169,8 +174,15 @@ def lqr_us_per_body_step(n_envs: int = 32, steps: int = 400, seed: int = 0) -> f
     return best_of(act_all, 3, warm=False) / (steps * n_envs) * 1e6
 
 
-def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: str | Path = ".", overrides: list[str] | None = None,
-        docs: str | Path | None = None) -> TrainBenchmark:
+def run(
+    *,
+    timesteps: int = 64_000,
+    repeats: int = 1,
+    seed: int = 0,
+    out_dir: str | Path = ".",
+    overrides: list[str] | None = None,
+    docs: str | Path | None = None,
+) -> TrainBenchmark:
     """Measure and write ``train_benchmark.json``, ``.csv``, ``.png`` into ``out_dir`` (module docstring).
 
     Parameters
@@ -196,17 +208,34 @@ def run(*, timesteps: int = 64_000, repeats: int = 1, seed: int = 0, out_dir: st
     alternate({env_id: case(env_id) for env_id in settings}, repeats, warm=False)
     fb, pd = (min(runs[env_id], key=lambda r: r.wall_s) for env_id in settings)
     n_envs = int(hp.get("n_envs", 32))
-    bench = TrainBenchmark(flatbody=fb, pendulum=pd, ratio_wall=fb.wall_s / pd.wall_s, flatbody_env_share=fb.env_share,
-                           pendulum_env_share=pd.env_share, lqr_us_per_body_step=lqr_us_per_body_step(n_envs), n_envs=n_envs)
+    bench = TrainBenchmark(
+        flatbody=fb,
+        pendulum=pd,
+        ratio_wall=fb.wall_s / pd.wall_s,
+        flatbody_env_share=fb.env_share,
+        pendulum_env_share=pd.env_share,
+        lqr_us_per_body_step=lqr_us_per_body_step(n_envs),
+        n_envs=n_envs,
+    )
     write_report(report(bench), out_dir, docs=docs)
     return bench
 
 
 def report(bench: TrainBenchmark) -> Report:
     """``train_benchmark``'s files: the record, one CSV row per run, the chart drawn from the CSV, the docs block ``train``."""
-    return Report(name="train_benchmark", record=asdict(bench), header=["env_id", "timesteps", "wall_s", "env_s", "env_share"],
-                  rows=[[r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"] for r in (bench.flatbody, bench.pendulum)],
-                  chart=plot, chart_from="csv", markdown=markdown(bench), block="train")
+    return Report(
+        name="train_benchmark",
+        record=asdict(bench),
+        header=["env_id", "timesteps", "wall_s", "env_s", "env_share"],
+        rows=[
+            [r.env_id, r.timesteps, f"{r.wall_s:.4g}", f"{r.env_s:.4g}", f"{r.env_share:.4f}"]
+            for r in (bench.flatbody, bench.pendulum)
+        ],
+        chart=plot,
+        chart_from="csv",
+        markdown=markdown(bench),
+        block="train",
+    )
 
 
 CAPTION = (
@@ -255,15 +284,23 @@ def markdown(bench: TrainBenchmark) -> str:
     def ok(x: float, bound: float) -> str:
         return "met" if x <= bound else "missed"
 
-    return "\n".join([
-        f"| same PPO settings, {fb.timesteps} env steps | wall time (s) | in the environment (+ LQR) |", "|---|---|---|",
-        f"| FlatBody-v0 (residual on the LQR) | {fb.wall_s:.1f} | {fb.env_s:.1f} s ({fb.env_share:.0%}) |",
-        f"| Pendulum-v1 | {pd.wall_s:.1f} | {pd.env_s:.1f} s ({pd.env_share:.0%}) |",
-        "", "| figure (same run) | measured | target |", "|---|---|---|",
-        f"| PPO wall time FlatBody-v0 / Pendulum-v1 | **{bench.ratio_wall:.2f}** | ≤ 1.0 ({ok(bench.ratio_wall, 1.0)}) |",
-        f"| share of FlatBody's wall time in env + LQR | **{bench.flatbody_env_share:.1%}** | ≤ 15 % ({ok(bench.flatbody_env_share, 0.15)}) |",
-        f"| LQR action per body-step (batch of {bench.n_envs}, gains stored) | {bench.lqr_us_per_body_step:.3f} µs | ≤ 1 µs ({ok(bench.lqr_us_per_body_step, 1.0)}) |",
-    ]) + "\n"
+    return (
+        "\n".join(
+            [
+                f"| same PPO settings, {fb.timesteps} env steps | wall time (s) | in the environment (+ LQR) |",
+                "|---|---|---|",
+                f"| FlatBody-v0 (residual on the LQR) | {fb.wall_s:.1f} | {fb.env_s:.1f} s ({fb.env_share:.0%}) |",
+                f"| Pendulum-v1 | {pd.wall_s:.1f} | {pd.env_s:.1f} s ({pd.env_share:.0%}) |",
+                "",
+                "| figure (same run) | measured | target |",
+                "|---|---|---|",
+                f"| PPO wall time FlatBody-v0 / Pendulum-v1 | **{bench.ratio_wall:.2f}** | ≤ 1.0 ({ok(bench.ratio_wall, 1.0)}) |",
+                f"| share of FlatBody's wall time in env + LQR | **{bench.flatbody_env_share:.1%}** | ≤ 15 % ({ok(bench.flatbody_env_share, 0.15)}) |",
+                f"| LQR action per body-step (batch of {bench.n_envs}, gains stored) | {bench.lqr_us_per_body_step:.3f} µs | ≤ 1 µs ({ok(bench.lqr_us_per_body_step, 1.0)}) |",
+            ]
+        )
+        + "\n"
+    )
 
 
 __all__ = ["TrainBenchmark", "TrainTiming", "lqr_us_per_body_step", "markdown", "plot", "report", "run"]

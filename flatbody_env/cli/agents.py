@@ -13,22 +13,36 @@ from flatbody_env.cli.args import int_at_least, output_dir
 from flatbody_env.physics import validation
 
 
-
-
 def _train_rsl(args) -> int:
     """``train --algo rsl-ppo``: rsl_rl's PPO on the torch vector env (agents/rsl.py)."""
     from agents.rsl import ALGO, train_rsl
 
     if args.study is not None or args.resume or args.hyperparams_file or args.trained_agent:
-        raise ValueError("--algo rsl-ppo: --study, --resume, --trained-agent and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)")
+        raise ValueError(
+            "--algo rsl-ppo: --study, --resume, --trained-agent and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)"
+        )
     from agents.numpy_policy import remember_run
 
-    command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
+    command = (
+        ["flatbody", *sys.argv[1:]]
+        if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
+        else None
+    )
     out = args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}"
     remember_run(out)  # a run folder this user creates: its model loads later without --trust
-    result = train_rsl(out, seed=args.seed, n_timesteps=args.n_timesteps,
-                       n_envs=args.n_envs, device=args.device, overrides=args.hyperparams or [], env_id=args.env, threads=args.threads,
-                       progress=not args.no_progress, command=command, force=args.force)
+    result = train_rsl(
+        out,
+        seed=args.seed,
+        n_timesteps=args.n_timesteps,
+        n_envs=args.n_envs,
+        device=args.device,
+        overrides=args.hyperparams or [],
+        env_id=args.env,
+        threads=args.threads,
+        progress=not args.no_progress,
+        command=command,
+        force=args.force,
+    )
     print(f"trained {ALGO} for {result.timesteps} steps in {result.wall_time_s:.0f} s; saved in {result.out}")
     return 0
 
@@ -69,7 +83,11 @@ def _train(args) -> int:
         args.n_envs = args.n_envs or n_envs
     elif args.algo is None:
         raise ValueError("--algo: required (ppo or sac), or give --study NAME --trial-id K")
-    command = ["flatbody", *sys.argv[1:]] if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")) else None
+    command = (
+        ["flatbody", *sys.argv[1:]]
+        if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
+        else None
+    )
     from agents.numpy_policy import check_trusted, remember_run
 
     out = args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}"
@@ -98,7 +116,9 @@ def _train(args) -> int:
         trained_agent=args.trained_agent,
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
-    print(f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}")
+    print(
+        f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}"
+    )
     _export_after_training(result.out)
     return 0
 
@@ -112,7 +132,9 @@ def _export_after_training(out) -> None:
     try:
         export_policy(out)
     except ValueError as exc:
-        sys.stderr.write(f"flatbody: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n")
+        sys.stderr.write(
+            f"flatbody: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n"
+        )
 
 
 @_trusting
@@ -155,8 +177,15 @@ def _evaluate_tasks(args) -> int:
         raise ValueError("--env: give one task id with MODEL (all evaluates the shipped agents)")
     reports = []
     for env_id in ids:
-        report = evaluate_task(env_id, episodes=args.episodes, seed=args.seed, model=args.model, baselines=not args.no_baselines,
-                               progress=not args.json, backend=args.backend)
+        report = evaluate_task(
+            env_id,
+            episodes=args.episodes,
+            seed=args.seed,
+            model=args.model,
+            baselines=not args.no_baselines,
+            progress=not args.json,
+            backend=args.backend,
+        )
         reports.append(report)
         if args.out_dir:
             print(f"wrote {save_report(report, args.out_dir)}", file=sys.stderr)
@@ -185,15 +214,26 @@ def _demo(args) -> int:
         from flatbody_env.output import check_output_path
 
         if not check_output_path("--docs", args.docs, (".md",)).is_file():
-            raise ValueError(f"--docs: {args.docs[:60]!r} does not exist (a Markdown page with <!-- demo:transcript --> markers)")
+            raise ValueError(
+                f"--docs: {args.docs[:60]!r} does not exist (a Markdown page with <!-- demo:transcript --> markers)"
+            )
     if args.out:  # rerun's writer cannot stop cleanly on a full disk: refuse up front what it cannot hold
         from flatbody_env.cli.record import check_space
 
         check_space(args.out, 1000)
     # the transcript's command line: the options given, less --docs
-    given = [("--model", args.model, None), ("--seed", args.seed, 7), ("--out", args.out, "demo.rrd"), ("--backend", args.backend, "auto")]
-    command = shlex.join(["flatbody", "demo", *(x for flag, value, default in given if value != default for x in (flag, str(value)))])
-    return run_demo(model=args.model, seed=args.seed, out=args.out, backend=args.backend, docs=args.docs or None, command=command)
+    given = [
+        ("--model", args.model, None),
+        ("--seed", args.seed, 7),
+        ("--out", args.out, "demo.rrd"),
+        ("--backend", args.backend, "auto"),
+    ]
+    command = shlex.join(
+        ["flatbody", "demo", *(x for flag, value, default in given if value != default for x in (flag, str(value)))]
+    )
+    return run_demo(
+        model=args.model, seed=args.seed, out=args.out, backend=args.backend, docs=args.docs or None, command=command
+    )
 
 
 @_trusting
@@ -210,7 +250,9 @@ def _lqr_table(args) -> int:
 
     from agents.heuristic import GAIN_GRID_LAMBDA, GAIN_GRID_W
 
-    table = build_gain_table(workers=args.workers, grid_lambda=(*GAIN_GRID_LAMBDA[:2], args.n_lambda), grid_w=(*GAIN_GRID_W[:2], args.n_w))
+    table = build_gain_table(
+        workers=args.workers, grid_lambda=(*GAIN_GRID_LAMBDA[:2], args.n_lambda), grid_w=(*GAIN_GRID_W[:2], args.n_w)
+    )
     out = args.out or GAIN_TABLE_PATH
     save_gain_table(table, out)
     print(f"wrote {out}: LQR gains at {table['K'].shape[0] * table['K'].shape[1] * table['K'].shape[2]} target shapes")
@@ -221,69 +263,202 @@ def register(sub) -> None:
     from agents.train import ALGOS, ENV_ID
 
     p = sub.add_parser("train", help="train an agent (SB3 PPO or SAC, or rsl_rl's PPO: rsl-ppo) on FlatBody-v0")
-    p.add_argument("--algo", choices=(*ALGOS, "rsl-ppo"), help="algorithm (required unless --study); rsl-ppo: rsl_rl's PPO on the torch vector env")
+    p.add_argument(
+        "--algo",
+        choices=(*ALGOS, "rsl-ppo"),
+        help="algorithm (required unless --study); rsl-ppo: rsl_rl's PPO on the torch vector env",
+    )
     p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="random seed (default 0)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=None, metavar="N", help="total environment steps (default: the YAML's)")
-    p.add_argument("--n-envs", "--num-envs", dest="n_envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
-    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
+    p.add_argument(
+        "--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="random seed (default 0)"
+    )
+    p.add_argument(
+        "--n-timesteps",
+        type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS),
+        default=None,
+        metavar="N",
+        help="total environment steps (default: the YAML's)",
+    )
+    p.add_argument(
+        "--n-envs",
+        "--num-envs",
+        dest="n_envs",
+        type=int_at_least("n_envs", 1, validation.MAX_BATCH),
+        default=None,
+        metavar="N",
+        help="parallel bodies (default: the YAML's)",
+    )
+    p.add_argument(
+        "--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)"
+    )
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
     p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
-    p.add_argument("--trained-agent", metavar="RUN", help="fine-tune: start from this run folder's model.zip and vecnormalize.pkl "
-                   "(this run's hyperparameters; SB3 algorithms)")
-    p.add_argument("--force", action="store_true", help="train into DIR even if it holds a run or is the shipped agent (overwrites it)")
-    p.add_argument("--checkpoint-freq", type=int_at_least("checkpoint_freq", 0, validation.MAX_TIMESTEPS), default=50_000, metavar="N", help="steps between checkpoints (0: none; default 50000)")
+    p.add_argument(
+        "--trained-agent",
+        metavar="RUN",
+        help="fine-tune: start from this run folder's model.zip and vecnormalize.pkl "
+        "(this run's hyperparameters; SB3 algorithms)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="train into DIR even if it holds a run or is the shipped agent (overwrites it)",
+    )
+    p.add_argument(
+        "--checkpoint-freq",
+        type=int_at_least("checkpoint_freq", 0, validation.MAX_TIMESTEPS),
+        default=50_000,
+        metavar="N",
+        help="steps between checkpoints (0: none; default 50000)",
+    )
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
-    p.add_argument("--threads", type=int_at_least("threads", 1, validation.MAX_WORKERS), default=1, help="torch threads (default 1)")
-    p.add_argument("--device", choices=("cpu", "cuda"), default="cpu", help="torch device of env and policy (rsl-ppo; default cpu)")
+    p.add_argument(
+        "--threads",
+        type=int_at_least("threads", 1, validation.MAX_WORKERS),
+        default=1,
+        help="torch threads (default 1)",
+    )
+    p.add_argument(
+        "--device", choices=("cpu", "cuda"), default="cpu", help="torch device of env and policy (rsl-ppo; default cpu)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--study", metavar="NAME", help="retrain a trial of this Optuna study ('flatbody tune') with its hyperparameters")
-    p.add_argument("--trial-id", type=int_at_least("trial_id", 0, validation.MAX_COUNT), default=None, metavar="K", help="with --study: the trial number")
-    p.add_argument("--storage", metavar="URL", help="with --study: journal file or database URL (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)")
-    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
+    p.add_argument(
+        "--study",
+        metavar="NAME",
+        help="retrain a trial of this Optuna study ('flatbody tune') with its hyperparameters",
+    )
+    p.add_argument(
+        "--trial-id",
+        type=int_at_least("trial_id", 0, validation.MAX_COUNT),
+        default=None,
+        metavar="K",
+        help="with --study: the trial number",
+    )
+    p.add_argument(
+        "--storage",
+        metavar="URL",
+        help="with --study: journal file or database URL (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)",
+    )
+    p.add_argument(
+        "--trust",
+        action="store_true",
+        help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
+    )
     p.set_defaults(handler=_train)
 
-    p = sub.add_parser("evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes")
-    p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="episodes (default 100)")
+    p = sub.add_parser(
+        "evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes"
+    )
+    p.add_argument(
+        "model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)"
+    )
+    p.add_argument(
+        "--episodes",
+        type=int_at_least("episodes", 1, validation.MAX_EPISODES),
+        default=100,
+        metavar="N",
+        help="episodes (default 100)",
+    )
     from agents.evaluate import EVAL_SEED
 
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=EVAL_SEED, metavar="S",
-                   help=f"episode i is reset with seed S + i (default {EVAL_SEED})")
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=EVAL_SEED,
+        metavar="S",
+        help=f"episode i is reset with seed S + i (default {EVAL_SEED})",
+    )
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
-    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
-                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
-    p.add_argument("--env", default=None, metavar="ID",
-                   help="task id (docs/tasks.md) or 'all': the baselines, the task's shipped agents (agents/models/ALGO-ID/) and target features")
-    p.add_argument("--out-dir", default="", metavar="DIR", help="with --env: save each task's report as DIR/ID.json (the reference table)")
-    p.add_argument("--docs", default="", metavar="FILE.md",
-                   help="regenerate the table between <!-- bench:tasks --> markers in FILE.md from the saved reports (--out-dir, default the shipped ones)")
-    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
+    p.add_argument(
+        "--backend",
+        choices=("auto", "numpy", "sb3"),
+        default="auto",
+        help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)",
+    )
+    p.add_argument(
+        "--env",
+        default=None,
+        metavar="ID",
+        help="task id (docs/tasks.md) or 'all': the baselines, the task's shipped agents (agents/models/ALGO-ID/) and target features",
+    )
+    p.add_argument(
+        "--out-dir",
+        default="",
+        metavar="DIR",
+        help="with --env: save each task's report as DIR/ID.json (the reference table)",
+    )
+    p.add_argument(
+        "--docs",
+        default="",
+        metavar="FILE.md",
+        help="regenerate the table between <!-- bench:tasks --> markers in FILE.md from the saved reports (--out-dir, default the shipped ones)",
+    )
+    p.add_argument(
+        "--trust",
+        action="store_true",
+        help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
+    )
     p.set_defaults(handler=_evaluate)
 
     p = sub.add_parser("demo", help="the main job: the shipped agent steers the body onto a stationary ellipse")
-    p.add_argument("--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="seed of the target and the initial state (default 7)")
-    p.add_argument("--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)")
-    p.add_argument("--backend", choices=("auto", "numpy", "sb3"), default="auto",
-                   help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)")
-    p.add_argument("--docs", default="", metavar="FILE.md",
-                   help="also regenerate the transcript between <!-- demo:transcript --> markers in FILE.md")
-    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
+    p.add_argument(
+        "--model", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)"
+    )
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=7,
+        help="seed of the target and the initial state (default 7)",
+    )
+    p.add_argument(
+        "--out", default="demo.rrd", metavar="FILE.rrd", help="rerun recording to write (default demo.rrd; '' for none)"
+    )
+    p.add_argument(
+        "--backend",
+        choices=("auto", "numpy", "sb3"),
+        default="auto",
+        help="policy evaluation: the exported numpy policy, SB3 itself, or auto (numpy when current; default)",
+    )
+    p.add_argument(
+        "--docs",
+        default="",
+        metavar="FILE.md",
+        help="also regenerate the transcript between <!-- demo:transcript --> markers in FILE.md",
+    )
+    p.add_argument(
+        "--trust",
+        action="store_true",
+        help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
+    )
     p.set_defaults(handler=_demo)
-    p = sub.add_parser("lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)")
+    p = sub.add_parser(
+        "lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)"
+    )
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
-    p.add_argument("--n-lambda", type=int_at_least("n_lambda", 2, 2001), default=36, help="grid nodes in lambda* (shipped: 36)")
-    p.add_argument("--n-w", type=int_at_least("n_w", 2, 2001), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)")
+    p.add_argument(
+        "--n-lambda", type=int_at_least("n_lambda", 2, 2001), default=36, help="grid nodes in lambda* (shipped: 36)"
+    )
+    p.add_argument(
+        "--n-w", type=int_at_least("n_w", 2, 2001), default=41, help="grid nodes in w = 1/(lambda* mu*) (shipped: 41)"
+    )
     p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=2, help="processes")
     p.set_defaults(handler=_lqr_table)
 
-    p = sub.add_parser("export-policy", help="export a trained agent's policy to numpy (policy.npz beside model.zip) for torch-free evaluate/demo")
-    p.add_argument("model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)")
-    p.add_argument("--trust", action="store_true", help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)")
+    p = sub.add_parser(
+        "export-policy",
+        help="export a trained agent's policy to numpy (policy.npz beside model.zip) for torch-free evaluate/demo",
+    )
+    p.add_argument(
+        "model", nargs="?", default=None, metavar="MODEL", help="model folder or model.zip (default: the shipped agent)"
+    )
+    p.add_argument(
+        "--trust",
+        action="store_true",
+        help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
+    )
     p.set_defaults(handler=_export_policy)
 
 
@@ -292,10 +467,18 @@ def _bench_train(args) -> int:
         return _bench_time_to_goal(args)
     from flatbody_env.bench.train import run
 
-    b = run(timesteps=args.timesteps, repeats=args.repeats, seed=args.seed, out_dir=args.out_dir, overrides=args.hyperparams or [],
-            docs=args.docs or None)
+    b = run(
+        timesteps=args.timesteps,
+        repeats=args.repeats,
+        seed=args.seed,
+        out_dir=args.out_dir,
+        overrides=args.hyperparams or [],
+        docs=args.docs or None,
+    )
     for r in (b.flatbody, b.pendulum):
-        print(f"{r.env_id:<12} {r.timesteps} steps  wall {r.wall_s:7.1f} s  in env {r.env_s:6.1f} s ({r.env_share:.0%})")
+        print(
+            f"{r.env_id:<12} {r.timesteps} steps  wall {r.wall_s:7.1f} s  in env {r.env_s:6.1f} s ({r.env_share:.0%})"
+        )
     print(f"PPO wall time FlatBody-v0 / Pendulum-v1: {b.ratio_wall:.2f} (target <= 1.0)")
     print(f"FlatBody share in env + LQR:             {b.flatbody_env_share:.1%} (target <= 15 %)")
     print(f"LQR action per body-step (batch, gains stored): {b.lqr_us_per_body_step:.3f} us (target <= 1)")
@@ -308,13 +491,21 @@ def _bench_train(args) -> int:
 def _bench_time_to_goal(args) -> int:
     from flatbody_env.bench.time_to_goal import run
 
-    b = run(seed=args.seed, max_timesteps=args.max_timesteps, eval_every=args.eval_every, episodes=args.episodes, out_dir=args.out_dir,
-            docs=args.docs or None)
+    b = run(
+        seed=args.seed,
+        max_timesteps=args.max_timesteps,
+        eval_every=args.eval_every,
+        episodes=args.episodes,
+        out_dir=args.out_dir,
+        docs=args.docs or None,
+    )
     for c in (b.sb3, b.rsl):
         reached = f"{c.goal_s:.1f} s ({c.goal_timesteps} steps)" if c.goal_s is not None else "not reached"
         t, w, s, d = c.points[-1]
         beat = f"{c.lqr_s:.1f} s ({c.lqr_timesteps} steps)" if c.lqr_s is not None else "not reached"
-        print(f"{c.trainer:<8} goal: {reached:<24} beats the LQR: {beat:<24} last: success {s:.0%}, final distance {d:.4f} after {t} steps, {w:.1f} s")
+        print(
+            f"{c.trainer:<8} goal: {reached:<24} beats the LQR: {beat:<24} last: success {s:.0%}, final distance {d:.4f} after {t} steps, {w:.1f} s"
+        )
     print(f"LQR on the same seeds: success {b.lqr_success:.0%}, final distance {b.lqr_final_distance:.4f}")
     if b.ratio is not None:
         print(f"rsl-ppo / sb3-ppo wall time to the goal: {b.ratio:.2f} (goal <= 0.5)")
@@ -327,20 +518,58 @@ def _bench_time_to_goal(args) -> int:
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("train", help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1, share in env + LQR; "
-                             "--to-goal: wall time to a good agent, SB3 vs rsl_rl")
-    p.add_argument("--timesteps", type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS), default=64_000, help="environment steps per run")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="runs per environment; the fastest is kept")
+    p = bench_sub.add_parser(
+        "train",
+        help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1, share in env + LQR; "
+        "--to-goal: wall time to a good agent, SB3 vs rsl_rl",
+    )
+    p.add_argument(
+        "--timesteps",
+        type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS),
+        default=64_000,
+        help="environment steps per run",
+    )
+    p.add_argument(
+        "--repeats",
+        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
+        default=1,
+        help="runs per environment; the fastest is kept",
+    )
     p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of both runs")
-    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs")
-    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", help="where to write train_benchmark.json/.csv/.png")
-    p.add_argument("--docs", default="", metavar="FILE.md", help="also regenerate the table between <!-- bench:train --> markers in FILE.md")
-    p.add_argument("--to-goal", action="store_true",
-                   help="instead: wall time to a good residual agent, SB3's PPO vs rsl_rl's PPO (rsl-ppo) in the same run "
-                        "(time_to_goal.json/.csv/.png; with --docs the <!-- bench:time-to-goal --> table)")
-    p.add_argument("--max-timesteps", type=int_at_least("max_timesteps", 1, validation.MAX_TIMESTEPS), default=3_000_000,
-                   help="--to-goal: stop a trainer here if it has not reached the goal")
-    p.add_argument("--eval-every", type=int_at_least("eval_every", 1, validation.MAX_TIMESTEPS), default=50_000,
-                   help="--to-goal: environment steps between evaluations (rounded up to whole rollouts)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1, 10_000), default=20, help="--to-goal: held-out episodes per evaluation (seeds 50000...)")
+    p.add_argument(
+        "--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs"
+    )
+    p.add_argument(
+        "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write train_benchmark.json/.csv/.png"
+    )
+    p.add_argument(
+        "--docs",
+        default="",
+        metavar="FILE.md",
+        help="also regenerate the table between <!-- bench:train --> markers in FILE.md",
+    )
+    p.add_argument(
+        "--to-goal",
+        action="store_true",
+        help="instead: wall time to a good residual agent, SB3's PPO vs rsl_rl's PPO (rsl-ppo) in the same run "
+        "(time_to_goal.json/.csv/.png; with --docs the <!-- bench:time-to-goal --> table)",
+    )
+    p.add_argument(
+        "--max-timesteps",
+        type=int_at_least("max_timesteps", 1, validation.MAX_TIMESTEPS),
+        default=3_000_000,
+        help="--to-goal: stop a trainer here if it has not reached the goal",
+    )
+    p.add_argument(
+        "--eval-every",
+        type=int_at_least("eval_every", 1, validation.MAX_TIMESTEPS),
+        default=50_000,
+        help="--to-goal: environment steps between evaluations (rounded up to whole rollouts)",
+    )
+    p.add_argument(
+        "--episodes",
+        type=int_at_least("episodes", 1, 10_000),
+        default=20,
+        help="--to-goal: held-out episodes per evaluation (seeds 50000...)",
+    )
     p.set_defaults(handler=_bench_train)

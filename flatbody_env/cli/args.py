@@ -42,7 +42,9 @@ def positive_float(name: str, high: float | None = validation.MAX_COUNT):
         value = _float(name, text)
         if not math.isfinite(value) or value <= 0 or (high is not None and value > high):
             hi = "inf)" if high is None else f"{high:g}]"
-            raise argparse.ArgumentTypeError(f"{name}: must be a finite number > 0 (allowed range (0, {hi}), got {text[:60]}")
+            raise argparse.ArgumentTypeError(
+                f"{name}: must be a finite number > 0 (allowed range (0, {hi}), got {text[:60]}"
+            )
         return value
 
     return parse
@@ -63,7 +65,6 @@ def int_at_least(name: str, low: int = 1, high: int | None = validation.MAX_COUN
         return value
 
     return parse
-
 
 
 def seed(name: str = "seed"):
@@ -97,7 +98,9 @@ def float_range(name: str, *, low: float = 0.0, high: float = validation.STRETCH
     def parse(text: str) -> tuple[float, float]:
         parts = text.split(",")
         if len(parts) != 2:
-            raise argparse.ArgumentTypeError(f"{name}: expected LO,HI (two numbers, {low:g} < LO < HI <= {high:g}), got {text[:60]!r}")
+            raise argparse.ArgumentTypeError(
+                f"{name}: expected LO,HI (two numbers, {low:g} < LO < HI <= {high:g}), got {text[:60]!r}"
+            )
         lo, hi = (_float(name, x) for x in parts)
         if not (math.isfinite(lo) and math.isfinite(hi) and low < lo < hi <= high):
             raise argparse.ArgumentTypeError(f"{name}: need {low:g} < LO < HI <= {high:g} (finite), got {text[:60]!r}")
@@ -119,7 +122,9 @@ def times_list(text: str) -> list[float]:
         try:
             v = float(x)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"times: expected comma-separated numbers, got {x.strip()[:40]!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"times: expected comma-separated numbers, got {x.strip()[:40]!r}"
+            ) from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"times: must be finite numbers, got {x.strip()[:40]}")
         values.append(v)
@@ -180,14 +185,53 @@ def add_integration_arguments(p) -> None:
     """Method, tolerance and budget flags shared by commands that integrate."""
     from flatbody_env.integrators.base import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME
 
-    p.add_argument("--t-end", type=positive_float("t_end", validation.T_END_MAX), metavar="T", help="final time in (0, 1e6] (default: the scene's t_end)")
-    p.add_argument("--method", default="auto", help="integrator (see 'flatbody methods') or auto (default): the fastest that meets --rtol/--atol in the chosen model")
-    p.add_argument("--rtol", type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="relative tolerance (adaptive methods), in [1e-16, 1]")
-    p.add_argument("--atol", type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]), default=1e-10, help="absolute tolerance (adaptive methods), in [1e-16, 1]")
-    p.add_argument("--step", type=fixed_step("step"), default=None, metavar="H", help="step size (fixed-step methods), in [1e-6, 1e6]")
-    p.add_argument("--model", default="auto", choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
-                   help="rung of the model ladder (default auto: the lowest the scene allows)")
-    p.add_argument("--max-nfev", type=int_at_least("max_nfev", 1, 10**12), default=DEFAULT_MAX_NFEV, metavar="N",
-                   help=f"work budget: right-hand-side evaluations (default {DEFAULT_MAX_NFEV:.0e})")
-    p.add_argument("--max-seconds", type=seconds("max_seconds"), default=DEFAULT_MAX_WALL_TIME, metavar="S",
-                   help=f"work budget: wall-clock seconds of the integration, at most 86400 (default {DEFAULT_MAX_WALL_TIME:g})")
+    p.add_argument(
+        "--t-end",
+        type=positive_float("t_end", validation.T_END_MAX),
+        metavar="T",
+        help="final time in (0, 1e6] (default: the scene's t_end)",
+    )
+    p.add_argument(
+        "--method",
+        default="auto",
+        help="integrator (see 'flatbody methods') or auto (default): the fastest that meets --rtol/--atol in the chosen model",
+    )
+    p.add_argument(
+        "--rtol",
+        type=number("rtol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]),
+        default=1e-10,
+        help="relative tolerance (adaptive methods), in [1e-16, 1]",
+    )
+    p.add_argument(
+        "--atol",
+        type=number("atol", low=validation.TOL_RANGE[0], high=validation.TOL_RANGE[1]),
+        default=1e-10,
+        help="absolute tolerance (adaptive methods), in [1e-16, 1]",
+    )
+    p.add_argument(
+        "--step",
+        type=fixed_step("step"),
+        default=None,
+        metavar="H",
+        help="step size (fixed-step methods), in [1e-6, 1e6]",
+    )
+    p.add_argument(
+        "--model",
+        default="auto",
+        choices=("auto", "stationary", "planar-V1", "planar", "two-polar", "regular"),
+        help="rung of the model ladder (default auto: the lowest the scene allows)",
+    )
+    p.add_argument(
+        "--max-nfev",
+        type=int_at_least("max_nfev", 1, 10**12),
+        default=DEFAULT_MAX_NFEV,
+        metavar="N",
+        help=f"work budget: right-hand-side evaluations (default {DEFAULT_MAX_NFEV:.0e})",
+    )
+    p.add_argument(
+        "--max-seconds",
+        type=seconds("max_seconds"),
+        default=DEFAULT_MAX_WALL_TIME,
+        metavar="S",
+        help=f"work budget: wall-clock seconds of the integration, at most 86400 (default {DEFAULT_MAX_WALL_TIME:g})",
+    )

@@ -23,6 +23,7 @@ def _methods(text: str) -> list[str]:
     import argparse
 
     from flatbody_env.integrators.specs import GPU_METHODS as allowed
+
     names = [p.strip() for p in text.split(",") if p.strip()]
     bad = [m for m in names if m not in allowed]
     if not names or bad:
@@ -47,10 +48,20 @@ def _cmd(args) -> int:
 
     def show(row):
         what = "dynamics" if row["what"] == WHAT else "whole env"
-        print(f"{what:<9} {row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  "
-              f"({row['device_name']})", flush=True)
+        print(
+            f"{what:<9} {row['backend']:<13} {row['method']:<13} N = {row['n']:>8}  {row['steps_per_s']:14.4g} body-steps/s  "
+            f"({row['device_name']})",
+            flush=True,
+        )
 
-    result = run(sizes=args.sizes, methods=args.methods, steps=args.steps, repeats=args.repeats, only=args.backends, progress=show)
+    result = run(
+        sizes=args.sizes,
+        methods=args.methods,
+        steps=args.steps,
+        repeats=args.repeats,
+        only=args.backends,
+        progress=show,
+    )
     for note in result["left_out"]:
         print(f"left out: {note}")
     out = Path(args.out)
@@ -60,14 +71,31 @@ def _cmd(args) -> int:
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("gpu", help="batched dynamics and the whole env step: body-steps/s against N on the CPU (serial, parallel) "
-                                         "and a CUDA GPU when present")
-    p.add_argument("--out", required=True, type=output_file("out", (".json",)), metavar="FILE.json",
-                   help="JSON of the rows; the table (FILE.csv) and the chart (FILE.png) go beside it")
-    p.add_argument("--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies")
-    p.add_argument("--methods", type=_methods, default=["RK4", "DOP853-numba"], metavar="NAME,...", help="batch methods to time")
-    p.add_argument("--backends", type=_backends, default=None, metavar="NAME,...",
-                   help="time only these (cpu-serial, cpu-parallel, cuda; default: every one here), e.g. cuda alone at large N")
+    p = bench_sub.add_parser(
+        "gpu",
+        help="batched dynamics and the whole env step: body-steps/s against N on the CPU (serial, parallel) "
+        "and a CUDA GPU when present",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        type=output_file("out", (".json",)),
+        metavar="FILE.json",
+        help="JSON of the rows; the table (FILE.csv) and the chart (FILE.png) go beside it",
+    )
+    p.add_argument(
+        "--sizes", type=_sizes, default=[256, 1024, 4096, 16384, 65536], metavar="N,N,...", help="numbers of bodies"
+    )
+    p.add_argument(
+        "--methods", type=_methods, default=["RK4", "DOP853-numba"], metavar="NAME,...", help="batch methods to time"
+    )
+    p.add_argument(
+        "--backends",
+        type=_backends,
+        default=None,
+        metavar="NAME,...",
+        help="time only these (cpu-serial, cpu-parallel, cuda; default: every one here), e.g. cuda alone at large N",
+    )
     p.add_argument("--steps", type=int_at_least("steps", 1, 100000), default=10, help="env steps per timed block")
     p.add_argument("--repeats", type=int_at_least("repeats", 1, 100), default=3, help="timed blocks; the best is kept")
     p.set_defaults(handler=_cmd)

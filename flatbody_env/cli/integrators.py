@@ -57,18 +57,27 @@ def _ladder(args) -> int:
     out = Path(args.out)
     csv_path, scenes_path, png_path = out / "ladder.csv", out / "ladder_scenes.csv", out / "ladder.png"
     if not args.plot_only:
-        points, records = ladder_study(args.scenes, quick=args.quick, repeats=1 if args.quick else args.repeats, max_run_s=_budget(args))
+        points, records = ladder_study(
+            args.scenes, quick=args.quick, repeats=1 if args.quick else args.repeats, max_run_s=_budget(args)
+        )
         write_csv(points, csv_path)
         write_scenes(records, scenes_path)
         for r in records:
-            floor = f"floor {r.floor:.1e}" if math.isfinite(r.floor) else f"floor n/a ({r.cross_check or 'no cross-check'})"
+            floor = (
+                f"floor {r.floor:.1e}" if math.isfinite(r.floor) else f"floor n/a ({r.cross_check or 'no cross-check'})"
+            )
             print(f"{r.scene:<20} auto -> {r.chosen:<10} (reference {r.reference}; {floor})")
         for s in speedups(points):
-            txt = (f"{_ratio(s['speedup_vs_full'], 'the cheapest full model', s['why_no_full'])}, "
-                   f"{_ratio(s['speedup_vs_default'], 'scipy DOP853', s['why_no_default'])}"
-                   if s["reached_target"] else "error target not reached")
-            print(f"  {s['scene']:<26} {s['rung']:<10} {s['method']:<17} {s['setting']:<11} error {s['error']:.1e} "
-                  f"in {s['wall_time'] * 1e3:.3f} ms: {txt}")
+            txt = (
+                f"{_ratio(s['speedup_vs_full'], 'the cheapest full model', s['why_no_full'])}, "
+                f"{_ratio(s['speedup_vs_default'], 'scipy DOP853', s['why_no_default'])}"
+                if s["reached_target"]
+                else "error target not reached"
+            )
+            print(
+                f"  {s['scene']:<26} {s['rung']:<10} {s['method']:<17} {s['setting']:<11} error {s['error']:.1e} "
+                f"in {s['wall_time'] * 1e3:.3f} ms: {txt}"
+            )
     elif not csv_path.exists():
         raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
     plot_ladder(csv_path, scenes_path, png_path)
@@ -102,8 +111,10 @@ def _chart(args) -> int:
         write_records(points, csv_path)
         write_json(refs, ref_path)
         for r in refs:
-            print(f"reference {r.scene} (t = {r.t_end:g}): {r.method} {r.setting}; cross-check {r.cross_method} "
-                  f"{r.cross_setting}: agreement floor {r.agreement:.2e}")
+            print(
+                f"reference {r.scene} (t = {r.t_end:g}): {r.method} {r.setting}; cross-check {r.cross_method} "
+                f"{r.cross_setting}: agreement floor {r.agreement:.2e}"
+            )
     elif not csv_path.exists():
         raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
     plot_work_precision(csv_path, png_path, ref_path)
@@ -124,7 +135,9 @@ def _failure(args) -> int:
             if s not in STUDIES:
                 raise ValueError(f"studies: unknown study {s!r} (allowed: {', '.join(STUDIES)})")
         methods = _methods(args.methods) if args.methods else DEFAULT_METHODS
-        points = failure_study(studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args), progress=not args.json)
+        points = failure_study(
+            studies, methods, quick=args.quick, repeats=args.repeats, max_run_s=_budget(args), progress=not args.json
+        )
         write_records(points, csv_path)
         if args.json:
             order = {(s, m): (i, j) for i, s in enumerate(studies) for j, m in enumerate(methods)}
@@ -133,7 +146,11 @@ def _failure(args) -> int:
             return 0
         fails = [p for p in points if p.status != "ok"]
         planned = planned_runs(studies, methods, quick=args.quick)
-        skipped = f" ({planned - len(points)} skipped: over the {_budget(args):g} s budget per run, --max-run-s)" if planned > len(points) else ""
+        skipped = (
+            f" ({planned - len(points)} skipped: over the {_budget(args):g} s budget per run, --max-run-s)"
+            if planned > len(points)
+            else ""
+        )
         print(f"{len(points)} of {planned} runs{skipped}, {len(fails)} detected failures:")
         seen = set()
         for p in fails:
@@ -141,8 +158,10 @@ def _failure(args) -> int:
             if key in seen:
                 continue
             seen.add(key)
-            print(f"  {p.study:<8} {p.method:<20} first fails at {p.parameter_name} = {p.parameter:g} "
-                  f"({p.measured_name} = {p.measured:.3g}): {p.status}")
+            print(
+                f"  {p.study:<8} {p.method:<20} first fails at {p.parameter_name} = {p.parameter:g} "
+                f"({p.measured_name} = {p.measured:.3g}): {p.status}"
+            )
     elif not csv_path.exists():
         raise ValueError(f"out: no {csv_path} to plot (run without --plot-only first)")
     plot_failure_study(csv_path, png_path)
@@ -160,7 +179,9 @@ def _bench(args) -> int:
     if args.plot_only:
         print(f"wrote {redraw(out, NAME, plot_bench, where='out')}")
     else:
-        rep = measure(quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile)
+        rep = measure(
+            quick=args.quick, repeats=args.repeats, max_run_s=args.max_run_s, with_compile=not args.no_compile
+        )
         print(describe(rep))
         print("wrote " + ", ".join(map(str, write_report(report(rep), out))))
     if args.docs:
@@ -171,10 +192,22 @@ def _bench(args) -> int:
 
 def _common(p, what):
     p.add_argument("--quick", action="store_true", help=f"a short {what} (shorter horizons, fewer settings, 1 repeat)")
-    p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (see 'flatbody methods'); default: a representative set")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=3, help="timing repeats (minimum taken; default 3)")
-    p.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=None, metavar="S",
-                   help="stop a method's sweep once one run takes (or is predicted to take) longer (default 5; 1 with --quick)")
+    p.add_argument(
+        "--methods", nargs="+", metavar="NAME", help="methods (see 'flatbody methods'); default: a representative set"
+    )
+    p.add_argument(
+        "--repeats",
+        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
+        default=3,
+        help="timing repeats (minimum taken; default 3)",
+    )
+    p.add_argument(
+        "--max-run-s",
+        type=positive_float("max_run_s", validation.MAX_SECONDS),
+        default=None,
+        metavar="S",
+        help="stop a method's sweep once one run takes (or is predicted to take) longer (default 5; 1 with --quick)",
+    )
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
     p.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved table")
 
@@ -182,17 +215,37 @@ def _common(p, what):
 def register(sub) -> None:
     p = sub.add_parser("chart", help="work-precision diagram of the integrators (CSV + PNG)")
     _common(p, "chart")
-    p.add_argument("--scenes", nargs="+", metavar="SCENE", help="regular close-approach small-rho-bounce long-horizon (default all; "
-                   "with --ladder: any built-in scene, default all)")
-    p.add_argument("--ladder", action="store_true", help="the model ladder: each scene's rung, error vs cost per rung (ladder.csv, ladder.png)")
-    p.add_argument("--tasks", action="store_true",
-                   help="the tasks' reference chart: success against the target's settling rate and growth rate (tasks_success.png), "
-                        "drawn from the saved task reports")
-    p.add_argument("--from", dest="reports", default="", metavar="DIR",
-                   help="with --tasks: the folder of saved task reports (default: the shipped ones, agents/data/reference)")
+    p.add_argument(
+        "--scenes",
+        nargs="+",
+        metavar="SCENE",
+        help="regular close-approach small-rho-bounce long-horizon (default all; "
+        "with --ladder: any built-in scene, default all)",
+    )
+    p.add_argument(
+        "--ladder",
+        action="store_true",
+        help="the model ladder: each scene's rung, error vs cost per rung (ladder.csv, ladder.png)",
+    )
+    p.add_argument(
+        "--tasks",
+        action="store_true",
+        help="the tasks' reference chart: success against the target's settling rate and growth rate (tasks_success.png), "
+        "drawn from the saved task reports",
+    )
+    p.add_argument(
+        "--from",
+        dest="reports",
+        default="",
+        metavar="DIR",
+        help="with --tasks: the folder of saved task reports (default: the shipped ones, agents/data/reference)",
+    )
     p.set_defaults(handler=_chart)
 
-    p = sub.add_parser("failure-study", help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon")
+    p = sub.add_parser(
+        "failure-study",
+        help="where integrators fail: error and cost vs closest approach to lambda = mu, rho_min, horizon",
+    )
     _common(p, "study")
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
     p.add_argument("--json", action="store_true", help="also print the rows as JSON (by study, then method)")
@@ -200,12 +253,35 @@ def register(sub) -> None:
 
 
 def register_bench(bsub) -> None:
-    b = bsub.add_parser("integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time")
+    b = bsub.add_parser(
+        "integrators", help="same-run ratios vs scipy DOP853, close approach, long horizon, per-step cost, compile time"
+    )
     b.add_argument("--quick", action="store_true", help="shorter horizons, one close-approach case, 1 repeat")
-    b.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=3, help="timing repeats (minimum taken; default 3)")
-    b.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=5.0, metavar="S", help="stop a sweep once one run takes longer")
+    b.add_argument(
+        "--repeats",
+        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
+        default=3,
+        help="timing repeats (minimum taken; default 3)",
+    )
+    b.add_argument(
+        "--max-run-s",
+        type=positive_float("max_run_s", validation.MAX_SECONDS),
+        default=5.0,
+        metavar="S",
+        help="stop a sweep once one run takes longer",
+    )
     b.add_argument("--no-compile", action="store_true", help="skip the compile-time measurement (two fresh processes)")
-    b.add_argument("--out", type=output_dir("out"), default=DEFAULT_OUT, metavar="DIR", help=f"output folder (default {DEFAULT_OUT})")
+    b.add_argument(
+        "--out",
+        type=output_dir("out"),
+        default=DEFAULT_OUT,
+        metavar="DIR",
+        help=f"output folder (default {DEFAULT_OUT})",
+    )
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
-    b.add_argument("--docs", metavar="FILE.md", help="also regenerate the tables between <!-- bench:integrators-* --> markers in FILE.md")
+    b.add_argument(
+        "--docs",
+        metavar="FILE.md",
+        help="also regenerate the tables between <!-- bench:integrators-* --> markers in FILE.md",
+    )
     b.set_defaults(handler=_bench)

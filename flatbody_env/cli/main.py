@@ -116,15 +116,19 @@ def main(argv: list[str] | None = None) -> int:
             what = "the database" if isinstance(exc, sqlite3.Error) else "the recording (disk full or file too large?)"
             sys.stderr.write(f"flatbody: I/O error writing {what}: {_one_line(exc)}\n")
             return 1
-        sys.stderr.write(f"flatbody: internal error ({type(exc).__name__}: {_one_line(exc)}); "
-                         "set FLATBODY_DEBUG=1 for the traceback and please report it\n")
+        sys.stderr.write(
+            f"flatbody: internal error ({type(exc).__name__}: {_one_line(exc)}); "
+            "set FLATBODY_DEBUG=1 for the traceback and please report it\n"
+        )
         return 1
 
 
 def _writer_failure(exc: BaseException) -> bool:
     """rerun's file sink reports a failed write (disk full, file too large) as a RuntimeError."""
     text = str(exc)
-    return isinstance(exc, RuntimeError) and any(k in text for k in ("File-writer", "Failed to write", "sink", "os error"))
+    return isinstance(exc, RuntimeError) and any(
+        k in text for k in ("File-writer", "Failed to write", "sink", "os error")
+    )
 
 
 def _one_line(exc) -> str:

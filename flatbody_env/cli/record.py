@@ -12,11 +12,16 @@ import sys
 import time
 from pathlib import Path
 
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, check_output_path, int_at_least, load_scene_arg, output_dir
+from flatbody_env.cli.args import (
+    add_integration_arguments,
+    add_scene_arguments,
+    check_output_path,
+    int_at_least,
+    load_scene_arg,
+    output_dir,
+)
 from flatbody_env.physics import validation
 from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
-
-
 
 
 def _rrd_path(text: str) -> str:
@@ -45,7 +50,9 @@ def check_space(path: str, steps: int, files: int = 1) -> None:
     folder = os.path.dirname(os.path.abspath(path)) or "."
     soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
     if soft != resource.RLIM_INFINITY and soft < need:
-        raise OSError(errno.EFBIG, f"the file-size limit ({soft} bytes) is below the ~{need} bytes this recording needs", path)
+        raise OSError(
+            errno.EFBIG, f"the file-size limit ({soft} bytes) is below the ~{need} bytes this recording needs", path
+        )
     try:
         free = shutil.disk_usage(folder).free
     except OSError:
@@ -108,8 +115,14 @@ def _record_agent(args) -> int:
         agent = Agent(args.agent or None)
     if args.out:
         check_space(args.out, 1000)
-    ep = rollout(agent, seed=args.seed, env_kwargs=agent.env_kwargs, record_to=args.out, title=args.title or f"agent {agent.path.name} (seed {args.seed})",
-                 env_id=agent.env_id)
+    ep = rollout(
+        agent,
+        seed=args.seed,
+        env_kwargs=agent.env_kwargs,
+        record_to=args.out,
+        title=args.title or f"agent {agent.path.name} (seed {args.seed})",
+        env_id=agent.env_id,
+    )
     print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
     if args.verify:
@@ -134,7 +147,9 @@ def _make_env(env_id: str, max_steps: int | None):
     except gym.error.Error as exc:
         raise ValueError(f"env-id: cannot make {env_id!r} ({exc})") from None
     except TypeError as exc:
-        raise ValueError(f"env-id: {env_id!r} does not take track_rotation=True, which recording needs ({exc})") from None
+        raise ValueError(
+            f"env-id: {env_id!r} does not take track_rotation=True, which recording needs ({exc})"
+        ) from None
 
 
 def _record_env(args) -> int:
@@ -200,7 +215,9 @@ def _record_shots(args) -> int:
         raise ValueError("file: name a recording (RUN.rrd), or give --frames for the env's rgb_array frames")
     from flatbody_env.recording.viewer import screenshots
 
-    shots = screenshots(args.file, args.times, args.out, size=args.size, views=args.views, prefix=args.prefix, colors=args.colors)
+    shots = screenshots(
+        args.file, args.times, args.out, size=args.size, views=args.views, prefix=args.prefix, colors=args.colors
+    )
     for shot in shots:
         print(f"wrote {shot.path}" + (f"  ({shot.view_class} '{shot.view}')" if shot.view else ""))
     reports = sorted({r for shot in shots for r in shot.reports})
@@ -227,7 +244,9 @@ def _frame_shot(args) -> int:
     with atomic_path(path) as tmp:
         Image.fromarray(strip).save(tmp, format="PNG", optimize=True)
     _compact_png(path, args.colors)
-    print(f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v0, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)")
+    print(
+        f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v0, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)"
+    )
     return 0
 
 
@@ -236,8 +255,15 @@ def _step_list(text: str) -> list[int]:
         values = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"frames: expected comma-separated step counts, got {text!r}") from None
-    if not values or values[0] < 0 or any(b <= a for a, b in zip(values, values[1:])) or values[-1] > validation.MAX_EPISODE_STEPS:
-        raise argparse.ArgumentTypeError(f"frames: expected increasing step counts in [0, {validation.MAX_EPISODE_STEPS}], got {text!r}")
+    if (
+        not values
+        or values[0] < 0
+        or any(b <= a for a, b in zip(values, values[1:]))
+        or values[-1] > validation.MAX_EPISODE_STEPS
+    ):
+        raise argparse.ArgumentTypeError(
+            f"frames: expected increasing step counts in [0, {validation.MAX_EPISODE_STEPS}], got {text!r}"
+        )
     return values
 
 
@@ -265,8 +291,15 @@ def _bench(args) -> int:
     from flatbody_env.bench.harness import write_report
     from flatbody_env.bench.recording import describe, measure, report
 
-    result = measure(scene=args.scene, steps=args.steps, sizes=args.sizes, repeats=args.repeats, block=args.block, frames=args.frames,
-                     episode_repeats=args.episode_repeats)
+    result = measure(
+        scene=args.scene,
+        steps=args.steps,
+        sizes=args.sizes,
+        repeats=args.repeats,
+        block=args.block,
+        frames=args.frames,
+        episode_repeats=args.episode_repeats,
+    )
     print(describe(result))
     paths = write_report(report(result), args.out_dir, docs=args.docs)
     print("wrote " + ", ".join(map(str, paths[:3])))
@@ -290,60 +323,195 @@ def register(sub) -> None:
     add_scene_arguments(p)
     add_integration_arguments(p)
     p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="the recording file")
-    p.add_argument("--samples", type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES), default=1001, metavar="N", help="recorded steps, evenly spaced in [0, t_end] (default 1001)")
-    p.add_argument("--tensor-every", type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES), default=1, metavar="K", help="log the G and C tensor views every K steps (default 1)")
+    p.add_argument(
+        "--samples",
+        type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES),
+        default=1001,
+        metavar="N",
+        help="recorded steps, evenly spaced in [0, t_end] (default 1001)",
+    )
+    p.add_argument(
+        "--tensor-every",
+        type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES),
+        default=1,
+        metavar="K",
+        help="log the G and C tensor views every K steps (default 1)",
+    )
     p.add_argument("--title", default=None, help="recording name shown in the viewer")
     p.add_argument("--verify", action="store_true", help="check the file with 'rerun rrd verify' afterwards")
-    p.add_argument("--agent", nargs="?", const="", default=None, metavar="MODEL",
-                   help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="with --agent: the episode's seed (default 7)")
-    p.add_argument("--trust", action="store_true", help="with --agent: allow unpickling a model from outside the shipped agent and your own runs")
+    p.add_argument(
+        "--agent",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="MODEL",
+        help="record an episode of a trained agent instead of a scene (no MODEL: the shipped agent)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=7,
+        help="with --agent: the episode's seed (default 7)",
+    )
+    p.add_argument(
+        "--trust",
+        action="store_true",
+        help="with --agent: allow unpickling a model from outside the shipped agent and your own runs",
+    )
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
     p.add_argument("--env-id", default="FlatBody-v0", help="gymnasium id (default FlatBody-v0)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=1, metavar="N", help="episodes to run (default 1)")
-    p.add_argument("--policy", choices=("zero", "random"), default="zero", help="actions: zero control or uniform random (default zero)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of the first episode (then seed+1, ...)")
-    p.add_argument("--max-steps", type=int_at_least("max_steps", 1, validation.MAX_EPISODE_STEPS), default=None, metavar="N", help="truncate episodes after N steps (default: the env's limit)")
-    p.add_argument("--tensor-every", type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES), default=1, metavar="K", help="log the G and C tensor views every K steps")
-    p.add_argument("--out", required=True, type=_rrd_path, metavar="RUN.rrd", help="episode 0's file; episode k ≥ 1 goes to RUN-k.rrd ({episode} in the name formats it)")
+    p.add_argument(
+        "--episodes",
+        type=int_at_least("episodes", 1, validation.MAX_EPISODES),
+        default=1,
+        metavar="N",
+        help="episodes to run (default 1)",
+    )
+    p.add_argument(
+        "--policy",
+        choices=("zero", "random"),
+        default="zero",
+        help="actions: zero control or uniform random (default zero)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=0,
+        help="seed of the first episode (then seed+1, ...)",
+    )
+    p.add_argument(
+        "--max-steps",
+        type=int_at_least("max_steps", 1, validation.MAX_EPISODE_STEPS),
+        default=None,
+        metavar="N",
+        help="truncate episodes after N steps (default: the env's limit)",
+    )
+    p.add_argument(
+        "--tensor-every",
+        type=int_at_least("tensor_every", 1, validation.MAX_SAMPLES),
+        default=1,
+        metavar="K",
+        help="log the G and C tensor views every K steps",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        type=_rrd_path,
+        metavar="RUN.rrd",
+        help="episode 0's file; episode k ≥ 1 goes to RUN-k.rrd ({episode} in the name formats it)",
+    )
     p.add_argument("--verify", action="store_true", help="check each file with 'rerun rrd verify'")
     p.set_defaults(handler=_record_env)
 
-    p = sub.add_parser("record-info", help="read a recording back offline and summarize it (entities, rows, first values)")
+    p = sub.add_parser(
+        "record-info", help="read a recording back offline and summarize it (entities, rows, first values)"
+    )
     p.add_argument("file", metavar="RUN.rrd")
-    p.add_argument("--rows", type=int_at_least("rows", 1, validation.MAX_SAMPLES), default=3, help="values shown per series (default 3)")
+    p.add_argument(
+        "--rows",
+        type=int_at_least("rows", 1, validation.MAX_SAMPLES),
+        default=3,
+        help="values shown per series (default 3)",
+    )
     p.add_argument("--no-verify", action="store_true", help="skip 'rerun rrd verify'")
     p.set_defaults(handler=_record_info)
 
-    p = sub.add_parser("record-shots", help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times; "
-                                             "with --frames, the env's rgb_array frames side by side")
+    p = sub.add_parser(
+        "record-shots",
+        help="screenshots of a recording in the real rerun viewer (Xvfb + software Vulkan), at given times; "
+        "with --frames, the env's rgb_array frames side by side",
+    )
     p.add_argument("file", metavar="RUN.rrd", nargs="?", default=None, help="the recording (not with --frames)")
-    p.add_argument("--times", type=_float_list, default=[0.0, 5.0, 10.0], metavar="T1,T2,...", help="sim_time values in seconds (default 0,5,10)")
+    p.add_argument(
+        "--times",
+        type=_float_list,
+        default=[0.0, 5.0, 10.0],
+        metavar="T1,T2,...",
+        help="sim_time values in seconds (default 0,5,10)",
+    )
     p.add_argument("--out", default="shots", metavar="DIR", help="folder of the PNGs (default shots)")
     p.add_argument("--size", type=_size, default=(1600, 1000), metavar="WxH", help="window size (default 1600x1000)")
     p.add_argument("--views", action="store_true", help="also save each visible view on its own")
     p.add_argument("--prefix", default=None, help="file-name prefix (default: the recording's stem)")
-    p.add_argument("--colors", type=int_at_least("colors", 0, 256), default=0, metavar="N", help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)")
-    p.add_argument("--frames", type=_step_list, default=None, metavar="K1,K2,...",
-                   help="instead of a recording: FlatBody-v0's rgb_array frames after K1, K2, ... seeded random actions, side by side, "
-                        "in OUT/PREFIX.png (default prefix frame-rgb_array)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=7, help="with --frames: the episode's seed (default 7)")
+    p.add_argument(
+        "--colors",
+        type=int_at_least("colors", 0, 256),
+        default=0,
+        metavar="N",
+        help="reduce PNGs to N palette colours (small files for docs; default 0: full colour)",
+    )
+    p.add_argument(
+        "--frames",
+        type=_step_list,
+        default=None,
+        metavar="K1,K2,...",
+        help="instead of a recording: FlatBody-v0's rgb_array frames after K1, K2, ... seeded random actions, side by side, "
+        "in OUT/PREFIX.png (default prefix frame-rgb_array)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=7,
+        help="with --frames: the episode's seed (default 7)",
+    )
     p.set_defaults(handler=_record_shots)
 
 
-
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("recording", help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000) and to draw an rgb_array frame (budget 1 ms)")
-    p.add_argument("--steps", type=int_at_least("steps", 2, validation.MAX_EPISODE_STEPS), default=10000, help="the size judged against the 1 s budget (default 10000)")
-    p.add_argument("--sizes", type=_int_list, default=[1000, 3000, 30000], metavar="N1,N2,...", help="further sizes for the scaling chart")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=5, help="runs per size (median reported; default 5)")
-    p.add_argument("--block", type=int_at_least("block", 1, validation.MAX_SAMPLES), default=256, help="block size of the live-recorder measurement")
-    p.add_argument("--frames", type=int_at_least("frames", 2, validation.MAX_SAMPLES), default=2000, help="rgb_array frames timed (budget 1 ms each; default 2000)")
+    p = bench_sub.add_parser(
+        "recording",
+        help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000) and to draw an rgb_array frame (budget 1 ms)",
+    )
+    p.add_argument(
+        "--steps",
+        type=int_at_least("steps", 2, validation.MAX_EPISODE_STEPS),
+        default=10000,
+        help="the size judged against the 1 s budget (default 10000)",
+    )
+    p.add_argument(
+        "--sizes",
+        type=_int_list,
+        default=[1000, 3000, 30000],
+        metavar="N1,N2,...",
+        help="further sizes for the scaling chart",
+    )
+    p.add_argument(
+        "--repeats",
+        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
+        default=5,
+        help="runs per size (median reported; default 5)",
+    )
+    p.add_argument(
+        "--block",
+        type=int_at_least("block", 1, validation.MAX_SAMPLES),
+        default=256,
+        help="block size of the live-recorder measurement",
+    )
+    p.add_argument(
+        "--frames",
+        type=int_at_least("frames", 2, validation.MAX_SAMPLES),
+        default=2000,
+        help="rgb_array frames timed (budget 1 ms each; default 2000)",
+    )
     p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
-    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", metavar="DIR", help="where recording.json, .csv and .png go (default bench)")
-    p.add_argument("--episode-repeats", type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS), default=3,
-                   help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)")
-    p.add_argument("--docs", metavar="FILE.md", help="also regenerate the table between <!-- bench:recording --> markers in FILE.md")
+    p.add_argument(
+        "--out-dir",
+        type=output_dir("out_dir"),
+        default="bench",
+        metavar="DIR",
+        help="where recording.json, .csv and .png go (default bench)",
+    )
+    p.add_argument(
+        "--episode-repeats",
+        type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS),
+        default=3,
+        help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)",
+    )
+    p.add_argument(
+        "--docs",
+        metavar="FILE.md",
+        help="also regenerate the table between <!-- bench:recording --> markers in FILE.md",
+    )
     p.set_defaults(handler=_bench)

@@ -48,19 +48,30 @@ def _serve(args) -> int:
     try:
         app = create_app(args.data_dir, workers=args.workers)
     except sqlite3.Error as exc:
-        raise ValueError(f"data_dir: cannot use the job database in {args.data_dir!r} ({' '.join(str(exc).split())})") from None
+        raise ValueError(
+            f"data_dir: cannot use the job database in {args.data_dir!r} ({' '.join(str(exc).split())})"
+        ) from None
     where = f"http://{'[' + args.host + ']' if ':' in args.host else args.host}:{args.port}/"
     if args.host not in LOOPBACK:
-        print(f"flatbody serve: listening on {args.host}:{args.port}, reachable from other machines as you asked; "
-              "there is no authentication built in (put it behind a reverse proxy to share it)", file=sys.stderr)
-    print(f"flatbody serve: {where} (page), {where}docs (API); data in {args.data_dir}; {args.workers} worker process(es)",
-          file=sys.stderr)
+        print(
+            f"flatbody serve: listening on {args.host}:{args.port}, reachable from other machines as you asked; "
+            "there is no authentication built in (put it behind a reverse proxy to share it)",
+            file=sys.stderr,
+        )
+    print(
+        f"flatbody serve: {where} (page), {where}docs (API); data in {args.data_dir}; {args.workers} worker process(es)",
+        file=sys.stderr,
+    )
     try:
-        interrupted = _serve_until_stopped(lambda: uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level))
+        interrupted = _serve_until_stopped(
+            lambda: uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+        )
     except SystemExit as exc:  # uvicorn exits 1 or 3 when it cannot start (e.g. the port was taken meanwhile)
         if exc.code in (0, None):
             return 0
-        raise ValueError(f"port: the server could not start on {args.host}:{args.port} (uvicorn's exit status {exc.code}; see the log line above)") from None
+        raise ValueError(
+            f"port: the server could not start on {args.host}:{args.port} (uvicorn's exit status {exc.code}; see the log line above)"
+        ) from None
     if interrupted:
         raise KeyboardInterrupt  # stopped by Ctrl-C: 'flatbody: interrupted', exit code 130
     return 0
@@ -80,7 +91,9 @@ def _check_bind(host: str, port: int) -> None:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.bind(address)
     except OSError as exc:
-        raise ValueError(f"port: cannot listen on {host}:{port} ({exc.strerror or exc}); choose another --port or stop what holds it") from None
+        raise ValueError(
+            f"port: cannot listen on {host}:{port} ({exc.strerror or exc}); choose another --port or stop what holds it"
+        ) from None
 
 
 def _serve_until_stopped(run) -> bool:
@@ -92,7 +105,10 @@ def _serve_until_stopped(run) -> bool:
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    ):
         run()
         return False
     seen: list[int] = []
@@ -139,19 +155,55 @@ def register(sub) -> None:
     p = sub.add_parser("serve", help="the analysis service: HTTP API (/docs) and a web page on loopback")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1, loopback only)")
     p.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
-    p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=default_workers(),
-                   help="worker processes for requests, and jobs run at once (default: CPUs, at most 4)")
-    p.add_argument("--data-dir", default="flatbody-data", metavar="DIR", help="job database and files (default ./flatbody-data)")
-    p.add_argument("--log-level", default="info", choices=("critical", "error", "warning", "info", "debug"), help="uvicorn log level")
+    p.add_argument(
+        "--workers",
+        type=int_at_least("workers", 1, validation.MAX_WORKERS),
+        default=default_workers(),
+        help="worker processes for requests, and jobs run at once (default: CPUs, at most 4)",
+    )
+    p.add_argument(
+        "--data-dir", default="flatbody-data", metavar="DIR", help="job database and files (default ./flatbody-data)"
+    )
+    p.add_argument(
+        "--log-level",
+        default="info",
+        choices=("critical", "error", "warning", "info", "debug"),
+        help="uvicorn log level",
+    )
     p.set_defaults(handler=_serve)
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("service", help="latency and requests/s of the HTTP service at 1, 8, 32 clients while a long job runs")
-    p.add_argument("--clients", type=_clients, default=[1, 8, 32], metavar="N,N,...", help="concurrent clients (default 1,8,32)")
-    p.add_argument("--requests", type=int_at_least("requests", 1, 1_000_000), default=200, help="requests per endpoint and client count, at most (default 200)")
-    p.add_argument("--seconds", type=positive_float("seconds", validation.MAX_SECONDS), default=20.0, help="time per endpoint and client count, at most (default 20)")
-    p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=default_workers(), help="the service's worker processes")
-    p.add_argument("--out-dir", type=output_dir("out_dir"), default="bench", help="where to write service_benchmark.json/.csv/.png")
-    p.add_argument("--plot-only", action="store_true", help="redraw service_benchmark.png from the saved service_benchmark.json in --out-dir")
+    p = bench_sub.add_parser(
+        "service", help="latency and requests/s of the HTTP service at 1, 8, 32 clients while a long job runs"
+    )
+    p.add_argument(
+        "--clients", type=_clients, default=[1, 8, 32], metavar="N,N,...", help="concurrent clients (default 1,8,32)"
+    )
+    p.add_argument(
+        "--requests",
+        type=int_at_least("requests", 1, 1_000_000),
+        default=200,
+        help="requests per endpoint and client count, at most (default 200)",
+    )
+    p.add_argument(
+        "--seconds",
+        type=positive_float("seconds", validation.MAX_SECONDS),
+        default=20.0,
+        help="time per endpoint and client count, at most (default 20)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int_at_least("workers", 1, validation.MAX_WORKERS),
+        default=default_workers(),
+        help="the service's worker processes",
+    )
+    p.add_argument(
+        "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write service_benchmark.json/.csv/.png"
+    )
+    p.add_argument(
+        "--plot-only",
+        action="store_true",
+        help="redraw service_benchmark.png from the saved service_benchmark.json in --out-dir",
+    )
     p.set_defaults(handler=_bench)

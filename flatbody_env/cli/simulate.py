@@ -7,7 +7,14 @@ import math
 import sys
 
 from flatbody_env.answers import methods_answer, scenes_answer, simulate_trajectory
-from flatbody_env.cli.args import add_integration_arguments, add_scene_arguments, int_at_least, load_scene_arg, output_file, times_list
+from flatbody_env.cli.args import (
+    add_integration_arguments,
+    add_scene_arguments,
+    int_at_least,
+    load_scene_arg,
+    output_file,
+    times_list,
+)
 from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
 from flatbody_env.simulation import DEFAULT_SAMPLES
 
@@ -68,7 +75,9 @@ def format_summary(scene, traj, rows: int = 6) -> str:
         )
     lines.append("")
     gap = float(np.min(np.abs(st["lambda"] - st["mu"])))
-    lines.append(f"closest approach to lambda = mu: |lambda - mu| = {gap:.3g}; rho in [{st['rho'].min():.4g}, {st['rho'].max():.4g}]")
+    lines.append(
+        f"closest approach to lambda = mu: |lambda - mu| = {gap:.3g}; rho in [{st['rho'].min():.4g}, {st['rho'].max():.4g}]"
+    )
     drift = traj.drift()
     lines.append("invariant drift (max |q(t) - q(0)|): " + ", ".join(f"{k} {v:.2e}" for k, v in drift.items()))
     return "\n".join(lines)
@@ -119,13 +128,27 @@ def register(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a scene and print the trajectory as JSON")
     add_scene_arguments(p)
     add_integration_arguments(p)
-    p.add_argument("--times", type=times_list, metavar="t1,t2,...",
-                   help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
-                   "it is also in the JSON's 'initial_state'); default: an even grid")
-    p.add_argument("--samples", type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES), default=None, metavar="N",
-                   help=f"number of evenly spaced output times in [0, t_end] (default {DEFAULT_SAMPLES}, at most {MAX_SAMPLES})")
+    p.add_argument(
+        "--times",
+        type=times_list,
+        metavar="t1,t2,...",
+        help="output times in [0, t_end], increasing: exactly these rows are returned (add 0 for the initial state; "
+        "it is also in the JSON's 'initial_state'); default: an even grid",
+    )
+    p.add_argument(
+        "--samples",
+        type=int_at_least("samples", MIN_SAMPLES, MAX_SAMPLES),
+        default=None,
+        metavar="N",
+        help=f"number of evenly spaced output times in [0, t_end] (default {DEFAULT_SAMPLES}, at most {MAX_SAMPLES})",
+    )
     p.add_argument("--with-rotation", action="store_true", help="also integrate R and output 'rotation'")
-    p.add_argument("--out", type=output_file("--out"), metavar="FILE", help="write the JSON here instead of stdout (replaced atomically)")
+    p.add_argument(
+        "--out",
+        type=output_file("--out"),
+        metavar="FILE",
+        help="write the JSON here instead of stdout (replaced atomically)",
+    )
     p.add_argument("--summary", action="store_true", help="print a readable summary instead of JSON")
     p.set_defaults(handler=_simulate)
 

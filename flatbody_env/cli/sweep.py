@@ -26,16 +26,24 @@ def _run(args, spec) -> int:
     from flatbody_env.sweep.report import as_json, format_report
     from flatbody_env.sweep.runner import run_sweep
 
-    report = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
-                       progress=not args.no_progress)
+    report = run_sweep(
+        spec,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
+        progress=not args.no_progress,
+    )
     _write_table(spec, report, Path(args.out), getattr(args, "plot", None))
     if args.json:
         print(json.dumps(as_json(report)))
     else:
         print(format_report(report))
     if report.failed:
-        sys.stderr.write(f"flatbody: {len(report.failed)} of {report.total} tasks failed (recorded in {Path(args.out) / 'results.sqlite'};"
-                         " --resume retries them)\n")
+        sys.stderr.write(
+            f"flatbody: {len(report.failed)} of {report.total} tasks failed (recorded in {Path(args.out) / 'results.sqlite'};"
+            " --resume retries them)\n"
+        )
         return 1
     return 0
 
@@ -67,12 +75,20 @@ def _stability_map(args) -> int:
 
     body, _, _ = resolve_body(args, need_spins=False)
     if not validation.SWEEP_GRID_RANGE[0] <= args.grid <= MAX_GRID:
-        raise ValueError(f"--grid: must be an integer in [{validation.SWEEP_GRID_RANGE[0]}, {MAX_GRID}], got {args.grid}")
+        raise ValueError(
+            f"--grid: must be an integer in [{validation.SWEEP_GRID_RANGE[0]}, {MAX_GRID}], got {args.grid}"
+        )
     chunk = args.chunk or default_chunk(args.grid)
     if chunk > args.grid:
         raise ValueError(f"--chunk: must be an integer in [1, {args.grid}] (the grid), got {chunk}")
-    spec = {"kind": "stability-map", "body": body.to_dict(), "lam_range": list(args.lam_range),
-            "mu_range": list(args.mu_range), "grid": args.grid, "chunk": chunk}
+    spec = {
+        "kind": "stability-map",
+        "body": body.to_dict(),
+        "lam_range": list(args.lam_range),
+        "mu_range": list(args.mu_range),
+        "grid": args.grid,
+        "chunk": chunk,
+    }
     return _run(args, spec)
 
 
@@ -88,8 +104,14 @@ def _failure_study(args) -> int:
     for m in methods:
         get_method(m)  # ValueError naming the allowed methods
     max_run_s = args.max_run_s if args.max_run_s is not None else (1.0 if args.quick else 5.0)
-    spec = {"kind": "failure-study", "studies": studies, "methods": methods, "quick": bool(args.quick), "repeats": args.repeats,
-            "max_run_s": max_run_s}
+    spec = {
+        "kind": "failure-study",
+        "studies": studies,
+        "methods": methods,
+        "quick": bool(args.quick),
+        "repeats": args.repeats,
+        "max_run_s": max_run_s,
+    }
     return _run(args, spec)
 
 
@@ -113,13 +135,21 @@ def parse_body(text: str) -> tuple[str, dict]:
     for item in filter(None, (x.strip() for x in rest.split(","))):
         name, eq, number = item.partition("=")
         if not eq or name not in allowed:
-            raise ValueError(f"bodies: {text!r}: expected NAME=VALUE with NAME one of {', '.join(allowed)}, got {item!r}")
+            raise ValueError(
+                f"bodies: {text!r}: expected NAME=VALUE with NAME one of {', '.join(allowed)}, got {item!r}"
+            )
         try:
             val[name] = float(number)
         except ValueError:
             raise ValueError(f"bodies: {text!r}: {name} must be a number, got {number!r}") from None
-    body = Body.from_dict({"params": {"J": val["J"], "J3": val["J3"]}, "potential": {"name": pot, **{c: val[c] for c in _BODY_FIELDS[pot]}},
-                           "thickness": {"a": val["a"], "b": val["b"]}}, where="bodies")
+    body = Body.from_dict(
+        {
+            "params": {"J": val["J"], "J3": val["J3"]},
+            "potential": {"name": pot, **{c: val[c] for c in _BODY_FIELDS[pot]}},
+            "thickness": {"a": val["a"], "b": val["b"]},
+        },
+        where="bodies",
+    )
     return text, body.to_dict()
 
 
@@ -140,9 +170,17 @@ def _family(args) -> int:
     if not lo <= args.seeds <= hi:
         raise ValueError(f"--seeds: must be an integer in [{lo}, {hi}], got {args.seeds}")
     box = _box(args)
-    spec = {"kind": "family", "bodies": [list(b) for b in bodies], "vary": list(args.vary), "ranges": ranges,
-            "s3": DEFAULT_S3 if args.s3 is None else args.s3, "p_theta": DEFAULT_P_THETA if args.p_theta is None else args.p_theta,
-            "seeds": args.seeds, "step": args.step, "box": {"lam": list(box.lam), "mu": list(box.mu), "n": box.n}}
+    spec = {
+        "kind": "family",
+        "bodies": [list(b) for b in bodies],
+        "vary": list(args.vary),
+        "ranges": ranges,
+        "s3": DEFAULT_S3 if args.s3 is None else args.s3,
+        "p_theta": DEFAULT_P_THETA if args.p_theta is None else args.p_theta,
+        "seeds": args.seeds,
+        "step": args.step,
+        "box": {"lam": list(box.lam), "mu": list(box.mu), "n": box.n},
+    }
     for name in ("s3", "p_theta"):
         if not math.isfinite(spec[name]):
             raise ValueError(f"--{name.replace('_', '-')}: must be a finite number, got {spec[name]!r}")
@@ -154,10 +192,17 @@ def _seeds(args) -> int:
     from flatbody_env.sweep.tasks import parse_seeds
 
     load_hyperparams(args.algo, path=args.hyperparams_file)  # ValueError naming the file
-    spec = {"kind": "seeds", "algo": args.algo, "seeds": parse_seeds(args.seeds), "n_timesteps": args.n_timesteps,
-            "n_envs": args.n_envs, "overrides": list(args.hyperparams or []),
-            "hyperparams_file": None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()),
-            "episodes": args.episodes, "eval_seed": args.eval_seed}
+    spec = {
+        "kind": "seeds",
+        "algo": args.algo,
+        "seeds": parse_seeds(args.seeds),
+        "n_timesteps": args.n_timesteps,
+        "n_envs": args.n_envs,
+        "overrides": list(args.hyperparams or []),
+        "hyperparams_file": None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()),
+        "episodes": args.episodes,
+        "eval_seed": args.eval_seed,
+    }
     from agents.numpy_policy import remember_run
 
     remember_run(args.out)  # the seeds' run folders are this user's own: their models load without --trust
@@ -184,11 +229,21 @@ def _serial_only(args) -> int:
 def _tune(args) -> int:
     from agents.tune import DEFAULT_STORAGE, TuneConfig, load_search_space, prepare, shares, summary, tune_worker
 
-    cfg = TuneConfig(algo=args.algo, study=args.study or f"{args.algo}-FlatBody-v0", storage=args.storage or DEFAULT_STORAGE,
-                     trials=args.trials, n_timesteps=args.n_timesteps, evaluations=args.evaluations,
-                     eval_episodes=args.eval_episodes, n_envs=args.n_envs, seed=args.seed,
-                     overrides=tuple(args.hyperparams or ()), search_file=args.search_file, out=args.out,
-                     hyperparams_file=None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()))
+    cfg = TuneConfig(
+        algo=args.algo,
+        study=args.study or f"{args.algo}-FlatBody-v0",
+        storage=args.storage or DEFAULT_STORAGE,
+        trials=args.trials,
+        n_timesteps=args.n_timesteps,
+        evaluations=args.evaluations,
+        eval_episodes=args.eval_episodes,
+        n_envs=args.n_envs,
+        seed=args.seed,
+        overrides=tuple(args.hyperparams or ()),
+        search_file=args.search_file,
+        out=args.out,
+        hyperparams_file=None if args.hyperparams_file is None else str(Path(args.hyperparams_file).resolve()),
+    )
     load_search_space(cfg.algo, path=cfg.search_file)  # bad files fail here, in one line
     left = prepare(cfg)
     if args.workers <= 1 and args.scheduler is None:
@@ -202,7 +257,9 @@ def _tune(args) -> int:
             n = args.workers if args.scheduler is None else max(1, len(client.scheduler_info()["workers"]))
             futures = [client.submit(tune_worker, cfg, i, k, pure=False) for i, k in enumerate(shares(left, n))]
             try:
-                for fut in as_completed(futures):  # not client.gather: a Ctrl-C there leaves Dask's tasks to print tracebacks
+                for fut in as_completed(
+                    futures
+                ):  # not client.gather: a Ctrl-C there leaves Dask's tasks to print tracebacks
                     fut.result()
             finally:
                 for fut in futures:
@@ -214,12 +271,17 @@ def _tune(args) -> int:
     states: dict[str, int] = {}
     for t in rep["trials"]:
         states[t["state"]] = states.get(t["state"], 0) + 1
-    print(f"study {rep['study']} ({rep['algo']}) in {cfg.storage}: {len(rep['trials'])} trials ("
-          + ", ".join(f"{v} {k.lower()}" for k, v in sorted(states.items())) + ")")
+    print(
+        f"study {rep['study']} ({rep['algo']}) in {cfg.storage}: {len(rep['trials'])} trials ("
+        + ", ".join(f"{v} {k.lower()}" for k, v in sorted(states.items()))
+        + ")"
+    )
     best = rep["best"]
     if best is not None:
-        print(f"best: trial {best['number']}, final distance {best['value']:.4f}"
-              + (f", success rate {best['success_rate']:.0%}" if best["success_rate"] is not None else ""))
+        print(
+            f"best: trial {best['number']}, final distance {best['value']:.4f}"
+            + (f", success rate {best['success_rate']:.0%}" if best["success_rate"] is not None else "")
+        )
         for k, v in best["params"].items():
             print(f"  {k} = {v}")
         print(f"retrain: flatbody train --study {rep['study']} --trial-id {best['number']} --storage {cfg.storage}")
@@ -234,8 +296,14 @@ def _bench_sweep(args) -> int:
     if args.plot_only:
         print(f"wrote {redraw(out, NAME, plot, where='out')}")
         return 0
-    rep = measure(grid=args.grid, workers=tuple(args.workers), sim_workers=args.sim_workers, chunk=args.chunk,
-                  noop_tasks=args.noop_tasks, extrapolate=(8, 32, 128))
+    rep = measure(
+        grid=args.grid,
+        workers=tuple(args.workers),
+        sim_workers=args.sim_workers,
+        chunk=args.chunk,
+        noop_tasks=args.noop_tasks,
+        extrapolate=(8, 32, 128),
+    )
     print(describe(rep))
     print("wrote " + ", ".join(map(str, write_report(report(rep), out))))
     return 0
@@ -245,11 +313,20 @@ def _bench_sweep(args) -> int:
 def _engine_arguments(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (results.sqlite, tables, models)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int_at_least("workers", 0, validation.MAX_WORKERS), default=1, metavar="N",
-                   help="embedded Dask cluster: N local worker processes (1: in this process; 0: no Dask); default 1")
+    g.add_argument(
+        "--workers",
+        type=int_at_least("workers", 0, validation.MAX_WORKERS),
+        default=1,
+        metavar="N",
+        help="embedded Dask cluster: N local worker processes (1: in this process; 0: no Dask); default 1",
+    )
     g.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://HOST:8786")
-    p.add_argument("--resume", action="store_true", help="continue the sweep in DIR: run only the tasks without a result")
-    p.add_argument("--json", action="store_true", help="print all rows sorted by key (the serial command's --json form)")
+    p.add_argument(
+        "--resume", action="store_true", help="continue the sweep in DIR: run only the tasks without a result"
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print all rows sorted by key (the serial command's --json form)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -262,36 +339,82 @@ def register(sub) -> None:
     kinds = sweep.add_subparsers(dest="sweep_kind", metavar="KIND", parser_class=sub._parser_class)
     sweep.set_defaults(handler=lambda args: (sweep.print_help(), 2)[1])
 
-    p = kinds.add_parser("stability-map", help="the shape stability map (flatbody stability-map), the grid split into chunks")
+    p = kinds.add_parser(
+        "stability-map", help="the shape stability map (flatbody stability-map), the grid split into chunks"
+    )
     add_body_arguments(p)
     add_map_arguments(p, grid_range=validation.SWEEP_GRID_RANGE, grid_name="grid")
-    p.add_argument("--chunk", type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]), default=None, metavar="ROWS",
-                   help="lambda rows per task (default: about 512 grid points per task, at least one row)")
+    p.add_argument(
+        "--chunk",
+        type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]),
+        default=None,
+        metavar="ROWS",
+        help="lambda rows per task (default: about 512 grid points per task, at least one row)",
+    )
     p.add_argument("--plot", metavar="FILE.png", help="draw the map (PNG)")
     _engine_arguments(p)
     p.set_defaults(handler=_stability_map)
 
-    p = kinds.add_parser("failure-study", help="the integrator failure study (flatbody failure-study), one task per study axis and method")
+    p = kinds.add_parser(
+        "failure-study",
+        help="the integrator failure study (flatbody failure-study), one task per study axis and method",
+    )
     p.add_argument("--studies", nargs="+", metavar="STUDY", help="gap rho horizon (default all)")
     p.add_argument("--methods", nargs="+", metavar="NAME", help="methods (default: the study's set)")
     p.add_argument("--quick", action="store_true", help="fewer cases per axis")
-    p.add_argument("--repeats", type=int_at_least("repeats", 1, validation.MAX_REPEATS), default=1, help="timing repeats (default 1)")
-    p.add_argument("--max-run-s", type=positive_float("max_run_s", validation.MAX_SECONDS), default=None, metavar="S",
-                   help="stop a method's axis once one run takes longer (default 5; 1 with --quick)")
+    p.add_argument(
+        "--repeats",
+        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
+        default=1,
+        help="timing repeats (default 1)",
+    )
+    p.add_argument(
+        "--max-run-s",
+        type=positive_float("max_run_s", validation.MAX_SECONDS),
+        default=None,
+        metavar="S",
+        help="stop a method's axis once one run takes longer (default 5; 1 with --quick)",
+    )
     _engine_arguments(p)
     p.set_defaults(handler=_failure_study)
 
     p = kinds.add_parser("family", help="families of stationary ellipses for several bodies, parameters and ranges")
     add_body_arguments(p)
     add_box_arguments(p)
-    p.add_argument("--bodies", nargs="+", metavar="BODY", help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags")
-    p.add_argument("--vary", nargs="+", default=["s3"], metavar="PARAM", help="parameters to vary (s3, p_theta or a constant); default s3")
+    p.add_argument(
+        "--bodies",
+        nargs="+",
+        metavar="BODY",
+        help="V1|V2|V3[:NAME=VALUE,...] (unset constants 1) or a scene; default: the body flags",
+    )
+    p.add_argument(
+        "--vary",
+        nargs="+",
+        default=["s3"],
+        metavar="PARAM",
+        help="parameters to vary (s3, p_theta or a constant); default s3",
+    )
     start, stop = DEFAULT_FAMILY_RANGE
-    p.add_argument("--ranges", nargs="+", type=float_range("--ranges", low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX),
-                   default=[DEFAULT_FAMILY_RANGE], metavar="LO,HI", help=f"parameter ranges (default {start:g},{stop:g})")
-    p.add_argument("--seeds", type=int_at_least("seeds", *validation.FAMILY_SEEDS_RANGE), default=DEFAULT_SEEDS,
-                   help=f"parameter values at which all solutions are sought (default {DEFAULT_SEEDS})")
-    p.add_argument("--step", type=positive_float("step", validation.STRETCH_RANGE[1]), default=None, help="largest continuation step (default range/60)")
+    p.add_argument(
+        "--ranges",
+        nargs="+",
+        type=float_range("--ranges", low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX),
+        default=[DEFAULT_FAMILY_RANGE],
+        metavar="LO,HI",
+        help=f"parameter ranges (default {start:g},{stop:g})",
+    )
+    p.add_argument(
+        "--seeds",
+        type=int_at_least("seeds", *validation.FAMILY_SEEDS_RANGE),
+        default=DEFAULT_SEEDS,
+        help=f"parameter values at which all solutions are sought (default {DEFAULT_SEEDS})",
+    )
+    p.add_argument(
+        "--step",
+        type=positive_float("step", validation.STRETCH_RANGE[1]),
+        default=None,
+        help="largest continuation step (default range/60)",
+    )
     _engine_arguments(p)
     p.set_defaults(handler=_family)
 
@@ -300,13 +423,38 @@ def register(sub) -> None:
     p = kinds.add_parser("seeds", help="train and evaluate one configuration over many seeds (one task per seed)")
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
     p.add_argument("--seeds", default="0-7", metavar="RANGE", help="seeds, e.g. 0-7 or 0,3,5 (default 0-7)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=None, metavar="N", help="steps per seed (default: the YAML's)")
-    p.add_argument("--n-envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies (default: the YAML's)")
-    p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)")
+    p.add_argument(
+        "--n-timesteps",
+        type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS),
+        default=None,
+        metavar="N",
+        help="steps per seed (default: the YAML's)",
+    )
+    p.add_argument(
+        "--n-envs",
+        type=int_at_least("n_envs", 1, validation.MAX_BATCH),
+        default=None,
+        metavar="N",
+        help="parallel bodies (default: the YAML's)",
+    )
+    p.add_argument(
+        "--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)"
+    )
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
-    p.add_argument("--episodes", type=int_at_least("episodes", 1, validation.MAX_EPISODES), default=100, metavar="N", help="evaluation episodes per seed (default 100)")
-    p.add_argument("--eval-seed", type=int_at_least("eval_seed", 0, validation.MAX_SEED), default=EVAL_SEED, metavar="S",
-                   help=f"evaluation episode i is reset with seed S + i (default {EVAL_SEED}, held apart from training)")
+    p.add_argument(
+        "--episodes",
+        type=int_at_least("episodes", 1, validation.MAX_EPISODES),
+        default=100,
+        metavar="N",
+        help="evaluation episodes per seed (default 100)",
+    )
+    p.add_argument(
+        "--eval-seed",
+        type=int_at_least("eval_seed", 0, validation.MAX_SEED),
+        default=EVAL_SEED,
+        metavar="S",
+        help=f"evaluation episode i is reset with seed S + i (default {EVAL_SEED}, held apart from training)",
+    )
     _engine_arguments(p)
     p.set_defaults(handler=_seeds)
 
@@ -315,35 +463,127 @@ def register(sub) -> None:
         # whatever flags follow (--workers N, the chart's own), the answer is the one line of _serial_only
         kinds._name_parser_map[name] = _SerialOnly(prog=p.prog)
 
-    p = sub.add_parser("tune", help="Optuna hyperparameter search (TPE sampler, median pruner) over the YAML hyperparameters")
+    p = sub.add_parser(
+        "tune", help="Optuna hyperparameter search (TPE sampler, median pruner) over the YAML hyperparameters"
+    )
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")
-    p.add_argument("--trials", type=int_at_least("trials", 1, validation.MAX_REPEATS), default=20, metavar="N", help="trials in the study, over all workers (default 20)")
-    p.add_argument("--n-timesteps", type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS), default=20_000, metavar="N", help="training steps per trial (default 20000)")
-    p.add_argument("--evaluations", type=int_at_least("evaluations", 1, validation.MAX_REPEATS), default=4, metavar="N", help="intermediate evaluations per trial (pruning points; default 4)")
-    p.add_argument("--eval-episodes", type=int_at_least("eval_episodes", 1, validation.MAX_EPISODES), default=20, metavar="N", help="episodes per evaluation (default 20)")
-    p.add_argument("--n-envs", type=int_at_least("n_envs", 1, validation.MAX_BATCH), default=None, metavar="N", help="parallel bodies while training (default: the YAML's)")
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="training seed of every trial (default 0)")
+    p.add_argument(
+        "--trials",
+        type=int_at_least("trials", 1, validation.MAX_REPEATS),
+        default=20,
+        metavar="N",
+        help="trials in the study, over all workers (default 20)",
+    )
+    p.add_argument(
+        "--n-timesteps",
+        type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS),
+        default=20_000,
+        metavar="N",
+        help="training steps per trial (default 20000)",
+    )
+    p.add_argument(
+        "--evaluations",
+        type=int_at_least("evaluations", 1, validation.MAX_REPEATS),
+        default=4,
+        metavar="N",
+        help="intermediate evaluations per trial (pruning points; default 4)",
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=int_at_least("eval_episodes", 1, validation.MAX_EPISODES),
+        default=20,
+        metavar="N",
+        help="episodes per evaluation (default 20)",
+    )
+    p.add_argument(
+        "--n-envs",
+        type=int_at_least("n_envs", 1, validation.MAX_BATCH),
+        default=None,
+        metavar="N",
+        help="parallel bodies while training (default: the YAML's)",
+    )
+    p.add_argument(
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=0,
+        help="training seed of every trial (default 0)",
+    )
     p.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="fixed overrides of YAML entries")
     p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
     p.add_argument("--search-file", metavar="FILE", help="search space (default: agents/hyperparams/ALGO_search.yml)")
-    p.add_argument("--storage", metavar="URL", help="journal file or database URL, e.g. postgresql://USER@HOST/DB (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)")
-    p.add_argument("--study", metavar="NAME", help="study name (default ALGO-FlatBody-v0); workers of one study share it")
+    p.add_argument(
+        "--storage",
+        metavar="URL",
+        help="journal file or database URL, e.g. postgresql://USER@HOST/DB (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)",
+    )
+    p.add_argument(
+        "--study", metavar="NAME", help="study name (default ALGO-FlatBody-v0); workers of one study share it"
+    )
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=1, metavar="N", help="local worker processes sharing the study (default 1)")
-    g.add_argument("--scheduler", metavar="ADDRESS", help="one search worker per worker of a running Dask scheduler (the storage: a database URL, or a journal file all of them see)")
+    g.add_argument(
+        "--workers",
+        type=int_at_least("workers", 1, validation.MAX_WORKERS),
+        default=1,
+        metavar="N",
+        help="local worker processes sharing the study (default 1)",
+    )
+    g.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="one search worker per worker of a running Dask scheduler (the storage: a database URL, or a journal file all of them see)",
+    )
     p.add_argument("--out", default="runs/tune", metavar="DIR", help="folder of the trials' runs (default runs/tune)")
     p.add_argument("--json", action="store_true", help="print the study's trials as JSON")
     p.set_defaults(handler=_tune)
 
 
 def register_bench(bsub) -> None:
-    b = bsub.add_parser("sweep", help="sweep scaling: speed-up over workers, scheduler overhead per task, extrapolation to 8/32/128 workers")
-    b.add_argument("--grid", type=int_at_least("grid", 4, validation.SWEEP_GRID_RANGE[1]), default=48, metavar="N", help="stability-map grid per axis (default 48)")
-    b.add_argument("--chunk", type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]), default=2, metavar="ROWS", help="lambda rows per task (default 2)")
-    b.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), nargs="+", default=[1, 2], metavar="N", help="local worker counts (default 1 2)")
-    b.add_argument("--sim-workers", type=int_at_least("sim_workers", 1, validation.MAX_WORKERS), default=4, metavar="N",
-                   help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)")
-    b.add_argument("--noop-tasks", type=int_at_least("noop_tasks", 10, 1_000_000), default=400, metavar="N", help="empty tasks timing the scheduler overhead (default 400)")
-    b.add_argument("--out", type=output_dir("out"), default="runs/sweep-bench", metavar="DIR", help="output folder (default runs/sweep-bench)")
+    b = bsub.add_parser(
+        "sweep",
+        help="sweep scaling: speed-up over workers, scheduler overhead per task, extrapolation to 8/32/128 workers",
+    )
+    b.add_argument(
+        "--grid",
+        type=int_at_least("grid", 4, validation.SWEEP_GRID_RANGE[1]),
+        default=48,
+        metavar="N",
+        help="stability-map grid per axis (default 48)",
+    )
+    b.add_argument(
+        "--chunk",
+        type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]),
+        default=2,
+        metavar="ROWS",
+        help="lambda rows per task (default 2)",
+    )
+    b.add_argument(
+        "--workers",
+        type=int_at_least("workers", 1, validation.MAX_WORKERS),
+        nargs="+",
+        default=[1, 2],
+        metavar="N",
+        help="local worker counts (default 1 2)",
+    )
+    b.add_argument(
+        "--sim-workers",
+        type=int_at_least("sim_workers", 1, validation.MAX_WORKERS),
+        default=4,
+        metavar="N",
+        help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)",
+    )
+    b.add_argument(
+        "--noop-tasks",
+        type=int_at_least("noop_tasks", 10, 1_000_000),
+        default=400,
+        metavar="N",
+        help="empty tasks timing the scheduler overhead (default 400)",
+    )
+    b.add_argument(
+        "--out",
+        type=output_dir("out"),
+        default="runs/sweep-bench",
+        metavar="DIR",
+        help="output folder (default runs/sweep-bench)",
+    )
     b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
     b.set_defaults(handler=_bench_sweep)

@@ -71,11 +71,16 @@ class ReachAnyBody(ReachStationaryEllipse):
     def __post_init__(self) -> None:
         super().__post_init__()
         for name in ("inertia_range", "kappa_range", "thickness_range"):
-            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=0.01, high=100.0, strict=False))
+            object.__setattr__(
+                self, name, validation.interval(name, getattr(self, name), low=0.01, high=100.0, strict=False)
+            )
 
     def ranges(self) -> np.ndarray:
         """(5, 2) ranges of (J, J3, κ, a, b)."""
-        return np.array([self.inertia_range, self.inertia_range, self.kappa_range, self.thickness_range, self.thickness_range], dtype=float)
+        return np.array(
+            [self.inertia_range, self.inertia_range, self.kappa_range, self.thickness_range, self.thickness_range],
+            dtype=float,
+        )
 
     def constants_from(self, u) -> np.ndarray:
         """(J, J3, κ, a, b) from :data:`BODY_DRAWS` uniforms: lo·(hi/lo)^u each (vectorised over u (..., 5))."""
@@ -87,12 +92,21 @@ class ReachAnyBody(ReachStationaryEllipse):
         """A body (module docstring) from :data:`BODY_DRAWS` uniforms of ``rng``."""
         return body_from_constants(self.constants_from(rng.random(BODY_DRAWS)))
 
-    def draw(self, rng: np.random.Generator, body: Body | None = None, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-             simulator: Any = None) -> Episode:
+    def draw(
+        self,
+        rng: np.random.Generator,
+        body: Body | None = None,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> Episode:
         """A body, then the target and the start of ``FlatBody-v0`` for it (``body`` is ignored: the task draws its own)."""
         own = self.sample_body(rng)
         target = self.sample_target(rng, own, limits=limits, control=control)
-        return Episode(state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target, body=own)
+        return Episode(
+            state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target, body=own
+        )
 
     def observation_extra(self, body: Body) -> np.ndarray:
         return body_constants(body)

@@ -26,5 +26,15 @@ controls_batch = retarget(_ek.controls_batch)
 ball_state_kernel = retarget(_sampling.ball_state_kernel)
 sample_episodes = retarget(_sampling.sample_episodes)  # the reset's draws (:mod:`flatbody_env.env.sampling`)
 
-__all__ = ["ball_state_kernel", "controls_batch", "domain_code", "domain_codes", "observe_kernel", "omega12_kernel", "post_step", "post_step_lanes",
-           "sample_episodes", "score_kernel"]
+__all__ = [
+    "ball_state_kernel",
+    "controls_batch",
+    "domain_code",
+    "domain_codes",
+    "observe_kernel",
+    "omega12_kernel",
+    "post_step",
+    "post_step_lanes",
+    "sample_episodes",
+    "score_kernel",
+]

@@ -110,8 +110,29 @@ def uniform_at(k0, k1, body, episode, stream, j):
 
 
 # --------------------------------------------------------------------------------------------- reset
-def draw_episode(k0, k1, body, episode, scfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin,
-                 y, tg, pot, table_code, cand, uu):
+def draw_episode(
+    k0,
+    k1,
+    body,
+    episode,
+    scfg,
+    P,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    y,
+    tg,
+    pot,
+    table_code,
+    cand,
+    uu,
+):
     """One episode of ``body`` from its uniforms (:func:`uniform_at`, stream :data:`STREAM_EPISODE`): the loop of
     :func:`~flatbody_env.env.sampling.sample_episode_kernel` with the exact test's answer "reject" for the shapes
     the table is unsure about. ``y`` (11,) the start, ``tg`` (6,) (λ*, μ*, ϱ*, s3*, p_θ*, sign); ``uu`` (12,)
@@ -120,9 +141,25 @@ def draw_episode(k0, k1, body, episode, scfg, P, grid, rate, margin, invalid, ed
     m = BALL_DRAWS if ball else (0 if scfg[13] == START_NONE else (10 if scfg[7] != 0.0 else 9))
     for a in range(MAX_ATTEMPTS):
         j = 3 * a
-        code = candidate_kernel(uniform_at(k0, k1, body, episode, STREAM_EPISODE, j), uniform_at(k0, k1, body, episode, STREAM_EPISODE, j + 1),
-                                uniform_at(k0, k1, body, episode, STREAM_EPISODE, j + 2), scfg, P, pot, table_code, grid, rate, margin,
-                                invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, cand)
+        code = candidate_kernel(
+            uniform_at(k0, k1, body, episode, STREAM_EPISODE, j),
+            uniform_at(k0, k1, body, episode, STREAM_EPISODE, j + 1),
+            uniform_at(k0, k1, body, episode, STREAM_EPISODE, j + 2),
+            scfg,
+            P,
+            pot,
+            table_code,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            cand,
+        )
         if code == REJECT or code == UNSURE:
             continue
         used = j + 3
@@ -139,16 +176,74 @@ def draw_episode(k0, k1, body, episode, scfg, P, grid, rate, margin, invalid, ed
     return NO_TARGET
 
 
-def reset_body(b, k0, k1, write_info, Y, T, OBS, INFO, I, ENDS, P, kcfg, scfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
-               fine_rate, fine_margin, y, tg, pot, table_code, cand, uu, yout, a2, terms, sc, vel, force):
+def reset_body(
+    b,
+    k0,
+    k1,
+    write_info,
+    Y,
+    T,
+    OBS,
+    INFO,
+    I,
+    ENDS,
+    P,
+    kcfg,
+    scfg,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    y,
+    tg,
+    pot,
+    table_code,
+    cand,
+    uu,
+    yout,
+    a2,
+    terms,
+    sc,
+    vel,
+    force,
+):
     """Reset body ``b``: its next episode's draws (:func:`draw_episode`; its episode count ``I[1, b]`` advances),
     its clock to 0, its observation into ``OBS[b]`` (:func:`~flatbody_env.env.kernels.post_step` of the start,
     as the CPU env's reset); with ``write_info`` also its distance, energy and |s|² into ``INFO[7:10, b]``.
     Returns 0, :data:`ERR_NO_TARGET` (the body is left as it was) or :data:`ERR_START`."""
     episode = I[1, b]
     I[1, b] = episode + 1
-    if draw_episode(k0, k1, b, episode, scfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin,
-                    y, tg, pot, table_code, cand, uu) == NO_TARGET:
+    if (
+        draw_episode(
+            k0,
+            k1,
+            b,
+            episode,
+            scfg,
+            P,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            y,
+            tg,
+            pot,
+            table_code,
+            cand,
+            uu,
+        )
+        == NO_TARGET
+    ):
         return ERR_NO_TARGET
     for i in range(11):
         Y[i, b] = y[i]
@@ -173,9 +268,62 @@ def stagger_body(b, k0, k1, max_steps, I):
 
 
 # --------------------------------------------------------------------------------------------- step
-def step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg, limits, mask, dt, h, rtol, atol, energy_tol, max_steps,
-              same_step, k0, k1, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin,
-              y, u, u2, out, K, ynew, ytmp, vel, force, f, counters, yout, a2, terms, sc, tg, pot, table_code, cand, uu):
+def step_body(
+    b,
+    kind,
+    coeffs,
+    A,
+    Y,
+    T,
+    OBS,
+    FINAL,
+    INFO,
+    I,
+    ENDS,
+    P,
+    kcfg,
+    scfg,
+    limits,
+    mask,
+    dt,
+    h,
+    rtol,
+    atol,
+    energy_tol,
+    max_steps,
+    same_step,
+    k0,
+    k1,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    y,
+    u,
+    u2,
+    out,
+    K,
+    ynew,
+    ytmp,
+    vel,
+    force,
+    f,
+    counters,
+    yout,
+    a2,
+    terms,
+    sc,
+    tg,
+    pot,
+    table_code,
+    cand,
+    uu,
+):
     """Body ``b``'s environment step (module docstring for the arrays), as :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv`'s
     step does it for that body: a body whose reset is pending (NEXT_STEP) is reset (reward 0, not ended); else its
     action ``A[b]`` is clipped and scaled, the integrator advances it, :func:`~flatbody_env.env.kernels.post_step` keeps or
@@ -193,10 +341,44 @@ def step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg
         I[3, b] = 0
         ENDS[0, b] = 0
         ENDS[1, b] = 0
-        return reset_body(b, k0, k1, True, Y, T, OBS, INFO, I, ENDS, P, kcfg, scfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
-                          fine_rate, fine_margin, y, tg, pot, table_code, cand, uu, yout, a2, terms, sc, vel, force)
+        return reset_body(
+            b,
+            k0,
+            k1,
+            True,
+            Y,
+            T,
+            OBS,
+            INFO,
+            I,
+            ENDS,
+            P,
+            kcfg,
+            scfg,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            y,
+            tg,
+            pot,
+            table_code,
+            cand,
+            uu,
+            yout,
+            a2,
+            terms,
+            sc,
+            vel,
+            force,
+        )
     n_act = A.shape[1]
-    if not controls_batch(A[b:b + 1], mask, limits, a2, u2):
+    if not controls_batch(A[b : b + 1], mask, limits, a2, u2):
         return ERR_ACTION
     for i in range(4):
         u[i] = u2[i, 0]
@@ -205,7 +387,9 @@ def step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg
     counters[0] = 0
     counters[1] = 0
     counters[2] = 0
-    status = env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+    status = env_step_into(
+        kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters
+    )
     ended = post_step(y, out, status, a2[0], n_act, T[:, b], kcfg, P, yout, OBS[b], terms, sc, vel, force)
     for i in range(11):
         Y[i, b] = yout[i]
@@ -231,42 +415,245 @@ def step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg
         return 0
     for i in range(OBS.shape[1]):
         FINAL[b, i] = OBS[b, i]
-    return reset_body(b, k0, k1, False, Y, T, OBS, INFO, I, ENDS, P, kcfg, scfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
-                      fine_rate, fine_margin, y, tg, pot, table_code, cand, uu, yout, a2, terms, sc, vel, force)
+    return reset_body(
+        b,
+        k0,
+        k1,
+        False,
+        Y,
+        T,
+        OBS,
+        INFO,
+        I,
+        ENDS,
+        P,
+        kcfg,
+        scfg,
+        grid,
+        rate,
+        margin,
+        invalid,
+        edge_lo,
+        edge_hi,
+        refined,
+        fine_rate,
+        fine_margin,
+        y,
+        tg,
+        pot,
+        table_code,
+        cand,
+        uu,
+        yout,
+        a2,
+        terms,
+        sc,
+        vel,
+        force,
+    )
 
 
 # --------------------------------------------------------------------------------------------- CPU loops
-def step_lanes(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcfg, scfg, limits, mask, dt, h, rtol, atol, energy_tol,
-               max_steps, same_step, k0, k1, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin):
+def step_lanes(
+    kind,
+    coeffs,
+    A,
+    Y,
+    T,
+    OBS,
+    FINAL,
+    INFO,
+    I,
+    ENDS,
+    FLAGS,
+    P,
+    kcfg,
+    scfg,
+    limits,
+    mask,
+    dt,
+    h,
+    rtol,
+    atol,
+    energy_tol,
+    max_steps,
+    same_step,
+    k0,
+    k1,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+):
     """:func:`step_body` for every body, one after another (the CPU side of the CUDA kernel of
     :func:`flatbody_env.integrators.cuda.env_step` with ``task=``)."""
-    y, u, out, ynew, ytmp, f, yout = np.empty(11), np.empty(4), np.empty(11), np.empty(11), np.empty(11), np.empty(11), np.empty(11)
+    y, u, out, ynew, ytmp, f, yout = (
+        np.empty(11),
+        np.empty(4),
+        np.empty(11),
+        np.empty(11),
+        np.empty(11),
+        np.empty(11),
+        np.empty(11),
+    )
     u2, a2, K = np.empty((4, 1)), np.zeros((1, 4)), np.empty((13, 11))
     vel, force, counters = np.empty(7), np.empty(4), np.zeros(4, np.int64)
-    counters[3] = ENV_STEP_MAX_NFEV  # each body's budget of RHS evaluations per step, as FlatBodyVectorEnv's (DOP853 checks it)
-    terms, sc, tg, pot, table_code, cand, uu = np.empty(6), np.empty(4), np.empty(6), np.empty((7, 4)), np.zeros(1, np.int64), \
-        np.empty(10), np.empty(12)
+    counters[3] = (
+        ENV_STEP_MAX_NFEV  # each body's budget of RHS evaluations per step, as FlatBodyVectorEnv's (DOP853 checks it)
+    )
+    terms, sc, tg, pot, table_code, cand, uu = (
+        np.empty(6),
+        np.empty(4),
+        np.empty(6),
+        np.empty((7, 4)),
+        np.zeros(1, np.int64),
+        np.empty(10),
+        np.empty(12),
+    )
     for b in range(Y.shape[1]):
-        err = step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg, limits, mask, dt, h, rtol, atol, energy_tol,
-                        max_steps, same_step, k0, k1, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin,
-                        y, u, u2, out, K, ynew, ytmp, vel, force, f, counters, yout, a2, terms, sc, tg, pot, table_code, cand, uu)
+        err = step_body(
+            b,
+            kind,
+            coeffs,
+            A,
+            Y,
+            T,
+            OBS,
+            FINAL,
+            INFO,
+            I,
+            ENDS,
+            P,
+            kcfg,
+            scfg,
+            limits,
+            mask,
+            dt,
+            h,
+            rtol,
+            atol,
+            energy_tol,
+            max_steps,
+            same_step,
+            k0,
+            k1,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            y,
+            u,
+            u2,
+            out,
+            K,
+            ynew,
+            ytmp,
+            vel,
+            force,
+            f,
+            counters,
+            yout,
+            a2,
+            terms,
+            sc,
+            tg,
+            pot,
+            table_code,
+            cand,
+            uu,
+        )
         if err != 0:
             FLAGS[0] = err
             FLAGS[1] = b
 
 
-def reset_lanes(MASK, stagger, Y, T, OBS, INFO, I, ENDS, FLAGS, P, kcfg, scfg, max_steps, k0, k1, grid, rate, margin, invalid, edge_lo,
-                edge_hi, refined, fine_rate, fine_margin):
+def reset_lanes(
+    MASK,
+    stagger,
+    Y,
+    T,
+    OBS,
+    INFO,
+    I,
+    ENDS,
+    FLAGS,
+    P,
+    kcfg,
+    scfg,
+    max_steps,
+    k0,
+    k1,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+):
     """:func:`reset_body` for the bodies with ``MASK[b]`` set (then :func:`stagger_body` with ``stagger``), one after another."""
     y, yout = np.empty(11), np.empty(11)
     a2 = np.zeros((1, 4))
     vel, force = np.empty(7), np.empty(4)
-    terms, sc, tg, pot, table_code, cand, uu = np.empty(6), np.empty(4), np.empty(6), np.empty((7, 4)), np.zeros(1, np.int64), \
-        np.empty(10), np.empty(12)
+    terms, sc, tg, pot, table_code, cand, uu = (
+        np.empty(6),
+        np.empty(4),
+        np.empty(6),
+        np.empty((7, 4)),
+        np.zeros(1, np.int64),
+        np.empty(10),
+        np.empty(12),
+    )
     for b in range(Y.shape[1]):
         if MASK[b] != 0:
-            err = reset_body(b, k0, k1, True, Y, T, OBS, INFO, I, ENDS, P, kcfg, scfg, grid, rate, margin, invalid, edge_lo, edge_hi,
-                             refined, fine_rate, fine_margin, y, tg, pot, table_code, cand, uu, yout, a2, terms, sc, vel, force)
+            err = reset_body(
+                b,
+                k0,
+                k1,
+                True,
+                Y,
+                T,
+                OBS,
+                INFO,
+                I,
+                ENDS,
+                P,
+                kcfg,
+                scfg,
+                grid,
+                rate,
+                margin,
+                invalid,
+                edge_lo,
+                edge_hi,
+                refined,
+                fine_rate,
+                fine_margin,
+                y,
+                tg,
+                pot,
+                table_code,
+                cand,
+                uu,
+                yout,
+                a2,
+                terms,
+                sc,
+                vel,
+                force,
+            )
             ENDS[0, b] = 0
             ENDS[1, b] = 0
             if stagger != 0:
@@ -281,8 +668,42 @@ cuda = None
 """numba.cuda in the kernels' globals (bound by :func:`flatbody_env.integrators.cuda.kernel` when it compiles them)."""
 
 
-def _step_kernel(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcfg, scfg, limits, mask, dt, h, rtol, atol, energy_tol,
-                 max_steps, same_step, k0, k1, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin):
+def _step_kernel(
+    kind,
+    coeffs,
+    A,
+    Y,
+    T,
+    OBS,
+    FINAL,
+    INFO,
+    I,
+    ENDS,
+    FLAGS,
+    P,
+    kcfg,
+    scfg,
+    limits,
+    mask,
+    dt,
+    h,
+    rtol,
+    atol,
+    energy_tol,
+    max_steps,
+    same_step,
+    k0,
+    k1,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+):
     """One thread per body: :func:`step_body` with local work arrays (the CUDA side of :func:`step_lanes`)."""
     b = cuda.grid(1)
     if b < Y.shape[1]:
@@ -297,7 +718,9 @@ def _step_kernel(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcf
         force = cuda.local.array(4, float64)
         f = cuda.local.array(11, float64)
         counters = cuda.local.array(4, int64)
-        counters[3] = ENV_STEP_MAX_NFEV  # the launch's work: at most this many RHS evaluations per body (a kernel has no clock)
+        counters[3] = (
+            ENV_STEP_MAX_NFEV  # the launch's work: at most this many RHS evaluations per body (a kernel has no clock)
+        )
         yout = cuda.local.array(11, float64)
         a2 = cuda.local.array((1, 4), float64)
         for i in range(4):
@@ -309,16 +732,93 @@ def _step_kernel(kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, FLAGS, P, kcf
         table_code = cuda.local.array(1, int64)
         cand = cuda.local.array(10, float64)
         uu = cuda.local.array(12, float64)
-        err = step_body(b, kind, coeffs, A, Y, T, OBS, FINAL, INFO, I, ENDS, P, kcfg, scfg, limits, mask, dt, h, rtol, atol, energy_tol,
-                        max_steps, same_step, k0, k1, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin,
-                        y, u, u2, out, K, ynew, ytmp, vel, force, f, counters, yout, a2, terms, sc, tg, pot, table_code, cand, uu)
+        err = step_body(
+            b,
+            kind,
+            coeffs,
+            A,
+            Y,
+            T,
+            OBS,
+            FINAL,
+            INFO,
+            I,
+            ENDS,
+            P,
+            kcfg,
+            scfg,
+            limits,
+            mask,
+            dt,
+            h,
+            rtol,
+            atol,
+            energy_tol,
+            max_steps,
+            same_step,
+            k0,
+            k1,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            y,
+            u,
+            u2,
+            out,
+            K,
+            ynew,
+            ytmp,
+            vel,
+            force,
+            f,
+            counters,
+            yout,
+            a2,
+            terms,
+            sc,
+            tg,
+            pot,
+            table_code,
+            cand,
+            uu,
+        )
         if err != 0:
             FLAGS[0] = err
             FLAGS[1] = b
 
 
-def _reset_kernel(MASK, stagger, Y, T, OBS, INFO, I, ENDS, FLAGS, P, kcfg, scfg, max_steps, k0, k1, grid, rate, margin, invalid, edge_lo,
-                  edge_hi, refined, fine_rate, fine_margin):
+def _reset_kernel(
+    MASK,
+    stagger,
+    Y,
+    T,
+    OBS,
+    INFO,
+    I,
+    ENDS,
+    FLAGS,
+    P,
+    kcfg,
+    scfg,
+    max_steps,
+    k0,
+    k1,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+):
     """One thread per body: :func:`reset_body` where ``MASK[b]`` is set (the CUDA side of :func:`reset_lanes`)."""
     b = cuda.grid(1)
     if b < Y.shape[1] and MASK[b] != 0:
@@ -336,8 +836,42 @@ def _reset_kernel(MASK, stagger, Y, T, OBS, INFO, I, ENDS, FLAGS, P, kcfg, scfg,
         table_code = cuda.local.array(1, int64)
         cand = cuda.local.array(10, float64)
         uu = cuda.local.array(12, float64)
-        err = reset_body(b, k0, k1, True, Y, T, OBS, INFO, I, ENDS, P, kcfg, scfg, grid, rate, margin, invalid, edge_lo, edge_hi,
-                         refined, fine_rate, fine_margin, y, tg, pot, table_code, cand, uu, yout, a2, terms, sc, vel, force)
+        err = reset_body(
+            b,
+            k0,
+            k1,
+            True,
+            Y,
+            T,
+            OBS,
+            INFO,
+            I,
+            ENDS,
+            P,
+            kcfg,
+            scfg,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            y,
+            tg,
+            pot,
+            table_code,
+            cand,
+            uu,
+            yout,
+            a2,
+            terms,
+            sc,
+            vel,
+            force,
+        )
         ENDS[0, b] = 0
         ENDS[1, b] = 0
         if stagger != 0:
@@ -388,8 +922,17 @@ class DeviceBatch:
     ``p`` is the :class:`~flatbody_env.env.env.FlatBodyEnv` whose configuration all bodies share.
     """
 
-    def __init__(self, p, num_envs: int, max_episode_steps: int, *, same_step: bool = True, backend: str = "cpu", alloc=None,
-                 threads_per_block: int | None = None) -> None:
+    def __init__(
+        self,
+        p,
+        num_envs: int,
+        max_episode_steps: int,
+        *,
+        same_step: bool = True,
+        backend: str = "cpu",
+        alloc=None,
+        threads_per_block: int | None = None,
+    ) -> None:
         from flatbody_env.integrators.batch_solve import KIND
 
         why = unsupported(p)
@@ -397,7 +940,13 @@ class DeviceBatch:
             raise ValueError(why)
         if backend not in ("cpu", "cuda"):
             raise ValueError(f"backend: must be 'cpu' or 'cuda', got {backend!r}")
-        self.p, self.num_envs, self.max_episode_steps, self.same_step, self.backend = p, int(num_envs), int(max_episode_steps), bool(same_step), backend
+        self.p, self.num_envs, self.max_episode_steps, self.same_step, self.backend = (
+            p,
+            int(num_envs),
+            int(max_episode_steps),
+            bool(same_step),
+            backend,
+        )
         st = p.stepper
         self.method = st.method
         self.kind, coeffs = KIND[st.method]
@@ -410,8 +959,10 @@ class DeviceBatch:
             dev = _cuda.require()
             self._put = dev.to_device
             if alloc is None:
+
                 def alloc(shape, dtype):
                     return dev.to_device(np.zeros(shape, dtype))
+
             self.threads_per_block = threads_per_block or _cuda.THREADS_PER_BLOCK
         else:
             self._put = np.ascontiguousarray
@@ -450,8 +1001,24 @@ class DeviceBatch:
             else:
                 blocks, threads = self._cuda._blocks(self.num_envs, self.threads_per_block)
                 self.cuda_kernels()[2][blocks, threads](MASK, self.I)
-        args = (MASK, 1 if stagger else 0, self.Y, self.T, self.OBS, self.INFO, self.I, self.ENDS, self.FLAGS, self.P, self.kcfg, self.scfg,
-                self.max_episode_steps, self.key[0], self.key[1], *self.table)
+        args = (
+            MASK,
+            1 if stagger else 0,
+            self.Y,
+            self.T,
+            self.OBS,
+            self.INFO,
+            self.I,
+            self.ENDS,
+            self.FLAGS,
+            self.P,
+            self.kcfg,
+            self.scfg,
+            self.max_episode_steps,
+            self.key[0],
+            self.key[1],
+            *self.table,
+        )
         if self.backend == "cpu":
             _cpu()[1](*args)
         else:
@@ -470,12 +1037,48 @@ class DeviceBatch:
             raise ValueError(f"actions: expected shape ({self.num_envs}, {self.n_act}), got {tuple(A.shape)}")
         dt, h, rtol, atol, etol = self.scalars
         if self.backend == "cpu":
-            _cpu()[0](self.kind, self.coeffs, A, self.Y, self.T, self.OBS, self.FINAL, self.INFO, self.I, self.ENDS, self.FLAGS, self.P, self.kcfg,
-                      self.scfg, self.limits, self.mask, dt, h, rtol, atol, etol, self.max_episode_steps, 1 if self.same_step else 0,
-                      self.key[0], self.key[1], *self.table)
+            _cpu()[0](
+                self.kind,
+                self.coeffs,
+                A,
+                self.Y,
+                self.T,
+                self.OBS,
+                self.FINAL,
+                self.INFO,
+                self.I,
+                self.ENDS,
+                self.FLAGS,
+                self.P,
+                self.kcfg,
+                self.scfg,
+                self.limits,
+                self.mask,
+                dt,
+                h,
+                rtol,
+                atol,
+                etol,
+                self.max_episode_steps,
+                1 if self.same_step else 0,
+                self.key[0],
+                self.key[1],
+                *self.table,
+            )
         else:
-            self._cuda.env_step(self.method, self.Y, A, self.P, dt, h=h, rtol=rtol, atol=atol, energy_tol=etol, task=self,
-                                threads_per_block=self.threads_per_block)
+            self._cuda.env_step(
+                self.method,
+                self.Y,
+                A,
+                self.P,
+                dt,
+                h=h,
+                rtol=rtol,
+                atol=atol,
+                energy_tol=etol,
+                task=self,
+                threads_per_block=self.threads_per_block,
+            )
         if check:
             self.check()
 
@@ -490,8 +1093,10 @@ class DeviceBatch:
         else:
             self.FLAGS.copy_to_device(np.zeros(2, np.int64))
         if code == ERR_ACTION:
-            raise ValueError(f"actions: must be finite numbers in [-1, 1] (body {body} was not stepped; the bodies with finite "
-                             "actions were)")
+            raise ValueError(
+                f"actions: must be finite numbers in [-1, 1] (body {body} was not stepped; the bodies with finite "
+                "actions were)"
+            )
         if code == ERR_NO_TARGET:
             raise ValueError(self.p.task.no_target_message)
         raise ValueError(f"initial_noise: body {body}'s start lies outside the domain; lower initial_noise")

@@ -23,7 +23,15 @@ from gymnasium import spaces
 from flatbody_env.env import kernels as python_kernels
 from flatbody_env.env.registration import TASK_CLASSES
 from flatbody_env.env.task import (
-    CONTROLS, OBSERVATION_NAMES, OBSERVATION_SIZE, REWARD_TERMS, TARGET_NAMES, Episode, ReachStationaryEllipse, control_mask, domain_code,
+    CONTROLS,
+    OBSERVATION_NAMES,
+    OBSERVATION_SIZE,
+    REWARD_TERMS,
+    TARGET_NAMES,
+    Episode,
+    ReachStationaryEllipse,
+    control_mask,
+    domain_code,
     target_row,
 )
 from flatbody_env.integrators import Tolerances, get_method
@@ -51,7 +59,6 @@ ROTATION_INTEGRATOR = "DOP853"
 step this body at all (e.g. a compiled method with a custom potential); ``info["integrator"]["method"]``
 then names it. The compiled two-polar methods carry R themselves
 (:mod:`flatbody_env.integrators.rotation_kernels`), so rendering and recording run the method asked for."""
-
 
 
 class FlatBodyEnv(gym.Env):
@@ -197,12 +204,18 @@ class FlatBodyEnv(gym.Env):
         if self.task.varies_body and body is not None:
             raise ValueError("body: this task draws its own body at every reset (leave body unset)")
         self.body = _as_body(body)
-        self.custom_potential = self.body.potential if getattr(self.body.potential, "kind", None) == KIND_CUSTOM else None
+        self.custom_potential = (
+            self.body.potential if getattr(self.body.potential, "kind", None) == KIND_CUSTOM else None
+        )
         """The body's custom (Python) potential, whose part of H the bookkeeping kernels leave out
         (:meth:`energy_left_out`); None for a built-in potential."""
         if not self.body.inertia.is_isotropic:
             raise ValueError("body: the task's stationary ellipses need J1 = J2 (isotropic in the plane)")
-        for name, value in (("torque_limit", torque_limit), ("force_limit", force_limit), ("momentum_bound", momentum_bound)):
+        for name, value in (
+            ("torque_limit", torque_limit),
+            ("force_limit", force_limit),
+            ("momentum_bound", momentum_bound),
+        ):
             validation.number(name, value, low=validation.PARAM_RANGE[0], high=validation.MOMENTUM_MAX)
         for name, pair in (("stretch_bounds", stretch_bounds), ("rho_bounds", rho_bounds)):
             validation.interval(name, pair, low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1])
@@ -217,32 +230,57 @@ class FlatBodyEnv(gym.Env):
         self.track_rotation = bool(track_rotation or render_mode is not None)
         if not info.adaptive and step is None:
             step = self.dt  # one fixed step per env step unless step= asks for sub-steps
-        if step is not None:  # bounded work: a floor (never replaced) and at most ENV_MAX_SUBSTEPS sub-steps per env step
+        if (
+            step is not None
+        ):  # bounded work: a floor (never replaced) and at most ENV_MAX_SUBSTEPS sub-steps per env step
             step = validation.fixed_step("step", step, high=self.dt)
             if math.ceil(self.dt / step) > validation.ENV_MAX_SUBSTEPS:
-                raise ValueError(f"step: at most {validation.ENV_MAX_SUBSTEPS} sub-steps per env step (step >= dt / "
-                                 f"{validation.ENV_MAX_SUBSTEPS} = {self.dt / validation.ENV_MAX_SUBSTEPS:g}), got step = {step!r}")
+                raise ValueError(
+                    f"step: at most {validation.ENV_MAX_SUBSTEPS} sub-steps per env step (step >= dt / "
+                    f"{validation.ENV_MAX_SUBSTEPS} = {self.dt / validation.ENV_MAX_SUBSTEPS:g}), got step = {step!r}"
+                )
         # the per-step budget (docs/reliability.md): every env step stops within these
-        self.tolerances = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=validation.ENV_STEP_MAX_NFEV,
-                                     max_wall_time=validation.ENV_STEP_MAX_SECONDS)
+        self.tolerances = Tolerances(
+            rtol=rtol,
+            atol=atol,
+            step=step,
+            max_nfev=validation.ENV_STEP_MAX_NFEV,
+            max_wall_time=validation.ENV_STEP_MAX_SECONDS,
+        )
         # adaptive methods: the first step guessed as one whole env step (accepted in one step at
         # the default tolerance; rejected and halved where needed)
         first_step = 0.0 if not info.adaptive else self.dt
         try:
-            self.stepper = make_env_step(integrator, self.body, self.tolerances, with_rotation=self.track_rotation, first_step=first_step)
+            self.stepper = make_env_step(
+                integrator, self.body, self.tolerances, with_rotation=self.track_rotation, first_step=first_step
+            )
         except ValueError:
             if not self.track_rotation:
                 raise
             # methods that do not carry R: drawing/recording integrates with the reference (info names it)
-            self.stepper = make_env_step(ROTATION_INTEGRATOR, self.body, Tolerances(rtol=rtol, atol=atol, max_nfev=validation.ENV_STEP_MAX_NFEV,
-                                                                                    max_wall_time=validation.ENV_STEP_MAX_SECONDS), with_rotation=True)
+            self.stepper = make_env_step(
+                ROTATION_INTEGRATOR,
+                self.body,
+                Tolerances(
+                    rtol=rtol,
+                    atol=atol,
+                    max_nfev=validation.ENV_STEP_MAX_NFEV,
+                    max_wall_time=validation.ENV_STEP_MAX_SECONDS,
+                ),
+                with_rotation=True,
+            )
         self.limits = np.array([torque_limit, torque_limit, torque_limit, force_limit])
         self.stretch_bounds = (float(stretch_bounds[0]), float(stretch_bounds[1]))
         self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
         self.momentum_bound = float(momentum_bound)
         self.gap_min = float(gap_min)
-        self._cfg = self.task.kernel_config(stretch_bounds=self.stretch_bounds, rho_bounds=self.rho_bounds, momentum_bound=self.momentum_bound,
-                                            gap_min=self.gap_min, check_gap=info.chart == "two-polar")
+        self._cfg = self.task.kernel_config(
+            stretch_bounds=self.stretch_bounds,
+            rho_bounds=self.rho_bounds,
+            momentum_bound=self.momentum_bound,
+            gap_min=self.gap_min,
+            check_gap=info.chart == "two-polar",
+        )
         self._P = np.array(self.body.kernel_params(), dtype=np.float64)
         self._mask_u8 = self.mask.astype(np.uint8)
 
@@ -278,7 +316,9 @@ class FlatBodyEnv(gym.Env):
         self._y = np.zeros(STATE_SIZE)
         self._R: np.ndarray | None = np.eye(3) if self.track_rotation else None
         self._target: StationaryEllipse | None = None
-        self._target_shape: tuple[float, float, float] | None = None  # (λ*, μ*, sign) of a target drawn by the sampler, built on demand
+        self._target_shape: tuple[float, float, float] | None = (
+            None  # (λ*, μ*, sign) of a target drawn by the sampler, built on demand
+        )
         self._sampler = None
         self._tvec = np.zeros(4)
         self.time = 0.0
@@ -313,7 +353,9 @@ class FlatBodyEnv(gym.Env):
             from flatbody_env.env import sampling
             from flatbody_env.env.sampling import EpisodeSampler
 
-            self._sampler = EpisodeSampler(self.task, self.body, self.limits, self.control, self.kernels if self.stepper.compiled else sampling)
+            self._sampler = EpisodeSampler(
+                self.task, self.body, self.limits, self.control, self.kernels if self.stepper.compiled else sampling
+            )
         return self._sampler
 
     @property
@@ -325,7 +367,16 @@ class FlatBodyEnv(gym.Env):
         t = self._target
         if t is None:
             return {}
-        return {"lambda": t.lam, "mu": t.mu, "rho": t.rho, "s3": t.s3, "p_theta": t.p_theta, "omega3": t.omega3, "theta_dot": t.theta_dot, "energy": t.energy}
+        return {
+            "lambda": t.lam,
+            "mu": t.mu,
+            "rho": t.rho,
+            "s3": t.s3,
+            "p_theta": t.p_theta,
+            "omega3": t.omega3,
+            "theta_dot": t.theta_dot,
+            "energy": t.energy,
+        }
 
     @property
     def target_vector(self) -> np.ndarray:
@@ -359,7 +410,9 @@ class FlatBodyEnv(gym.Env):
         return self._cfg
 
     # --- gymnasium API ---------------------------------------------------------------------------------
-    def sample_episode(self, rng: np.random.Generator, options: Mapping[str, Any] | None = None) -> tuple[np.ndarray, StationaryEllipse]:
+    def sample_episode(
+        self, rng: np.random.Generator, options: Mapping[str, Any] | None = None
+    ) -> tuple[np.ndarray, StationaryEllipse]:
         """The initial state y (11,) and the target that :meth:`reset` draws from ``rng`` with ``options``
         (the env itself is not changed; ``rng`` advances exactly as in ``reset``). :meth:`draw_episodes`
         gives the task's whole draw (body and witness included)."""
@@ -367,8 +420,9 @@ class FlatBodyEnv(gym.Env):
         target = ep.ellipse
         if target is None:
             body = ep.body or self.body
-            target = stationary_from_shape(body, float(ep.target[0]), float(ep.target[1]), branch=self.task.target_branch,
-                                           sign=float(ep.target[5]))
+            target = stationary_from_shape(
+                body, float(ep.target[0]), float(ep.target[1]), branch=self.task.target_branch, sign=float(ep.target[5])
+            )
         return ep.state, target
 
     def draw_episodes(self, rngs, options: Mapping[str, Any] | None = None) -> list[Episode]:
@@ -377,7 +431,9 @@ class FlatBodyEnv(gym.Env):
         in a reset of its own), or the target and state the options give. The env itself is not changed."""
         options = _checked_options(options)
         if not options:
-            episodes = self.task.draw_batch(list(rngs), self.body, limits=self.limits, control=self.control, simulator=self)
+            episodes = self.task.draw_batch(
+                list(rngs), self.body, limits=self.limits, control=self.control, simulator=self
+            )
         else:
             episodes = [self._draw_with_options(rng, options) for rng in rngs]
         for ep in episodes:
@@ -459,16 +515,43 @@ class FlatBodyEnv(gym.Env):
         """The observation (:attr:`observation_size`,) float32 and the reset ``info`` of state ``y`` with target
         (λ*, μ*, ϱ*, s3*) (the env's current body)."""
         obs = np.empty(self.observation_size, dtype=np.float32)
-        self.kernels.post_step(y, y, 0, self._a, 0, target_vector, self._cfg, self._P, self._yout, obs, self._terms, self._sc, self._vel, self._force)
+        self.kernels.post_step(
+            y,
+            y,
+            0,
+            self._a,
+            0,
+            target_vector,
+            self._cfg,
+            self._P,
+            self._yout,
+            obs,
+            self._terms,
+            self._sc,
+            self._vel,
+            self._force,
+        )
         obs[OBSERVATION_SIZE:] = self._obs_extra
         if self.custom_potential is not None:
             self._sc[1] += self.energy_left_out(self._yout)
-        return obs, build_info(t=0.0, scalars=self._sc, p_theta=y[3], ended=False, failure=None, left=None, method=self.stepper.method,
-                               nfev=0, terms=None, success_tolerance=self.task.success_tolerance)
+        return obs, build_info(
+            t=0.0,
+            scalars=self._sc,
+            p_theta=y[3],
+            ended=False,
+            failure=None,
+            left=None,
+            method=self.stepper.method,
+            nfev=0,
+            terms=None,
+            success_tolerance=self.task.success_tolerance,
+        )
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        if not options and self.task.compiled_resets and self.sampler.applies:  # the task's draws, through the sampler's kernels
+        if (
+            not options and self.task.compiled_resets and self.sampler.applies
+        ):  # the task's draws, through the sampler's kernels
             Y = np.empty((STATE_SIZE, 1))
             tg = self.sampler.sample([self.np_random], Y, [0])[0]
             y = Y[:, 0].copy()
@@ -513,8 +596,11 @@ class FlatBodyEnv(gym.Env):
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError, OverflowError):
             a = None
-        if a is None or a.size != self._a.size or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row,
-                                                                                   self._u_col):
+        if (
+            a is None
+            or a.size != self._a.size
+            or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row, self._u_col)
+        ):
             raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r:.80}")
 
     def step(self, action):
@@ -527,8 +613,22 @@ class FlatBodyEnv(gym.Env):
         st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)
         obs = np.empty(self.observation_size, dtype=np.float32)
         terms = self._terms
-        ended = k.post_step(y, self._ynew, st, self._a, self._a.size, self._tvec, self._cfg, self._P, self._yout, obs, terms, self._sc,
-                            self._vel, self._force)
+        ended = k.post_step(
+            y,
+            self._ynew,
+            st,
+            self._a,
+            self._a.size,
+            self._tvec,
+            self._cfg,
+            self._P,
+            self._yout,
+            obs,
+            terms,
+            self._sc,
+            self._vel,
+            self._force,
+        )
         obs[OBSERVATION_SIZE:] = self._obs_extra
         if self.custom_potential is not None:
             self._sc[1] += self.energy_left_out(self._yout)
@@ -555,9 +655,18 @@ class FlatBodyEnv(gym.Env):
                 self._R = self._Rnew.copy()
             self.time += self.dt
         tl = terms.tolist()
-        info = build_info(t=self.time, scalars=self._sc, p_theta=y[3], ended=bool(ended), failure=failure, left=left,
-                          method=self.stepper.method, nfev=int(self._counters[0]), terms=dict(zip(self.reward_names, tl)),
-                          success_tolerance=self.task.success_tolerance)
+        info = build_info(
+            t=self.time,
+            scalars=self._sc,
+            p_theta=y[3],
+            ended=bool(ended),
+            failure=failure,
+            left=left,
+            method=self.stepper.method,
+            nfev=int(self._counters[0]),
+            terms=dict(zip(self.reward_names, tl)),
+            success_tolerance=self.task.success_tolerance,
+        )
         return obs, sum(tl), bool(ended), False, info
 
     def render(self):
@@ -591,7 +700,9 @@ class FlatBodyEnv(gym.Env):
         return f"|lambda - mu|/(lambda + mu) < gap_min = {self.gap_min:g} (two-polar chart singular at lambda = mu)"
 
 
-def build_info(*, t, scalars, p_theta, ended, failure, left, method: str, nfev, terms, success_tolerance: float) -> dict[str, Any]:
+def build_info(
+    *, t, scalars, p_theta, ended, failure, left, method: str, nfev, terms, success_tolerance: float
+) -> dict[str, Any]:
     """The ``info`` of ``reset`` and ``step`` (the one builder; class docstring, "Info").
 
     One body: floats, ``failure``/``left`` a str or None, ``terms`` a dict of floats or None (reset).
@@ -636,7 +747,9 @@ def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any])
     ``task_kwargs``, or a task instance)."""
     if isinstance(task, ReachStationaryEllipse):
         if task_kwargs:
-            raise ValueError(f"{sorted(task_kwargs)[0]}: give the task's fields to its constructor, not beside a task instance")
+            raise ValueError(
+                f"{sorted(task_kwargs)[0]}: give the task's fields to its constructor, not beside a task instance"
+            )
         return task
     if not isinstance(task, str) or task not in TASK_CLASSES:
         raise ValueError(f"task: must be one of {', '.join(TASK_CLASSES)} or a task instance, got {task!r}")
@@ -660,8 +773,15 @@ def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
     raise ValueError(f"body: expected a Body or a dict with params/potential/thickness, got {type(body).__name__}")
 
 
-__all__ = ["FlatBodyEnv", "DEFAULT_INTEGRATOR", "OBSERVATION_NAMES", "CONTROLS", "REWARD_TERMS", "TARGET_NAMES", "build_info"]
-
+__all__ = [
+    "FlatBodyEnv",
+    "DEFAULT_INTEGRATOR",
+    "OBSERVATION_NAMES",
+    "CONTROLS",
+    "REWARD_TERMS",
+    "TARGET_NAMES",
+    "build_info",
+]
 
 
 def _checked_options(options: Any) -> dict[str, Any]:
@@ -677,7 +797,10 @@ def _checked_options(options: Any) -> dict[str, Any]:
     if target is not None and not isinstance(target, StationaryEllipse):
         target = v.mapping("options.target", target)
         v.keys("options.target", target, ("lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"), ("lambda", "mu"))
-        checked = {k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1]) for k in ("lambda", "mu")}
+        checked = {
+            k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1])
+            for k in ("lambda", "mu")
+        }
         if "branch" in target:
             checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
         if "sign" in target:
@@ -688,4 +811,3 @@ def _checked_options(options: Any) -> dict[str, Any]:
     if "state" in options:
         options["state"] = v.mapping("options.state", options["state"])
     return options
-

@@ -82,47 +82,90 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
         for name in ("min_growth_rate", "max_growth_rate", "w_alive"):
             validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
         if self.max_growth_rate < self.min_growth_rate:
-            raise ValueError(f"max_growth_rate: must be >= min_growth_rate ({self.min_growth_rate}), got {self.max_growth_rate!r}")
+            raise ValueError(
+                f"max_growth_rate: must be >= min_growth_rate ({self.min_growth_rate}), got {self.max_growth_rate!r}"
+            )
         lo, hi = validation.interval("start_radius", self.start_radius, low=0.0, high=1.0, strict=False)
         object.__setattr__(self, "start_radius", (lo, hi))
         if hi >= 1.0:
-            raise ValueError(f"start_radius: must be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance), got {(lo, hi)!r}")
+            raise ValueError(
+                f"start_radius: must be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance), got {(lo, hi)!r}"
+            )
         if self.success_tolerance <= 0:
-            raise ValueError(f"success_tolerance: must be > 0 for a task that ends outside it, got {self.success_tolerance!r}")
+            raise ValueError(
+                f"success_tolerance: must be > 0 for a task that ends outside it, got {self.success_tolerance!r}"
+            )
 
     @property
     def no_target_message(self) -> str:
-        return ("target_lambda/target_aspect: no hyperbolic stationary ellipse of the rotation branch with growth rate in "
-                "[min_growth_rate, max_growth_rate] found for this body in the target ranges")
+        return (
+            "target_lambda/target_aspect: no hyperbolic stationary ellipse of the rotation branch with growth rate in "
+            "[min_growth_rate, max_growth_rate] found for this body in the target ranges"
+        )
 
     def accepts(self, target: StationaryEllipse) -> bool:
         """Hyperbolic: q > 0 with √q in range, the shape Hessian positive definite (module docstring)."""
-        if target.q is None or target.shape_hessian_min is None or not (target.q > 0.0 and target.shape_hessian_min > 0.0):
+        if (
+            target.q is None
+            or target.shape_hessian_min is None
+            or not (target.q > 0.0 and target.shape_hessian_min > 0.0)
+        ):
             return False
         return self.min_growth_rate <= math.sqrt(target.q) <= self.max_growth_rate
 
     def sampler_settings(self) -> tuple[float, ...]:
         tol = self.success_tolerance
-        return (1.0, HYPERBOLIC, self.min_growth_rate, self.max_growth_rate, START_BALL, self.start_radius[0] * tol,
-                self.start_radius[1] * tol)
+        return (
+            1.0,
+            HYPERBOLIC,
+            self.min_growth_rate,
+            self.max_growth_rate,
+            START_BALL,
+            self.start_radius[0] * tol,
+            self.start_radius[1] * tol,
+        )
 
-    def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body) -> np.ndarray:
+    def sample_initial_state(
+        self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body
+    ) -> np.ndarray:
         """The start inside the success ball (module docstring): :func:`~flatbody_env.env.sampling.ball_state_kernel`
         on :data:`~flatbody_env.env.sampling.BALL_DRAWS` uniforms (``body`` gives J and J3 for s1, s2 from ω1, ω2)."""
         tol = self.success_tolerance
         y = np.empty(11)
-        ball_state_kernel(rng.random(BALL_DRAWS), self.start_radius[0] * tol, self.start_radius[1] * tol, target.lam, target.mu, target.rho,
-                          target.s3, target.p_theta, body.inertia.J1, body.inertia.J3, y)
+        ball_state_kernel(
+            rng.random(BALL_DRAWS),
+            self.start_radius[0] * tol,
+            self.start_radius[1] * tol,
+            target.lam,
+            target.mu,
+            target.rho,
+            target.s3,
+            target.p_theta,
+            body.inertia.J1,
+            body.inertia.J3,
+            y,
+        )
         return y
 
-    def start_near(self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body) -> np.ndarray:
+    def start_near(
+        self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body
+    ) -> np.ndarray:
         return self.sample_initial_state(rng, target, control, body=body)
 
-    def draw(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-             simulator: Any = None) -> Episode:
+    def draw(
+        self,
+        rng: np.random.Generator,
+        body: Body,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> Episode:
         """A hyperbolic target (:meth:`sample_target`), then a start inside the success ball (:meth:`sample_initial_state`)."""
         target = self.sample_target(rng, body, limits=limits, control=control)
-        return Episode(state=self.sample_initial_state(rng, target, control, body=body), target=target_row(target), ellipse=target)
+        return Episode(
+            state=self.sample_initial_state(rng, target, control, body=body), target=target_row(target), ellipse=target
+        )
 
     # --- termination and the alive term (one body: floats; N bodies: arrays) -----------------------
     def leaves(self, distance, ended):

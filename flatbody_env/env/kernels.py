@@ -113,8 +113,20 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
     if P[0] == P[1]:
         for k in range(n):
             v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], Y_out[7, k], Y_out[8, k], Y_out[9, k])
-            kin = kinetic_iso(Y_out[0, k], Y_out[1, k], Y_out[2, k], Y_out[3, k], Y_out[4, k], Y_out[5, k], Y_out[6, k], Y_out[7, k],
-                              Y_out[8, k], Y_out[9, k], J, J3)
+            kin = kinetic_iso(
+                Y_out[0, k],
+                Y_out[1, k],
+                Y_out[2, k],
+                Y_out[3, k],
+                Y_out[4, k],
+                Y_out[5, k],
+                Y_out[6, k],
+                Y_out[7, k],
+                Y_out[8, k],
+                Y_out[9, k],
+                J,
+                J3,
+            )
             SC[1, k] = kin[0] + v
     else:
         for k in range(n):

@@ -43,18 +43,36 @@ class TaskSpec:
 
 
 TASKS = (
-    TaskSpec(env_id=ENV_ID, kwargs={"task": "reach"},
-             summary="reach a stable stationary ellipse that linear feedback settles fast (settling rate r >= 0.15/s)"),
-    TaskSpec(env_id="FlatBodySlow-v0", kwargs={"task": "reach", "min_settling_rate": 0.0},
-             summary="reach any stable ellipse of the circulation family in the same shape ranges (no settling-rate filter)"),
-    TaskSpec(env_id="FlatBodyHoldUnstable-v0", kwargs={"task": "hold-unstable"},
-             summary="stay within the tolerance of a hyperbolic stationary ellipse (rotation about the intermediate axis)"),
-    TaskSpec(env_id="FlatBodyTorque-v0", kwargs={"task": "reach-witnessed", "control": "torque", "min_uncontrolled_offset": 0.05},
-             summary="reach a stable ellipse with torque only (thickness uncontrolled), from witnessed starts"),
-    TaskSpec(env_id="FlatBodyDilatation-v0", kwargs={"task": "reach-witnessed", "control": "dilatation"},
-             summary="reach a stable ellipse with the thickness force only, from witnessed starts"),
-    TaskSpec(env_id="FlatBodyAnyBody-v0", kwargs={"task": "any-body"},
-             summary="FlatBody-v0 for a body drawn per episode (J, J3, kappa, a, b), the constants in the observation"),
+    TaskSpec(
+        env_id=ENV_ID,
+        kwargs={"task": "reach"},
+        summary="reach a stable stationary ellipse that linear feedback settles fast (settling rate r >= 0.15/s)",
+    ),
+    TaskSpec(
+        env_id="FlatBodySlow-v0",
+        kwargs={"task": "reach", "min_settling_rate": 0.0},
+        summary="reach any stable ellipse of the circulation family in the same shape ranges (no settling-rate filter)",
+    ),
+    TaskSpec(
+        env_id="FlatBodyHoldUnstable-v0",
+        kwargs={"task": "hold-unstable"},
+        summary="stay within the tolerance of a hyperbolic stationary ellipse (rotation about the intermediate axis)",
+    ),
+    TaskSpec(
+        env_id="FlatBodyTorque-v0",
+        kwargs={"task": "reach-witnessed", "control": "torque", "min_uncontrolled_offset": 0.05},
+        summary="reach a stable ellipse with torque only (thickness uncontrolled), from witnessed starts",
+    ),
+    TaskSpec(
+        env_id="FlatBodyDilatation-v0",
+        kwargs={"task": "reach-witnessed", "control": "dilatation"},
+        summary="reach a stable ellipse with the thickness force only, from witnessed starts",
+    ),
+    TaskSpec(
+        env_id="FlatBodyAnyBody-v0",
+        kwargs={"task": "any-body"},
+        summary="FlatBody-v0 for a body drawn per episode (J, J3, kappa, a, b), the constants in the observation",
+    ),
 )
 """The registered tasks, in the order of ``docs/tasks.md``."""
 

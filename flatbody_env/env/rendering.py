@@ -119,7 +119,11 @@ def _font(size: int):
         if path is not None:
             font = ImageFont.truetype(path, size)
         else:  # pragma: no cover - a system without DejaVu
-            font = ImageFont.load_default_imagefont() if hasattr(ImageFont, "load_default_imagefont") else ImageFont.load_default()
+            font = (
+                ImageFont.load_default_imagefont()
+                if hasattr(ImageFont, "load_default_imagefont")
+                else ImageFont.load_default()
+            )
         _FONTS[size] = font
     return font
 
@@ -195,7 +199,9 @@ def _legend() -> tuple[np.ndarray, np.ndarray]:
             alpha[y + 7 : y + 10, 0:14] = 1.0
             colors[y + 7 : y + 10, 0:14] = COLORS[name]
             tm = _text_alpha(label, 12)[:15, : w - 18]
-            alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]] = np.maximum(alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]], tm)
+            alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]] = np.maximum(
+                alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]], tm
+            )
             colors[y : y + tm.shape[0], 18 : 18 + tm.shape[1]][tm > 0] = _INK
         got = _STATIC["legend"] = (alpha, colors)
     return got
@@ -222,7 +228,9 @@ def _rho_key() -> tuple[np.ndarray, np.ndarray]:
         alpha[yl : yl + lo.shape[0], : lo.shape[1]] = lo
         colors[yl : yl + lo.shape[0], : lo.shape[1]] = _INK
         xr = KEY_W - hi.shape[1] + 2
-        alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]] = np.maximum(alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]], hi)
+        alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]] = np.maximum(
+            alpha[yl : yl + hi.shape[0], xr : xr + hi.shape[1]], hi
+        )
         colors[yl : yl + hi.shape[0], xr : xr + hi.shape[1]] = _INK
         got = _STATIC["rho_key"] = (alpha, colors)
     return got
@@ -241,7 +249,9 @@ def _scale_bar() -> tuple[np.ndarray, np.ndarray]:
     return got
 
 
-def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_width: float | None = None) -> np.ndarray:
+def render_frame(
+    y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_width: float | None = None
+) -> np.ndarray:
     """An RGB frame of the plate seen from +z, shape (256, 256, 3), dtype uint8.
 
     Parameters
@@ -271,7 +281,9 @@ def render_frame(y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_w
     canvas = aggdraw.Draw("RGB", (SIZE, SIZE), _BACKGROUND)
     # plate: R·diag(λ, μ)·circle, shaded darker for a thicker plate (the key in the corner)
     fill = plate_fill(rho)
-    canvas.polygon(px(R2 @ (np.array([[lam], [mu]]) * _CIRCLE)), aggdraw.Pen(COLORS["plate_edge"], 1.2), aggdraw.Brush(fill))
+    canvas.polygon(
+        px(R2 @ (np.array([[lam], [mu]]) * _CIRCLE)), aggdraw.Pen(COLORS["plate_edge"], 1.2), aggdraw.Brush(fill)
+    )
     # principal semi-axes (columns of R, lengths λ, μ) in the colours of λ and μ
     for col, (length, name) in enumerate(((lam, "lambda"), (mu, "mu"))):
         end = R2[:, col] * length

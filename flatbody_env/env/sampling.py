@@ -75,8 +75,25 @@ def potential_stencil_kernel(P, lam, mu, rho, pot):
         pot[r, 3] = gr
 
 
-def candidate_kernel(u_lam, u_aspect, u_sign, cfg, P, pot, table_code, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
-                     fine_rate, fine_margin, cand):
+def candidate_kernel(
+    u_lam,
+    u_aspect,
+    u_sign,
+    cfg,
+    P,
+    pot,
+    table_code,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    cand,
+):
     """Decide one candidate target from its three uniforms (the loop body of
     :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target`).
 
@@ -104,7 +121,9 @@ def candidate_kernel(u_lam, u_aspect, u_sign, cfg, P, pot, table_code, grid, rat
     sign = 1.0 if u_sign < 0.5 else -1.0
     code = UNSURE if cfg[5] == 0.0 else ACCEPT
     if cfg[5] == 1.0:
-        code = decide_kernel(lam, aspect, cfg[4], grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin)
+        code = decide_kernel(
+            lam, aspect, cfg[4], grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin
+        )
     table_code[0] = code
     if code == REJECT:
         return REJECT
@@ -226,8 +245,27 @@ def ball_state_kernel(u, r_lo, r_hi, lam, mu, rho, s3t, pt, J, J3, y):
     y[10] = -math.pi + 2.0 * math.pi * u[11]
 
 
-def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, decisions,
-                          y, tgt, pot, table_code, cand):
+def sample_episode_kernel(
+    D,
+    n,
+    cfg,
+    P,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    decisions,
+    y,
+    tgt,
+    pot,
+    table_code,
+    cand,
+):
     """One episode (target and initial state) from the uniforms ``D[:n]`` of one body.
 
     ``decisions`` (:data:`MAX_ATTEMPTS`,) int64: the exact test's answers for unsure candidates
@@ -242,8 +280,25 @@ def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, ed
     for a in range(MAX_ATTEMPTS):
         if 3 * a + 3 > n:
             return NEED_MORE
-        code = candidate_kernel(D[3 * a], D[3 * a + 1], D[3 * a + 2], cfg, P, pot, table_code, grid, rate, margin, invalid, edge_lo,
-                                edge_hi, refined, fine_rate, fine_margin, cand)
+        code = candidate_kernel(
+            D[3 * a],
+            D[3 * a + 1],
+            D[3 * a + 2],
+            cfg,
+            P,
+            pot,
+            table_code,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            cand,
+        )
         if code == REJECT:
             continue
         if code == UNSURE:
@@ -261,22 +316,66 @@ def sample_episode_kernel(D, n, cfg, P, grid, rate, margin, invalid, edge_lo, ed
         if cfg[13] == START_NONE:
             return used
         if ball:
-            ball_state_kernel(D[used:used + m], cfg[14], cfg[15], cand[0], cand[1], cand[2], cand[3], cand[4], P[0], P[2], y)
+            ball_state_kernel(
+                D[used : used + m], cfg[14], cfg[15], cand[0], cand[1], cand[2], cand[3], cand[4], P[0], P[2], y
+            )
         else:
-            initial_state_kernel(D[used:used + m], cfg[6], cfg[7] != 0.0, cand[0], cand[1], cand[2], cand[3], cand[4], y)
+            initial_state_kernel(
+                D[used : used + m], cfg[6], cfg[7] != 0.0, cand[0], cand[1], cand[2], cand[3], cand[4], y
+            )
         return used + m
     return NO_TARGET
 
 
-def sample_episodes(D, counts, cfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, decisions,
-                    Y, cols, TG, used, pot, table_code, cand):
+def sample_episodes(
+    D,
+    counts,
+    cfg,
+    P,
+    grid,
+    rate,
+    margin,
+    invalid,
+    edge_lo,
+    edge_hi,
+    refined,
+    fine_rate,
+    fine_margin,
+    decisions,
+    Y,
+    cols,
+    TG,
+    used,
+    pot,
+    table_code,
+    cand,
+):
     """:func:`sample_episode_kernel` for m bodies: body b's uniforms in ``D[b, :counts[b]]`` (m, K), its
     decisions in ``decisions[b]`` (m, :data:`MAX_ATTEMPTS`); its state into column ``cols[b]`` of
     ``Y`` (11, N), its target (λ*, μ*, ϱ*, s3*, p_θ*, sign) into ``TG[b]`` (m, 6), the uniforms used (or the
     code) into ``used[b]``, its last candidate into ``cand[b]`` (m, 10) and ``table_code[b]`` (m,)."""
     for b in range(D.shape[0]):
-        used[b] = sample_episode_kernel(D[b], counts[b], cfg, P, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate,
-                                        fine_margin, decisions[b], Y[:, cols[b]], TG[b], pot, table_code[b:b + 1], cand[b])
+        used[b] = sample_episode_kernel(
+            D[b],
+            counts[b],
+            cfg,
+            P,
+            grid,
+            rate,
+            margin,
+            invalid,
+            edge_lo,
+            edge_hi,
+            refined,
+            fine_rate,
+            fine_margin,
+            decisions[b],
+            Y[:, cols[b]],
+            TG[b],
+            pot,
+            table_code[b : b + 1],
+            cand[b],
+        )
 
 
 class EpisodeSampler:
@@ -310,22 +409,48 @@ class EpisodeSampler:
         self.limits = np.asarray(limits, dtype=float)
         filtered = task.filter_applies(control)
         table = task.table_for(body, self.limits, control) if filtered else None
-        self.applies = bool(task.compiled_targets and body.compiled and body.inertia.is_isotropic and body.thickness is not None
-                            and (table is not None or not filtered))
+        self.applies = bool(
+            task.compiled_targets
+            and body.compiled
+            and body.inertia.is_isotropic
+            and body.thickness is not None
+            and (table is not None or not filtered)
+        )
         """Whether resets go through the kernels (class docstring)."""
         if not self.applies:
             return
         mode = 1.0 if table is not None else 2.0
         (l0, l1), (a0, a1) = task.target_lambda, task.target_aspect
-        self.cfg = np.array([l0, l1, a0, a1, task.min_settling_rate, mode, task.initial_noise, 1.0 if "torque" in control else 0.0,
-                             equilibrium_thickness(body, l0, l0 / a1), *task.sampler_settings()])
+        self.cfg = np.array(
+            [
+                l0,
+                l1,
+                a0,
+                a1,
+                task.min_settling_rate,
+                mode,
+                task.initial_noise,
+                1.0 if "torque" in control else 0.0,
+                equilibrium_thickness(body, l0, l0 / a1),
+                *task.sampler_settings(),
+            ]
+        )
         assert self.cfg.size == CFG_SIZE
         self.P = np.ascontiguousarray(body.kernel_params(), dtype=np.float64)
         if table is not None:
             self.table = table.kernel_arrays()
         else:  # never read (mode 2): arrays of the right types
-            self.table = (np.zeros(6), np.zeros((2, 2)), np.zeros((1, 1)), np.zeros((1, 1), np.uint8), np.zeros((1, 1)), np.zeros((1, 1)),
-                          np.full((1, 1), -1, np.int64), np.zeros((1, 2, 2)), np.zeros((1, 1, 1)))
+            self.table = (
+                np.zeros(6),
+                np.zeros((2, 2)),
+                np.zeros((1, 1)),
+                np.zeros((1, 1), np.uint8),
+                np.zeros((1, 1)),
+                np.zeros((1, 1)),
+                np.full((1, 1), -1, np.int64),
+                np.zeros((1, 2, 2)),
+                np.zeros((1, 1, 1)),
+            )
         self._pot = np.empty((7, 4))
         self.refills = 0
         """Bodies that needed more uniforms than the block drawn ahead (a diagnostic count)."""
@@ -352,7 +477,9 @@ class EpisodeSampler:
             found in :data:`MAX_ATTEMPTS` candidates.
         """
         if not self.applies:
-            raise RuntimeError("EpisodeSampler.sample: this configuration draws through the task's methods (see applies)")
+            raise RuntimeError(
+                "EpisodeSampler.sample: this configuration draws through the task's methods (see applies)"
+            )
         m = len(rngs)
         cols = np.asarray(cols, dtype=np.int64)
         D = np.empty((m, self.DRAWS))
@@ -366,9 +493,11 @@ class EpisodeSampler:
         used = np.empty(m, dtype=np.int64)
         codes = np.empty(m, dtype=np.int64)
         cand = np.empty((m, 10))
-        self.kernels.sample_episodes(D, counts, self.cfg, self.P, *self.table, decisions, Y, cols, TG, used, self._pot, codes, cand)
+        self.kernels.sample_episodes(
+            D, counts, self.cfg, self.P, *self.table, decisions, Y, cols, TG, used, self._pot, codes, cand
+        )
         for b in np.flatnonzero(used < 0):
-            row = D[b:b + 1]
+            row = D[b : b + 1]
             while used[b] < 0:
                 if used[b] == NO_TARGET:
                     raise ValueError(self.task.no_target_message)
@@ -382,14 +511,46 @@ class EpisodeSampler:
                     y = target_state(c[0], c[1], c[2], c[3], c[4])
                     rate = settling_rate(self.body, y, self.limits, np.ones(4, dtype=bool))
                     decisions[b, codes[b]] = DECIDE_ACCEPT if rate >= self.task.min_settling_rate else DECIDE_REJECT
-                self.kernels.sample_episodes(row, counts[b:b + 1], self.cfg, self.P, *self.table, decisions[b:b + 1], Y, cols[b:b + 1],
-                                             TG[b:b + 1], used[b:b + 1], self._pot, codes[b:b + 1], cand[b:b + 1])
+                self.kernels.sample_episodes(
+                    row,
+                    counts[b : b + 1],
+                    self.cfg,
+                    self.P,
+                    *self.table,
+                    decisions[b : b + 1],
+                    Y,
+                    cols[b : b + 1],
+                    TG[b : b + 1],
+                    used[b : b + 1],
+                    self._pot,
+                    codes[b : b + 1],
+                    cand[b : b + 1],
+                )
         for b, rng in enumerate(rngs):
             rng.bit_generator.state = states[b]
             rng.random(int(used[b]))
         return TG
 
 
-__all__ = ["BALL_DRAWS", "CFG_SIZE", "DECIDE_ACCEPT", "EpisodeSampler", "DECIDE_REJECT", "HYPERBOLIC", "MAX_ATTEMPTS", "NEED_DECISION", "NEED_MORE",
-           "NO_TARGET", "STABLE", "START_BALL", "START_NOISE", "START_NONE", "ball_state_kernel", "candidate_kernel", "initial_state_kernel",
-           "potential_stencil_kernel", "sample_episode_kernel", "sample_episodes"]
+__all__ = [
+    "BALL_DRAWS",
+    "CFG_SIZE",
+    "DECIDE_ACCEPT",
+    "EpisodeSampler",
+    "DECIDE_REJECT",
+    "HYPERBOLIC",
+    "MAX_ATTEMPTS",
+    "NEED_DECISION",
+    "NEED_MORE",
+    "NO_TARGET",
+    "STABLE",
+    "START_BALL",
+    "START_NOISE",
+    "START_NONE",
+    "ball_state_kernel",
+    "candidate_kernel",
+    "initial_state_kernel",
+    "potential_stencil_kernel",
+    "sample_episode_kernel",
+    "sample_episodes",
+]

@@ -116,7 +116,9 @@ class SettlingRateTable:
     def applies(self, body: Body, limits, control: str, target_lambda, target_aspect) -> bool:
         """Whether the table answers for this body, these limits, controls and target ranges."""
         m = self.meta
-        if getattr(body.potential, "kind", None) == KIND_CUSTOM:  # Python callables: no JSON form, never the table's body
+        if (
+            getattr(body.potential, "kind", None) == KIND_CUSTOM
+        ):  # Python callables: no JSON form, never the table's body
             return False
         return (
             control == "torque+dilatation"
@@ -124,26 +126,46 @@ class SettlingRateTable:
             and m.get("cheap_control_r") == CHEAP_CONTROL_R
             and list(np.asarray(limits, dtype=float)) == m.get("limits")
             and json.loads(json.dumps(body.to_dict())) == m.get("body")
-            and self.lambdas[0] <= target_lambda[0] and target_lambda[1] <= self.lambdas[-1]
-            and self.aspects[0] <= target_aspect[0] and target_aspect[1] <= self.aspects[-1]
+            and self.lambdas[0] <= target_lambda[0]
+            and target_lambda[1] <= self.lambdas[-1]
+            and self.aspects[0] <= target_aspect[0]
+            and target_aspect[1] <= self.aspects[-1]
         )
 
     def decide(self, lam: float, aspect: float, threshold: float) -> int:
         """:data:`ACCEPT`, :data:`REJECT`, :data:`ACCEPT_IF_STABLE` (an edge cell: accept if a stable
         ellipse exists at this shape) or :data:`UNSURE` (run the exact test) (module docstring;
         :func:`decide_kernel` on plain-float copies of the arrays)."""
-        return decide_kernel(lam, aspect, threshold, self._grid, self._rate, self._margin, self._invalid, self._edge_lo, self._edge_hi,
-                             self._refined, self._fine_rate, self._fine_margin)
+        return decide_kernel(
+            lam,
+            aspect,
+            threshold,
+            self._grid,
+            self._rate,
+            self._margin,
+            self._invalid,
+            self._edge_lo,
+            self._edge_hi,
+            self._refined,
+            self._fine_rate,
+            self._fine_margin,
+        )
 
     def kernel_arrays(self) -> tuple:
         """The arrays :func:`decide_kernel` reads, as numpy arrays (for the compiled reset):
         ``grid`` (l0, a0, dl, da, n_λ, n_a), ``rate``, ``margin``, ``invalid`` (uint8), ``edge_lo``,
         ``edge_hi``, ``refined``, ``fine_rate``, ``fine_margin``."""
-        return (np.array(self._grid, dtype=np.float64), np.ascontiguousarray(self.rate, dtype=np.float64),
-                np.ascontiguousarray(self.margin, dtype=np.float64), np.ascontiguousarray(self.invalid, dtype=np.uint8),
-                np.ascontiguousarray(self.edge_lo, dtype=np.float64), np.ascontiguousarray(self.edge_hi, dtype=np.float64),
-                np.ascontiguousarray(self.refined, dtype=np.int64), np.ascontiguousarray(self.fine_rate, dtype=np.float64),
-                np.ascontiguousarray(self.fine_margin, dtype=np.float64))
+        return (
+            np.array(self._grid, dtype=np.float64),
+            np.ascontiguousarray(self.rate, dtype=np.float64),
+            np.ascontiguousarray(self.margin, dtype=np.float64),
+            np.ascontiguousarray(self.invalid, dtype=np.uint8),
+            np.ascontiguousarray(self.edge_lo, dtype=np.float64),
+            np.ascontiguousarray(self.edge_hi, dtype=np.float64),
+            np.ascontiguousarray(self.refined, dtype=np.int64),
+            np.ascontiguousarray(self.fine_rate, dtype=np.float64),
+            np.ascontiguousarray(self.fine_margin, dtype=np.float64),
+        )
 
     def __post_init__(self) -> None:
         # plain-float copies for the per-draw lookup (numpy scalar indexing costs more than the arithmetic)
@@ -155,18 +177,38 @@ class SettlingRateTable:
         object.__setattr__(self, "_refined", self.refined.tolist())
         object.__setattr__(self, "_fine_rate", self.fine_rate.tolist())
         object.__setattr__(self, "_fine_margin", self.fine_margin.tolist())
-        object.__setattr__(self, "_grid", [float(self.lambdas[0]), float(self.aspects[0]), float(self.lambdas[1] - self.lambdas[0]),
-                                           float(self.aspects[1] - self.aspects[0]), float(len(self.lambdas)), float(len(self.aspects))])
+        object.__setattr__(
+            self,
+            "_grid",
+            [
+                float(self.lambdas[0]),
+                float(self.aspects[0]),
+                float(self.lambdas[1] - self.lambdas[0]),
+                float(self.aspects[1] - self.aspects[0]),
+                float(len(self.lambdas)),
+                float(len(self.aspects)),
+            ],
+        )
 
     # --- file -----------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, lambdas=self.lambdas, aspects=self.aspects, rate=self.rate, margin=self.margin, invalid=self.invalid,
-                            edge_lo=self.edge_lo, edge_hi=self.edge_hi, refined=self.refined, fine_rate=self.fine_rate,
-                            fine_margin=self.fine_margin,
-                            meta=np.array(json.dumps(self.meta, sort_keys=True)))
+        np.savez_compressed(
+            tmp,
+            lambdas=self.lambdas,
+            aspects=self.aspects,
+            rate=self.rate,
+            margin=self.margin,
+            invalid=self.invalid,
+            edge_lo=self.edge_lo,
+            edge_hi=self.edge_hi,
+            refined=self.refined,
+            fine_rate=self.fine_rate,
+            fine_margin=self.fine_margin,
+            meta=np.array(json.dumps(self.meta, sort_keys=True)),
+        )
         tmp.replace(path)
 
     @classmethod
@@ -175,12 +217,24 @@ class SettlingRateTable:
             meta = json.loads(str(f["meta"]))
             if meta.get("version") != TABLE_VERSION:
                 raise ValueError(f"table: {path} has version {meta.get('version')!r}, expected {TABLE_VERSION}")
-            return cls(lambdas=f["lambdas"], aspects=f["aspects"], rate=f["rate"], margin=f["margin"], invalid=f["invalid"],
-                       edge_lo=f["edge_lo"], edge_hi=f["edge_hi"], refined=f["refined"], fine_rate=f["fine_rate"],
-                       fine_margin=f["fine_margin"], meta=meta)
+            return cls(
+                lambdas=f["lambdas"],
+                aspects=f["aspects"],
+                rate=f["rate"],
+                margin=f["margin"],
+                invalid=f["invalid"],
+                edge_lo=f["edge_lo"],
+                edge_hi=f["edge_hi"],
+                refined=f["refined"],
+                fine_rate=f["fine_rate"],
+                fine_margin=f["fine_margin"],
+                meta=meta,
+            )
 
 
-def decide_kernel(lam, aspect, threshold, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin):
+def decide_kernel(
+    lam, aspect, threshold, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin
+):
     """:meth:`SettlingRateTable.decide` on the table's arrays (plain floats: the same source runs on
     nested lists in Python and compiled on numpy arrays at the environment's reset).
 
@@ -220,8 +274,12 @@ def decide_kernel(lam, aspect, threshold, grid, rate, margin, invalid, edge_lo, 
         m = fine_margin[q][j][i]
     else:
         r = rate
-    r_hat = ((1 - fx) * (1 - fy) * r[j][i] + fx * (1 - fy) * r[j][i + 1]
-             + (1 - fx) * fy * r[j + 1][i] + fx * fy * r[j + 1][i + 1])
+    r_hat = (
+        (1 - fx) * (1 - fy) * r[j][i]
+        + fx * (1 - fy) * r[j][i + 1]
+        + (1 - fx) * fy * r[j + 1][i]
+        + fx * fy * r[j + 1][i + 1]
+    )
     if r_hat - m >= threshold:
         return ACCEPT
     if r_hat + m < threshold:
@@ -240,17 +298,25 @@ def _map_rates(body: Body, limits, points: list[tuple[float, float]], workers: i
 
     from flatbody_env.progress import progress_bar
 
-    chunks = [points[k:k + 64] for k in range(0, len(points), 64)]
+    chunks = [points[k : k + 64] for k in range(0, len(points), 64)]
     jobs = [(body.to_dict(), limits, c) for c in chunks]
     out: list[float] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for part in progress_bar(pool.map(_rates, jobs), total=len(jobs), desc="settling rates", unit="chunk", enabled=progress):
+        for part in progress_bar(
+            pool.map(_rates, jobs), total=len(jobs), desc="settling rates", unit="chunk", enabled=progress
+        ):
             out.extend(part)
     return out
 
 
-def build_table(body: Body | None = None, limits=(0.5, 0.5, 0.5, 1.0), grid_lambda=GRID_LAMBDA, grid_aspect=GRID_ASPECT,
-                workers: int = 2, progress: bool = False) -> SettlingRateTable:
+def build_table(
+    body: Body | None = None,
+    limits=(0.5, 0.5, 0.5, 1.0),
+    grid_lambda=GRID_LAMBDA,
+    grid_aspect=GRID_ASPECT,
+    workers: int = 2,
+    progress: bool = False,
+) -> SettlingRateTable:
     """Compute the table: exact r at every grid node, and at the centre of every cell whose
     corners all hold an ellipse or none does (module docstring)."""
     body = body or default_body()
@@ -277,8 +343,12 @@ def build_table(body: Body | None = None, limits=(0.5, 0.5, 0.5, 1.0), grid_lamb
     edge_hi = np.full((na - 1, nl - 1), np.nan)
     mixed = np.argwhere(~all_finite & ~none_finite)
     f = (np.arange(EDGE_SUB) + 0.5) / EDGE_SUB
-    pts = [(float(lambdas[i] + fx * (lambdas[i + 1] - lambdas[i])), float(aspects[j] + fy * (aspects[j + 1] - aspects[j])))
-           for j, i in mixed for fy in f for fx in f]
+    pts = [
+        (float(lambdas[i] + fx * (lambdas[i + 1] - lambdas[i])), float(aspects[j] + fy * (aspects[j + 1] - aspects[j])))
+        for j, i in mixed
+        for fy in f
+        for fx in f
+    ]
     sub = np.array(_map_rates(body, limits, pts, workers, progress)).reshape(len(mixed), EDGE_SUB * EDGE_SUB)
     for (j, i), r_sub in zip(mixed, sub):
         r = np.concatenate([r_sub, corners[:, j, i]])
@@ -302,16 +372,41 @@ def build_table(body: Body | None = None, limits=(0.5, 0.5, 0.5, 1.0), grid_lamb
         n_nodes = len(cross) * (FINE + 1) ** 2
         fine_rate[:] = r[:n_nodes].reshape(len(cross), FINE + 1, FINE + 1)
         sub_centre = r[n_nodes:].reshape(len(cross), FINE, FINE)
-        sub_interp = 0.25 * (fine_rate[:, :-1, :-1] + fine_rate[:, :-1, 1:] + fine_rate[:, 1:, :-1] + fine_rate[:, 1:, 1:])
+        sub_interp = 0.25 * (
+            fine_rate[:, :-1, :-1] + fine_rate[:, :-1, 1:] + fine_rate[:, 1:, :-1] + fine_rate[:, 1:, 1:]
+        )
         fine_margin[:] = SAFETY * np.abs(sub_interp - sub_centre) + MARGIN_FLOOR
         fine_margin[~np.isfinite(fine_margin)] = np.inf
         refined[cross[:, 0], cross[:, 1]] = np.arange(len(cross))
-    meta = {"version": TABLE_VERSION, "body": json.loads(json.dumps(body.to_dict())), "limits": [float(x) for x in limits],
-            "control": "torque+dilatation", "cheap_control_r": CHEAP_CONTROL_R, "safety": SAFETY, "margin_floor": MARGIN_FLOOR,
-            "fine": FINE, "refine_threshold": REFINE_THRESHOLD, "edge_sub": EDGE_SUB, "edge_safety": EDGE_SAFETY,
-            "grid_lambda": list(grid_lambda), "grid_aspect": list(grid_aspect), "regenerate": "flatbody targets-table"}
-    return SettlingRateTable(lambdas=lambdas, aspects=aspects, rate=rate, margin=margin, invalid=invalid, edge_lo=edge_lo, edge_hi=edge_hi,
-                             refined=refined, fine_rate=fine_rate, fine_margin=fine_margin, meta=meta)
+    meta = {
+        "version": TABLE_VERSION,
+        "body": json.loads(json.dumps(body.to_dict())),
+        "limits": [float(x) for x in limits],
+        "control": "torque+dilatation",
+        "cheap_control_r": CHEAP_CONTROL_R,
+        "safety": SAFETY,
+        "margin_floor": MARGIN_FLOOR,
+        "fine": FINE,
+        "refine_threshold": REFINE_THRESHOLD,
+        "edge_sub": EDGE_SUB,
+        "edge_safety": EDGE_SAFETY,
+        "grid_lambda": list(grid_lambda),
+        "grid_aspect": list(grid_aspect),
+        "regenerate": "flatbody targets-table",
+    }
+    return SettlingRateTable(
+        lambdas=lambdas,
+        aspects=aspects,
+        rate=rate,
+        margin=margin,
+        invalid=invalid,
+        edge_lo=edge_lo,
+        edge_hi=edge_hi,
+        refined=refined,
+        fine_rate=fine_rate,
+        fine_margin=fine_margin,
+        meta=meta,
+    )
 
 
 _LOADED: dict[str, SettlingRateTable | None] = {}
@@ -325,4 +420,15 @@ def shipped_table() -> SettlingRateTable | None:
     return _LOADED[key]
 
 
-__all__ = ["ACCEPT", "ACCEPT_IF_STABLE", "REJECT", "UNSURE", "SettlingRateTable", "TABLE_PATH", "TABLE_VERSION", "build_table", "exact_rate", "shipped_table"]
+__all__ = [
+    "ACCEPT",
+    "ACCEPT_IF_STABLE",
+    "REJECT",
+    "UNSURE",
+    "SettlingRateTable",
+    "TABLE_PATH",
+    "TABLE_VERSION",
+    "build_table",
+    "exact_rate",
+    "shipped_table",
+]

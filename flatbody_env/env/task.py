@@ -117,8 +117,22 @@ CONTROLS = ("none", "torque", "dilatation", "torque+dilatation")
 REWARD_TERMS = ("shape", "spin", "tumble", "rest", "action", "failure")
 TARGET_NAMES = ("lambda", "mu", "rho", "s3")
 OBSERVATION_NAMES: tuple[str, ...] = (
-    "s1", "s2", "s3", "p_theta", "p_lambda", "p_mu", "p_rho", "lambda", "mu", "rho", "sin_theta", "cos_theta",
-    "target_lambda", "target_mu", "target_rho", "target_s3",
+    "s1",
+    "s2",
+    "s3",
+    "p_theta",
+    "p_lambda",
+    "p_mu",
+    "p_rho",
+    "lambda",
+    "mu",
+    "rho",
+    "sin_theta",
+    "cos_theta",
+    "target_lambda",
+    "target_mu",
+    "target_rho",
+    "target_s3",
 )
 """The observation layout: entries 0–9 are the state entries 0–9 (:data:`flatbody_env.physics.state.STATE_NAMES`),
 10–11 (sin θ, cos θ), 12–15 the target (:data:`TARGET_NAMES`)."""
@@ -206,12 +220,33 @@ class ReachStationaryEllipse:
     (:mod:`flatbody_env.env.targets`: the same targets, without a Riccati solve per draw); False: always solve."""
 
     def __post_init__(self) -> None:
-        for name in ("w_shape", "w_spin", "w_tumble", "w_rest", "w_action", "failure_penalty", "success_tolerance", "min_settling_rate"):
+        for name in (
+            "w_shape",
+            "w_spin",
+            "w_tumble",
+            "w_rest",
+            "w_action",
+            "failure_penalty",
+            "success_tolerance",
+            "min_settling_rate",
+        ):
             validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
         validation.number("initial_noise", self.initial_noise, low=0.0, high=INITIAL_NOISE_MAX)
-        for name in ("target_lambda", "target_aspect"):  # kept as a tuple of floats whatever pair was given (an array too)
-            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=validation.STRETCH_RANGE[0],
-                                                               high=validation.STRETCH_RANGE[1], strict=False))
+        for name in (
+            "target_lambda",
+            "target_aspect",
+        ):  # kept as a tuple of floats whatever pair was given (an array too)
+            object.__setattr__(
+                self,
+                name,
+                validation.interval(
+                    name,
+                    getattr(self, name),
+                    low=validation.STRETCH_RANGE[0],
+                    high=validation.STRETCH_RANGE[1],
+                    strict=False,
+                ),
+            )
         if self.target_aspect[0] <= 1.0:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
         validation.boolean("settling_table", self.settling_table)
@@ -225,9 +260,11 @@ class ReachStationaryEllipse:
     @property
     def no_target_message(self) -> str:
         """The ``ValueError`` of a reset that finds no target in the ranges."""
-        return ("target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
-                "found for this body in the target ranges (the settling rate grows with torque_limit and force_limit: "
-                "raise them, lower min_settling_rate, or widen the ranges)")
+        return (
+            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
+            "found for this body in the target ranges (the settling rate grows with torque_limit and force_limit: "
+            "raise them, lower min_settling_rate, or widen the ranges)"
+        )
 
     def accepts(self, target: StationaryEllipse) -> bool:
         """The stability class of a target: spectrally stable (q < 0, shape Hessian positive definite)."""
@@ -254,12 +291,21 @@ class ReachStationaryEllipse:
         """Write the terms of :attr:`extra_reward_names` into ``terms[6:]`` (and the ``failure`` term of a
         step the task ends, ``left``): none here."""
 
-    def start_near(self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body) -> np.ndarray:
+    def start_near(
+        self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body
+    ) -> np.ndarray:
         """The task's start near a given target (:meth:`sample_initial_state` here)."""
         return self.sample_initial_state(rng, target, control)
 
-    def draw(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-             simulator: Any = None) -> Episode:
+    def draw(
+        self,
+        rng: np.random.Generator,
+        body: Body,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> Episode:
         """One reset's draws: a target (:meth:`sample_target`), then a start near it (:meth:`sample_initial_state`).
 
         ``simulator`` is the environment's (:meth:`flatbody_env.env.env.FlatBodyEnv.rollout`), for tasks
@@ -268,13 +314,22 @@ class ReachStationaryEllipse:
         target = self.sample_target(rng, body, limits=limits, control=control)
         return Episode(state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target)
 
-    def draw_batch(self, rngs: Sequence[np.random.Generator], body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-                   simulator: Any = None) -> list[Episode]:
+    def draw_batch(
+        self,
+        rngs: Sequence[np.random.Generator],
+        body: Body,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> list[Episode]:
         """:meth:`draw` for each generator (each draws exactly what it would alone)."""
         return [self.draw(rng, body, limits=limits, control=control, simulator=simulator) for rng in rngs]
 
     # --- targets --------------------------------------------------------------------------------
-    def reachable(self, target: StationaryEllipse, body: Body, limits=DEFAULT_LIMITS, control: str = "torque+dilatation") -> bool:
+    def reachable(
+        self, target: StationaryEllipse, body: Body, limits=DEFAULT_LIMITS, control: str = "torque+dilatation"
+    ) -> bool:
         """Whether ``target`` passes the reachability filter (module docstring, "Reachability").
 
         True when the controls settle it at a rate ≥ :attr:`min_settling_rate`; also True for
@@ -286,8 +341,9 @@ class ReachStationaryEllipse:
         y = target_state(target.lam, target.mu, target.rho, target.s3, target.p_theta)
         return settling_rate(body, y, limits, control_mask(control)) >= self.min_settling_rate
 
-    def sample_target(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS,
-                      control: str = "torque+dilatation") -> StationaryEllipse:
+    def sample_target(
+        self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation"
+    ) -> StationaryEllipse:
         """A stable stationary ellipse of the circulation family that the controls can reach (module docstring).
 
         The draws and the test are those of :meth:`reachable`; where the shipped settling-rate
@@ -328,7 +384,13 @@ class ReachStationaryEllipse:
         """The settling-rate table when it answers the filter here, else None (every draw solves)."""
         if not self.settling_table or self.min_settling_rate == 0 or control != "torque+dilatation":
             return None
-        key = (id(body), tuple(np.asarray(limits, dtype=float).tolist()), control, self.target_lambda, self.target_aspect)
+        key = (
+            id(body),
+            tuple(np.asarray(limits, dtype=float).tolist()),
+            control,
+            self.target_lambda,
+            self.target_aspect,
+        )
         hit = _TABLE_FOR.get(key)
         if hit is not None and hit[0] is body:
             return hit[1]
@@ -352,7 +414,9 @@ class ReachStationaryEllipse:
         lam, mu = float(spec["lambda"]), float(spec["mu"])
         if not (math.isfinite(lam) and math.isfinite(mu) and lam > 0 and mu > 0) or lam == mu:
             raise ValueError(f"target.lambda: need finite λ, μ > 0 with λ ≠ μ, got {lam}, {mu}")
-        return stationary_from_shape(body, lam, mu, branch=spec.get("branch", self.target_branch), sign=float(spec.get("sign", 1.0)))
+        return stationary_from_shape(
+            body, lam, mu, branch=spec.get("branch", self.target_branch), sign=float(spec.get("sign", 1.0))
+        )
 
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""
@@ -360,17 +424,45 @@ class ReachStationaryEllipse:
         # one call for all draws: the same stream and values as one uniform(−n, n) per draw
         # (numpy's uniform(lo, hi) is lo + (hi − lo)·next_double)
         y = np.empty(11)
-        initial_state_kernel(rng.random(10 if torque else 9), self.initial_noise, torque, target.lam, target.mu, target.rho, target.s3,
-                             target.p_theta, y)
+        initial_state_kernel(
+            rng.random(10 if torque else 9),
+            self.initial_noise,
+            torque,
+            target.lam,
+            target.mu,
+            target.rho,
+            target.s3,
+            target.p_theta,
+            y,
+        )
         return y
 
     # --- kernel configuration ---------------------------------------------------------------------
-    def kernel_config(self, *, stretch_bounds: tuple[float, float], rho_bounds: tuple[float, float],
-                      momentum_bound: float, gap_min: float, check_gap: bool) -> np.ndarray:
+    def kernel_config(
+        self,
+        *,
+        stretch_bounds: tuple[float, float],
+        rho_bounds: tuple[float, float],
+        momentum_bound: float,
+        gap_min: float,
+        check_gap: bool,
+    ) -> np.ndarray:
         """The configuration vector ``cfg`` (:data:`CFG_SIZE`) of the kernels (module docstring)."""
         cfg = np.array(
-            [self.w_shape, self.w_spin, self.w_tumble, self.w_rest, self.w_action, self.failure_penalty, self.success_tolerance,
-             *stretch_bounds, *rho_bounds, momentum_bound, gap_min, 1.0 if check_gap else 0.0],
+            [
+                self.w_shape,
+                self.w_spin,
+                self.w_tumble,
+                self.w_rest,
+                self.w_action,
+                self.failure_penalty,
+                self.success_tolerance,
+                *stretch_bounds,
+                *rho_bounds,
+                momentum_bound,
+                gap_min,
+                1.0 if check_gap else 0.0,
+            ],
             dtype=np.float64,
         )
         assert cfg.size == CFG_SIZE
@@ -390,7 +482,9 @@ class ReachStationaryEllipse:
         ``target`` = (λ*, μ*, ϱ*, s3*), shape (4,) or (4, N)."""
         return self.reward_terms(y, body, target, np.zeros(1), False, _with_distance=True)[1]
 
-    def reward_terms(self, y: np.ndarray, body: Body, target: np.ndarray, action: np.ndarray, failed, *, _with_distance: bool = False):
+    def reward_terms(
+        self, y: np.ndarray, body: Body, target: np.ndarray, action: np.ndarray, failed, *, _with_distance: bool = False
+    ):
         """The named terms (module docstring) by :func:`score_kernel`; floats for one body, arrays (N,) for N.
 
         ``action`` has shape (n,) or (N, n); ``failed`` is a bool or a bool array (N,).
@@ -425,7 +519,9 @@ def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def target_row(target: StationaryEllipse) -> np.ndarray:
     """(λ*, μ*, ϱ*, s3*, p_θ*, sign) (6,): the target as :class:`Episode` and the episode sampler hold it
     (sign: of σ₊ = s3* + p_θ*, the ``sign`` of :func:`~flatbody_env.physics.equilibria.stationary_from_shape`)."""
-    return np.array([target.lam, target.mu, target.rho, target.s3, target.p_theta, 1.0 if target.s3 + target.p_theta > 0 else -1.0])
+    return np.array(
+        [target.lam, target.mu, target.rho, target.s3, target.p_theta, 1.0 if target.s3 + target.p_theta > 0 else -1.0]
+    )
 
 
 def target_vector(target: StationaryEllipse) -> np.ndarray:

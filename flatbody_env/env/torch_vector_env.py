@@ -80,8 +80,15 @@ class FlatBodyTorchVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, device: str | torch.device = "cpu", max_episode_steps: int = MAX_EPISODE_STEPS,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP, num_threads: int | None = 1, **env_kwargs: Any) -> None:
+    def __init__(
+        self,
+        num_envs: int = 1,
+        device: str | torch.device = "cpu",
+        max_episode_steps: int = MAX_EPISODE_STEPS,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        num_threads: int | None = 1,
+        **env_kwargs: Any,
+    ) -> None:
         try:
             dev = torch.device(device)
         except (RuntimeError, TypeError):
@@ -95,8 +102,13 @@ class FlatBodyTorchVectorEnv(VectorEnv):
             _cuda_ready()
             self._gpu = _CudaBatch(self, num_envs, dev, max_episode_steps, autoreset_mode, env_kwargs)
             return
-        self.venv = FlatBodyVectorEnv(num_envs=num_envs, max_episode_steps=max_episode_steps, autoreset_mode=autoreset_mode,
-                                      num_threads=num_threads, **env_kwargs)
+        self.venv = FlatBodyVectorEnv(
+            num_envs=num_envs,
+            max_episode_steps=max_episode_steps,
+            autoreset_mode=autoreset_mode,
+            num_threads=num_threads,
+            **env_kwargs,
+        )
         """The batched env that steps the bodies (its arrays are the tensors' memory)."""
         self.metadata = {**self.metadata, "autoreset_mode": self.venv.metadata["autoreset_mode"]}
         self.num_envs = num_envs
@@ -106,7 +118,13 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         self.observation_space = self.venv.observation_space
         self.action_space = self.venv.action_space
         self.single_env = self.venv.single_env
-        self.body, self.task, self.control, self.limits, self.dt = self.venv.body, self.venv.task, self.venv.control, self.venv.limits, self.venv.dt
+        self.body, self.task, self.control, self.limits, self.dt = (
+            self.venv.body,
+            self.venv.task,
+            self.venv.control,
+            self.venv.limits,
+            self.venv.dt,
+        )
         self.reward_names = self.venv.reward_names
 
     # --- state ---------------------------------------------------------------------------------------------
@@ -151,8 +169,13 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         if self._gpu is not None:
             return self._gpu.step(actions)
         obs, rewards, terminated, truncated, info = self.venv.step(_as_numpy(actions))
-        return (torch.from_numpy(obs), torch.from_numpy(rewards.astype(np.float32)), torch.from_numpy(terminated),
-                torch.from_numpy(truncated), _to_torch(info))
+        return (
+            torch.from_numpy(obs),
+            torch.from_numpy(rewards.astype(np.float32)),
+            torch.from_numpy(terminated),
+            torch.from_numpy(truncated),
+            _to_torch(info),
+        )
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._gpu is None:
@@ -164,13 +187,19 @@ def _cuda_ready() -> None:
     from flatbody_env.integrators import cuda
 
     if not torch.cuda.is_available():
-        raise cuda.CudaUnavailableError(f"device: 'cuda' needs a CUDA GPU and torch's CUDA build (torch.cuda.is_available() is False); "
-                                        f"use device='cpu', or {cuda.INSTALL_HINT}")
+        raise cuda.CudaUnavailableError(
+            f"device: 'cuda' needs a CUDA GPU and torch's CUDA build (torch.cuda.is_available() is False); "
+            f"use device='cpu', or {cuda.INSTALL_HINT}"
+        )
     cuda.require()
 
 
-_TORCH_DTYPES = {np.dtype(np.float64): torch.float64, np.dtype(np.float32): torch.float32, np.dtype(np.int64): torch.int64,
-                 np.dtype(np.uint8): torch.uint8}
+_TORCH_DTYPES = {
+    np.dtype(np.float64): torch.float64,
+    np.dtype(np.float32): torch.float32,
+    np.dtype(np.int64): torch.int64,
+    np.dtype(np.uint8): torch.uint8,
+}
 
 
 class _CudaBatch:
@@ -180,7 +209,9 @@ class _CudaBatch:
 
     NAMES = ("Y", "T", "OBS", "FINAL", "INFO", "I", "ENDS", "FLAGS")
 
-    def __init__(self, env: FlatBodyTorchVectorEnv, num_envs, dev, max_episode_steps, autoreset_mode, env_kwargs) -> None:
+    def __init__(
+        self, env: FlatBodyTorchVectorEnv, num_envs, dev, max_episode_steps, autoreset_mode, env_kwargs
+    ) -> None:
         from gymnasium.vector.utils import batch_space
 
         from flatbody_env.env.device import DeviceBatch
@@ -201,14 +232,19 @@ class _CudaBatch:
             return cuda.cuda.as_cuda_array(t)
 
         with torch.cuda.device(dev):
-            self.batch = DeviceBatch(p, num_envs, max_episode_steps, same_step=mode == AutoresetMode.SAME_STEP, backend="cuda", alloc=alloc)
+            self.batch = DeviceBatch(
+                p, num_envs, max_episode_steps, same_step=mode == AutoresetMode.SAME_STEP, backend="cuda", alloc=alloc
+            )
         self._keep = keep
         self.t = {name: torch.as_tensor(getattr(self.batch, name), device=dev) for name in self.NAMES}
         """The batch's arrays as torch tensors (the same memory)."""
         env.metadata = {**env.metadata, "autoreset_mode": mode}
         env.num_envs, env.max_episode_steps = num_envs, max_episode_steps
         env.single_observation_space, env.single_action_space = p.observation_space, p.action_space
-        env.observation_space, env.action_space = batch_space(p.observation_space, num_envs), batch_space(p.action_space, num_envs)
+        env.observation_space, env.action_space = (
+            batch_space(p.observation_space, num_envs),
+            batch_space(p.action_space, num_envs),
+        )
         env.single_env, env.venv = p, None
         env.body, env.task, env.control, env.limits, env.dt = p.body, p.task, p.control, p.limits, p.dt
         env.reward_names = p.reward_names
@@ -216,9 +252,17 @@ class _CudaBatch:
 
     def _info(self, *, t, terms: bool) -> dict:
         INFO, I = self.t["INFO"], self.t["I"]
-        info = {"distance": INFO[7].clone(), "is_success": INFO[7] <= self.p.task.success_tolerance, "energy": INFO[8].clone(),
-                "casimir": INFO[9].clone(), "p_theta": self.t["Y"][3].clone(), "t": t,
-                "integrator": {"method": self.batch.method, "nfev": I[3].clone()}, "status": I[2].clone(), "domain_code": INFO[10].to(torch.int64)}
+        info = {
+            "distance": INFO[7].clone(),
+            "is_success": INFO[7] <= self.p.task.success_tolerance,
+            "energy": INFO[8].clone(),
+            "casimir": INFO[9].clone(),
+            "p_theta": self.t["Y"][3].clone(),
+            "t": t,
+            "integrator": {"method": self.batch.method, "nfev": I[3].clone()},
+            "status": I[2].clone(),
+            "domain_code": INFO[10].to(torch.int64),
+        }
         if terms:
             info["reward_terms"] = {name: INFO[1 + k].clone() for k, name in enumerate(self.reward_names)}
         return info
@@ -234,9 +278,13 @@ class _CudaBatch:
         mask = options.pop("reset_mask", None)
         stagger = bool(options.pop("stagger", False))
         if options:
-            raise ValueError(f"options.{sorted(options)[0]}: not supported on device='cuda' (reset_mask and stagger are)")
+            raise ValueError(
+                f"options.{sorted(options)[0]}: not supported on device='cuda' (reset_mask and stagger are)"
+            )
         if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-            raise ValueError(f"seed: device='cuda' takes one int >= 0 (the bodies' generators are counters under one key), got {seed!r}")
+            raise ValueError(
+                f"seed: device='cuda' takes one int >= 0 (the bodies' generators are counters under one key), got {seed!r}"
+            )
         m = None if mask is None else self._mask(mask)
         view = None if m is None else self.cuda.cuda.as_cuda_array(m.to(torch.uint8).contiguous())
         self.batch.reset(seed=seed, mask=view, stagger=stagger)
@@ -261,7 +309,13 @@ class _CudaBatch:
     def set_episode_steps(self, steps) -> None:
         s = torch.as_tensor(steps, device=self.dev)
         n, top = self.batch.num_envs, self.batch.max_episode_steps
-        if tuple(s.shape) != (n,) or s.dtype.is_floating_point or s.dtype == torch.bool or bool((s < 0).any()) or bool((s >= top).any()):
+        if (
+            tuple(s.shape) != (n,)
+            or s.dtype.is_floating_point
+            or s.dtype == torch.bool
+            or bool((s < 0).any())
+            or bool((s >= top).any())
+        ):
             raise ValueError(f"steps: must be {n} integers in [0, {top})")
         self.t["I"][0].copy_(s)
 

@@ -117,10 +117,18 @@ class FlatBodyVectorEnv(VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, num_threads: int | None = 1, **kwargs: Any) -> None:
+    def __init__(
+        self,
+        num_envs: int = 1,
+        max_episode_steps: int = MAX_EPISODE_STEPS,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        num_threads: int | None = 1,
+        **kwargs: Any,
+    ) -> None:
         num_envs, max_episode_steps, mode = batch_arguments(num_envs, max_episode_steps, autoreset_mode)
-        if num_threads is not None and (not isinstance(num_threads, int) or isinstance(num_threads, bool) or not 1 <= num_threads <= MAX_THREADS):
+        if num_threads is not None and (
+            not isinstance(num_threads, int) or isinstance(num_threads, bool) or not 1 <= num_threads <= MAX_THREADS
+        ):
             raise ValueError(f"num_threads: must be an integer in [1, {MAX_THREADS}] or None, got {num_threads!r}")
         if kwargs.get("render_mode") is not None or kwargs.get("track_rotation"):
             raise ValueError("render_mode: FlatBodyVectorEnv does not render; use FlatBody-v0 for frames")
@@ -181,11 +189,25 @@ class FlatBodyVectorEnv(VectorEnv):
         edges = np.linspace(0, num_envs, threads + 1).round().astype(int)
         self._slices = [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
         self._steppers = [self.stepper] + [copy.deepcopy(self.stepper) for _ in range(threads - 1)]
-        self._lane_works = [(np.empty(sl.stop - sl.start), np.empty((4, sl.stop - sl.start)), np.empty(7), np.empty(4), np.empty(STATE_SIZE))
-                            for sl in self._slices]
+        self._lane_works = [
+            (
+                np.empty(sl.stop - sl.start),
+                np.empty((4, sl.stop - sl.start)),
+                np.empty(7),
+                np.empty(4),
+                np.empty(STATE_SIZE),
+            )
+            for sl in self._slices
+        ]
         # per thread, contiguous copies of its columns of the (k, N) arrays (the kernels run faster on them)
-        self._columns = [tuple(np.empty((k, sl.stop - sl.start)) for k in (STATE_SIZE, 4, STATE_SIZE, STATE_SIZE, n_terms, 4))
-                         for sl in self._slices] if threads > 1 else []
+        self._columns = (
+            [
+                tuple(np.empty((k, sl.stop - sl.start)) for k in (STATE_SIZE, 4, STATE_SIZE, STATE_SIZE, n_terms, 4))
+                for sl in self._slices
+            ]
+            if threads > 1
+            else []
+        )
         self._pool: ThreadPoolExecutor | None = None
         self._pool_pid = 0
 
@@ -225,7 +247,12 @@ class FlatBodyVectorEnv(VectorEnv):
         """Set each body's episode clock (N,) (integers in [0, ``max_episode_steps``)), e.g. to stagger the
         bodies' truncations (Isaac Lab's ``episode_length_buf``); ``reset(options={"stagger": True})`` draws them."""
         s = np.asarray(steps)
-        if s.shape != (self.num_envs,) or not np.issubdtype(s.dtype, np.integer) or (s < 0).any() or (s >= self.max_episode_steps).any():
+        if (
+            s.shape != (self.num_envs,)
+            or not np.issubdtype(s.dtype, np.integer)
+            or (s < 0).any()
+            or (s >= self.max_episode_steps).any()
+        ):
             raise ValueError(f"steps: must be {self.num_envs} integers in [0, {self.max_episode_steps})")
         self._steps[:] = s
 
@@ -277,10 +304,31 @@ class FlatBodyVectorEnv(VectorEnv):
         m = idx.size
         Y = np.ascontiguousarray(self._Ys[:, idx])
         p = self.single_env
-        OBS, SC, TERMS = np.empty((m, p.observation_size), dtype=np.float32), np.empty((4, m)), np.empty((len(self.reward_names), m))
-        self._kernels.post_step_lanes(Y, Y, np.zeros(m, np.int64), np.zeros((m, 1)), 0, np.ascontiguousarray(self._T[idx]), p.kernel_config,
-                                      p.kernel_params, np.empty_like(Y), OBS, TERMS, SC, np.empty(m, np.int64), np.empty(m), np.empty((4, m)),
-                                      np.empty(7), np.empty(4), np.empty(STATE_SIZE))
+        OBS, SC, TERMS = (
+            np.empty((m, p.observation_size), dtype=np.float32),
+            np.empty((4, m)),
+            np.empty((len(self.reward_names), m)),
+        )
+        self._kernels.post_step_lanes(
+            Y,
+            Y,
+            np.zeros(m, np.int64),
+            np.zeros((m, 1)),
+            0,
+            np.ascontiguousarray(self._T[idx]),
+            p.kernel_config,
+            p.kernel_params,
+            np.empty_like(Y),
+            OBS,
+            TERMS,
+            SC,
+            np.empty(m, np.int64),
+            np.empty(m),
+            np.empty((4, m)),
+            np.empty(7),
+            np.empty(4),
+            np.empty(STATE_SIZE),
+        )
         OBS[:, OBSERVATION_SIZE:] = self._OBS_EXTRA[idx]
         if np.any(SC[3] != 0):
             p.check_start(Y[:, int(np.flatnonzero(SC[3] != 0)[0])], "initial_noise")
@@ -312,7 +360,9 @@ class FlatBodyVectorEnv(VectorEnv):
             counters[:] = 0
             st = self._lane_steppers[i].advance(y, u, self.dt, ynew, counters)
             P = self._lane_P[:, i].copy()
-            self._ENDED[i] = k.post_step(y, ynew, st, a, n_act, self._T[i].copy(), p.kernel_config, P, yout, obs, terms, sc, vel, force)
+            self._ENDED[i] = k.post_step(
+                y, ynew, st, a, n_act, self._T[i].copy(), p.kernel_config, P, yout, obs, terms, sc, vel, force
+            )
             self._STATUS[i] = st
             self._NFEV[i] = counters[0]
             self._OUT[:, i] = ynew
@@ -332,10 +382,31 @@ class FlatBodyVectorEnv(VectorEnv):
             Ys, U, OUT, Ynext, TERMS, SC = self._columns[c]
             np.copyto(Ys, self._Ys[:, sl])
             np.copyto(U, self._U[:, sl])
-            STATUS, NFEV, A, T, OBS, ENDED = self._STATUS[sl], self._NFEV[sl], self._A[sl], self._T[sl], self._OBS[sl], self._ENDED[sl]
+            STATUS, NFEV, A, T, OBS, ENDED = (
+                self._STATUS[sl],
+                self._NFEV[sl],
+                self._A[sl],
+                self._T[sl],
+                self._OBS[sl],
+                self._ENDED[sl],
+            )
         self._steppers[c].advance_batch(Ys, U, self.dt, OUT, STATUS, NFEV)
-        self._kernels.post_step_lanes(Ys, OUT, STATUS, A, A.shape[1], T, p.kernel_config, p.kernel_params, Ynext, OBS, TERMS, SC, ENDED,
-                                      *self._lane_works[c])
+        self._kernels.post_step_lanes(
+            Ys,
+            OUT,
+            STATUS,
+            A,
+            A.shape[1],
+            T,
+            p.kernel_config,
+            p.kernel_params,
+            Ynext,
+            OBS,
+            TERMS,
+            SC,
+            ENDED,
+            *self._lane_works[c],
+        )
         if p.custom_potential is not None:  # its part of H (the kernels know the built-in potentials only)
             SC[1] += p.energy_left_out(Ynext)
         if self.num_threads > 1:
@@ -376,9 +447,18 @@ class FlatBodyVectorEnv(VectorEnv):
         self._cur_obs[:] = obs
         self._cur_sc[:] = sc
         blank = np.array([""] * n, dtype=object)
-        info = build_info(t=self._steps * self.dt, scalars=sc, p_theta=self._Ys[3], ended=np.zeros(n, dtype=bool), failure=blank,
-                          left=blank.copy(), method=self.stepper.method, nfev=np.zeros(n, np.int64), terms=None,
-                          success_tolerance=self.task.success_tolerance)
+        info = build_info(
+            t=self._steps * self.dt,
+            scalars=sc,
+            p_theta=self._Ys[3],
+            ended=np.zeros(n, dtype=bool),
+            failure=blank,
+            left=blank.copy(),
+            method=self.stepper.method,
+            nfev=np.zeros(n, np.int64),
+            terms=None,
+            success_tolerance=self.task.success_tolerance,
+        )
         return obs, info
 
     def step(self, actions):
@@ -449,8 +529,18 @@ class FlatBodyVectorEnv(VectorEnv):
             self._autoreset = done
         self._cur_obs[:] = obs
         self._cur_sc[:] = sc_now
-        info = build_info(t=t, scalars=sc, p_theta=self._Ys[3], ended=ended, failure=failures, left=lefts, method=self.stepper.method,
-                          nfev=nfev, terms=terms, success_tolerance=self.task.success_tolerance)
+        info = build_info(
+            t=t,
+            scalars=sc,
+            p_theta=self._Ys[3],
+            ended=ended,
+            failure=failures,
+            left=lefts,
+            method=self.stepper.method,
+            nfev=nfev,
+            terms=terms,
+            success_tolerance=self.task.success_tolerance,
+        )
         if same_step:
             info["final_obs"] = final_obs
             info["_final_obs"] = done.copy()

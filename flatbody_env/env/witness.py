@@ -101,29 +101,54 @@ class ReachWithWitness(ReachStationaryEllipse):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name, upper in (("witness_radius", 1.0), ("witness_amplitude", 1.0), ("start_distance", validation.PARAM_RANGE[1])):
-            object.__setattr__(self, name, validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False))
+        for name, upper in (
+            ("witness_radius", 1.0),
+            ("witness_amplitude", 1.0),
+            ("start_distance", validation.PARAM_RANGE[1]),
+        ):
+            object.__setattr__(
+                self, name, validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False)
+            )
         for name in ("witness_steps", "max_witness_attempts"):
             validation.integer(name, getattr(self, name), low=1, high=validation.MAX_EPISODE_STEPS)
         pair = self.witness_half_period
         if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
             raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {pair!r:.60}")
-        lo, hi = (validation.integer(f"witness_half_period[{i}]", x, low=1, high=validation.MAX_EPISODE_STEPS) for i, x in enumerate(pair))
+        lo, hi = (
+            validation.integer(f"witness_half_period[{i}]", x, low=1, high=validation.MAX_EPISODE_STEPS)
+            for i, x in enumerate(pair)
+        )
         if lo > hi:
             raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {(lo, hi)!r}")
         object.__setattr__(self, "witness_half_period", (lo, hi))
-        validation.number("min_uncontrolled_offset", self.min_uncontrolled_offset, low=0.0, high=validation.PARAM_RANGE[1])
+        validation.number(
+            "min_uncontrolled_offset", self.min_uncontrolled_offset, low=0.0, high=validation.PARAM_RANGE[1]
+        )
 
     def sampler_settings(self) -> tuple[float, ...]:
         """The episode sampler draws the targets only (:data:`~flatbody_env.env.sampling.START_NONE`)."""
         return (0.0, 0.0, 0.0, 0.0, START_NONE, 0.0, 0.0)
 
-    def draw(self, rng: np.random.Generator, body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-             simulator: Any = None) -> Episode:
+    def draw(
+        self,
+        rng: np.random.Generator,
+        body: Body,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> Episode:
         return self.draw_batch([rng], body, limits=limits, control=control, simulator=simulator)[0]
 
-    def draw_batch(self, rngs: Sequence[np.random.Generator], body: Body, *, limits=DEFAULT_LIMITS, control: str = "torque+dilatation",
-                   simulator: Any = None) -> list[Episode]:
+    def draw_batch(
+        self,
+        rngs: Sequence[np.random.Generator],
+        body: Body,
+        *,
+        limits=DEFAULT_LIMITS,
+        control: str = "torque+dilatation",
+        simulator: Any = None,
+    ) -> list[Episode]:
         """Targets, then witnessed starts for all generators at once (module docstring, "The draw").
 
         ``simulator`` is the environment (:meth:`flatbody_env.env.env.FlatBodyEnv.rollout` runs the reversed
@@ -153,8 +178,10 @@ class ReachWithWitness(ReachStationaryEllipse):
         k_steps = np.arange(steps)
         while pending.size:
             if attempts == self.max_witness_attempts:
-                raise ValueError(f"start_distance: no witnessed start in {self.start_distance} with an uncontrolled offset >= "
-                                 f"{self.min_uncontrolled_offset} after {attempts} draws (widen start_distance or witness_amplitude)")
+                raise ValueError(
+                    f"start_distance: no witnessed start in {self.start_distance} with an uncontrolled offset >= "
+                    f"{self.min_uncontrolled_offset} after {attempts} draws (widen start_distance or witness_amplitude)"
+                )
             attempts += 1
             k = pending.size
             YB = np.empty((11, k))
@@ -162,8 +189,19 @@ class ReachWithWitness(ReachStationaryEllipse):
             for j, b in enumerate(pending):
                 u = rngs[b].random(self.attempt_draws(n_act))
                 tg = targets[b]
-                ball_state_kernel(u[:BALL_DRAWS], self.witness_radius[0] * tol, self.witness_radius[1] * tol, tg[0], tg[1], tg[2], tg[3], tg[4],
-                                  J, J3, YB[:, j])
+                ball_state_kernel(
+                    u[:BALL_DRAWS],
+                    self.witness_radius[0] * tol,
+                    self.witness_radius[1] * tol,
+                    tg[0],
+                    tg[1],
+                    tg[2],
+                    tg[3],
+                    tg[4],
+                    J,
+                    J3,
+                    YB[:, j],
+                )
                 amplitude = a_lo + (a_hi - a_lo) * u[BALL_DRAWS]
                 for c in range(n_act):
                     half = h_lo + min(int((h_hi - h_lo + 1) * u[BALL_DRAWS + 1 + 2 * c]), h_hi - h_lo)
@@ -173,14 +211,21 @@ class ReachWithWitness(ReachStationaryEllipse):
             Y0 = REVERSAL[:, None] * Z
             tv = targets[pending, :4].T
             d0 = self.distance(Y0, body, tv)
-            keep = (ok & (d0 >= self.start_distance[0]) & (d0 <= self.start_distance[1])
-                    & (self.uncontrolled_offset(Y0, body, tv, control) >= self.min_uncontrolled_offset))
+            keep = (
+                ok
+                & (d0 >= self.start_distance[0])
+                & (d0 <= self.start_distance[1])
+                & (self.uncontrolled_offset(Y0, body, tv, control) >= self.min_uncontrolled_offset)
+            )
             for j in np.flatnonzero(keep):
                 b = pending[j]
                 starts[:, b] = Y0[:, j]
                 witnesses[b] = actions[::-1, j]
             pending = pending[~keep]
-        return [Episode(state=starts[:, b].copy(), target=targets[b].copy(), ellipse=ellipses[b], witness=witnesses[b]) for b in range(m)]
+        return [
+            Episode(state=starts[:, b].copy(), target=targets[b].copy(), ellipse=ellipses[b], witness=witnesses[b])
+            for b in range(m)
+        ]
 
     @staticmethod
     def uncontrolled_offset(Y: np.ndarray, body: Body, target: np.ndarray, control: str):
@@ -195,7 +240,16 @@ class ReachWithWitness(ReachStationaryEllipse):
             total = total + (Y[9] - target[2]) ** 2 + Y[6] ** 2
         if not mask[2]:
             w1, w2 = ReachStationaryEllipse.omega12(Y, body)
-            total = total + (Y[7] - target[0]) ** 2 + (Y[8] - target[1]) ** 2 + (Y[2] - target[3]) ** 2 + w1 ** 2 + w2 ** 2 + Y[4] ** 2 + Y[5] ** 2
+            total = (
+                total
+                + (Y[7] - target[0]) ** 2
+                + (Y[8] - target[1]) ** 2
+                + (Y[2] - target[3]) ** 2
+                + w1**2
+                + w2**2
+                + Y[4] ** 2
+                + Y[5] ** 2
+            )
         return np.sqrt(total)
 
     def attempt_draws(self, n_act: int) -> int:

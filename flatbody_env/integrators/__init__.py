@@ -8,7 +8,19 @@ environment steps through :func:`flatbody_env.integrators.steppers.make_env_step
 
 from __future__ import annotations
 
-from flatbody_env.integrators.base import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, CHARTS, IntegrationError, Method, MethodInfo, Solution, Tolerances, available_methods, get_method, register_method
+from flatbody_env.integrators.base import (
+    DEFAULT_MAX_NFEV,
+    DEFAULT_MAX_WALL_TIME,
+    CHARTS,
+    IntegrationError,
+    Method,
+    MethodInfo,
+    Solution,
+    Tolerances,
+    available_methods,
+    get_method,
+    register_method,
+)
 
 _LOADED = False
 

@@ -56,11 +56,19 @@ def auto_method(chart: str, body: Body) -> MethodChoice:
     """The method ``auto`` tries first in ``chart`` (``"two-polar"`` or ``"regular"``) for ``body``."""
     if chart == "two-polar":
         if body.compiled:
-            return MethodChoice("DOP853-numba", "auto: the compiled DOP853, fastest in the two-polar chart at every error (work-precision chart)")
-        return MethodChoice("DOP853", "auto: scipy DOP853 (a custom potential runs Python code, which the compiled methods refuse)")
+            return MethodChoice(
+                "DOP853-numba",
+                "auto: the compiled DOP853, fastest in the two-polar chart at every error (work-precision chart)",
+            )
+        return MethodChoice(
+            "DOP853", "auto: scipy DOP853 (a custom potential runs Python code, which the compiled methods refuse)"
+        )
     if chart == "regular":
-        return MethodChoice(RATTLE_AUTO, "auto: compiled RATTLE-kahanli6 in the regular chart (fastest near lambda = mu, work-precision chart), "
-                                         "step halved until the Richardson error estimate meets rtol/atol")
+        return MethodChoice(
+            RATTLE_AUTO,
+            "auto: compiled RATTLE-kahanli6 in the regular chart (fastest near lambda = mu, work-precision chart), "
+            "step halved until the Richardson error estimate meets rtol/atol",
+        )
     raise ValueError(f"model: method='auto' chooses within the full models two-polar and regular, got {chart!r}")
 
 
@@ -70,7 +78,9 @@ def _error_ratio(fine: np.ndarray, coarse: np.ndarray, tol: Tolerances) -> float
     return float(np.max(est / (tol.atol + tol.rtol * np.abs(fine))))
 
 
-def rattle_to_tolerance(body: Body, y0: np.ndarray, times: np.ndarray, tol: Tolerances, *, with_rotation: bool = False) -> tuple[Solution, float, float]:
+def rattle_to_tolerance(
+    body: Body, y0: np.ndarray, times: np.ndarray, tol: Tolerances, *, with_rotation: bool = False
+) -> tuple[Solution, float, float]:
     """RATTLE-kahanli6 at the largest step h = FIRST_STEP / 2^k whose error estimate meets ``tol``.
 
     Returns (solution at h, h, the estimated error ratio ≤ 1). Raises ValueError where RATTLE does
@@ -99,12 +109,17 @@ def rattle_to_tolerance(body: Body, y0: np.ndarray, times: np.ndarray, tol: Tole
                 return sol, h, ratio
         coarse = sol
         h /= 2
-    raise last_error or IntegrationError(f"no step down to {MIN_STEP:g} met rtol = {tol.rtol:g}, atol = {tol.atol:g}",
-                                         t=float(times[0]), method=RATTLE_AUTO, kind="budget")
+    raise last_error or IntegrationError(
+        f"no step down to {MIN_STEP:g} met rtol = {tol.rtol:g}, atol = {tol.atol:g}",
+        t=float(times[0]),
+        method=RATTLE_AUTO,
+        kind="budget",
+    )
 
 
-def integrate_auto(chart: str, body: Body, y0: np.ndarray, times: np.ndarray, tol: Tolerances, *,
-                   with_rotation: bool = False) -> tuple[Solution, str, dict]:
+def integrate_auto(
+    chart: str, body: Body, y0: np.ndarray, times: np.ndarray, tol: Tolerances, *, with_rotation: bool = False
+) -> tuple[Solution, str, dict]:
     """Integrate with the method ``auto`` picks in ``chart``; returns (solution, method name, meta entries).
 
     ``meta``: ``method_requested`` ("auto"), ``method_reason`` and, for RATTLE, ``auto_step`` and
@@ -112,7 +127,11 @@ def integrate_auto(chart: str, body: Body, y0: np.ndarray, times: np.ndarray, to
     """
     choice = auto_method(chart, body)
     if choice.method != RATTLE_AUTO:
-        return get_method(choice.method).integrate(body, y0, times, tol=tol, with_rotation=with_rotation), choice.method, choice.as_meta()
+        return (
+            get_method(choice.method).integrate(body, y0, times, tol=tol, with_rotation=with_rotation),
+            choice.method,
+            choice.as_meta(),
+        )
     try:
         sol, h, ratio = rattle_to_tolerance(body, y0, times, tol, with_rotation=with_rotation)
         return sol, RATTLE_AUTO, {**choice.as_meta(), "auto_step": h, "auto_error_estimate": ratio}

@@ -108,12 +108,19 @@ class Tolerances:
             if step > v.T_END_MAX:
                 raise ValueError(f"step: must lie in (0, {v.T_END_MAX:g}], got {step!r}")
             object.__setattr__(self, "step", step)
-        if not (isinstance(self.energy_tol, (int, float, np.integer, np.floating)) and not isinstance(self.energy_tol, bool)
-                and (self.energy_tol == np.inf or (math.isfinite(float(self.energy_tol)) and self.energy_tol > 0))):
-            raise ValueError(f"energy_tol: must be a number > 0 or inf (allowed range (0, inf]), got {self.energy_tol!r}")
+        if not (
+            isinstance(self.energy_tol, (int, float, np.integer, np.floating))
+            and not isinstance(self.energy_tol, bool)
+            and (self.energy_tol == np.inf or (math.isfinite(float(self.energy_tol)) and self.energy_tol > 0))
+        ):
+            raise ValueError(
+                f"energy_tol: must be a number > 0 or inf (allowed range (0, inf]), got {self.energy_tol!r}"
+            )
         object.__setattr__(self, "energy_tol", float(self.energy_tol))
         object.__setattr__(self, "max_nfev", v.integer("max_nfev", self.max_nfev, low=1, high=10**12))
-        object.__setattr__(self, "max_wall_time", v.number("max_wall_time", self.max_wall_time, positive=True, high=v.MAX_SECONDS))
+        object.__setattr__(
+            self, "max_wall_time", v.number("max_wall_time", self.max_wall_time, positive=True, high=v.MAX_SECONDS)
+        )
 
 
 def check_step(info: "MethodInfo", tol: Tolerances) -> float:
@@ -133,7 +140,9 @@ def budget_error(*, t: float, method: str, used: str, tol: Tolerances) -> Integr
     return IntegrationError(
         f"work budget exhausted ({used}; budget max_nfev = {tol.max_nfev}, max_wall_time = {tol.max_wall_time:g} s — "
         "raise them (max_nfev=, max_wall_time=; CLI --max-nfev, --max-seconds) or shorten t_end)",
-        t=t, method=method, kind="budget",
+        t=t,
+        method=method,
+        kind="budget",
     )
 
 

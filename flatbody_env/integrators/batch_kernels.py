@@ -84,8 +84,27 @@ def rhs_lanes(X, U, P, F):
         rho = X[9 * BLOCK + k]
         v, gl, gm, gr = potential_kernel(kind, c1, c2, a, b, lam, mu, rho)
         (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, w1, w2, w3, thd, ld, md, rd, f1, f2, f3) = rhs_iso(
-            X[k], X[BLOCK + k], X[2 * BLOCK + k], X[3 * BLOCK + k], X[4 * BLOCK + k], X[5 * BLOCK + k], X[6 * BLOCK + k], lam, mu, rho,
-            U[k], U[BLOCK + k], U[2 * BLOCK + k], U[3 * BLOCK + k], J, J3, conv, gl, gm, gr)
+            X[k],
+            X[BLOCK + k],
+            X[2 * BLOCK + k],
+            X[3 * BLOCK + k],
+            X[4 * BLOCK + k],
+            X[5 * BLOCK + k],
+            X[6 * BLOCK + k],
+            lam,
+            mu,
+            rho,
+            U[k],
+            U[BLOCK + k],
+            U[2 * BLOCK + k],
+            U[3 * BLOCK + k],
+            J,
+            J3,
+            conv,
+            gl,
+            gm,
+            gr,
+        )
         F[k] = d0
         F[BLOCK + k] = d1
         F[2 * BLOCK + k] = d2
@@ -121,10 +140,10 @@ def combine_lanes(KS, Y, HH, row, OUT, ACC):
         c1 = STAGE_C[row, q + 1] if m > 1 else 0.0
         c2 = STAGE_C[row, q + 2] if m > 2 else 0.0
         c3 = STAGE_C[row, q + 3] if m > 3 else 0.0
-        K0 = KS[j0 * S:(j0 + 1) * S]
-        K1 = KS[j1 * S:(j1 + 1) * S]
-        K2 = KS[j2 * S:(j2 + 1) * S]
-        K3 = KS[j3 * S:(j3 + 1) * S]
+        K0 = KS[j0 * S : (j0 + 1) * S]
+        K1 = KS[j1 * S : (j1 + 1) * S]
+        K2 = KS[j2 * S : (j2 + 1) * S]
+        K3 = KS[j3 * S : (j3 + 1) * S]
         if m == 4:
             for x in range(S):
                 ACC[x] = ACC[x] + K0[x] * c0 + K1[x] * c1 + K2[x] * c2 + K3[x] * c3
@@ -156,7 +175,7 @@ def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3)
     rhs_lanes(Y, U, P, KS[0:S])
     for s in range(1, 12):
         combine_lanes(KS, Y, HH, s, YT, ACC)
-        rhs_lanes(YT, U, P, KS[s * S:(s + 1) * S])
+        rhs_lanes(YT, U, P, KS[s * S : (s + 1) * S])
     combine_lanes(KS, Y, HH, 12, OUT, ACC)
     for x in range(S):
         A5[x] = 0.0
@@ -165,10 +184,10 @@ def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3)
     q = 0
     while q < n:  # the error sums, four stages per pass (as in combine_lanes), both estimates at once
         if n - q >= 4:
-            K0 = KS[ERROR_J[q] * S:(ERROR_J[q] + 1) * S]
-            K1 = KS[ERROR_J[q + 1] * S:(ERROR_J[q + 1] + 1) * S]
-            K2 = KS[ERROR_J[q + 2] * S:(ERROR_J[q + 2] + 1) * S]
-            K3 = KS[ERROR_J[q + 3] * S:(ERROR_J[q + 3] + 1) * S]
+            K0 = KS[ERROR_J[q] * S : (ERROR_J[q] + 1) * S]
+            K1 = KS[ERROR_J[q + 1] * S : (ERROR_J[q + 1] + 1) * S]
+            K2 = KS[ERROR_J[q + 2] * S : (ERROR_J[q + 2] + 1) * S]
+            K3 = KS[ERROR_J[q + 3] * S : (ERROR_J[q + 3] + 1) * S]
             a0, a1, a2, a3 = ERROR_E5[q], ERROR_E5[q + 1], ERROR_E5[q + 2], ERROR_E5[q + 3]
             b0, b1, b2, b3 = ERROR_E3[q], ERROR_E3[q + 1], ERROR_E3[q + 2], ERROR_E3[q + 3]
             for x in range(S):
@@ -180,7 +199,7 @@ def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3)
                 A3[x] = A3[x] + k0 * b0 + k1 * b1 + k2 * b2 + k3 * b3
             q += 4
         else:
-            K0 = KS[ERROR_J[q] * S:(ERROR_J[q] + 1) * S]
+            K0 = KS[ERROR_J[q] * S : (ERROR_J[q] + 1) * S]
             a0 = ERROR_E5[q]
             b0 = ERROR_E3[q]
             for x in range(S):
@@ -206,8 +225,43 @@ def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3)
         E5S[k] = 0.0 if (e5 == 0.0 and e3 == 0.0) else abs(H[k]) * e5 / math.sqrt((e5 + 0.01 * e3) * 11)
 
 
-def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, ERR, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB,
-                          LANES, W, yl, ul, K1, ynew, ytmp, f, out1, vel, force, counters):
+def dop853_batch_env_step(
+    Y,
+    U,
+    P,
+    dt,
+    rtol,
+    atol,
+    energy_tol,
+    OUT,
+    STATUS,
+    NFEV,
+    ERR,
+    YB,
+    UB,
+    OB,
+    KS,
+    YT,
+    EB,
+    E3S,
+    ACC,
+    HH,
+    A5,
+    A3,
+    HB,
+    LANES,
+    W,
+    yl,
+    ul,
+    K1,
+    ynew,
+    ytmp,
+    f,
+    out1,
+    vel,
+    force,
+    counters,
+):
     """One env step of DOP853 (first step guess dt) for N lanes: the fused step on blocks of
     :data:`BLOCK` lanes copied into the flat block arrays ``YB``, ``UB``, ``OB`` (the last block
     padded with its first lane), then the lanes it cannot accept redone by :func:`dop853_redo_lanes`
@@ -218,8 +272,32 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
     check_energy = energy_tol < np.inf or (counters.size > 3 and counters[3] < FUSED_MAX_NFEV)
     if check_energy:
         for k in range(n):
-            scalar_lane(k, DOP853_KIND, NO_COEFFS, Y, U, P, dt, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, yl, ul, out1, K1, ynew, ytmp,
-                        vel, force, f, counters)
+            scalar_lane(
+                k,
+                DOP853_KIND,
+                NO_COEFFS,
+                Y,
+                U,
+                P,
+                dt,
+                dt,
+                rtol,
+                atol,
+                energy_tol,
+                OUT,
+                STATUS,
+                NFEV,
+                yl,
+                ul,
+                out1,
+                K1,
+                ynew,
+                ytmp,
+                vel,
+                force,
+                f,
+                counters,
+            )
         return
     for j in range(BLOCK):
         HB[j] = dt
@@ -247,8 +325,14 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
                     if not math.isfinite(OB[i * BLOCK + j]):
                         finite = False
                 gap_sign = 1.0 if YB[7 * BLOCK + j] > YB[8 * BLOCK + j] else -1.0
-                STATUS[start + j] = state_code(finite, OB[7 * BLOCK + j], OB[8 * BLOCK + j], OB[9 * BLOCK + j], gap_sign,
-                                               not crossable(P[0], P[1], YB[2 * BLOCK + j], YB[3 * BLOCK + j], UB[2 * BLOCK + j]))
+                STATUS[start + j] = state_code(
+                    finite,
+                    OB[7 * BLOCK + j],
+                    OB[8 * BLOCK + j],
+                    OB[9 * BLOCK + j],
+                    gap_sign,
+                    not crossable(P[0], P[1], YB[2 * BLOCK + j], YB[3 * BLOCK + j], UB[2 * BLOCK + j]),
+                )
                 NFEV[start + j] = 13
     nl = 0
     for k in range(n):
@@ -256,8 +340,43 @@ def dop853_batch_env_step(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV
             LANES[nl] = k
             nl += 1
     if nl > 0:
-        dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
-                          ul, K1, ynew, ytmp, f, out1, vel, force, counters)
+        dop853_redo_lanes(
+            Y,
+            U,
+            P,
+            dt,
+            rtol,
+            atol,
+            LANES,
+            nl,
+            ERR,
+            OUT,
+            STATUS,
+            NFEV,
+            YB,
+            UB,
+            OB,
+            KS,
+            YT,
+            EB,
+            E3S,
+            ACC,
+            HH,
+            A5,
+            A3,
+            HB,
+            W,
+            yl,
+            ul,
+            K1,
+            ynew,
+            ytmp,
+            f,
+            out1,
+            vel,
+            force,
+            counters,
+        )
 
 
 MAX_ROUNDS = 64
@@ -270,8 +389,43 @@ a lane handed to the scalar kernel runs with it from its start. Either way every
 count are the scalar kernel's with the same budget, bit for bit."""
 
 
-def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV, YB, UB, OB, KS, YT, EB, E3S, ACC, HH, A5, A3, HB, W, yl,
-                      ul, K1, ynew, ytmp, f, out1, vel, force, counters):
+def dop853_redo_lanes(
+    Y,
+    U,
+    P,
+    dt,
+    rtol,
+    atol,
+    LANES,
+    nl,
+    ERR,
+    OUT,
+    STATUS,
+    NFEV,
+    YB,
+    UB,
+    OB,
+    KS,
+    YT,
+    EB,
+    E3S,
+    ACC,
+    HH,
+    A5,
+    A3,
+    HB,
+    W,
+    yl,
+    ul,
+    K1,
+    ynew,
+    ytmp,
+    f,
+    out1,
+    vel,
+    force,
+    counters,
+):
     """The lanes ``LANES[:nl]``, whose single step h = dt was rejected with the error norms ``ERR``,
     over one env step with the scalar kernel's step control, fused.
 
@@ -299,7 +453,7 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
             for i in range(4):
                 UB[i * BLOCK + j] = U[i, k]
             # the first attempt (h = dt) was the fused step's, rejected with the error ERR[k]: go on from there
-            factor = _SAFETY * ERR[k]**_ERROR_EXPONENT
+            factor = _SAFETY * ERR[k] ** _ERROR_EXPONENT
             if not factor > _MIN_FACTOR:
                 factor = _MIN_FACTOR
             W[0, j] = 0.0
@@ -372,8 +526,32 @@ def dop853_redo_lanes(Y, U, P, dt, rtol, atol, LANES, nl, ERR, OUT, STATUS, NFEV
         for j in range(m):
             k = LANES[start + j]
             if W[3, j] != 0.0:  # collapsed or unfinished: the scalar kernel from the start
-                scalar_lane(k, DOP853_KIND, NO_COEFFS, Y, U, P, dt, dt, rtol, atol, np.inf, OUT, STATUS, NFEV, yl, ul, out1, K1, ynew, ytmp,
-                            vel, force, f, counters)
+                scalar_lane(
+                    k,
+                    DOP853_KIND,
+                    NO_COEFFS,
+                    Y,
+                    U,
+                    P,
+                    dt,
+                    dt,
+                    rtol,
+                    atol,
+                    np.inf,
+                    OUT,
+                    STATUS,
+                    NFEV,
+                    yl,
+                    ul,
+                    out1,
+                    K1,
+                    ynew,
+                    ytmp,
+                    vel,
+                    force,
+                    f,
+                    counters,
+                )
                 continue
             for i in range(11):
                 OUT[i, k] = YB[i * BLOCK + j]
@@ -399,7 +577,9 @@ _ERROR_EXPONENT = _tk._ERROR_EXPONENT
 
 # compiled with every callee re-bound recursively (the physics kernels included); the rejected lanes go on
 # in blocks of REDO_BLOCK lanes: the same code with BLOCK (and S) re-bound
-dop853_batch_env_step_c = retarget(dop853_batch_env_step, dop853_redo_lanes=retarget(dop853_redo_lanes, BLOCK=REDO_BLOCK, S=N * REDO_BLOCK))
+dop853_batch_env_step_c = retarget(
+    dop853_batch_env_step, dop853_redo_lanes=retarget(dop853_redo_lanes, BLOCK=REDO_BLOCK, S=N * REDO_BLOCK)
+)
 """Compiled :func:`dop853_batch_env_step`."""
 
 
@@ -412,10 +592,33 @@ class DOP853Batch:
 
     def _alloc(self) -> None:
         B, Sz = BLOCK, S
-        self.work = (np.empty(self.n), np.empty(Sz), np.empty(4 * B), np.empty(Sz), np.empty(12 * Sz), np.empty(Sz), np.empty(B), np.empty(B),
-                     np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(Sz), np.empty(B), np.empty(self.n, np.int64), np.empty((9, B)),
-                     np.empty(N), np.empty(4), np.empty((13, N)), np.empty(N), np.empty(N), np.empty(N), np.empty(N), np.empty(7), np.empty(4),
-                     np.zeros(4, np.int64))  # counters: [nfev, steps, rejected, budget of nfev per lane]
+        self.work = (
+            np.empty(self.n),
+            np.empty(Sz),
+            np.empty(4 * B),
+            np.empty(Sz),
+            np.empty(12 * Sz),
+            np.empty(Sz),
+            np.empty(B),
+            np.empty(B),
+            np.empty(Sz),
+            np.empty(Sz),
+            np.empty(Sz),
+            np.empty(Sz),
+            np.empty(B),
+            np.empty(self.n, np.int64),
+            np.empty((9, B)),
+            np.empty(N),
+            np.empty(4),
+            np.empty((13, N)),
+            np.empty(N),
+            np.empty(N),
+            np.empty(N),
+            np.empty(N),
+            np.empty(7),
+            np.empty(4),
+            np.zeros(4, np.int64),
+        )  # counters: [nfev, steps, rejected, budget of nfev per lane]
 
     def __getstate__(self):
         return {"n": self.n}
@@ -435,5 +638,17 @@ class DOP853Batch:
         dop853_batch_env_step_c(Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, *self.work)
 
 
-__all__ = ["BLOCK", "DOP853Batch", "FUSED_MAX_NFEV", "MAX_ROUNDS", "REDO_BLOCK", "S", "combine_lanes", "dop853_batch_env_step", "dop853_batch_env_step_c",
-           "dop853_lanes", "dop853_redo_lanes", "rhs_lanes"]
+__all__ = [
+    "BLOCK",
+    "DOP853Batch",
+    "FUSED_MAX_NFEV",
+    "MAX_ROUNDS",
+    "REDO_BLOCK",
+    "S",
+    "combine_lanes",
+    "dop853_batch_env_step",
+    "dop853_batch_env_step_c",
+    "dop853_lanes",
+    "dop853_redo_lanes",
+    "rhs_lanes",
+]

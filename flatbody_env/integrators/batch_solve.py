@@ -48,8 +48,33 @@ CHUNK = 32
 
 # --------------------------------------------------------------------------------------------- drivers
 @njit
-def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_nfev, Y, STATUS, NFEV, TFAIL,
-               y, f, K, ynew, ytmp, vel, force, counters, fail):
+def solve_body(
+    b,
+    kind,
+    coeffs,
+    y0,
+    times,
+    u,
+    P,
+    h,
+    rtol,
+    atol,
+    energy_tol,
+    max_nfev,
+    Y,
+    STATUS,
+    NFEV,
+    TFAIL,
+    y,
+    f,
+    K,
+    ynew,
+    ytmp,
+    vel,
+    force,
+    counters,
+    fail,
+):
     """Body ``b``'s trajectory from ``y0`` (11,) through ``times`` into ``Y`` (11, T) (a view of the batch
     output); STATUS[b], NFEV[b], TFAIL[b] (t of the failure, NaN on success) receive its outcome.
     Rows from the failing one on are NaN: a failed body's state is never returned as physics."""
@@ -61,7 +86,9 @@ def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_
     fail[1] = 0.0
     fail[2] = 0.0
     if kind == DOP853_KIND:
-        st = dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force)
+        st = dop853_solve_into(
+            y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force
+        )
     else:
         st = fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, K, vel, force)
     STATUS[b] = st
@@ -76,8 +103,32 @@ def solve_body(b, kind, coeffs, y0, times, u, P, h, rtol, atol, energy_tol, max_
 
 
 @njit
-def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
-                  y, u, out, K, ynew, ytmp, vel, force, f, counters):
+def env_step_body(
+    b,
+    kind,
+    coeffs,
+    Y,
+    U,
+    P,
+    dt,
+    h,
+    rtol,
+    atol,
+    energy_tol,
+    OUT,
+    STATUS,
+    NFEV,
+    y,
+    u,
+    out,
+    K,
+    ynew,
+    ytmp,
+    vel,
+    force,
+    f,
+    counters,
+):
     """Body ``b``'s environment step: column b of Y (11, N) and U (4, N) → column b of OUT, STATUS[b],
     NFEV[b]; the env step of :func:`~.twopolar_kernels.env_step_into`. ``counters`` (3,) or (4,): the
     first three are reset here; a fourth entry is the step's budget of RHS evaluations (DOP853)."""
@@ -88,7 +139,9 @@ def env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, 
     counters[0] = 0
     counters[1] = 0
     counters[2] = 0
-    STATUS[b] = env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters)
+    STATUS[b] = env_step_into(
+        kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel, force, f, counters
+    )
     NFEV[b] = counters[0]
     for i in range(N):
         OUT[i, b] = out[i]
@@ -111,8 +164,33 @@ def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nf
         counters = np.zeros(4, np.int64)
         fail = np.zeros(3)
         for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            solve_body(b, kind, coeffs, Y0[b], times, u, P, h, rtol, atol, ENERGY_TOL[b], max_nfev, OUT[b].T, STATUS, NFEV, TFAIL,
-                       y, f, K, ynew, ytmp, vel, force, counters, fail)
+            solve_body(
+                b,
+                kind,
+                coeffs,
+                Y0[b],
+                times,
+                u,
+                P,
+                h,
+                rtol,
+                atol,
+                ENERGY_TOL[b],
+                max_nfev,
+                OUT[b].T,
+                STATUS,
+                NFEV,
+                TFAIL,
+                y,
+                f,
+                K,
+                ynew,
+                ytmp,
+                vel,
+                force,
+                counters,
+                fail,
+            )
 
 
 NO_BUDGET = 2**62
@@ -133,9 +211,36 @@ def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, 
     force = np.empty(4)
     f = np.empty(N)
     counters = np.zeros(4, np.int64)
-    counters[3] = max_nfev  # each body's budget of RHS evaluations in this step (the DOP853 kernel checks it before every step)
+    counters[3] = (
+        max_nfev  # each body's budget of RHS evaluations in this step (the DOP853 kernel checks it before every step)
+    )
     for b in range(Y.shape[1]):
-        env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, y, u, out, K, ynew, ytmp, vel, force, f, counters)
+        env_step_body(
+            b,
+            kind,
+            coeffs,
+            Y,
+            U,
+            P,
+            dt,
+            h,
+            rtol,
+            atol,
+            energy_tol,
+            OUT,
+            STATUS,
+            NFEV,
+            y,
+            u,
+            out,
+            K,
+            ynew,
+            ytmp,
+            vel,
+            force,
+            f,
+            counters,
+        )
 
 
 @njit(parallel=True)
@@ -158,8 +263,32 @@ def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, ST
         counters = np.zeros(4, np.int64)
         counters[3] = max_nfev  # each body's budget of RHS evaluations in this step
         for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
-                          y, u, out, K, ynew, ytmp, vel, force, f, counters)
+            env_step_body(
+                b,
+                kind,
+                coeffs,
+                Y,
+                U,
+                P,
+                dt,
+                h,
+                rtol,
+                atol,
+                energy_tol,
+                OUT,
+                STATUS,
+                NFEV,
+                y,
+                u,
+                out,
+                K,
+                ynew,
+                ytmp,
+                vel,
+                force,
+                f,
+                counters,
+            )
 
 
 @njit(parallel=True)
@@ -173,6 +302,19 @@ def batch_energy(Y0, P, H):
             H[b] = energy_kernel(Y0[b], P, vel, force)
 
 
-__all__ = ["BATCH_METHODS", "CHUNK", "DOP853_KIND", "KIND", "NO_BUDGET", "RK4_KIND", "SPLIT_KIND", "STRANG", "batch_energy", "batch_env_step",
-           "batch_env_step_serial", "batch_solve",
-           "env_step_body", "solve_body"]
+__all__ = [
+    "BATCH_METHODS",
+    "CHUNK",
+    "DOP853_KIND",
+    "KIND",
+    "NO_BUDGET",
+    "RK4_KIND",
+    "SPLIT_KIND",
+    "STRANG",
+    "batch_energy",
+    "batch_env_step",
+    "batch_env_step_serial",
+    "batch_solve",
+    "env_step_body",
+    "solve_body",
+]

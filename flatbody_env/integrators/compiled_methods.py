@@ -68,7 +68,14 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.kinematics import Decomposition
 from flatbody_env.physics.potentials import V2
 from flatbody_env.physics.regular import paper_from_regular, regular_from_paper
-from flatbody_env.integrators.base import IntegrationError, Solution, Tolerances, budget_error, check_step, register_method
+from flatbody_env.integrators.base import (
+    IntegrationError,
+    Solution,
+    Tolerances,
+    budget_error,
+    check_step,
+    register_method,
+)
 from flatbody_env.integrators.failure import KINDS, raise_for
 from flatbody_env.integrators.specs import BY_NAME, ENV_METHODS, SPECS, MethodSpec
 
@@ -101,8 +108,12 @@ def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol
     spans = np.diff(times)
     steps = float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
     if steps * stages > tol.max_nfev:
-        raise budget_error(t=float(times[0]), method=name, tol=tol,
-                           used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]")
+        raise budget_error(
+            t=float(times[0]),
+            method=name,
+            tol=tol,
+            used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]",
+        )
     return steps * stages
 
 
@@ -153,7 +164,12 @@ def _check_fixed_wall_time(name: str, run_probe, total_nfev: float, tol: Toleran
     n = max(1, int(run_probe()))
     per_eval = (time.perf_counter() - start) / n
     if total_nfev * per_eval > tol.max_wall_time:
-        raise budget_error(t=t0, method=name, tol=tol, used=f"~{total_nfev * per_eval:.3g} s predicted for {total_nfev:.6g} RHS evaluations")
+        raise budget_error(
+            t=t0,
+            method=name,
+            tol=tol,
+            used=f"~{total_nfev * per_eval:.3g} s predicted for {total_nfev:.6g} RHS evaluations",
+        )
 
 
 def _times(times) -> np.ndarray:
@@ -206,6 +222,7 @@ class CompiledTwoPolar:
         start = time.perf_counter()
         wall = False
         if self.kind == "dop853":
+
             def run(budget: int) -> int:  # from the first time, within ``budget`` RHS evaluations
                 counters[:] = (0, 0, 0, budget)
                 fail[:] = 0.0
@@ -213,24 +230,40 @@ class CompiledTwoPolar:
 
             st, wall = _run_within_budget(run, counters, tol)  # max_nfev and max_wall_time
         else:
+
             def probe() -> int:  # a few hundred steps from the first time: the cost of one RHS evaluation
                 c = np.zeros(4, np.int64)
                 span = min(256 * h, times[-1] - times[0])
-                fixed(self.spec.code, self.coeffs, y0, np.array([times[0], times[0] + span]), uu, P, h, np.inf, np.empty((y0.size, 2)), c,
-                      np.zeros(2))
+                fixed(
+                    self.spec.code,
+                    self.coeffs,
+                    y0,
+                    np.array([times[0], times[0] + span]),
+                    uu,
+                    P,
+                    h,
+                    np.inf,
+                    np.empty((y0.size, 2)),
+                    c,
+                    np.zeros(2),
+                )
                 return int(c[0])
 
             _check_fixed_wall_time(name, probe, total, tol, float(times[0]))
             st = fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail)
         if KINDS[st] == "budget":
             used = f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {time.perf_counter() - start:.3g} s"
-            raise budget_error(t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else ""))
+            raise budget_error(
+                t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else "")
+            )
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
         rotation = np.ascontiguousarray(Z[11:].T).reshape(times.size, 3, 3) if with_rotation else None
-        return Solution(t=times.copy(), Y=np.ascontiguousarray(Z[:11]), rotation=rotation, nfev=int(counters[0]), stats=stats)
+        return Solution(
+            t=times.copy(), Y=np.ascontiguousarray(Z[:11]), rotation=rotation, nfev=int(counters[0]), stats=stats
+        )
 
     def check_env(self, body: Body, tol: Tolerances) -> float:
         """The method's refusals (custom potential, step setting, J1 ≠ J2 for a splitting); returns the fixed step (0 if adaptive)."""
@@ -238,7 +271,9 @@ class CompiledTwoPolar:
         _check_compiled_body(body, name)
         h = check_step(self.info, tol)
         if self.kind == "split" and not body.inertia.is_isotropic:
-            raise ValueError(f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba")
+            raise ValueError(
+                f"params: {name} (Poisson splitting, docs/physics.md §10) needs J1 = J2; use RK4 or DOP853-numba"
+            )
         return h
 
 
@@ -255,7 +290,9 @@ class CompiledRattle:
         _check_compiled_body(body, name)
         h = check_step(self.info, tol)
         if body.spin_convention != "corrected":
-            raise ValueError("spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method")
+            raise ValueError(
+                "spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method"
+            )
         if isinstance(body.potential, V2) and body.potential.c != body.potential.d:
             raise ValueError(
                 f"potential: V2 with c != d is no function of the invariants (erratum E9); {name} needs c = d — "
@@ -282,34 +319,48 @@ class CompiledRattle:
         fail = np.zeros(2)
         from flatbody_env.integrators.rattle_kernels import rattle_solve
 
-        st = rattle_solve(self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail)
+        st = rattle_solve(
+            self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail
+        )
         if KINDS[st] == "chart-singularity":
             raise IntegrationError(
                 "the paper chart's frame could not be followed through lambda ~ mu (the regular state itself is fine; "
                 "ask for output times away from the pass or a smaller step)",
-                t=fail[0], method=name, kind="chart-singularity",
+                t=fail[0],
+                method=name,
+                kind="chart-singularity",
             )
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
         Y, rotation = paper_states(Z, DEC, body, times, name)
         return Solution(
-            t=times.copy(), Y=Y, rotation=rotation if with_rotation else None, nfev=int(counters[0]),
+            t=times.copy(),
+            Y=Y,
+            rotation=rotation if with_rotation else None,
+            nfev=int(counters[0]),
             stats={"steps": int(counters[1]), "regular": Z},
         )
 
 
-def paper_states(Z: np.ndarray, DEC: np.ndarray, body: Body, times: np.ndarray, name: str = "") -> tuple[np.ndarray, np.ndarray]:
+def paper_states(
+    Z: np.ndarray, DEC: np.ndarray, body: Body, times: np.ndarray, name: str = ""
+) -> tuple[np.ndarray, np.ndarray]:
     """Paper states (11, n) and R (n, 3, 3) from regular states Z (18, n) and followed decompositions DEC (13, n)."""
     n = Z.shape[1]
     Y = np.empty((11, n))
     rotation = np.empty((n, 3, 3))
     for k in range(n):
         d = DEC[:, k]
-        dec = Decomposition(R=d[:9].reshape(3, 3).copy(), lam=float(d[9]), mu=float(d[10]), rho=float(d[11]), theta=float(d[12]))
+        dec = Decomposition(
+            R=d[:9].reshape(3, 3).copy(), lam=float(d[9]), mu=float(d[10]), rho=float(d[11]), theta=float(d[12])
+        )
         try:
             Y[:, k], _ = paper_from_regular(Z[:, k], body, decomposition=dec)
         except ValueError as exc:
             raise IntegrationError(
-                f"cannot express the state in the paper's chart: {exc}", t=times[k], method=name, kind="chart-singularity"
+                f"cannot express the state in the paper's chart: {exc}",
+                t=times[k],
+                method=name,
+                kind="chart-singularity",
             ) from exc
         rotation[k] = dec.R
     return Y, rotation
@@ -355,14 +406,23 @@ def env_stepper(name: str) -> EnvStepper:
     if spec.kind == "rattle":
         from flatbody_env.integrators import rattle_kernels as _rk
 
-        return EnvStepper(name=name, step=_rk.rattle_env_step, batch=_rk.batch_rattle_env_step, state="regular", fixed_step=True)
+        return EnvStepper(
+            name=name, step=_rk.rattle_env_step, batch=_rk.batch_rattle_env_step, state="regular", fixed_step=True
+        )
     from flatbody_env.integrators.batch_solve import batch_env_step_serial
     from flatbody_env.integrators.twopolar_kernels import env_step
 
     step = functools.partial(env_step, spec.code, spec.coeffs)
     batch = functools.partial(batch_env_step_serial, spec.code, spec.coeffs)
-    return EnvStepper(name=name, step=functools.partial(_uncounted, step), batch=functools.partial(_uncounted, batch), state="paper",
-                      fixed_step=not spec.info.adaptive, step_counted=step, batch_counted=batch)
+    return EnvStepper(
+        name=name,
+        step=functools.partial(_uncounted, step),
+        batch=functools.partial(_uncounted, batch),
+        state="paper",
+        fixed_step=not spec.info.adaptive,
+        step_counted=step,
+        batch_counted=batch,
+    )
 
 
 def warm_up(names=None) -> None:
@@ -390,4 +450,13 @@ def warm_up(names=None) -> None:
         meth.integrate(body, y, times, tol=tol)
 
 
-__all__ = ["CompiledRattle", "CompiledTwoPolar", "ENV_METHODS", "EnvStepper", "env_stepper", "kernel_params", "paper_states", "warm_up"]
+__all__ = [
+    "CompiledRattle",
+    "CompiledTwoPolar",
+    "ENV_METHODS",
+    "EnvStepper",
+    "env_stepper",
+    "kernel_params",
+    "paper_states",
+    "warm_up",
+]

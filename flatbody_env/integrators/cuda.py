@@ -71,8 +71,10 @@ def _import_cuda():
     try:
         from numba import cuda as module
     except Exception as exc:  # ImportError, or numba-cuda on numpy >= 2.5 (AttributeError: row_stack)
-        raise CudaUnavailableError(f"device: numba's CUDA target does not import ({type(exc).__name__}: {exc}); {INSTALL_HINT} "
-                                   "(numpy below 2.5 for numba-cuda 0.30)") from exc
+        raise CudaUnavailableError(
+            f"device: numba's CUDA target does not import ({type(exc).__name__}: {exc}); {INSTALL_HINT} "
+            "(numpy below 2.5 for numba-cuda 0.30)"
+        ) from exc
     return module
 
 
@@ -114,10 +116,27 @@ def device_name() -> str:
 
 
 # --------------------------------------------------------------------------------------------- device twins
-_SCALAR_UFUNCS = {"sqrt": math.sqrt, "abs": math.fabs, "absolute": math.fabs, "fabs": math.fabs, "exp": math.exp, "log": math.log,
-                  "sin": math.sin, "cos": math.cos, "tan": math.tan, "arctan": math.atan, "arctan2": math.atan2, "hypot": math.hypot,
-                  "tanh": math.tanh, "floor": math.floor, "ceil": math.ceil, "isfinite": math.isfinite, "isnan": math.isnan,
-                  "isinf": math.isinf, "copysign": math.copysign}
+_SCALAR_UFUNCS = {
+    "sqrt": math.sqrt,
+    "abs": math.fabs,
+    "absolute": math.fabs,
+    "fabs": math.fabs,
+    "exp": math.exp,
+    "log": math.log,
+    "sin": math.sin,
+    "cos": math.cos,
+    "tan": math.tan,
+    "arctan": math.atan,
+    "arctan2": math.atan2,
+    "hypot": math.hypot,
+    "tanh": math.tanh,
+    "floor": math.floor,
+    "ceil": math.ceil,
+    "isfinite": math.isfinite,
+    "isnan": math.isnan,
+    "isinf": math.isinf,
+    "copysign": math.copysign,
+}
 
 
 def _device_numpy() -> types.ModuleType:
@@ -139,8 +158,9 @@ def _target() -> tuple[Target, dict]:
     :data:`DEVICE_NUMPY`, and the device side of the initial step (its CPU wrapper allocates) wherever a device
     function calls it."""
     module = require()
-    return Target("cuda", module.jit(device=True), share_compiled=False), dict(cuda=module, np=DEVICE_NUMPY,
-                                                                                dop853_initial_step=_dop853_initial_step_device)
+    return Target("cuda", module.jit(device=True), share_compiled=False), dict(
+        cuda=module, np=DEVICE_NUMPY, dop853_initial_step=_dop853_initial_step_device
+    )
 
 
 def device_twin(func):
@@ -174,8 +194,32 @@ def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, max_n
         f = cuda.local.array(11, float64)
         counters = cuda.local.array(4, int64)
         counters[3] = max_nfev
-        env_step_body(b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV,
-                      y, u, out, K, ynew, ytmp, vel, force, f, counters)
+        env_step_body(
+            b,
+            kind,
+            coeffs,
+            Y,
+            U,
+            P,
+            dt,
+            h,
+            rtol,
+            atol,
+            energy_tol,
+            OUT,
+            STATUS,
+            NFEV,
+            y,
+            u,
+            out,
+            K,
+            ynew,
+            ytmp,
+            vel,
+            force,
+            f,
+            counters,
+        )
 
 
 def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
@@ -191,15 +235,42 @@ def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_
         force = cuda.local.array(4, float64)
         counters = cuda.local.array(4, int64)
         fail = cuda.local.array(3, float64)
-        solve_body(b, kind, coeffs, Y0[:, b], times, u, P, h, rtol, atol, ENERGY_TOL[b], max_nfev, OUT[:, :, b], STATUS, NFEV, TFAIL,
-                   y, f, K, ynew, ytmp, vel, force, counters, fail)
+        solve_body(
+            b,
+            kind,
+            coeffs,
+            Y0[:, b],
+            times,
+            u,
+            P,
+            h,
+            rtol,
+            atol,
+            ENERGY_TOL[b],
+            max_nfev,
+            OUT[:, :, b],
+            STATUS,
+            NFEV,
+            TFAIL,
+            y,
+            f,
+            K,
+            ynew,
+            ytmp,
+            vel,
+            force,
+            counters,
+            fail,
+        )
 
 
 @functools.lru_cache(maxsize=1)
 def _kernels():
     target, constants = _target()
     module = constants["cuda"]
-    return module.jit(rebound(_env_step_kernel, target, **constants)), module.jit(rebound(_solve_kernel, target, **constants))
+    return module.jit(rebound(_env_step_kernel, target, **constants)), module.jit(
+        rebound(_solve_kernel, target, **constants)
+    )
 
 
 @functools.cache
@@ -222,8 +293,24 @@ def _method(method: str) -> tuple[int, np.ndarray]:
     return _bs.KIND[method]
 
 
-def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=np.inf, OUT=None, STATUS=None, NFEV=None,
-             threads_per_block=THREADS_PER_BLOCK, task=None, max_nfev=_bs.NO_BUDGET):
+def env_step(
+    method,
+    Y,
+    U,
+    P,
+    dt,
+    *,
+    h=0.0,
+    rtol=1e-11,
+    atol=1e-11,
+    energy_tol=np.inf,
+    OUT=None,
+    STATUS=None,
+    NFEV=None,
+    threads_per_block=THREADS_PER_BLOCK,
+    task=None,
+    max_nfev=_bs.NO_BUDGET,
+):
     """One environment step of N bodies on the GPU, one kernel launch.
 
     ``Y`` (11, N), ``U`` (4, N), ``P`` (9,) host or device arrays; outputs ``OUT`` (11, N), ``STATUS``,
@@ -240,9 +327,34 @@ def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=n
     (:func:`flatbody_env.env.device.step_body`); returns None."""
     if task is not None:
         blocks, threads = _blocks(Y.shape[1], threads_per_block)
-        task.cuda_kernels()[0][blocks, threads](task.kind, task.coeffs, U, Y, task.T, task.OBS, task.FINAL, task.INFO, task.I, task.ENDS, task.FLAGS, P,
-                                task.kcfg, task.scfg, task.limits, task.mask, float(dt), float(h), float(rtol), float(atol), float(energy_tol),
-                                task.max_episode_steps, 1 if task.same_step else 0, task.key[0], task.key[1], *task.table)
+        task.cuda_kernels()[0][blocks, threads](
+            task.kind,
+            task.coeffs,
+            U,
+            Y,
+            task.T,
+            task.OBS,
+            task.FINAL,
+            task.INFO,
+            task.I,
+            task.ENDS,
+            task.FLAGS,
+            P,
+            task.kcfg,
+            task.scfg,
+            task.limits,
+            task.mask,
+            float(dt),
+            float(h),
+            float(rtol),
+            float(atol),
+            float(energy_tol),
+            task.max_episode_steps,
+            1 if task.same_step else 0,
+            task.key[0],
+            task.key[1],
+            *task.table,
+        )
         return None
     kind, coeffs = _method(method)
     kernel, _ = _kernels()
@@ -254,8 +366,22 @@ def env_step(method, Y, U, P, dt, *, h=0.0, rtol=1e-11, atol=1e-11, energy_tol=n
     if NFEV is None:
         NFEV = cuda.device_array(n, np.int64)
     blocks, threads = _blocks(n, threads_per_block)
-    kernel[blocks, threads](kind, coeffs, Y, U, P, float(dt), float(h), float(rtol), float(atol), float(energy_tol), int(max_nfev), OUT, STATUS,
-                            NFEV)
+    kernel[blocks, threads](
+        kind,
+        coeffs,
+        Y,
+        U,
+        P,
+        float(dt),
+        float(h),
+        float(rtol),
+        float(atol),
+        float(energy_tol),
+        int(max_nfev),
+        OUT,
+        STATUS,
+        NFEV,
+    )
     return OUT, STATUS, NFEV
 
 
@@ -272,8 +398,23 @@ def solve(method, Y0, times, u, P, *, h, rtol, atol, energy_tol, max_nfev, threa
     d_NFEV = cuda.device_array(n, np.int64)
     d_TFAIL = cuda.device_array(n, np.float64)
     blocks, threads = _blocks(n, threads_per_block)
-    kernel[blocks, threads](kind, cuda.to_device(coeffs), d_Y0, cuda.to_device(times), cuda.to_device(u), cuda.to_device(P), float(h),
-                            float(rtol), float(atol), cuda.to_device(energy_tol), int(max_nfev), d_OUT, d_STATUS, d_NFEV, d_TFAIL)
+    kernel[blocks, threads](
+        kind,
+        cuda.to_device(coeffs),
+        d_Y0,
+        cuda.to_device(times),
+        cuda.to_device(u),
+        cuda.to_device(P),
+        float(h),
+        float(rtol),
+        float(atol),
+        cuda.to_device(energy_tol),
+        int(max_nfev),
+        d_OUT,
+        d_STATUS,
+        d_NFEV,
+        d_TFAIL,
+    )
     OUT = np.ascontiguousarray(d_OUT.copy_to_host().transpose(2, 1, 0))
     return OUT, d_STATUS.copy_to_host(), d_NFEV.copy_to_host(), d_TFAIL.copy_to_host()
 

@@ -56,12 +56,12 @@ def nonzero_terms(rows):
     for s, r in enumerate(rows):
         nz = np.flatnonzero(r)
         L[s] = nz.size
-        J[s, :nz.size] = nz
-        C[s, :nz.size] = r[nz]
+        J[s, : nz.size] = nz
+        C[s, : nz.size] = r[nz]
     return J, C, L
 
 
-STAGE_J, STAGE_C, STAGE_L = nonzero_terms([dop.A[s, :dop.N_STAGES] for s in range(dop.N_STAGES)] + [dop.B])
+STAGE_J, STAGE_C, STAGE_L = nonzero_terms([dop.A[s, : dop.N_STAGES] for s in range(dop.N_STAGES)] + [dop.B])
 """DOP853's stage sums without their zero terms: row s < 12 holds the nonzero a_sj (stage s's
 argument y + h Σ_j a_sj k_j), row 12 the nonzero b_j (the 8th-order solution); see :func:`nonzero_terms`."""
 ERROR_J = np.flatnonzero((dop.E5 != 0) | (dop.E3 != 0)).astype(np.int64)

@@ -85,5 +85,20 @@ def raise_for(status: int, *, t: float, method: str, detail: str = "") -> None:
     raise IntegrationError(reason, t=t, method=method, kind=KINDS[status] if 0 <= status < len(KINDS) else "failure")
 
 
-__all__ = ["KINDS", "MAX_TURN", "failure_reason", "raise_for", "OK", "NON_FINITE", "STEP_COLLAPSE", "CHART_SINGULARITY", "DOMAIN",
-           "ENERGY", "CONSTRAINT", "UNDER_RESOLVED", "BUDGET", "MAX_STEPS", "UNSUPPORTED"]
+__all__ = [
+    "KINDS",
+    "MAX_TURN",
+    "failure_reason",
+    "raise_for",
+    "OK",
+    "NON_FINITE",
+    "STEP_COLLAPSE",
+    "CHART_SINGULARITY",
+    "DOMAIN",
+    "ENERGY",
+    "CONSTRAINT",
+    "UNDER_RESOLVED",
+    "BUDGET",
+    "MAX_STEPS",
+    "UNSUPPORTED",
+]

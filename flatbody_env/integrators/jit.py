@@ -161,6 +161,7 @@ class _DigestCache(FunctionCache):
 def njit(func=None, **options):
     """``numba.njit`` with :data:`JIT_OPTIONS` (and ``options``) whose on-disk cache entry is keyed by
     :func:`code_digest` too; as ``@njit`` or ``njit(parallel=True)(func)``."""
+
     def compile_(f):
         dispatcher = numba.njit(**{**JIT_OPTIONS, **options})(f)
         if CACHE:
@@ -173,7 +174,9 @@ def njit(func=None, **options):
 def _clone(func, callees):
     """The plain-Python ``func`` (or a dispatcher's Python function) with the globals ``callees`` replaced."""
     func = getattr(func, "py_func", func)
-    clone = types.FunctionType(func.__code__, {**func.__globals__, **callees}, func.__name__, func.__defaults__, func.__closure__)
+    clone = types.FunctionType(
+        func.__code__, {**func.__globals__, **callees}, func.__name__, func.__defaults__, func.__closure__
+    )
     clone.__module__, clone.__qualname__, clone.__doc__ = func.__module__, func.__qualname__, func.__doc__
     return clone
 
@@ -276,5 +279,25 @@ def energy_kernel(y, P, vel, force):
     return kinetic_kernel(y, P, vel, force) + v
 
 
-__all__ = ["CACHE", "CACHE_DIR", "CPU", "JIT_OPTIONS", "Target", "cache_location", "code_digest", "njit", "rebound", "retarget", "kinetic_iso", "kinetic_kernel", "potential_kernel", "rhs_iso",
-           "rhs_core", "rhs_kernel", "rotation_rate_kernel", "rhs_rotation_kernel", "turn_rotation_kernel", "energy_kernel"]
+__all__ = [
+    "CACHE",
+    "CACHE_DIR",
+    "CPU",
+    "JIT_OPTIONS",
+    "Target",
+    "cache_location",
+    "code_digest",
+    "njit",
+    "rebound",
+    "retarget",
+    "kinetic_iso",
+    "kinetic_kernel",
+    "potential_kernel",
+    "rhs_iso",
+    "rhs_core",
+    "rhs_kernel",
+    "rotation_rate_kernel",
+    "rhs_rotation_kernel",
+    "turn_rotation_kernel",
+    "energy_kernel",
+]

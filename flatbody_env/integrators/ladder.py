@@ -193,9 +193,13 @@ def check_rung(rung: str, y0, body: Body, u=None) -> RungChoice:
             reasons.append("controls are given")
         res = stationary_residual(y, body)
         if res > STATIONARY_TOL:
-            reasons.append(f"the state is no stationary ellipse: residual of eqs. (52)-(54) {res:.3g} > {STATIONARY_TOL:g}")
+            reasons.append(
+                f"the state is no stationary ellipse: residual of eqs. (52)-(54) {res:.3g} > {STATIONARY_TOL:g}"
+            )
         if reasons:
-            raise ValueError(f"model: the scene leaves the invariant set of the 'stationary' rung: {'; '.join(reasons)}")
+            raise ValueError(
+                f"model: the scene leaves the invariant set of the 'stationary' rung: {'; '.join(reasons)}"
+            )
         return RungChoice(
             rung="stationary",
             invariant="stationary ellipse: s1 = s2 = p_lambda = p_mu = p_rho = 0 and eqs. (52)-(54) hold (J1 = J2, no control)",
@@ -217,10 +221,16 @@ def check_rung(rung: str, y0, body: Body, u=None) -> RungChoice:
         bound = planar_gap_lower_bound(y, body)
         measured["gap_lower_bound"] = float(bound)
         if y[2] != y[3] and bound < GAP_MIN:
-            reasons.append(f"the in-plane energy bound only guarantees |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} (sigma- = {y[2] - y[3]:.3g})")
+            reasons.append(
+                f"the in-plane energy bound only guarantees |lambda - mu| >= {bound:.3g} < {GAP_MIN:g} (sigma- = {y[2] - y[3]:.3g})"
+            )
     if reasons:
         raise ValueError(f"model: the scene leaves the invariant set of the 'planar' rung: {'; '.join(reasons)}")
-    why = "sigma- = 0 (no barrier: smooth through lambda = mu)" if y[2] == y[3] else f"|lambda - mu| >= {measured['gap_lower_bound']:.3g}"
+    why = (
+        "sigma- = 0 (no barrier: smooth through lambda = mu)"
+        if y[2] == y[3]
+        else f"|lambda - mu| >= {measured['gap_lower_bound']:.3g}"
+    )
     return RungChoice(
         rung="planar",
         invariant=f"planar motion (s1 = s2 = 0, J1 = J2, no tau, V = V_lm + V_rho) and {why}",
@@ -269,7 +279,12 @@ def _energy(Y: np.ndarray, P: np.ndarray, times: np.ndarray, tol: Tolerances, na
         bad = err > tol.energy_tol
         if np.any(bad):
             k = int(np.argmax(bad))
-            raise IntegrationError(f"energy error {err[k]:.3g} exceeds the tolerance {tol.energy_tol:.3g}", t=times[k], method=name, kind="energy")
+            raise IntegrationError(
+                f"energy error {err[k]:.3g} exceeds the tolerance {tol.energy_tol:.3g}",
+                t=times[k],
+                method=name,
+                kind="energy",
+            )
     return H
 
 
@@ -280,7 +295,19 @@ def _times(times) -> np.ndarray:
     return times
 
 
-def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, name: str, *, spent: tuple[int, float] = (0, 0.0)):
+def _small(
+    solve,
+    x0,
+    times,
+    template,
+    u,
+    P,
+    tol: Tolerances,
+    check_gap: bool,
+    name: str,
+    *,
+    spent: tuple[int, float] = (0, 0.0),
+):
     """One small system through ``times`` within the run's budgets, ``tol.max_nfev`` and ``tol.max_wall_time``,
     less what the run has ``spent`` already (RHS evaluations, seconds): the compiled DOP853's budget of
     evaluations checked before every step, and the wall clock through the timed probe of
@@ -292,7 +319,12 @@ def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, n
     nfev_left = tol.max_nfev - int(spent[0])
     seconds_left = tol.max_wall_time - float(spent[1])
     if nfev_left < 1 or seconds_left <= 0.0:
-        raise budget_error(t=float(times[0]), method=name, tol=tol, used=f"{int(spent[0])} RHS evaluations, {spent[1]:.3g} s before this part")
+        raise budget_error(
+            t=float(times[0]),
+            method=name,
+            tol=tol,
+            used=f"{int(spent[0])} RHS evaluations, {spent[1]:.3g} s before this part",
+        )
     budget = tol if spent == (0, 0.0) else dataclasses.replace(tol, max_nfev=nfev_left, max_wall_time=seconds_left)
     X = np.empty((x0.size, times.size))
     counters = np.zeros(4, np.int64)  # [nfev, accepted, rejected, budget of nfev]
@@ -309,14 +341,18 @@ def _small(solve, x0, times, template, u, P, tol: Tolerances, check_gap: bool, n
     st, wall = _run_within_budget(run, counters, budget)
     if KINDS[st] == "budget":
         used = f"{int(spent[0] + counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {spent[1] + time.perf_counter() - start:.3g} s"
-        raise budget_error(t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else ""))
+        raise budget_error(
+            t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else "")
+        )
     raise_for(st, t=fail[0], method=name)
     return X, counters
 
 
 def _check_adaptive(name: str, tol: Tolerances) -> None:
     if tol.step is not None:
-        raise ValueError(f"step: the {name} model integrates with its own adaptive (or exact) solver; step= applies to fixed-step methods only")
+        raise ValueError(
+            f"step: the {name} model integrates with its own adaptive (or exact) solver; step= applies to fixed-step methods only"
+        )
 
 
 # --------------------------------------------------------------------------------------------- models
@@ -324,7 +360,11 @@ class StationaryModel:
     """Rung 1: the stationary ellipse, exact (module docstring)."""
 
     info = MethodInfo(
-        name="ladder-stationary", adaptive=True, order=0, chart="stationary", compiled=False,
+        name="ladder-stationary",
+        adaptive=True,
+        order=0,
+        chart="stationary",
+        compiled=False,
         preserves=("all invariants (exact)",),
         description="closed form of a stationary ellipse (eqs. (52)-(54)): theta and R turn uniformly, O(1) per output time",
     )
@@ -340,7 +380,13 @@ class StationaryModel:
         Y[10] = y0[10] + vel["theta_dot"] * dt
         rotation = rotation_about_normal(np.eye(3) if R0 is None else R0, vel["omega3"] * dt) if with_rotation else None
         H = np.full(times.size, hamiltonian(y0, body))
-        return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=0, stats={"energy": H, "theta_dot": vel["theta_dot"], "omega3": vel["omega3"]})
+        return Solution(
+            t=times.copy(),
+            Y=Y,
+            rotation=rotation,
+            nfev=0,
+            stats={"energy": H, "theta_dot": vel["theta_dot"], "omega3": vel["omega3"]},
+        )
 
 
 def _template(y0: np.ndarray) -> np.ndarray:
@@ -353,14 +399,20 @@ def _template(y0: np.ndarray) -> np.ndarray:
 def _thickness(y0, times, u, P, tol, name, *, spent: tuple[int, float] = (0, 0.0)):
     from flatbody_env.integrators import ladder_kernels as _lk
 
-    return _small(_lk.dop853_thickness, np.array([y0[9], y0[6]]), times, _template(y0), u, P, tol, False, name, spent=spent)
+    return _small(
+        _lk.dop853_thickness, np.array([y0[9], y0[6]]), times, _template(y0), u, P, tol, False, name, spent=spent
+    )
 
 
 class PlanarModel:
     """Rung 2: planar motion as two small compiled systems, each with its own steps (module docstring)."""
 
     info = MethodInfo(
-        name="ladder-planar", adaptive=True, order=8, chart="planar", compiled=True,
+        name="ladder-planar",
+        adaptive=True,
+        order=8,
+        chart="planar",
+        compiled=True,
         preserves=("s1 = s2 = 0", "s3", "p_theta"),
         description="planar motion: (lambda, mu, p_lambda, p_mu, theta, alpha) and (rho, p_rho) apart, compiled DOP853 each",
     )
@@ -380,14 +432,21 @@ class PlanarModel:
         check_gap = bool(y0[2] != y0[3])
         start = time.perf_counter()
         Xp, cp = _small(_lk.dop853_inplane, x0, times, _template(y0), uu, P, tol, check_gap, name)
-        Xr, cr = _thickness(y0, times, uu, P, tol, name, spent=(int(cp[0]), time.perf_counter() - start))  # one budget for both
+        Xr, cr = _thickness(
+            y0, times, uu, P, tol, name, spent=(int(cp[0]), time.perf_counter() - start)
+        )  # one budget for both
         Y = np.repeat(_template(y0)[:, None], times.size, axis=1)
         Y[7], Y[8], Y[4], Y[5], Y[10] = Xp[0], Xp[1], Xp[2], Xp[3], Xp[4]
         Y[9], Y[6] = Xr[0], Xr[1]
         rotation = rotation_about_normal(np.eye(3) if R0 is None else R0, Xp[5]) if with_rotation else None
         H = _energy(Y, P, times, tol, name, uu)
-        stats = {"energy": H, "inplane_steps": int(cp[1]), "thickness_steps": int(cr[1]),
-                 "inplane_nfev": int(cp[0]), "thickness_nfev": int(cr[0])}
+        stats = {
+            "energy": H,
+            "inplane_steps": int(cp[1]),
+            "thickness_steps": int(cr[1]),
+            "inplane_nfev": int(cp[0]),
+            "thickness_nfev": int(cr[0]),
+        }
         return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(cp[0] + cr[0]), stats=stats)
 
 
@@ -437,7 +496,11 @@ class PlanarV1Model:
     """Rung 3: planar motion with V1, the in-plane block in closed form (module docstring)."""
 
     info = MethodInfo(
-        name="ladder-planar-V1", adaptive=True, order=8, chart="planar-V1", compiled=True,
+        name="ladder-planar-V1",
+        adaptive=True,
+        order=8,
+        chart="planar-V1",
+        compiled=True,
         preserves=("s1 = s2 = 0", "s3", "p_theta", "in-plane motion exact"),
         description="planar V1: the in-plane block of Phi is an isotropic oscillator (exact, O(1) per time); rho by compiled DOP853",
     )
@@ -467,8 +530,12 @@ class PlanarV1Model:
         dt = times - times[0]
         t_hit = first_collapse_time(zp0, zpd0, zm0, zmd0, w)
         if t_hit <= dt[-1]:
-            raise IntegrationError("mu reached 0: V1 has no barrier and the plate collapsed to a segment (det Phi = 0)",
-                                   t=times[0] + t_hit, method=name, kind="domain")
+            raise IntegrationError(
+                "mu reached 0: V1 has no barrier and the plate collapsed to a segment (det Phi = 0)",
+                t=times[0] + t_hit,
+                method=name,
+                kind="domain",
+            )
         c, s = np.cos(w * dt), np.sin(w * dt)
         zp = zp0 * c + zpd0 * s / w
         zm = zm0 * c + zmd0 * s / w
@@ -507,8 +574,13 @@ class PlanarV1Model:
         alpha = 0.5 * (bplus - bminus)
         rotation = rotation_about_normal(np.eye(3) if R0 is None else R0, alpha) if with_rotation else None
         H = _energy(Y, P, times, tol, name, uu)
-        return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(cr[0]),
-                        stats={"energy": H, "thickness_steps": int(cr[1]), "omega": w})
+        return Solution(
+            t=times.copy(),
+            Y=Y,
+            rotation=rotation,
+            nfev=int(cr[0]),
+            stats={"energy": H, "thickness_steps": int(cr[1]), "omega": w},
+        )
 
 
 LADDER_MODELS = {"stationary": StationaryModel(), "planar-V1": PlanarV1Model(), "planar": PlanarModel()}
@@ -523,7 +595,21 @@ def rung_model(rung: str):
 
 
 __all__ = [
-    "GAP_MIN", "LADDER_MODELS", "LADDER_RUNGS", "PlanarModel", "PlanarV1Model", "RUNGS", "RungChoice", "STATIONARY_TOL",
-    "StationaryModel", "check_rung", "choose_rung", "first_collapse_time", "planar_gap_lower_bound", "rotation_about_normal",
-    "rung_model", "rung_reasons", "stationary_residual",
+    "GAP_MIN",
+    "LADDER_MODELS",
+    "LADDER_RUNGS",
+    "PlanarModel",
+    "PlanarV1Model",
+    "RUNGS",
+    "RungChoice",
+    "STATIONARY_TOL",
+    "StationaryModel",
+    "check_rung",
+    "choose_rung",
+    "first_collapse_time",
+    "planar_gap_lower_bound",
+    "rotation_about_normal",
+    "rung_model",
+    "rung_reasons",
+    "stationary_residual",
 ]

@@ -120,7 +120,9 @@ def _dop853_subsystem(x0, times, template, u, P, rtol, atol, check_gap, X, count
     fail[0] = t
     h_abs = dop853_initial_step_into(x, f, t, times[times.size - 1], u, PT, rtol, atol, W, force, xtmp, xnew, counters)
     for k in range(1, times.size):
-        st, t, h_abs = dop853_advance(x, f, t, times[k], h_abs, u, PT, rtol, atol, gap_sign, check_gap, K, xnew, xtmp, W, force, counters)
+        st, t, h_abs = dop853_advance(
+            x, f, t, times[k], h_abs, u, PT, rtol, atol, gap_sign, check_gap, K, xnew, xtmp, W, force, counters
+        )
         fail[0] = t
         if st != OK:
             return st
@@ -133,16 +135,28 @@ _finite = _tk._finite
 state_code = _tk.state_code
 dop853_advance = _tk.dop853_advance
 dop853_initial_step_into = _tk.dop853_initial_step_into
-dop853_inplane = retarget(_dop853_subsystem, N=6, STATE_IDX=INPLANE_STATE, RATE_IDX=INPLANE_RATE, rhs_kernel=subsystem_rhs,
-                          _state_status=retarget(_subsystem_status, POSITIVE=2))
+dop853_inplane = retarget(
+    _dop853_subsystem,
+    N=6,
+    STATE_IDX=INPLANE_STATE,
+    RATE_IDX=INPLANE_RATE,
+    rhs_kernel=subsystem_rhs,
+    _state_status=retarget(_subsystem_status, POSITIVE=2),
+)
 """DOP853 on the in-plane system from ``times[0]`` through every output time:
 ``(x0 (6,), times (m,), template (11,), u, P, rtol, atol, check_gap, X (6, m), counters, fail) -> status``.
 
 ``template``, ``u``, ``P`` as in :func:`sub_rhs`; ``check_gap``: whether λ − μ must keep its sign (the
 chart's barrier, σ₋ ≠ 0); ``counters`` (3,) int64 accumulates [RHS evaluations, accepted steps, rejected
 steps]; ``fail`` (1,) receives the time reached (the failure time on failure); the status is :mod:`.failure`'s."""
-dop853_thickness = retarget(_dop853_subsystem, N=2, STATE_IDX=THICKNESS_STATE, RATE_IDX=THICKNESS_RATE, rhs_kernel=subsystem_rhs,
-                            _state_status=retarget(_subsystem_status, POSITIVE=1))
+dop853_thickness = retarget(
+    _dop853_subsystem,
+    N=2,
+    STATE_IDX=THICKNESS_STATE,
+    RATE_IDX=THICKNESS_RATE,
+    rhs_kernel=subsystem_rhs,
+    _state_status=retarget(_subsystem_status, POSITIVE=1),
+)
 """DOP853 on the thickness oscillator (ϱ, p_ϱ): the arguments of :data:`dop853_inplane` (``check_gap`` False)."""
 
 
@@ -158,5 +172,15 @@ def energy_series(Y, P, out):
         out[k] = energy_kernel(y, P, vel, force)
 
 
-__all__ = ["energy_series", "INPLANE_RATE", "INPLANE_STATE", "RATE_OMEGA3", "THICKNESS_RATE", "THICKNESS_STATE", "dop853_inplane", "dop853_thickness",
-           "sub_rhs", "subsystem_rhs"]
+__all__ = [
+    "energy_series",
+    "INPLANE_RATE",
+    "INPLANE_STATE",
+    "RATE_OMEGA3",
+    "THICKNESS_RATE",
+    "THICKNESS_STATE",
+    "dop853_inplane",
+    "dop853_thickness",
+    "sub_rhs",
+    "subsystem_rhs",
+]

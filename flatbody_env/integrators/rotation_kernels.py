@@ -84,17 +84,34 @@ dop853_initial_step_into = _tk.dop853_initial_step_into
 
 # the stepping code re-bound, recursively, to z: N = 20 and the right-hand side carrying R; the error
 # norm and the first-step guess keep to the paper entries, the splitting's pieces turn R by their exact flows
-_ON_Z = dict(N=_NZ, rhs_kernel=rhs_rotation_kernel, _dop853_error=_tk._dop853_error, _masked_rates=_tk._masked_rates,
-             dop853_initial_step=njit(dop853_initial_step_paper), dop853_initial_step_into=njit(dop853_initial_step_paper_into),
-             _flow_h1=njit(flow_h1_with_rotation), _flow_h2=njit(flow_h2_with_rotation), _flow_h3=njit(flow_h3_with_rotation))
+_ON_Z = dict(
+    N=_NZ,
+    rhs_kernel=rhs_rotation_kernel,
+    _dop853_error=_tk._dop853_error,
+    _masked_rates=_tk._masked_rates,
+    dop853_initial_step=njit(dop853_initial_step_paper),
+    dop853_initial_step_into=njit(dop853_initial_step_paper_into),
+    _flow_h1=njit(flow_h1_with_rotation),
+    _flow_h2=njit(flow_h2_with_rotation),
+    _flow_h3=njit(flow_h3_with_rotation),
+)
 dop853_solve_R = retarget(_tk.dop853_solve, **_ON_Z)
 fixed_solve_R = retarget(_tk.fixed_solve, **_ON_Z)
 env_step_R = retarget(_tk.env_step, **_ON_Z)
 """:func:`~.twopolar_kernels.env_step` on z = (y, vec(R)): ``(kind, coeffs, z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``."""
 
-ENV_STEP_WITH_ROTATION = {name: functools.partial(env_step_R, BY_NAME[name].code, BY_NAME[name].coeffs) for name in ROTATION_METHODS}
+ENV_STEP_WITH_ROTATION = {
+    name: functools.partial(env_step_R, BY_NAME[name].code, BY_NAME[name].coeffs) for name in ROTATION_METHODS
+}
 """Method name → its compiled env step on z = (y, vec(R)): ``(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``
 (:data:`env_step_R` bound to the method's (kind, coefficients) from :mod:`.specs`)."""
 
-__all__ = ["ENV_STEP_WITH_ROTATION", "dop853_solve_R", "env_step_R", "fixed_solve_R", "flow_h1_with_rotation", "flow_h2_with_rotation",
-           "flow_h3_with_rotation"]
+__all__ = [
+    "ENV_STEP_WITH_ROTATION",
+    "dop853_solve_R",
+    "env_step_R",
+    "fixed_solve_R",
+    "flow_h1_with_rotation",
+    "flow_h2_with_rotation",
+    "flow_h3_with_rotation",
+]

@@ -29,8 +29,24 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs, rhs_with_rotation
 from flatbody_env.physics.hamiltonian import hamiltonian
 from flatbody_env.physics.kinematics import Decomposition
-from flatbody_env.physics.regular import FrameTracker, constraint_residual, follow_chart, paper_from_regular, regular_energy, regular_from_paper, regular_rhs
-from flatbody_env.integrators.base import IntegrationError, MethodInfo, Solution, Tolerances, budget_error, check_step, register_method
+from flatbody_env.physics.regular import (
+    FrameTracker,
+    constraint_residual,
+    follow_chart,
+    paper_from_regular,
+    regular_energy,
+    regular_from_paper,
+    regular_rhs,
+)
+from flatbody_env.integrators.base import (
+    IntegrationError,
+    MethodInfo,
+    Solution,
+    Tolerances,
+    budget_error,
+    check_step,
+    register_method,
+)
 
 _ORDERS = {"RK23": 3, "RK45": 5, "DOP853": 8, "Radau": 5, "BDF": 5, "LSODA": 12}
 _DESCRIPTIONS = {
@@ -98,7 +114,9 @@ class _Budget:
 
 def _solve(fun, span, z0, *, tol: Tolerances, name: str, **kwargs):
     """``solve_ivp`` under the work budget of ``tol`` (``IntegrationError(kind="budget")`` past it)."""
-    from scipy.integrate import solve_ivp  # here, not at import: scipy.integrate is slow to import (docs/integrators.md)
+    from scipy.integrate import (
+        solve_ivp,
+    )  # here, not at import: scipy.integrate is slow to import (docs/integrators.md)
 
     wrapped = _Budget(fun, tol)
     try:
@@ -158,14 +176,21 @@ class ScipyTwoPolar:
         for ev in (lam_zero, mu_zero, rho_zero):
             ev.terminal = True
         events = [lam_zero, mu_zero, rho_zero] + ([] if may_cross else [gap])
-        sol = _solve(fun, (times[0], times[-1]), z0, tol=tol, name=name, method=self.algorithm, t_eval=times, events=events)
+        sol = _solve(
+            fun, (times[0], times[-1]), z0, tol=tol, name=name, method=self.algorithm, t_eval=times, events=events
+        )
         if sol.status == -1:
-            raise IntegrationError(sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse")
+            raise IntegrationError(
+                sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse"
+            )
         if sol.status == 1:
             for k, label in enumerate(("lambda", "mu", "rho")):
                 if sol.t_events[k].size:
                     raise IntegrationError(
-                        f"{label} reached 0 (outside the domain {label} > 0)", t=sol.t_events[k][0], method=name, kind="domain"
+                        f"{label} reached 0 (outside the domain {label} > 0)",
+                        t=sol.t_events[k][0],
+                        method=name,
+                        kind="domain",
                     )
             raise IntegrationError(
                 "lambda - mu changed sign while s3 - p_theta != 0: the two-polar chart is singular at lambda = mu "
@@ -203,7 +228,9 @@ class ScipyRegular:
         name = self.info.name
         check_step(self.info, tol)
         if body.spin_convention != "corrected":
-            raise ValueError("spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method")
+            raise ValueError(
+                "spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method"
+            )
         y0 = np.asarray(y0, float)
         times = np.asarray(times, float)
         R0 = np.eye(3) if R0 is None else np.asarray(R0, float)
@@ -217,7 +244,9 @@ class ScipyRegular:
 
         sol = _solve(fun, (times[0], times[-1]), z0, tol=tol, name=name, method=self.algorithm, dense_output=True)
         if sol.status == -1:
-            raise IntegrationError(sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse")
+            raise IntegrationError(
+                sol.message, t=sol.t[-1] if sol.t.size else times[0], method=name, kind="step-collapse"
+            )
         _check_finite(sol.y, sol.t, name)
         # Follow the chart's discrete branch through every internal step (steps shrink where the
         # frame turns fast), then read the outputs off the dense output.
@@ -238,7 +267,10 @@ class ScipyRegular:
             res = np.max(np.abs(constraint_residual(z)))
             if res > ctol:
                 raise IntegrationError(
-                    f"Kirchhoff-Love constraint violated by {res:.3g} (> {ctol:.3g})", t=grid[j], method=name, kind="constraint"
+                    f"Kirchhoff-Love constraint violated by {res:.3g} (> {ctol:.3g})",
+                    t=grid[j],
+                    method=name,
+                    kind="constraint",
                 )
             try:
                 ref = follow_chart(sol.sol, t_prev, grid[j], ref, keep_order=keep_order)
@@ -247,7 +279,10 @@ class ScipyRegular:
                     Y[:, k], _ = paper_from_regular(z, body, decomposition=ref)
             except ValueError as exc:
                 raise IntegrationError(
-                    f"cannot express the state in the paper's chart: {exc}", t=grid[j], method=name, kind="chart-singularity"
+                    f"cannot express the state in the paper's chart: {exc}",
+                    t=grid[j],
+                    method=name,
+                    kind="chart-singularity",
                 ) from exc
             if is_output[j]:
                 rotation[k] = ref.R

@@ -134,8 +134,9 @@ class GenericEnvStep:
 
     def _run(self, y, u, dt, R):
         try:
-            sol = get_method(self.method).integrate(self.body, y, np.array([0.0, dt]), tol=self.tol, u=u, R0=R,
-                                                    with_rotation=self.carries_rotation)
+            sol = get_method(self.method).integrate(
+                self.body, y, np.array([0.0, dt]), tol=self.tol, u=u, R0=R, with_rotation=self.carries_rotation
+            )
         except IntegrationError as exc:
             status = KINDS.index(exc.kind) if exc.kind in KINDS and exc.kind != "ok" else _OTHER_FAILURE
             return status, f"{exc.kind}: {exc.reason}", None
@@ -168,7 +169,9 @@ class GenericEnvStep:
 
     def describe(self, status: int, lane: int | None = None) -> str:
         if lane is not None:
-            return self._lane_reasons.get(lane, f"{KINDS[status] if status < len(KINDS) else 'failure'}: {failure_reason(status)}")
+            return self._lane_reasons.get(
+                lane, f"{KINDS[status] if status < len(KINDS) else 'failure'}: {failure_reason(status)}"
+            )
         return self._last
 
 
@@ -206,8 +209,9 @@ class CompiledRotationEnvStep(CompiledEnvStep):
         return status
 
 
-def make_env_step(name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False,
-                  first_step: float = 0.0) -> CompiledEnvStep | GenericEnvStep:
+def make_env_step(
+    name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False, first_step: float = 0.0
+) -> CompiledEnvStep | GenericEnvStep:
     """The environment step of method ``name`` (module docstring).
 
     With ``with_rotation=True`` the compiled two-polar methods carry R in their own compiled step
@@ -222,7 +226,13 @@ def make_env_step(name: str, body: Body, tol: Tolerances, *, with_rotation: bool
     if check is not None:
         check(body, tol)  # the method's own refusals (step, body)
     spec = BY_NAME.get(name)
-    if body.compiled and spec is not None and spec.env and spec.kind != "rattle" and (spec.carries_R or not with_rotation):
+    if (
+        body.compiled
+        and spec is not None
+        and spec.env
+        and spec.kind != "rattle"
+        and (spec.carries_R or not with_rotation)
+    ):
         return (CompiledRotationEnvStep if with_rotation else CompiledEnvStep)(name, body, tol, first_step=first_step)
     return GenericEnvStep(name, body, tol, with_rotation=with_rotation)
 

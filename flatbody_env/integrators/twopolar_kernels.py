@@ -60,7 +60,17 @@ from flatbody_env.integrators.dop853_tableau import STAGE_J as _STAGE_J
 from flatbody_env.integrators.dop853_tableau import STAGE_L as _STAGE_L
 
 from flatbody_env.integrators.compositions import KAHAN_LI6, STRANG, SUZUKI4, YOSHIDA4  # noqa: F401 (re-exported)
-from flatbody_env.integrators.failure import CHART_SINGULARITY, DOMAIN, ENERGY, MAX_STEPS, MAX_TURN, NON_FINITE, OK, STEP_COLLAPSE, UNDER_RESOLVED
+from flatbody_env.integrators.failure import (
+    CHART_SINGULARITY,
+    DOMAIN,
+    ENERGY,
+    MAX_STEPS,
+    MAX_TURN,
+    NON_FINITE,
+    OK,
+    STEP_COLLAPSE,
+    UNDER_RESOLVED,
+)
 from flatbody_env.integrators.specs import DOP853_KIND
 from flatbody_env.integrators.jit import njit, energy_kernel, kinetic_kernel, potential_kernel, rhs_kernel
 
@@ -71,7 +81,6 @@ _MIN_FACTOR = 0.2
 _MAX_FACTOR = 10.0
 _ERROR_EXPONENT = -1.0 / 8.0  # scipy: -1/(error_estimator_order + 1), order 7
 DOP853_MAX_STEPS = 50_000_000
-
 
 
 # --------------------------------------------------------------------------------------------- checks
@@ -300,7 +309,9 @@ def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail
     for k in range(1, times.size):
         if fail.size > 2:
             fail[2] = k
-        st, t, h_abs = dop853_advance(y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters)
+        st, t, h_abs = dop853_advance(
+            y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters
+        )
         fail[0] = t
         for i in range(N):
             Y[i, k] = y[i]
@@ -321,8 +332,25 @@ def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
     counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
     last check]. Returns the status. (:func:`dop853_solve_into` with its work arrays allocated.)
     """
-    return dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, np.empty(N), np.empty(N), np.empty((13, N)),
-                             np.empty(N), np.empty(N), np.empty(7), np.empty(4))
+    return dop853_solve_into(
+        y0,
+        times,
+        u,
+        P,
+        rtol,
+        atol,
+        energy_tol,
+        Y,
+        counters,
+        fail,
+        np.empty(N),
+        np.empty(N),
+        np.empty((13, N)),
+        np.empty(N),
+        np.empty(N),
+        np.empty(7),
+        np.empty(4),
+    )
 
 
 @njit
@@ -334,7 +362,9 @@ def _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel,
     if h <= 0.0:
         h = dop853_initial_step(out, f, 0.0, dt, u, P, rtol, atol, vel, force, ytmp, counters)
     gap_sign = 1.0 if y[7] > y[8] else -1.0
-    st, t, h = dop853_advance(out, f, 0.0, dt, h, u, P, rtol, atol, gap_sign, not may_cross(y, u, P), K, ynew, ytmp, vel, force, counters)
+    st, t, h = dop853_advance(
+        out, f, 0.0, dt, h, u, P, rtol, atol, gap_sign, not may_cross(y, u, P), K, ynew, ytmp, vel, force, counters
+    )
     if st != OK:
         return st
     if energy_tol < np.inf and no_control(u):
@@ -528,7 +558,9 @@ def fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, 
     for k in range(1, times.size):
         if fail.size > 2:
             fail[2] = k
-        st, dt_done = _fixed_advance(kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters)
+        st, dt_done = _fixed_advance(
+            kind, y, times[k] - times[k - 1], h, coeffs, u, P, gap_sign, check_gap, work, vel, force, counters
+        )
         fail[0] = times[k - 1] + dt_done
         for i in range(N):
             Y[i, k] = y[i]
@@ -549,8 +581,23 @@ def fixed_solve(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail)
     Y (11, len(times)) receives the states; counters (3,) int64 [nfev, steps, 0]; fail (2,)
     [t of failure, last |H − H₀|]. Returns the status. (:func:`fixed_solve_into` with its work arrays allocated.)
     """
-    return fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, np.empty(N), np.empty((5, N)), np.empty(7),
-                            np.empty(4))
+    return fixed_solve_into(
+        kind,
+        coeffs,
+        y0,
+        times,
+        u,
+        P,
+        h,
+        energy_tol,
+        Y,
+        counters,
+        fail,
+        np.empty(N),
+        np.empty((5, N)),
+        np.empty(7),
+        np.empty(4),
+    )
 
 
 @njit
@@ -558,7 +605,9 @@ def _fixed_env(kind, coeffs, y, u, P, dt, h, energy_tol, out, work, vel, force, 
     for i in range(N):
         out[i] = y[i]
     gap_sign = 1.0 if y[7] > y[8] else -1.0
-    st, dt_done = _fixed_advance(kind, out, dt, h, coeffs, u, P, gap_sign, not may_cross(y, u, P), work, vel, force, counters)
+    st, dt_done = _fixed_advance(
+        kind, out, dt, h, coeffs, u, P, gap_sign, not may_cross(y, u, P), work, vel, force, counters
+    )
     if st != OK:
         return st
     if energy_tol < np.inf and no_control(u):
@@ -581,8 +630,26 @@ def env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, K, 
 @njit
 def env_step(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, counters):
     """One environment step (module docstring): :func:`env_step_into` with its work arrays allocated."""
-    return env_step_into(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, np.empty((13, N)), np.empty(N), np.empty(N),
-                         np.empty(7), np.empty(4), np.empty(N), counters)
+    return env_step_into(
+        kind,
+        coeffs,
+        y,
+        u,
+        P,
+        dt,
+        h,
+        rtol,
+        atol,
+        energy_tol,
+        out,
+        np.empty((13, N)),
+        np.empty(N),
+        np.empty(N),
+        np.empty(7),
+        np.empty(4),
+        np.empty(N),
+        counters,
+    )
 
 
 @njit

@@ -40,7 +40,17 @@ from typing import Any
 import numpy as np
 
 from flatbody_env.physics import validation
-from flatbody_env.physics.potentials import KIND_CUSTOM, CustomPotential, InPlanePotential, ThicknessPotential, V1, V2, V3, _check_positive, potential_kernel
+from flatbody_env.physics.potentials import (
+    KIND_CUSTOM,
+    CustomPotential,
+    InPlanePotential,
+    ThicknessPotential,
+    V1,
+    V2,
+    V3,
+    _check_positive,
+    potential_kernel,
+)
 
 SPIN_CONVENTIONS = ("corrected", "paper")
 KERNEL_PARAMS_SIZE = 9
@@ -99,9 +109,7 @@ class Body:
         if self.thickness is not None and not isinstance(self.thickness, ThicknessPotential):
             raise ValueError("thickness: expected ThicknessPotential(a=..., b=...) or None")
         if self.spin_convention not in SPIN_CONVENTIONS:
-            raise ValueError(
-                f"spin_convention: must be one of {SPIN_CONVENTIONS}, got {self.spin_convention!r}"
-            )
+            raise ValueError(f"spin_convention: must be one of {SPIN_CONVENTIONS}, got {self.spin_convention!r}")
         c1, c2 = self.potential.constants
         a, b = (self.thickness.a, self.thickness.b) if self.thickness is not None else (0.0, 0.0)
         conv = 1.0 if self.spin_convention == "corrected" else -1.0
@@ -170,7 +178,9 @@ class Body:
         """
         pre = f"{where}." if where else ""
         data = validation.mapping(where or "body", data)
-        validation.keys(where or "body", data, set(data) | {"params", "potential", "thickness"}, ("params", "potential"))
+        validation.keys(
+            where or "body", data, set(data) | {"params", "potential", "thickness"}, ("params", "potential")
+        )
         inertia = _inertia_from(pre + "params", validation.mapping(pre + "params", data["params"]))
         potential = _potential_from(pre + "potential", validation.mapping(pre + "potential", data["potential"]))
         thick = data.get("thickness")
@@ -179,10 +189,16 @@ class Body:
             thick = validation.mapping(pre + "thickness", thick)
             validation.keys(pre + "thickness", thick, ("a", "b"), ("a", "b"))
             thickness = ThicknessPotential(
-                a=validation.number(pre + "thickness.a", thick["a"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]),
-                b=validation.number(pre + "thickness.b", thick["b"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]),
+                a=validation.number(
+                    pre + "thickness.a", thick["a"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]
+                ),
+                b=validation.number(
+                    pre + "thickness.b", thick["b"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]
+                ),
             )
-        convention = validation.string(pre + "spin_convention", data.get("spin_convention", "corrected"), choices=SPIN_CONVENTIONS)
+        convention = validation.string(
+            pre + "spin_convention", data.get("spin_convention", "corrected"), choices=SPIN_CONVENTIONS
+        )
         return cls(inertia=inertia, potential=potential, thickness=thickness, spin_convention=convention)
 
     def to_dict(self) -> dict[str, Any]:
@@ -231,10 +247,23 @@ def _inertia_from(where: str, params: Mapping[str, Any]) -> Inertia:
     if "J" in params:
         validation.keys(where, params, ("J", "J3"), ("J", "J3"))
         J = validation.number(f"{where}.J", params["J"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1])
-        return Inertia(J1=J, J2=J, J3=validation.number(f"{where}.J3", params["J3"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]))
+        return Inertia(
+            J1=J,
+            J2=J,
+            J3=validation.number(
+                f"{where}.J3", params["J3"], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]
+            ),
+        )
     if "J1" in params or "J2" in params:
         validation.keys(where, params, ("J1", "J2", "J3"), ("J1", "J2", "J3"))
-        return Inertia(**{k: validation.number(f"{where}.{k}", params[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]) for k in ("J1", "J2", "J3")})
+        return Inertia(
+            **{
+                k: validation.number(
+                    f"{where}.{k}", params[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]
+                )
+                for k in ("J1", "J2", "J3")
+            }
+        )
     validation.keys(where, params, ("J", "J1", "J2", "J3"))
     raise ValueError(f"{where}.J: missing field (give J and J3, or J1, J2 and J3; each in [1e-06, 1e+06])")
 
@@ -247,7 +276,10 @@ def _potential_from(where: str, pot: Mapping[str, Any]):
         raise ValueError(f"{where}.name: unknown potential {name!r} (allowed: V1, V2, V3)")
     fields = _POTENTIAL_FIELDS[name]
     validation.keys(where, pot, ("name", *fields), fields)
-    values = {k: validation.number(f"{where}.{k}", pot[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1]) for k in fields}
+    values = {
+        k: validation.number(f"{where}.{k}", pot[k], low=validation.PARAM_RANGE[0], high=validation.PARAM_RANGE[1])
+        for k in fields
+    }
     return {"V1": V1, "V2": V2, "V3": V3}[name](**values)
 
 
@@ -258,4 +290,3 @@ def default_body() -> Body:
         potential=V3(kappa=1.0),
         thickness=ThicknessPotential(a=1.0, b=1.0),
     )
-

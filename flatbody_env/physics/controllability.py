@@ -150,8 +150,14 @@ def settling_rate_map(body: Body, lambdas, aspects, limits, mask=None, *, sign: 
             try:
                 t = stationary_from_shape(body, float(lam), float(lam) / float(aspect), branch="circulation", sign=sign)
             except ValueError:
-                out.append(SettlingRateEntry(lam=float(lam), aspect=float(aspect), exists=False, stable=False, rate=math.nan))
+                out.append(
+                    SettlingRateEntry(lam=float(lam), aspect=float(aspect), exists=False, stable=False, rate=math.nan)
+                )
                 continue
-            rate = settling_rate(body, target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta), limits, mask) if t.stable else math.nan
+            rate = (
+                settling_rate(body, target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta), limits, mask)
+                if t.stable
+                else math.nan
+            )
             out.append(SettlingRateEntry(lam=float(lam), aspect=float(aspect), exists=True, stable=t.stable, rate=rate))
     return out

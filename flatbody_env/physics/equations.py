@@ -60,7 +60,27 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     """
     if P[0] == P[1]:
         (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, w1, w2, w3, thd, ld, md, rd, f1, f2, f3) = rhs_iso(
-            y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], u[0], u[1], u[2], u[3], P[0], P[2], P[8], gl, gm, gr)
+            y[0],
+            y[1],
+            y[2],
+            y[3],
+            y[4],
+            y[5],
+            y[6],
+            y[7],
+            y[8],
+            y[9],
+            u[0],
+            u[1],
+            u[2],
+            u[3],
+            P[0],
+            P[2],
+            P[8],
+            gl,
+            gm,
+            gr,
+        )
         out[0] = d0
         out[1] = d1
         out[2] = d2
@@ -120,8 +140,29 @@ def rhs_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, u0, u1, u2, u3, J, J3, con
     d0 = conv * (w2 * s3 - w3 * s2) + u0
     d1 = conv * (w3 * s1 - w1 * s3) + u1
     d2 = conv * J * (lam - mu) * (lam + mu) * s1 * s2 / ((J * mu * mu + j3r2) * (J * lam * lam + j3r2)) + u2
-    return (d0, d1, d2, 0.0, f1 - gl, f2 - gm, f3 - gr + u3, ld, md, rd, thd,  # eqs. (46)–(49) + dilatation force; q̇ = ∂𝒯/∂p
-            w1, w2, w3, thd, ld, md, rd, f1, f2, f3)
+    return (
+        d0,
+        d1,
+        d2,
+        0.0,
+        f1 - gl,
+        f2 - gm,
+        f3 - gr + u3,
+        ld,
+        md,
+        rd,
+        thd,  # eqs. (46)–(49) + dilatation force; q̇ = ∂𝒯/∂p
+        w1,
+        w2,
+        w3,
+        thd,
+        ld,
+        md,
+        rd,
+        f1,
+        f2,
+        f3,
+    )
 
 
 def rhs_kernel(y, u, P, out, vel, force):

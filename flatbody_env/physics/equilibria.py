@@ -273,7 +273,9 @@ def stationary_shape_kernel(J, J3, lam, mu, rho, pot, rotation, sign, out):
     return True
 
 
-def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0) -> StationaryEllipse:
+def stationary_from_shape(
+    body: Body, lam: float, mu: float, *, branch: str = "circulation", sign: float = 1.0
+) -> StationaryEllipse:
     """The stationary ellipse with in-plane shape (λ, μ) (inverse problem, docs/physics.md §8).
 
     Parameters
@@ -301,8 +303,9 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
     J = body.inertia.J1
     rho = equilibrium_thickness(body, lam, mu)
     out = np.empty(6)
-    if not stationary_shape_kernel(J, body.inertia.J3, lam, mu, rho, potential_stencil(body, lam, mu, rho), branch == "rotation",
-                                   float(sign), out):
+    if not stationary_shape_kernel(
+        J, body.inertia.J3, lam, mu, rho, potential_stencil(body, lam, mu, rho), branch == "rotation", float(sign), out
+    ):
         raise ValueError(
             f"lambda, mu: no stationary ellipse with shape ({lam:g}, {mu:g}) for this potential "
             f"(needs dV/du >= 0 and (lambda-mu) dV/dv >= 0)"
@@ -316,6 +319,13 @@ def stationary_from_shape(body: Body, lam: float, mu: float, *, branch: str = "c
     dy = rhs_iso(0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, 0.0, 0.0, 0.0, 0.0, J, J3, conv, gl, gm, gr)
     energy = kinetic_iso(0.0, 0.0, s3, pt, 0.0, 0.0, 0.0, lam, mu, rho, J, J3)[0] + v
     return StationaryEllipse(
-        branch="N", state=unpack(y), omega=(0.0, 0.0, omega3), theta_dot=theta_dot, energy=energy,
-        residual=max(abs(d) for d in dy[:10]), method="inverse", q=q, shape_hessian_min=hmin,
+        branch="N",
+        state=unpack(y),
+        omega=(0.0, 0.0, omega3),
+        theta_dot=theta_dot,
+        energy=energy,
+        residual=max(abs(d) for d in dy[:10]),
+        method="inverse",
+        q=q,
+        shape_hessian_min=hmin,
     )

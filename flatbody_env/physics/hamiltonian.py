@@ -297,7 +297,9 @@ def hamiltonian_series(Y: np.ndarray, body: Body) -> np.ndarray:
         J, J3 = float(P[0]), float(P[2])
         with np.errstate(all="ignore"):
             T = kinetic_iso(*(Y[i] for i in range(10)), J, J3)[0]
-            V = potential_kernel(int(P[3]), float(P[4]), float(P[5]), float(P[6]), float(P[7]), Y[LAMBDA], Y[MU], Y[RHO])[0]
+            V = potential_kernel(
+                int(P[3]), float(P[4]), float(P[5]), float(P[6]), float(P[7]), Y[LAMBDA], Y[MU], Y[RHO]
+            )[0]
             out = np.asarray(T + V, dtype=np.float64)
         if out.shape == (Y.shape[1],) and np.all(np.isfinite(out)):
             return out

@@ -250,7 +250,12 @@ def decompose(
                 Rc, tc = Rc @ HALF_TURN, tc + np.pi
             # nearest 2π copy of θ
             tc = tc + 2.0 * np.pi * np.round((reference.theta - tc) / (2.0 * np.pi))
-            score = np.linalg.norm(Rc - reference.R) + abs(tc - reference.theta) + abs(lc - reference.lam) + abs(mc - reference.mu)
+            score = (
+                np.linalg.norm(Rc - reference.R)
+                + abs(tc - reference.theta)
+                + abs(lc - reference.lam)
+                + abs(mc - reference.mu)
+            )
             if keep_order and (lc - mc) * (reference.lam - reference.mu) < 0.0:
                 continue
             if score < best_score:

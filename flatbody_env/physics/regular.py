@@ -56,8 +56,15 @@ import numpy as np
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.hamiltonian import mass_matrix, velocities_from_momenta
-from flatbody_env.physics.kinematics import (Decomposition, column_dot, configuration, configuration_rate, decompose, material_rotation,
-                                            stretches_kernel)
+from flatbody_env.physics.kinematics import (
+    Decomposition,
+    column_dot,
+    configuration,
+    configuration_rate,
+    decompose,
+    material_rotation,
+    stretches_kernel,
+)
 from flatbody_env.physics.potentials import invariant_gradient_kernel, potential_kernel
 
 REGULAR_SIZE = 18
@@ -103,7 +110,9 @@ def paper_from_regular(
         the constrained set.
     """
     Phi, Phi_dot = matrices(z)
-    dec = decomposition if decomposition is not None else decompose(Phi, reference, kl_tol=kl_tol, keep_order=keep_order)
+    dec = (
+        decomposition if decomposition is not None else decompose(Phi, reference, kl_tol=kl_tol, keep_order=keep_order)
+    )
     lam, mu, rho, theta = dec.lam, dec.mu, dec.rho, dec.theta
     if lam == mu:
         raise ValueError("lambda: equals mu — the two-polar chart is singular at λ = μ")

@@ -78,9 +78,7 @@ def validate_state(state: Mapping[str, Any], *, where: str = "state") -> None:
         raise ValueError(f"{where}: expected a mapping with the fields {', '.join(STATE_NAMES)}")
     unknown = sorted(set(state) - set(STATE_NAMES))
     if unknown:
-        raise ValueError(
-            f"{where}.{unknown[0]}: unknown field (allowed: {', '.join(STATE_NAMES)})"
-        )
+        raise ValueError(f"{where}.{unknown[0]}: unknown field (allowed: {', '.join(STATE_NAMES)})")
     from flatbody_env.physics.validation import MOMENTUM_MAX, STRETCH_RANGE, number
 
     for name in STATE_NAMES:

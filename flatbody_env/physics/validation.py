@@ -114,11 +114,15 @@ def finite_result(where: str, values: Mapping[str, Any]) -> None:
             continue
         arr = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(arr)):
-            raise ValueError(f"{where}.{name}: not finite on this input (NaN or infinity; e.g. at a singular state such as "
-                             "lambda = mu or lambda = 0), so it is not reported")
+            raise ValueError(
+                f"{where}.{name}: not finite on this input (NaN or infinity; e.g. at a singular state such as "
+                "lambda = mu or lambda = 0), so it is not reported"
+            )
 
 
-def number(where: str, value: Any, *, positive: bool = False, low: float | None = None, high: float | None = None) -> float:
+def number(
+    where: str, value: Any, *, positive: bool = False, low: float | None = None, high: float | None = None
+) -> float:
     """``value`` as a finite float, optionally > 0 and within [low, high].
 
     Raises
@@ -214,9 +218,12 @@ def float_array(where: str, value: Any, *, shape: tuple[int | None, ...], finite
     except (ValueError, TypeError, OverflowError, RecursionError):
         raise ValueError(f"{where}: expected an array of shape ({dims}) of numbers") from None
     if arr.dtype.kind not in "iuf":
-        raise ValueError(f"{where}: expected an array of shape ({dims}) of numbers, got elements of type {arr.dtype.kind!r}"
-                         if arr.dtype.kind != "O" else f"{where}: expected an array of shape ({dims}) of numbers (ragged, nested "
-                         "too deep, or holding non-numbers / integers too large for a float)")
+        raise ValueError(
+            f"{where}: expected an array of shape ({dims}) of numbers, got elements of type {arr.dtype.kind!r}"
+            if arr.dtype.kind != "O"
+            else f"{where}: expected an array of shape ({dims}) of numbers (ragged, nested "
+            "too deep, or holding non-numbers / integers too large for a float)"
+        )
     if arr.ndim != len(shape) or any(d is not None and d != n for d, n in zip(shape, arr.shape)):
         raise ValueError(f"{where}: expected an array of shape ({dims}), got shape {arr.shape}")
     if isinstance(value, (list, tuple)) and _has_bool(value, len(shape)):
@@ -311,7 +318,9 @@ def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
     except OSError as exc:
         raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
     if head != b"SQLite format 3\x00":
-        raise ValueError(f"{where}: {str(p)!r} is not an SQLite database (corrupt or another kind of file; move it away)")
+        raise ValueError(
+            f"{where}: {str(p)!r} is not an SQLite database (corrupt or another kind of file; move it away)"
+        )
     try:
         db = sqlite3.connect(f"file:{os.fspath(p.resolve())}?mode=ro", uri=True, timeout=30.0)
         try:
@@ -320,10 +329,14 @@ def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
         finally:
             db.close()
     except sqlite3.Error as exc:
-        raise ValueError(f"{where}: {str(p)!r} is a damaged SQLite database ({_short(str(exc))}; move it away)") from None
+        raise ValueError(
+            f"{where}: {str(p)!r} is a damaged SQLite database ({_short(str(exc))}; move it away)"
+        ) from None
     missing = sorted(set(tables) - have)
     if missing:
-        raise ValueError(f"{where}: {str(p)!r} is another program's SQLite database (no table {missing[0]!r}); move it away or choose another folder")
+        raise ValueError(
+            f"{where}: {str(p)!r} is another program's SQLite database (no table {missing[0]!r}); move it away or choose another folder"
+        )
 
 
 def _range_text(positive: bool, low: float | None, high: float | None) -> str:
@@ -344,9 +357,45 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-__all__ = ["boolean", "interval", "ENV_DT_RANGE", "ENV_MAX_SUBSTEPS", "ENV_STEP_MAX_NFEV", "ENV_STEP_MAX_SECONDS", "FAMILY_SEEDS_RANGE", "MAX_BATCH", "MAX_COUNT",
-           "MAP_GRID_RANGE", "MAX_EPISODES", "MAX_EPISODE_STEPS", "MAX_REPEATS", "MAX_SECONDS", "MAX_SEED", "MAX_TIMESTEPS", "MAX_WORKERS", "MIN_SAMPLES",
-           "SEARCH_GRID_RANGE", "STEP_MIN", "SWEEP_GRID_RANGE",
-           "count", "finite_result", "fixed_step", "sqlite_file",
-           "MAX_JSON_BYTES", "MAX_SAMPLES", "MOMENTUM_MAX", "PARAM_RANGE", "STRETCH_RANGE", "TOL_RANGE", "T_END_MAX", "float_array",
-           "integer", "keys", "mapping", "number", "parse_json", "read_json", "string"]
+__all__ = [
+    "boolean",
+    "interval",
+    "ENV_DT_RANGE",
+    "ENV_MAX_SUBSTEPS",
+    "ENV_STEP_MAX_NFEV",
+    "ENV_STEP_MAX_SECONDS",
+    "FAMILY_SEEDS_RANGE",
+    "MAX_BATCH",
+    "MAX_COUNT",
+    "MAP_GRID_RANGE",
+    "MAX_EPISODES",
+    "MAX_EPISODE_STEPS",
+    "MAX_REPEATS",
+    "MAX_SECONDS",
+    "MAX_SEED",
+    "MAX_TIMESTEPS",
+    "MAX_WORKERS",
+    "MIN_SAMPLES",
+    "SEARCH_GRID_RANGE",
+    "STEP_MIN",
+    "SWEEP_GRID_RANGE",
+    "count",
+    "finite_result",
+    "fixed_step",
+    "sqlite_file",
+    "MAX_JSON_BYTES",
+    "MAX_SAMPLES",
+    "MOMENTUM_MAX",
+    "PARAM_RANGE",
+    "STRETCH_RANGE",
+    "TOL_RANGE",
+    "T_END_MAX",
+    "float_array",
+    "integer",
+    "keys",
+    "mapping",
+    "number",
+    "parse_json",
+    "read_json",
+    "string",
+]

@@ -124,4 +124,3 @@ def material_lines(spokes: int = 12, segments: int = 96) -> list[np.ndarray]:
         strips.append(np.array([[0.0, 0.0, 0.0], [np.cos(b), np.sin(b), 0.0]]))
     strips.append(np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]]))
     return strips
-

@@ -81,7 +81,10 @@ others by a CIE ΔE ≥ 20 (``tests/recording/test_layout.py`` checks it in the 
 SPARE_COLORS = ((230, 140, 255), (110, 130, 60), (50, 255, 119), (187, 50, 255), (255, 0, 0), (84, 255, 50))
 """Colours for reward terms or actions this layout does not name, in order of appearance."""
 
-TENSOR_ENTRY_COLORS = np.array([(140, 255, 216), (140, 235, 255), (140, 178, 255), (216, 140, 255), (255, 140, 216), (255, 187, 50)], dtype=np.uint8)
+TENSOR_ENTRY_COLORS = np.array(
+    [(140, 255, 216), (140, 235, 255), (140, 178, 255), (216, 140, 255), (255, 140, 216), (255, 187, 50)],
+    dtype=np.uint8,
+)
 """Colours of the entries 11, 22, 33, 12, 13, 23 of G and C (the same entry the same colour in both
 views; none of them a variable's colour)."""
 
@@ -170,20 +173,47 @@ def camera(view: str, extent: float):
 
     d = float(extent)
     if view == "top":  # straight down the laboratory's +z axis, x to the right, y up
-        return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[0.0, 0.0, 2.6 * d], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 1.0, 0.0])
-    return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[1.4 * d, -1.9 * d, 1.6 * d], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0])
+        return rrb.EyeControls3D(
+            kind=rrb.Eye3DKind.Orbital,
+            position=[0.0, 0.0, 2.6 * d],
+            look_target=[0.0, 0.0, 0.0],
+            eye_up=[0.0, 1.0, 0.0],
+        )
+    return rrb.EyeControls3D(
+        kind=rrb.Eye3DKind.Orbital,
+        position=[1.4 * d, -1.9 * d, 1.6 * d],
+        look_target=[0.0, 0.0, 0.0],
+        eye_up=[0.0, 0.0, 1.0],
+    )
 
 
-def _series_view(name: str, contents: list[str], *, axis: tuple[float, float] | None, legend: bool, t_range: tuple[float, float] | None, end: float | None):
+def _series_view(
+    name: str,
+    contents: list[str],
+    *,
+    axis: tuple[float, float] | None,
+    legend: bool,
+    t_range: tuple[float, float] | None,
+    end: float | None,
+):
     import rerun as rr
     import rerun.blueprint as rrb
 
     axis_y = rrb.ScalarAxis(range=axis, zoom_lock=False) if axis is not None else None
     axis_x = None
     if t_range is not None and end is not None:  # the whole run, and room on the right for the last tick label
-        axis_x = rrb.TimeAxis(view_range=rr.TimeRange(start=rr.TimeRangeBoundary.absolute(seconds=t_range[0]), end=rr.TimeRangeBoundary.absolute(seconds=end)))
+        axis_x = rrb.TimeAxis(
+            view_range=rr.TimeRange(
+                start=rr.TimeRangeBoundary.absolute(seconds=t_range[0]), end=rr.TimeRangeBoundary.absolute(seconds=end)
+            )
+        )
     return rrb.TimeSeriesView(
-        name=name, origin="/series", contents=contents, plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend), axis_y=axis_y, axis_x=axis_x
+        name=name,
+        origin="/series",
+        contents=contents,
+        plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend),
+        axis_y=axis_y,
+        axis_x=axis_x,
     )
 
 
@@ -215,7 +245,9 @@ BOTTOM_ROW_SHARE = 1.3
 
 
 def _shape_paths(episode: bool) -> tuple[str, ...]:
-    return ("/series/lambda", "/series/mu", "/series/rho") + (("/series/target/lambda", "/series/target/mu", "/series/target/rho") if episode else ())
+    return ("/series/lambda", "/series/mu", "/series/rho") + (
+        ("/series/target/lambda", "/series/target/mu", "/series/target/rho") if episode else ()
+    )
 
 
 def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
@@ -235,10 +267,17 @@ def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
             ("control power P̄ = ω·τ + ϱ̇ f_ϱ", ("/series/power",), "power"),
         ]
     else:
-        views += [("conserved: drift (Q − Q₀)/|Q₀|", ("/series/drift",), "relative"), ("energy H", ("/series/energy",), "self")]
+        views += [
+            ("conserved: drift (Q − Q₀)/|Q₀|", ("/series/drift",), "relative"),
+            ("energy H", ("/series/energy",), "self"),
+        ]
     views += [
         ("s₃" + (" vs s₃*" if episode else ""), ("/series/s3",) + (("/series/target/s3",) if episode else ()), "spin"),
-        ("p_θ" + (" vs p_θ*" if episode else ""), ("/series/p_theta",) + (("/series/target/p_theta",) if episode else ()), "spin"),
+        (
+            "p_θ" + (" vs p_θ*" if episode else ""),
+            ("/series/p_theta",) + (("/series/target/p_theta",) if episode else ()),
+            "spin",
+        ),
     ]
     if episode:
         views.append(("energy H vs H*", ("/series/energy", "/series/target/energy"), "self"))
@@ -280,11 +319,20 @@ def grow_axes(needed: list[tuple], sent: list[tuple] | None, t0: float = 0.0) ->
     needed one with room: a y range that is not flat grows by :data:`LIVE_ROOM` of its span on each
     side (flat ranges are fixed to ±10 % of their scale and are taken as they are), the time axis by
     LIVE_ROOM of the run. ``t0``: the run's first time."""
+
     def holds(outer, inner):
         return inner is None or (outer is not None and outer[0] <= inner[0] and inner[1] <= outer[1])
 
-    if sent is not None and len(sent) == len(needed) and all(
-        s[0] == n[0] and s[2] == n[2] and holds(s[1], n[1]) and (n[3] is None or (s[3] is not None and s[3] >= n[3])) for s, n in zip(sent, needed)
+    if (
+        sent is not None
+        and len(sent) == len(needed)
+        and all(
+            s[0] == n[0]
+            and s[2] == n[2]
+            and holds(s[1], n[1])
+            and (n[3] is None or (s[3] is not None and s[3] >= n[3]))
+            for s, n in zip(sent, needed)
+        )
     ):
         return None
     out = []
@@ -298,8 +346,14 @@ def grow_axes(needed: list[tuple], sent: list[tuple] | None, t0: float = 0.0) ->
     return out
 
 
-def y_axis(paths: tuple[str, ...], rule: str, ranges: dict[str, tuple[float, float, int]], t_range: tuple[float, float] | None = None,
-           *, legend: bool = True):
+def y_axis(
+    paths: tuple[str, ...],
+    rule: str,
+    ranges: dict[str, tuple[float, float, int]],
+    t_range: tuple[float, float] | None = None,
+    *,
+    legend: bool = True,
+):
     """(y range, flat, legend entries) of a time-series view from the logged values' ranges.
 
     ``ranges``: entity path → (min, max, number of series in it). The view's values are *flat* when
@@ -366,7 +420,9 @@ def _clear_bottom(bottom: float, top: float) -> float:
     return bottom
 
 
-def view_specs(*, episode: bool, ranges: dict | None = None, t_range: tuple[float, float] | None = None) -> list[tuple[str, str, tuple[str, ...]]]:
+def view_specs(
+    *, episode: bool, ranges: dict | None = None, t_range: tuple[float, float] | None = None
+) -> list[tuple[str, str, tuple[str, ...]]]:
     """(view class, name, entity paths or origins) of every view :func:`blueprint` lays out, in order.
 
     The single source of the layout: :func:`blueprint` builds the views from it and the tests check
@@ -404,7 +460,14 @@ def series_axes(*, episode: bool, ranges: dict | None, t_range: tuple[float, flo
     return out
 
 
-def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None, t_range: tuple[float, float] | None = None, axes: list[tuple] | None = None):
+def blueprint(
+    *,
+    episode: bool,
+    extent: float = 2.0,
+    ranges: dict | None = None,
+    t_range: tuple[float, float] | None = None,
+    axes: list[tuple] | None = None,
+):
     """The default blueprint of a recording.
 
     Parameters
@@ -438,7 +501,11 @@ def blueprint(*, episode: bool, extent: float = 2.0, ranges: dict | None = None,
             if kind == "top":  # seen from +z the ϱ axis is a point at the centre: its label would sit on μ's
                 contents.append("- /world/labels/normal")
             return rrb.Spatial3DView(
-                name=name, origin=paths[0], contents=contents, eye_controls=camera(kind, extent), line_grid=rrb.LineGrid3D(visible=kind != "top", spacing=0.5)
+                name=name,
+                origin=paths[0],
+                contents=contents,
+                eye_controls=camera(kind, extent),
+                line_grid=rrb.LineGrid3D(visible=kind != "top", spacing=0.5),
             )
         if cls == "TextDocument":
             return rrb.TextDocumentView(name=name, origin=paths[0])
@@ -509,7 +576,10 @@ def tensor_text(t: np.ndarray, G: np.ndarray, C: np.ndarray, half: np.ndarray) -
     half = np.asarray(half, dtype=np.float64).reshape(n, 3)
     sq = half * half
     cols = [t[:, None]]
-    for M, eig in ((np.asarray(G, dtype=np.float64).reshape(n, 3, 3), sq), (np.asarray(C, dtype=np.float64).reshape(n, 3, 3), 1 / sq)):
+    for M, eig in (
+        (np.asarray(G, dtype=np.float64).reshape(n, 3, 3), sq),
+        (np.asarray(C, dtype=np.float64).reshape(n, 3, 3), 1 / sq),
+    ):
         cols.append(np.concatenate([M, eig[:, :, None]], axis=2).reshape(n, 12))
     return ((_TENSOR_TEXT + _SEP) * n % tuple(np.concatenate(cols, axis=1).ravel().tolist())).split(_SEP)[:n]
 
@@ -520,7 +590,9 @@ def axis_labels(half: np.ndarray) -> list[str]:
     n = half.shape[0]
     if n == 0:
         return []
-    return (("λ = %.3f" + _SEP + "μ = %.3f" + _SEP + "ϱ = %.3f" + _SEP) * n % tuple(half.ravel().tolist())).split(_SEP)[: 3 * n]
+    return (("λ = %.3f" + _SEP + "μ = %.3f" + _SEP + "ϱ = %.3f" + _SEP) * n % tuple(half.ravel().tolist())).split(_SEP)[
+        : 3 * n
+    ]
 
 
 def description_markdown(title: str, body, extra: str, *, episode: bool) -> str:
@@ -529,7 +601,13 @@ def description_markdown(title: str, body, extra: str, *, episode: bool) -> str:
         desc = body.describe()
     except AttributeError:  # a duck-typed body without describe()
         desc = repr(body)
-    balance = ("\n  **Energy balance** — the controls u = (τ₁, τ₂, τ₃, f_ϱ) change H on purpose: H − H₀ is drawn with the work W = ∫P dt\n  of the control, P = ω·τ + ϱ̇ f_ϱ (ω = ∂H/∂s, ϱ̇ = ∂H/∂p_ϱ); the two curves coincide (checked to the\n  integrator's tolerance). **Control power** P̄ is its mean over each step. Reward terms, the distance to the\n  target with the success tolerance, and the actions (scaled to [−1, 1]) are drawn at the step they lead to.") if episode else ""
+    balance = (
+        (
+            "\n  **Energy balance** — the controls u = (τ₁, τ₂, τ₃, f_ϱ) change H on purpose: H − H₀ is drawn with the work W = ∫P dt\n  of the control, P = ω·τ + ϱ̇ f_ϱ (ω = ∂H/∂s, ϱ̇ = ∂H/∂p_ϱ); the two curves coincide (checked to the\n  integrator's tolerance). **Control power** P̄ is its mean over each step. Reward terms, the distance to the\n  target with the success tolerance, and the actions (scaled to [−1, 1]) are drawn at the step they lead to."
+        )
+        if episode
+        else ""
+    )
     text = f"""# {title}
 
 A flat affinely-rigid body with thickness (V. Kovalchuk & E. E. Rożko, arXiv:0902.3573; corrections in

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+
 @dataclass
 class EntityData:
     """The temporal rows of one entity, sorted by ``step``: timelines and decoded components."""
@@ -107,7 +108,11 @@ def read_recording(path: str | Path) -> RecordingData:
             names = rb.schema.names
             if "ViewBlueprint:class_identifier" in names:
                 cls = rb.column("ViewBlueprint:class_identifier").to_pylist()
-                disp = rb.column("ViewBlueprint:display_name").to_pylist() if "ViewBlueprint:display_name" in names else [None] * len(cls)
+                disp = (
+                    rb.column("ViewBlueprint:display_name").to_pylist()
+                    if "ViewBlueprint:display_name" in names
+                    else [None] * len(cls)
+                )
                 for c, d in zip(cls, disp):
                     if c:
                         views.append((str(c[0]), str(d[0]) if d else ""))
@@ -224,7 +229,9 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
                 values = rb.column(i).to_pylist()
                 last = next((v for v in reversed(values) if v is not None), None)
                 if last is not None:
-                    props.setdefault(chunk.entity_path, {})[f.name] = last[0] if isinstance(last, list) and len(last) == 1 else last
+                    props.setdefault(chunk.entity_path, {})[f.name] = (
+                        last[0] if isinstance(last, list) and len(last) == 1 else last
+                    )
     views = []
     for ent, comp in props.items():
         if "ViewBlueprint:class_identifier" not in comp:
@@ -232,7 +239,12 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
         origin = str(comp.get("ViewBlueprint:space_origin", "/"))
         query = props.get(ent + "/ViewContents", {}).get("ViewContents:query", ["$origin/**"])
         query = [query] if isinstance(query, str) else list(query)
-        settings = {k: v for sub, c in props.items() if sub.startswith(ent + "/") and not sub.endswith("/ViewContents") for k, v in c.items()}
+        settings = {
+            k: v
+            for sub, c in props.items()
+            if sub.startswith(ent + "/") and not sub.endswith("/ViewContents")
+            for k, v in c.items()
+        }
         views.append(
             ViewInfo(
                 view_class=str(comp["ViewBlueprint:class_identifier"]),
@@ -243,12 +255,18 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
             )
         )
     panels = {}
-    for name, key in (("time_panel", "TimePanelBlueprint:state"), ("blueprint_panel", "PanelBlueprint:state"), ("selection_panel", "PanelBlueprint:state")):
+    for name, key in (
+        ("time_panel", "TimePanelBlueprint:state"),
+        ("blueprint_panel", "PanelBlueprint:state"),
+        ("selection_panel", "PanelBlueprint:state"),
+    ):
         state = props.get(f"/{name}", {}).get(key)
         if state is not None:
             panels[name] = _PANEL_STATES.get(int(state), str(state))
     timeline = props.get("/time_panel", {}).get("TimePanelBlueprint:timeline")
-    return BlueprintInfo(views=tuple(sorted(views, key=lambda v: (v.view_class, v.name))), panels=panels, timeline=timeline)
+    return BlueprintInfo(
+        views=tuple(sorted(views, key=lambda v: (v.view_class, v.name))), panels=panels, timeline=timeline
+    )
 
 
 def verify_recording(path: str | Path) -> str:
@@ -268,7 +286,9 @@ def verify_recording(path: str | Path) -> str:
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     out = (proc.stdout + proc.stderr).strip()
     if proc.returncode != 0:
-        raise ValueError(f"path: {str(path)!r} failed 'rerun rrd verify': {out.splitlines()[-1] if out else proc.returncode}")
+        raise ValueError(
+            f"path: {str(path)!r} failed 'rerun rrd verify': {out.splitlines()[-1] if out else proc.returncode}"
+        )
     return out
 
 
@@ -283,7 +303,9 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
     """A readable account of a recording, read back from the file: entities, rows, first values, and G and C
     as 3×3 matrices at the first and the last step (rebuilt from their entry series, :func:`_tensor_lines`)."""
     data = read_recording(path)
-    lines = [f"{path}: application {data.application_id!r}, recording {data.recording_id}, {data.blueprints} blueprint(s)"]
+    lines = [
+        f"{path}: application {data.application_id!r}, recording {data.recording_id}, {data.blueprints} blueprint(s)"
+    ]
     if data.views:
         lines.append("default blueprint: " + "; ".join(f"{c} '{d}'" for c, d in data.views))
     lines.append(f"{'entity':<26} {'rows':>6} {'steps':>13} {'sim_time [s]':>19}  components")
@@ -331,4 +353,3 @@ def _tensor_lines(data) -> list[str]:
             out.append(f"  {sym} ({ent}) at step {int(e.step[k])} (sim_time {e.sim_time[k]:g}):")
             out.extend("    [" + "  ".join(f"{x:+.6f}" for x in row) + "]" for row in mats[k])
     return out
-

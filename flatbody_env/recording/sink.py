@@ -106,7 +106,9 @@ class FileSink:
                 # opened for reading first and without blocking, so that rerun's open for writing returns at once;
                 # the copy runs before ``save``, which writes what was logged so far before it returns
                 self._fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
-                with contextlib.suppress(OSError, AttributeError):  # fewer hand-overs between rerun and the copy (Linux)
+                with contextlib.suppress(
+                    OSError, AttributeError
+                ):  # fewer hand-overs between rerun and the copy (Linux)
                     fcntl.fcntl(self._fd, fcntl.F_SETPIPE_SZ, PIPE_SIZE)
                 self._thread = threading.Thread(target=self._copy, name=f"flatbody-rrd-{self.path.name}", daemon=True)
                 self._thread.start()
@@ -221,7 +223,9 @@ class FileSink:
                 if self._thread is not None:
                     self._thread.join(FINISH_TIMEOUT_S)
                     if self._thread.is_alive() and self.error is None:
-                        self.error = TimeoutError(f"the copy of rerun's stream did not finish within {FINISH_TIMEOUT_S:g} s")
+                        self.error = TimeoutError(
+                            f"the copy of rerun's stream did not finish within {FINISH_TIMEOUT_S:g} s"
+                        )
             if self.error is None and self.bytes == 0:
                 self.error = OSError(errno.EIO, "rerun wrote nothing")
         except BaseException as exc:

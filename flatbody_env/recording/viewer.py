@@ -192,7 +192,16 @@ def screenshots(
         env = dict(os.environ, DISPLAY=display, WGPU_BACKEND="vulkan", VK_ICD_FILENAMES=str(_lavapipe()), CI="1")
         env.pop("WAYLAND_DISPLAY", None)
         viewer = subprocess.Popen(
-            [str(_rerun_exe()), "--bind", "127.0.0.1", "--port", str(port), "--window-size", f"{width}x{height}", "--hide-welcome-screen"],
+            [
+                str(_rerun_exe()),
+                "--bind",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--window-size",
+                f"{width}x{height}",
+                "--hide-welcome-screen",
+            ],
             env=env,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -237,7 +246,15 @@ def screenshots(
                     if not vpath.exists():
                         continue
                     _compact_png(vpath, colors)
-                    shots.append(Shot(path=vpath, t=t, view=v.name, view_class=v.view_class, reports=tuple(r.summary for r in (v.reports or []))))
+                    shots.append(
+                        Shot(
+                            path=vpath,
+                            t=t,
+                            view=v.name,
+                            view_class=v.view_class,
+                            reports=tuple(r.summary for r in (v.reports or [])),
+                        )
+                    )
     finally:
         _stop(viewer)
         _stop(xvfb)

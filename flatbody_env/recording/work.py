@@ -34,7 +34,10 @@ def _velocities(Y: np.ndarray, body) -> tuple[np.ndarray, np.ndarray]:
     if P[0] == P[1]:
         with np.errstate(all="ignore"):
             _, w1, w2, w3, _, _, _, rd, _, _, _ = kinetic_iso(*(Y[i] for i in range(10)), float(P[0]), float(P[2]))
-        return np.stack([np.broadcast_to(w1, Y.shape[1:]), np.broadcast_to(w2, Y.shape[1:]), np.broadcast_to(w3, Y.shape[1:])], axis=-1), np.asarray(rd, dtype=np.float64)
+        return np.stack(
+            [np.broadcast_to(w1, Y.shape[1:]), np.broadcast_to(w2, Y.shape[1:]), np.broadcast_to(w3, Y.shape[1:])],
+            axis=-1,
+        ), np.asarray(rd, dtype=np.float64)
     n = Y.shape[1]
     w = np.empty((n, 3))
     rd = np.empty(n)
@@ -61,7 +64,19 @@ def _flow(Y: np.ndarray, U: np.ndarray, body) -> np.ndarray:
     if P[0] == P[1]:
         _, gl, gm, gr = body.potential_terms(Y[7], Y[8], Y[9])
         with np.errstate(all="ignore"):
-            out = rhs_iso(*(Y[i] for i in range(10)), U[:, 0], U[:, 1], U[:, 2], U[:, 3], float(P[0]), float(P[2]), float(P[8]), gl, gm, gr)
+            out = rhs_iso(
+                *(Y[i] for i in range(10)),
+                U[:, 0],
+                U[:, 1],
+                U[:, 2],
+                U[:, 3],
+                float(P[0]),
+                float(P[2]),
+                float(P[8]),
+                gl,
+                gm,
+                gr,
+            )
         return np.stack([np.broadcast_to(np.asarray(v, dtype=np.float64), Y.shape[1:]) for v in out[:11]])
     return np.stack([rhs(0.0, np.ascontiguousarray(Y[:, k]), U[k], body) for k in range(Y.shape[1])], axis=1)
 

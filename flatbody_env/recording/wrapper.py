@@ -59,7 +59,9 @@ def _check_contract(u) -> None:
     """A clear error when the unwrapped env lacks what the recorder reads (module docstring)."""
     for name in ("body", "state", "rotation", "time"):
         if not hasattr(u, name):
-            raise ValueError(f"env.unwrapped.{name}: missing — RerunRecorder needs body, state, rotation, time (see flatbody_env.recording.wrapper)")
+            raise ValueError(
+                f"env.unwrapped.{name}: missing — RerunRecorder needs body, state, rotation, time (see flatbody_env.recording.wrapper)"
+            )
     state = u.state
     if not isinstance(state, dict) or any(k not in state for k in STATE_NAMES):
         raise ValueError(f"env.unwrapped.state: expected a dict with the entries {', '.join(STATE_NAMES)}")
@@ -67,8 +69,12 @@ def _check_contract(u) -> None:
     if packed is not None:
         from flatbody_env.physics.state import pack
 
-        if np.shape(packed) != (len(STATE_NAMES),) or not np.array_equal(np.asarray(packed, dtype=np.float64), pack(state, validate=False), equal_nan=True):
-            raise ValueError(f"env.unwrapped.physics_state: expected the state packed in the order {', '.join(STATE_NAMES)}")
+        if np.shape(packed) != (len(STATE_NAMES),) or not np.array_equal(
+            np.asarray(packed, dtype=np.float64), pack(state, validate=False), equal_nan=True
+        ):
+            raise ValueError(
+                f"env.unwrapped.physics_state: expected the state packed in the order {', '.join(STATE_NAMES)}"
+            )
     R = u.rotation
     if R is None or np.shape(R) != (3, 3):
         raise ValueError(
@@ -225,7 +231,11 @@ class RerunRecorder(gym.Wrapper):
         if stepped:
             for key in ("integrator_failure", "left_domain"):
                 if info.get(key):
-                    self._rec.note(f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)", step=self._step, t=t)
+                    self._rec.note(
+                        f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)",
+                        step=self._step,
+                        t=t,
+                    )
 
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -240,7 +250,10 @@ class RerunRecorder(gym.Wrapper):
             _check_contract(u)
             target = _numeric(getattr(u, "target", None))
             state = u.state
-            extent = max([float(state[k]) for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho") if k in target])
+            extent = max(
+                [float(state[k]) for k in ("lambda", "mu", "rho")]
+                + [target[k] for k in ("lambda", "mu", "rho") if k in target]
+            )
             self._rec = Recorder(
                 self.episode_path(self._episode),
                 u.body,
@@ -248,7 +261,11 @@ class RerunRecorder(gym.Wrapper):
                 description=f"Environment `{getattr(getattr(u, 'spec', None), 'id', None) or type(u).__name__}`, episode {self._episode}"
                 + (f", seed {seed}" if seed is not None else "")
                 + ". Actions and rewards are drawn at the step they lead to."
-                + (("\n\n**Target**: " + ", ".join(f"{display_name(k)}* = {v:.4g}" for k, v in target.items())) if target else ""),
+                + (
+                    ("\n\n**Target**: " + ", ".join(f"{display_name(k)}* = {v:.4g}" for k, v in target.items()))
+                    if target
+                    else ""
+                ),
                 block=self._block,
                 tensor_every=self._tensor_every,
                 action_names=_action_names(u),

@@ -71,7 +71,14 @@ import numpy as np
 
 from flatbody_env.physics.kinematics import cauchy_tensor, configuration, green_tensor, material_rotation
 from flatbody_env.physics.state import STATE_NAMES
-from flatbody_env.recording.geometry import material_lines, principal_axes, quaternions_xyzw, relative_drift, symmetric_entries, unit_circle
+from flatbody_env.recording.geometry import (
+    material_lines,
+    principal_axes,
+    quaternions_xyzw,
+    relative_drift,
+    symmetric_entries,
+    unit_circle,
+)
 from flatbody_env.recording.layout import (
     ACTION_NAMES,
     AXIS_COLORS,
@@ -123,7 +130,13 @@ BODY_ENTITIES = (
 FREE_ENTITIES = tuple(f"/series/drift/{name}" for name, _ in DRIFT_SERIES)
 """Entity paths a free scene adds: the relative drift of its conserved quantities."""
 
-EPISODE_ENTITIES = ("/series/distance", "/world/target", "/world/target/outline", "/series/balance/delta_energy", *(f"/series/target/{n}" for n in TARGET_SERIES))
+EPISODE_ENTITIES = (
+    "/series/distance",
+    "/world/target",
+    "/world/target/outline",
+    "/series/balance/delta_energy",
+    *(f"/series/target/{n}" for n in TARGET_SERIES),
+)
 """Entity paths an env episode adds (besides ``/series/action/…``, ``/series/reward/…``, the control's
 power and work ``/series/power``, ``/series/balance/work`` when the env tells its controls, the
 success tolerance ``/series/distance_tolerance`` when it has one, and ``/events``)."""
@@ -249,12 +262,16 @@ class _Columns:
         and ``total`` under ``"total"`` unless ``d`` has that entry."""
         r = self.rows
         cols = self.cols
-        if total is None and r and d is not None and self._last is not None and _same(d, self._last):  # the same row again: repeat it
+        if (
+            total is None and r and d is not None and self._last is not None and _same(d, self._last)
+        ):  # the same row again: repeat it
             for col in cols.values():
                 col.append(col[-1])
             self.rows = r + 1
             return
-        self._last = dict(d) if isinstance(d, dict) and total is None else None  # a copy: an env may change its dict in place
+        self._last = (
+            dict(d) if isinstance(d, dict) and total is None else None
+        )  # a copy: an env may change its dict in place
         added = 0
         items = list(d.items()) if isinstance(d, Mapping) else []
         if total is not None:
@@ -324,7 +341,11 @@ def _matrix_column(component: str, M: np.ndarray):
     import rerun as rr
 
     if component not in _MATRIX_TYPES:
-        one = rr.encodings.TensorDataBatch(np.zeros((3, 3))) if component == "Tensor:data" else rr.components.TransformMat3x3Batch(np.eye(3))
+        one = (
+            rr.encodings.TensorDataBatch(np.zeros((3, 3)))
+            if component == "Tensor:data"
+            else rr.components.TransformMat3x3Batch(np.eye(3))
+        )
         descriptor = rr.Tensor.descriptor_data() if component == "Tensor:data" else rr.Transform3D.descriptor_mat3x3()
         _MATRIX_TYPES[component] = (descriptor, one.as_arrow_array().type)
     descriptor, typ = _MATRIX_TYPES[component]
@@ -334,16 +355,27 @@ def _matrix_column(component: str, M: np.ndarray):
         array = pa.FixedSizeListArray.from_arrays(pa.array(np.swapaxes(M, 1, 2).astype(np.float32).ravel()), type=typ)
     else:
         pair = pa.array(np.arange(0, 2 * n + 1, 2, dtype=np.int32))
-        shape = pa.ListArray.from_arrays(pair, pa.array(np.full(2 * n, 3, dtype=np.uint64)), type=typ.field("shape").type)
-        names = pa.ListArray.from_arrays(pair, pa.array(["row", "col"] * n, type=pa.string()), type=typ.field("names").type)
+        shape = pa.ListArray.from_arrays(
+            pair, pa.array(np.full(2 * n, 3, dtype=np.uint64)), type=typ.field("shape").type
+        )
+        names = pa.ListArray.from_arrays(
+            pair, pa.array(["row", "col"] * n, type=pa.string()), type=typ.field("names").type
+        )
         union = typ.field("buffer").type
         arms = [f.name for f in union]
         children = [pa.array([], type=f.type) for f in union]
         children[arms.index("F64")] = pa.ListArray.from_arrays(
-            pa.array(np.arange(0, 9 * n + 1, 9, dtype=np.int32)), pa.array(np.ascontiguousarray(M).ravel()), type=union.field(arms.index("F64")).type
+            pa.array(np.arange(0, 9 * n + 1, 9, dtype=np.int32)),
+            pa.array(np.ascontiguousarray(M).ravel()),
+            type=union.field(arms.index("F64")).type,
         )
         codes = np.full(n, union.type_codes[arms.index("F64")], dtype=np.int8)
-        buffer = pa.Array.from_buffers(union, n, [None, pa.py_buffer(codes.tobytes()), pa.py_buffer(np.arange(n, dtype=np.int32).tobytes())], children=children)
+        buffer = pa.Array.from_buffers(
+            union,
+            n,
+            [None, pa.py_buffer(codes.tobytes()), pa.py_buffer(np.arange(n, dtype=np.int32).tobytes())],
+            children=children,
+        )
         array = pa.StructArray.from_arrays([shape, names, buffer], fields=list(typ))
 
     class _Batch:  # the rerun.ComponentBatchLike protocol
@@ -455,11 +487,15 @@ class Recorder:
         self._saved = False
         self._sink = None  # the file: flatbody_env.recording.sink.FileSink, opened with the first block
         self._work = 0.0
-        self._last: tuple[float, np.ndarray] | None = None  # (t, state) of the last step sent: the start of the next step's work
+        self._last: tuple[float, np.ndarray] | None = (
+            None  # (t, state) of the last step sent: the start of the next step's work
+        )
         self._rr = rr
         self.rec = rr.RecordingStream(APP_ID, recording_id=recording_id or str(uuid.uuid4()), send_properties=True)
         if not self.rec.is_enabled():
-            raise ValueError("RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record")
+            raise ValueError(
+                "RERUN: rerun logging is disabled by the environment variable RERUN (e.g. RERUN=off); unset it to record"
+            )
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec.send_recording_name(title)
         self._log_static(title, description, int(spokes))
@@ -472,35 +508,65 @@ class Recorder:
         rr = self._rr
         text = description_markdown(title, self.body, description, episode=self.episode)
         self._static_log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
-        self._static_log("/tensors/numbers", _static(("numbers",), lambda: rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN)))
+        self._static_log(
+            "/tensors/numbers",
+            _static(("numbers",), lambda: rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN)),
+        )
         for ent in ("/world", "/material"):
             self._static_log(ent, rr.ViewCoordinates.RIGHT_HAND_Z_UP)
-        lines = _static(("lines", spokes), lambda: rr.LineStrips3D(material_lines(spokes), colors=material_line_colors(spokes), radii=0.008))
+        lines = _static(
+            ("lines", spokes),
+            lambda: rr.LineStrips3D(material_lines(spokes), colors=material_line_colors(spokes), radii=0.008),
+        )
         self._static_log("/world/material/lines", lines)
         self._static_log("/material/reference", lines)
         ellipsoid = _static(
             ("ellipsoid",),
-            lambda: rr.Ellipsoids3D.from_fields(colors=[rgba((150, 165, 195))], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006),
+            lambda: rr.Ellipsoids3D.from_fields(
+                colors=[rgba((150, 165, 195))], fill_mode=rr.components.FillMode.MajorWireframe, line_radii=0.006
+            ),
         )
         self._static_log("/world/body", ellipsoid)
         self._static_log("/material/G_ellipsoid", ellipsoid)
-        arrows = _static(("arrows",), lambda: rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=False))
+        arrows = _static(
+            ("arrows",), lambda: rr.Arrows3D.from_fields(colors=AXIS_COLORS, radii=0.02, show_labels=False)
+        )
         for ent in ("/world/axes_C", "/material/axes_G"):
             self._static_log(ent, arrows)
-        for ent, colors in (("/world/labels/in_plane", AXIS_COLORS[:2]), ("/world/labels/normal", AXIS_COLORS[2:]), ("/material/labels", AXIS_COLORS)):
-            self._static_log(ent, _static(("labels", ent), lambda colors=colors: rr.Points3D.from_fields(colors=colors, radii=0.012, show_labels=True)))
+        for ent, colors in (
+            ("/world/labels/in_plane", AXIS_COLORS[:2]),
+            ("/world/labels/normal", AXIS_COLORS[2:]),
+            ("/material/labels", AXIS_COLORS),
+        ):
+            self._static_log(
+                ent,
+                _static(
+                    ("labels", ent),
+                    lambda colors=colors: rr.Points3D.from_fields(colors=colors, radii=0.012, show_labels=True),
+                ),
+            )
         for name in BODY_SERIES:
             self._style(f"/series/{name}")
         if not self.episode:
             for name, _ in DRIFT_SERIES:
                 self._style(f"/series/drift/{name}")
         for sym in ("G", "C"):
-            entries = _static(("entries", sym), lambda: rr.SeriesLines(names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS))
+            entries = _static(
+                ("entries", sym),
+                lambda: rr.SeriesLines(
+                    names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS
+                ),
+            )
             self._static_log(f"/series/{sym}", entries)
         if self.episode:
             from flatbody_env.env.rendering import COLORS
 
-            self._static_log("/world/target/outline", _static(("outline",), lambda: rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012)))
+            self._static_log(
+                "/world/target/outline",
+                _static(
+                    ("outline",), lambda: rr.LineStrips3D([unit_circle()], colors=[rgba(COLORS["target"])], radii=0.012)
+                ),
+            )
             self._style("/series/distance")
             self._style("/series/balance/delta_energy")
             for name in TARGET_SERIES:
@@ -558,8 +624,12 @@ class Recorder:
             y = np.array(state, dtype=np.float64).ravel()
             if y.shape != (len(STATE_NAMES),):
                 raise ValueError(f"state: expected {len(STATE_NAMES)} entries, got shape {y.shape}")
-        if (action is not None or reward_terms or reward is not None or target or distance is not None) and not self.episode:
-            raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
+        if (
+            action is not None or reward_terms or reward is not None or target or distance is not None
+        ) and not self.episode:
+            raise ValueError(
+                "recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))"
+            )
         b = self._buf
         b.t.append(float(t))
         b.y.append(y)
@@ -592,7 +662,11 @@ class Recorder:
         if self.episode:
             keep = np.isfinite(Y).all(axis=0) & np.isfinite(R.reshape(n, 9)).all(axis=1)
             for i in np.flatnonzero(~keep):
-                self.note("non-finite state (integration failure): step not drawn", step=step[i], t=t[i] if math.isfinite(t[i]) else 0.0)
+                self.note(
+                    "non-finite state (integration failure): step not drawn",
+                    step=step[i],
+                    t=t[i] if math.isfinite(t[i]) else 0.0,
+                )
             if not keep.any():
                 return
             actions = None
@@ -618,7 +692,13 @@ class Recorder:
                     if c is not None and c.size == 4:
                         controls[i] = c
                 controls = controls[keep]
-            episode = {"actions": actions, "reward_terms": terms or None, "target": target or None, "distance": np.array(b.distance)[keep], "controls": controls}
+            episode = {
+                "actions": actions,
+                "reward_terms": terms or None,
+                "target": target or None,
+                "distance": np.array(b.distance)[keep],
+                "controls": controls,
+            }
             t, Y, R, step, energy = t[keep], Y[:, keep], R[keep], step[keep], energy[keep]
         missing = np.isnan(energy)
         if missing.any():
@@ -686,13 +766,41 @@ class Recorder:
         if step is None:
             step = np.arange(self._steps, self._steps + n, dtype=np.int64)
         self._steps += n
-        self._extend(t, states, rotations, step=step, energy=energy, actions=actions, reward_terms=reward_terms, target=target, distance=distance, controls=controls)
+        self._extend(
+            t,
+            states,
+            rotations,
+            step=step,
+            energy=energy,
+            actions=actions,
+            reward_terms=reward_terms,
+            target=target,
+            distance=distance,
+            controls=controls,
+        )
         if not self._saved:
             self._save()
 
-    def _extend(self, t, states, rotations, *, step, energy, actions=None, reward_terms=None, target=None, distance=None, controls=None) -> None:
-        if (actions is not None or reward_terms or target or distance is not None or controls is not None) and not self.episode:
-            raise ValueError("recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))")
+    def _extend(
+        self,
+        t,
+        states,
+        rotations,
+        *,
+        step,
+        energy,
+        actions=None,
+        reward_terms=None,
+        target=None,
+        distance=None,
+        controls=None,
+    ) -> None:
+        if (
+            actions is not None or reward_terms or target or distance is not None or controls is not None
+        ) and not self.episode:
+            raise ValueError(
+                "recorder: actions, reward terms, target and distance belong to an episode (Recorder(..., episode=True))"
+            )
         if energy is None:
             from flatbody_env.physics.hamiltonian import hamiltonian_series
 
@@ -707,8 +815,12 @@ class Recorder:
         if self.episode:
             episode = {
                 "actions": None if actions is None else _optional_column("actions", actions, n, np.shape(actions)[-1]),
-                "reward_terms": {str(k): _optional_column(f"reward_terms[{k!r}]", v, n) for k, v in (reward_terms or {}).items()},
-                "target": {k: _optional_column(f"target[{k!r}]", target[k], n) for k in TARGET_SERIES if target and k in target},
+                "reward_terms": {
+                    str(k): _optional_column(f"reward_terms[{k!r}]", v, n) for k, v in (reward_terms or {}).items()
+                },
+                "target": {
+                    k: _optional_column(f"target[{k!r}]", target[k], n) for k in TARGET_SERIES if target and k in target
+                },
                 "distance": None if distance is None else _optional_column("distance", distance, n),
                 "controls": None if controls is None else _optional_column("controls", controls, n, 4),
             }
@@ -764,7 +876,12 @@ class Recorder:
         are one block (``final``: no block follows; see the class docstring), else with axes that
         follow the data."""
         one = final and self._blocks == 1
-        bp = blueprint(episode=self.episode, extent=self._extent, ranges=self._ranges if one else None, t_range=self._t_range if one else None)
+        bp = blueprint(
+            episode=self.episode,
+            extent=self._extent,
+            ranges=self._ranges if one else None,
+            t_range=self._t_range if one else None,
+        )
         from flatbody_env.recording.sink import FileSink
 
         # rerun's file sink writes into a pipe that our thread copies to a temporary file, renamed at close:
@@ -789,7 +906,9 @@ class Recorder:
         Phi = configuration(lam, mu, rho, theta, R)
         idx = block.index
         self._send("/world/body", idx, rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(R)))
-        self._send("/material/G_ellipsoid", idx, rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(U)))
+        self._send(
+            "/material/G_ellipsoid", idx, rr.Ellipsoids3D.columns(half_sizes=half, quaternions=quaternions_xyzw(U))
+        )
         self._send("/world/material", idx, [_matrix_column("Transform3D:mat3x3", Phi)])
         labels = np.array(axis_labels(half), dtype=object).reshape(n, 3)
         gap = LABEL_GAP * self._extent  # labels just beyond the arrows' tips: off the spokes, the fibre and each other
@@ -798,16 +917,39 @@ class Recorder:
             self._send(ent, idx, rr.Arrows3D.columns(vectors=vectors.reshape(3 * n, 3)).partition(np.full(n, 3)))
             tips = vectors + gap * np.swapaxes(frames, 1, 2)
             if ent == "/world/axes_C":
-                self._send("/world/labels/in_plane", idx, rr.Points3D.columns(positions=tips[:, :2].reshape(2 * n, 3), labels=labels[:, :2].ravel().tolist()).partition(np.full(n, 2)))
-                self._send("/world/labels/normal", idx, rr.Points3D.columns(positions=tips[:, 2], labels=labels[:, 2].tolist()))
+                self._send(
+                    "/world/labels/in_plane",
+                    idx,
+                    rr.Points3D.columns(
+                        positions=tips[:, :2].reshape(2 * n, 3), labels=labels[:, :2].ravel().tolist()
+                    ).partition(np.full(n, 2)),
+                )
+                self._send(
+                    "/world/labels/normal", idx, rr.Points3D.columns(positions=tips[:, 2], labels=labels[:, 2].tolist())
+                )
             else:
-                self._send("/material/labels", idx, rr.Points3D.columns(positions=tips.reshape(3 * n, 3), labels=labels.ravel().tolist()).partition(np.full(n, 3)))
+                self._send(
+                    "/material/labels",
+                    idx,
+                    rr.Points3D.columns(positions=tips.reshape(3 * n, 3), labels=labels.ravel().tolist()).partition(
+                        np.full(n, 3)
+                    ),
+                )
         for sym, M in (("G", G), ("C", C)):
             entries = symmetric_entries(M)
             self._send(f"/series/{sym}", idx, self._scalars(entries, 6))
             self._note(f"/series/{sym}", entries, 6)
         casimir = y[_IDX["s1"]] ** 2 + y[_IDX["s2"]] ** 2 + y[_IDX["s3"]] ** 2
-        series = {"lambda": lam, "mu": mu, "rho": rho, "theta": theta, "s3": y[_IDX["s3"]], "p_theta": y[_IDX["p_theta"]], "energy": block.energy, "casimir": casimir}
+        series = {
+            "lambda": lam,
+            "mu": mu,
+            "rho": rho,
+            "theta": theta,
+            "s3": y[_IDX["s3"]],
+            "p_theta": y[_IDX["p_theta"]],
+            "energy": block.energy,
+            "casimir": casimir,
+        }
         if self._q0 is None:
             self._q0 = {name: float(series[name][0]) for name in ("energy", "casimir", "p_theta")}
         for name, values in series.items():
@@ -821,7 +963,11 @@ class Recorder:
         sel = np.flatnonzero(block.step % self.tensor_every == 0)
         if sel.size:
             tidx = idx if sel.size == n else _timelines(block.step[sel], block.t[sel])
-            self._send("/tensors/numbers", tidx, rr.TextDocument.columns(text=tensor_text(block.t[sel], G[sel], C[sel], half[sel])))
+            self._send(
+                "/tensors/numbers",
+                tidx,
+                rr.TextDocument.columns(text=tensor_text(block.t[sel], G[sel], C[sel], half[sel])),
+            )
 
     def _send_episode(self, block: _Block, *, actions, reward_terms, target, distance, controls=None) -> None:
         """Actions, reward terms, target (series and outline), distance and the control's power and
@@ -830,7 +976,9 @@ class Recorder:
             has = ~np.isnan(actions).any(axis=1)
             if has.any():
                 k = actions.shape[1]
-                names = self.action_names or (ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k)))
+                names = self.action_names or (
+                    ACTION_NAMES if k == len(ACTION_NAMES) else tuple(f"a{i}" for i in range(k))
+                )
                 if len(names) != k:
                     raise ValueError(f"action_names: {len(names)} names for actions of size {k}")
                 idx = self._rows(block, has)
@@ -851,13 +999,19 @@ class Recorder:
             d = np.stack([target["lambda"], target["mu"], target["rho"]], axis=1)
             has = ~np.isnan(d).any(axis=1)
             if has.any():  # R·diag(λ*, μ*, ϱ*): the target ellipse along the body's axes
-                self._send("/world/target", self._rows(block, has), [_matrix_column("Transform3D:mat3x3", block.rotations[has] * d[has][:, None, :])])
+                self._send(
+                    "/world/target",
+                    self._rows(block, has),
+                    [_matrix_column("Transform3D:mat3x3", block.rotations[has] * d[has][:, None, :])],
+                )
         if distance is not None:
             has = ~np.isnan(distance)
             if has.any():
                 self._series("/series/distance", self._rows(block, has), distance[has])
                 if self._tolerance is not None:
-                    self._series("/series/distance_tolerance", self._rows(block, has), np.full(int(has.sum()), self._tolerance))
+                    self._series(
+                        "/series/distance_tolerance", self._rows(block, has), np.full(int(has.sum()), self._tolerance)
+                    )
         dH = block.energy - self._q0["energy"]
         self._series("/series/balance/delta_energy", block.index, dH)
         if controls is not None:  # the work of the control, step by step (flatbody_env.recording.work)
@@ -865,17 +1019,24 @@ class Recorder:
 
             n = block.t.size
             t_prev = np.concatenate([[np.nan if self._last is None else self._last[0]], block.t[:-1]])
-            y_prev = np.concatenate([(np.full((11, 1), np.nan) if self._last is None else self._last[1][:, None]), block.states[:, :-1]], axis=1)
+            y_prev = np.concatenate(
+                [(np.full((11, 1), np.nan) if self._last is None else self._last[1][:, None]), block.states[:, :-1]],
+                axis=1,
+            )
             has = ~np.isnan(controls).any(axis=1) & np.isfinite(t_prev)
             dW = np.zeros(n)
             if has.any():
-                dW[has] = step_work(t_prev[has], y_prev[:, has], block.t[has], block.states[:, has], controls[has], self.body)
+                dW[has] = step_work(
+                    t_prev[has], y_prev[:, has], block.t[has], block.states[:, has], controls[has], self.body
+                )
             W = self._work + np.cumsum(dW)
             self._work = float(W[-1])
             self._series("/series/balance/work", block.index, W)
             if has.any():
                 h = block.t[has] - t_prev[has]
-                self._series("/series/power", self._rows(block, has), np.where(h > 0, dW[has] / np.where(h > 0, h, 1.0), 0.0))
+                self._series(
+                    "/series/power", self._rows(block, has), np.where(h > 0, dW[has] / np.where(h > 0, h, 1.0), 0.0)
+                )
         self._last = (float(block.t[-1]), block.states[:, -1].copy())
 
     @staticmethod
@@ -989,12 +1150,29 @@ def record_arrays(
         energy = hamiltonian_series(Y, body)
     block = _as_block(t, Y, rotations, energy=energy, step=step)
     extent = float(max(Y[_IDX["lambda"]].max(), Y[_IDX["mu"]].max(), Y[_IDX["rho"]].max()))
-    with Recorder(path, body, title=title, description=description, tensor_every=tensor_every, recording_id=recording_id, extent=extent) as rec:
+    with Recorder(
+        path,
+        body,
+        title=title,
+        description=description,
+        tensor_every=tensor_every,
+        recording_id=recording_id,
+        extent=extent,
+    ) as rec:
         rec._send_block(block)
     return Path(path)
 
 
-def record_trajectory(traj, body, path: str | Path, *, title: str | None = None, description: str = "", tensor_every: int = 1, recording_id: str | None = None) -> Path:
+def record_trajectory(
+    traj,
+    body,
+    path: str | Path,
+    *,
+    title: str | None = None,
+    description: str = "",
+    tensor_every: int = 1,
+    recording_id: str | None = None,
+) -> Path:
     """Record a :class:`flatbody_env.simulation.Trajectory` (with rotation) to ``path``.
 
     ``traj`` must come from ``simulate(..., with_rotation=True)`` (or the regular model, which
@@ -1015,5 +1193,3 @@ def record_trajectory(traj, body, path: str | Path, *, title: str | None = None,
         tensor_every=tensor_every,
         recording_id=recording_id,
     )
-
-

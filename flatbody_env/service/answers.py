@@ -104,7 +104,9 @@ def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None
             with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
             max_wall_time=limits.job_seconds if in_job else limits.request_seconds,
         )
-    except ValueError as exc:  # a method's refusal of the scene's body (J1 = J2, V2 with c = d, ...) names the request's field
+    except (
+        ValueError
+    ) as exc:  # a method's refusal of the scene's body (J1 = J2, V2 with c = d, ...) names the request's field
         if str(exc).split(":", 1)[0].split(".", 1)[0] in _SCENE_FIELDS:
             raise _prefixed("scene", exc) from None
         raise
@@ -239,8 +241,14 @@ ANSWERS: dict[str, Callable[[Mapping[str, Any]], Any]] = {
 """Request-path computations by endpoint name."""
 
 
-INPUT_FIELDS = {"simulate": "scene", "ellipses": "body", "stability": "body", "invariants": "trajectory", "invariants-json": "trajectory",
-                "check-job": "params"}
+INPUT_FIELDS = {
+    "simulate": "scene",
+    "ellipses": "body",
+    "stability": "body",
+    "invariants": "trajectory",
+    "invariants-json": "trajectory",
+    "check-job": "params",
+}
 """The request field an endpoint computes with, named by a refusal that no narrower field explains: a failed integration
 (the scene's trajectory), a computation that fails for these inputs. An HTTP 4xx always names a field."""
 
@@ -273,8 +281,14 @@ def error_data(exc: BaseException, *, endpoint: str | None = None) -> dict[str, 
             text = f"t_end: not reached within this request's budget ({text}); send it as a job (POST /jobs with kind simulate or record)"
         elif field:
             text = f"{field}: {text}"
-        return {"kind": "too-large" if budget else "integration", "detail": text, "field": field,
-                "when": exc.t if math.isfinite(exc.t) else None, "why": exc.reason, "method": exc.method or None}
+        return {
+            "kind": "too-large" if budget else "integration",
+            "detail": text,
+            "field": field,
+            "when": exc.t if math.isfinite(exc.t) else None,
+            "why": exc.reason,
+            "method": exc.method or None,
+        }
     if isinstance(exc, LimitExceeded):
         return {"kind": "too-large", "detail": str(exc), "field": exc.field}
     if isinstance(exc, OSError):  # a job's file could not be written (disk full, file-size limit): the server's fault
@@ -283,11 +297,16 @@ def error_data(exc: BaseException, *, endpoint: str | None = None) -> dict[str, 
     if isinstance(exc, ValueError):
         text = _first_line(exc)
         field = _field_of(text)
-        if field and field.startswith("-"):  # a check shared with the CLI names its flag (--spin): name the request's field
-            text = field.lstrip("-").replace("-", "_") + text[len(field):]
+        if field and field.startswith(
+            "-"
+        ):  # a check shared with the CLI names its flag (--spin): name the request's field
+            text = field.lstrip("-").replace("-", "_") + text[len(field) :]
             field = field.lstrip("-").replace("-", "_")
         if field is None and where:  # a numerical failure (numpy's LinAlgError is a ValueError), not a check of a field
-            field, text = where, f"{where}: the computation failed for these inputs ({type(exc).__name__}: {text[:200]})"
+            field, text = (
+                where,
+                f"{where}: the computation failed for these inputs ({type(exc).__name__}: {text[:200]})",
+            )
         return {"kind": "validation", "detail": text, "field": field}
     # Anything else is a computation that cannot be done for these inputs (a singular matrix, an
     # overflow, ...): the caller gets one line, never a traceback.
@@ -325,5 +344,23 @@ def warm_up() -> bool:
     return True
 
 
-__all__ = ["ANSWERS", "INPUT_FIELDS", "LIMITS", "RequestInvalid", "build_body", "build_scene", "ellipses", "error_data", "invariants", "invariants_json",
-           "methods", "outcome", "outcome_json", "scenes", "simulate", "stability", "trajectory", "warm_up"]
+__all__ = [
+    "ANSWERS",
+    "INPUT_FIELDS",
+    "LIMITS",
+    "RequestInvalid",
+    "build_body",
+    "build_scene",
+    "ellipses",
+    "error_data",
+    "invariants",
+    "invariants_json",
+    "methods",
+    "outcome",
+    "outcome_json",
+    "scenes",
+    "simulate",
+    "stability",
+    "trajectory",
+    "warm_up",
+]

@@ -77,15 +77,29 @@ DOCS_ASSETS = "/docs-assets"
 _ERRORS = {
     400: {"model": models.ErrorAnswer, "description": "a Host header the service does not answer to"},
     413: {"model": models.ErrorAnswer, "description": "the body or the work is over a limit (the detail names it)"},
-    422: {"model": models.ErrorAnswer, "description": "bad input (the field and its allowed range) or a failed integration"},
-    503: {"model": models.ErrorAnswer, "description": "a server fault: the workers are restarting, the job database is missing or "
-                                                      "corrupt, or the disk is full (one line); try again later"},
+    422: {
+        "model": models.ErrorAnswer,
+        "description": "bad input (the field and its allowed range) or a failed integration",
+    },
+    503: {
+        "model": models.ErrorAnswer,
+        "description": "a server fault: the workers are restarting, the job database is missing or "
+        "corrupt, or the disk is full (one line); try again later",
+    },
 }
-_JOB_ERRORS = {400: _ERRORS[400], 404: {"model": models.ErrorAnswer, "description": "no such job"}, 422: _ERRORS[422],
-               503: _ERRORS[503]}
-_QUEUE_FULL = {429: {"model": models.ErrorAnswer, "description": "the job queue is full (in all or for this client): try again after "
-                                                                  "Retry-After seconds",
-                     "headers": {"Retry-After": {"description": "seconds to wait", "schema": {"type": "integer"}}}}}
+_JOB_ERRORS = {
+    400: _ERRORS[400],
+    404: {"model": models.ErrorAnswer, "description": "no such job"},
+    422: _ERRORS[422],
+    503: _ERRORS[503],
+}
+_QUEUE_FULL = {
+    429: {
+        "model": models.ErrorAnswer,
+        "description": "the job queue is full (in all or for this client): try again after Retry-After seconds",
+        "headers": {"Retry-After": {"description": "seconds to wait", "schema": {"type": "integer"}}},
+    }
+}
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 """The ``Host`` names the service answers to by default (``FLATBODY_ALLOWED_HOSTS`` changes them)."""
@@ -158,11 +172,22 @@ class HostCheck:
             if name == b"host":
                 host = value.decode("latin-1").strip().lower()
                 break
-        name = host[1:host.index("]")] if host.startswith("[") and "]" in host else host.rsplit(":", 1)[0] if host.count(":") == 1 else host
+        name = (
+            host[1 : host.index("]")]
+            if host.startswith("[") and "]" in host
+            else host.rsplit(":", 1)[0]
+            if host.count(":") == 1
+            else host
+        )
         if name in self.allowed:
             return await self.app(scope, receive, send)
-        response = error(400, "bad-host", f"host: this service does not answer to the Host {host[:60]!r} (allowed: "
-                                          f"{', '.join(sorted(self.allowed))}; set FLATBODY_ALLOWED_HOSTS)", field="host")
+        response = error(
+            400,
+            "bad-host",
+            f"host: this service does not answer to the Host {host[:60]!r} (allowed: "
+            f"{', '.join(sorted(self.allowed))}; set FLATBODY_ALLOWED_HOSTS)",
+            field="host",
+        )
         await response(scope, receive, send)
 
 
@@ -223,8 +248,10 @@ class Service:
         try:
             self.store = JobStore(data_dir)
         except sqlite3.Error as exc:
-            raise ValueError(f"data-dir: the job database {Path(data_dir) / 'jobs.sqlite3'} cannot be used ({exc}); "
-                             "move it away to start with an empty one") from None
+            raise ValueError(
+                f"data-dir: the job database {Path(data_dir) / 'jobs.sqlite3'} cannot be used ({exc}); "
+                "move it away to start with an empty one"
+            ) from None
         self.store.lock()
         self.runner = JobRunner(self.store, workers)
         self.workers = workers
@@ -239,8 +266,12 @@ class Service:
     def _new_pool(self) -> None:
         from flatbody_env.service.answers import warm_up
 
-        self.pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=process_context(),
-                                        initializer=die_with_service, initargs=(os.getpid(),))
+        self.pool = ProcessPoolExecutor(
+            max_workers=self.workers,
+            mp_context=process_context(),
+            initializer=die_with_service,
+            initargs=(os.getpid(),),
+        )
         for _ in range(self.workers):
             self.pool.submit(warm_up)
 
@@ -263,8 +294,12 @@ class Service:
         try:
             ok, data = await asyncio.wait_for(asyncio.wrap_future(future), timeout=self.limits.request_seconds)
         except asyncio.TimeoutError:
-            return error(413, "too-large", f"request: took longer than {self.limits.request_seconds:g} s; send it as a job (POST /jobs)",
-                         field="request")
+            return error(
+                413,
+                "too-large",
+                f"request: took longer than {self.limits.request_seconds:g} s; send it as a job (POST /jobs)",
+                field="request",
+            )
         except BrokenProcessPool:
             self._new_pool()
             return error(503, "unavailable", "a worker process died while answering (out of memory?); try again")
@@ -273,8 +308,13 @@ class Service:
         return _error_from(data)
 
 
-def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limits: Limits | None = None,
-               allowed_hosts: tuple[str, ...] | None = None) -> FastAPI:
+def create_app(
+    data_dir: str | Path = "flatbody-data",
+    *,
+    workers: int = 2,
+    limits: Limits | None = None,
+    allowed_hosts: tuple[str, ...] | None = None,
+) -> FastAPI:
     """The analysis service.
 
     Parameters
@@ -304,7 +344,9 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
     async def lifespan(app: FastAPI):
         service.start()
         if service.interrupted:
-            sys.stderr.write(f"flatbody serve: {service.interrupted} job(s) were running when the service stopped; marked failed\n")
+            sys.stderr.write(
+                f"flatbody serve: {service.interrupted} job(s) were running when the service stopped; marked failed\n"
+            )
         try:
             yield
         finally:
@@ -315,16 +357,20 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         title="flatbody analysis service",
         version=__version__,
         description="Stationary ellipses, stability, families, simulations and rerun recordings of a flat affinely-rigid body "
-                    "with thickness. Answers are the `flatbody` command's JSON answers.",
+        "with thickness. Answers are the `flatbody` command's JSON answers.",
         lifespan=lifespan,
     )
     app.state.service = service
-    app.add_middleware(BodyLimit, max_bytes=limits.max_body_bytes, larger={"/invariants": limits.max_trajectory_body_bytes})
+    app.add_middleware(
+        BodyLimit, max_bytes=limits.max_body_bytes, larger={"/invariants": limits.max_trajectory_body_bytes}
+    )
     app.add_middleware(HostCheck, allowed=tuple(allowed_hosts))
     # ReDoc's bundle shows a logo it fetches from cdn.redoc.ly: served here with that address emptied
     # (the image fails to load and ReDoc leaves it out), so /redoc makes no request outside the service.
     # Inserted ahead of the /docs-assets mount, which would otherwise answer this path.
-    app.router.routes.insert(0, Route(f"{DOCS_ASSETS}/redoc.standalone.js", _redoc_bundle, methods=["GET"], include_in_schema=False))
+    app.router.routes.insert(
+        0, Route(f"{DOCS_ASSETS}/redoc.standalone.js", _redoc_bundle, methods=["GET"], include_in_schema=False)
+    )
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError):
@@ -335,7 +381,9 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
     async def _http(request: Request, exc: StarletteHTTPException):
         if exc.status_code == 400:  # a body that cannot be decoded (FastAPI says 400): bad input, as every other
             return error(422, "validation", f"body: not valid JSON ({exc.detail})", field="body")
-        kind = {404: "not-found", 405: "method-not-allowed", 409: "conflict", 413: "too-large"}.get(exc.status_code, "validation")
+        kind = {404: "not-found", 405: "method-not-allowed", 409: "conflict", 413: "too-large"}.get(
+            exc.status_code, "validation"
+        )
         named = {404: "path", 405: "method"}.get(exc.status_code)  # no such path / a method the path does not have
         detail = str(exc.detail)
         if exc.status_code == 404:
@@ -345,7 +393,9 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         response = error(exc.status_code, kind, detail, field=named)
         for name, value in (exc.headers or {}).items():
             response.headers[name] = value
-        if exc.status_code == 405:  # Allow: every method of every route at this path (starlette names the first route's only)
+        if (
+            exc.status_code == 405
+        ):  # Allow: every method of every route at this path (starlette names the first route's only)
             allowed = set()
             for route in app.routes:
                 methods = getattr(route, "methods", None)
@@ -408,9 +458,18 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         """Integrate a scene: the ``flatbody simulate`` JSON. Integration failures are 422 with ``when`` and ``why``."""
         return await service.answer("simulate", request.model_dump(by_alias=True))
 
-    @app.post("/invariants", tags=["analysis"], response_model=models.InvariantsAnswer, responses=_ERRORS,
-              openapi_extra={"requestBody": {"required": True, "content": {"application/json": {
-                  "schema": {"$ref": "#/components/schemas/TrajectoryRequest"}}}}})
+    @app.post(
+        "/invariants",
+        tags=["analysis"],
+        response_model=models.InvariantsAnswer,
+        responses=_ERRORS,
+        openapi_extra={
+            "requestBody": {
+                "required": True,
+                "content": {"application/json": {"schema": {"$ref": "#/components/schemas/TrajectoryRequest"}}},
+            }
+        },
+    )
     async def invariants(request: Request):
         """Invariants and drift table along a trajectory (the ``flatbody simulate`` JSON): ``flatbody invariants --json``.
 
@@ -429,14 +488,32 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
         if checked.status_code != 200:
             return checked
         client = http.client.host if http.client else None
-        job_id = await _store(service.runner.submit, job["kind"], job["params"], client=client, max_queued=limits.max_queued_jobs,
-                              max_queued_per_client=limits.max_queued_per_client, max_stored=limits.max_stored_jobs)
+        job_id = await _store(
+            service.runner.submit,
+            job["kind"],
+            job["params"],
+            client=client,
+            max_queued=limits.max_queued_jobs,
+            max_queued_per_client=limits.max_queued_per_client,
+            max_stored=limits.max_stored_jobs,
+        )
         return AnswerResponse({"id": job_id}, status_code=202)
 
-    @app.get("/jobs", tags=["jobs"], response_model=models.JobList, responses={400: _ERRORS[400], 422: _ERRORS[422], 503: _ERRORS[503]})
-    async def list_jobs(limit: int = Query(50, ge=1, le=limits.max_list_jobs),
-                        before: str | None = Query(None, max_length=100, pattern=r"^[0-9]{1,12}(\.[0-9]{1,20})?:[0-9a-f]{1,64}$",
-                                                   description="the `next` of the previous page")):
+    @app.get(
+        "/jobs",
+        tags=["jobs"],
+        response_model=models.JobList,
+        responses={400: _ERRORS[400], 422: _ERRORS[422], 503: _ERRORS[503]},
+    )
+    async def list_jobs(
+        limit: int = Query(50, ge=1, le=limits.max_list_jobs),
+        before: str | None = Query(
+            None,
+            max_length=100,
+            pattern=r"^[0-9]{1,12}(\.[0-9]{1,20})?:[0-9a-f]{1,64}$",
+            description="the `next` of the previous page",
+        ),
+    ):
         """A page of jobs, newest first, without their results (``GET /jobs/{id}`` has a job's result). A page holds
         at most ``limit`` jobs and ``max_list_bytes`` of JSON; ``next`` is the ``before`` of the next page."""
         body = await _store(service.store.list_json, limit, before=before, max_bytes=limits.max_list_bytes)
@@ -450,25 +527,43 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
             return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         return Response(body, media_type="application/json")
 
-    @app.get("/jobs/{job_id}/artifact", tags=["jobs"], response_class=FileResponse,
-             responses={**_JOB_ERRORS, 409: {"model": models.ErrorAnswer, "description": "the job has not finished"},
-                        200: {"description": "the file (.rrd, .png, .csv, .json)",
-                              "content": {"application/octet-stream": {}, "image/png": {}, "text/csv": {}, "application/json": {}}}})
+    @app.get(
+        "/jobs/{job_id}/artifact",
+        tags=["jobs"],
+        response_class=FileResponse,
+        responses={
+            **_JOB_ERRORS,
+            409: {"model": models.ErrorAnswer, "description": "the job has not finished"},
+            200: {
+                "description": "the file (.rrd, .png, .csv, .json)",
+                "content": {"application/octet-stream": {}, "image/png": {}, "text/csv": {}, "application/json": {}},
+            },
+        },
+    )
     async def get_artifact(job_id: str = PathParam(max_length=64), name: str | None = Query(None, max_length=64)):
         """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json)."""
         job = await _store(service.store.get, job_id)
         if job is None:
             return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
         if job["status"] != "done":
-            return error(409, "conflict", f"job_id: job {job_id} is {job['status']}; its files come when it is done", field="job_id")
+            return error(
+                409,
+                "conflict",
+                f"job_id: job {job_id} is {job['status']}; its files come when it is done",
+                field="job_id",
+            )
         names = job["artifacts"]
         chosen = names[0] if name is None and names else name
         if chosen not in names:
-            return error(404, "not-found", f"name: must be one of {', '.join(names) or '(none)'}, got {name!r}", field="name")
+            return error(
+                404, "not-found", f"name: must be one of {', '.join(names) or '(none)'}, got {name!r}", field="name"
+            )
         path = service.store.job_dir(job_id) / chosen
         if not path.is_file():
             return error(404, "not-found", f"name: {chosen} is gone from the data dir", field="name")
-        media = {".png": "image/png", ".csv": "text/csv", ".json": "application/json"}.get(path.suffix, "application/octet-stream")
+        media = {".png": "image/png", ".csv": "text/csv", ".json": "application/json"}.get(
+            path.suffix, "application/octet-stream"
+        )
         return FileResponse(path, media_type=media, filename=chosen)
 
     @app.delete("/jobs/{job_id}", tags=["jobs"], response_model=models.JobDeleted, responses=_JOB_ERRORS)
@@ -494,13 +589,17 @@ def create_app(data_dir: str | Path = "flatbody-data", *, workers: int = 2, limi
 
     app.mount("/page", StaticFiles(directory=PAGE_DIR), name="page")
 
-    def openapi() -> dict[str, Any]:  # the trajectory body of /invariants is read by hand (in a worker): its schema added here
+    def openapi() -> dict[
+        str, Any
+    ]:  # the trajectory body of /invariants is read by hand (in a worker): its schema added here
         if app.openapi_schema is None:
             from fastapi.openapi.utils import get_openapi
             from pydantic.json_schema import models_json_schema
 
             doc = get_openapi(title=app.title, version=app.version, description=app.description, routes=app.routes)
-            _, defs = models_json_schema([(models.TrajectoryRequest, "validation")], ref_template="#/components/schemas/{model}")
+            _, defs = models_json_schema(
+                [(models.TrajectoryRequest, "validation")], ref_template="#/components/schemas/{model}"
+            )
             schemas = doc.setdefault("components", {}).setdefault("schemas", {})
             for key, value in defs.get("$defs", {}).items():
                 schemas.setdefault(key, value)
@@ -530,8 +629,22 @@ def _public(job: dict[str, Any]) -> dict[str, Any]:
 def app_from_environment() -> FastAPI:
     """The app for ``uvicorn --factory flatbody_env.service.app:app_from_environment`` (``FLATBODY_DATA_DIR``,
     ``FLATBODY_WORKERS``)."""
-    return create_app(os.environ.get("FLATBODY_DATA_DIR", "flatbody-data"), workers=int(os.environ.get("FLATBODY_WORKERS", "2")))
+    return create_app(
+        os.environ.get("FLATBODY_DATA_DIR", "flatbody-data"), workers=int(os.environ.get("FLATBODY_WORKERS", "2"))
+    )
 
 
-__all__ = ["AnswerResponse", "BodyLimit", "HostCheck", "LOOPBACK_HOSTS", "PAGE_DIR", "PALETTE_MARK", "ServerFault", "Service", "app_from_environment",
-           "create_app", "page_html", "palette_css"]
+__all__ = [
+    "AnswerResponse",
+    "BodyLimit",
+    "HostCheck",
+    "LOOPBACK_HOSTS",
+    "PAGE_DIR",
+    "PALETTE_MARK",
+    "ServerFault",
+    "Service",
+    "app_from_environment",
+    "create_app",
+    "page_html",
+    "palette_css",
+]

@@ -218,8 +218,20 @@ def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
     report.step(0.02, 0.9, f"following the family over {p['vary']}")
     box = SearchBox(lam=tuple(p["lam_range"]), mu=tuple(p["mu_range"]), n=p["grid"])
     with reporting_bars(report):
-        answer = family_answer(body, p["vary"], p["from"], p["to"], s3=p["s3"], p_theta=p["p_theta"], seeds=p["seeds"], box=box,
-                               step=p["step"], out=str(out / "family.csv"), plot=str(out / "family.png"), progress=True)
+        answer = family_answer(
+            body,
+            p["vary"],
+            p["from"],
+            p["to"],
+            s3=p["s3"],
+            p_theta=p["p_theta"],
+            seeds=p["seeds"],
+            box=box,
+            step=p["step"],
+            out=str(out / "family.csv"),
+            plot=str(out / "family.png"),
+            progress=True,
+        )
     answer["csv"], answer["plot"] = "family.csv", "family.png"
     return answer, ["family.png", "family.csv"]
 
@@ -232,8 +244,15 @@ def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple
     body = build_body(p["body"])
     report.step(0.02, 0.92, f"stability map: {p['grid']} × {p['grid']} shapes")
     with reporting_bars(report):
-        answer = stability_map_answer(body, tuple(p["lam_range"]), tuple(p["mu_range"]), p["grid"],
-                                      out=str(out / "stability-map.csv"), plot=str(out / "stability-map.png"), progress=True)
+        answer = stability_map_answer(
+            body,
+            tuple(p["lam_range"]),
+            tuple(p["mu_range"]),
+            p["grid"],
+            out=str(out / "stability-map.csv"),
+            plot=str(out / "stability-map.png"),
+            progress=True,
+        )
     return answer, ["stability-map.png", "stability-map.csv"]
 
 
@@ -244,7 +263,9 @@ def _evaluate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
     report.step(0.02, 0.98, "evaluating the shipped agent")
     bars = 1 + (len(baselines_for("FlatBody-v0")) if p["baselines"] else 0)
     with reporting_bars(report, bars=bars):
-        report_json = evaluate_all(None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"], progress=True)  # the shipped agent only
+        report_json = evaluate_all(
+            None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"], progress=True
+        )  # the shipped agent only
     atomic_write(out / "evaluation.json", json.dumps(report_json, indent=2) + "\n")
     return report_json, ["evaluation.json"]
 
@@ -330,7 +351,9 @@ def run_job(data_dir: str, job_id: str, kind: str, params: dict[str, Any], servi
 def process_context():
     """The multiprocessing context of worker processes: a forkserver (no fork of the threaded service)."""
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["flatbody_env.service.answers", "flatbody_env.service.jobs", "flatbody_env.simulation", "analysis.stability"])
+    ctx.set_forkserver_preload(
+        ["flatbody_env.service.answers", "flatbody_env.service.jobs", "flatbody_env.simulation", "analysis.stability"]
+    )
     return ctx
 
 
@@ -427,8 +450,12 @@ class JobRunner:
             job = self.store.claim_next()
             if job is None:
                 return
-            proc = self._ctx.Process(target=run_job, args=(str(self.store.data_dir), job["id"], job["kind"], job["params"], os.getpid()),
-                                     name=f"flatbody-job-{job['id'][:8]}", daemon=True)
+            proc = self._ctx.Process(
+                target=run_job,
+                args=(str(self.store.data_dir), job["id"], job["kind"], job["params"], os.getpid()),
+                name=f"flatbody-job-{job['id'][:8]}",
+                daemon=True,
+            )
             proc.start()
             self.store.set_pid(job["id"], proc.pid)
             with self._lock:
@@ -473,5 +500,16 @@ def _stop_process(proc) -> None:
         proc.join(timeout=3)
 
 
-__all__ = ["JobRunner", "REPORT_EVERY_S", "Reporter", "WORK", "die_with_service", "exit_reason",
-           "process_context", "remove_partial_files", "reporting_bars", "reporting_integration", "run_job"]
+__all__ = [
+    "JobRunner",
+    "REPORT_EVERY_S",
+    "Reporter",
+    "WORK",
+    "die_with_service",
+    "exit_reason",
+    "process_context",
+    "remove_partial_files",
+    "reporting_bars",
+    "reporting_integration",
+    "run_job",
+]

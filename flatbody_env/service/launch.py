@@ -19,8 +19,16 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_service(data_dir: str | Path, *, workers: int, port: int | None = None, timeout: float = 60.0, env: dict[str, str] | None = None,
-                  preexec_fn=None, log_path: str | Path | None = None) -> tuple[subprocess.Popen, str]:
+def start_service(
+    data_dir: str | Path,
+    *,
+    workers: int,
+    port: int | None = None,
+    timeout: float = 60.0,
+    env: dict[str, str] | None = None,
+    preexec_fn=None,
+    log_path: str | Path | None = None,
+) -> tuple[subprocess.Popen, str]:
     """Start ``flatbody serve`` on a loopback port in a subprocess; ``(process, base URL)`` once /health answers.
 
     Parameters
@@ -43,15 +51,41 @@ def start_service(data_dir: str | Path, *, workers: int, port: int | None = None
     import httpx
 
     port = port or _free_port()
-    cmd = [sys.executable, "-m", "flatbody_env.cli", "serve", "--host", "127.0.0.1", "--port", str(port), "--workers", str(workers),
-           "--data-dir", str(data_dir), "--log-level", "warning"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "flatbody_env.cli",
+        "serve",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--workers",
+        str(workers),
+        "--data-dir",
+        str(data_dir),
+        "--log-level",
+        "warning",
+    ]
     if log_path is None:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
-                                preexec_fn=preexec_fn)
+        proc = subprocess.Popen(
+            cmd,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, **(env or {})},
+            preexec_fn=preexec_fn,
+        )
     else:
         with open(log_path, "w", encoding="utf-8") as log:  # the child keeps its own copy of the descriptor
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, text=True, env={**os.environ, **(env or {})},
-                                    preexec_fn=preexec_fn)
+            proc = subprocess.Popen(
+                cmd,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                text=True,
+                env={**os.environ, **(env or {})},
+                preexec_fn=preexec_fn,
+            )
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

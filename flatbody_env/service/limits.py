@@ -88,7 +88,6 @@ class Limits:
         """The limits as JSON (``GET /limits``)."""
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
-
     def with_environment(self, environ=None) -> "Limits":
         """These limits with any ``FLATBODY_LIMIT_<NAME>`` environment variable applied
         (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS=8``); a bad value is a ``ValueError`` naming the variable."""
@@ -121,7 +120,9 @@ class LimitExceeded(ValueError):
         super().__init__(f"{field}: {message}")
 
 
-def check_integration_cost(*, t_end: float, samples: int, step: float | None, in_job: bool, limits: Limits = DEFAULT_LIMITS) -> None:
+def check_integration_cost(
+    *, t_end: float, samples: int, step: float | None, in_job: bool, limits: Limits = DEFAULT_LIMITS
+) -> None:
     """Refuse an integration whose horizon, output size or fixed-step count is over the limits.
 
     Raises
@@ -139,7 +140,9 @@ def check_integration_cost(*, t_end: float, samples: int, step: float | None, in
     if samples > n_max:
         raise LimitExceeded("samples", f"at most {n_max} output times in a {where}, got {samples}{hint}")
     if step is not None and t_end / step > steps_max:
-        raise LimitExceeded("step", f"t_end / step is at most {steps_max:g} fixed steps in a {where}, got {t_end / step:.3g}{hint}")
+        raise LimitExceeded(
+            "step", f"t_end / step is at most {steps_max:g} fixed steps in a {where}, got {t_end / step:.3g}{hint}"
+        )
 
 
 __all__ = ["DEFAULT_LIMITS", "LimitExceeded", "Limits", "check_integration_cost"]

@@ -22,16 +22,43 @@ import json
 from importlib import resources
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_serializer
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    field_validator,
+    model_serializer,
+)
 
 from agents.evaluate import EVAL_SEED
-from analysis.families import (DEFAULT_FAMILY_RANGE, DEFAULT_P_THETA, DEFAULT_S3, DEFAULT_SEEDS, MAP_GRID, MAP_LAM_RANGE, MAP_MU_RANGE,
-                               PARAMETERS)
+from analysis.families import (
+    DEFAULT_FAMILY_RANGE,
+    DEFAULT_P_THETA,
+    DEFAULT_S3,
+    DEFAULT_SEEDS,
+    MAP_GRID,
+    MAP_LAM_RANGE,
+    MAP_MU_RANGE,
+    PARAMETERS,
+)
 from analysis.stationary import SearchBox
 from flatbody_env.integrators.base import Tolerances
 from flatbody_env.physics.body import default_body
-from flatbody_env.physics.validation import (FAMILY_SEEDS_RANGE, MAX_SAMPLES, MAX_SEED, MIN_SAMPLES, MOMENTUM_MAX, PARAM_RANGE,
-                                             SEARCH_GRID_RANGE, STRETCH_RANGE, SWEEP_GRID_RANGE, TOL_RANGE)
+from flatbody_env.physics.validation import (
+    FAMILY_SEEDS_RANGE,
+    MAX_SAMPLES,
+    MAX_SEED,
+    MIN_SAMPLES,
+    MOMENTUM_MAX,
+    PARAM_RANGE,
+    SEARCH_GRID_RANGE,
+    STRETCH_RANGE,
+    SWEEP_GRID_RANGE,
+    TOL_RANGE,
+)
 from flatbody_env.service.limits import DEFAULT_LIMITS
 from flatbody_env.simulation import DEFAULT_SAMPLES
 
@@ -58,6 +85,8 @@ Momentum = Annotated[float, Field(ge=-MOMENTUM_MAX, le=MOMENTUM_MAX, allow_inf_n
 """A spin or momentum component (s1, s2, s3, p_θ, …) within ± :data:`~flatbody_env.physics.validation.MOMENTUM_MAX`."""
 Tolerance = Annotated[float, Field(ge=TOL_RANGE[0], le=TOL_RANGE[1], allow_inf_nan=False, strict=True)]
 """rtol or atol in :data:`~flatbody_env.physics.validation.TOL_RANGE`."""
+
+
 def _integral(value: Any) -> Any:
     """An integral JSON number written with a fraction or exponent (``263.0``, ``2e2``) as the integer it is:
     JSON Schema counts it an integer, so the service does too. ``263.5``, strings and booleans are left
@@ -70,6 +99,8 @@ def Count(lo: int, hi: int):  # noqa: N802 - a type, spelled as one
     or a boolean. The bounds sit inside the strict integer, after the conversion, so the OpenAPI document states
     them as ``minimum`` / ``maximum``."""
     return Annotated[int, Field(strict=True, ge=lo, le=hi), BeforeValidator(_integral)]
+
+
 Flag = Annotated[bool, Field(strict=True)]
 """true or false (not 0/1 or a string)."""
 Name = Annotated[str, Field(max_length=64)]
@@ -139,8 +170,10 @@ def _inertia_tag(value: Any) -> str:
     return "three-moments" if isinstance(value, dict) and ("J1" in value or "J2" in value) else "isotropic"
 
 
-InertiaSpec = Annotated[Union[Annotated[IsotropicInertia, Tag("isotropic")], Annotated[Inertia, Tag("three-moments")]],
-                        Discriminator(_inertia_tag)]
+InertiaSpec = Annotated[
+    Union[Annotated[IsotropicInertia, Tag("isotropic")], Annotated[Inertia, Tag("three-moments")]],
+    Discriminator(_inertia_tag),
+]
 
 
 class PotentialV1(_Strict):
@@ -186,9 +219,15 @@ class BodySpec(_Strict):
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [DEFAULT_BODY]})
 
-    params: InertiaSpec = Field(description=f'inertia: {{"J", "J3"}} (isotropic) or {{"J1", "J2", "J3"}}, each in {_PARAM_TEXT}')
-    potential: PotentialSpec = Field(description=f'{{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in {_PARAM_TEXT}}}')
-    thickness: Union[ThicknessSpec, None] = Field(default=None, description='thickness potential V_rho {"a", "b"}, or null')
+    params: InertiaSpec = Field(
+        description=f'inertia: {{"J", "J3"}} (isotropic) or {{"J1", "J2", "J3"}}, each in {_PARAM_TEXT}'
+    )
+    potential: PotentialSpec = Field(
+        description=f'{{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in {_PARAM_TEXT}}}'
+    )
+    thickness: Union[ThicknessSpec, None] = Field(
+        default=None, description='thickness potential V_rho {"a", "b"}, or null'
+    )
     spin_convention: Literal["corrected", "paper"] = "corrected"
 
     def as_data(self) -> dict[str, Any]:
@@ -228,7 +267,9 @@ class SceneSpec(BodySpec):
 
     name: Union[Name, None] = None
     description: Union[Annotated[str, Field(max_length=L.max_string)], None] = None
-    thickness: Union[ThicknessSpec, None] = Field(description='thickness potential V_rho {"a", "b"}, or null (required)')
+    thickness: Union[ThicknessSpec, None] = Field(
+        description='thickness potential V_rho {"a", "b"}, or null (required)'
+    )
     state: StateSpec
     t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = None
 
@@ -248,8 +289,13 @@ def _scene_tag(value: Any) -> str:
     return "scene-name" if isinstance(value, str) else "scene-object"
 
 
-RequestScene = Annotated[Union[Annotated[SceneName, Tag("scene-name")], Annotated[SceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)]
-JobScene = Annotated[Union[Annotated[SceneName, Tag("scene-name")], Annotated[JobSceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)]
+RequestScene = Annotated[
+    Union[Annotated[SceneName, Tag("scene-name")], Annotated[SceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)
+]
+JobScene = Annotated[
+    Union[Annotated[SceneName, Tag("scene-name")], Annotated[JobSceneSpec, Tag("scene-object")]],
+    Discriminator(_scene_tag),
+]
 
 
 SearchRange = tuple[Stretch, Stretch]
@@ -264,14 +310,18 @@ STEP_MIN_JOB = L.job_t_end / L.job_steps
 class SpinsRequest(_Strict):
     """A body and the spins (s3, p_θ) of ``flatbody ellipses`` / ``flatbody stability``."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"body": DEFAULT_BODY, "s3": DEFAULT_S3,
-                                                                                "p_theta": DEFAULT_P_THETA}]})
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{"body": DEFAULT_BODY, "s3": DEFAULT_S3, "p_theta": DEFAULT_P_THETA}]},
+    )
 
     body: AnalysisBodySpec
     s3: Momentum = Field(description=f"spin component s3 (conserved with |s|), within {_MOMENTUM_TEXT}")
     p_theta: Momentum = Field(description=f"material momentum p_theta, within {_MOMENTUM_TEXT}")
     branch: Literal["N", "A", "all"] = Field("N", description="N: s1 = s2 = 0 (paper); A: in-plane axis (needs spin)")
-    spin: Union[Momentum, None] = Field(None, description=f"spin about the in-plane axis for branch A, within {_MOMENTUM_TEXT}")
+    spin: Union[Momentum, None] = Field(
+        None, description=f"spin about the in-plane axis for branch A, within {_MOMENTUM_TEXT}"
+    )
     lam_range: SearchRange = Field(BOX.lam, description=f"search range of lambda [LO, HI], {_SEARCH_TEXT}")
     mu_range: SearchRange = Field(BOX.mu, description=f"search range of mu [LO, HI], {_SEARCH_TEXT}")
     grid: SearchGrid = Field(BOX.n, description="grid points per axis of the root search")
@@ -285,20 +335,29 @@ class SpinsRequest(_Strict):
 class SimulateRequest(_Strict):
     """``flatbody simulate``: a scene (object or built-in name) and the integration settings, within the request limits."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 2.0, "samples": 21}]})
+    model_config = ConfigDict(
+        extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 2.0, "samples": 21}]}
+    )
 
     scene: RequestScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
     t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
-        None, description="final time (default: the scene's t_end)")
+        None, description="final time (default: the scene's t_end)"
+    )
     times: Union[list[Annotated[float, Field(ge=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
-        None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
+        None,
+        min_length=1,
+        max_length=L.max_times,
+        description="output times in [0, t_end], increasing (default: an even grid)",
+    )
     samples: Union[Count(MIN_SAMPLES, L.sync_samples), None] = Field(
-        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})")
+        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})"
+    )
     method: Name = Field("auto", description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
     rtol: Tolerance = Field(TOLERANCES.rtol, description=f"relative tolerance (adaptive methods), in {_TOL_TEXT}")
     atol: Tolerance = Field(TOLERANCES.atol, description=f"absolute tolerance (adaptive methods), in {_TOL_TEXT}")
-    step: Union[Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
-        None, description="step size (fixed-step methods)")
+    step: Union[
+        Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None
+    ] = Field(None, description="step size (fixed-step methods)")
     model: Literal["auto", "two-polar", "regular"] = "auto"
     with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
 
@@ -315,8 +374,13 @@ class TrajectoryRequest(_Strict):
     energy: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
     casimir: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
     p_theta: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
-    rotation: Union[Annotated[list[Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)]],
-                              Field(max_length=L.trajectory_samples)], None] = None
+    rotation: Union[
+        Annotated[
+            list[Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)]],
+            Field(max_length=L.trajectory_samples),
+        ],
+        None,
+    ] = None
     initial_state: Union[Annotated[dict[str, Finite], Field(max_length=16)], None] = None
     meta: Union[Annotated[dict[str, Any], Field(max_length=64)], None] = None
     body: Union[BodySpec, None] = Field(None, description="the body (default: the built-in scene named in meta.scene)")
@@ -334,15 +398,23 @@ class TrajectoryRequest(_Strict):
 class SimulateJobParams(_Strict):
     """A ``simulate`` job: as ``POST /simulate``, with the larger job limits; artifact ``trajectory.json``."""
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 200.0, "samples": 2001}]})
+    model_config = ConfigDict(
+        extra="forbid", json_schema_extra={"examples": [{"scene": "default", "t_end": 200.0, "samples": 2001}]}
+    )
 
     scene: JobScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
     t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
-        None, description="final time (default: the scene's t_end)")
+        None, description="final time (default: the scene's t_end)"
+    )
     times: Union[list[Annotated[float, Field(ge=0, le=L.job_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
-        None, min_length=1, max_length=L.max_times, description="output times in [0, t_end], increasing (default: an even grid)")
+        None,
+        min_length=1,
+        max_length=L.max_times,
+        description="output times in [0, t_end], increasing (default: an even grid)",
+    )
     samples: Union[Count(MIN_SAMPLES, L.job_samples), None] = Field(
-        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})")
+        None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})"
+    )
     method: Name = Field("auto", description="integrator (GET /methods) or auto")
     rtol: Tolerance = TOLERANCES.rtol
     atol: Tolerance = TOLERANCES.atol
@@ -356,7 +428,8 @@ class RecordJobParams(_Strict):
 
     scene: JobScene = Field("default", description="a scene object or a built-in scene name")
     t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
-        None, description="final time (default: the scene's t_end)")
+        None, description="final time (default: the scene's t_end)"
+    )
     method: Name = "auto"
     rtol: Tolerance = TOLERANCES.rtol
     atol: Tolerance = TOLERANCES.atol
@@ -372,14 +445,22 @@ class FamilyJobParams(_Strict):
 
     body: AnalysisBodySpec = Field(default_factory=lambda: AnalysisBodySpec(**DEFAULT_BODY))
     vary: Literal[FAMILY_PARAMETERS] = "s3"  # type: ignore[valid-type]
-    start: Momentum = Field(DEFAULT_FAMILY_RANGE[0], alias="from", description=f"start of the range (within {_MOMENTUM_TEXT})")
-    stop: Momentum = Field(DEFAULT_FAMILY_RANGE[1], alias="to", description=f"end of the range (within {_MOMENTUM_TEXT}; greater than from)")
+    start: Momentum = Field(
+        DEFAULT_FAMILY_RANGE[0], alias="from", description=f"start of the range (within {_MOMENTUM_TEXT})"
+    )
+    stop: Momentum = Field(
+        DEFAULT_FAMILY_RANGE[1],
+        alias="to",
+        description=f"end of the range (within {_MOMENTUM_TEXT}; greater than from)",
+    )
     s3: Union[Momentum, None] = Field(None, description=f"s3 held fixed (default {DEFAULT_S3:g})")
     p_theta: Union[Momentum, None] = Field(None, description=f"p_theta held fixed (default {DEFAULT_P_THETA:g})")
     seeds: Count(FAMILY_SEEDS_RANGE[0], min(L.job_family_seeds, FAMILY_SEEDS_RANGE[1])) = Field(
-        DEFAULT_SEEDS, description="parameter values at which all solutions are sought")
+        DEFAULT_SEEDS, description="parameter values at which all solutions are sought"
+    )
     step: Union[Annotated[float, Field(gt=0, le=2 * MOMENTUM_MAX, allow_inf_nan=False, strict=True)], None] = Field(
-        None, description="largest continuation step (default range/60)")
+        None, description="largest continuation step (default range/60)"
+    )
     lam_range: SearchRange = BOX.lam
     mu_range: SearchRange = BOX.mu
     grid: SearchGrid = BOX.n
@@ -440,7 +521,9 @@ class EvaluateJob(_Strict):
     params: EvaluateJobParams = Field(default_factory=EvaluateJobParams)
 
 
-JobRequest = Annotated[Union[SimulateJob, RecordJob, FamilyJob, StabilityMapJob, EvaluateJob], Field(discriminator="kind")]
+JobRequest = Annotated[
+    Union[SimulateJob, RecordJob, FamilyJob, StabilityMapJob, EvaluateJob], Field(discriminator="kind")
+]
 """``POST /jobs``: ``{"kind", "params"}``."""
 
 JOB_KINDS = ("simulate", "family", "stability-map", "record", "evaluate")
@@ -534,7 +617,9 @@ class JobStatus(BaseModel):
     id: str
     kind: str
     status: Literal["queued", "running", "done", "failed"]
-    progress: float = Field(ge=0.0, le=1.0, description="fraction done, reported by the worker while the job runs; never decreases")
+    progress: float = Field(
+        ge=0.0, le=1.0, description="fraction done, reported by the worker while the job runs; never decreases"
+    )
     params: dict[str, Any]
     result: Union[Any, None] = Field(None, description="the answer, when done (left out of GET /jobs)")
     error: Union[str, None] = None
@@ -543,15 +628,21 @@ class JobStatus(BaseModel):
     started: Union[float, None] = None
     finished: Union[float, None] = None
     stage: Union[str, None] = Field(None, description="what the job is doing now (e.g. 'row 12 of 30'), while it runs")
-    elapsed: Union[float, None] = Field(None, description="seconds since the job started (to its end once it has ended)")
-    remaining: Union[float, None] = Field(None, description="while it runs: estimated seconds left at its mean rate so far")
+    elapsed: Union[float, None] = Field(
+        None, description="seconds since the job started (to its end once it has ended)"
+    )
+    remaining: Union[float, None] = Field(
+        None, description="while it runs: estimated seconds left at its mean rate so far"
+    )
 
 
 class JobList(BaseModel):
     """A page of jobs, newest first; ``next`` is the ``before`` of the next page (null: no more)."""
 
     jobs: list[JobStatus]
-    next: Union[str, None] = Field(None, description="pass as ?before= for the next page; null when this page is the last")
+    next: Union[str, None] = Field(
+        None, description="pass as ?before= for the next page; null when this page is the last"
+    )
 
 
 class JobDeleted(BaseModel):
@@ -564,8 +655,17 @@ class ErrorAnswer(BaseModel):
     """Every error: one line (``detail``) naming the field and the allowed range or the limit."""
 
     detail: str
-    kind: Literal["validation", "too-large", "integration", "not-found", "conflict", "unavailable", "too-many-jobs",
-                  "method-not-allowed", "bad-host"]
+    kind: Literal[
+        "validation",
+        "too-large",
+        "integration",
+        "not-found",
+        "conflict",
+        "unavailable",
+        "too-many-jobs",
+        "method-not-allowed",
+        "bad-host",
+    ]
     field: Union[str, None] = Field(None, description="the request field at fault (dotted)")
     when: Union[float, None] = Field(None, description="integration failures: the time t at which it failed")
     why: Union[str, None] = Field(None, description="integration failures: the reason (IntegrationError)")
@@ -584,7 +684,9 @@ def _bound_text(kind: str, ctx: dict[str, Any], value: Any) -> str | None:
     if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and ctx:
         op = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}[kind]
         bound = next(iter(ctx.values()))
-        return f"outside the allowed range: must be {op} {bound:g}, got {got}" if isinstance(bound, (int, float)) else None
+        return (
+            f"outside the allowed range: must be {op} {bound:g}, got {got}" if isinstance(bound, (int, float)) else None
+        )
     return None
 
 
@@ -625,8 +727,12 @@ def describe_errors(errors: list[dict[str, Any]], *, where: str = "request") -> 
         limit = ctx.get("le", ctx.get("max_length", ctx.get("ge")))
         what = "at least" if kind == "greater_than_equal" else "at most"
         hint = "; send it as a job (POST /jobs with kind simulate or record)" if where == "request" else ""
-        return {"status": 413, "kind": "too-large", "field": field,
-                "detail": f"{field}: {what} {limit:g} ({WORK_FIELDS[name]}) in a {where}, got {_got(first.get('input'))}{hint}"}
+        return {
+            "status": 413,
+            "kind": "too-large",
+            "field": field,
+            "detail": f"{field}: {what} {limit:g} ({WORK_FIELDS[name]}) in a {where}, got {_got(first.get('input'))}{hint}",
+        }
     return {"status": 422, "kind": "validation", "field": field, "detail": f"{field}: {msg}{more}"}
 
 

@@ -67,7 +67,10 @@ CREATE TABLE IF NOT EXISTS jobs (
 );
 CREATE INDEX IF NOT EXISTS jobs_status ON jobs (status, created);
 """
-_MIGRATIONS = (("stage", "ALTER TABLE jobs ADD COLUMN stage TEXT"), ("client", "ALTER TABLE jobs ADD COLUMN client TEXT"))
+_MIGRATIONS = (
+    ("stage", "ALTER TABLE jobs ADD COLUMN stage TEXT"),
+    ("client", "ALTER TABLE jobs ADD COLUMN client TEXT"),
+)
 
 _PUBLIC = "id, kind, params, status, progress, error, artifacts, created, started, finished, stage"
 """The columns of a job as GET /jobs lists it (no result, no pid, no client)."""
@@ -83,6 +86,8 @@ class QueueFull(Exception):
 
 class MissingDatabase(sqlite3.OperationalError):
     """The job database file is gone from the data dir (the service answers 503)."""
+
+
 """Columns added since the first schema: a data dir written by an older service gets them on start."""
 
 
@@ -121,8 +126,12 @@ class JobStore:
         if self._created and not self.db_path.exists():  # deleted under the service: never a new, empty database
             raise missing
         try:  # once created, opened read-write only: SQLite must not make a new file in its place
-            db = sqlite3.connect(f"file:{quote(str(self.db_path.resolve()))}?mode=rw" if self._created else self.db_path,
-                                 timeout=30.0, isolation_level=None, uri=self._created)
+            db = sqlite3.connect(
+                f"file:{quote(str(self.db_path.resolve()))}?mode=rw" if self._created else self.db_path,
+                timeout=30.0,
+                isolation_level=None,
+                uri=self._created,
+            )
         except sqlite3.OperationalError:
             if self._created and not self.db_path.exists():
                 raise missing from None
@@ -150,7 +159,9 @@ class JobStore:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             fh.close()
-            raise ValueError(f"data-dir: {self.data_dir} is in use by another flatbody serve (one service per data dir)") from None
+            raise ValueError(
+                f"data-dir: {self.data_dir} is in use by another flatbody serve (one service per data dir)"
+            ) from None
         self._lock_file = fh
 
     def unlock(self) -> None:
@@ -164,8 +175,16 @@ class JobStore:
         return self.data_dir / "jobs" / job_id
 
     # -- the service's side ------------------------------------------------------------------
-    def create(self, kind: str, params: dict[str, Any], *, client: str | None = None, max_queued: int | None = None,
-               max_queued_per_client: int | None = None, max_stored: int | None = None) -> str:
+    def create(
+        self,
+        kind: str,
+        params: dict[str, Any],
+        *,
+        client: str | None = None,
+        max_queued: int | None = None,
+        max_queued_per_client: int | None = None,
+        max_stored: int | None = None,
+    ) -> str:
         """A new queued job; its id.
 
         Raises
@@ -182,19 +201,30 @@ class JobStore:
                 if max_queued is not None:
                     queued = db.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued'").fetchone()[0]
                     if queued >= max_queued:
-                        raise QueueFull(f"jobs: the queue is full ({queued} jobs waiting, at most {max_queued}); try again later")
+                        raise QueueFull(
+                            f"jobs: the queue is full ({queued} jobs waiting, at most {max_queued}); try again later"
+                        )
                 if max_queued_per_client is not None:
-                    mine = db.execute("SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND client IS ?", (client,)).fetchone()[0]
+                    mine = db.execute(
+                        "SELECT COUNT(*) FROM jobs WHERE status = 'queued' AND client IS ?", (client,)
+                    ).fetchone()[0]
                     if mine >= max_queued_per_client:
-                        raise QueueFull(f"jobs: you have {mine} jobs waiting (at most {max_queued_per_client} per client); "
-                                        "try again when some have started")
+                        raise QueueFull(
+                            f"jobs: you have {mine} jobs waiting (at most {max_queued_per_client} per client); "
+                            "try again when some have started"
+                        )
                 if max_stored is not None:
                     stored = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0]
                     if stored >= max_stored:
-                        raise QueueFull(f"jobs: the service keeps at most {max_stored} jobs; delete finished ones "
-                                        "(DELETE /jobs/{{id}}) first", retry=False)
-                db.execute("INSERT INTO jobs (id, kind, params, status, created, client) VALUES (?, ?, ?, 'queued', ?, ?)",
-                           (job_id, kind, text, time.time(), client))
+                        raise QueueFull(
+                            f"jobs: the service keeps at most {max_stored} jobs; delete finished ones "
+                            "(DELETE /jobs/{{id}}) first",
+                            retry=False,
+                        )
+                db.execute(
+                    "INSERT INTO jobs (id, kind, params, status, created, client) VALUES (?, ?, ?, 'queued', ?, ?)",
+                    (job_id, kind, text, time.time(), client),
+                )
             except BaseException:
                 db.execute("ROLLBACK")
                 raise
@@ -210,7 +240,9 @@ class JobStore:
     def list(self, limit: int = 100) -> list[dict[str, Any]]:
         """The newest jobs first, without their results."""
         with self.connect() as db:
-            rows = db.execute(f"SELECT {_PUBLIC}, NULL AS result FROM jobs ORDER BY created DESC, id DESC LIMIT ?", (limit,)).fetchall()
+            rows = db.execute(
+                f"SELECT {_PUBLIC}, NULL AS result FROM jobs ORDER BY created DESC, id DESC LIMIT ?", (limit,)
+            ).fetchall()
         return [_as_dict(r, with_result=False) for r in rows]
 
     def get_json(self, job_id: str) -> bytes | None:
@@ -239,7 +271,10 @@ class JobStore:
         next_cursor = None
         last = None  # the last job put on the page (the cursor of the next one)
         with self.connect() as db:
-            cur = db.execute(f"SELECT {_PUBLIC}, NULL AS result FROM jobs {where} ORDER BY created DESC, id DESC LIMIT ?", (*args, limit + 1))
+            cur = db.execute(
+                f"SELECT {_PUBLIC}, NULL AS result FROM jobs {where} ORDER BY created DESC, id DESC LIMIT ?",
+                (*args, limit + 1),
+            )
             for row in cur:
                 if len(parts) == limit:
                     next_cursor = _cursor(last)
@@ -256,8 +291,10 @@ class JobStore:
     def fail_interrupted(self) -> int:
         """Mark the jobs left ``running`` by a previous service process failed (:data:`RESTART_REASON`)."""
         with self.connect() as db:
-            cur = db.execute("UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE status = 'running'",
-                             (RESTART_REASON, time.time()))
+            cur = db.execute(
+                "UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE status = 'running'",
+                (RESTART_REASON, time.time()),
+            )
             return cur.rowcount
 
     def claim_next(self) -> dict[str, Any] | None:
@@ -268,7 +305,9 @@ class JobStore:
             if row is None:
                 db.execute("COMMIT")
                 return None
-            db.execute("UPDATE jobs SET status = 'running', started = ?, progress = 0 WHERE id = ?", (time.time(), row["id"]))
+            db.execute(
+                "UPDATE jobs SET status = 'running', started = ?, progress = 0 WHERE id = ?", (time.time(), row["id"])
+            )
             db.execute("COMMIT")
         return _as_dict(row)
 
@@ -280,8 +319,10 @@ class JobStore:
         """Mark a job failed with one line ``error``; False if it was not running (or not there)."""
         cond = " AND status = 'running'" if only_running else " AND status IN ('queued', 'running')"
         with self.connect() as db:
-            cur = db.execute(f"UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ?{cond}",
-                             (error, time.time(), job_id))
+            cur = db.execute(
+                f"UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ?{cond}",
+                (error, time.time(), job_id),
+            )
             return cur.rowcount == 1
 
     def delete(self, job_id: str) -> bool:
@@ -296,12 +337,16 @@ class JobStore:
         """Record progress (never lower than the job's last one) and, when given, what the job is doing;
         False when the job is no longer this worker's (deleted or failed)."""
         with self.connect() as db:
-            cur = db.execute("UPDATE jobs SET progress = MAX(progress, ?), stage = COALESCE(?, stage) "
-                             "WHERE id = ? AND status = 'running' AND pid = ?",
-                             (min(max(float(fraction), 0.0), 1.0), None if stage is None else str(stage)[:200], job_id, pid))
+            cur = db.execute(
+                "UPDATE jobs SET progress = MAX(progress, ?), stage = COALESCE(?, stage) "
+                "WHERE id = ? AND status = 'running' AND pid = ?",
+                (min(max(float(fraction), 0.0), 1.0), None if stage is None else str(stage)[:200], job_id, pid),
+            )
             return cur.rowcount == 1
 
-    def finish(self, job_id: str, pid: int, *, result: Any = None, artifacts: list[str] | None = None, error: str | None = None) -> bool:
+    def finish(
+        self, job_id: str, pid: int, *, result: Any = None, artifacts: list[str] | None = None, error: str | None = None
+    ) -> bool:
         """Mark the job done (``result``) or failed (``error``) if it is still this worker's."""
         now = time.time()
         with self.connect() as db:
@@ -309,11 +354,13 @@ class JobStore:
                 cur = db.execute(
                     "UPDATE jobs SET status = 'done', progress = 1, result = ?, artifacts = ?, finished = ?, pid = NULL "
                     "WHERE id = ? AND status = 'running' AND pid = ?",
-                    (finite_json(result), json.dumps(artifacts or []), now, job_id, pid))
+                    (finite_json(result), json.dumps(artifacts or []), now, job_id, pid),
+                )
             else:
                 cur = db.execute(
                     "UPDATE jobs SET status = 'failed', error = ?, finished = ?, pid = NULL WHERE id = ? AND status = 'running' AND pid = ?",
-                    (error, now, job_id, pid))
+                    (error, now, job_id, pid),
+                )
             return cur.rowcount == 1
 
 

@@ -89,7 +89,9 @@ def dask_client(*, workers: int = 1, scheduler: str | None = None, timeout_s: fl
         try:
             client = Client(scheduler, timeout=timeout_s)
         except (OSError, TimeoutError) as exc:
-            raise ValueError(f"scheduler: cannot reach {scheduler} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
+            raise ValueError(
+                f"scheduler: cannot reach {scheduler} ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})"
+            ) from None
         try:
             yield client
         finally:
@@ -100,8 +102,14 @@ def dask_client(*, workers: int = 1, scheduler: str | None = None, timeout_s: fl
     cluster = client = None
     try:
         with workers_leave_sigint():  # a Ctrl-C during the start is raised at the end of this block: the finally closes
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=workers > 1, dashboard_address=None,
-                                   silence_logs=logging.CRITICAL, scheduler_kwargs=QUIET_SCHEDULER)
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=workers > 1,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+                scheduler_kwargs=QUIET_SCHEDULER,
+            )
             client = Client(cluster)
         yield client
     finally:

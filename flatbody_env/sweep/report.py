@@ -63,12 +63,17 @@ def format_report(report: SweepReport) -> str:
     """A few lines for the terminal: counts, then a kind-specific table."""
     kind = report.spec["kind"]
     rows = rows_of(report)
-    lines = [f"sweep {kind}: {report.total} tasks, {len(report.results) - len(report.failed)} ok, {len(report.failed)} failed"
-             + (f", {report.missing} missing" if report.missing else "") + f" ({report.ran} run now)"]
+    lines = [
+        f"sweep {kind}: {report.total} tasks, {len(report.results) - len(report.failed)} ok, {len(report.failed)} failed"
+        + (f", {report.missing} missing" if report.missing else "")
+        + f" ({report.ran} run now)"
+    ]
     if kind == "stability-map":
         counts: dict[str, int] = {}
         for r in rows:
-            key = f"{r['kind']} {r['classification']}" + (" (energy-Casimir stable)" if r["nonlinear"] == "stable" else "")
+            key = f"{r['kind']} {r['classification']}" + (
+                " (energy-Casimir stable)" if r["nonlinear"] == "stable" else ""
+            )
             counts[key] = counts.get(key, 0) + 1
         lines.append(f"{len(rows)} stationary ellipses: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
     elif kind == "failure-study":
@@ -79,12 +84,16 @@ def format_report(report: SweepReport) -> str:
             if (r["study"], r["method"]) in seen:
                 continue
             seen.add((r["study"], r["method"]))
-            lines.append(f"  {r['study']:<8} {r['method']:<20} first fails at {r['parameter_name']} = {r['parameter']:g}: {r['status']}")
+            lines.append(
+                f"  {r['study']:<8} {r['method']:<20} first fails at {r['parameter_name']} = {r['parameter']:g}: {r['status']}"
+            )
     elif kind == "family":
         for r in rows:
             ev = ", ".join(f"{e['kind']} at {r['param']} = {e['param']:.6g}" for e in r["events"]) or "no event"
-            lines.append(f"  {r['body']}: {r['param']} in [{r['range'][0]:g}, {r['range'][1]:g}]: {r['branches']} branch(es), "
-                         f"{r['points']} points; {ev} ({r['csv']})")
+            lines.append(
+                f"  {r['body']}: {r['param']} in [{r['range'][0]:g}, {r['range'][1]:g}]: {r['branches']} branch(es), "
+                f"{r['points']} points; {ev} ({r['csv']})"
+            )
     elif kind == "seeds":
         lines.append("| seed | success rate | final distance (mean) | model |")
         lines.append("|---|---|---|---|")
@@ -92,8 +101,10 @@ def format_report(report: SweepReport) -> str:
             lines.append(f"| {r['seed']} | {r['success_rate']:.0%} | {r['final_distance']:.4f} | {r['model']} |")
         s = seeds_summary(rows)
         if rows:
-            lines.append(f"| mean ± std ({len(rows)} seeds) | {s['success_rate']['mean']:.0%} ± {s['success_rate']['std']:.0%} | "
-                         f"{s['final_distance']['mean']:.4f} ± {s['final_distance']['std']:.4f} | |")
+            lines.append(
+                f"| mean ± std ({len(rows)} seeds) | {s['success_rate']['mean']:.0%} ± {s['success_rate']['std']:.0%} | "
+                f"{s['final_distance']['mean']:.4f} ± {s['final_distance']['std']:.4f} | |"
+            )
     for r in report.failed:
         lines.append(f"  failed {r.key}: {r.error}")
     return "\n".join(lines)

@@ -51,8 +51,15 @@ def _store(store: ResultStore, out: Outcome) -> None:
     store.put(out.key, payload=out.payload, error=out.error, seconds=out.seconds, worker=out.worker)
 
 
-def run_tasks(tasks: list[Task], store: ResultStore, *, workers: int = 1, scheduler: str | None = None,
-              progress: bool = True, desc: str = "sweep") -> int:
+def run_tasks(
+    tasks: list[Task],
+    store: ResultStore,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+    desc: str = "sweep",
+) -> int:
     """Run ``tasks`` (already filtered) and store each outcome as it arrives; returns how many ran.
 
     ``workers=0`` runs them one after another in this process, without Dask (the reference path);
@@ -74,15 +81,23 @@ def run_tasks(tasks: list[Task], store: ResultStore, *, workers: int = 1, schedu
         from flatbody_env.sweep.cluster import dask_client
 
         with dask_client(workers=workers, scheduler=scheduler) as client:
-            futures = {client.submit(execute, t, key=f"flatbody-sweep-{t.kind}-{t.key}-{id(store)}", pure=False): t for t in tasks}
+            futures = {
+                client.submit(execute, t, key=f"flatbody-sweep-{t.kind}-{t.key}-{id(store)}", pure=False): t
+                for t in tasks
+            }
             try:
                 for fut in as_completed(futures):
                     task = futures[fut]
                     try:
                         out = fut.result()
                     except Exception as exc:  # a worker died under the task (KilledWorker) or the cluster failed
-                        out = Outcome(key=task.key, payload=None, error=f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}",
-                                      seconds=0.0, worker="")
+                        out = Outcome(
+                            key=task.key,
+                            payload=None,
+                            error=f"{type(exc).__name__}: {' '.join(str(exc).split())[:300]}",
+                            seconds=0.0,
+                            worker="",
+                        )
                     _store(store, out)
                     bar.set_postfix_str(task.key, refresh=False)
                     bar.update(1)
@@ -94,8 +109,15 @@ def run_tasks(tasks: list[Task], store: ResultStore, *, workers: int = 1, schedu
         bar.close()
 
 
-def run_sweep(spec: dict[str, Any], out: str | Path, *, workers: int = 1, scheduler: str | None = None, resume: bool = False,
-              progress: bool = True) -> SweepReport:
+def run_sweep(
+    spec: dict[str, Any],
+    out: str | Path,
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> SweepReport:
     """Run the sweep ``spec`` with results under ``out`` (``out/results.sqlite``).
 
     Parameters
@@ -123,7 +145,9 @@ def run_sweep(spec: dict[str, Any], out: str | Path, *, workers: int = 1, schedu
         store.begin(spec, resume=resume)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
-        ran = run_tasks(todo, store, workers=workers, scheduler=scheduler, progress=progress, desc=f"sweep {spec['kind']}")
+        ran = run_tasks(
+            todo, store, workers=workers, scheduler=scheduler, progress=progress, desc=f"sweep {spec['kind']}"
+        )
         keys = {t.key for t in tasks}
         results = tuple(r for r in store.results() if r.key in keys)
     return SweepReport(spec=spec, total=len(tasks), ran=ran, results=results)

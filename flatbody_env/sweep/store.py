@@ -111,7 +111,9 @@ class ResultStore:
         except (TypeError, ValueError):
             spec = None
         if not isinstance(spec, dict):
-            raise ValueError(f"out: {str(self.path)!r} holds a damaged sweep specification; move it away or choose another folder")
+            raise ValueError(
+                f"out: {str(self.path)!r} holds a damaged sweep specification; move it away or choose another folder"
+            )
         return spec
 
     def begin(self, spec: dict[str, Any], *, resume: bool) -> None:
@@ -132,13 +134,19 @@ class ResultStore:
             self._db.commit()
             return
         if not resume:
-            raise ValueError(f"out: {self.folder} already holds a sweep; pass --resume to continue it or choose another folder")
+            raise ValueError(
+                f"out: {self.folder} already holds a sweep; pass --resume to continue it or choose another folder"
+            )
         if json.dumps(stored, sort_keys=True) != text:
             diff = sorted(k for k in set(stored) | set(spec) if stored.get(k) != spec.get(k))
-            raise ValueError(f"resume: the sweep in {self.folder} was started with other parameters ({', '.join(diff)} differ)")
+            raise ValueError(
+                f"resume: the sweep in {self.folder} was started with other parameters ({', '.join(diff)} differ)"
+            )
 
     # -- rows ---------------------------------------------------------------------------------
-    def put(self, key: str, *, payload: Any = None, error: str | None = None, seconds: float = 0.0, worker: str = "local") -> None:
+    def put(
+        self, key: str, *, payload: Any = None, error: str | None = None, seconds: float = 0.0, worker: str = "local"
+    ) -> None:
         """Upsert the outcome of task ``key`` (one atomic commit): ok when ``error`` is None."""
         status = "ok" if error is None else "error"
         try:
@@ -151,8 +159,15 @@ class ResultStore:
             "INSERT INTO rows (key, status, payload, error, seconds, worker, finished_utc) VALUES (?, ?, ?, ?, ?, ?, ?) "
             "ON CONFLICT(key) DO UPDATE SET status = excluded.status, payload = excluded.payload, error = excluded.error, "
             "seconds = excluded.seconds, worker = excluded.worker, finished_utc = excluded.finished_utc",
-            (key, status, None if error is not None else json.dumps(payload), error, float(seconds), worker,
-             time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())),
+            (
+                key,
+                status,
+                None if error is not None else json.dumps(payload),
+                error,
+                float(seconds),
+                worker,
+                time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            ),
         )
         self._db.commit()
 
@@ -165,8 +180,17 @@ class ResultStore:
     def results(self) -> list[StoredResult]:
         """All stored outcomes, sorted by key."""
         cur = self._db.execute("SELECT key, status, payload, error, seconds, worker FROM rows ORDER BY key")
-        return [StoredResult(key=k, status=s, payload=None if p is None else json.loads(p), error=e, seconds=float(t or 0.0),
-                             worker=w or "") for k, s, p, e, t, w in cur]
+        return [
+            StoredResult(
+                key=k,
+                status=s,
+                payload=None if p is None else json.loads(p),
+                error=e,
+                seconds=float(t or 0.0),
+                worker=w or "",
+            )
+            for k, s, p, e, t, w in cur
+        ]
 
     def count(self) -> int:
         return int(self._db.execute("SELECT COUNT(*) FROM rows").fetchone()[0])

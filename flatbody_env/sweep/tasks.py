@@ -96,8 +96,9 @@ def failure_case(task: Task) -> list[dict[str, Any]]:
     from flatbody_env.answers import failure_rows
 
     p = task.params
-    points = failure_study((p["study"],), (p["method"],), quick=p["quick"], repeats=p["repeats"], max_run_s=p["max_run_s"],
-                           progress=False)
+    points = failure_study(
+        (p["study"],), (p["method"],), quick=p["quick"], repeats=p["repeats"], max_run_s=p["max_run_s"], progress=False
+    )
     return failure_rows(points)
 
 
@@ -112,8 +113,17 @@ def family_case(task: Task) -> dict[str, Any]:
     p = task.params
     body = Body.from_dict(p["body"])
     box = SearchBox(lam=tuple(p["box"]["lam"]), mu=tuple(p["box"]["mu"]), n=p["box"]["n"])
-    fam = follow_family(body, p["vary"], p["start"], p["stop"], s3=p["s3"], p_theta=p["p_theta"], seeds=p["seeds"], box=box,
-                        step=p["step"])
+    fam = follow_family(
+        body,
+        p["vary"],
+        p["start"],
+        p["stop"],
+        s3=p["s3"],
+        p_theta=p["p_theta"],
+        seeds=p["seeds"],
+        box=box,
+        step=p["step"],
+    )
     csv = Path(p["csv"])
     csv.parent.mkdir(parents=True, exist_ok=True)
     write_family_csv(fam, csv)
@@ -137,9 +147,21 @@ def seed_case(task: Task) -> dict[str, Any]:
     p = task.params
     seed = seed_of(task.key)
     out = Path(p["model_dir"])
-    train(p["algo"], out, seed=seed, n_timesteps=p["n_timesteps"], n_envs=p["n_envs"], overrides=list(p["overrides"]),
-          hyperparams_file=p["hyperparams_file"], checkpoint_freq=0, threads=1, progress=False, force=True, notes=False,
-          command=["flatbody", "sweep", "seeds", f"--algo={p['algo']}", f"--seed={seed}"])
+    train(
+        p["algo"],
+        out,
+        seed=seed,
+        n_timesteps=p["n_timesteps"],
+        n_envs=p["n_envs"],
+        overrides=list(p["overrides"]),
+        hyperparams_file=p["hyperparams_file"],
+        checkpoint_freq=0,
+        threads=1,
+        progress=False,
+        force=True,
+        notes=False,
+        command=["flatbody", "sweep", "seeds", f"--algo={p['algo']}", f"--seed={seed}"],
+    )
     agent = Agent(out)
     summary = summarize(run_episodes(agent, episodes=p["episodes"], seed=p["eval_seed"], env_kwargs=agent.env_kwargs))
     return {"seed": seed, "model": p["model_name"], **summary}
@@ -200,37 +222,89 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
         grid, chunk = spec["grid"], spec["chunk"]
         for i0 in range(0, grid, chunk):
             i1 = min(grid, i0 + chunk)
-            tasks.append(Task(kind=kind, key=f"lam-{i0:06d}-{i1:06d}", params={
-                "body": spec["body"], "lam_range": spec["lam_range"], "mu_range": spec["mu_range"], "grid": grid, "rows": [i0, i1]}))
+            tasks.append(
+                Task(
+                    kind=kind,
+                    key=f"lam-{i0:06d}-{i1:06d}",
+                    params={
+                        "body": spec["body"],
+                        "lam_range": spec["lam_range"],
+                        "mu_range": spec["mu_range"],
+                        "grid": grid,
+                        "rows": [i0, i1],
+                    },
+                )
+            )
     elif kind == "failure-study":
         for si, study in enumerate(spec["studies"]):
             for mi, method in enumerate(spec["methods"]):
-                tasks.append(Task(kind=kind, key=f"{si:02d}-{study}-{mi:02d}-{method}", params={
-                    "study": study, "method": method, "quick": spec["quick"], "repeats": spec["repeats"],
-                    "max_run_s": spec["max_run_s"]}))
+                tasks.append(
+                    Task(
+                        kind=kind,
+                        key=f"{si:02d}-{study}-{mi:02d}-{method}",
+                        params={
+                            "study": study,
+                            "method": method,
+                            "quick": spec["quick"],
+                            "repeats": spec["repeats"],
+                            "max_run_s": spec["max_run_s"],
+                        },
+                    )
+                )
     elif kind == "family":
         for bi, (label, body) in enumerate(spec["bodies"]):
             for vi, vary in enumerate(spec["vary"]):
                 for ri, (start, stop) in enumerate(spec["ranges"]):
                     key = f"{bi:03d}-{vi:02d}-{ri:03d}"
                     name = f"families/{key}.csv"
-                    tasks.append(Task(kind=kind, key=key, params={
-                        "body": body, "body_label": label, "vary": vary, "start": start, "stop": stop, "s3": spec["s3"],
-                        "p_theta": spec["p_theta"], "seeds": spec["seeds"], "box": spec["box"], "step": spec["step"],
-                        "csv": str(out / name), "csv_name": name}))
+                    tasks.append(
+                        Task(
+                            kind=kind,
+                            key=key,
+                            params={
+                                "body": body,
+                                "body_label": label,
+                                "vary": vary,
+                                "start": start,
+                                "stop": stop,
+                                "s3": spec["s3"],
+                                "p_theta": spec["p_theta"],
+                                "seeds": spec["seeds"],
+                                "box": spec["box"],
+                                "step": spec["step"],
+                                "csv": str(out / name),
+                                "csv_name": name,
+                            },
+                        )
+                    )
     else:  # seeds
         for seed in spec["seeds"]:
             name = f"models/seed-{seed}"
-            tasks.append(Task(kind=kind, key=f"seed-{seed:06d}", params={
-                "algo": spec["algo"], "n_timesteps": spec["n_timesteps"], "n_envs": spec["n_envs"],
-                "overrides": spec["overrides"], "hyperparams_file": spec["hyperparams_file"], "episodes": spec["episodes"],
-                "eval_seed": spec["eval_seed"], "model_dir": str(out / name), "model_name": name}))
+            tasks.append(
+                Task(
+                    kind=kind,
+                    key=f"seed-{seed:06d}",
+                    params={
+                        "algo": spec["algo"],
+                        "n_timesteps": spec["n_timesteps"],
+                        "n_envs": spec["n_envs"],
+                        "overrides": spec["overrides"],
+                        "hyperparams_file": spec["hyperparams_file"],
+                        "episodes": spec["episodes"],
+                        "eval_seed": spec["eval_seed"],
+                        "model_dir": str(out / name),
+                        "model_name": name,
+                    },
+                )
+            )
     return sorted(tasks, key=lambda t: t.key)
 
 
 def serial_only_message(kind: str) -> str:
-    return (f"kind: {kind} is a timing study and stays serial (concurrent runs on shared cores skew wall time); "
-            "run 'flatbody chart' or 'flatbody bench ...' instead")
+    return (
+        f"kind: {kind} is a timing study and stays serial (concurrent runs on shared cores skew wall time); "
+        "run 'flatbody chart' or 'flatbody bench ...' instead"
+    )
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -245,12 +319,28 @@ def parse_seeds(text: str) -> list[int]:
             else:
                 lo = hi = int(part)
         except ValueError:
-            raise ValueError(f"seeds: expected ranges like 0-7 or lists like 0,3,5 (integers >= 0), got {text!r}") from None
+            raise ValueError(
+                f"seeds: expected ranges like 0-7 or lists like 0,3,5 (integers >= 0), got {text!r}"
+            ) from None
         if lo < 0 or hi < lo or hi - lo > 10_000:
             raise ValueError(f"seeds: need 0 <= FIRST <= LAST (at most 10000 apart), got {part!r}")
         seeds.update(range(lo, hi + 1))
     return sorted(seeds)
 
 
-__all__ = ["EVAL_SEED", "KINDS", "MAX_GRID", "Outcome", "RUNNERS", "SERIAL_ONLY", "TASK_POINTS", "Task", "default_chunk", "execute",
-           "parse_seeds", "plan", "seed_of", "serial_only_message"]
+__all__ = [
+    "EVAL_SEED",
+    "KINDS",
+    "MAX_GRID",
+    "Outcome",
+    "RUNNERS",
+    "SERIAL_ONLY",
+    "TASK_POINTS",
+    "Task",
+    "default_chunk",
+    "execute",
+    "parse_seeds",
+    "plan",
+    "seed_of",
+    "serial_only_message",
+]

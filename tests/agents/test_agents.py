@@ -14,7 +14,14 @@ import pytest
 import yaml
 
 import flatbody_env  # noqa: F401  (registers FlatBody-v0)
-from agents.heuristic import REDUCED_STATE, HeuristicController, HeuristicGains, PassivityController, linearize, state_from_observation
+from agents.heuristic import (
+    REDUCED_STATE,
+    HeuristicController,
+    HeuristicGains,
+    PassivityController,
+    linearize,
+    state_from_observation,
+)
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
 
@@ -23,8 +30,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _cli(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-m", "flatbody_env.cli", *args], capture_output=True, text=True,
-                          cwd=cwd or ROOT, env=env, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "flatbody_env.cli", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd or ROOT,
+        env=env,
+        timeout=timeout,
+    )
 
 
 def _target_state(env) -> np.ndarray:
@@ -81,7 +94,9 @@ def test_lqr_batch_uses_stored_table_gains_close_to_the_exact_ones():
     rel = np.max(np.abs(K_table - K_exact), axis=(1, 2)) / np.max(np.abs(K_exact), axis=(1, 2))
     assert rel.max() < 0.03, rel  # bilinear in (lambda*, 1/(lambda* mu*)); median ~1e-4
     for i in range(6):  # the same law, row by row
-        ystar = np.array([0.0, 0.0, target[3, i], y[3, i], 0.0, 0.0, 0.0, target[0, i], target[1, i], target[2, i], 0.0])
+        ystar = np.array(
+            [0.0, 0.0, target[3, i], y[3, i], 0.0, 0.0, 0.0, target[0, i], target[1, i], target[2, i], 0.0]
+        )
         dx = (y[:, i] - ystar)[list(REDUCED_STATE)]
         np.testing.assert_allclose(a[i], np.clip(-K_table[i] @ dx, -1, 1).astype(np.float32), rtol=1e-6, atol=1e-7)
     obs2 = obs.copy()
@@ -90,7 +105,9 @@ def test_lqr_batch_uses_stored_table_gains_close_to_the_exact_ones():
     np.testing.assert_array_equal(np.delete(ctl._K, 2, axis=0), np.delete(K_table, 2, axis=0))
     assert not np.array_equal(ctl._K[2], K_table[2])
     # the closed loop with the table gain is stable, as with the exact one
-    A, B = linearize(venv.body, np.array([0.0, 0.0, target[3, 0], y[3, 0], 0.0, 0.0, 0.0, *target[:3, 0], 0.0]), venv.limits)
+    A, B = linearize(
+        venv.body, np.array([0.0, 0.0, target[3, 0], y[3, 0], 0.0, 0.0, 0.0, *target[:3, 0], 0.0]), venv.limits
+    )
     assert np.max(np.linalg.eigvals(A - B @ K_table[0]).real) < -1e-3
     # another control mode: the table does not apply, exact gains
     torque = HeuristicController(venv.body, "torque", venv.limits)
@@ -106,7 +123,12 @@ def test_passivity_controller_decreases_its_lyapunov_function():
     tg = u.target
 
     def lyap(y):
-        return hamiltonian(y, u.body) - tg["omega3"] * y[2] + 0.5 * g.c_s3 * (y[2] - tg["s3"]) ** 2 + 0.5 * g.k_rho * (y[9] - tg["rho"]) ** 2
+        return (
+            hamiltonian(y, u.body)
+            - tg["omega3"] * y[2]
+            + 0.5 * g.c_s3 * (y[2] - tg["s3"]) ** 2
+            + 0.5 * g.k_rho * (y[9] - tg["rho"]) ** 2
+        )
 
     # the target's omega3 is what the controller regulates to
     y_star = _target_state(env)
@@ -126,10 +148,26 @@ def test_residual_actions_keep_the_target_an_equilibrium():
     env.reset(seed=5)
     u = env.unwrapped
     tg = u.target
-    at_target = {"s1": 0.0, "s2": 0.0, "s3": tg["s3"], "p_theta": tg["p_theta"], "p_lambda": 0.0, "p_mu": 0.0, "p_rho": 0.0,
-                 "lambda": tg["lambda"], "mu": tg["mu"], "rho": tg["rho"], "theta": 0.4}
-    obs_star, _ = env.reset(seed=5, options={"target": {"lambda": tg["lambda"], "mu": tg["mu"], "sign": float(np.sign(tg["p_theta"]))},
-                                                   "state": at_target})
+    at_target = {
+        "s1": 0.0,
+        "s2": 0.0,
+        "s3": tg["s3"],
+        "p_theta": tg["p_theta"],
+        "p_lambda": 0.0,
+        "p_mu": 0.0,
+        "p_rho": 0.0,
+        "lambda": tg["lambda"],
+        "mu": tg["mu"],
+        "rho": tg["rho"],
+        "theta": 0.4,
+    }
+    obs_star, _ = env.reset(
+        seed=5,
+        options={
+            "target": {"lambda": tg["lambda"], "mu": tg["mu"], "sign": float(np.sign(tg["p_theta"]))},
+            "state": at_target,
+        },
+    )
     obs_off, _ = env.reset(seed=5)
     obs = np.stack([obs_star, obs_off])
     rng = np.random.default_rng(0)
@@ -182,8 +220,12 @@ def test_baseline_metrics_are_physical_and_seeded():
 
 # --- commands -------------------------------------------------------------------------------------
 def test_cli_errors_are_one_line(tmp_path):
-    for args in (["evaluate", "--episodes", "0"], ["evaluate", str(tmp_path / "nothing")], ["train", "--algo", "ppo", "--hyperparams", "oops", "--out", str(tmp_path / "x")],
-                 ["train", "--algo", "ppo", "--resume", "--out", str(tmp_path / "none")]):
+    for args in (
+        ["evaluate", "--episodes", "0"],
+        ["evaluate", str(tmp_path / "nothing")],
+        ["train", "--algo", "ppo", "--hyperparams", "oops", "--out", str(tmp_path / "x")],
+        ["train", "--algo", "ppo", "--resume", "--out", str(tmp_path / "none")],
+    ):
         p = _cli(*args)
         assert p.returncode == 2, (args, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr
@@ -192,8 +234,23 @@ def test_cli_errors_are_one_line(tmp_path):
 @pytest.mark.slow  # a long equality/training check (pytest -m slow); shorter ones of the same path run by default
 def test_train_resume_evaluate_smoke(tmp_path):
     out = tmp_path / "run"
-    common = ["train", "--algo", "ppo", "--n-envs", "4", "--out", str(out), "--checkpoint-freq", "256", "--keep-checkpoints",
-              "--no-progress", "--hyperparams", "n_steps=64", "batch_size=64", "n_epochs=2"]
+    common = [
+        "train",
+        "--algo",
+        "ppo",
+        "--n-envs",
+        "4",
+        "--out",
+        str(out),
+        "--checkpoint-freq",
+        "256",
+        "--keep-checkpoints",
+        "--no-progress",
+        "--hyperparams",
+        "n_steps=64",
+        "batch_size=64",
+        "n_epochs=2",
+    ]
     p = _cli(*common, "--n-timesteps", "512")
     assert p.returncode == 0, p.stderr
     for name in ("model.zip", "vecnormalize.pkl", "config.yml", "run.json"):
@@ -204,7 +261,10 @@ def test_train_resume_evaluate_smoke(tmp_path):
     assert run["git_hash"] == "unknown" or len(run["git_hash"]) == 40
     cfg = yaml.safe_load((out / "config.yml").read_text())
     assert cfg["algo"] == "ppo" and cfg["hyperparams"]["n_steps"] == 64 and cfg["hyperparams"]["n_envs"] == 4
-    assert sorted(p.name for p in (out / "checkpoints").glob("*.zip")) == ["rl_model_256_steps.zip", "rl_model_512_steps.zip"]
+    assert sorted(p.name for p in (out / "checkpoints").glob("*.zip")) == [
+        "rl_model_256_steps.zip",
+        "rl_model_512_steps.zip",
+    ]
 
     p = _cli("train", "--algo", "ppo", "--out", str(out), "--resume", "--n-timesteps", "1024", "--no-progress")
     assert p.returncode == 0, p.stderr
@@ -225,8 +285,25 @@ def test_train_resume_evaluate_smoke(tmp_path):
 @pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_sac_trains_and_saves(tmp_path):
     out = tmp_path / "sac"
-    p = _cli("train", "--algo", "sac", "--n-timesteps", "256", "--n-envs", "2", "--out", str(out), "--no-progress",
-             "--checkpoint-freq", "0", "--hyperparams", "learning_starts=64", "batch_size=32", "train_freq=4", "gradient_steps=1")
+    p = _cli(
+        "train",
+        "--algo",
+        "sac",
+        "--n-timesteps",
+        "256",
+        "--n-envs",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--checkpoint-freq",
+        "0",
+        "--hyperparams",
+        "learning_starts=64",
+        "batch_size=32",
+        "train_freq=4",
+        "gradient_steps=1",
+    )
     assert p.returncode == 0, p.stderr
     assert (out / "model.zip").exists() and (out / "vecnormalize.pkl").exists()
     from agents.evaluate import Agent, run_episodes

@@ -14,8 +14,19 @@ SLOW = MODELS_DIR / "ppo-FlatBodySlow-v0"
 SMALL = PlanSettings(samples=8, iterations=4, elite=2, chunk=2, knots=4)
 
 
-@pytest.mark.parametrize("field, value", [("knots", 0), ("samples", 1), ("elite", 9), ("init_std", -1.0), ("reach", float("nan")),
-                                          ("iterations", 0), ("chunk", 0), ("seed", -1)])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("knots", 0),
+        ("samples", 1),
+        ("elite", 9),
+        ("init_std", -1.0),
+        ("reach", float("nan")),
+        ("iterations", 0),
+        ("chunk", 0),
+        ("seed", -1),
+    ],
+)
 def test_plan_settings_refuse_bad_values_naming_the_field(field, value):
     kwargs = {"samples": 8, field: value}
     with pytest.raises(ValueError, match=field):
@@ -66,8 +77,13 @@ def test_plan_never_costs_more_than_the_lqr_alone():
 
 
 def test_plans_round_trip_without_pickles_and_refuse_other_files(tmp_path):
-    p = Plans(env_id="FlatBodySlow-v0", model="m", seeds=np.array([1, 2]), final_distance=np.array([0.01, 0.2]),
-              knots=np.zeros((2, 3, 4)))
+    p = Plans(
+        env_id="FlatBodySlow-v0",
+        model="m",
+        seeds=np.array([1, 2]),
+        final_distance=np.array([0.01, 0.2]),
+        knots=np.zeros((2, 3, 4)),
+    )
     p.save(tmp_path / "p.npz")
     q = Plans.load(tmp_path / "p.npz")
     assert q.env_id == p.env_id and np.array_equal(q.seeds, p.seeds) and np.array_equal(q.knots, p.knots)
@@ -82,7 +98,9 @@ def test_plans_round_trip_without_pickles_and_refuse_other_files(tmp_path):
 
 def test_clone_fits_the_plans_and_writes_a_run_that_loads(tmp_path):
     plans = plan(SLOW, [0, 1], SMALL, progress=False)
-    plans = Plans(env_id=plans.env_id, model=plans.model, seeds=plans.seeds, final_distance=np.zeros(2), knots=plans.knots)  # clone both
+    plans = Plans(
+        env_id=plans.env_id, model=plans.model, seeds=plans.seeds, final_distance=np.zeros(2), knots=plans.knots
+    )  # clone both
     res = clone(plans, SLOW, tmp_path / "bc", epochs=3, progress=False)
     assert res["plans"] == 2 and res["pairs"] == 800
     assert res["mse_end"] < res["mse_start"]
@@ -91,16 +109,41 @@ def test_clone_fits_the_plans_and_writes_a_run_that_loads(tmp_path):
     with pytest.raises(ValueError, match="out|holds"):
         clone(plans, SLOW, tmp_path / "bc", epochs=1, progress=False)  # an existing run is not overwritten
     with pytest.raises(ValueError, match="plans"):
-        clone(Plans(env_id="FlatBody-v0", model="m", seeds=plans.seeds, final_distance=plans.final_distance, knots=plans.knots),
-              SLOW, tmp_path / "x", progress=False)
+        clone(
+            Plans(
+                env_id="FlatBody-v0",
+                model="m",
+                seeds=plans.seeds,
+                final_distance=plans.final_distance,
+                knots=plans.knots,
+            ),
+            SLOW,
+            tmp_path / "x",
+            progress=False,
+        )
 
 
 def test_command_refuses_bad_input_with_one_line(tmp_path, capsys):
-    assert main(["plan", "--model", str(MODELS_DIR / "ppo-FlatBodyHoldUnstable-v0"), "--seeds", "0:2", "--out", str(tmp_path / "p.npz")]) == 2
+    assert (
+        main(
+            [
+                "plan",
+                "--model",
+                str(MODELS_DIR / "ppo-FlatBodyHoldUnstable-v0"),
+                "--seeds",
+                "0:2",
+                "--out",
+                str(tmp_path / "p.npz"),
+            ]
+        )
+        == 2
+    )
     assert "additive" in capsys.readouterr().err  # a gain-mode residual agent cannot execute an additive plan
     with pytest.raises(SystemExit):
         main(["plan", "--model", str(SLOW), "--seeds", "5:2", "--out", str(tmp_path / "p.npz")])
-    assert main(["plan", "--model", str(SLOW), "--seeds", "0:2", "--samples", "1", "--out", str(tmp_path / "p.npz")]) == 2
+    assert (
+        main(["plan", "--model", str(SLOW), "--seeds", "0:2", "--samples", "1", "--out", str(tmp_path / "p.npz")]) == 2
+    )
     assert "samples" in capsys.readouterr().err
 
 
@@ -114,12 +157,28 @@ def test_fine_tuning_starts_from_the_given_run(tmp_path):
 
     tiny = ["n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=1", "policy_kwargs.net_arch=[8]"]
     train("ppo", tmp_path / "a", n_timesteps=32, overrides=tiny, progress=False, checkpoint_freq=0, notes=False)
-    train("ppo", tmp_path / "b", n_timesteps=32, overrides=tiny[:4], progress=False, checkpoint_freq=0, notes=False,
-          trained_agent=tmp_path / "a")
+    train(
+        "ppo",
+        tmp_path / "b",
+        n_timesteps=32,
+        overrides=tiny[:4],
+        progress=False,
+        checkpoint_freq=0,
+        notes=False,
+        trained_agent=tmp_path / "a",
+    )
     cfg = yaml.safe_load((tmp_path / "b" / "config.yml").read_text())
     assert cfg["trained_agent"] == str(tmp_path / "a")
     net = A(tmp_path / "b", backend="sb3").model.policy.mlp_extractor.policy_net
     assert [m.out_features for m in net if hasattr(m, "out_features")] == [8]  # the loaded run's, not the YAML's 64x64
     with pytest.raises(ValueError, match="trained_agent"):
-        train("ppo", tmp_path / "c", n_timesteps=32, overrides=tiny, progress=False, checkpoint_freq=0, notes=False,
-              trained_agent=tmp_path / "nothing")
+        train(
+            "ppo",
+            tmp_path / "c",
+            n_timesteps=32,
+            overrides=tiny,
+            progress=False,
+            checkpoint_freq=0,
+            notes=False,
+            trained_agent=tmp_path / "nothing",
+        )

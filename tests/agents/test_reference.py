@@ -21,7 +21,12 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_wilson_interval_matches_known_values():
     # E. B. Wilson (1927), z = 1.96, worked by hand: 0/100 -> [0, 0.0370], 67/100 -> [0.5731, 0.7544], 1/2 -> [0.0945, 0.9055]
-    for k, n, lo, hi in [(0, 100, 0.0, 0.0370), (67, 100, 0.5731, 0.7544), (100, 100, 0.9630, 1.0), (1, 2, 0.0945, 0.9055)]:
+    for k, n, lo, hi in [
+        (0, 100, 0.0, 0.0370),
+        (67, 100, 0.5731, 0.7544),
+        (100, 100, 0.9630, 1.0),
+        (1, 2, 0.0945, 0.9055),
+    ]:
         a, b = success_interval(k, n)
         assert a == pytest.approx(lo, abs=5e-5) and b == pytest.approx(hi, abs=5e-5)
     with pytest.raises(ValueError, match="episodes"):
@@ -43,7 +48,19 @@ def test_reports_are_saved_the_docs_block_and_the_chart_come_from_them(tmp_path,
     out = tmp_path / "reports"
     page = tmp_path / "page.md"
     page.write_text("# page\n\n<!-- bench:tasks -->\nstale\n<!-- /bench:tasks -->\n\nafter\n")
-    argv = ["evaluate", "--env", "FlatBodyDilatation-v0", "--episodes", "3", "--seed", "10000", "--out-dir", str(out), "--docs", str(page)]
+    argv = [
+        "evaluate",
+        "--env",
+        "FlatBodyDilatation-v0",
+        "--episodes",
+        "3",
+        "--seed",
+        "10000",
+        "--out-dir",
+        str(out),
+        "--docs",
+        str(page),
+    ]
     assert main(argv) == 0
     saved = json.loads((out / "FlatBodyDilatation-v0.json").read_text())
     assert saved["version"] == 1 and saved["targets"]["seed"] == [10000, 10001, 10002]
@@ -71,7 +88,10 @@ def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
         assert rep["episodes"] == 100 and rep["seed"] == 10_000
         for name, entry in rep["policies"].items():
             if "episodes" in entry:
-                assert entry["summary"]["success_rate"] == pytest.approx(np.mean(entry["episodes"]["success"])), (rep["env_id"], name)
+                assert entry["summary"]["success_rate"] == pytest.approx(np.mean(entry["episodes"]["success"])), (
+                    rep["env_id"],
+                    name,
+                )
     # FlatBody-v0's figures are those of docs/agents.md (the task is unchanged)
     v0 = reports[0]["policies"]
     assert v0["heuristic"]["summary"]["final_distance"] == pytest.approx(0.0032, abs=5e-5)
@@ -86,7 +106,22 @@ def test_a_task_agent_is_found_in_its_folder(tmp_path, monkeypatch):
     monkeypatch.setattr(evaluate, "MODELS_DIR", tmp_path)
     assert shipped_agents("FlatBodySlow-v0") == {"sac": folder}
     assert shipped_agents("FlatBody-v0") == {}
-    rep = {"env_id": "FlatBodySlow-v0", "episodes": 1, "seed": 0,
-           "policies": {"sac": {"kind": "agent", "summary": {"success_rate": 1.0, "success_ci95": [0.2, 1.0], "final_distance": 0.01,
-                                                              "final_distance_median": 0.01, "return": -1.0, "length_median": 400}}}}
+    rep = {
+        "env_id": "FlatBodySlow-v0",
+        "episodes": 1,
+        "seed": 0,
+        "policies": {
+            "sac": {
+                "kind": "agent",
+                "summary": {
+                    "success_rate": 1.0,
+                    "success_ci95": [0.2, 1.0],
+                    "final_distance": 0.01,
+                    "final_distance_median": 0.01,
+                    "return": -1.0,
+                    "length_median": 400,
+                },
+            }
+        },
+    }
     assert "| FlatBodySlow-v0 | agent (sac) | 100% (20%–100%) |" in markdown([rep])

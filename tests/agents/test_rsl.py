@@ -109,7 +109,9 @@ def test_held_noise_is_held_for_k_rollout_steps_and_fresh_in_the_update():
 def test_reward_normalisation_scales_the_training_rewards_only():
     n = 16
     raw = RslVecEnv(FlatBodyTorchVectorEnv(n, max_episode_steps=6), TorchResidual({}, 1.0, "gain", "cpu"), seed=1)
-    norm = RslVecEnv(FlatBodyTorchVectorEnv(n, max_episode_steps=6), TorchResidual({}, 1.0, "gain", "cpu"), seed=1, reward_gamma=0.9)
+    norm = RslVecEnv(
+        FlatBodyTorchVectorEnv(n, max_episode_steps=6), TorchResidual({}, 1.0, "gain", "cpu"), seed=1, reward_gamma=0.9
+    )
     for _ in range(12):
         _, r_raw, _, _ = raw.step(torch.zeros(n, 4))
         _, r_norm, _, _ = norm.step(torch.zeros(n, 4))
@@ -117,7 +119,9 @@ def test_reward_normalisation_scales_the_training_rewards_only():
         assert torch.allclose(scale, scale[0].expand_as(scale), rtol=1e-4)  # one positive factor for the whole batch
         assert float(scale[0]) > 0
     assert float(scale[0]) != pytest.approx(1.0)
-    assert [e[0] for e in norm.episodes] == pytest.approx([e[0] for e in raw.episodes])  # episodes logged with raw rewards
+    assert [e[0] for e in norm.episodes] == pytest.approx(
+        [e[0] for e in raw.episodes]
+    )  # episodes logged with raw rewards
     with pytest.raises(ValueError, match="gamma"):
         RslVecEnv(FlatBodyTorchVectorEnv(2), None, reward_gamma=1.5)
 
@@ -127,12 +131,38 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
     from flatbody_env.cli.main import main
 
     monkeypatch.chdir(tmp_path)
-    assert main(["train", "--algo", "rsl-ppo", "--num-envs", "8", "--n-timesteps", "100", "--device", "cpu", "--seed", "3",
-                 "--hyperparams", "num_steps_per_env=8", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "rsl-ppo",
+                "--num-envs",
+                "8",
+                "--n-timesteps",
+                "100",
+                "--device",
+                "cpu",
+                "--seed",
+                "3",
+                "--hyperparams",
+                "num_steps_per_env=8",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     out = tmp_path / "runs" / "rsl-ppo-FlatBody-v0-seed3"
-    assert {"model.zip", "config.yml", "run.json", "progress.csv", "policy.npz", "rsl_model.pt"} <= {p.name for p in out.iterdir()}
+    assert {"model.zip", "config.yml", "run.json", "progress.csv", "policy.npz", "rsl_model.pt"} <= {
+        p.name for p in out.iterdir()
+    }
     cfg = yaml.safe_load((out / "config.yml").read_text())
-    assert cfg["algo"] == "ppo" and cfg["seed"] == 3 and cfg["trainer"]["name"] == "rsl-ppo" and cfg["hyperparams"]["residual"] == "heuristic"
+    assert (
+        cfg["algo"] == "ppo"
+        and cfg["seed"] == 3
+        and cfg["trainer"]["name"] == "rsl-ppo"
+        and cfg["hyperparams"]["residual"] == "heuristic"
+    )
     run = json.loads((out / "run.json").read_text())
     assert run["algo"] == "rsl-ppo" and run["n_timesteps"] == 128 and run["versions"]["rsl_rl"] == "5.5.1"
     assert len((out / "progress.csv").read_text().splitlines()) == 3
@@ -140,9 +170,40 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
     assert agent.backend == "numpy" and agent.residual == "heuristic"
     recs = run_episodes(agent, episodes=2, seed=10_000)
     assert len(recs) == 2 and all(np.isfinite(r["final_distance"]) for r in recs)
-    assert main(["train", "--algo", "rsl-ppo", "--out", str(tmp_path / "x"), "--hyperparams", "nope=1", "--no-progress"]) == 2
-    assert main(["train", "--algo", "rsl-ppo", "--out", str(tmp_path / "z"), "--hyperparams", "learning_rate=fast", "--no-progress"]) == 2
-    assert main(["train", "--algo", "rsl-ppo", "--out", str(tmp_path / "w"), "--hyperparams", "noise_hold_steps=0", "--no-progress"]) == 2
+    assert (
+        main(["train", "--algo", "rsl-ppo", "--out", str(tmp_path / "x"), "--hyperparams", "nope=1", "--no-progress"])
+        == 2
+    )
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "rsl-ppo",
+                "--out",
+                str(tmp_path / "z"),
+                "--hyperparams",
+                "learning_rate=fast",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "rsl-ppo",
+                "--out",
+                str(tmp_path / "w"),
+                "--hyperparams",
+                "noise_hold_steps=0",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     assert main(["train", "--algo", "ppo", "--device", "cuda", "--out", str(tmp_path / "y")]) == 2
 
 
@@ -159,12 +220,21 @@ def test_callback_stops_the_run_and_the_live_policy_is_the_exported_agent(tmp_pa
         seen.append(live(obs))
         return row["iteration"] == 2
 
-    result = train_rsl(tmp_path / "run", seed=1, n_timesteps=10_000, n_envs=8, overrides=["num_steps_per_env=8"], progress=False,
-                       callback=callback)
+    result = train_rsl(
+        tmp_path / "run",
+        seed=1,
+        n_timesteps=10_000,
+        n_envs=8,
+        overrides=["num_steps_per_env=8"],
+        progress=False,
+        callback=callback,
+    )
     assert seen[0::2] == [1, 2] and result.timesteps == 2 * 8 * 8
     assert json.loads((tmp_path / "run" / "run.json").read_text())["n_timesteps"] == 128
     assert len((tmp_path / "run" / "progress.csv").read_text().splitlines()) == 3
-    np.testing.assert_allclose(Agent(tmp_path / "run")(obs), seen[-1], atol=1e-5)  # what the callback evaluated is what ships
+    np.testing.assert_allclose(
+        Agent(tmp_path / "run")(obs), seen[-1], atol=1e-5
+    )  # what the callback evaluated is what ships
 
 
 @pytest.mark.slow
@@ -197,8 +267,31 @@ def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_
     from flatbody_env.cli.main import main
 
     out = tmp_path / "scratch"
-    assert main(["train", "--algo", "rsl-ppo", "--num-envs", "8", "--n-timesteps", "64", "--device", "cpu", "--seed", "2",
-                 "--out", str(out), "--hyperparams", "residual=null", "num_steps_per_env=8", "init_std=0.5", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "rsl-ppo",
+                "--num-envs",
+                "8",
+                "--n-timesteps",
+                "64",
+                "--device",
+                "cpu",
+                "--seed",
+                "2",
+                "--out",
+                str(out),
+                "--hyperparams",
+                "residual=null",
+                "num_steps_per_env=8",
+                "init_std=0.5",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     cfg = yaml.safe_load((out / "config.yml").read_text())
     assert cfg["hyperparams"]["residual"] is None and cfg["hyperparams"]["init_std"] == 0.5
     agent = Agent(out)
@@ -215,7 +308,9 @@ def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_
     assert np.all(np.abs(live) <= 1.0)
     lqr = TorchResidual({}, 1.0, "gain", "cpu").lqr(torch.from_numpy(obs)).numpy()
     assert not np.allclose(live, lqr, atol=1e-3)  # not the LQR's action
-    same = [RslVecEnv(FlatBodyTorchVectorEnv(6), None, seed=5) for _ in range(2)]  # the adapter clips the policy's output itself
+    same = [
+        RslVecEnv(FlatBodyTorchVectorEnv(6), None, seed=5) for _ in range(2)
+    ]  # the adapter clips the policy's output itself
     o_big = same[0].step(torch.full((6, 4), 3.0))[0]["policy"]
     o_one = same[1].step(torch.ones(6, 4))[0]["policy"]
     o_zero = RslVecEnv(FlatBodyTorchVectorEnv(6), None, seed=5).step(torch.zeros(6, 4))[0]["policy"]
@@ -231,8 +326,15 @@ def test_from_scratch_curve_evaluates_the_policy_it_ships_and_the_chart_reads_th
     from agents.rsl import CURVE_HEADER, from_scratch_curve, plot_curve
 
     table = tmp_path / "curve.csv"
-    rows = from_scratch_curve(tmp_path / "run", table, budget_s=1e-3, eval_every_s=1e-3, episodes=2, eval_seed=10_000,
-                              overrides=["n_envs=8", "num_steps_per_env=8"])
+    rows = from_scratch_curve(
+        tmp_path / "run",
+        table,
+        budget_s=1e-3,
+        eval_every_s=1e-3,
+        episodes=2,
+        eval_seed=10_000,
+        overrides=["n_envs=8", "num_steps_per_env=8"],
+    )
     assert len(rows) == 1 and rows[0][0] == 64  # stopped after the first iteration
     with open(table, newline="") as fh:
         saved = list(csv.reader(fh))
@@ -261,8 +363,16 @@ def test_from_scratch_curve_trains_on_the_gpu_and_the_agent_runs_on_the_cpu(tmp_
     if not torch.cuda.is_available():
         pytest.skip("no CUDA GPU here")
     table = tmp_path / "curve.csv"
-    rows = from_scratch_curve(tmp_path / "run", table, budget_s=1e-3, eval_every_s=1e-3, episodes=4, eval_seed=10_000,
-                              overrides=["n_envs=64", "num_steps_per_env=8"], device="cuda")
+    rows = from_scratch_curve(
+        tmp_path / "run",
+        table,
+        budget_s=1e-3,
+        eval_every_s=1e-3,
+        episodes=4,
+        eval_seed=10_000,
+        overrides=["n_envs=64", "num_steps_per_env=8"],
+        device="cuda",
+    )
     assert len(rows) == 1 and rows[0][0] == 512
     with open(table, newline="") as fh:
         saved = list(csv.reader(fh))

@@ -33,10 +33,33 @@ def test_curriculum_switches_the_training_task_and_keeps_the_registered_one(tmp_
     from agents.curriculum import main
 
     out = tmp_path / "run"
-    assert main(["--env", "FlatBodySlow-v0", "--out", str(out), "--stages", "0.15,0", "--min-stage-steps", "1",
-                 "--max-stage-steps", "1", "--n-timesteps", "64", "--train-env-kwargs", "w_tumble=0",
-                 "--log-std-per-action=-1,-1,-3,-3",
-                 "--hyperparams", "n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=1"]) == 0
+    assert (
+        main(
+            [
+                "--env",
+                "FlatBodySlow-v0",
+                "--out",
+                str(out),
+                "--stages",
+                "0.15,0",
+                "--min-stage-steps",
+                "1",
+                "--max-stage-steps",
+                "1",
+                "--n-timesteps",
+                "64",
+                "--train-env-kwargs",
+                "w_tumble=0",
+                "--log-std-per-action=-1,-1,-3,-3",
+                "--hyperparams",
+                "n_envs=2",
+                "n_steps=16",
+                "batch_size=32",
+                "n_epochs=1",
+            ]
+        )
+        == 0
+    )
     cfg = yaml.safe_load((out / "config.yml").read_text())
     assert [h["value"] for h in cfg["curriculum"]["history"]] == [0.15, 0.0]
     assert cfg["curriculum"]["train_env_kwargs"] == {"w_tumble": 0}
@@ -51,9 +74,14 @@ def test_train_refuses_an_unregistered_id(tmp_path):
         train("ppo", tmp_path / "run", env_id="CartPole-v1")
 
 
-@pytest.mark.parametrize("env_id,residual", [("FlatBodyDilatation-v0", None),
-                                              pytest.param("FlatBodyHoldUnstable-v0", "passivity", marks=pytest.mark.slow),
-                                              pytest.param("FlatBodyAnyBody-v0", "heuristic", marks=pytest.mark.slow)])
+@pytest.mark.parametrize(
+    "env_id,residual",
+    [
+        ("FlatBodyDilatation-v0", None),
+        pytest.param("FlatBodyHoldUnstable-v0", "passivity", marks=pytest.mark.slow),
+        pytest.param("FlatBodyAnyBody-v0", "heuristic", marks=pytest.mark.slow),
+    ],
+)
 def test_train_and_evaluate_on_a_task(tmp_path, env_id, residual):
     """A tiny run on the task: the saved config names it, the agent evaluates on it (its spaces, its residual)."""
     import yaml
@@ -62,7 +90,16 @@ def test_train_and_evaluate_on_a_task(tmp_path, env_id, residual):
     from agents.train import train
 
     over = ["n_steps=16", "batch_size=32", "n_epochs=1"] + ([f"residual={residual}"] if residual else [])
-    res = train("ppo", tmp_path / "run", env_id=env_id, n_timesteps=64, n_envs=2, overrides=over, checkpoint_freq=0, progress=False)
+    res = train(
+        "ppo",
+        tmp_path / "run",
+        env_id=env_id,
+        n_timesteps=64,
+        n_envs=2,
+        overrides=over,
+        checkpoint_freq=0,
+        progress=False,
+    )
     cfg = yaml.safe_load((res.out / "config.yml").read_text())
     assert cfg["env_id"] == env_id
     agent = Agent(res.out)
@@ -72,8 +109,14 @@ def test_train_and_evaluate_on_a_task(tmp_path, env_id, residual):
     assert len(records) == 2 and all(np.isfinite(r["final_distance"]) for r in records)
 
 
-@pytest.mark.parametrize("env_id,base", [("FlatBodyHoldUnstable-v0", "passivity"), ("FlatBodyHoldUnstable-v0", "heuristic"),
-                                         ("FlatBodyAnyBody-v0", "heuristic")])
+@pytest.mark.parametrize(
+    "env_id,base",
+    [
+        ("FlatBodyHoldUnstable-v0", "passivity"),
+        ("FlatBodyHoldUnstable-v0", "heuristic"),
+        ("FlatBodyAnyBody-v0", "heuristic"),
+    ],
+)
 def test_zero_residual_is_the_base_controller(env_id, base):
     """A zero policy on the residual (gain mode) runs exactly the base controller: its baseline's figures."""
     ra = ResidualAction(env_kwargs_for(env_id), 1.0, 0.0, "gain", base)

@@ -17,7 +17,19 @@ from flatbody_env.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = ROOT / "agents" / "models" / "ppo-FlatBody-v0"
-TINY = ["--algo", "ppo", "--n-envs", "2", "--hyperparams", "n_steps=64", "batch_size=64", "n_epochs=1", "--checkpoint-freq", "0", "--no-progress"]
+TINY = [
+    "--algo",
+    "ppo",
+    "--n-envs",
+    "2",
+    "--hyperparams",
+    "n_steps=64",
+    "batch_size=64",
+    "n_epochs=1",
+    "--checkpoint-freq",
+    "0",
+    "--no-progress",
+]
 
 
 def _one_error_line(capsys) -> str:
@@ -39,7 +51,9 @@ def test_train_refuses_a_folder_holding_a_run_and_the_shipped_agent(tmp_path, mo
 
     before = {p.name: p.stat().st_mtime_ns for p in SHIPPED.iterdir()}
     # docs/agents.md's reproducibility command, with the bad override that keeps it from training if it is not refused
-    assert main(["train", "--algo", "ppo", "--seed", "0", "--out", str(SHIPPED), "--hyperparams", "not-an-override"]) == 2
+    assert (
+        main(["train", "--algo", "ppo", "--seed", "0", "--out", str(SHIPPED), "--hyperparams", "not-an-override"]) == 2
+    )
     line = _one_error_line(capsys)
     assert str(SHIPPED) in line and "shipped agent" in line and "--force overwrites" in line
     assert {p.name: p.stat().st_mtime_ns for p in SHIPPED.iterdir()} == before
@@ -50,7 +64,9 @@ def test_rounding_up_is_said_and_force_overwrites(tmp_path, capsys):
     assert main(["train", *TINY, "--n-timesteps", "100", "--out", str(out)]) == 0
     err = capsys.readouterr().err
     notes = [line for line in err.splitlines() if "rounds up" in line]
-    assert notes == ["flatbody: note: n_timesteps 100 rounds up to 128 (PPO trains whole rollouts of n_envs x n_steps = 2 x 64 = 128 steps)"]
+    assert notes == [
+        "flatbody: note: n_timesteps 100 rounds up to 128 (PPO trains whole rollouts of n_envs x n_steps = 2 x 64 = 128 steps)"
+    ]
     assert json.loads((out / "run.json").read_text())["n_timesteps"] == 128
 
     assert main(["train", *TINY, "--n-timesteps", "128", "--out", str(out)]) == 2
@@ -67,23 +83,54 @@ def test_rounding_up_is_said_and_force_overwrites(tmp_path, capsys):
 def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
     out = tmp_path / "run"
     env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", FLATBODY_PROGRESS_S="0")
-    argv = [sys.executable, "-m", "flatbody_env.cli", "train", "--algo", "ppo", "--n-envs", "2", "--hyperparams", "n_steps=64",
-            "batch_size=64", "n_epochs=1", "--out", str(out)]
-    proc = subprocess.Popen([*argv, "--n-timesteps", "1000000"], cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    argv = [
+        sys.executable,
+        "-m",
+        "flatbody_env.cli",
+        "train",
+        "--algo",
+        "ppo",
+        "--n-envs",
+        "2",
+        "--hyperparams",
+        "n_steps=64",
+        "batch_size=64",
+        "n_epochs=1",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.Popen(
+        [*argv, "--n-timesteps", "1000000"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     for line in proc.stderr:  # progress lines (FLATBODY_PROGRESS_S=0: one per update)
         if line.startswith("train: ") and int(line.split()[1].split("/")[0]) >= 200:
             break
     _, rest = interrupt(proc)
     assert proc.returncode == 130, rest[-3000:]
     last = rest.strip().splitlines()[-1]
-    assert "Traceback" not in rest and last.startswith("flatbody: interrupted (training stopped at ") and "--resume continues" in last, rest
+    assert (
+        "Traceback" not in rest
+        and last.startswith("flatbody: interrupted (training stopped at ")
+        and "--resume continues" in last
+    ), rest
     (kept,) = (out / "checkpoints").glob("rl_model_*_steps.zip")
     steps = int(kept.name.split("_")[2])
     assert steps >= 200 and (out / "checkpoints" / f"rl_model_vecnormalize_{steps}_steps.pkl").exists()
     assert not (out / "model.zip").exists()  # no model of an unfinished run under the final name
-    r = subprocess.run([*argv, "--resume", "--n-timesteps", str(steps + 128), "--no-progress"], cwd=ROOT, env=env, capture_output=True,
-                       text=True, timeout=300)
+    r = subprocess.run(
+        [*argv, "--resume", "--n-timesteps", str(steps + 128), "--no-progress"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     assert f"resumed from {steps} steps" in r.stdout
     assert json.loads((out / "run.json").read_text())["n_timesteps"] == steps + 128

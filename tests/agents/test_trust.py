@@ -46,7 +46,9 @@ def test_damaged_policy_is_an_error_not_a_fallback(tmp_path, config_home):
 
 
 def test_unpickling_outside_trusted_folders_needs_trust(tmp_path, config_home, capsys):
-    d = _copy(tmp_path, "foreign", ("model.zip", "config.yml", "vecnormalize.pkl"))  # no policy.npz: only SB3 could load it
+    d = _copy(
+        tmp_path, "foreign", ("model.zip", "config.yml", "vecnormalize.pkl")
+    )  # no policy.npz: only SB3 could load it
     assert main(["evaluate", str(d), "--episodes", "1", "--no-baselines"]) == 2
     assert "--trust" in capsys.readouterr().err
     assert main(["export-policy", str(d)]) == 2
@@ -61,8 +63,15 @@ def test_env_var_trusted_dirs(tmp_path, config_home, monkeypatch):
     assert npp.trusted(tmp_path / "mine" / "run1") and not npp.trusted(tmp_path / "other")
 
 
-@pytest.mark.parametrize("text,match", [("- a\n- b\n", "mapping"), ("algo: [x\n", "cannot read"), ("hyperparams: 3\n", "hyperparams"),
-                                        ("algo: 5\n", "algo")])
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        ("- a\n- b\n", "mapping"),
+        ("algo: [x\n", "cannot read"),
+        ("hyperparams: 3\n", "hyperparams"),
+        ("algo: 5\n", "algo"),
+    ],
+)
 def test_bad_config_yml_is_one_line(tmp_path, config_home, text, match, capsys):
     d = _copy(tmp_path, "run", ("model.zip", "policy.npz"))
     (d / "config.yml").write_text(text)

@@ -45,7 +45,9 @@ def test_v1_and_v2_flags_and_tables(capsys):
     assert rc == 0 and "1.50000000" in out and "0.50000000" in out
     rc, out, _ = run(capsys, "stability", "--potential", "V1", "--k", "1", "--s3", "2.5", "--p-theta", "1.5")
     assert rc == 0 and "hyperbolic" in out and "casimir, p_theta" in out
-    rc, out, _ = run(capsys, "ellipses", "--potential", "V2", "--c", "1", "--d", "2", "--s3", "2", "--p-theta", "0.5", "--json")
+    rc, out, _ = run(
+        capsys, "ellipses", "--potential", "V2", "--c", "1", "--d", "2", "--s3", "2", "--p-theta", "0.5", "--json"
+    )
     assert rc == 0 and len(json.loads(out)["solutions"]) == 2
 
 
@@ -87,8 +89,23 @@ def test_bad_input_exit_code_2_one_line(capsys, argv, flag):
 
 def test_family_writes_csv_and_png(capsys, tmp_path):
     csv_path, png = tmp_path / "family.csv", tmp_path / "family.png"
-    rc, out, _ = run(capsys, "family", *BODY, "--vary", "s3", "--from", "0.6", "--to", "2.5", "--p-theta", "0.5",
-                     "--out", str(csv_path), "--plot", str(png))
+    rc, out, _ = run(
+        capsys,
+        "family",
+        *BODY,
+        "--vary",
+        "s3",
+        "--from",
+        "0.6",
+        "--to",
+        "2.5",
+        "--p-theta",
+        "0.5",
+        "--out",
+        str(csv_path),
+        "--plot",
+        str(png),
+    )
     assert rc == 0 and "stability-change" in out
     header = csv_path.read_text().splitlines()[0].split(",")
     assert header[:4] == ["branch", "event", "param_name", "param"] and "classification" in header

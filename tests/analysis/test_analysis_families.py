@@ -34,8 +34,11 @@ def _gradient(l, m, r):
 
 @pytest.mark.parametrize("p_theta, n_folds", [(0.5, 2), (3.0, 2)])
 def test_folds_found_where_sigma_plus_squared_is_extremal(p_theta, n_folds):
-    body = Body(inertia=Inertia.isotropic(1.0, 1.0), potential=CustomPotential(value=_value, gradient=_gradient),
-                thickness=ThicknessPotential(a=1.0, b=1.0))
+    body = Body(
+        inertia=Inertia.isotropic(1.0, 1.0),
+        potential=CustomPotential(value=_value, gradient=_gradient),
+        thickness=ThicknessPotential(a=1.0, b=1.0),
+    )
     box = SearchBox(lam=(0.3, 4.0), mu=(0.01, 3.0), rho=(0.5, 2.0), n=61, n_rho=8)
     fam = follow_family(body, "s3", 1.0, 8.0, p_theta=p_theta, box=box, seeds=6)
     # independent prediction: folds at the local extrema of φ(u) = 2J u³ V_u(u) (φ = σ₊²), s3 = √φ − p_θ,

@@ -20,7 +20,9 @@ def stationary_run(t_end=10.0, samples=2001):
     body = default_body()
     e = stationary_ellipses(body, 2.0, 0.5)[0]
     scene = Scene(name="stationary", body=body, state=dict(e.state))
-    traj = simulate(scene, t_end=t_end, times=np.linspace(0, t_end, samples), rtol=1e-12, atol=1e-12, with_rotation=True)
+    traj = simulate(
+        scene, t_end=t_end, times=np.linspace(0, t_end, samples), rtol=1e-12, atol=1e-12, with_rotation=True
+    )
     return body, e, traj
 
 
@@ -102,16 +104,19 @@ def test_trajectory_json_round_trip(tmp_path):
     assert back.drift() == traj.drift()
 
 
-@pytest.mark.parametrize("change, field", [
-    ({"t": 3.0}, "trajectory.t"),
-    ({"state": None}, "trajectory.state"),
-    ({"meta": []}, "trajectory.meta"),
-    ({"t": [[[[0.0]]]]}, "trajectory.t"),
-    ({"t": [0.0, 0.0]}, "trajectory.t"),
-    ({"rotation": [[1.0]]}, "trajectory.rotation"),
-    ({"energy": [True, 1.0]}, "trajectory.energy"),
-    ({"extra": 1}, "trajectory.extra"),
-])
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"t": 3.0}, "trajectory.t"),
+        ({"state": None}, "trajectory.state"),
+        ({"meta": []}, "trajectory.meta"),
+        ({"t": [[[[0.0]]]]}, "trajectory.t"),
+        ({"t": [0.0, 0.0]}, "trajectory.t"),
+        ({"rotation": [[1.0]]}, "trajectory.rotation"),
+        ({"energy": [True, 1.0]}, "trajectory.energy"),
+        ({"extra": 1}, "trajectory.extra"),
+    ],
+)
 def test_malformed_trajectory_names_the_field(change, field):
     good = {"t": [0.0, 1.0], "state": {n: [1.0, 1.1] for n in STATE_NAMES}}
     with pytest.raises(ValueError, match=field.replace(".", r"\.")):

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from flatbody_env import Body, Inertia, ThicknessPotential, V1, V2, V3, default_body
-from analysis.stability import analyse_stability, hamiltonian_hessian, reduced_jacobian, sample_stable_target, stability_of, stability_of_shape
+from analysis.stability import (
+    analyse_stability,
+    hamiltonian_hessian,
+    reduced_jacobian,
+    sample_stable_target,
+    stability_of,
+    stability_of_shape,
+)
 from analysis.stationary import stationary_ellipses
 from analysis.verification import verify_bounded, verify_growth, verify_stationary
 
@@ -73,8 +80,19 @@ def test_jacobian_equals_poisson_tensor_times_amended_hessian():
 
 
 def test_stationarity_by_simulation_v3_and_v2():
-    for body, s3, pt in ((default_body(), 2.0, 0.5), (default_body(), 1.45, 1.77),
-                         (Body(inertia=Inertia.isotropic(1.0, 1.0), potential=V2(c=1.0, d=2.0), thickness=ThicknessPotential(a=1.0, b=1.0)), 2.0, 0.5)):
+    for body, s3, pt in (
+        (default_body(), 2.0, 0.5),
+        (default_body(), 1.45, 1.77),
+        (
+            Body(
+                inertia=Inertia.isotropic(1.0, 1.0),
+                potential=V2(c=1.0, d=2.0),
+                thickness=ThicknessPotential(a=1.0, b=1.0),
+            ),
+            2.0,
+            0.5,
+        ),
+    ):
         for e in stationary_ellipses(body, s3, pt):
             check = verify_stationary(body, e, t_end=100.0)
             assert check.passed, check.drift

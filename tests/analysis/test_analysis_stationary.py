@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from flatbody_env import Body, CustomPotential, Inertia, ThicknessPotential, V1, V2, V3, default_body
-from analysis.stationary import SearchBox, solve_branch, spins_for_shape, stationary_ellipses, steady_rotations, v1_closed_form
+from analysis.stationary import (
+    SearchBox,
+    solve_branch,
+    spins_for_shape,
+    stationary_ellipses,
+    steady_rotations,
+    v1_closed_form,
+)
 
 
 def body_with(pot, J=1.0, J3=1.0, a=1.0, b=1.0):
@@ -125,8 +132,11 @@ def test_custom_potential_with_coupled_rho_matches_builtin():
     def gradient(l, m, r):
         return (l - 1.0 / (l * l * m), m - 1.0 / (l * m * m), 0.0)
 
-    custom = Body(inertia=Inertia.isotropic(1.0, 1.0), potential=CustomPotential(value=value, gradient=gradient),
-                  thickness=ThicknessPotential(a=1.0, b=1.0))
+    custom = Body(
+        inertia=Inertia.isotropic(1.0, 1.0),
+        potential=CustomPotential(value=value, gradient=gradient),
+        thickness=ThicknessPotential(a=1.0, b=1.0),
+    )
     box = SearchBox(lam=(0.3, 5.0), mu=(0.3, 5.0), rho=(0.3, 3.0), n=61, n_rho=16)
     got = stationary_ellipses(custom, 2.0, 0.5, box=box)
     ref = stationary_ellipses(default_body(), 2.0, 0.5)
@@ -138,7 +148,9 @@ def test_custom_potential_with_coupled_rho_matches_builtin():
 def test_circle_case_and_bad_input():
     rep = solve_branch(default_body(), "N", (1.0, 1.0))
     assert rep.solutions == () and any("circle" in n for n in rep.notes)
-    aniso = Body(inertia=Inertia(J1=1.0, J2=2.0, J3=1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1, b=1))
+    aniso = Body(
+        inertia=Inertia(J1=1.0, J2=2.0, J3=1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1, b=1)
+    )
     with pytest.raises(ValueError, match="J1 = J2"):
         stationary_ellipses(aniso, 2.0, 0.5)
     with pytest.raises(ValueError, match="s3"):

@@ -54,8 +54,14 @@ def test_write_report_writes_the_record_the_table_the_chart_from_the_saved_file_
 
     page = tmp_path / "page.md"
     page.write_text("# x\n<!-- bench:demo -->\nold\n<!-- /bench:demo -->\nafter\n")
-    report = Report(name="demo", record={"rows": [[1, 2.5]]}, header=["n", "rate"], rows=[[1, 2.5]], chart=chart,
-                    markdown="| n | rate |\n|---|---|\n| 1 | 2.5 |\n")
+    report = Report(
+        name="demo",
+        record={"rows": [[1, 2.5]]},
+        header=["n", "rate"],
+        rows=[[1, 2.5]],
+        chart=chart,
+        markdown="| n | rate |\n|---|---|\n| 1 | 2.5 |\n",
+    )
     paths = write_report(report, tmp_path / "out", docs=page)
     out = tmp_path / "out"
     assert [p.name for p in paths] == ["demo.json", "demo.csv", "demo.png", "page.md"]
@@ -63,7 +69,10 @@ def test_write_report_writes_the_record_the_table_the_chart_from_the_saved_file_
     assert record["rows"] == [[1, 2.5]] and {"cpu", "python", "numpy", "git"} <= set(record["machine"])
     assert list(csv.reader(open(out / "demo.csv"))) == [["n", "rate"], ["1", "2.5"]]
     assert drawn == [[[1, 2.5]]]
-    assert page.read_text() == "# x\n<!-- bench:demo -->\n| n | rate |\n|---|---|\n| 1 | 2.5 |\n<!-- /bench:demo -->\nafter\n"
+    assert (
+        page.read_text()
+        == "# x\n<!-- bench:demo -->\n| n | rate |\n|---|---|\n| 1 | 2.5 |\n<!-- /bench:demo -->\nafter\n"
+    )
 
 
 def test_write_report_refuses_a_docs_page_without_a_block_text(tmp_path):

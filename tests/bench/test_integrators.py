@@ -28,7 +28,11 @@ def test_tables_come_from_the_saved_report_and_replace_only_their_block(tmp_path
     page.write_text("a\n<!-- bench:integrators-long -->\nstale\n<!-- /bench:integrators-long -->\nb\n")
     replace_marked_block(page, "integrators-long", tables["integrators-long"])
     text = page.read_text()
-    assert "stale" not in text and text.startswith("a\n<!-- bench:integrators-long -->\n| method and setting") and text.endswith("-->\nb\n")
+    assert (
+        "stale" not in text
+        and text.startswith("a\n<!-- bench:integrators-long -->\n| method and setting")
+        and text.endswith("-->\nb\n")
+    )
     with pytest.raises(ValueError, match="^docs:"):
         replace_marked_block(page, "integrators-close", "x")
 

@@ -13,7 +13,12 @@ from flatbody_env.bench.time_to_goal import GoalBenchmark, _curve, _Reached, loa
 
 def test_criteria_and_curves():
     reached = _Reached(0.99, 0.002, 0.0018)
-    pts = [(50_000, 2.0, 1.0, 0.0025), (100_000, 4.0, 0.95, 0.0010), (150_000, 6.0, 1.0, 0.0019), (200_000, 8.0, 1.0, 0.0017)]
+    pts = [
+        (50_000, 2.0, 1.0, 0.0025),
+        (100_000, 4.0, 0.95, 0.0010),
+        (150_000, 6.0, 1.0, 0.0019),
+        (200_000, 8.0, 1.0, 0.0017),
+    ]
     assert not reached(0, 0, pts[:2])  # success 95 % does not count
     assert not reached(0, 0, pts[:3])  # the goal, not yet the LQR
     assert reached(0, 0, pts)
@@ -27,8 +32,15 @@ def test_files_and_table(tmp_path):
     reached = _Reached(0.99, 0.002, 0.0018)
     sb3 = _curve("sb3-ppo", [(100_000, 10.0, 1.0, 0.0019), (200_000, 20.0, 1.0, 0.0017)], reached)
     rsl = _curve("rsl-ppo", [(100_000, 4.0, 1.0, 0.0015)], reached)
-    settings = {"lqr_final_distance": 0.0018, "lqr_success": 1.0, "episodes": 20, "eval_seed": 50_000, "success_goal": 0.99,
-                "distance_goal": 0.002, "seed": 0}
+    settings = {
+        "lqr_final_distance": 0.0018,
+        "lqr_success": 1.0,
+        "episodes": 20,
+        "eval_seed": 50_000,
+        "success_goal": 0.99,
+        "distance_goal": 0.002,
+        "seed": 0,
+    }
     b = GoalBenchmark(sb3=sb3, rsl=rsl, **settings)
     assert b.ratio == pytest.approx(0.4) and b.ratio_lqr == pytest.approx(0.2)
     assert report(b).block == "time-to-goal"
@@ -39,13 +51,22 @@ def test_files_and_table(tmp_path):
     assert (tmp_path / "time_to_goal.png").stat().st_size > 1000
     assert load(tmp_path / "time_to_goal.json") == b
     table = markdown(b)
-    assert "| rsl-ppo | 4.0 s (100000 steps) | 4.0 s (100000 steps) |" in table and "**0.40** (goal ≤ 0.5: met)" in table
+    assert (
+        "| rsl-ppo | 4.0 s (100000 steps) | 4.0 s (100000 steps) |" in table and "**0.40** (goal ≤ 0.5: met)" in table
+    )
     slow = GoalBenchmark(sb3=sb3, rsl=_curve("rsl-ppo", [(100_000, 15.0, 1.0, 0.0025)], reached), **settings)
     assert slow.ratio is None and "not reached" in markdown(slow)
 
 
-@pytest.mark.parametrize("kw, field", [({"max_timesteps": 0}, "max_timesteps"), ({"episodes": 1.5}, "episodes"),
-                                       ({"success_goal": 1.5}, "success_goal"), ({"distance_goal": 0.0}, "distance_goal")])
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"max_timesteps": 0}, "max_timesteps"),
+        ({"episodes": 1.5}, "episodes"),
+        ({"success_goal": 1.5}, "success_goal"),
+        ({"distance_goal": 0.0}, "distance_goal"),
+    ],
+)
 def test_bad_settings_name_the_field(kw, field, tmp_path):
     with pytest.raises(ValueError, match=field):
         run(out_dir=tmp_path, **kw)
@@ -84,7 +105,23 @@ def test_bench_train_to_goal_writes_its_files(tmp_path):
     """``flatbody bench train --to-goal`` end to end on a tiny budget: both trainers, the three files."""
     from flatbody_env.cli.main import main
 
-    assert main(["bench", "train", "--to-goal", "--max-timesteps", "64", "--eval-every", "64", "--episodes", "1",
-                 "--out-dir", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "train",
+                "--to-goal",
+                "--max-timesteps",
+                "64",
+                "--eval-every",
+                "64",
+                "--episodes",
+                "1",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     for name in ("time_to_goal.json", "time_to_goal.csv", "time_to_goal.png"):
         assert (tmp_path / name).stat().st_size > 0

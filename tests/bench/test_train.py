@@ -33,8 +33,15 @@ def test_train_benchmark_monitors_each_stack_once(env_id):
 def test_files_and_table(tmp_path):
     fb = TrainTiming(env_id="FlatBody-v0", timesteps=64_000, wall_s=6.6, env_s=0.83)
     pd = TrainTiming(env_id="Pendulum-v1", timesteps=64_000, wall_s=7.6, env_s=1.95)
-    b = TrainBenchmark(flatbody=fb, pendulum=pd, ratio_wall=fb.wall_s / pd.wall_s, flatbody_env_share=fb.env_share,
-                       pendulum_env_share=pd.env_share, lqr_us_per_body_step=0.94, n_envs=32)
+    b = TrainBenchmark(
+        flatbody=fb,
+        pendulum=pd,
+        ratio_wall=fb.wall_s / pd.wall_s,
+        flatbody_env_share=fb.env_share,
+        pendulum_env_share=pd.env_share,
+        lqr_us_per_body_step=0.94,
+        n_envs=32,
+    )
     docs = tmp_path / "agents.md"
     docs.write_text("before\n<!-- bench:train -->\nold\n<!-- /bench:train -->\nafter\n", encoding="utf-8")
     write_report(report(b), tmp_path, docs=docs)

@@ -16,9 +16,16 @@ def test_negative_numbers_in_e_notation_are_values(capsys):
     assert main(["ellipses", "--s3", "-.5", "--p-theta", "-1", "--grid", "10", "--json"]) == 0
 
 
-@pytest.mark.parametrize("argv", [["bench", "env", "--batch", "1000000000"], ["bench", "env", "--steps", "10000000000"],
-                                  ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-30"],
-                                  ["simulate", "--scene", "default", "--max-seconds", "1e9"], ["sweep", "stability-map", "--out", "x", "--grid", "-5"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "env", "--batch", "1000000000"],
+        ["bench", "env", "--steps", "10000000000"],
+        ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-30"],
+        ["simulate", "--scene", "default", "--max-seconds", "1e9"],
+        ["sweep", "stability-map", "--out", "x", "--grid", "-5"],
+    ],
+)
 def test_sizes_beyond_the_bounds_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as exc:
         main(argv)
@@ -56,14 +63,35 @@ def test_compiled_dop853_honours_the_wall_clock_budget(extra, capsys):
     import time
 
     start = time.perf_counter()
-    assert main(["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "0.5", "--samples", "3", *extra]) == 1
+    assert (
+        main(["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "0.5", "--samples", "3", *extra])
+        == 1
+    )
     assert time.perf_counter() - start < 2.5  # it ran 4.2 s (58.8 s under load) before
     assert "wall-clock budget" in capsys.readouterr().err
 
 
 def test_compiled_fixed_step_refuses_a_run_predicted_past_the_wall_clock_budget(capsys):
-    assert main(["simulate", "--scene", "default", "--t-end", "1e4", "--method", "RK4", "--step", "0.01", "--max-seconds", "0.2",
-                 "--samples", "3"]) == 1
+    assert (
+        main(
+            [
+                "simulate",
+                "--scene",
+                "default",
+                "--t-end",
+                "1e4",
+                "--method",
+                "RK4",
+                "--step",
+                "0.01",
+                "--max-seconds",
+                "0.2",
+                "--samples",
+                "3",
+            ]
+        )
+        == 1
+    )
     assert "predicted" in capsys.readouterr().err
 
 
@@ -82,8 +110,17 @@ def test_bench_gpu_backends_are_checked(tmp_path, capsys):
     assert not (tmp_path / "g.json").exists()
 
 
-@pytest.mark.parametrize("argv", [["bench", "env", "--out-dir"], ["bench", "train", "--out-dir"], ["bench", "recording", "--out-dir"],
-                                  ["bench", "service", "--out-dir"], ["bench", "sweep", "--out"], ["bench", "integrators", "--out"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "env", "--out-dir"],
+        ["bench", "train", "--out-dir"],
+        ["bench", "recording", "--out-dir"],
+        ["bench", "service", "--out-dir"],
+        ["bench", "sweep", "--out"],
+        ["bench", "integrators", "--out"],
+    ],
+)
 def test_bench_output_folders_are_checked_before_measuring(argv, tmp_path, capsys):
     """A benchmark's output folder that cannot be one (an existing file, a read-only parent) is refused while the
     arguments are read (exit 2, one line naming the flag), not after minutes of measuring."""

@@ -75,11 +75,16 @@ def test_family_options_are_the_library_family_defaults():
     # the library's and the answers' own defaults are the same names
     signature = inspect.signature(families.follow_family).parameters
     assert (signature["s3"].default, signature["p_theta"].default, signature["seeds"].default) == (
-        families.DEFAULT_S3, families.DEFAULT_P_THETA, families.DEFAULT_SEEDS)
+        families.DEFAULT_S3,
+        families.DEFAULT_P_THETA,
+        families.DEFAULT_SEEDS,
+    )
 
 
-@pytest.mark.parametrize("command, grid_range", [(("stability-map",), validation.MAP_GRID_RANGE),
-                                                 (("sweep", "stability-map"), validation.SWEEP_GRID_RANGE)])
+@pytest.mark.parametrize(
+    "command, grid_range",
+    [(("stability-map",), validation.MAP_GRID_RANGE), (("sweep", "stability-map"), validation.SWEEP_GRID_RANGE)],
+)
 def test_stability_map_options_are_the_library_map_defaults(command, grid_range):
     p = _command(*command)
     assert _option(p, "--lam-range").default == families.MAP_LAM_RANGE
@@ -117,15 +122,19 @@ def test_service_models_read_the_same_names():
     assert (family.lam_range, family.mu_range, family.grid) == (BOX.lam, BOX.mu, BOX.n)
     stability_map = models.StabilityMapJobParams()
     assert (stability_map.lam_range, stability_map.mu_range, stability_map.grid) == (
-        families.MAP_LAM_RANGE, families.MAP_MU_RANGE, families.MAP_GRID)
+        families.MAP_LAM_RANGE,
+        families.MAP_MU_RANGE,
+        families.MAP_GRID,
+    )
     assert models.EvaluateJobParams().seed == evaluate.EVAL_SEED
     assert models.RecordJobParams().samples == models.RECORD_JOB_SAMPLES
 
 
 def test_the_default_energy_tolerance_is_one_rule():
     rtol, atol = 1e-10, 1e-12
-    assert simulation.energy_tol_scale(rtol, atol) == max(simulation.ADAPTIVE_ENERGY_TOL_FLOOR,
-                                                          simulation.ADAPTIVE_ENERGY_TOL_FACTOR * rtol)
+    assert simulation.energy_tol_scale(rtol, atol) == max(
+        simulation.ADAPTIVE_ENERGY_TOL_FLOOR, simulation.ADAPTIVE_ENERGY_TOL_FACTOR * rtol
+    )
     assert simulation.energy_tol_scale(rtol, atol, adaptive=False) == simulation.FIXED_STEP_ENERGY_TOL
     assert simulation.default_energy_tol(-3.0, rtol, atol) == 3.0 * simulation.energy_tol_scale(rtol, atol)
     assert simulation.default_energy_tol(0.5, rtol, atol) == simulation.energy_tol_scale(rtol, atol)
@@ -133,9 +142,16 @@ def test_the_default_energy_tolerance_is_one_rule():
 
 def test_reading_the_defaults_does_not_load_scipy():
     """The command reads SearchBox and the family defaults when it builds its parser: ``flatbody --help`` stays fast."""
-    code = ("import sys\nfrom flatbody_env.cli.main import build_parser\nbuild_parser()\n"
-            "print(','.join(m for m in ('scipy.optimize', 'scipy.linalg') if m in sys.modules))")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                          cwd=Path(__file__).resolve().parents[2])
+    code = (
+        "import sys\nfrom flatbody_env.cli.main import build_parser\nbuild_parser()\n"
+        "print(','.join(m for m in ('scipy.optimize', 'scipy.linalg') if m in sys.modules))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=Path(__file__).resolve().parents[2],
+    )
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == ""

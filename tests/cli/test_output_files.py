@@ -77,4 +77,6 @@ def test_outputs_get_the_mode_the_umask_gives(tmp_path, umask, mode):
         os.umask(previous)
         plt.close(fig)
     modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in tmp_path.iterdir()}
-    assert modes == dict.fromkeys(["a.txt", "b.bin", "c.rrd", "d.zip", "e.csv", "f.png", "old.txt"], mode), {k: oct(v) for k, v in modes.items()}
+    assert modes == dict.fromkeys(["a.txt", "b.bin", "c.rrd", "d.zip", "e.csv", "f.png", "old.txt"], mode), {
+        k: oct(v) for k, v in modes.items()
+    }

@@ -45,7 +45,19 @@ def test_piped_progress_prints_periodic_lines_on_stderr():
 
 
 def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
-    argv = [sys.executable, "-m", "flatbody_env.cli", "sweep", "stability-map", "--grid", "8", "--chunk", "2", "--workers", "0"]
+    argv = [
+        sys.executable,
+        "-m",
+        "flatbody_env.cli",
+        "sweep",
+        "stability-map",
+        "--grid",
+        "8",
+        "--chunk",
+        "2",
+        "--workers",
+        "0",
+    ]
     quiet = _run([*argv, "--out", str(tmp_path / "a")])  # shorter than the 10 s interval: no progress line
     assert quiet.returncode == 0, quiet.stderr
     assert quiet.stderr == ""
@@ -60,8 +72,22 @@ def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
 
 
 def test_a_bad_interval_is_one_line(tmp_path):
-    r = _run([sys.executable, "-m", "flatbody_env.cli", "sweep", "stability-map", "--grid", "4", "--workers", "0", "--out", str(tmp_path)],
-             FLATBODY_PROGRESS_S="soon")
+    r = _run(
+        [
+            sys.executable,
+            "-m",
+            "flatbody_env.cli",
+            "sweep",
+            "stability-map",
+            "--grid",
+            "4",
+            "--workers",
+            "0",
+            "--out",
+            str(tmp_path),
+        ],
+        FLATBODY_PROGRESS_S="soon",
+    )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "FLATBODY_PROGRESS_S" in r.stderr
 
 

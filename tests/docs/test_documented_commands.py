@@ -147,7 +147,7 @@ def _blocks(page: Path) -> list[Block]:
         j = i + 1
         while j < len(lines) and not (lines[j].strip().startswith(fence) and lines[j].strip().strip(fence[0]) == ""):
             j += 1
-        body = [ln[len(indent):] if ln.startswith(indent) else ln.lstrip() for ln in lines[i + 1 : j]]
+        body = [ln[len(indent) :] if ln.startswith(indent) else ln.lstrip() for ln in lines[i + 1 : j]]
         before = MARKER.match(lines[i - 1]) if i > 0 else None
         out.append(Block(rel, i + 1, lang, "\n".join(body) + "\n", before.group(1).strip() if before else None))
         i = j + 1
@@ -232,20 +232,32 @@ def _check_made_files(made: set[Path], root: Path) -> None:
 def _run(cmd: list[str], cwd: Path, timeout: float, stdin: str | None = None) -> subprocess.CompletedProcess:
     """Run ``cmd`` in its own process group; past ``timeout`` the whole group is killed (a block's
     commands, and what they started, never outlive the test)."""
-    proc = subprocess.Popen(cmd, cwd=cwd, env=_env(), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        cmd,
+        cwd=cwd,
+        env=_env(),
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = proc.communicate(stdin, timeout=timeout)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
-        pytest.fail(f"`{' '.join(cmd)}` ran past {timeout:g} s\n--- stdout (tail) ---\n{out[-3000:]}\n--- stderr (tail) ---\n{err[-3000:]}")
+        pytest.fail(
+            f"`{' '.join(cmd)}` ran past {timeout:g} s\n--- stdout (tail) ---\n{out[-3000:]}\n--- stderr (tail) ---\n{err[-3000:]}"
+        )
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 def _fail_text(block: Block, proc: subprocess.CompletedProcess, what: str) -> str:
-    return (f"{block.id} ({block.lang}) {what}, exit {proc.returncode}\n--- block ---\n{block.text}"
-            f"--- stdout (tail) ---\n{proc.stdout[-3000:]}\n--- stderr (tail) ---\n{proc.stderr[-3000:]}")
+    return (
+        f"{block.id} ({block.lang}) {what}, exit {proc.returncode}\n--- block ---\n{block.text}"
+        f"--- stdout (tail) ---\n{proc.stdout[-3000:]}\n--- stderr (tail) ---\n{proc.stderr[-3000:]}"
+    )
 
 
 # ---------------------------------------------------------------- transcripts
@@ -310,7 +322,10 @@ def _run_console(block: Block, cwd: Path, timeout: float) -> None:
         actual = [ln.rstrip() for ln in out.splitlines()]
         assert _output_matches(expected, actual), (
             f"{block.id}: the output of `{cmd}` does not match the transcript\n--- documented ---\n"
-            + "\n".join(expected) + "\n--- printed ---\n" + "\n".join(actual))
+            + "\n".join(expected)
+            + "\n--- printed ---\n"
+            + "\n".join(actual)
+        )
 
 
 # ---------------------------------------------------------------- services
@@ -344,7 +359,9 @@ def _run_serve_lines(block: Block, cwd: Path) -> None:
             argv = shlex.split(line, comments=True)
             if not argv:
                 continue
-            assert argv[:2] == ["flatbody", "serve"], f"{block.id}: a 'serve' block holds only 'flatbody serve' lines, got {line!r}"
+            assert argv[:2] == ["flatbody", "serve"], (
+                f"{block.id}: a 'serve' block holds only 'flatbody serve' lines, got {line!r}"
+            )
             port = _free_port()
             if "--port" in argv:
                 argv[argv.index("--port") + 1] = str(port)
@@ -356,7 +373,9 @@ def _run_serve_lines(block: Block, cwd: Path) -> None:
                 d = argv.index("--data-dir") + 1
                 argv[d] = str(home / argv[d].lstrip("/"))
             with open(home / "log.txt", "w") as log:
-                proc = subprocess.Popen([str(BIN / "flatbody"), *argv[1:]], cwd=home, env=_env(), stdout=log, stderr=subprocess.STDOUT)
+                proc = subprocess.Popen(
+                    [str(BIN / "flatbody"), *argv[1:]], cwd=home, env=_env(), stdout=log, stderr=subprocess.STDOUT
+                )
             started.append((line, argv, port, proc, home / "log.txt"))
         waiting = list(started)
         deadline = time.monotonic() + 90
@@ -369,7 +388,9 @@ def _run_serve_lines(block: Block, cwd: Path) -> None:
                         waiting.remove(item)
                 except httpx.HTTPError:
                     pass
-            assert time.monotonic() < deadline, f"{block.id}: {[w[0] for w in waiting]} did not answer /health within 90 s"
+            assert time.monotonic() < deadline, (
+                f"{block.id}: {[w[0] for w in waiting]} did not answer /health within 90 s"
+            )
             time.sleep(0.1)
     finally:
         for *_, proc, _ in started:
@@ -415,7 +436,9 @@ def test_documented_block_runs(block: Block, sandbox: Path, request):
 
 
 def test_console_block_checks_output_and_exit_status(tmp_path):
-    ok = Block("x.md", 1, "console", "$ echo a; echo b\na\n...\n$ sh -c 'echo no >&2; exit 3'\nn...\n$ echo $?\n3\n", None)
+    ok = Block(
+        "x.md", 1, "console", "$ echo a; echo b\na\n...\n$ sh -c 'echo no >&2; exit 3'\nn...\n$ echo $?\n3\n", None
+    )
     _run_console(ok, tmp_path, 30)
     for bad in ("$ echo a\nb\n", "$ false\n", "$ echo a; echo b\na\n"):
         with pytest.raises(AssertionError):
@@ -434,9 +457,13 @@ def test_readme_demo_transcript_is_what_flatbody_demo_prints(sandbox):
     assert proc.returncode == 0, proc.stderr[-3000:]
     now = copy.read_text(encoding="utf-8")
     if now != page:
-        old, new = (re.search(r"<!-- demo:transcript -->.*?<!-- /demo:transcript -->", p, re.S).group(0) for p in (page, now))
-        pytest.fail("README's demo transcript is not what `flatbody demo` prints now; regenerate it with "
-                    f"`flatbody demo --docs README.md`\n--- README ---\n{old}\n--- now ---\n{new}")
+        old, new = (
+            re.search(r"<!-- demo:transcript -->.*?<!-- /demo:transcript -->", p, re.S).group(0) for p in (page, now)
+        )
+        pytest.fail(
+            "README's demo transcript is not what `flatbody demo` prints now; regenerate it with "
+            f"`flatbody demo --docs README.md`\n--- README ---\n{old}\n--- now ---\n{new}"
+        )
 
 
 def test_json_blocks_parse():
@@ -454,11 +481,15 @@ def test_a_marker_quoted_in_a_sentence_is_not_a_marker(tmp_path):
     from flatbody_env.output import replace_marked_block
 
     page = tmp_path / "p.md"
-    page.write_text("it rewrites the text between `<!-- demo:transcript -->` markers:\n\n<!-- demo:transcript -->\nold\n"
-                    "<!-- /demo:transcript -->\nafter\n")
+    page.write_text(
+        "it rewrites the text between `<!-- demo:transcript -->` markers:\n\n<!-- demo:transcript -->\nold\n"
+        "<!-- /demo:transcript -->\nafter\n"
+    )
     replace_marked_block(page, "transcript", "new", kind="demo")
-    assert page.read_text() == ("it rewrites the text between `<!-- demo:transcript -->` markers:\n\n<!-- demo:transcript -->\nnew\n"
-                                "<!-- /demo:transcript -->\nafter\n")
+    assert page.read_text() == (
+        "it rewrites the text between `<!-- demo:transcript -->` markers:\n\n<!-- demo:transcript -->\nnew\n"
+        "<!-- /demo:transcript -->\nafter\n"
+    )
     page.write_text("only quoted: `<!-- demo:transcript -->` … `<!-- /demo:transcript -->`\n")
     with pytest.raises(ValueError, match="^docs:"):
         replace_marked_block(page, "transcript", "new", kind="demo")
@@ -572,7 +603,7 @@ def _expand_braces(text: str) -> list[str]:
     m = re.search(r"\{([^{}]*,[^{}]*)\}", text)
     if not m:
         return [text]
-    return [x for alt in m.group(1).split(",") for x in _expand_braces(text[: m.start()] + alt + text[m.end():])]
+    return [x for alt in m.group(1).split(",") for x in _expand_braces(text[: m.start()] + alt + text[m.end() :])]
 
 
 def _path_resolves(span: str) -> str | None:
@@ -580,10 +611,18 @@ def _path_resolves(span: str) -> str | None:
     missing = []
     for candidate in _expand_braces(path.rstrip(".,;:")):
         pattern = re.sub(r"(?<![A-Za-z])[A-Z]{2,}(?![a-z])", "*", candidate)
-        matches = list(REPO.glob(pattern.rstrip("/"))) if "*" in pattern else [REPO / pattern] if (REPO / pattern).exists() else []
+        matches = (
+            list(REPO.glob(pattern.rstrip("/")))
+            if "*" in pattern
+            else [REPO / pattern]
+            if (REPO / pattern).exists()
+            else []
+        )
         if not matches:
             missing.append(candidate)
-        elif test_name and not re.search(rf"^\s*(async\s+)?def {re.escape(test_name.strip())}\b", matches[0].read_text(), re.M):
+        elif test_name and not re.search(
+            rf"^\s*(async\s+)?def {re.escape(test_name.strip())}\b", matches[0].read_text(), re.M
+        ):
             missing.append(f"{candidate}::{test_name}")
     return ", ".join(missing) or None
 
@@ -638,7 +677,12 @@ def test_named_commands_exist(page: Path, subcommands):
                 continue
             if words[1] not in commands:
                 problems.append(f"`{span}`: no command {words[1]!r}")
-            elif words[1] == "bench" and len(words) > 2 and not words[2].startswith("-") and words[2] not in bench_targets:
+            elif (
+                words[1] == "bench"
+                and len(words) > 2
+                and not words[2].startswith("-")
+                and words[2] not in bench_targets
+            ):
                 problems.append(f"`{span}`: no bench target {words[2]!r}")
     assert not problems, f"{page.relative_to(REPO)}:\n" + "\n".join(problems)
 
@@ -653,5 +697,6 @@ def test_path_and_name_rules():
     assert _path_resolves("tests/test_equations.py") is not None
     assert _output_matches(["a ...", "...", "z"], ["a b", "c", "d", "z"]) and not _output_matches(["a"], ["a", "b"])
     assert _absolute_inputs("x agents/models/ppo-FlatBody-v0/model.zip runs/agents/x docs/img/a.png") == (
-        f"x {REPO}/agents/models/ppo-FlatBody-v0/model.zip runs/agents/x docs/img/a.png")
+        f"x {REPO}/agents/models/ppo-FlatBody-v0/model.zip runs/agents/x docs/img/a.png"
+    )
     assert _expand_braces("x{1,2}y{a,b}") == ["x1ya", "x1yb", "x2ya", "x2yb"]

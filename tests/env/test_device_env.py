@@ -34,8 +34,12 @@ def test_philox_known_answers():
     m = 0xFFFFFFFF
     assert [int(x) for x in philox4x32(0, 0, 0, 0, 0, 0)] == [0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8]
     assert [int(x) for x in philox4x32(m, m, m, m, m, m)] == [0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD]
-    assert [int(x) for x in philox4x32(0xA4093822, 0x299F31D0, 0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344)] == \
-        [0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1]
+    assert [int(x) for x in philox4x32(0xA4093822, 0x299F31D0, 0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344)] == [
+        0xD16CFE09,
+        0x94FDCCEB,
+        0x5001E420,
+        0x24126EA1,
+    ]
 
 
 def test_uniforms_are_uniform_and_the_compiled_twin_agrees():
@@ -69,8 +73,21 @@ def test_device_reset_is_the_cpu_sampler_on_the_same_uniforms():
     D = np.array([[fast(d.key[0], d.key[1], b, 0, 0, j) for j in range(k)] for b in range(n)])
     Y, TG = np.zeros((11, n)), np.empty((n, 6))
     used, codes, cand = np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 10))
-    compiled.sample_episodes(D, np.full(n, k, np.int64), sampler.cfg, sampler.P, *sampler.table, np.full((n, MAX_ATTEMPTS), DECIDE_REJECT, np.int64),
-                             Y, np.arange(n), TG, used, np.empty((7, 4)), codes, cand)
+    compiled.sample_episodes(
+        D,
+        np.full(n, k, np.int64),
+        sampler.cfg,
+        sampler.P,
+        *sampler.table,
+        np.full((n, MAX_ATTEMPTS), DECIDE_REJECT, np.int64),
+        Y,
+        np.arange(n),
+        TG,
+        used,
+        np.empty((7, 4)),
+        codes,
+        cand,
+    )
     assert (used > 0).all()
     assert np.array_equal(Y, d.Y) and np.array_equal(TG[:, :4].T, d.T)
     assert (d.I[1] == 1).all() and (d.I[0] == 0).all()
@@ -148,15 +165,21 @@ def test_device_step_equals_flatbody_vector_env(same_step):
         d.step(A)
         done = term | trunc
         same = ~fresh
-        assert np.array_equal(d.ENDS[0][same].astype(bool), term[same]) and np.array_equal(d.ENDS[1][same].astype(bool), trunc[same])
+        assert np.array_equal(d.ENDS[0][same].astype(bool), term[same]) and np.array_equal(
+            d.ENDS[1][same].astype(bool), trunc[same]
+        )
         assert np.array_equal(d.INFO[0][same], rew[same])
         for k, name in enumerate(v.reward_names):
             assert np.array_equal(d.INFO[1 + k][same], info["reward_terms"][name][same])
         stepped = same & ~resetting
         rows = stepped & ~done if same_step else stepped
         assert np.array_equal(d.OBS[rows], obs[rows])
-        assert np.array_equal(d.INFO[7][stepped], info["distance"][stepped]) and np.array_equal(d.INFO[8][stepped], info["energy"][stepped])
-        assert np.array_equal(d.I[3][same], info["integrator"]["nfev"][same]) and np.array_equal(d.INFO[11][same], info["t"][same])
+        assert np.array_equal(d.INFO[7][stepped], info["distance"][stepped]) and np.array_equal(
+            d.INFO[8][stepped], info["energy"][stepped]
+        )
+        assert np.array_equal(d.I[3][same], info["integrator"]["nfev"][same]) and np.array_equal(
+            d.INFO[11][same], info["t"][same]
+        )
         if same_step:
             assert np.array_equal(d.FINAL[stepped & done], info["final_obs"][stepped & done])
             fresh |= done
@@ -232,14 +255,20 @@ def simulator_report() -> dict:
             action_error = ""
         except ValueError as exc:
             action_error = str(exc)
-        report["modes"]["same_step" if same else "next_step"] = {"diffs": diffs, "episodes": episodes,
-                                                                "ends": int(c.host("ENDS")[:2].sum()), "action_error": action_error}
+        report["modes"]["same_step" if same else "next_step"] = {
+            "diffs": diffs,
+            "episodes": episodes,
+            "ends": int(c.host("ENDS")[:2].sum()),
+            "action_error": action_error,
+        }
     return report
 
 
 @pytest.fixture(scope="module")
 def report():
-    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    env = dict(
+        os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
     proc = subprocess.run([sys.executable, __file__], capture_output=True, text=True, cwd=ROOT, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])

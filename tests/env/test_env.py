@@ -56,7 +56,10 @@ def _rollout(env, seed, n=60):
         out.append(obs)
         rewards.append(r)
         # each term and the reward from docs/env.md's formulas on the state after the step (tests/oracles.py, not the env's kernels)
-        expect = {k: float(v[0]) for k, v in documented_reward_terms(u.physics_state, u.target_vector, a, term, u.body).items()}
+        expect = {
+            k: float(v[0])
+            for k, v in documented_reward_terms(u.physics_state, u.target_vector, a, term, u.body).items()
+        }
         assert list(info["reward_terms"]) == list(expect)
         for name, value in expect.items():
             assert info["reward_terms"][name] == pytest.approx(value, rel=1e-11, abs=1e-12), name
@@ -113,8 +116,19 @@ def test_holding_the_target_is_success():
     env = FlatBodyEnv()
     env.reset(seed=0, options={"target": {"lambda": 1.5, "mu": 0.9}})
     target = env.target
-    state = {"s1": 0.0, "s2": 0.0, "s3": target["s3"], "p_theta": target["p_theta"], "p_lambda": 0.0, "p_mu": 0.0, "p_rho": 0.0,
-             "lambda": target["lambda"], "mu": target["mu"], "rho": target["rho"], "theta": 0.3}
+    state = {
+        "s1": 0.0,
+        "s2": 0.0,
+        "s3": target["s3"],
+        "p_theta": target["p_theta"],
+        "p_lambda": 0.0,
+        "p_mu": 0.0,
+        "p_rho": 0.0,
+        "lambda": target["lambda"],
+        "mu": target["mu"],
+        "rho": target["rho"],
+        "theta": 0.3,
+    }
     _, info = env.reset(seed=0, options={"target": {"lambda": 1.5, "mu": 0.9}, "state": state})
     assert info["is_success"] and info["distance"] < 1e-12
     for _ in range(100):
@@ -159,8 +173,13 @@ def test_integrator_failure_is_flagged_not_returned():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"control": "thrust"}, "control"), ({"dt": 0.0}, "dt"), ({"integrator": "Euler"}, "method"), ({"w_shape": -1.0}, "w_shape"),
-     ({"body": {"params": {"J": -1, "J3": 1}, "potential": {"name": "V1", "k": 1}}}, "params.J")],
+    [
+        ({"control": "thrust"}, "control"),
+        ({"dt": 0.0}, "dt"),
+        ({"integrator": "Euler"}, "method"),
+        ({"w_shape": -1.0}, "w_shape"),
+        ({"body": {"params": {"J": -1, "J3": 1}, "potential": {"name": "V1", "k": 1}}}, "params.J"),
+    ],
 )
 def test_bad_arguments(kwargs, field):
     with pytest.raises(ValueError, match=field):
@@ -246,7 +265,9 @@ def test_generic_stepper_agrees_with_the_compiled_one_for_the_same_method():
 
     fast = FlatBodyEnv()
     slow = FlatBodyEnv()
-    slow.stepper = GenericEnvStep(slow.integrator, slow.body, slow.tolerances)  # the seam's generic stepper, same method
+    slow.stepper = GenericEnvStep(
+        slow.integrator, slow.body, slow.tolerances
+    )  # the seam's generic stepper, same method
     assert fast.stepper.compiled and not slow.stepper.compiled
     o1, _ = fast.reset(seed=4)
     o2, _ = slow.reset(seed=4)

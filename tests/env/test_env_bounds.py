@@ -13,17 +13,28 @@ from flatbody_env.env.vector_env import FlatBodyVectorEnv
 from flatbody_env.physics import validation
 
 
-@pytest.mark.parametrize("kw,field", [
-    (dict(dt=1e6), "dt"), (dict(dt=1e9), "dt"), (dict(dt=0.0), "dt"), (dict(dt=float("nan")), "dt"),
-    (dict(integrator="RK4", step=1e-12), "step"), (dict(integrator="RK4", step=1e-30), "step"),  # a floor, never replaced by dt
-    (dict(integrator="RK4", dt=1.0, step=5e-6), "step"), (dict(integrator=7), "integrator"), (dict(momentum_bound=1e300), "momentum_bound"),
-])
+@pytest.mark.parametrize(
+    "kw,field",
+    [
+        (dict(dt=1e6), "dt"),
+        (dict(dt=1e9), "dt"),
+        (dict(dt=0.0), "dt"),
+        (dict(dt=float("nan")), "dt"),
+        (dict(integrator="RK4", step=1e-12), "step"),
+        (dict(integrator="RK4", step=1e-30), "step"),  # a floor, never replaced by dt
+        (dict(integrator="RK4", dt=1.0, step=5e-6), "step"),
+        (dict(integrator=7), "integrator"),
+        (dict(momentum_bound=1e300), "momentum_bound"),
+    ],
+)
 def test_env_settings_beyond_the_bounds_are_refused(kw, field):
     with pytest.raises(ValueError, match=f"^{field}"):
         gym.make("FlatBody-v0", **kw)
 
 
-@pytest.mark.parametrize("kw,field", [(dict(num_envs=10**9), "num_envs"), (dict(num_envs=2, max_episode_steps=10**12), "max_episode_steps")])
+@pytest.mark.parametrize(
+    "kw,field", [(dict(num_envs=10**9), "num_envs"), (dict(num_envs=2, max_episode_steps=10**12), "max_episode_steps")]
+)
 def test_vector_env_sizes_are_bounded_before_allocation(kw, field):
     with pytest.raises(ValueError, match=f"^{field}"):
         FlatBodyVectorEnv(**kw)

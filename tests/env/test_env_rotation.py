@@ -9,7 +9,9 @@ from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.integrators import Tolerances, get_method
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"integrator": "RK4", "step": 0.01}, {"integrator": "splitting-suzuki4", "step": 0.01}])
+@pytest.mark.parametrize(
+    "kwargs", [{}, {"integrator": "RK4", "step": 0.01}, {"integrator": "splitting-suzuki4", "step": 0.01}]
+)
 def test_tracked_episode_equals_the_untracked_one_and_R_is_the_reference(kwargs):
     tracked = FlatBodyEnv(track_rotation=True, **kwargs)
     plain = FlatBodyEnv(**kwargs)
@@ -29,7 +31,9 @@ def test_tracked_episode_equals_the_untracked_one_and_R_is_the_reference(kwargs)
         assert np.array_equal(o1, o2) and r1 == r2 and t1 == t2 and i1 == i2
         assert np.array_equal(tracked.physics_state, plain.physics_state)
         # R against scipy's DOP853 at 1e-13 on (y, R), restarted from the same state and R
-        sol = get_method("DOP853").integrate(tracked.body, y0, np.array([0.0, tracked.dt]), tol=ref_tol, u=u, R0=R0, with_rotation=True)
+        sol = get_method("DOP853").integrate(
+            tracked.body, y0, np.array([0.0, tracked.dt]), tol=ref_tol, u=u, R0=R0, with_rotation=True
+        )
         worst = max(worst, float(np.max(np.abs(tracked.rotation - sol.rotation[-1]))))
         if t1:
             break

@@ -79,7 +79,9 @@ def test_sampler_gives_up_like_the_task():
         env.sampler.sample([np.random.default_rng(0)], np.empty((11, 1)), [0])
     with pytest.raises(ValueError, match="target_lambda/target_aspect"):
         env.reset(seed=0)
-    outside = FlatBodyEnv(target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0)  # outside the table: Python path
+    outside = FlatBodyEnv(
+        target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0
+    )  # outside the table: Python path
     assert not outside.sampler.applies
     with pytest.raises(ValueError, match="target_lambda/target_aspect"):
         outside.reset(seed=0)
@@ -91,9 +93,19 @@ def test_single_env_reset_uses_the_sampler_and_builds_the_same_target():
     obs, info = env.reset(seed=5)
     y, target, _ = _python_episode(env, 5)
     np.testing.assert_array_equal(env.physics_state, y)
-    t = stationary_from_shape(env.body, target.lam, target.mu, branch="circulation", sign=1.0 if target.s3 + target.p_theta > 0 else -1.0)
-    assert env.target == {"lambda": t.lam, "mu": t.mu, "rho": t.rho, "s3": t.s3, "p_theta": t.p_theta, "omega3": t.omega3,
-                          "theta_dot": t.theta_dot, "energy": t.energy}
+    t = stationary_from_shape(
+        env.body, target.lam, target.mu, branch="circulation", sign=1.0 if target.s3 + target.p_theta > 0 else -1.0
+    )
+    assert env.target == {
+        "lambda": t.lam,
+        "mu": t.mu,
+        "rho": t.rho,
+        "s3": t.s3,
+        "p_theta": t.p_theta,
+        "omega3": t.omega3,
+        "theta_dot": t.theta_dot,
+        "energy": t.energy,
+    }
     np.testing.assert_array_equal(env.target_vector, target_vector(target))
 
 

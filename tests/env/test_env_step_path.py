@@ -34,7 +34,9 @@ def test_one_step_path_is_bitwise_the_compiled_composition_for_the_default_integ
         ynew = np.empty(11)
         st = raw.step(y, u, P, env.dt, env.dt, tol.rtol, tol.atol, np.inf, ynew)
         y_out, o_ref, terms, sc = np.empty(11), np.empty(16, np.float32), np.empty(6), np.empty(4)
-        ended = compiled.post_step(y, ynew, st, a_clip, 4, tgt, cfg, P, y_out, o_ref, terms, sc, np.empty(7), np.empty(4))
+        ended = compiled.post_step(
+            y, ynew, st, a_clip, 4, tgt, cfg, P, y_out, o_ref, terms, sc, np.empty(7), np.empty(4)
+        )
         o, r, term, trunc, info = env.step(a.astype(np.float64))
         np.testing.assert_array_equal(o, o_ref)
         assert r == sum(terms.tolist())
@@ -63,7 +65,9 @@ def test_info_names_the_integrator_that_ran_and_its_real_nfev():
     y0, u = ref.physics_state, ref.controls(np.full(4, 0.2))[1]
     info = ref.step(np.full(4, 0.2, dtype=np.float32))[4]
     # scipy with the domain events the method watches: DOP853 then also evaluates its dense output (3 per step)
-    sol = solve_ivp(lambda t, y: rhs(t, y, u, ref.body), (0.0, ref.dt), y0, method="DOP853", rtol=1e-9, atol=1e-9, dense_output=True)
+    sol = solve_ivp(
+        lambda t, y: rhs(t, y, u, ref.body), (0.0, ref.dt), y0, method="DOP853", rtol=1e-9, atol=1e-9, dense_output=True
+    )
     assert info["integrator"] == {"method": "DOP853", "nfev": sol.nfev}
 
     drawn = FlatBodyEnv(render_mode="rgb_array")  # drawing carries R in the compiled method itself
@@ -146,7 +150,9 @@ def test_same_step_autoreset_keeps_the_final_observation():
         o = single.step(np.zeros(4))[0]
     assert trunc.all() and info["_final_obs"].all()
     np.testing.assert_array_equal(info["final_obs"][0], o)
-    np.testing.assert_array_equal(obs[0], single.reset()[0])  # the next episode's first observation, drawn as a single env would
+    np.testing.assert_array_equal(
+        obs[0], single.reset()[0]
+    )  # the next episode's first observation, drawn as a single env would
 
 
 def test_bad_vector_actions_and_mode():
@@ -182,14 +188,56 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
     status[9:13] = 2  # the integrator failed
     A = rng.uniform(-1, 1, (n, 4))
     T = venv.target_vectors
-    Y_out, OBS, TERMS, SC, ENDED = (np.empty((11, n)), np.empty((n, OBSERVATION_SIZE), np.float32), np.empty((len(REWARD_TERMS), n)),
-                                    np.empty((4, n)), np.empty(n, np.int64))
-    k.post_step_lanes(Y_old, Y_new, status, A, 4, T, p.kernel_config, P, Y_out, OBS, TERMS, SC, ENDED, np.empty(n), np.empty((4, n)),
-                      np.empty(7), np.empty(4), np.empty(11))
+    Y_out, OBS, TERMS, SC, ENDED = (
+        np.empty((11, n)),
+        np.empty((n, OBSERVATION_SIZE), np.float32),
+        np.empty((len(REWARD_TERMS), n)),
+        np.empty((4, n)),
+        np.empty(n, np.int64),
+    )
+    k.post_step_lanes(
+        Y_old,
+        Y_new,
+        status,
+        A,
+        4,
+        T,
+        p.kernel_config,
+        P,
+        Y_out,
+        OBS,
+        TERMS,
+        SC,
+        ENDED,
+        np.empty(n),
+        np.empty((4, n)),
+        np.empty(7),
+        np.empty(4),
+        np.empty(11),
+    )
     for i in range(n):
-        y, obs, terms, sc = np.empty(11), np.empty(OBSERVATION_SIZE, np.float32), np.empty(len(REWARD_TERMS)), np.empty(4)
-        ended = k.post_step(Y_old[:, i].copy(), Y_new[:, i].copy(), status[i], A[i].copy(), 4, T[i].copy(), p.kernel_config, P, y, obs,
-                            terms, sc, np.empty(7), np.empty(4))
+        y, obs, terms, sc = (
+            np.empty(11),
+            np.empty(OBSERVATION_SIZE, np.float32),
+            np.empty(len(REWARD_TERMS)),
+            np.empty(4),
+        )
+        ended = k.post_step(
+            Y_old[:, i].copy(),
+            Y_new[:, i].copy(),
+            status[i],
+            A[i].copy(),
+            4,
+            T[i].copy(),
+            p.kernel_config,
+            P,
+            y,
+            obs,
+            terms,
+            sc,
+            np.empty(7),
+            np.empty(4),
+        )
         assert ENDED[i] == ended
         np.testing.assert_array_equal(Y_out[:, i], y)
         np.testing.assert_array_equal(OBS[i], obs)

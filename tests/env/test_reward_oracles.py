@@ -18,8 +18,16 @@ from flatbody_env.env import kernels as python_kernels
 from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.env.registration import TASK_IDS, task_spec
 from flatbody_env.integrators import get_method
-from oracles import (DOCUMENTED_ALIVE, DOCUMENTED_DOMAIN, DOCUMENTED_TOLERANCE, DOCUMENTED_WEIGHTS, documented_distance,
-                           documented_in_domain, documented_reward_terms, tumble_rates)
+from oracles import (
+    DOCUMENTED_ALIVE,
+    DOCUMENTED_DOMAIN,
+    DOCUMENTED_TOLERANCE,
+    DOCUMENTED_WEIGHTS,
+    documented_distance,
+    documented_in_domain,
+    documented_reward_terms,
+    tumble_rates,
+)
 
 HOLD = "FlatBodyHoldUnstable-v0"
 RTOL, ATOL = 1e-11, 1e-12
@@ -36,7 +44,9 @@ def _names(env_id: str) -> list[str]:
 def _check_terms(got: dict, expect: dict, where: str) -> None:
     assert list(got) == list(expect), where
     for name, value in expect.items():
-        np.testing.assert_allclose(np.asarray(got[name], dtype=np.float64), value, rtol=RTOL, atol=ATOL, err_msg=f"{where}: {name}")
+        np.testing.assert_allclose(
+            np.asarray(got[name], dtype=np.float64), value, rtol=RTOL, atol=ATOL, err_msg=f"{where}: {name}"
+        )
 
 
 # --- the oracle itself -------------------------------------------------------------------------------------------
@@ -78,13 +88,13 @@ def _random_step(env: FlatBodyEnv, n: int, seed: int):
     for i in range(7):  # one momentum entry beyond the bound, each sign
         Y_new[i, k] = DOCUMENTED_DOMAIN["momentum"] * 1.5 * (-1) ** i
         k += 1
-    Y_new[rng.integers(0, 11), k:k + 3] = np.nan
+    Y_new[rng.integers(0, 11), k : k + 3] = np.nan
     Y_new[10, k + 3] = np.inf
     k += 4
-    Y_new[8, k:k + 2] = Y_new[7, k:k + 2]  # λ = μ: outside for two-polar integrators
+    Y_new[8, k : k + 2] = Y_new[7, k : k + 2]  # λ = μ: outside for two-polar integrators
     k += 2
     status = np.zeros(n, np.int64)
-    status[k:k + 5] = rng.integers(1, 4, 5)  # the integrator failed
+    status[k : k + 5] = rng.integers(1, 4, 5)  # the integrator failed
     near = slice(n - n // 5, n)  # the last fifth next to their targets (inside and just outside the success ball)
     Y_new[[0, 1, 4, 5, 6], near] = rng.normal(scale=0.012, size=(5, n // 5))
     Y_new[[7, 8, 9, 2], near] = T[near].T + rng.normal(scale=0.012, size=(4, n // 5))
@@ -114,10 +124,33 @@ def test_kernels_score_random_states_as_documented(env_id, kernels):
 
     A_clip = np.empty_like(A)  # the step path: the actions clipped (and scaled) first, then the bookkeeping
     assert kernels.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_clip, np.empty((4, n)))
-    Y_out, OBS, TERMS, SC, ENDED = (np.empty((11, n)), np.empty((n, 16), np.float32), np.empty((6, n)), np.empty((4, n)),
-                                    np.empty(n, np.int64))
-    kernels.post_step_lanes(Y_old, Y_new, status, A_clip, m, T, cfg, P, Y_out, OBS, TERMS, SC, ENDED, np.empty(n), np.empty((4, n)),
-                            np.empty(7), np.empty(4), np.empty(11))
+    Y_out, OBS, TERMS, SC, ENDED = (
+        np.empty((11, n)),
+        np.empty((n, 16), np.float32),
+        np.empty((6, n)),
+        np.empty((4, n)),
+        np.empty(n, np.int64),
+    )
+    kernels.post_step_lanes(
+        Y_old,
+        Y_new,
+        status,
+        A_clip,
+        m,
+        T,
+        cfg,
+        P,
+        Y_out,
+        OBS,
+        TERMS,
+        SC,
+        ENDED,
+        np.empty(n),
+        np.empty((4, n)),
+        np.empty(7),
+        np.empty(4),
+        np.empty(11),
+    )
     np.testing.assert_array_equal(ENDED.astype(bool), ended)
     np.testing.assert_array_equal(Y_out, kept)
     _check_terms(dict(zip(DOCUMENTED_WEIGHTS, TERMS)), expect, f"{env_id} post_step_lanes")
@@ -125,10 +158,28 @@ def test_kernels_score_random_states_as_documented(env_id, kernels):
 
     for k in range(0, n, 7):  # the single body's kernel
         y, obs, terms, sc = np.empty(11), np.empty(16, np.float32), np.empty(6), np.empty(4)
-        e = kernels.post_step(Y_old[:, k].copy(), Y_new[:, k].copy(), status[k], A_clip[k].copy(), m, T[k].copy(), cfg, P, y, obs, terms, sc,
-                              np.empty(7), np.empty(4))
+        e = kernels.post_step(
+            Y_old[:, k].copy(),
+            Y_new[:, k].copy(),
+            status[k],
+            A_clip[k].copy(),
+            m,
+            T[k].copy(),
+            cfg,
+            P,
+            y,
+            obs,
+            terms,
+            sc,
+            np.empty(7),
+            np.empty(4),
+        )
         assert bool(e) == ended[k]
-        _check_terms(dict(zip(DOCUMENTED_WEIGHTS, terms)), {name: v[k] for name, v in expect.items()}, f"{env_id} post_step body {k}")
+        _check_terms(
+            dict(zip(DOCUMENTED_WEIGHTS, terms)),
+            {name: v[k] for name, v in expect.items()},
+            f"{env_id} post_step body {k}",
+        )
         assert sc[0] == pytest.approx(d[k], rel=RTOL, abs=ATOL)
 
     if kernels is python_kernels:  # the task's own vectorised API (Python): the same formulas, one call for N bodies
@@ -144,8 +195,11 @@ def test_kernels_score_random_states_as_documented(env_id, kernels):
         assert not leaves.any()
     full = np.vstack([TERMS, np.zeros((len(env.reward_names) - 6, n))])
     env.task.extra_terms(ended | leaves, leaves, full)
-    _check_terms(dict(zip(env.reward_names, full)), documented_reward_terms(kept, T.T, A, ended | leaves, body, alive=_alive(env_id)),
-                 f"{env_id} with the task's terms")
+    _check_terms(
+        dict(zip(env.reward_names, full)),
+        documented_reward_terms(kept, T.T, A, ended | leaves, body, alive=_alive(env_id)),
+        f"{env_id} with the task's terms",
+    )
 
 
 def test_every_weight_is_a_keyword_and_each_one_counts():
@@ -159,10 +213,31 @@ def test_every_weight_is_a_keyword_and_each_one_counts():
     kept = np.where(ended, Y_old, Y_new)
     TERMS, A_clip = np.empty((6, n)), np.empty_like(A)
     assert env.kernels.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_clip, np.empty((4, n)))
-    env.kernels.post_step_lanes(Y_old, Y_new, status, A_clip, 4, T, env.kernel_config, env.kernel_params, np.empty((11, n)),
-                                np.empty((n, 16), np.float32), TERMS, np.empty((4, n)), np.empty(n, np.int64), np.empty(n),
-                                np.empty((4, n)), np.empty(7), np.empty(4), np.empty(11))
-    _check_terms(dict(zip(DOCUMENTED_WEIGHTS, TERMS)), documented_reward_terms(kept, T.T, A, ended, env.body, weights=weights), "weights")
+    env.kernels.post_step_lanes(
+        Y_old,
+        Y_new,
+        status,
+        A_clip,
+        4,
+        T,
+        env.kernel_config,
+        env.kernel_params,
+        np.empty((11, n)),
+        np.empty((n, 16), np.float32),
+        TERMS,
+        np.empty((4, n)),
+        np.empty(n, np.int64),
+        np.empty(n),
+        np.empty((4, n)),
+        np.empty(7),
+        np.empty(4),
+        np.empty(11),
+    )
+    _check_terms(
+        dict(zip(DOCUMENTED_WEIGHTS, TERMS)),
+        documented_reward_terms(kept, T.T, A, ended, env.body, weights=weights),
+        "weights",
+    )
     hold = gym.make(HOLD, w_alive=0.25).unwrapped
     hold.reset(seed=0)
     _, r, term, _, info = hold.step(np.zeros(4, dtype=np.float32))
@@ -220,7 +295,9 @@ def test_episode_rewards_follow_the_documented_formulas(env_id):
     env.reset(seed=0)
     state = dict(env.unwrapped.state, rho=0.2, p_rho=-45.0)
     actions = np.zeros((20,) + shape, dtype=np.float32)
-    for k, (a, r, term, trunc, info, y, tg, body) in enumerate(_single_env_steps(env_id, 0, actions, options={"state": state})):
+    for k, (a, r, term, trunc, info, y, tg, body) in enumerate(
+        _single_env_steps(env_id, 0, actions, options={"state": state})
+    ):
         _check_step(env_id, a, r, term, trunc, info, y, tg, body, f"{env_id} domain step {k}")
     assert term and info["reward_terms"]["failure"] == -DOCUMENTED_WEIGHTS["failure"]
     if env_id != HOLD:  # the reaching tasks: the gentle episode runs to its truncation, no failure on the last step
@@ -248,7 +325,9 @@ def test_vector_env_rewards_follow_the_documented_formulas(env_id):
             expect = {k: float(v[0]) for k, v in expect.items()}
             _check_terms({k: v[i] for k, v in info["reward_terms"].items()}, expect, f"{env_id} step {step} body {i}")
             assert rew[i] == pytest.approx(sum(expect.values()), rel=RTOL, abs=ATOL)
-            assert info["distance"][i] == pytest.approx(float(documented_distance(Y[:, i], T[:, i], bodies[i])[0]), rel=RTOL, abs=ATOL)
+            assert info["distance"][i] == pytest.approx(
+                float(documented_distance(Y[:, i], T[:, i], bodies[i])[0]), rel=RTOL, abs=ATOL
+            )
             checked += 1
         resetting = term | trunc
         ends += int(resetting.sum())

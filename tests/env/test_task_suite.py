@@ -66,20 +66,30 @@ def _compiled_draws(env: FlatBodyEnv, n: int, seed0: int = 0):
 
 # --- registration and checkers ----------------------------------------------------------------------------
 def test_every_task_is_registered_with_its_spec():
-    assert TASK_IDS == ("FlatBody-v0", "FlatBodySlow-v0", "FlatBodyHoldUnstable-v0", "FlatBodyTorque-v0", "FlatBodyDilatation-v0",
-                        "FlatBodyAnyBody-v0")
+    assert TASK_IDS == (
+        "FlatBody-v0",
+        "FlatBodySlow-v0",
+        "FlatBodyHoldUnstable-v0",
+        "FlatBodyTorque-v0",
+        "FlatBodyDilatation-v0",
+        "FlatBodyAnyBody-v0",
+    )
     for spec in TASKS:
         env = gym.make(spec.env_id)
         assert env.spec.max_episode_steps == spec.max_episode_steps == 400
         assert isinstance(env.unwrapped, FlatBodyEnv)
-        assert gym.make(f"flatbody_env:{spec.env_id}").unwrapped.control == spec.kwargs.get("control", "torque+dilatation")
+        assert gym.make(f"flatbody_env:{spec.env_id}").unwrapped.control == spec.kwargs.get(
+            "control", "torque+dilatation"
+        )
     with pytest.raises(ValueError, match="env: must be one of"):
         task_spec("FlatBody-v9")
     with pytest.raises(ValueError, match="task: must be one of"):
         FlatBodyEnv(task="juggle")
     with pytest.raises(ValueError, match="body: this task draws its own body"):
-        FlatBodyEnv(task="any-body", body={"params": {"J": 1, "J3": 1}, "potential": {"name": "V3", "kappa": 1},
-                                           "thickness": {"a": 1, "b": 1}})
+        FlatBodyEnv(
+            task="any-body",
+            body={"params": {"J": 1, "J3": 1}, "potential": {"name": "V3", "kappa": 1}, "thickness": {"a": 1, "b": 1}},
+        )
 
 
 def test_rl_zoo_gym_packages_path_registers_every_task():
@@ -87,8 +97,10 @@ def test_rl_zoo_gym_packages_path_registers_every_task():
     import subprocess
     import sys
 
-    code = ("import gymnasium as gym, importlib\nimportlib.import_module('flatbody_env')\n"
-            f"for i in {TASK_IDS!r}:\n    e = gym.make(i); e.reset(seed=0); print(i, e.observation_space.shape[0])")
+    code = (
+        "import gymnasium as gym, importlib\nimportlib.import_module('flatbody_env')\n"
+        f"for i in {TASK_IDS!r}:\n    e = gym.make(i); e.reset(seed=0); print(i, e.observation_space.shape[0])"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.split() == [x for i in TASK_IDS for x in (i, "21" if i == "FlatBodyAnyBody-v0" else "16")]
@@ -205,7 +217,9 @@ def test_flatbody_slow_draws_every_stable_target_of_the_ranges():
     assert 0.5 < np.mean(rates < 0.15) < 0.95 and rates.min() < 0.05
     # the existence and stability region itself: a shape is drawn iff a stable ellipse exists there (λ*μ* ≥ 1 for V3)
     assert (TG[:, 0] * TG[:, 1] >= 1.0 - 1e-12).all()
-    frac_fast = np.mean(np.array([settling_rate(fast.body, _target_state(TG[k]), fast.limits) >= 0.15 for k in range(60, 120)]))
+    frac_fast = np.mean(
+        np.array([settling_rate(fast.body, _target_state(TG[k]), fast.limits) >= 0.15 for k in range(60, 120)])
+    )
     assert frac_fast < 0.5
 
 
@@ -221,7 +235,7 @@ def test_hold_unstable_draws_hyperbolic_targets_and_starts_inside_the_ball():
     assert (q > 0).all()
     assert (np.sqrt(q) >= task.min_growth_rate).all() and (np.sqrt(q) <= task.max_growth_rate).all()
     # mostly rotation about the intermediate principal axis, Jμ*² < J3ϱ*² < Jλ*² (exact for θ̇ = 0, [2] §7; here θ̇ ≠ 0)
-    assert np.mean((J * mu ** 2 < J3 * rho ** 2) & (J3 * rho ** 2 < J * lam ** 2)) > 0.8
+    assert np.mean((J * mu**2 < J3 * rho**2) & (J3 * rho**2 < J * lam**2)) > 0.8
     (l0, l1), (a0, a1) = task.target_lambda, task.target_aspect
     assert (lam >= l0).all() and (lam <= l1).all() and (lam / mu >= a0 - 1e-12).all() and (lam / mu <= a1 + 1e-12).all()
     # the start: inside the success ball, at a distance uniform in [0.3, 0.9] × tolerance
@@ -301,9 +315,19 @@ def _check_witnessed(env, eps):
     if "dilatation" not in env.control:  # torque only: the thickness is off by at least the tolerance
         off = np.hypot(Y[9] - TG[:, 2], Y[6])
         assert (off >= 0.05 - 1e-12).all()
-    if "torque" not in env.control:  # dilatation only: the shape and spin are off by no more than y_b inside the ball (docs)
+    if (
+        "torque" not in env.control
+    ):  # dilatation only: the shape and spin are off by no more than y_b inside the ball (docs)
         w1, w2 = _omega12(Y, J, J3)
-        off = np.sqrt((Y[7] - TG[:, 0]) ** 2 + (Y[8] - TG[:, 1]) ** 2 + (Y[2] - TG[:, 3]) ** 2 + w1 ** 2 + w2 ** 2 + Y[4] ** 2 + Y[5] ** 2)
+        off = np.sqrt(
+            (Y[7] - TG[:, 0]) ** 2
+            + (Y[8] - TG[:, 1]) ** 2
+            + (Y[2] - TG[:, 3]) ** 2
+            + w1**2
+            + w2**2
+            + Y[4] ** 2
+            + Y[5] ** 2
+        )
         assert np.percentile(off, 90) < task.success_tolerance
     W = np.stack([e.witness for e in eps])
     assert W.shape[1:] == (400, env.action_space.shape[0]) and np.abs(W).max() <= task.witness_amplitude[1]
@@ -344,7 +368,9 @@ def test_torque_only_lqr_leaves_the_thickness_undamped_and_dilatation_only_has_n
         else:
             K = lqr_gain(env.body, y, env.limits, env.mask, LQRWeights())
             A, B = linearize(env.body, y, env.limits)
-            assert abs(np.linalg.eigvals(A - B[:, env.mask] @ K).real.max()) < 1e-8  # marginal: the thickness mode stays
+            assert (
+                abs(np.linalg.eigvals(A - B[:, env.mask] @ K).real.max()) < 1e-8
+            )  # marginal: the thickness mode stays
 
 
 # --- FlatBodyAnyBody-v0 ------------------------------------------------------------------------------------------
@@ -398,5 +424,8 @@ def test_lqr_solves_rotation_targets_exactly_instead_of_reading_the_circulation_
     env = gym.make("FlatBodyHoldUnstable-v0")
     obs, _ = env.reset(seed=2)
     u = env.unwrapped
-    table, exact = HeuristicController(u.body, u.control, u.limits), HeuristicController(u.body, u.control, u.limits, exact=True)
+    table, exact = (
+        HeuristicController(u.body, u.control, u.limits),
+        HeuristicController(u.body, u.control, u.limits, exact=True),
+    )
     np.testing.assert_array_equal(table.act(obs[None]), exact.act(obs[None]))

@@ -99,7 +99,9 @@ def test_next_step_mode_and_bad_devices():
         got, want = env.step(torch.zeros(2, 4)), ref.step(np.zeros((2, 4)))
         np.testing.assert_array_equal(got[0].numpy(), want[0])
         np.testing.assert_array_equal(got[3].numpy(), want[3])
-    if not torch.cuda.is_available():  # one clear error without a GPU (docs/gpu.md); with one: tests/env/test_device_env.py
+    if (
+        not torch.cuda.is_available()
+    ):  # one clear error without a GPU (docs/gpu.md); with one: tests/env/test_device_env.py
         from flatbody_env.integrators.cuda import CudaUnavailableError
 
         with pytest.raises(CudaUnavailableError, match="device: 'cuda' needs a CUDA GPU"):
@@ -140,7 +142,9 @@ def test_reset_mask_resets_those_bodies_only(cls):
         obs_before = np.asarray(env.step(np.full((n, 4), 0.3, np.float32))[0]).copy()
     states = np.asarray(env.states).copy()
     mask = np.array([False, True, False, True])
-    obs, info = env.reset(seed=100, options={"reset_mask": torch.from_numpy(mask) if cls is FlatBodyTorchVectorEnv else mask})
+    obs, info = env.reset(
+        seed=100, options={"reset_mask": torch.from_numpy(mask) if cls is FlatBodyTorchVectorEnv else mask}
+    )
     obs = np.asarray(obs)
     np.testing.assert_array_equal(obs[~mask], obs_before[~mask])
     np.testing.assert_array_equal(np.asarray(env.states)[~mask], states[~mask])

@@ -43,20 +43,44 @@ NOT_COUNTS = ["-1", "-2e0", "1.5", "", "nan", "0x10"]
 
 # (argv prefix, count flag): every size and count a user can give on the command line
 COUNT_FLAGS: list[tuple[tuple[str, ...], str]] = [
-    (("bench", "env"), "--steps"), (("bench", "env"), "--batch"), (("bench", "env"), "--batch-steps"),
-    (("bench", "env"), "--episode-steps"), (("bench", "env"), "--repeats"),
-    (("train", "--algo", "ppo"), "--seed"), (("train", "--algo", "ppo"), "--n-timesteps"), (("train", "--algo", "ppo"), "--n-envs"),
-    (("train", "--algo", "ppo"), "--checkpoint-freq"), (("train", "--algo", "ppo"), "--threads"),
-    (("evaluate",), "--episodes"), (("evaluate",), "--seed"), (("demo",), "--seed"),
-    (("record", "--scene", "default"), "--samples"), (("record", "--scene", "default"), "--tensor-every"),
-    (("record-env",), "--episodes"), (("record-env",), "--seed"), (("record-env",), "--max-steps"), (("record-env",), "--tensor-every"),
-    (("simulate", "--scene", "default"), "--samples"), (("simulate", "--scene", "default"), "--max-nfev"),
-    (("sweep", "stability-map", "--out", "{tmp}/sw"), "--grid"), (("sweep", "stability-map", "--out", "{tmp}/sw"), "--chunk"),
-    (("sweep", "stability-map", "--out", "{tmp}/sw"), "--workers"), (("sweep", "family", "--out", "{tmp}/sf"), "--seeds"),
-    (("tune", "--algo", "ppo"), "--trials"), (("tune", "--algo", "ppo"), "--n-timesteps"), (("tune", "--algo", "ppo"), "--evaluations"),
-    (("tune", "--algo", "ppo"), "--eval-episodes"), (("tune", "--algo", "ppo"), "--n-envs"), (("tune", "--algo", "ppo"), "--workers"),
-    (("bench", "sweep"), "--grid"), (("bench", "sweep"), "--noop-tasks"), (("bench", "sweep"), "--sim-workers"),
-    (("serve",), "--workers"), (("bench", "service"), "--requests"), (("ellipses",), "--grid"), (("stability-map",), "--grid"),
+    (("bench", "env"), "--steps"),
+    (("bench", "env"), "--batch"),
+    (("bench", "env"), "--batch-steps"),
+    (("bench", "env"), "--episode-steps"),
+    (("bench", "env"), "--repeats"),
+    (("train", "--algo", "ppo"), "--seed"),
+    (("train", "--algo", "ppo"), "--n-timesteps"),
+    (("train", "--algo", "ppo"), "--n-envs"),
+    (("train", "--algo", "ppo"), "--checkpoint-freq"),
+    (("train", "--algo", "ppo"), "--threads"),
+    (("evaluate",), "--episodes"),
+    (("evaluate",), "--seed"),
+    (("demo",), "--seed"),
+    (("record", "--scene", "default"), "--samples"),
+    (("record", "--scene", "default"), "--tensor-every"),
+    (("record-env",), "--episodes"),
+    (("record-env",), "--seed"),
+    (("record-env",), "--max-steps"),
+    (("record-env",), "--tensor-every"),
+    (("simulate", "--scene", "default"), "--samples"),
+    (("simulate", "--scene", "default"), "--max-nfev"),
+    (("sweep", "stability-map", "--out", "{tmp}/sw"), "--grid"),
+    (("sweep", "stability-map", "--out", "{tmp}/sw"), "--chunk"),
+    (("sweep", "stability-map", "--out", "{tmp}/sw"), "--workers"),
+    (("sweep", "family", "--out", "{tmp}/sf"), "--seeds"),
+    (("tune", "--algo", "ppo"), "--trials"),
+    (("tune", "--algo", "ppo"), "--n-timesteps"),
+    (("tune", "--algo", "ppo"), "--evaluations"),
+    (("tune", "--algo", "ppo"), "--eval-episodes"),
+    (("tune", "--algo", "ppo"), "--n-envs"),
+    (("tune", "--algo", "ppo"), "--workers"),
+    (("bench", "sweep"), "--grid"),
+    (("bench", "sweep"), "--noop-tasks"),
+    (("bench", "sweep"), "--sim-workers"),
+    (("serve",), "--workers"),
+    (("bench", "service"), "--requests"),
+    (("ellipses",), "--grid"),
+    (("stability-map",), "--grid"),
 ]
 # (argv prefix, flag, values that must be refused): floats with an upper bound or a floor
 FLOAT_FLAGS: list[tuple[tuple[str, ...], str, list[str]]] = [
@@ -151,7 +175,9 @@ def _model_folders(folder: Path) -> dict[str, Path]:
     import numpy as np
 
     np.savez(d / "policy.npz", meta=np.array([{"format": 1}], dtype=object))
-    copy("foreign-pickle", ("model.zip", "config.yml", "vecnormalize.pkl"))  # no policy.npz: SB3 (a pickle) from outside
+    copy(
+        "foreign-pickle", ("model.zip", "config.yml", "vecnormalize.pkl")
+    )  # no policy.npz: SB3 (a pickle) from outside
     d = copy("step-1e-12", ("model.zip", "policy.npz", "vecnormalize.pkl"))
     (d / "config.yml").write_text((src / "config.yml").read_text() + "\n")
     import yaml
@@ -184,59 +210,190 @@ def cli_cases(folder: Path) -> list[Case]:
     # the product owner's reports
     cases += [
         Case("cli", "bench env --batch 1e9 (int)", "refuse", ["bench", "env", "--batch", "1000000000"]),
-        Case("cli", "negative -2e0 is a value", "ok", ["ellipses", "--s3", "-2e0", "--p-theta", "-1E+0", "--grid", "10"]),
-        Case("cli", "negative -.5 is a value", "ok", ["ellipses", "--s3", "-.5", "--p-theta", "-1", "--grid", "10", "--json"]),
-        Case("cli", "simulate RK4 step 1e-6 t_end 1e6 stops at the budget", "fail",
-             ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-6", "--t-end", "1e6"]),
-        Case("cli", "DOP853-numba 1 s budget", "fail", ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1",
-                                                        "--samples", "3"], limit=4.0),
-        Case("cli", "DOP853-numba 1 s budget with R", "fail", ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1",
-                                                               "--samples", "3", "--with-rotation"], limit=4.0),
-        Case("cli", "RK4 predicted past 0.3 s", "fail", ["simulate", "--scene", "default", "--t-end", "1e4", "--method", "RK4", "--step",
-                                                         "0.01", "--max-seconds", "0.3", "--samples", "3"], limit=4.0),
+        Case(
+            "cli", "negative -2e0 is a value", "ok", ["ellipses", "--s3", "-2e0", "--p-theta", "-1E+0", "--grid", "10"]
+        ),
+        Case(
+            "cli",
+            "negative -.5 is a value",
+            "ok",
+            ["ellipses", "--s3", "-.5", "--p-theta", "-1", "--grid", "10", "--json"],
+        ),
+        Case(
+            "cli",
+            "simulate RK4 step 1e-6 t_end 1e6 stops at the budget",
+            "fail",
+            ["simulate", "--scene", "default", "--method", "RK4", "--step", "1e-6", "--t-end", "1e6"],
+        ),
+        Case(
+            "cli",
+            "DOP853-numba 1 s budget",
+            "fail",
+            ["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "1", "--samples", "3"],
+            limit=4.0,
+        ),
+        Case(
+            "cli",
+            "DOP853-numba 1 s budget with R",
+            "fail",
+            [
+                "simulate",
+                "--scene",
+                "default",
+                "--t-end",
+                "1e6",
+                "--max-seconds",
+                "1",
+                "--samples",
+                "3",
+                "--with-rotation",
+            ],
+            limit=4.0,
+        ),
+        Case(
+            "cli",
+            "RK4 predicted past 0.3 s",
+            "fail",
+            [
+                "simulate",
+                "--scene",
+                "default",
+                "--t-end",
+                "1e4",
+                "--method",
+                "RK4",
+                "--step",
+                "0.01",
+                "--max-seconds",
+                "0.3",
+                "--samples",
+                "3",
+            ],
+            limit=4.0,
+        ),
     ]
     for name, path in _trajectories(folder).items():
-        cases.append(Case("cli", f"invariants {name}", "refuse", ["invariants", str(path), "--json", "--scene", "default"]))
-        cases.append(Case("cli", f"invariants {name} (no body)", "refuse" if name not in ("lambda_eq_mu", "mu_eq_lambda_once") else "clean",
-                          ["invariants", str(path), "--json"]))
+        cases.append(
+            Case("cli", f"invariants {name}", "refuse", ["invariants", str(path), "--json", "--scene", "default"])
+        )
+        cases.append(
+            Case(
+                "cli",
+                f"invariants {name} (no body)",
+                "refuse" if name not in ("lambda_eq_mu", "mu_eq_lambda_once") else "clean",
+                ["invariants", str(path), "--json"],
+            )
+        )
     for kind in ("directory", "corrupt", "garbage", "foreign"):
         sw = folder / f"sweep-{kind}"
         _bad_sqlite(sw / "results.sqlite", kind)
-        cases.append(Case("cli", f"sweep on a {kind} database", "refuse", ["sweep", "stability-map", "--grid", "4", "--workers", "0",
-                                                                            "--no-progress", "--out", str(sw)]))
+        cases.append(
+            Case(
+                "cli",
+                f"sweep on a {kind} database",
+                "refuse",
+                ["sweep", "stability-map", "--grid", "4", "--workers", "0", "--no-progress", "--out", str(sw)],
+            )
+        )
         sv = folder / f"serve-{kind}"
         _bad_sqlite(sv / "jobs.sqlite3", kind)
-        cases.append(Case("cli", f"serve on a {kind} database", "refuse", ["serve", "--data-dir", str(sv), "--port", "0"]))
+        cases.append(
+            Case("cli", f"serve on a {kind} database", "refuse", ["serve", "--data-dir", str(sv), "--port", "0"])
+        )
         db = folder / f"optuna-{kind}.sqlite3"
         _bad_sqlite(db, kind)
-        cases.append(Case("cli", f"tune on a {kind} storage", "refuse", ["tune", "--algo", "ppo", "--trials", "1", "--storage",
-                                                                          f"sqlite:///{db}", "--out", str(folder / "tune")]))
+        cases.append(
+            Case(
+                "cli",
+                f"tune on a {kind} storage",
+                "refuse",
+                [
+                    "tune",
+                    "--algo",
+                    "ppo",
+                    "--trials",
+                    "1",
+                    "--storage",
+                    f"sqlite:///{db}",
+                    "--out",
+                    str(folder / "tune"),
+                ],
+            )
+        )
     import socket
 
     held = socket.socket()  # a port in use for the whole run: serve must refuse it (exit 2), not exit 3
     held.bind(("127.0.0.1", 0))
     held.listen()
     _HELD.append(held)
-    cases.append(Case("cli", "serve on a port in use", "refuse", ["serve", "--data-dir", str(folder / "serve-ok"), "--port",
-                                                                  str(held.getsockname()[1])]))
-    cases.append(Case("cli", "serve on an unknown host", "refuse", ["serve", "--data-dir", str(folder / "serve-ok"), "--host",
-                                                                    "no-such-host.invalid", "--port", "0"]))
+    cases.append(
+        Case(
+            "cli",
+            "serve on a port in use",
+            "refuse",
+            ["serve", "--data-dir", str(folder / "serve-ok"), "--port", str(held.getsockname()[1])],
+        )
+    )
+    cases.append(
+        Case(
+            "cli",
+            "serve on an unknown host",
+            "refuse",
+            ["serve", "--data-dir", str(folder / "serve-ok"), "--host", "no-such-host.invalid", "--port", "0"],
+        )
+    )
     (folder / "a-file").write_text("x")
-    cases.append(Case("cli", "sweep --out is a file", "refuse", ["sweep", "stability-map", "--grid", "4", "--workers", "0", "--out",
-                                                                 str(folder / "a-file")]))
-    cases.append(Case("cli", "serve --data-dir is a file", "refuse", ["serve", "--data-dir", str(folder / "a-file"), "--port", "0"]))
+    cases.append(
+        Case(
+            "cli",
+            "sweep --out is a file",
+            "refuse",
+            ["sweep", "stability-map", "--grid", "4", "--workers", "0", "--out", str(folder / "a-file")],
+        )
+    )
+    cases.append(
+        Case(
+            "cli",
+            "serve --data-dir is a file",
+            "refuse",
+            ["serve", "--data-dir", str(folder / "a-file"), "--port", "0"],
+        )
+    )
     models = _model_folders(folder)
     for name, path in models.items():
-        for cmd in (["evaluate", str(path), "--episodes", "1", "--no-baselines", "--json"], ["demo", "--model", str(path), "--out", ""],
-                    ["record", "--agent", str(path), "--out", str(folder / f"agent-{name}.rrd")], ["export-policy", str(path)]):
-            if cmd[0] in ("demo", "record", "export-policy") and name not in ("empty-zip", "config-list", "damaged-npz", "foreign-pickle",
-                                                                                "missing"):
+        for cmd in (
+            ["evaluate", str(path), "--episodes", "1", "--no-baselines", "--json"],
+            ["demo", "--model", str(path), "--out", ""],
+            ["record", "--agent", str(path), "--out", str(folder / f"agent-{name}.rrd")],
+            ["export-policy", str(path)],
+        ):
+            if cmd[0] in ("demo", "record", "export-policy") and name not in (
+                "empty-zip",
+                "config-list",
+                "damaged-npz",
+                "foreign-pickle",
+                "missing",
+            ):
                 continue
             cases.append(Case("cli", f"{cmd[0]} {name}", "refuse", cmd, limit=60.0))
-    cases.append(Case("cli", "evaluate empty-zip --trust", "refuse", ["evaluate", str(models["empty-zip"]), "--trust", "--episodes", "1",
-                                                                      "--no-baselines"], limit=60.0))
-    cases.append(Case("cli", "train --resume from an untrusted folder", "refuse",
-                      ["train", "--algo", "ppo", "--resume", "--out", str(models["foreign-pickle"])], limit=60.0))
+    cases.append(
+        Case(
+            "cli",
+            "evaluate empty-zip --trust",
+            "refuse",
+            ["evaluate", str(models["empty-zip"]), "--trust", "--episodes", "1", "--no-baselines"],
+            limit=60.0,
+        )
+    )
+    cases.append(
+        Case(
+            "cli",
+            "train --resume from an untrusted folder",
+            "refuse",
+            ["train", "--algo", "ppo", "--resume", "--out", str(models["foreign-pickle"])],
+            limit=60.0,
+        )
+    )
     return cases
 
 
@@ -253,6 +410,7 @@ def api_cases(folder: Path) -> list[Case]:
             obs, reward, term, trunc, info = env.step(env.action_space.sample() * 0)
             env.close()
             return {"obs": obs, "reward": reward, "t": info["t"]}
+
         return call
 
     def vec(**kw):
@@ -262,6 +420,7 @@ def api_cases(folder: Path) -> list[Case]:
             env = FlatBodyVectorEnv(**kw)
             obs, info = env.reset(seed=0)
             return {"obs": obs}
+
         return call
 
     def sim(**kw):
@@ -269,25 +428,70 @@ def api_cases(folder: Path) -> list[Case]:
 
     folder.mkdir(parents=True, exist_ok=True)
     cases: list[Case] = []
-    refuse_env = [dict(dt=1e6), dict(dt=1e9), dict(dt=0.0), dict(dt=-1.0), dict(dt=math.nan), dict(dt=math.inf), dict(dt=1e-9),
-                  dict(dt="0.05"), dict(dt=True), dict(dt=1e300),
-                  dict(integrator="RK4", step=1e-12), dict(integrator="RK4", step=1e-30), dict(integrator="RK4", step=1e-7),
-                  dict(integrator="RK4", step=-0.01), dict(integrator="RK4", step=0.06), dict(integrator="RK4", dt=1.0, step=5e-6),
-                  dict(integrator=123), dict(integrator="nope"), dict(integrator=None), dict(rtol=0.0), dict(atol=math.nan),
-                  dict(torque_limit=1e300), dict(force_limit=-1.0), dict(momentum_bound=math.inf), dict(stretch_bounds=(5,)),
-                  dict(stretch_bounds="ab"), dict(stretch_bounds=(2.0, 1.0)), dict(rho_bounds=(0.0, 1e400)), dict(gap_min=2.0),
-                  dict(track_rotation="x"), dict(foo=1), dict(control=5), dict(task=3), dict(body=[1])]
+    refuse_env = [
+        dict(dt=1e6),
+        dict(dt=1e9),
+        dict(dt=0.0),
+        dict(dt=-1.0),
+        dict(dt=math.nan),
+        dict(dt=math.inf),
+        dict(dt=1e-9),
+        dict(dt="0.05"),
+        dict(dt=True),
+        dict(dt=1e300),
+        dict(integrator="RK4", step=1e-12),
+        dict(integrator="RK4", step=1e-30),
+        dict(integrator="RK4", step=1e-7),
+        dict(integrator="RK4", step=-0.01),
+        dict(integrator="RK4", step=0.06),
+        dict(integrator="RK4", dt=1.0, step=5e-6),
+        dict(integrator=123),
+        dict(integrator="nope"),
+        dict(integrator=None),
+        dict(rtol=0.0),
+        dict(atol=math.nan),
+        dict(torque_limit=1e300),
+        dict(force_limit=-1.0),
+        dict(momentum_bound=math.inf),
+        dict(stretch_bounds=(5,)),
+        dict(stretch_bounds="ab"),
+        dict(stretch_bounds=(2.0, 1.0)),
+        dict(rho_bounds=(0.0, 1e400)),
+        dict(gap_min=2.0),
+        dict(track_rotation="x"),
+        dict(foo=1),
+        dict(control=5),
+        dict(task=3),
+        dict(body=[1]),
+    ]
     for kw in refuse_env:
         cases.append(Case("api", f"gym.make {kw}", "refuse", call=env_step(**kw)))
-    for kw in [dict(num_envs=10**9), dict(num_envs=0), dict(num_envs=True), dict(num_envs=2.5), dict(num_envs=2, max_episode_steps=10**12),
-               dict(num_envs=2, max_episode_steps=0), dict(num_envs=2, dt=1e6)]:
+    for kw in [
+        dict(num_envs=10**9),
+        dict(num_envs=0),
+        dict(num_envs=True),
+        dict(num_envs=2.5),
+        dict(num_envs=2, max_episode_steps=10**12),
+        dict(num_envs=2, max_episode_steps=0),
+        dict(num_envs=2, dt=1e6),
+    ]:
         cases.append(Case("api", f"FlatBodyVectorEnv {kw}", "refuse", call=vec(**kw)))
     # the largest allowed work per env step stays within the per-step budget
-    for kw in [dict(dt=1.0, integrator="RK4", step=1e-5), dict(dt=1.0, rtol=1e-16, atol=1e-16), dict(dt=1.0, integrator="DOP853"),
-               dict(dt=1e-4)]:
+    for kw in [
+        dict(dt=1.0, integrator="RK4", step=1e-5),
+        dict(dt=1.0, rtol=1e-16, atol=1e-16),
+        dict(dt=1.0, integrator="DOP853"),
+        dict(dt=1e-4),
+    ]:
         cases.append(Case("api", f"gym.make {kw} (allowed extreme)", "clean", call=env_step(**kw), limit=30.0))
-    for kw in [dict(t_end=1.0, method="RK4", step=1e-30), dict(t_end=1.0, method="RK4", step=1e-7), dict(t_end=1.0, max_wall_time=1e9),
-               dict(t_end=1.0, max_wall_time=math.inf), dict(t_end=1.0, method="RK4", step=True), dict(t_end=1e7)]:
+    for kw in [
+        dict(t_end=1.0, method="RK4", step=1e-30),
+        dict(t_end=1.0, method="RK4", step=1e-7),
+        dict(t_end=1.0, max_wall_time=1e9),
+        dict(t_end=1.0, max_wall_time=math.inf),
+        dict(t_end=1.0, method="RK4", step=True),
+        dict(t_end=1e7),
+    ]:
         cases.append(Case("api", f"simulate {kw}", "refuse", call=sim(**kw)))
     cases.append(Case("api", "simulate RK4 1e6/1e-6 (budget)", "fail", call=sim(t_end=1e6, method="RK4", step=1e-6)))
     trajs = _trajectories(folder)
@@ -296,7 +500,9 @@ def api_cases(folder: Path) -> list[Case]:
 
     body = load_scene("default").body
     for name, path in trajs.items():
-        cases.append(Case("api", f"invariants_along {name}", "refuse", call=lambda p=path: invariants_along(p, body).to_dict()))
+        cases.append(
+            Case("api", f"invariants_along {name}", "refuse", call=lambda p=path: invariants_along(p, body).to_dict())
+        )
     from flatbody_env.sweep.store import ResultStore
 
     for kind in ("directory", "corrupt", "garbage", "foreign"):
@@ -307,7 +513,16 @@ def api_cases(folder: Path) -> list[Case]:
     from agents.numpy_policy import load_policy
 
     models = _model_folders(folder)
-    for name in ("empty-zip", "config-list", "config-bad-yaml", "config-hp-list", "damaged-npz", "pickled-npz", "not-a-folder", "missing"):
+    for name in (
+        "empty-zip",
+        "config-list",
+        "config-bad-yaml",
+        "config-hp-list",
+        "damaged-npz",
+        "pickled-npz",
+        "not-a-folder",
+        "missing",
+    ):
         cases.append(Case("api", f"Agent {name}", "refuse", call=lambda p=models[name]: Agent(p), limit=60.0))
     cases.append(Case("api", "load_policy damaged", "refuse", call=lambda: load_policy(models["damaged-npz"])))
     cases.append(Case("api", "load_policy pickled", "refuse", call=lambda: load_policy(models["pickled-npz"])))
@@ -344,7 +559,14 @@ def run(case: Case) -> dict:
                 outcome = "traceback"
             if r["code"] == 2 and ("unrecognized arguments" in err or "invalid choice" in err or "required" in err):
                 outcome = "misparsed"  # refused, but not for the reason the case tests
-        return {"name": case.name, "expect": case.expect, "outcome": outcome, "nan": r["nan"], "err_lines": r["err_lines"], "err": err}
+        return {
+            "name": case.name,
+            "expect": case.expect,
+            "outcome": outcome,
+            "nan": r["nan"],
+            "err_lines": r["err_lines"],
+            "err": err,
+        }
     from flatbody_env.integrators import IntegrationError
 
     def alarm(signum, frame):
@@ -375,7 +597,14 @@ def run(case: Case) -> dict:
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
-    return {"name": case.name, "expect": case.expect, "outcome": outcome, "nan": nan, "err_lines": len(err.splitlines()), "err": err[-300:]}
+    return {
+        "name": case.name,
+        "expect": case.expect,
+        "outcome": outcome,
+        "nan": nan,
+        "err_lines": len(err.splitlines()),
+        "err": err[-300:],
+    }
 
 
 def bad(row: dict) -> str | None:
@@ -394,7 +623,11 @@ def bad(row: dict) -> str | None:
 
 
 def tally(rows: list[dict]) -> dict:
-    out = {"cases": len(rows), "cli": sum(r.get("kind") == "cli" for r in rows), "api": sum(r.get("kind") == "api" for r in rows)}
+    out = {
+        "cases": len(rows),
+        "cli": sum(r.get("kind") == "cli" for r in rows),
+        "api": sum(r.get("kind") == "api" for r in rows),
+    }
     for key in ("ok", "fail", "refuse"):
         out[key] = sum(r["outcome"] == key for r in rows)
     reasons = [bad(r) for r in rows]
@@ -402,7 +635,13 @@ def tally(rows: list[dict]) -> dict:
     out["hangs"] = sum(x == "hang" for x in reasons)
     out["silent_accepts"] = sum(x == "silent accept" for x in reasons)
     out["non_finite_outputs"] = sum(x == "non-finite output" for x in reasons)
-    out["other_problems"] = sum(x is not None for x in reasons) - out["tracebacks"] - out["hangs"] - out["silent_accepts"] - out["non_finite_outputs"]
+    out["other_problems"] = (
+        sum(x is not None for x in reasons)
+        - out["tracebacks"]
+        - out["hangs"]
+        - out["silent_accepts"]
+        - out["non_finite_outputs"]
+    )
     return out
 
 
@@ -428,4 +667,8 @@ if __name__ == "__main__":  # python tests/fuzz/corpus.py [FOLDER]
     for r in rows:
         why = bad(r)
         if why:
-            print(f"{why:>18} | {r['kind']} {r['name'][:70]} | {r['outcome']} | {r['err'].strip()[-220:]}".replace("\n", " / "))
+            print(
+                f"{why:>18} | {r['kind']} {r['name'][:70]} | {r['outcome']} | {r['err'].strip()[-220:]}".replace(
+                    "\n", " / "
+                )
+            )

@@ -18,12 +18,71 @@ import sys
 from pathlib import Path
 
 DEEP = "[" * 100_000 + "]" * 100_000
-BAD_NUMBERS = [10**400, -(10**400), 1e308, -1e308, 1e-308, 0, -1, 0.0, True, None, "1", "V1", ["V1"], {"x": 1}, [], 1e7, 1e-7]
-BAD_TEXT = ["1e400", "9" * 400, "-1", "0", "nan", "inf", "-inf", "1e308", "1e-308", "x", "", "1,2", "[1]", "0x10", "1e-400"]
-SCENE_FIELDS = [("params", "J"), ("params", "J3"), ("potential", "name"), ("potential", "kappa"), ("thickness", "a"), ("thickness", "b"),
-                ("state", "lambda"), ("state", "mu"), ("state", "rho"), ("state", "s3"), ("state", "p_theta"), ("state", "p_rho"),
-                ("t_end",), ("name",), ("params",), ("potential",), ("state",)]
-TRAJ_FIELDS = [("t",), ("state",), ("meta",), ("rotation",), ("energy",), ("state", "lambda"), ("state", "theta"), ("initial_state",)]
+BAD_NUMBERS = [
+    10**400,
+    -(10**400),
+    1e308,
+    -1e308,
+    1e-308,
+    0,
+    -1,
+    0.0,
+    True,
+    None,
+    "1",
+    "V1",
+    ["V1"],
+    {"x": 1},
+    [],
+    1e7,
+    1e-7,
+]
+BAD_TEXT = [
+    "1e400",
+    "9" * 400,
+    "-1",
+    "0",
+    "nan",
+    "inf",
+    "-inf",
+    "1e308",
+    "1e-308",
+    "x",
+    "",
+    "1,2",
+    "[1]",
+    "0x10",
+    "1e-400",
+]
+SCENE_FIELDS = [
+    ("params", "J"),
+    ("params", "J3"),
+    ("potential", "name"),
+    ("potential", "kappa"),
+    ("thickness", "a"),
+    ("thickness", "b"),
+    ("state", "lambda"),
+    ("state", "mu"),
+    ("state", "rho"),
+    ("state", "s3"),
+    ("state", "p_theta"),
+    ("state", "p_rho"),
+    ("t_end",),
+    ("name",),
+    ("params",),
+    ("potential",),
+    ("state",),
+]
+TRAJ_FIELDS = [
+    ("t",),
+    ("state",),
+    ("meta",),
+    ("rotation",),
+    ("energy",),
+    ("state", "lambda"),
+    ("state", "theta"),
+    ("initial_state",),
+]
 
 
 def base_scene() -> dict:
@@ -45,8 +104,16 @@ def scene_texts() -> list[str]:
     """Scene files as JSON text: one field replaced by a hostile value each, plus broken files."""
     base = base_scene()
     texts = [json.dumps(_set(base, path, value)) for path in SCENE_FIELDS for value in BAD_NUMBERS]
-    texts += ["", "{", "null", "[]", DEEP, '{"params": ' + DEEP + "}", json.dumps({"potential": {"name": ["V1"]}}),
-              json.dumps(_set(base, ("potential", "name"), {"V1": 1}))]
+    texts += [
+        "",
+        "{",
+        "null",
+        "[]",
+        DEEP,
+        '{"params": ' + DEEP + "}",
+        json.dumps({"potential": {"name": ["V1"]}}),
+        json.dumps(_set(base, ("potential", "name"), {"V1": 1})),
+    ]
     return texts
 
 
@@ -54,8 +121,19 @@ def trajectory_texts() -> list[str]:
     from flatbody_env.simulation import simulate
 
     good = simulate("default", t_end=0.2, times=[0.0, 0.1, 0.2], with_rotation=True).to_dict()
-    texts = [json.dumps(_set(good, path, value)) for path in TRAJ_FIELDS for value in [3.0, None, [], "x", {"a": 1}, [[[[0.0]]]], 10**400, True]]
-    texts += ["", "{", DEEP, json.dumps({"t": 3.0}), json.dumps({"state": None, "t": [0]}), json.dumps({"meta": [], "t": [0], "state": {}})]
+    texts = [
+        json.dumps(_set(good, path, value))
+        for path in TRAJ_FIELDS
+        for value in [3.0, None, [], "x", {"a": 1}, [[[[0.0]]]], 10**400, True]
+    ]
+    texts += [
+        "",
+        "{",
+        DEEP,
+        json.dumps({"t": 3.0}),
+        json.dumps({"state": None, "t": [0]}),
+        json.dumps({"meta": [], "t": [0], "state": {}}),
+    ]
     return texts
 
 
@@ -86,8 +164,18 @@ def cases(folder: Path) -> list[list[str]]:
             out.append(["simulate", "--scene", "default", flag, text, *extra])
     for flag in ("--J", "--kappa", "--s3", "--p-theta", "--grid", "--lam-range"):
         for text in BAD_TEXT:
-            out.append(["ellipses", flag, text, "--s3", "2", "--p-theta", "0.5"] if flag not in ("--s3", "--p-theta") else
-                       ["stability", flag, text, "--grid", "12", *(["--p-theta", "0.5"] if flag == "--s3" else ["--s3", "2"])])
+            out.append(
+                ["ellipses", flag, text, "--s3", "2", "--p-theta", "0.5"]
+                if flag not in ("--s3", "--p-theta")
+                else [
+                    "stability",
+                    flag,
+                    text,
+                    "--grid",
+                    "12",
+                    *(["--p-theta", "0.5"] if flag == "--s3" else ["--s3", "2"]),
+                ]
+            )
     for text in BAD_TEXT[:8]:
         out.append(["family", "--from", text, "--to", "2", "--seeds", "2", "--grid", "12"])
     (folder / "adir").mkdir(exist_ok=True)
@@ -95,10 +183,43 @@ def cases(folder: Path) -> list[list[str]]:
     (folder / "fake.rrd").write_bytes(b"\x00garbage" * 10)
     paths = ["/nonexistent/dir/x", str(folder / "adir"), "/proc/version", "/dev/null", "", str(folder / "adir") + "/"]
     for p in paths:
-        out.append(["simulate", "--scene", "default", "--t-end", "0.2", "--out", p + (".json" if p and not p.endswith("/") and "adir" not in p else "")])
+        out.append(
+            [
+                "simulate",
+                "--scene",
+                "default",
+                "--t-end",
+                "0.2",
+                "--out",
+                p + (".json" if p and not p.endswith("/") and "adir" not in p else ""),
+            ]
+        )
         out.append(["record", "--scene", "default", "--t-end", "0.2", "--samples", "5", "--out", p + ".rrd"])
-        out.append(["family", "--from", "1.5", "--to", "2", "--seeds", "2", "--grid", "12", "--out", p + ".csv", "--plot", p + ".png"])
-    for p in [str(folder / "plain.txt"), str(folder / "fake.rrd"), str(folder / "adir"), "/nonexistent.rrd", "/dev/null", str(folder / "scene0.json")]:
+        out.append(
+            [
+                "family",
+                "--from",
+                "1.5",
+                "--to",
+                "2",
+                "--seeds",
+                "2",
+                "--grid",
+                "12",
+                "--out",
+                p + ".csv",
+                "--plot",
+                p + ".png",
+            ]
+        )
+    for p in [
+        str(folder / "plain.txt"),
+        str(folder / "fake.rrd"),
+        str(folder / "adir"),
+        "/nonexistent.rrd",
+        "/dev/null",
+        str(folder / "scene0.json"),
+    ]:
         out.append(["record-info", p, "--no-verify"])
     # extreme but in-range magnitudes: must stop at the budget, not hang
     for J, s3 in ((1e-6, 1e6), (1e6, 1e-6), (1e-6, 1.0)):
@@ -149,9 +270,18 @@ def run_case(argv: list[str], limit: float = 30.0) -> dict:
             nan = True
     if "Traceback" in text_err and outcome == "exit":
         outcome = "traceback"
-    elif "internal error" in text_err and outcome == "exit":  # an exception main caught and printed as one line: still a bug
+    elif (
+        "internal error" in text_err and outcome == "exit"
+    ):  # an exception main caught and printed as one line: still a bug
         outcome = "internal-error"
-    return {"argv": argv, "outcome": outcome, "code": code, "nan": nan, "err_lines": len(text_err.strip().splitlines()), "err": text_err[-300:]}
+    return {
+        "argv": argv,
+        "outcome": outcome,
+        "code": code,
+        "nan": nan,
+        "err_lines": len(text_err.strip().splitlines()),
+        "err": text_err[-300:],
+    }
 
 
 def probe(folder: Path, limit: float = 30.0) -> dict:
@@ -169,7 +299,12 @@ def probe(folder: Path, limit: float = 30.0) -> dict:
         "long_errors": sum(r["err_lines"] > 3 for r in rows),
         "commands": sorted({r["argv"][0] for r in rows}),
     }
-    return {"tally": tally, "bad": [r for r in rows if r["outcome"] != "exit" or r["nan"] or r["err_lines"] > 3 or r["code"] not in (0, 1, 2)]}
+    return {
+        "tally": tally,
+        "bad": [
+            r for r in rows if r["outcome"] != "exit" or r["nan"] or r["err_lines"] > 3 or r["code"] not in (0, 1, 2)
+        ],
+    }
 
 
 if __name__ == "__main__":  # python tests/fuzz/hostile.py [FOLDER]
@@ -181,4 +316,3 @@ if __name__ == "__main__":  # python tests/fuzz/hostile.py [FOLDER]
     print(json.dumps(result["tally"], indent=2))
     for r in result["bad"][:40]:
         print(r["outcome"], r["code"], " ".join(r["argv"])[:160], "|", r["err"].strip()[-200:].replace("\n", " / "))
-

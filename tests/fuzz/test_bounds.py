@@ -41,11 +41,16 @@ def test_corpus_all(tmp_path):
 
 
 @FAST
-@given(which=st.sampled_from(corpus.COUNT_FLAGS), value=st.integers(min_value=10**13, max_value=10**60) | st.integers(max_value=-1))
+@given(
+    which=st.sampled_from(corpus.COUNT_FLAGS),
+    value=st.integers(min_value=10**13, max_value=10**60) | st.integers(max_value=-1),
+)
 def test_every_count_flag_has_an_upper_bound(tmp_path_factory, which, value):
     prefix, flag = which
     tmp = str(tmp_path_factory.mktemp("c"))
-    row = corpus.run(corpus.Case("cli", f"{flag} {value}", "refuse", [*(x.replace("{tmp}", tmp) for x in prefix), flag, str(value)]))
+    row = corpus.run(
+        corpus.Case("cli", f"{flag} {value}", "refuse", [*(x.replace("{tmp}", tmp) for x in prefix), flag, str(value)])
+    )
     assert corpus.bad(row) is None, row
     assert row["outcome"] == "refuse"
 
@@ -72,19 +77,32 @@ def _one_step(kw):
         env.reset(seed=1)
         obs, *_ = env.step(env.action_space.sample() * 0)
         return {"obs": obs}
+
     return call
 
 
 @FAST
-@given(step=st.floats(allow_nan=True, allow_infinity=True, min_value=None, max_value=None),
-       wall=st.floats(allow_nan=True, allow_infinity=True) | st.integers(min_value=-5, max_value=10**12),
-       nfev=st.integers(min_value=-5, max_value=10**14) | st.booleans())
+@given(
+    step=st.floats(allow_nan=True, allow_infinity=True, min_value=None, max_value=None),
+    wall=st.floats(allow_nan=True, allow_infinity=True) | st.integers(min_value=-5, max_value=10**12),
+    nfev=st.integers(min_value=-5, max_value=10**14) | st.booleans(),
+)
 def test_simulate_step_and_budget_are_bounded_or_refused(step, wall, nfev):
     from flatbody_env.simulation import simulate
 
-    row = corpus.run(corpus.Case("api", f"simulate step={step} wall={wall} nfev={nfev}", "clean",
-                                 call=lambda: {"y": simulate("default", t_end=0.5, times=[0.0, 0.5], method="RK4", step=step,
-                                                             max_wall_time=wall, max_nfev=nfev).y}, limit=30.0))
+    row = corpus.run(
+        corpus.Case(
+            "api",
+            f"simulate step={step} wall={wall} nfev={nfev}",
+            "clean",
+            call=lambda: {
+                "y": simulate(
+                    "default", t_end=0.5, times=[0.0, 0.5], method="RK4", step=step, max_wall_time=wall, max_nfev=nfev
+                ).y
+            },
+            limit=30.0,
+        )
+    )
     assert corpus.bad(row) is None, row
     if row["outcome"] == "ok":  # accepted only within the documented bounds
         assert 1e-6 <= step <= 1e6 and 0 < wall <= 86_400 and not isinstance(nfev, bool) and 1 <= nfev <= 10**12

@@ -29,13 +29,28 @@ from flatbody_env.env.registration import TASK_CLASSES, TASK_IDS, task_spec
 FAST = settings(max_examples=12, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 SLOW = settings(max_examples=200, deadline=None, suppress_health_check=list(HealthCheck))
 
-numbers = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(min_value=-(10**400), max_value=10**400)
-           | st.sampled_from([0, -1, 1e-300, 1e300, 5e-324, -0.0, 1e6, 1e-6, 2**63]))
-hostile = st.recursive(
-    st.none() | st.booleans() | numbers | st.text(max_size=8) | st.sampled_from(["V1", "reach", "RK4", "DOP853", "rgb_array", "human"]),
-    lambda inner: st.lists(inner, max_size=3) | st.tuples(inner, inner) | st.dictionaries(st.text(max_size=6), inner, max_size=3),
-    max_leaves=8,
-) | st.tuples(numbers, numbers) | st.builds(np.array, st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=3))
+numbers = (
+    st.floats(allow_nan=True, allow_infinity=True)
+    | st.integers(min_value=-(10**400), max_value=10**400)
+    | st.sampled_from([0, -1, 1e-300, 1e300, 5e-324, -0.0, 1e6, 1e-6, 2**63])
+)
+hostile = (
+    st.recursive(
+        st.none()
+        | st.booleans()
+        | numbers
+        | st.text(max_size=8)
+        | st.sampled_from(["V1", "reach", "RK4", "DOP853", "rgb_array", "human"]),
+        lambda inner: (
+            st.lists(inner, max_size=3)
+            | st.tuples(inner, inner)
+            | st.dictionaries(st.text(max_size=6), inner, max_size=3)
+        ),
+        max_leaves=8,
+    )
+    | st.tuples(numbers, numbers)
+    | st.builds(np.array, st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=3))
+)
 
 
 def keywords(env_id: str) -> list[str]:
@@ -63,7 +78,9 @@ def _make(env_id: str, **kw):
 
 def _keyword_case(env_id: str, key: str, value) -> None:
     try:
-        if key == "render_mode":  # gym.make reads render_mode itself first (a list ends in its AttributeError): ours is the env's
+        if (
+            key == "render_mode"
+        ):  # gym.make reads render_mode itself first (a list ends in its AttributeError): ours is the env's
             env = FlatBodyEnv(**task_spec(env_id).kwargs, render_mode=value)
         else:
             env = _make(env_id, **{key: value})
@@ -73,7 +90,9 @@ def _keyword_case(env_id: str, key: str, value) -> None:
     try:
         _finite_step(env)
     except (ValueError, TypeError) as exc:  # refused at the first reset: settings that together leave no target to draw
-        named = [k for k in keywords(env_id) if k in str(exc)]  # e.g. a tiny torque_limit: no target settles fast enough
+        named = [
+            k for k in keywords(env_id) if k in str(exc)
+        ]  # e.g. a tiny torque_limit: no target settles fast enough
         assert named, (key, repr(value)[:80], str(exc)[:200])
     finally:
         env.close()

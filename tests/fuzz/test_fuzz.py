@@ -31,8 +31,12 @@ SLOW = settings(max_examples=400, deadline=None, suppress_health_check=list(Heal
 LIMIT_S = 30.0
 
 json_values = st.recursive(
-    st.none() | st.booleans() | st.integers(min_value=-(10**400), max_value=10**400) | st.floats(allow_nan=True, allow_infinity=True)
-    | st.text(max_size=8) | st.sampled_from([1e308, 1e-308, -1e-308, 5e-324, 1e6, 1e-6, "V1", "V2", "V3"]),
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(10**400), max_value=10**400)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8)
+    | st.sampled_from([1e308, 1e-308, -1e-308, 5e-324, 1e6, 1e-6, "V1", "V2", "V3"]),
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
     max_leaves=12,
 )
@@ -63,7 +67,18 @@ def test_cli_hostile_inputs_long(case_list, index):
     _check_cli(hostile.run_case(case_list[index % len(case_list)], LIMIT_S))
 
 
-FLAGS = ["--t-end", "--times", "--samples", "--rtol", "--atol", "--step", "--method", "--model", "--max-nfev", "--max-seconds"]
+FLAGS = [
+    "--t-end",
+    "--times",
+    "--samples",
+    "--rtol",
+    "--atol",
+    "--step",
+    "--method",
+    "--model",
+    "--max-nfev",
+    "--max-seconds",
+]
 
 
 @FAST
@@ -121,7 +136,11 @@ def _traj_outcome(change):
 
 
 @FAST
-@given(change=st.dictionaries(st.sampled_from(["t", "state", "energy", "rotation", "meta", "initial_state", "x"]), json_values, max_size=3))
+@given(
+    change=st.dictionaries(
+        st.sampled_from(["t", "state", "energy", "rotation", "meta", "initial_state", "x"]), json_values, max_size=3
+    )
+)
 def test_trajectory_json(change):
     _traj_outcome(change)
 
@@ -139,8 +158,9 @@ def env():
 
 option_values = st.dictionaries(
     st.sampled_from(["target", "state", "x"]),
-    json_values | st.fixed_dictionaries({"lambda": json_values, "mu": json_values}) | st.fixed_dictionaries(
-        {n: st.floats(min_value=-2.0, max_value=2.0) for n in STATE_NAMES}),
+    json_values
+    | st.fixed_dictionaries({"lambda": json_values, "mu": json_values})
+    | st.fixed_dictionaries({n: st.floats(min_value=-2.0, max_value=2.0) for n in STATE_NAMES}),
     max_size=2,
 )
 

@@ -58,11 +58,19 @@ def test_fixed_corpus(service, capsys):
 def json_values():
     """Any JSON value, hostile ones weighted in: NaN/±inf (sent as JSON tokens), huge and tiny numbers, unicode,
     nested lists and objects."""
-    scalars = st.one_of(st.none(), st.booleans(), st.integers(min_value=-(10**30), max_value=10**30),
-                        st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=40),
-                        st.sampled_from([1e308, -1e308, 10**400, 1e-308, 0, -1, 263.0, 263.5, "NaN", "inf", "", "é中😀"]))
-    return st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=6), st.dictionaries(st.text(max_size=8), inner, max_size=4)),
-                        max_leaves=12)
+    scalars = st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(min_value=-(10**30), max_value=10**30),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.text(max_size=40),
+        st.sampled_from([1e308, -1e308, 10**400, 1e-308, 0, -1, 263.0, 263.5, "NaN", "inf", "", "é中😀"]),
+    )
+    return st.recursive(
+        scalars,
+        lambda inner: st.one_of(st.lists(inner, max_size=6), st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+        max_leaves=12,
+    )
 
 
 def _choices(trajectory):
@@ -100,7 +108,13 @@ def test_corpus_oracle_knows_the_bounds():
     """The oracle itself: out-of-range, non-finite and wrongly typed values must be refused, in-range ones may pass."""
     grid = corpus.integer(8, 401)
     assert corpus.in_bounds(263, grid) and corpus.in_bounds(corpus.Raw("263.0"), grid)
-    assert not any(corpus.in_bounds(v, grid) for v in (corpus.Raw("263.5"), 7, 402, True, "263", None, corpus.Raw("1e999"), 10**400))
+    assert not any(
+        corpus.in_bounds(v, grid)
+        for v in (corpus.Raw("263.5"), 7, 402, True, "263", None, corpus.Raw("1e999"), 10**400)
+    )
     t_end = corpus.num(0, 200, gt=True, nullable=True)
     assert corpus.in_bounds(None, t_end) and corpus.in_bounds(200, t_end)
-    assert not any(corpus.in_bounds(v, t_end) for v in (0, -1, corpus.Raw("NaN"), corpus.Raw("Infinity"), "1", 1e308, json.loads("1e999")))
+    assert not any(
+        corpus.in_bounds(v, t_end)
+        for v in (0, -1, corpus.Raw("NaN"), corpus.Raw("Infinity"), "1", 1e308, json.loads("1e999"))
+    )

@@ -16,7 +16,13 @@ from flatbody_env.integrators import cuda
 from flatbody_env.integrators.compiled_methods import kernel_params
 from flatbody_env.physics.state import pack
 
-STEPS = {"RK4": 0.02, "splitting-strang": 0.01, "splitting-suzuki4": 0.04, "splitting-yoshida4": 0.02, "DOP853-numba": 0.0}
+STEPS = {
+    "RK4": 0.02,
+    "splitting-strang": 0.01,
+    "splitting-suzuki4": 0.04,
+    "splitting-yoshida4": 0.02,
+    "DOP853-numba": 0.0,
+}
 
 
 def _states() -> tuple[object, np.ndarray]:
@@ -60,8 +66,11 @@ def _device_functions() -> dict:
         for name in _names(fn.__code__):
             value = fn.__globals__.get(name)
             if isinstance(value, types.ModuleType):
-                ufuncs.update(f"{fn.__name__}: {name}.{attr}" for attr in fn.__code__.co_names
-                              if isinstance(getattr(value, attr, None), np.ufunc))
+                ufuncs.update(
+                    f"{fn.__name__}: {name}.{attr}"
+                    for attr in fn.__code__.co_names
+                    if isinstance(getattr(value, attr, None), np.ufunc)
+                )
             if isinstance(value, (Dispatcher, types.FunctionType)):
                 left.append(f"{fn.__name__}.{name}")
             elif hasattr(value, "py_func") and id(value) not in seen:
@@ -71,7 +80,12 @@ def _device_functions() -> dict:
 
 
 def main() -> dict:
-    report = {"simulated": cuda.simulated(), "available": cuda.is_available(), "device": cuda.device_name(), "methods": {}}
+    report = {
+        "simulated": cuda.simulated(),
+        "available": cuda.is_available(),
+        "device": cuda.device_name(),
+        "methods": {},
+    }
     body, Y0 = _states()
     P = kernel_params(body)
     n = Y0.shape[0]
@@ -83,8 +97,9 @@ def main() -> dict:
         OUT = np.empty((n, times.size, 11))
         ST, NF, TF = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n)
         bs.batch_solve(kind, coeffs, Y0, times, u, P, h, 1e-10, 1e-10, etol, 10**7, OUT, ST, NF, TF)
-        gOUT, gST, gNF, gTF = cuda.solve(name, Y0, times, u, P, h=h, rtol=1e-10, atol=1e-10, energy_tol=etol, max_nfev=10**7,
-                                         threads_per_block=4)
+        gOUT, gST, gNF, gTF = cuda.solve(
+            name, Y0, times, u, P, h=h, rtol=1e-10, atol=1e-10, energy_tol=etol, max_nfev=10**7, threads_per_block=4
+        )
         # one environment step, controls on two bodies
         Ys = np.ascontiguousarray(Y0.T)
         U = np.zeros((4, n))
@@ -93,27 +108,40 @@ def main() -> dict:
         O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
         bs.batch_env_step(kind, coeffs, Ys, U, P, 0.05, h / 4, 1e-11, 1e-11, 1e-3, O1, S1, N1)
         d_Y, d_U, d_P = cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P)
-        d_OUT, d_ST, d_NF = cuda.env_step(name, d_Y, d_U, d_P, 0.05, h=h / 4, rtol=1e-11, atol=1e-11, energy_tol=1e-3, threads_per_block=2)
+        d_OUT, d_ST, d_NF = cuda.env_step(
+            name, d_Y, d_U, d_P, 0.05, h=h / 4, rtol=1e-11, atol=1e-11, energy_tol=1e-3, threads_per_block=2
+        )
         report["methods"][name] = {
             "solve_diff": _diff(OUT, gOUT),
-            "solve_status_cpu": ST.tolist(), "solve_status_cuda": gST.tolist(),
+            "solve_status_cpu": ST.tolist(),
+            "solve_status_cuda": gST.tolist(),
             "solve_nfev_equal": bool(np.array_equal(NF, gNF)),
             "solve_tfail_diff": _diff(TF, gTF),
             "env_diff": _diff(O1, d_OUT.copy_to_host()),
-            "env_status_cpu": S1.tolist(), "env_status_cuda": d_ST.copy_to_host().tolist(),
+            "env_status_cpu": S1.tolist(),
+            "env_status_cuda": d_ST.copy_to_host().tolist(),
             "env_nfev_equal": bool(np.array_equal(N1, d_NF.copy_to_host())),
         }
     # DOP853 out of budget on every body: the budget status on both targets
     OUT = np.empty((n, times.size, 11))
     ST, NF, TF = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n)
     bs.batch_solve(bs.DOP853_KIND, bs.STRANG, Y0, times, u, P, 0.0, 1e-10, 1e-10, etol, 30, OUT, ST, NF, TF)
-    gOUT, gST, gNF, gTF = cuda.solve("DOP853-numba", Y0, times, u, P, h=0.0, rtol=1e-10, atol=1e-10, energy_tol=etol, max_nfev=30)
-    report["dop853_budget"] = {"status_cpu": ST.tolist(), "status_cuda": gST.tolist(), "diff": _diff(OUT, gOUT),
-                               "nfev_equal": bool(np.array_equal(NF, gNF))}
+    gOUT, gST, gNF, gTF = cuda.solve(
+        "DOP853-numba", Y0, times, u, P, h=0.0, rtol=1e-10, atol=1e-10, energy_tol=etol, max_nfev=30
+    )
+    report["dop853_budget"] = {
+        "status_cpu": ST.tolist(),
+        "status_cuda": gST.tolist(),
+        "diff": _diff(OUT, gOUT),
+        "nfev_equal": bool(np.array_equal(NF, gNF)),
+    }
     on_cpu = simulate_batch(body, Y0[:3], times=[0.3, 0.6], method="RK4", step=0.05)
     on_gpu = simulate_batch(body, Y0[:3], times=[0.3, 0.6], method="RK4", step=0.05, device="cuda")
-    report["simulate_batch"] = {"diff": _diff(on_cpu.state, on_gpu.state), "device": on_gpu.device,
-                                "status_equal": bool(np.array_equal(on_cpu.status, on_gpu.status))}
+    report["simulate_batch"] = {
+        "diff": _diff(on_cpu.state, on_gpu.state),
+        "device": on_gpu.device,
+        "status_equal": bool(np.array_equal(on_cpu.status, on_gpu.status)),
+    }
     report["device_functions"] = _device_functions()
     report["env_step_budget"] = _env_step_budget(body, Y0, P)
     report["wall_time"] = _wall_time(body, Y0)
@@ -126,12 +154,34 @@ def _env_step_budget(body, Y0, P) -> dict:
     Ys, U = np.ascontiguousarray(Y0.T), np.zeros((4, n))
     O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
     bs.batch_env_step(bs.DOP853_KIND, bs.STRANG, Ys, U, P, 0.5, 0.0, 1e-11, 1e-11, np.inf, O1, S1, N1, 30)
-    d_OUT, d_ST, d_NF = cuda.env_step("DOP853-numba", cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P), 0.5,
-                                      rtol=1e-11, atol=1e-11, max_nfev=30, threads_per_block=2)
-    unbounded = cuda.env_step("DOP853-numba", cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P), 0.5, rtol=1e-11,
-                              atol=1e-11, threads_per_block=2)[2].copy_to_host()
-    return {"status_cpu": S1.tolist(), "status_cuda": d_ST.copy_to_host().tolist(), "diff": _diff(O1, d_OUT.copy_to_host()),
-            "nfev_equal": bool(np.array_equal(N1, d_NF.copy_to_host())), "nfev_unbounded": unbounded.tolist()}
+    d_OUT, d_ST, d_NF = cuda.env_step(
+        "DOP853-numba",
+        cuda.cuda.to_device(Ys),
+        cuda.cuda.to_device(U),
+        cuda.cuda.to_device(P),
+        0.5,
+        rtol=1e-11,
+        atol=1e-11,
+        max_nfev=30,
+        threads_per_block=2,
+    )
+    unbounded = cuda.env_step(
+        "DOP853-numba",
+        cuda.cuda.to_device(Ys),
+        cuda.cuda.to_device(U),
+        cuda.cuda.to_device(P),
+        0.5,
+        rtol=1e-11,
+        atol=1e-11,
+        threads_per_block=2,
+    )[2].copy_to_host()
+    return {
+        "status_cpu": S1.tolist(),
+        "status_cuda": d_ST.copy_to_host().tolist(),
+        "diff": _diff(O1, d_OUT.copy_to_host()),
+        "nfev_equal": bool(np.array_equal(N1, d_NF.copy_to_host())),
+        "nfev_unbounded": unbounded.tolist(),
+    }
 
 
 def _wall_time(body, Y0) -> dict:
@@ -145,7 +195,9 @@ def _wall_time(body, Y0) -> dict:
     batch._PROBE_NFEV = 100
     y = Y0[:3]
     cpu = simulate_batch(body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6)
-    gpu = simulate_batch(body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6, max_wall_time=600.0, device="cuda")
+    gpu = simulate_batch(
+        body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6, max_wall_time=600.0, device="cuda"
+    )
     t0 = time.perf_counter()
     out = simulate_batch(body, y, times=[1e4], method="DOP853-numba", max_nfev=10**7, max_wall_time=2.0, device="cuda")
     took = time.perf_counter() - t0
@@ -154,11 +206,24 @@ def _wall_time(body, Y0) -> dict:
         refused = ""
     except IntegrationError as exc:
         refused = f"{exc.kind}: {exc}"
-    return {"fixed_refused": refused,
-            "finished": {"diff": _diff(cpu.state, gpu.state), "status_cpu": cpu.status.tolist(), "status_cuda": gpu.status.tolist(),
-                         "nfev_equal": bool(np.array_equal(cpu.nfev, gpu.nfev)), "launches": gpu.extra["launches"]},
-            "over": {"status": out.status.tolist(), "seconds": took, "launches": out.extra["launches"], "nfev": out.nfev.tolist(),
-                     "all_nan": bool(np.isnan(out.state).all()), "t_fail": out.t_fail.tolist()}}
+    return {
+        "fixed_refused": refused,
+        "finished": {
+            "diff": _diff(cpu.state, gpu.state),
+            "status_cpu": cpu.status.tolist(),
+            "status_cuda": gpu.status.tolist(),
+            "nfev_equal": bool(np.array_equal(cpu.nfev, gpu.nfev)),
+            "launches": gpu.extra["launches"],
+        },
+        "over": {
+            "status": out.status.tolist(),
+            "seconds": took,
+            "launches": out.extra["launches"],
+            "nfev": out.nfev.tolist(),
+            "all_nan": bool(np.isnan(out.state).all()),
+            "t_fail": out.t_fail.tolist(),
+        },
+    }
 
 
 if __name__ == "__main__":

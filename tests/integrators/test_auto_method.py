@@ -39,14 +39,17 @@ def test_auto_picks_what_the_work_precision_chart_says(scene, target):
     assert auto_method(rung, sc.body).method == _chart_fastest(scene, target, rung)
 
 
-@pytest.mark.parametrize("scene, method, model", [
-    ("default", "DOP853-numba", "two-polar"),
-    ("regular", "DOP853-numba", "two-polar"),
-    ("close-approach", RATTLE_AUTO, "regular"),
-    ("anisotropic", RATTLE_AUTO, "regular"),
-    ("stationary-ellipse", "ladder-stationary", "stationary"),
-    ("planar-v3", "ladder-planar", "planar"),
-])
+@pytest.mark.parametrize(
+    "scene, method, model",
+    [
+        ("default", "DOP853-numba", "two-polar"),
+        ("regular", "DOP853-numba", "two-polar"),
+        ("close-approach", RATTLE_AUTO, "regular"),
+        ("anisotropic", RATTLE_AUTO, "regular"),
+        ("stationary-ellipse", "ladder-stationary", "stationary"),
+        ("planar-v3", "ladder-planar", "planar"),
+    ],
+)
 def test_simulate_default_is_auto_and_names_the_choice(scene, method, model):
     traj = simulate(scene, t_end=2.0)
     assert traj.method == method and traj.model == model
@@ -92,7 +95,9 @@ def test_auto_falls_back_where_the_compiled_methods_do_not_apply():
     assert traj.method == "DOP853-regular"
     assert "does not apply" in traj.extra["method_reason"]
     y0 = np.array([v2.state[k] for k in traj.state])
-    ref = get_method("DOP853-regular").integrate(BODIES["V2"], y0, np.array([0.0, 0.25, 0.5]), tol=Tolerances(rtol=1e-10, atol=1e-10))
+    ref = get_method("DOP853-regular").integrate(
+        BODIES["V2"], y0, np.array([0.0, 0.25, 0.5]), tol=Tolerances(rtol=1e-10, atol=1e-10)
+    )
     assert np.allclose(traj.y, ref.Y[:, 1:], rtol=0, atol=1e-12)
 
 

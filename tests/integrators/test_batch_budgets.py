@@ -103,7 +103,9 @@ def test_env_stepper_batch_carries_the_tolerances_budget():
     Y, U = _lanes()
     n = Y.shape[1]
     for first_step in (0.0, DT):  # the scalar batch kernel and the fused one
-        step = make_env_step("DOP853-numba", body, Tolerances(rtol=1e-11, atol=1e-11, max_nfev=TINY), first_step=first_step)
+        step = make_env_step(
+            "DOP853-numba", body, Tolerances(rtol=1e-11, atol=1e-11, max_nfev=TINY), first_step=first_step
+        )
         OUT, S, NF = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)
         step.advance_batch(Y, U, DT, OUT, S, NF)
         _same((OUT, S, NF), _scalar(Y, U, kernel_params(body), first_step, TINY))
@@ -132,15 +134,28 @@ def _planar_kernel_directly(t_end):
 
 def test_ladder_planar_ample_budget_is_bit_for_bit_the_kernels_result():
     times, X = _planar_kernel_directly(200.0)
-    run = simulate("planar-v3", times=times, t_end=200.0, model="planar", rtol=1e-10, atol=1e-10)  # probes, then the run
+    run = simulate(
+        "planar-v3", times=times, t_end=200.0, model="planar", rtol=1e-10, atol=1e-10
+    )  # probes, then the run
     assert run.model == "planar"
     np.testing.assert_array_equal(run.state["lambda"], X[0])
     np.testing.assert_array_equal(run.state["theta"], X[4])
-    again = simulate("planar-v3", times=times, t_end=200.0, model="planar", rtol=1e-10, atol=1e-10, max_nfev=10**12, max_wall_time=86400)
+    again = simulate(
+        "planar-v3",
+        times=times,
+        t_end=200.0,
+        model="planar",
+        rtol=1e-10,
+        atol=1e-10,
+        max_nfev=10**12,
+        max_wall_time=86400,
+    )
     np.testing.assert_array_equal(again.y, run.y)
 
 
-@pytest.mark.parametrize("budget, words", [({"max_nfev": 1000}, "max_nfev = 1000"), ({"max_wall_time": 0.5}, "(the wall-clock budget)")])
+@pytest.mark.parametrize(
+    "budget, words", [({"max_nfev": 1000}, "max_nfev = 1000"), ({"max_wall_time": 0.5}, "(the wall-clock budget)")]
+)
 def test_ladder_planar_stops_at_its_budget(budget, words):
     with pytest.raises(IntegrationError) as info:
         simulate("planar-v3", t_end=1e6, model="planar", **budget)
@@ -150,8 +165,26 @@ def test_ladder_planar_stops_at_its_budget(budget, words):
 
 def test_ladder_wall_time_budget_stops_the_cli_at_once():
     """A hostile run (t = 1e6 on the planar rung, ~5 min of work before) with a 1 s budget: one line, exit 1."""
-    r = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "simulate", "--scene", "planar-v3", "--t-end", "1e6", "--model", "planar",
-                        "--max-seconds", "1"], capture_output=True, text=True, timeout=120, check=False)  # hang guard
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flatbody_env.cli",
+            "simulate",
+            "--scene",
+            "planar-v3",
+            "--t-end",
+            "1e6",
+            "--model",
+            "planar",
+            "--max-seconds",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )  # hang guard
     assert r.returncode == 1, r.stderr[-2000:]
     lines = [x for x in r.stderr.splitlines() if x.strip()]
     assert len(lines) == 1 and "Traceback" not in r.stderr and "(the wall-clock budget)" in lines[0], r.stderr
@@ -190,12 +223,30 @@ def test_simulate_batch_ample_wall_time_is_bit_for_bit():
 
     body, Y0 = _batch_states(100)
     times = np.linspace(1.0, 200.0, 50)
-    a = simulate_batch(body, Y0, times=times, method="DOP853-numba", energy_tol=1.0, max_nfev=10**9, max_wall_time=86_400)
+    a = simulate_batch(
+        body, Y0, times=times, method="DOP853-numba", energy_tol=1.0, max_nfev=10**9, max_wall_time=86_400
+    )
     assert a.kinds == ["ok"] * 100 and a.nfev.min() > _PROBE_NFEV
     kind, coeffs = bs.KIND["DOP853-numba"]
     grid = np.concatenate([[0.0], times])
     OUT, ST, NF, TF = np.empty((100, grid.size, 11)), np.zeros(100, np.int64), np.zeros(100, np.int64), np.empty(100)
-    bs.batch_solve(kind, coeffs, Y0, grid, np.zeros(4), kernel_params(body), 0.0, 1e-10, 1e-10, np.full(100, 1.0), 10**9, OUT, ST, NF, TF)
+    bs.batch_solve(
+        kind,
+        coeffs,
+        Y0,
+        grid,
+        np.zeros(4),
+        kernel_params(body),
+        0.0,
+        1e-10,
+        1e-10,
+        np.full(100, 1.0),
+        10**9,
+        OUT,
+        ST,
+        NF,
+        TF,
+    )
     np.testing.assert_array_equal(a.state, OUT[:, 1:])
     np.testing.assert_array_equal(a.nfev, NF)
 

@@ -14,7 +14,13 @@ from flatbody_env.integrators.compiled_methods import env_stepper, kernel_params
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import load_scene
 
-STEPS = {"RK4": 0.02, "splitting-strang": 0.01, "splitting-suzuki4": 0.04, "splitting-yoshida4": 0.02, "DOP853-numba": 0.0}
+STEPS = {
+    "RK4": 0.02,
+    "splitting-strang": 0.01,
+    "splitting-suzuki4": 0.04,
+    "splitting-yoshida4": 0.02,
+    "DOP853-numba": 0.0,
+}
 
 
 def _batch():
@@ -30,9 +36,31 @@ def _batch():
 
 def test_next_up_is_nextafter_bit_for_bit():
     rng = np.random.default_rng(0)
-    vals = [0.0, -0.0, 5e-324, -5e-324, 1e-310, -1e-310, 2.0**-1022, -(2.0**-1022), 0.5, -0.5, 1.0, -1.0, 0.05, 1e300,
-            1.7976931348623157e308, -1.7976931348623157e308, math.inf, -math.inf]
-    vals += list(rng.uniform(-10, 10, 500)) + list(np.exp(rng.uniform(-745, 709, 500))) + list(-np.exp(rng.uniform(-745, 709, 500)))
+    vals = [
+        0.0,
+        -0.0,
+        5e-324,
+        -5e-324,
+        1e-310,
+        -1e-310,
+        2.0**-1022,
+        -(2.0**-1022),
+        0.5,
+        -0.5,
+        1.0,
+        -1.0,
+        0.05,
+        1e300,
+        1.7976931348623157e308,
+        -1.7976931348623157e308,
+        math.inf,
+        -math.inf,
+    ]
+    vals += (
+        list(rng.uniform(-10, 10, 500))
+        + list(np.exp(rng.uniform(-745, 709, 500)))
+        + list(-np.exp(rng.uniform(-745, 709, 500)))
+    )
     with np.errstate(over="ignore"):
         expected = [np.nextafter(v, np.inf).tobytes() for v in vals]
     for f in (tk.next_up, tk.next_up.py_func):  # compiled and plain Python (what the CUDA target compiles)
@@ -49,7 +77,9 @@ def test_initial_step_into_equals_the_allocating_wrapper():
         tk.rhs_compiled(y, u, P, f)
         c1, c2 = np.zeros(3, np.int64), np.zeros(3, np.int64)
         h1 = tk.dop853_initial_step(y, f, 0.0, 1.0, u, P, 1e-9, 1e-9, np.empty(7), np.empty(4), np.empty(11), c1)
-        h2 = tk.dop853_initial_step_into(y, f, 0.0, 1.0, u, P, 1e-9, 1e-9, np.empty(7), np.empty(4), np.empty(11), np.empty(11), c2)
+        h2 = tk.dop853_initial_step_into(
+            y, f, 0.0, 1.0, u, P, 1e-9, 1e-9, np.empty(7), np.empty(4), np.empty(11), np.empty(11), c2
+        )
         assert h1 == h2 and h1 > 0 and (c1 == c2).all()
 
 

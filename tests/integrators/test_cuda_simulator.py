@@ -19,9 +19,17 @@ FIXED = ("RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4")
 @pytest.fixture(scope="module")
 def report():
     """The simulator run (a child process: NUMBA_ENABLE_CUDASIM must be set before numba.cuda is imported)."""
-    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.run([sys.executable, str(Path(__file__).with_name("cuda_sim_check.py"))], capture_output=True, text=True,
-                          cwd=ROOT, env=env, timeout=600)
+    env = dict(
+        os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    )
+    proc = subprocess.run(
+        [sys.executable, str(Path(__file__).with_name("cuda_sim_check.py"))],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -79,8 +87,12 @@ def test_simulate_batch_on_cuda_honours_the_wall_clock_budget(report):
     assert done["launches"] >= 2  # the probe's 100 evaluations were not enough: re-launched with a larger budget
     assert over["status"] == [8, 8, 8] and over["all_nan"]
     assert over["launches"] >= 3 and max(over["nfev"]) < 10**7
-    assert over["seconds"] < 2.0 + 6.0, over  # the last launch is predicted to fit the time left; slack for a loaded machine
-    assert report["wall_time"]["fixed_refused"].startswith("budget: "), report["wall_time"]  # RK4 over the time: refused up front
+    assert over["seconds"] < 2.0 + 6.0, (
+        over
+    )  # the last launch is predicted to fit the time left; slack for a loaded machine
+    assert report["wall_time"]["fixed_refused"].startswith("budget: "), report[
+        "wall_time"
+    ]  # RK4 over the time: refused up front
 
 
 def test_every_device_function_is_retargeted(report):
@@ -102,7 +114,11 @@ def test_device_numpy_is_numpy_with_math_scalars():
 
     dnp = cuda.DEVICE_NUMPY
     assert dnp.uint64 is np.uint64 and dnp.inf == np.inf and dnp.float64 is np.float64
-    assert not [k for k in dir(dnp) if isinstance(getattr(dnp, k), np.ufunc) and not k.startswith("_") and k in cuda._SCALAR_UFUNCS]
+    assert not [
+        k
+        for k in dir(dnp)
+        if isinstance(getattr(dnp, k), np.ufunc) and not k.startswith("_") and k in cuda._SCALAR_UFUNCS
+    ]
     rng = np.random.default_rng(0)
     for x in np.concatenate([rng.uniform(1e-3, 10.0, 200), [0.0, 1.0, 2.0]]):
         assert dnp.sqrt(x) == np.sqrt(x) and dnp.abs(-x) == np.abs(-x)

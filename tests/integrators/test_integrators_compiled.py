@@ -24,8 +24,15 @@ from flatbody_env.physics.state import pack
 BODIES = [
     Body(inertia=Inertia.isotropic(1.0, 1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1.0, b=1.0)),
     Body(inertia=Inertia.isotropic(1.3, 0.7), potential=V1(k=2.0), thickness=ThicknessPotential(a=0.5, b=2.0)),
-    Body(inertia=Inertia(J1=1.2, J2=0.8, J3=1.0), potential=V2(c=0.7, d=1.1), thickness=ThicknessPotential(a=1.0, b=1.0)),
-    Body(inertia=Inertia.isotropic(1.0, 1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1.0, b=1.0), spin_convention="paper"),
+    Body(
+        inertia=Inertia(J1=1.2, J2=0.8, J3=1.0), potential=V2(c=0.7, d=1.1), thickness=ThicknessPotential(a=1.0, b=1.0)
+    ),
+    Body(
+        inertia=Inertia.isotropic(1.0, 1.0),
+        potential=V3(kappa=1.0),
+        thickness=ThicknessPotential(a=1.0, b=1.0),
+        spin_convention="paper",
+    ),
 ]
 
 
@@ -55,7 +62,9 @@ def test_invariant_gradient_kernel_equals_physics(pot):
     c1 = pot.constants[0]
     for _ in range(10):
         tr, det = rng.uniform(1.0, 4.0), rng.uniform(0.2, 1.0)
-        assert np.allclose(rk.invariant_gradient_kernel(float(pot.kind), c1, tr, det), pot.invariant_gradient(tr, det), rtol=1e-14)
+        assert np.allclose(
+            rk.invariant_gradient_kernel(float(pot.kind), c1, tr, det), pot.invariant_gradient(tr, det), rtol=1e-14
+        )
 
 
 def test_regular_energy_and_forces_equal_python():
@@ -140,7 +149,9 @@ def test_seam_uses_the_compiled_stepper_and_flags_failures():
             kinds.add(stepper.describe(st).split(":")[0])
             break
         y = out.copy()
-    assert kinds & {"chart-singularity", "under-resolved", "non-finite", "energy"}, "RK4 crossed the close pass unflagged"
+    assert kinds & {"chart-singularity", "under-resolved", "non-finite", "energy"}, (
+        "RK4 crossed the close pass unflagged"
+    )
 
 
 def test_compiled_methods_refuse_custom_potentials_and_missing_steps():
@@ -152,7 +163,9 @@ def test_compiled_methods_refuse_custom_potentials_and_missing_steps():
     y = pack(load_scene("default").state)
     for name in ("DOP853-numba", "RK4", "RATTLE-suzuki4"):
         with pytest.raises(ValueError, match="potential"):
-            get_method(name).integrate(body, y, np.array([0.0, 1.0]), tol=Tolerances(step=None if name == "DOP853-numba" else 0.1))
+            get_method(name).integrate(
+                body, y, np.array([0.0, 1.0]), tol=Tolerances(step=None if name == "DOP853-numba" else 0.1)
+            )
     good = load_scene("default").body
     with pytest.raises(ValueError, match="step"):
         get_method("RK4").integrate(good, y, np.array([0.0, 1.0]), tol=Tolerances())
@@ -166,7 +179,15 @@ def test_simulate_and_cli_accept_every_compiled_method(capsys):
     from flatbody_env.cli.main import main
     from flatbody_env.simulation import simulate
 
-    for name in ("DOP853-numba", "RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4", "RATTLE", "RATTLE-suzuki4"):
+    for name in (
+        "DOP853-numba",
+        "RK4",
+        "splitting-strang",
+        "splitting-suzuki4",
+        "splitting-yoshida4",
+        "RATTLE",
+        "RATTLE-suzuki4",
+    ):
         step = None if name == "DOP853-numba" else 0.01
         traj = simulate("regular", t_end=2.0, method=name, step=step)
         assert traj.method == name and np.all(np.isfinite(traj.y))

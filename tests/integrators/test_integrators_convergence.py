@@ -50,7 +50,9 @@ def test_every_fixed_step_method_is_covered():
 @pytest.mark.parametrize("name", sorted(FIXED))
 def test_measured_order_within_0_3_of_nominal(smooth_problem, name):
     sc, y0, times, ref = smooth_problem
-    hs = {2: np.array([0.05, 0.025, 0.0125]), 4: np.array([0.1, 0.05, 0.025]), 6: np.array([0.2, 0.1, 0.05])}[FIXED[name]]
+    hs = {2: np.array([0.05, 0.025, 0.0125]), 4: np.array([0.1, 0.05, 0.025]), 6: np.array([0.2, 0.1, 0.05])}[
+        FIXED[name]
+    ]
     err = []
     for h in hs:
         Y = get_method(name).integrate(sc.body, y0, times, tol=Tolerances(step=float(h))).Y
@@ -69,7 +71,9 @@ def test_dop853_port_takes_scipys_steps():
     for rtol in (1e-6, 1e-10):
         tol = Tolerances(rtol=rtol, atol=rtol * 1e-3)
         a = get_method("DOP853-numba").integrate(sc.body, y0, times, tol=tol)
-        b = solve_ivp(lambda t, y: rhs(t, y, None, sc.body), (0.0, 20.0), y0, method="DOP853", rtol=tol.rtol, atol=tol.atol)
+        b = solve_ivp(
+            lambda t, y: rhs(t, y, None, sc.body), (0.0, 20.0), y0, method="DOP853", rtol=tol.rtol, atol=tol.atol
+        )
         assert a.nfev == b.nfev
         assert a.stats["steps"] == b.t.size - 1
         assert np.max(np.abs(a.Y[:, -1] - b.y[:, -1])) < 1e-11

@@ -36,7 +36,9 @@ def regular_chart_errors():
         y0 = pack(sc.state)
         times = np.linspace(0.0, T_END, 3)
         ref = get_method("DOP853-regular").integrate(sc.body, y0, times, tol=Tolerances(rtol=1e-12, atol=1e-12))
-        sol = get_method("RATTLE-suzuki4").integrate(sc.body, y0, np.linspace(0.0, T_END, 1201), tol=Tolerances(step=0.01))
+        sol = get_method("RATTLE-suzuki4").integrate(
+            sc.body, y0, np.linspace(0.0, T_END, 1201), tol=Tolerances(step=0.01)
+        )
         errors[delta] = (np.max(np.abs(sol.Y[:, ::600] - ref.Y)), _min_relative_gap(sol.stats["regular"]))
     return errors
 
@@ -68,7 +70,9 @@ def test_the_same_step_is_fine_away_from_lambda_equals_mu(name):
     """The failure above is the chart's, not the step size's: on the 1e-2 orbit the run succeeds."""
     sc = gap_scene(1e-1)
     y0 = pack(sc.state)
-    sol = get_method(name).integrate(sc.body, y0, np.linspace(0.0, T_END, 7), tol=Tolerances(step=0.01, energy_tol=1e-3))
+    sol = get_method(name).integrate(
+        sc.body, y0, np.linspace(0.0, T_END, 7), tol=Tolerances(step=0.01, energy_tol=1e-3)
+    )
     assert np.all(np.isfinite(sol.Y))
 
 
@@ -76,7 +80,9 @@ def test_adaptive_two_polar_pays_with_cost_near_lambda_equals_mu():
     costs = []
     for delta in (1e-1, 1e-5):
         sc = gap_scene(delta)
-        sol = get_method("DOP853-numba").integrate(sc.body, pack(sc.state), np.array([0.0, T_END]), tol=Tolerances(rtol=1e-10, atol=1e-12))
+        sol = get_method("DOP853-numba").integrate(
+            sc.body, pack(sc.state), np.array([0.0, T_END]), tol=Tolerances(rtol=1e-10, atol=1e-12)
+        )
         costs.append(sol.nfev)
     assert costs[1] > 2 * costs[0]
 

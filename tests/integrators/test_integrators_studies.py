@@ -60,7 +60,19 @@ def test_failure_study_progress_and_summary_count_the_same_runs(tmp_path, capsys
     from flatbody_env.cli.main import main
 
     monkeypatch.setenv("FLATBODY_PROGRESS_S", "0")  # stderr is not a terminal here: a progress line per run
-    argv = ["failure-study", "--quick", "--studies", "horizon", "--methods", "RK4", "DOP853-numba", "--max-run-s", "0.05", "--out", str(tmp_path)]
+    argv = [
+        "failure-study",
+        "--quick",
+        "--studies",
+        "horizon",
+        "--methods",
+        "RK4",
+        "DOP853-numba",
+        "--max-run-s",
+        "0.05",
+        "--out",
+        str(tmp_path),
+    ]
     assert main(argv) == 0
     out, err = capsys.readouterr()
     planned = planned_runs(("horizon",), ("RK4", "DOP853-numba"), quick=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 
-CALLER = textwrap.dedent('''
+CALLER = textwrap.dedent("""
     import callee_mod
     from flatbody_env.integrators.jit import njit, retarget
 
@@ -19,7 +19,7 @@ CALLER = textwrap.dedent('''
     @njit
     def f(x):
         return 2.0 * g(x)
-''')
+""")
 RUN = "import caller_mod; print(caller_mod.f(1.0), sum(caller_mod.f.stats.cache_hits.values()))"
 
 

@@ -17,7 +17,13 @@ from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.integrators import ladder_kernels as lk
 from flatbody_env.integrators.compiled_methods import kernel_params
 from flatbody_env.integrators.ladder import (
-    GAP_MIN, STATIONARY_TOL, check_rung, choose_rung, first_collapse_time, planar_gap_lower_bound, rung_model,
+    GAP_MIN,
+    STATIONARY_TOL,
+    check_rung,
+    choose_rung,
+    first_collapse_time,
+    planar_gap_lower_bound,
+    rung_model,
 )
 from flatbody_env.physics.body import Body, Inertia, default_body
 from flatbody_env.physics.equations import rhs
@@ -44,7 +50,11 @@ def _full(body, y, times=T100, u=None):
 
 
 def _full_rotation(body, y, times=T100):
-    return get_method("DOP853").integrate(body, y, times, tol=Tolerances(rtol=1e-12, atol=1e-13), with_rotation=True).rotation
+    return (
+        get_method("DOP853")
+        .integrate(body, y, times, tol=Tolerances(rtol=1e-12, atol=1e-13), with_rotation=True)
+        .rotation
+    )
 
 
 def _rung(name, body, y, times=T100, u=None, with_rotation=False):
@@ -72,7 +82,13 @@ def test_planar_set_is_invariant_and_splits_into_two_systems(name):
     rng = np.random.default_rng(3)
     P = kernel_params(body)
     for _ in range(5):
-        y = np.concatenate([[0.0, 0.0], rng.normal(size=5), [rng.uniform(1.1, 1.8), rng.uniform(0.4, 0.9), rng.uniform(0.6, 1.4), rng.uniform(-3, 3)]])
+        y = np.concatenate(
+            [
+                [0.0, 0.0],
+                rng.normal(size=5),
+                [rng.uniform(1.1, 1.8), rng.uniform(0.4, 0.9), rng.uniform(0.6, 1.4), rng.uniform(-3, 3)],
+            ]
+        )
         f = rhs(0.0, y, None, body)
         assert f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0 and f[3] == 0.0
         other = y.copy()
@@ -86,7 +102,19 @@ def test_planar_set_is_invariant_and_splits_into_two_systems(name):
         # the compiled sub-systems read exactly these rates, and α̇ = ω3
         x = np.array([y[7], y[8], y[4], y[5], y[10], 0.3])
         dx = np.empty(6)
-        lk.sub_rhs(x, y, lk.INPLANE_STATE, lk.INPLANE_RATE, np.zeros(4), P, dx, np.empty(11), np.empty(12), np.empty(7), np.empty(4))
+        lk.sub_rhs(
+            x,
+            y,
+            lk.INPLANE_STATE,
+            lk.INPLANE_RATE,
+            np.zeros(4),
+            P,
+            dx,
+            np.empty(11),
+            np.empty(12),
+            np.empty(7),
+            np.empty(4),
+        )
         np.testing.assert_allclose(dx[:5], f[[7, 8, 4, 5, 10]], rtol=1e-13, atol=1e-13)
         assert dx[5] == pytest.approx(velocities_from_momenta(y, body)["omega3"], rel=1e-13)
         # an independent derivation: ṗ_λ = −∂H/∂λ, ṗ_μ = −∂H/∂μ, ṗ_ϱ = −∂H/∂ϱ with H built from matrices
@@ -102,8 +130,10 @@ def test_planar_set_is_invariant_and_splits_into_two_systems(name):
 # ------------------------------------------------------------------------------- rung 1
 def _stationary_cases():
     body = default_body()
-    out = [("stationary-v1", load_scene("stationary-v1").body, pack(load_scene("stationary-v1").state)),
-           ("stationary-ellipse", load_scene("stationary-ellipse").body, pack(load_scene("stationary-ellipse").state))]
+    out = [
+        ("stationary-v1", load_scene("stationary-v1").body, pack(load_scene("stationary-v1").state)),
+        ("stationary-ellipse", load_scene("stationary-ellipse").body, pack(load_scene("stationary-ellipse").state)),
+    ]
     for branch in ("rotation", "circulation"):
         e = stationary_from_shape(body, 1.5, 1.0, branch=branch)
         y = pack(e.state)
@@ -155,8 +185,12 @@ def _planar_cases():
     y_v2 = np.array([0.0, 0.0, 1.6, 1.1, 0.2, -0.3, 0.3, 1.5, 0.8, 1.1, 0.2])
     y_v3b = pack(sc.state)
     y_v3b[[4, 5, 6, 10]] = [-0.2, 0.25, -0.4, 1.0]
-    return [("planar-v3", sc.body, pack(sc.state)), ("V3-other", sc.body, y_v3b), ("crossing (sigma- = 0)", cr.body, pack(cr.state)),
-            ("V2 c != d", BV2, y_v2)]
+    return [
+        ("planar-v3", sc.body, pack(sc.state)),
+        ("V3-other", sc.body, y_v3b),
+        ("crossing (sigma- = 0)", cr.body, pack(cr.state)),
+        ("V2 c != d", BV2, y_v2),
+    ]
 
 
 @pytest.mark.parametrize("case", _planar_cases(), ids=lambda c: c[0])
@@ -243,7 +277,9 @@ def test_planar_v1_in_plane_block_is_the_oscillator():
     Md0 = configuration_rate(y[7], y[8], y[9], y[10], vel)
     for k, t in enumerate(times):
         Phi = configuration(a.Y[7, k], a.Y[8, k], a.Y[9, k], a.Y[10, k], a.rotation[k])
-        np.testing.assert_allclose(Phi[:2, :2], M0[:2, :2] * math.cos(w * t) + Md0[:2, :2] * math.sin(w * t) / w, atol=1e-13)
+        np.testing.assert_allclose(
+            Phi[:2, :2], M0[:2, :2] * math.cos(w * t) + Md0[:2, :2] * math.sin(w * t) / w, atol=1e-13
+        )
 
 
 def test_planar_v1_collapse_found_exactly():
@@ -267,13 +303,22 @@ def test_planar_v1_collapse_found_exactly():
 
 # ------------------------------------------------------------------------------- the choice
 def test_auto_picks_the_lowest_rung():
-    expected = {"stationary-ellipse": "stationary", "stationary-v1": "stationary", "planar-v3": "planar",
-                "planar-v1-crossing": "planar-V1", "crossing": "planar", "default": "two-polar",
-                "close-approach": "regular", "anisotropic": "regular"}
+    expected = {
+        "stationary-ellipse": "stationary",
+        "stationary-v1": "stationary",
+        "planar-v3": "planar",
+        "planar-v1-crossing": "planar-V1",
+        "crossing": "planar",
+        "default": "two-polar",
+        "close-approach": "regular",
+        "anisotropic": "regular",
+    }
     for name, rung in expected.items():
         sc = load_scene(name)
         assert choose_model(sc.state, sc.body) == rung, name
-    assert choose_model(load_scene("close-approach").state, load_scene("close-approach").body, ladder=False) == "regular"
+    assert (
+        choose_model(load_scene("close-approach").state, load_scene("close-approach").body, ladder=False) == "regular"
+    )
 
 
 def test_controls_keep_only_the_rungs_they_leave_invariant():
@@ -291,8 +336,13 @@ def test_controls_keep_only_the_rungs_they_leave_invariant():
 
 @pytest.mark.parametrize(
     "scene, rung, words",
-    [("default", "planar", "s1, s2"), ("planar-v3", "stationary", "residual"), ("planar-v3", "planar-V1", "not V1"),
-     ("close-approach", "planar", "guarantees"), ("anisotropic", "planar", "J1")],
+    [
+        ("default", "planar", "s1, s2"),
+        ("planar-v3", "stationary", "residual"),
+        ("planar-v3", "planar-V1", "not V1"),
+        ("close-approach", "planar", "guarantees"),
+        ("anisotropic", "planar", "J1"),
+    ],
 )
 def test_forcing_a_rung_outside_its_invariant_set_is_refused(scene, rung, words):
     with pytest.raises(ValueError, match=f"'{rung}' rung.*{words}"):
@@ -307,7 +357,10 @@ def test_simulate_meta_names_the_rung_and_why():
     assert run.model == meta["rung"] == "planar" and meta["method"] == "ladder-planar"
     assert "s1 = s2 = 0" in meta["rung_invariant"] and meta["rung_measured"]["gap_lower_bound"] >= GAP_MIN
     run = simulate("default", t_end=1.0)
-    assert run.to_dict()["meta"]["rung"] == "two-polar" and run.to_dict()["meta"]["rung_measured"]["gap_lower_bound"] >= GAP_MIN
+    assert (
+        run.to_dict()["meta"]["rung"] == "two-polar"
+        and run.to_dict()["meta"]["rung_measured"]["gap_lower_bound"] >= GAP_MIN
+    )
     forced = simulate("planar-v3", t_end=10.0, model="two-polar", rtol=1e-12, atol=1e-12)
     again = simulate("planar-v3", t_end=10.0, rtol=1e-12, atol=1e-12)
     assert np.max(np.abs(forced.y - again.y)) < 1e-9
@@ -315,7 +368,9 @@ def test_simulate_meta_names_the_rung_and_why():
         simulate("planar-v3", t_end=1.0, model="planar", method="RK4", step=0.01)
 
 
-@pytest.mark.parametrize("scene, rung", [("stationary-ellipse", "stationary"), ("planar-v3", "planar"), ("planar-v1-crossing", "planar-V1")])
+@pytest.mark.parametrize(
+    "scene, rung", [("stationary-ellipse", "stationary"), ("planar-v3", "planar"), ("planar-v1-crossing", "planar-V1")]
+)
 def test_cli_simulate_reports_the_rung(scene, rung, capsys):
     assert main(["simulate", "--scene", scene, "--t-end", "5", "--summary"]) == 0
     assert f"rung: {rung} --" in capsys.readouterr().out

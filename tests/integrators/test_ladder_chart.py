@@ -14,7 +14,13 @@ from flatbody_env.scene import load_scene
 
 
 def test_applicable_rungs_follow_the_invariants():
-    assert applicable_rungs(load_scene("stationary-v1")) == ["stationary", "planar-V1", "planar", "two-polar", "regular"]
+    assert applicable_rungs(load_scene("stationary-v1")) == [
+        "stationary",
+        "planar-V1",
+        "planar",
+        "two-polar",
+        "regular",
+    ]
     assert applicable_rungs(load_scene("planar-v3")) == ["planar", "two-polar", "regular"]
     assert applicable_rungs(load_scene("default")) == ["two-polar", "regular"]
 
@@ -32,7 +38,10 @@ def test_ladder_study_quick_and_plot(tmp_path):
     assert tp and tp[0].error < 1e-9
     sp = speedups(points)
     assert any(s["rung"] == "stationary" and s["reached_target"] for s in sp)
-    csv_path, scenes_path = write_csv(points, tmp_path / "ladder.csv"), write_scenes(records, tmp_path / "ladder_scenes.csv")
+    csv_path, scenes_path = (
+        write_csv(points, tmp_path / "ladder.csv"),
+        write_scenes(records, tmp_path / "ladder_scenes.csv"),
+    )
     rows = read_csv(csv_path)
     assert len(rows) == len(points) and all(isinstance(r["error"], float) for r in rows)
     png = plot_ladder(csv_path, scenes_path, tmp_path / "ladder.png")
@@ -56,7 +65,22 @@ def test_new_scenes_validate(scene):
 def test_cli_ladder_prints_no_nan(tmp_path, capsys):
     """The horizon rows run no scipy DOP853 and their reference is exact: the ratio and the floor
     that cannot be measured are said so ("n/a (why)"), never printed as nan."""
-    assert main(["chart", "--ladder", "--quick", "--scenes", "stationary-ellipse", "--max-run-s", "0.2", "--out", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "chart",
+                "--ladder",
+                "--quick",
+                "--scenes",
+                "stationary-ellipse",
+                "--max-run-s",
+                "0.2",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert not re.search(r"\bx?nan\b", out), out
     horizon = [line for line in out.splitlines() if "stationary-ellipse t=1e+02" in line and " ms: " in line]
@@ -68,16 +92,33 @@ def test_speedups_say_why_a_ratio_is_missing():
     from analysis.ladder import LadderPoint
 
     def point(scene, rung, method, error, wall, status="ok"):
-        return LadderPoint(scene=scene, chosen="stationary", rung=rung, method=method, setting="s", t_end=1.0, error=error,
-                           wall_time=wall, nfev=1, status=status)
+        return LadderPoint(
+            scene=scene,
+            chosen="stationary",
+            rung=rung,
+            method=method,
+            setting="s",
+            t_end=1.0,
+            error=error,
+            wall_time=wall,
+            nfev=1,
+            status=status,
+        )
 
-    points = [point("a", "stationary", "ladder-stationary", 0.0, 1e-5), point("a", "two-polar", "DOP853-numba", 1e-12, 1e-4),
-              point("a", "two-polar", "DOP853", 1e-7, 1e-2), point("a", "two-polar", "DOP853", math.nan, math.nan, "skipped"),
-              point("b", "stationary", "ladder-stationary", 0.0, 1e-5), point("b", "two-polar", "DOP853-numba", 1e-6, 1e-4)]
+    points = [
+        point("a", "stationary", "ladder-stationary", 0.0, 1e-5),
+        point("a", "two-polar", "DOP853-numba", 1e-12, 1e-4),
+        point("a", "two-polar", "DOP853", 1e-7, 1e-2),
+        point("a", "two-polar", "DOP853", math.nan, math.nan, "skipped"),
+        point("b", "stationary", "ladder-stationary", 0.0, 1e-5),
+        point("b", "two-polar", "DOP853-numba", 1e-6, 1e-4),
+    ]
     by = {(s["scene"], s["method"]): s for s in speedups(points)}
     a = by["a", "ladder-stationary"]
     assert a["speedup_vs_full"] == pytest.approx(10.0) and a["why_no_full"] == ""
-    assert math.isnan(a["speedup_vs_default"]) and a["why_no_default"] == "it did not reach 1e-09 within the time budget"
+    assert (
+        math.isnan(a["speedup_vs_default"]) and a["why_no_default"] == "it did not reach 1e-09 within the time budget"
+    )
     b = by["b", "ladder-stationary"]
     assert math.isnan(b["speedup_vs_full"]) and b["why_no_full"] == "no full model reached 1e-09"
     assert b["why_no_default"] == "not run on this scene"

@@ -72,7 +72,9 @@ def test_compiled_method_runs_from_a_readonly_copy(tmp_path):
         FLATBODY_TEST_READONLY=os.pathsep.join([str(site), str(home)]),
     )
     try:
-        proc = subprocess.run([sys.executable, "-c", PROGRAM], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        proc = subprocess.run(
+            [sys.executable, "-c", PROGRAM], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300
+        )
     finally:
         for path in [site, home, *site.rglob("*")]:
             path.chmod(path.stat().st_mode | stat.S_IWUSR)

@@ -15,7 +15,9 @@ ROOT = Path(__file__).resolve().parents[2]
 def _names(first_import: str) -> list[str]:
     code = f"{first_import}\nfrom flatbody_env.answers import methods_answer\nimport json\nprint(json.dumps([m['name'] for m in methods_answer()]))"
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    return json.loads(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout)
+    return json.loads(
+        subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    )
 
 
 def test_method_list_does_not_depend_on_import_order():

@@ -37,7 +37,9 @@ def test_env_kernels_reach_only_compiled_code():
         reached, plain = _reached(getattr(compiled, name))
         assert plain == [], name
     reached, _ = _reached(compiled.post_step)
-    assert {"score_kernel", "omega12_kernel", "kinetic_kernel", "potential_kernel"} <= {f.py_func.__name__ for f in reached}
+    assert {"score_kernel", "omega12_kernel", "kinetic_kernel", "potential_kernel"} <= {
+        f.py_func.__name__ for f in reached
+    }
 
 
 def test_the_ladder_runs_the_two_polar_dop853():
@@ -83,7 +85,25 @@ def test_subsystem_rhs_is_sub_rhs():
     P = np.array([1.0, 1.0, 0.8, 3.0, 1.0, 0.0, 1.0, 1.0, 1.0])
     x = y[lk.INPLANE_STATE[:5]].tolist() + [0.0]
     a, b = np.empty(6), np.empty(6)
-    lk.sub_rhs(np.array(x), y, lk.INPLANE_STATE, lk.INPLANE_RATE, np.zeros(4), P, a, np.empty(11), np.empty(12), np.empty(7), np.empty(4))
-    lk.subsystem_rhs(np.array(x), np.zeros(4), (P, y, lk.INPLANE_STATE, lk.INPLANE_RATE), b, (np.empty(7), np.empty(11), np.empty(12)),
-                     np.empty(4))
+    lk.sub_rhs(
+        np.array(x),
+        y,
+        lk.INPLANE_STATE,
+        lk.INPLANE_RATE,
+        np.zeros(4),
+        P,
+        a,
+        np.empty(11),
+        np.empty(12),
+        np.empty(7),
+        np.empty(4),
+    )
+    lk.subsystem_rhs(
+        np.array(x),
+        np.zeros(4),
+        (P, y, lk.INPLANE_STATE, lk.INPLANE_RATE),
+        b,
+        (np.empty(7), np.empty(11), np.empty(12)),
+        np.empty(4),
+    )
     assert np.array_equal(a, b) and np.all(np.isfinite(a))

@@ -21,15 +21,25 @@ from tests.conftest import BODIES
 
 Y0 = np.array([0.05, 0.02, 1.45, 1.77, 0.02, 0.0, 0.05, 1.4, 0.9, 1.0, 0.3])
 U = np.array([0.1, -0.2, 0.05, 0.3])
-PLAIN = {name: env_stepper(name).step_counted for name in ("DOP853-numba", "RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4")}
+PLAIN = {
+    name: env_stepper(name).step_counted
+    for name in ("DOP853-numba", "RK4", "splitting-strang", "splitting-suzuki4", "splitting-yoshida4")
+}
 # largest |R - R_ref| after 20 steps of dt = 0.05 with h = 0.01 (DOP853: rtol = atol = 1e-11): the
 # method's order shows; Strang is second order
-R_TOL = {"DOP853-numba": 1e-9, "RK4": 1e-7, "splitting-strang": 1e-4, "splitting-suzuki4": 1e-7, "splitting-yoshida4": 1e-6}
+R_TOL = {
+    "DOP853-numba": 1e-9,
+    "RK4": 1e-7,
+    "splitting-strang": 1e-4,
+    "splitting-suzuki4": 1e-7,
+    "splitting-yoshida4": 1e-6,
+}
 
 
 def _reference_R(body, y0, u, t_end, R0=np.eye(3)):
-    sol = get_method("DOP853").integrate(body, y0, np.array([0.0, t_end]), tol=Tolerances(rtol=1e-13, atol=1e-13), u=u, R0=R0,
-                                         with_rotation=True)
+    sol = get_method("DOP853").integrate(
+        body, y0, np.array([0.0, t_end]), tol=Tolerances(rtol=1e-13, atol=1e-13), u=u, R0=R0, with_rotation=True
+    )
     return sol.Y[:, -1], sol.rotation[-1]
 
 
@@ -91,7 +101,9 @@ def test_integrate_with_rotation_compiled(name, body_name):
     with_R = meth.integrate(body, Y0, times, tol=tol, R0=R0, with_rotation=True)
     without = meth.integrate(body, Y0, times, tol=tol)
     assert np.array_equal(with_R.Y, without.Y) and with_R.nfev == without.nfev
-    ref = get_method("DOP853").integrate(body, Y0, times, tol=Tolerances(rtol=1e-13, atol=1e-13), R0=R0, with_rotation=True)
+    ref = get_method("DOP853").integrate(
+        body, Y0, times, tol=Tolerances(rtol=1e-13, atol=1e-13), R0=R0, with_rotation=True
+    )
     assert with_R.rotation.shape == (11, 3, 3)
     assert np.allclose(with_R.rotation[0], R0, atol=0)
     err = np.max(np.abs(with_R.rotation - ref.rotation))

@@ -36,7 +36,9 @@ def test_lab_spin_is_minus_physical_angular_momentum(default_run):
         vel = velocities_from_momenta(y, scene.body)
         Phi = configuration(y[7], y[8], y[9], y[10], R)
         Phid = configuration_rate(y[7], y[8], y[9], y[10], vel, R)
-        np.testing.assert_allclose(angular_momentum(Phi, Phid, scene.body.inertia), -default_run.lab_spin[k], atol=1e-10)
+        np.testing.assert_allclose(
+            angular_momentum(Phi, Phid, scene.body.inertia), -default_run.lab_spin[k], atol=1e-10
+        )
 
 
 def test_printed_convention_breaks_lab_spin():

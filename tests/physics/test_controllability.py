@@ -9,7 +9,13 @@ import pytest
 from scipy.linalg import expm
 
 from flatbody_env.physics.body import default_body
-from flatbody_env.physics.controllability import REDUCED_STATE, linearize, settling_rate, settling_rate_map, target_state
+from flatbody_env.physics.controllability import (
+    REDUCED_STATE,
+    linearize,
+    settling_rate,
+    settling_rate_map,
+    target_state,
+)
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.equilibria import stationary_from_shape
 from flatbody_env.env.task import DEFAULT_LIMITS, ReachStationaryEllipse
@@ -21,9 +27,6 @@ LIMITS = np.array(DEFAULT_LIMITS)
 def _y(body, lam, aspect, sign=1.0):
     t = stationary_from_shape(body, lam, lam / aspect, sign=sign)
     return target_state(t.lam, t.mu, t.rho, t.s3, t.p_theta)
-
-
-
 
 
 def test_linearization_is_the_small_signal_model():
@@ -88,7 +91,9 @@ def test_task_samples_only_targets_reachable_in_the_episode():
     with pytest.raises(ValueError, match="min_settling_rate"):
         ReachStationaryEllipse(min_settling_rate=-1.0)
     with pytest.raises(ValueError, match="min_settling_rate"):
-        ReachStationaryEllipse(target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0).sample_target(rng, body)
+        ReachStationaryEllipse(
+            target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0
+        ).sample_target(rng, body)
 
 
 def test_smallest_eigenvalue_closed_form_matches_numpy():
@@ -102,5 +107,7 @@ def test_smallest_eigenvalue_closed_form_matches_numpy():
         if k % 3 == 0:
             H[0, 2] = H[2, 0] = H[1, 2] = H[2, 1] = 0.0  # the shape block's usual (λ, μ) | ϱ split
         expected = np.linalg.eigvalsh(H)[0]
-        assert abs(smallest_eigenvalue_sym3(H[0, 0], H[0, 1], H[0, 2], H[1, 1], H[1, 2], H[2, 2]) - expected) <= 1e-12 * max(1.0, np.abs(H).max())
+        assert abs(
+            smallest_eigenvalue_sym3(H[0, 0], H[0, 1], H[0, 2], H[1, 1], H[1, 2], H[2, 2]) - expected
+        ) <= 1e-12 * max(1.0, np.abs(H).max())
     assert smallest_eigenvalue_sym3(2.0, 0.0, 0.0, 2.0, 0.0, 2.0) == 2.0

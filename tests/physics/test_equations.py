@@ -49,7 +49,9 @@ def test_theta_cyclic_only_when_isotropic():
     rng = np.random.default_rng(3)
     y = random_state(rng)
     iso = BODIES["V3"]
-    aniso = Body(inertia=Inertia(J1=1.3, J2=0.7, J3=1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1, b=1))
+    aniso = Body(
+        inertia=Inertia(J1=1.3, J2=0.7, J3=1.0), potential=V3(kappa=1.0), thickness=ThicknessPotential(a=1, b=1)
+    )
     assert rhs(0.0, y, None, iso)[3] == 0.0
     assert abs(rhs(0.0, y, None, aniso)[3]) > 1e-3
 

@@ -8,7 +8,19 @@ from scipy.spatial.transform import Rotation
 
 from conftest import BODIES, random_state
 from flatbody_env.physics.hamiltonian import velocities_from_momenta
-from flatbody_env.physics.kinematics import Decomposition, cauchy_rate, cauchy_tensor, configuration, configuration_rate, decompose, deformation_invariants, green_rate, green_tensor, kirchhoff_love_residual, omega_matrix
+from flatbody_env.physics.kinematics import (
+    Decomposition,
+    cauchy_rate,
+    cauchy_tensor,
+    configuration,
+    configuration_rate,
+    decompose,
+    deformation_invariants,
+    green_rate,
+    green_tensor,
+    kirchhoff_love_residual,
+    omega_matrix,
+)
 
 
 def _samples(n=30, seed=5):

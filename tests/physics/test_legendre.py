@@ -8,7 +8,13 @@ import numpy as np
 
 from conftest import BODIES, random_state
 from oracles import independent_mass_matrix
-from flatbody_env.physics.hamiltonian import VELOCITY_NAMES, kinetic_energy, mass_matrix, momenta_from_velocities, velocities_from_momenta
+from flatbody_env.physics.hamiltonian import (
+    VELOCITY_NAMES,
+    kinetic_energy,
+    mass_matrix,
+    momenta_from_velocities,
+    velocities_from_momenta,
+)
 from flatbody_env.physics.kinematics import configuration_rate
 
 
@@ -18,7 +24,9 @@ def test_legendre_round_trip(body):
         y = random_state(rng)
         vel = velocities_from_momenta(y, body)
         p = momenta_from_velocities(vel, lam=y[7], mu=y[8], rho=y[9], theta=y[10], inertia=body.inertia)
-        np.testing.assert_allclose([p[k] for k in ("s1", "s2", "s3", "p_theta", "p_lambda", "p_mu", "p_rho")], y[:7], rtol=1e-11, atol=1e-11)
+        np.testing.assert_allclose(
+            [p[k] for k in ("s1", "s2", "s3", "p_theta", "p_lambda", "p_mu", "p_rho")], y[:7], rtol=1e-11, atol=1e-11
+        )
 
 
 def test_kinetic_energy_three_ways(body):
@@ -34,7 +42,9 @@ def test_kinetic_energy_three_ways(body):
         t_eq32 = kinetic_energy(y, body)
         assert math.isclose(t_matrix, t_eq30, rel_tol=1e-11)
         assert math.isclose(t_matrix, t_eq32, rel_tol=1e-11)
-        np.testing.assert_allclose(mass_matrix(y[7], y[8], y[9], y[10], body.inertia), independent_mass_matrix(y, body), atol=1e-12)
+        np.testing.assert_allclose(
+            mass_matrix(y[7], y[8], y[9], y[10], body.inertia), independent_mass_matrix(y, body), atol=1e-12
+        )
 
 
 def test_printed_eq30_factor_is_a_misprint():
@@ -48,11 +58,15 @@ def test_printed_eq30_factor_is_a_misprint():
 
     def eq30(factor):
         return (
-            A / 2 * ld**2 + B / 2 * md**2 + J3 / 2 * rd**2
-            + (B * mu**2 + J3 * rho**2) / 2 * w1**2 + (A * lam**2 + J3 * rho**2) / 2 * w2**2
+            A / 2 * ld**2
+            + B / 2 * md**2
+            + J3 / 2 * rd**2
+            + (B * mu**2 + J3 * rho**2) / 2 * w1**2
+            + (A * lam**2 + J3 * rho**2) / 2 * w2**2
             + (J1 + J2) * lam * mu * w3 * thd
             + (J1 - J2) * factor * ((mu * md - lam * ld) * thd + (lam * md - mu * ld) * w3 + lam * mu * w1 * w2)
-            + (A * lam**2 + B * mu**2) / 2 * w3**2 + (B * lam**2 + A * mu**2) / 2 * thd**2
+            + (A * lam**2 + B * mu**2) / 2 * w3**2
+            + (B * lam**2 + A * mu**2) / 2 * thd**2
         )
 
     vel = dict(zip(VELOCITY_NAMES, (w1, w2, w3, thd, ld, md, rd)))

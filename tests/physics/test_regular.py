@@ -11,7 +11,15 @@ from flatbody_env import load_scene, simulate
 from flatbody_env.physics.equations import rhs_with_rotation
 from flatbody_env.physics.hamiltonian import hamiltonian
 from flatbody_env.physics.kinematics import Decomposition, configuration
-from flatbody_env.physics.regular import FrameTracker, constraint_residual, matrices, paper_from_regular, regular_energy, regular_from_paper, regular_rhs
+from flatbody_env.physics.regular import (
+    FrameTracker,
+    constraint_residual,
+    matrices,
+    paper_from_regular,
+    regular_energy,
+    regular_from_paper,
+    regular_rhs,
+)
 from flatbody_env.simulation import choose_model, gap_lower_bound
 
 
@@ -24,7 +32,9 @@ def test_conversions_round_trip(body):
         ref = Decomposition(R=np.eye(3), lam=y[7], mu=y[8], rho=y[9], theta=y[10])
         back, _ = paper_from_regular(z, body, ref)
         np.testing.assert_allclose(back, y, rtol=1e-11, atol=1e-11)
-        assert abs(regular_energy(z, body, y[7] > y[8]) - hamiltonian(y, body)) < 1e-11 * (1 + abs(hamiltonian(y, body)))
+        assert abs(regular_energy(z, body, y[7] > y[8]) - hamiltonian(y, body)) < 1e-11 * (
+            1 + abs(hamiltonian(y, body))
+        )
 
 
 @pytest.mark.parametrize("scene_name", ["default", "anisotropic"])
@@ -34,7 +44,15 @@ def test_formulations_agree_over_t20(scene_name):
     times = np.linspace(0, 20, 41)
     paper = simulate(scene, t_end=20.0, times=times, model="two-polar", rtol=1e-12, atol=1e-12, with_rotation=True)
     z0 = regular_from_paper(np.array([scene.state[k] for k in paper.state]), scene.body)
-    sol = solve_ivp(lambda t, z: regular_rhs(t, z, None, scene.body), (0, 20), z0, method="DOP853", t_eval=times, rtol=1e-12, atol=1e-12)
+    sol = solve_ivp(
+        lambda t, z: regular_rhs(t, z, None, scene.body),
+        (0, 20),
+        z0,
+        method="DOP853",
+        t_eval=times,
+        rtol=1e-12,
+        atol=1e-12,
+    )
     st = paper.state
     Phi_paper = configuration(st["lambda"], st["mu"], st["rho"], st["theta"], paper.rotation)
     Phi_regular = np.stack([matrices(sol.y[:, k])[0] for k in range(times.size)])
@@ -65,10 +83,24 @@ def test_controls_equivalent_in_both_formulations():
     rng = np.random.default_rng(9)
     y0 = random_state(rng)
     u = np.array([0.2, -0.1, 0.15, 0.3])
-    s1 = solve_ivp(lambda t, z: rhs_with_rotation(t, z, u, body), (0, 5), np.concatenate([y0, np.eye(3).ravel()]), method="DOP853", rtol=1e-12, atol=1e-12)
+    s1 = solve_ivp(
+        lambda t, z: rhs_with_rotation(t, z, u, body),
+        (0, 5),
+        np.concatenate([y0, np.eye(3).ravel()]),
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+    )
     z0 = regular_from_paper(y0, body)
     frame = FrameTracker(Decomposition(R=np.eye(3), lam=y0[7], mu=y0[8], rho=y0[9], theta=y0[10]))
-    s2 = solve_ivp(lambda t, z: regular_rhs(t, z, u, body, y0[7] > y0[8], frame), (0, 5), z0, method="DOP853", rtol=1e-12, atol=1e-12)
+    s2 = solve_ivp(
+        lambda t, z: regular_rhs(t, z, u, body, y0[7] > y0[8], frame),
+        (0, 5),
+        z0,
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+    )
     yf, Rf = s1.y[:11, -1], s1.y[11:, -1].reshape(3, 3)
     np.testing.assert_allclose(configuration(*yf[7:11], Rf), matrices(s2.y[:, -1])[0], atol=1e-9)
 

@@ -10,11 +10,27 @@ import pytest
 from conftest import random_state
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.kinematics import decompose, decompose_kernel, stretches_kernel
-from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential, invariant_gradient_kernel, potential_kernel
-from flatbody_env.physics.regular import regular_energy, regular_energy_kernel, regular_forces_kernel, regular_from_paper
+from flatbody_env.physics.potentials import (
+    KIND_CUSTOM,
+    V1,
+    V2,
+    V3,
+    ThicknessPotential,
+    invariant_gradient_kernel,
+    potential_kernel,
+)
+from flatbody_env.physics.regular import (
+    regular_energy,
+    regular_energy_kernel,
+    regular_forces_kernel,
+    regular_from_paper,
+)
 
 POTENTIALS = [V1(k=1.7), V2(c=0.9, d=0.9), V3(kappa=1.3)]
-BODIES = [Body(inertia=Inertia(J1=1.2, J2=0.8, J3=0.9), potential=p, thickness=ThicknessPotential(a=0.7, b=1.4)) for p in POTENTIALS]
+BODIES = [
+    Body(inertia=Inertia(J1=1.2, J2=0.8, J3=0.9), potential=p, thickness=ThicknessPotential(a=0.7, b=1.4))
+    for p in POTENTIALS
+]
 
 
 @pytest.mark.parametrize("pot", POTENTIALS, ids=["V1", "V2", "V3"])
@@ -68,6 +84,10 @@ def test_decompose_kernel_equals_decompose_to_round_off():
         keep = bool(k % 2)
         want = decompose(Phi, ref, kl_tol=np.inf, keep_order=keep)
         out = np.empty(13)
-        jump = decompose_kernel(Phi.T.ravel(), np.concatenate([ref.R.ravel(), [ref.lam, ref.mu, ref.rho, ref.theta]]), keep, out)
-        np.testing.assert_allclose(out, np.concatenate([want.R.ravel(), [want.lam, want.mu, want.rho, want.theta]]), atol=1e-12)
+        jump = decompose_kernel(
+            Phi.T.ravel(), np.concatenate([ref.R.ravel(), [ref.lam, ref.mu, ref.rho, ref.theta]]), keep, out
+        )
+        np.testing.assert_allclose(
+            out, np.concatenate([want.R.ravel(), [want.lam, want.mu, want.rho, want.theta]]), atol=1e-12
+        )
         assert jump == pytest.approx(abs(want.theta - ref.theta) + np.linalg.norm(want.R - ref.R), abs=1e-12)

@@ -93,7 +93,9 @@ class FakeFlatBodyEnv(gym.Env):
         self.fail_at = fail_at
         self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (11,), np.float64)
-        self._traj = simulate(sc, t_end=n_steps * dt, times=np.linspace(0.0, n_steps * dt, n_steps + 1), with_rotation=True)
+        self._traj = simulate(
+            sc, t_end=n_steps * dt, times=np.linspace(0.0, n_steps * dt, n_steps + 1), with_rotation=True
+        )
         self.target = {"lambda": 1.2, "mu": 1.0, "rho": 1.0, "s3": 0.5, "label": "circle"}
         self._k = 0
 

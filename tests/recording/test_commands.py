@@ -29,7 +29,10 @@ def test_record_command(tmp_path, capsys):
     # G and C, rebuilt from their logged entries (/series/G, /series/C), at the first and the last step
     lam, mu, rho = (data[f"/series/{n}"].components[SCALARS][0, 0] for n in ("lambda", "mu", "rho"))
     for sym, eig in (("G", [lam**2, mu**2, rho**2]), ("C", [lam**-2, mu**-2, rho**-2])):
-        assert f"{sym} (/series/{sym}) at step 0 (sim_time 0):" in text and f"{sym} (/series/{sym}) at step 50 (sim_time 1):" in text
+        assert (
+            f"{sym} (/series/{sym}) at step 0 (sim_time 0):" in text
+            and f"{sym} (/series/{sym}) at step 50 (sim_time 1):" in text
+        )
         rows = text.split(f"{sym} (/series/{sym}) at step 0 (sim_time 0):\n", 1)[1].splitlines()[:3]
         M = np.array([[float(x) for x in r.strip().strip("[]").split()] for r in rows])
         assert np.allclose(M, M.T) and np.allclose(np.linalg.eigvalsh(M), sorted(eig), atol=1e-5)
@@ -51,7 +54,23 @@ def test_record_env_command(tmp_path, capsys):
     gym.register(id="FakeFlatBodyForRecording-v0", entry_point=FakeFlatBodyEnv, kwargs={"n_steps": 12})
     try:
         out = tmp_path / "env.rrd"
-        assert main(["record-env", "--env-id", "FakeFlatBodyForRecording-v0", "--episodes", "2", "--policy", "random", "--out", str(out), "--verify"]) == 0
+        assert (
+            main(
+                [
+                    "record-env",
+                    "--env-id",
+                    "FakeFlatBodyForRecording-v0",
+                    "--episodes",
+                    "2",
+                    "--policy",
+                    "random",
+                    "--out",
+                    str(out),
+                    "--verify",
+                ]
+            )
+            == 0
+        )
         printed = capsys.readouterr().out
         assert str(out) in printed and str(tmp_path / "env-1.rrd") in printed
         data = read_recording(tmp_path / "env-1.rrd")
@@ -65,7 +84,12 @@ def test_record_env_command(tmp_path, capsys):
 
 def test_record_env_command_on_flatbody_v0(tmp_path, capsys):
     out = tmp_path / "fb.rrd"
-    assert main(["record-env", "--episodes", "1", "--max-steps", "20", "--policy", "random", "--out", str(out), "--verify"]) == 0
+    assert (
+        main(
+            ["record-env", "--episodes", "1", "--max-steps", "20", "--policy", "random", "--out", str(out), "--verify"]
+        )
+        == 0
+    )
     data = read_recording(out)
     assert data["/series/lambda"].step.size == 21
     assert data["/series/reward/total"].step.size == 20
@@ -79,8 +103,31 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     out = tmp_path / "bench"
     page = tmp_path / "page.md"
     page.write_text("# page\n\n<!-- bench:recording -->\nold table\n<!-- /bench:recording -->\n\nafter\n")
-    assert main(["bench", "recording", "--steps", "40", "--sizes", "20", "--repeats", "2", "--block", "8", "--frames", "30",
-                 "--episode-repeats", "1", "--out-dir", str(out), "--docs", str(page)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "recording",
+                "--steps",
+                "40",
+                "--sizes",
+                "20",
+                "--repeats",
+                "2",
+                "--block",
+                "8",
+                "--frames",
+                "30",
+                "--episode-repeats",
+                "1",
+                "--out-dir",
+                str(out),
+                "--docs",
+                str(page),
+            ]
+        )
+        == 0
+    )
     result = json.loads((out / "recording.json").read_text())
     ep = result["episode"]
     assert ep["compiled_method"] == "DOP853-numba" and ep["scene_auto_method"] == "DOP853-numba"
@@ -96,8 +143,31 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     # a page without the markers: one line naming the field, exit 2
     (tmp_path / "plain.md").write_text("no markers\n")
-    assert main(["bench", "recording", "--steps", "20", "--sizes", "20", "--repeats", "1", "--block", "8", "--frames", "4",
-                 "--episode-repeats", "1", "--out-dir", str(out), "--docs", str(tmp_path / "plain.md")]) == 2
+    assert (
+        main(
+            [
+                "bench",
+                "recording",
+                "--steps",
+                "20",
+                "--sizes",
+                "20",
+                "--repeats",
+                "1",
+                "--block",
+                "8",
+                "--frames",
+                "4",
+                "--episode-repeats",
+                "1",
+                "--out-dir",
+                str(out),
+                "--docs",
+                str(tmp_path / "plain.md"),
+            ]
+        )
+        == 2
+    )
     assert "docs:" in capsys.readouterr().err
 
 

@@ -9,7 +9,16 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from flatbody_env.env.rendering import COLORS, HALF_WIDTH, SIZE, _text_alpha, nice_half_width, plate_fill, render_frame, view_half_width
+from flatbody_env.env.rendering import (
+    COLORS,
+    HALF_WIDTH,
+    SIZE,
+    _text_alpha,
+    nice_half_width,
+    plate_fill,
+    render_frame,
+    view_half_width,
+)
 
 
 def _state(lam, mu, rho=1.0, theta=0.0):
@@ -28,7 +37,9 @@ def _near(img, rgb, tol=12):
 
 
 def test_nice_half_width():
-    assert [nice_half_width(x) for x in (0.3, 1.0, 1.2, 2.7, 7.0, 9.5, 11.0)] == pytest.approx([0.3, 1.0, 1.5, 3.0, 8.0, 10.0, 15.0])
+    assert [nice_half_width(x) for x in (0.3, 1.0, 1.2, 2.7, 7.0, 9.5, 11.0)] == pytest.approx(
+        [0.3, 1.0, 1.5, 3.0, 8.0, 10.0, 15.0]
+    )
     with pytest.raises(ValueError, match="extent"):
         nice_half_width(0.0)
 
@@ -81,7 +92,12 @@ def test_view_holds_a_large_body_and_stays_fixed_through_an_episode():
     cols = np.flatnonzero(body.any(axis=0))
     assert cols.min() > 2 and cols.max() < SIZE - 3  # not clipped
     # one view for every episode and target: the scale bar means the same length in every frame
-    assert view_half_width(1.2, 0.9, target) == view_half_width(1.6, 0.7, {"lambda": 2.0, "mu": 0.5}) == view_half_width(1.0, 1.0) == HALF_WIDTH
+    assert (
+        view_half_width(1.2, 0.9, target)
+        == view_half_width(1.6, 0.7, {"lambda": 2.0, "mu": 0.5})
+        == view_half_width(1.0, 1.0)
+        == HALF_WIDTH
+    )
 
 
 def test_legend_fill_key_and_scale_bar_are_drawn():

@@ -11,7 +11,9 @@ def test_quaternions_against_an_independent_conversion():
     from scipy.spatial.transform import Rotation
 
     rot = Rotation.random(500, random_state=1)
-    extra = Rotation.from_rotvec(np.array([[np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi], [np.pi / np.sqrt(2), np.pi / np.sqrt(2), 0], [0, 0, 0]]))
+    extra = Rotation.from_rotvec(
+        np.array([[np.pi, 0, 0], [0, np.pi, 0], [0, 0, np.pi], [np.pi / np.sqrt(2), np.pi / np.sqrt(2), 0], [0, 0, 0]])
+    )
     R = np.concatenate([rot.as_matrix(), extra.as_matrix()])
     q = quaternions_xyzw(R)
     ref = Rotation.from_matrix(R).as_quat()

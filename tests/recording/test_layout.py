@@ -43,7 +43,13 @@ def demo(tmp_path_factory):
     from agents.demo import rollout
 
     path = tmp_path_factory.mktemp("demo") / "demo.rrd"
-    ep = rollout(lambda obs: -0.3 * np.tanh(obs[:, :4]), seed=7, env_kwargs={"max_episode_steps": 30}, record_to=path, title="demo test")
+    ep = rollout(
+        lambda obs: -0.3 * np.tanh(obs[:, :4]),
+        seed=7,
+        env_kwargs={"max_episode_steps": 30},
+        record_to=path,
+        title="demo test",
+    )
     assert ep["path"] == path and ep["t"].size == 31
     return path
 
@@ -66,7 +72,9 @@ def test_blueprint_names_each_expected_view_and_entity(kind, recorded, episode, 
         view = base[name]
         for p in paths:
             assert view.shows(p), (name, p)
-            assert any(e == p or e.startswith(p + "/") for e in logged), f"view {name!r} promises {p}, which is not logged"
+            assert any(e == p or e.startswith(p + "/") for e in logged), (
+                f"view {name!r} promises {p}, which is not logged"
+            )
     # nothing logged is orphaned
     orphans = [e for e in sorted(logged) if not any(v.shows(e) for v in bp.views)]
     assert not orphans, orphans
@@ -76,7 +84,9 @@ def test_blueprint_names_each_expected_view_and_entity(kind, recorded, episode, 
         for name in TARGET_SERIES:
             assert f"/series/target/{name}" in data.entities
         assert "/series/distance" in data.entities and "/world/target" in data.entities
-        assert any(e.startswith("/series/reward/") for e in data.entities) and any(e.startswith("/series/action/") for e in data.entities)
+        assert any(e.startswith("/series/reward/") for e in data.entities) and any(
+            e.startswith("/series/action/") for e in data.entities
+        )
     else:
         assert not any(v.name.startswith(("reward", "actions", "distance")) for v in bp.views)
     # the time panel collapsed, the side panels closed, sim_time first
@@ -101,7 +111,11 @@ def test_top_view_looks_down_the_lab_z_axis_and_tensors_have_a_diverging_map(epi
     dp = np.asarray(oblique.properties["EyeControls3D:position"], dtype=float).ravel()
     assert dp[2] > 0.4 * np.linalg.norm(dp)  # above the plate, not grazing it
     # seen from +z the ϱ axis is a point at the centre: its label is shown in the 3-D view only
-    assert top.shows("/world/labels/in_plane") and not top.shows("/world/labels/normal") and oblique.shows("/world/labels/normal")
+    assert (
+        top.shows("/world/labels/in_plane")
+        and not top.shows("/world/labels/normal")
+        and oblique.shows("/world/labels/normal")
+    )
     # labels sit beyond the arrows' tips, off the plate: never on the spokes or on each other
     arrows = data["/world/axes_C"].components["Arrows3D:vectors"]
     pts = data["/world/labels/in_plane"].components["Points3D:positions"]
@@ -125,7 +139,11 @@ def test_one_colour_per_variable_shared_with_its_target_and_greek_names(episode)
         tlabel, tgt = style(f"/series/target/{name}")
         assert rgb(var) == rgb(tgt) == COLORS[name], name  # the palette shared with the rgb_array frames
         assert tlabel.startswith(label + "*"), (label, tlabel)
-    labels = {style(p)[0] for p in data.static if p.startswith("/series/") and "SeriesLines:names" in data.static[p] and p not in ("/series/G", "/series/C")}
+    labels = {
+        style(p)[0]
+        for p in data.static
+        if p.startswith("/series/") and "SeriesLines:names" in data.static[p] and p not in ("/series/G", "/series/C")
+    }
     assert {"λ", "μ", "ϱ", "θ", "s₃", "p_θ", "H", "|s|²", "τ₁", "τ₂", "τ₃", "f_ϱ"} <= labels
     assert not any(w in lab for lab in labels for w in ("lambda", "rho", "theta", "tau"))
     # within each plot every series has a colour of its own
@@ -154,13 +172,19 @@ def _rgb(packed):
 def _lab(rgb):
     c = np.asarray(rgb, dtype=float) / 255.0
     c = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
-    xyz = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]) @ c / np.array([0.9505, 1.0, 1.089])
+    xyz = (
+        np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
+        @ c
+        / np.array([0.9505, 1.0, 1.089])
+    )
     f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16 / 116)
     return np.array([116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])])
 
 
 @pytest.mark.parametrize("kind", ["free scene", "env episode", "agent demo"])
-def test_no_panel_draws_round_off_titles_match_and_no_two_variables_share_a_colour(kind, recorded, episode_one_block, demo):
+def test_no_panel_draws_round_off_titles_match_and_no_two_variables_share_a_colour(
+    kind, recorded, episode_one_block, demo
+):
     """From the blueprint and the logged data: (1) a time-series view whose values spread by less than
     FLAT_RTOL of their scale has a fixed axis at least 10⁶ × that spread wide, and says "flat" in its
     title; a view that is not flat fits its data; (2) every title names what the view shows; (3) every
@@ -175,7 +199,12 @@ def test_no_panel_draws_round_off_titles_match_and_no_two_variables_share_a_colo
         flat = view.name.endswith(FLAT_NOTE)
         paths, rule = titles[view.name.removesuffix(FLAT_NOTE)]
         values = np.concatenate(
-            [np.asarray(data[e].components["Scalars:scalars"], dtype=float).ravel() for p in paths for e in data.entities if e == p or e.startswith(p + "/")]
+            [
+                np.asarray(data[e].components["Scalars:scalars"], dtype=float).ravel()
+                for p in paths
+                for e in data.entities
+                if e == p or e.startswith(p + "/")
+            ]
         )
         lo, hi = np.asarray(view.properties["ScalarAxis:range"], dtype=float).ravel()
         spread = np.ptp(values)
@@ -192,8 +221,25 @@ def test_no_panel_draws_round_off_titles_match_and_no_two_variables_share_a_colo
     for name, (paths, _) in titles.items():
         for p in paths:
             leaf = p.rsplit("/", 1)[-1]
-            sym = {"lambda": "λ", "mu": "μ", "rho": "ϱ", "s3": "s₃", "p_theta": "p_θ", "energy": "H", "casimir": "|s|²", "theta": "θ", "G": "G", "C": "C",
-                   "drift": "drift", "reward": "reward", "distance": "distance", "distance_tolerance": "tolerance", "action": "actions", "balance": "W", "power": "power"}[leaf]
+            sym = {
+                "lambda": "λ",
+                "mu": "μ",
+                "rho": "ϱ",
+                "s3": "s₃",
+                "p_theta": "p_θ",
+                "energy": "H",
+                "casimir": "|s|²",
+                "theta": "θ",
+                "G": "G",
+                "C": "C",
+                "drift": "drift",
+                "reward": "reward",
+                "distance": "distance",
+                "distance_tolerance": "tolerance",
+                "action": "actions",
+                "balance": "W",
+                "power": "power",
+            }[leaf]
             assert sym in name, (name, p)
     if is_episode:
         assert not any("conserved" in v.name for v in bp.views)  # under control nothing is called conserved
@@ -292,7 +338,12 @@ def _check_series_axes(path, is_episode, *, t_factor):
         flat = view.name.endswith(FLAT_NOTE)
         paths, _ = titles[view.name.removesuffix(FLAT_NOTE)]
         values = np.concatenate(
-            [np.asarray(data[e].components["Scalars:scalars"], dtype=float).ravel() for p in paths for e in data.entities if e == p or e.startswith(p + "/")]
+            [
+                np.asarray(data[e].components["Scalars:scalars"], dtype=float).ravel()
+                for p in paths
+                for e in data.entities
+                if e == p or e.startswith(p + "/")
+            ]
         )
         values = values[np.isfinite(values)]
         lo, hi = np.asarray(view.properties["ScalarAxis:range"], dtype=float).ravel()
@@ -304,7 +355,10 @@ def _check_series_axes(path, is_episode, *, t_factor):
         else:
             assert spread > FLAT_RTOL * max(np.abs(values).max(), 1.0) and spread >= 0.3 * (hi - lo), view.name
         window = view.properties["TimeAxis:view_range"]
-        assert window["start"] == 0 and t_factor[0] * t_end * 1e9 <= window["end"] <= t_factor[1] * t_end * 1e9, (view.name, window)
+        assert window["start"] == 0 and t_factor[0] * t_end * 1e9 <= window["end"] <= t_factor[1] * t_end * 1e9, (
+            view.name,
+            window,
+        )
     return bp, seen_flat
 
 

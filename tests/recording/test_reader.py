@@ -29,7 +29,9 @@ def test_file_is_complete_when_the_call_returns(recorded, tmp_path, scene, traj)
     # the rerun CLI itself
     exe = shutil.which("rerun")
     cmd = [exe] if exe else [sys.executable, "-m", "rerun"]
-    proc = subprocess.run(cmd + ["rrd", "verify", str(path)], capture_output=True, text=True, env=dict(os.environ, CI="1"), timeout=120)
+    proc = subprocess.run(
+        cmd + ["rrd", "verify", str(path)], capture_output=True, text=True, env=dict(os.environ, CI="1"), timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
     # an open recording is streamed to a temporary file next to its target, without a footer yet; the
     # target appears when it is closed; a cut file fails verification

@@ -66,12 +66,16 @@ def test_a_failed_write_is_an_output_error_at_the_next_block(run, tmp_path):
 
 def test_a_recording_never_closed_leaves_no_file_and_the_program_exits(tmp_path):
     path = tmp_path / "run.rrd"
-    code = ("import numpy as np; from flatbody_env.scene import load_scene; from flatbody_env.simulation import simulate; "
-            "from flatbody_env.recording.writer import Recorder; s = load_scene('default'); "
-            "tr = simulate(s, t_end=1.0, times=np.linspace(0, 1, 300), with_rotation=True); "
-            f"rec = Recorder({str(path)!r}, s.body, block=16)\n"
-            "for k in range(300): rec.append(tr.t[k], tr.y[:, k], tr.rotation[k], energy=tr.energy[k])\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=ENV, check=False)  # hang guard
+    code = (
+        "import numpy as np; from flatbody_env.scene import load_scene; from flatbody_env.simulation import simulate; "
+        "from flatbody_env.recording.writer import Recorder; s = load_scene('default'); "
+        "tr = simulate(s, t_end=1.0, times=np.linspace(0, 1, 300), with_rotation=True); "
+        f"rec = Recorder({str(path)!r}, s.body, block=16)\n"
+        "for k in range(300): rec.append(tr.t[k], tr.y[:, k], tr.rotation[k], energy=tr.energy[k])\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=ENV, check=False
+    )  # hang guard
     assert r.returncode == 0, r.stderr[-2000:]
     assert list(tmp_path.iterdir()) == []
 
@@ -79,10 +83,14 @@ def test_a_recording_never_closed_leaves_no_file_and_the_program_exits(tmp_path)
 def test_record_env_on_a_disk_that_fills_is_one_line(tmp_path):
     """``record-env`` streams its episode: the file-size limit reached mid-episode is one line, exit 1."""
     target = tmp_path / "ep.rrd"
-    code = ("import resource, sys; from flatbody_env.cli import record; record.check_space = lambda *a, **k: None; "
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (200000, 200000)); from flatbody_env.cli.main import main; "
-            f"sys.exit(main(['record-env', '--max-steps', '3000', '--out', {str(target)!r}]))")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=ENV, check=False)  # hang guard
+    code = (
+        "import resource, sys; from flatbody_env.cli import record; record.check_space = lambda *a, **k: None; "
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (200000, 200000)); from flatbody_env.cli.main import main; "
+        f"sys.exit(main(['record-env', '--max-steps', '3000', '--out', {str(target)!r}]))"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=ENV, check=False
+    )  # hang guard
     assert r.returncode == 1, r.stderr[-2000:]
     lines = [x for x in r.stderr.splitlines() if x.strip()]
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr

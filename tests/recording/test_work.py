@@ -56,7 +56,15 @@ def test_energy_change_equals_the_work_of_the_controls(controlled):
     nodes, weights = np.polynomial.legendre.leggauss(12)
     W = [0.0]
     for k in range(1, t.size):
-        sol = solve_ivp(lambda s, y: rhs(s, y, U[k - 1], body), (t[k - 1], t[k]), Y[:, k - 1], method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
+        sol = solve_ivp(
+            lambda s, y: rhs(s, y, U[k - 1], body),
+            (t[k - 1], t[k]),
+            Y[:, k - 1],
+            method="DOP853",
+            rtol=1e-12,
+            atol=1e-12,
+            dense_output=True,
+        )
         h = t[k] - t[k - 1]
         s = t[k - 1] + 0.5 * h * (nodes + 1.0)
         W.append(W[-1] + 0.5 * h * sum(w * _power(sol.sol(x), U[k - 1], body) for x, w in zip(s, weights)))

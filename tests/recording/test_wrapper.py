@@ -54,10 +54,14 @@ def test_wrapper_records_episodes_in_blocks(tmp_path):
     np.testing.assert_allclose(shape, -np.abs(fake._traj.state["lambda"][1:] - 1.2))
     total = series(data, "reward/total")
     np.testing.assert_allclose(total, shape + series(data, "reward/effort"))
-    assert set(e for e in data.entities if e.startswith("/series/target/")) == {f"/series/target/{k}" for k in ("lambda", "mu", "rho", "s3")}
+    assert set(e for e in data.entities if e.startswith("/series/target/")) == {
+        f"/series/target/{k}" for k in ("lambda", "mu", "rho", "s3")
+    }
     np.testing.assert_array_equal(data["/series/target/s3"].step, np.arange(24))
     assert "/events" not in data.entities
-    assert ("TimeSeries", "reward terms") in data.views and any(n.startswith("actions u = (τ₁, τ₂, τ₃, f_ϱ)") for _, n in data.views)
+    assert ("TimeSeries", "reward terms") in data.views and any(
+        n.startswith("actions u = (τ₁, τ₂, τ₃, f_ϱ)") for _, n in data.views
+    )
     # the distance comes from info (the fake env has none): no distance series, nothing invented
     assert "/series/distance" not in data.entities
     second = read_recording(tmp_path / "ep-1.rrd")
@@ -90,7 +94,9 @@ def test_wrapper_names_a_broken_contract(tmp_path):
 def test_wrapper_on_flatbody_v0(tmp_path):
     from flatbody_env.env.task import REWARD_TERMS
 
-    env = RerunRecorder(gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=30), tmp_path / "fb.rrd", block=8)
+    env = RerunRecorder(
+        gym.make("FlatBody-v0", track_rotation=True, max_episode_steps=30), tmp_path / "fb.rrd", block=8
+    )
     env.reset(seed=3)
     rng = np.random.default_rng(3)
     steps = 0
@@ -105,22 +111,38 @@ def test_wrapper_on_flatbody_v0(tmp_path):
     data = read_recording(tmp_path / "fb.rrd")
     np.testing.assert_array_equal(data["/world/body"].step, np.arange(steps + 1))
     np.testing.assert_allclose(data["/world/body"].sim_time[1:] - data["/world/body"].sim_time[:-1], 0.05, atol=1e-9)
-    assert {e for e in data.entities if e.startswith("/series/action/")} == {f"/series/action/{n}" for n in ("tau1", "tau2", "tau3", "f_rho")}
-    assert {e for e in data.entities if e.startswith("/series/reward/")} == {f"/series/reward/{n}" for n in (*REWARD_TERMS, "total")}
+    assert {e for e in data.entities if e.startswith("/series/action/")} == {
+        f"/series/action/{n}" for n in ("tau1", "tau2", "tau3", "f_rho")
+    }
+    assert {e for e in data.entities if e.startswith("/series/reward/")} == {
+        f"/series/reward/{n}" for n in (*REWARD_TERMS, "total")
+    }
     assert {"/series/target/lambda", "/series/target/s3"} <= set(data.entities)
     # G, C from the logged λ, μ, ϱ, θ and quaternions, as for scene recordings
     lam, mu, rho, theta = (series(data, k) for k in ("lambda", "mu", "rho", "theta"))
     R = rotation_from_quaternions(data["/world/body"].components["Ellipsoids3D:quaternions"][:, 0, :])
     Phi = phi_of(lam, mu, rho, theta, R)
-    np.testing.assert_allclose(symmetric_from_entries(data["/series/G"].components[SCALARS]), np.swapaxes(Phi, 1, 2) @ Phi, atol=1e-5, rtol=1e-5)
-    np.testing.assert_allclose(symmetric_from_entries(data["/series/C"].components[SCALARS]), np.linalg.inv(Phi @ np.swapaxes(Phi, 1, 2)), atol=1e-5, rtol=1e-5)
+    np.testing.assert_allclose(
+        symmetric_from_entries(data["/series/G"].components[SCALARS]),
+        np.swapaxes(Phi, 1, 2) @ Phi,
+        atol=1e-5,
+        rtol=1e-5,
+    )
+    np.testing.assert_allclose(
+        symmetric_from_entries(data["/series/C"].components[SCALARS]),
+        np.linalg.inv(Phi @ np.swapaxes(Phi, 1, 2)),
+        atol=1e-5,
+        rtol=1e-5,
+    )
     # a torque-only env names three actions
     env = RerunRecorder(gym.make("FlatBody-v0", control="torque", track_rotation=True), tmp_path / "tq.rrd")
     env.reset(seed=0)
     env.step(np.zeros(3, np.float32))
     env.close()
     data = read_recording(tmp_path / "tq.rrd")
-    assert {e for e in data.entities if e.startswith("/series/action/")} == {f"/series/action/{n}" for n in ("tau1", "tau2", "tau3")}
+    assert {e for e in data.entities if e.startswith("/series/action/")} == {
+        f"/series/action/{n}" for n in ("tau1", "tau2", "tau3")
+    }
 
 
 def test_flatbody_v0_without_rotation_tracking_is_named(tmp_path):
@@ -138,8 +160,15 @@ def test_wrapper_columns_equal_step_by_step_appends(tmp_path):
     u = env.unwrapped
     obs, info = env.reset(seed=4)
     target = dict(u.target)
-    rec = Recorder(tmp_path / "stepwise.rrd", u.body, episode=True, block=1000, action_names=("tau1", "tau2", "tau3", "f_rho"),
-                   extent=max([u.state[k] for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho")]), success_tolerance=u.task.success_tolerance)
+    rec = Recorder(
+        tmp_path / "stepwise.rrd",
+        u.body,
+        episode=True,
+        block=1000,
+        action_names=("tau1", "tau2", "tau3", "f_rho"),
+        extent=max([u.state[k] for k in ("lambda", "mu", "rho")] + [target[k] for k in ("lambda", "mu", "rho")]),
+        success_tolerance=u.task.success_tolerance,
+    )
     rec.append(u.time, u.state, u.rotation, step=0, target=u.target, distance=info["distance"])
     rng = np.random.default_rng(4)
     k, done = 0, False
@@ -148,8 +177,17 @@ def test_wrapper_columns_equal_step_by_step_appends(tmp_path):
         control = u.controls(a)[1]
         _, reward, term, trunc, info = env.step(a)
         k += 1
-        rec.append(u.time, u.state, u.rotation, step=k, action=a, reward_terms={**info["reward_terms"], "total": reward},
-                   target=u.target, distance=info["distance"], control=control)
+        rec.append(
+            u.time,
+            u.state,
+            u.rotation,
+            step=k,
+            action=a,
+            reward_terms={**info["reward_terms"], "total": reward},
+            target=u.target,
+            distance=info["distance"],
+            control=control,
+        )
         done = term or trunc
     env.close()
     rec.close()

@@ -13,7 +13,12 @@ import numpy as np
 import pytest
 
 from flatbody_env import simulate
-from flatbody_env.recording.geometry import TENSOR_ENTRIES, rotation_from_quaternions, symmetric_entries, symmetric_from_entries
+from flatbody_env.recording.geometry import (
+    TENSOR_ENTRIES,
+    rotation_from_quaternions,
+    symmetric_entries,
+    symmetric_from_entries,
+)
 from flatbody_env.recording.reader import read_recording
 from flatbody_env.recording.writer import BODY_ENTITIES, record_arrays, record_trajectory
 from recording_oracles import N, SCALARS, phi_of, series
@@ -32,8 +37,12 @@ def test_entities_timelines_and_counts(recorded, traj):
     assert data.application_id == "flatbody"
     assert data.blueprints == 1
     kinds = [c for c, _ in data.views]
-    assert kinds.count("3D") == 3 and kinds.count("Tensor") == 0 and kinds.count("TextDocument") == 2  # G, C: numbers, no heat map
-    assert ("TimeSeries", "reward terms") not in data.views and any(n.startswith("conserved: drift") for _, n in data.views)
+    assert (
+        kinds.count("3D") == 3 and kinds.count("Tensor") == 0 and kinds.count("TextDocument") == 2
+    )  # G, C: numbers, no heat map
+    assert ("TimeSeries", "reward terms") not in data.views and any(
+        n.startswith("conserved: drift") for _, n in data.views
+    )
     temporal = [e for e in BODY_ENTITIES if e in data.entities]
     assert "/world/body" in temporal and "/series/G" in temporal
     for ent in temporal:
@@ -48,7 +57,10 @@ def test_entities_timelines_and_counts(recorded, traj):
     strips = data.static["/world/material/lines"]["LineStrips3D:strips"]
     assert len(strips[0]) == 12 + 2  # rim circle, 12 spokes, normal
     # env-only entities are absent from a scene recording
-    assert not any(e.startswith(("/series/action", "/series/reward", "/series/target", "/series/distance", "/world/target")) for e in present)
+    assert not any(
+        e.startswith(("/series/action", "/series/reward", "/series/target", "/series/distance", "/world/target"))
+        for e in present
+    )
 
 
 def test_logged_series_equal_the_trajectory(recorded, traj):
@@ -90,7 +102,13 @@ def test_transform_and_principal_axes(recorded):
     G = data["/series/G"].components[SCALARS]
     C = data["/series/C"].components[SCALARS]
     # Transform3D(mat3x3=Φ) is stored column-major float32
-    Phi = data["/world/material"].components["Transform3D:mat3x3"][:, 0, :].reshape(-1, 3, 3).transpose(0, 2, 1).astype(np.float64)
+    Phi = (
+        data["/world/material"]
+        .components["Transform3D:mat3x3"][:, 0, :]
+        .reshape(-1, 3, 3)
+        .transpose(0, 2, 1)
+        .astype(np.float64)
+    )
     np.testing.assert_allclose(symmetric_entries(np.swapaxes(Phi, 1, 2) @ Phi), G, atol=2e-5, rtol=2e-5)
     # arrows: eigenvectors of C (spatial) and G (material) whose length is the semi-axis, and whose
     # label prints that same length ("λ = 1.203")
@@ -104,7 +122,9 @@ def test_transform_and_principal_axes(recorded):
         else:
             lab_ents = ("/material/labels",)
         labels = [sum((list(data[e].components["Points3D:labels"][k]) for e in lab_ents), []) for k in range(N)]
-        pos = np.concatenate([data[e].components["Points3D:positions"].reshape(N, -1, 3) for e in lab_ents], axis=1).astype(np.float64)
+        pos = np.concatenate(
+            [data[e].components["Points3D:positions"].reshape(N, -1, 3) for e in lab_ents], axis=1
+        ).astype(np.float64)
         assert [lab.split(" = ")[0] for lab in labels[0]] == ["λ", "μ", "ϱ"]
         printed = np.array([[float(lab.split(" = ")[1]) for lab in row] for row in labels])
         np.testing.assert_allclose(printed, length, atol=5e-4 + 1e-6)
@@ -219,6 +239,11 @@ def test_recordings_use_rerun_public_api_with_one_escape_hatch():
             assert private not in src, (mod.__name__, private)
         assert not re.search(r"\brrb?\._[A-Za-z]", src), mod.__name__  # rr._private (rr.__version__ is public)
     tree = ast.parse(inspect.getsource(writer))
-    users = {fn.name for fn in ast.walk(tree) if isinstance(fn, ast.FunctionDef)
-             for node in ast.walk(fn) if isinstance(node, ast.Import) and any(a.name == "pyarrow" for a in node.names)}
+    users = {
+        fn.name
+        for fn in ast.walk(tree)
+        if isinstance(fn, ast.FunctionDef)
+        for node in ast.walk(fn)
+        if isinstance(node, ast.Import) and any(a.name == "pyarrow" for a in node.names)
+    }
     assert users == {"_matrix_column"}

@@ -13,7 +13,11 @@ with warnings.catch_warnings():
 
 from flatbody_env.service.app import create_app
 
-DEFAULT_BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.0}, "thickness": {"a": 1.0, "b": 1.0}}
+DEFAULT_BODY = {
+    "params": {"J": 1.0, "J3": 1.0},
+    "potential": {"name": "V3", "kappa": 1.0},
+    "thickness": {"a": 1.0, "b": 1.0},
+}
 V1_BODY = {"params": {"J": 1.0, "J3": 0.7}, "potential": {"name": "V1", "k": 1.3}, "thickness": {"a": 1.0, "b": 1.0}}
 
 

@@ -61,7 +61,9 @@ def test_health(client):
 def test_scenes_and_methods_are_the_commands_json(client):
     # the command as a user runs it (a fresh process: other tests may register methods in this one)
     for name in ("scenes", "methods"):
-        proc = subprocess.run([sys.executable, "-m", "flatbody_env.cli", name, "--json"], capture_output=True, text=True, timeout=120)
+        proc = subprocess.run(
+            [sys.executable, "-m", "flatbody_env.cli", name, "--json"], capture_output=True, text=True, timeout=120
+        )
         assert proc.returncode == 0, proc.stderr
         assert client.get(f"/{name}").json() == json.loads(proc.stdout)
 
@@ -118,7 +120,12 @@ def test_simulate_takes_a_scene_object(client):
 
 def test_invariants_of_a_posted_trajectory_is_the_commands_json(client, capsys, tmp_path):
     path = tmp_path / "traj.json"
-    assert cli(["simulate", "--scene", "default", "--t-end", "1", "--samples", "11", "--with-rotation", "--out", str(path)]) == 0
+    assert (
+        cli(
+            ["simulate", "--scene", "default", "--t-end", "1", "--samples", "11", "--with-rotation", "--out", str(path)]
+        )
+        == 0
+    )
     data = json.loads(path.read_text())
     r = client.post("/invariants", json=data)
     assert r.status_code == 200, r.text
@@ -128,7 +135,9 @@ def test_invariants_of_a_posted_trajectory_is_the_commands_json(client, capsys, 
     # an explicit body gives the same H as the scene's body (the default scene's)
     r2 = client.post("/invariants", json={**data, "body": DEFAULT_BODY})
     assert r2.status_code == 200
-    assert {x["name"]: x["initial"] for x in r2.json()["drift"]}["energy"] == pytest.approx(drift["energy"]["initial"], rel=1e-12)
+    assert {x["name"]: x["initial"] for x in r2.json()["drift"]}["energy"] == pytest.approx(
+        drift["energy"]["initial"], rel=1e-12
+    )
 
 
 def test_health_answers_while_a_slow_request_runs(client):
@@ -153,14 +162,20 @@ def test_health_answers_while_a_slow_request_runs(client):
 # ------------------------------------------------------------------------------------------------
 def test_bad_body_constant_names_the_field_and_range(client):
     bad = {**DEFAULT_BODY, "params": {"J": -1.0, "J3": 1.0}}
-    assert_error(client.post("/ellipses", json={"body": bad, "s3": 2, "p_theta": 0.5}), 422, "body.params.J", "allowed range")
+    assert_error(
+        client.post("/ellipses", json={"body": bad, "s3": 2, "p_theta": 0.5}), 422, "body.params.J", "allowed range"
+    )
     bad = {**DEFAULT_BODY, "potential": {"name": "V9"}}
-    assert_error(client.post("/stability", json={"body": bad, "s3": 2, "p_theta": 0.5}), 422, "body.potential.name", "V1")
+    assert_error(
+        client.post("/stability", json={"body": bad, "s3": 2, "p_theta": 0.5}), 422, "body.potential.name", "V1"
+    )
 
 
 def test_anisotropic_body_is_refused_by_the_analysis(client):
     body = {**DEFAULT_BODY, "params": {"J1": 1.2, "J2": 0.8, "J3": 1.0}}
-    assert_error(client.post("/ellipses", json={"body": body, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic")
+    assert_error(
+        client.post("/ellipses", json={"body": body, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic"
+    )
 
 
 @pytest.mark.filterwarnings("error::UserWarning")
@@ -181,21 +196,28 @@ def test_three_moment_bodies_serialize_without_pydantic_warnings(client):
         assert dumped["body"]["params"] == three["params"]
         job = TypeAdapter(models.JobRequest).validate_python({"kind": "family", "params": {"body": three}})
         assert job.params.model_dump(by_alias=True)["body"]["params"] == three["params"]
-        iso = models.SpinsRequest.model_validate({"body": DEFAULT_BODY, "s3": 2, "p_theta": 0.5}).model_dump(by_alias=True)
+        iso = models.SpinsRequest.model_validate({"body": DEFAULT_BODY, "s3": 2, "p_theta": 0.5}).model_dump(
+            by_alias=True
+        )
         assert iso["body"]["params"] == DEFAULT_BODY["params"]
         # the request end to end (a warning raised in the endpoint would be a 503, not the analysis' 422)
-        assert_error(client.post("/stability", json={"body": three, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic")
+        assert_error(
+            client.post("/stability", json={"body": three, "s3": 2, "p_theta": 0.5}), 422, "body.params", "isotropic"
+        )
 
 
-@pytest.mark.parametrize("change, field", [
-    ({"s3": "two"}, "s3"),
-    ({"p_theta": None}, "p_theta"),
-    ({"grid": 5000}, "grid"),
-    ({"grid": 3}, "grid"),
-    ({"lam_range": [3.0, 1.0]}, "lam_range"),
-    ({"branch": "Z"}, "branch"),
-    ({"colour": "red"}, "colour"),
-])
+@pytest.mark.parametrize(
+    "change, field",
+    [
+        ({"s3": "two"}, "s3"),
+        ({"p_theta": None}, "p_theta"),
+        ({"grid": 5000}, "grid"),
+        ({"grid": 3}, "grid"),
+        ({"lam_range": [3.0, 1.0]}, "lam_range"),
+        ({"branch": "Z"}, "branch"),
+        ({"colour": "red"}, "colour"),
+    ],
+)
 def test_bad_fields_are_422_naming_the_field(client, change, field):
     req = {"body": DEFAULT_BODY, "s3": 2.0, "p_theta": 0.5, **change}
     data = assert_error(client.post("/ellipses", json=req), 422, field)
@@ -214,15 +236,20 @@ def test_oversized_body_is_413(client):
     big = DEFAULT_LIMITS.max_trajectory_body_bytes  # a trajectory may be larger than other bodies
     r = client.post("/invariants", content=b" " * (big + 1), headers={"content-type": "application/json"})
     assert_error(r, 413, "body", str(big))
-    r = client.post("/ellipses", content=b" " * (DEFAULT_LIMITS.max_body_bytes + 1), headers={"content-type": "application/json"})
+    r = client.post(
+        "/ellipses", content=b" " * (DEFAULT_LIMITS.max_body_bytes + 1), headers={"content-type": "application/json"}
+    )
     assert_error(r, 413, "body", str(DEFAULT_LIMITS.max_body_bytes))
 
 
-@pytest.mark.parametrize("req, field", [
-    ({"t_end": 1000.0}, "t_end"),
-    ({"t_end": 10.0, "samples": DEFAULT_LIMITS.sync_samples + 1}, "samples"),
-    ({"t_end": 100.0, "method": "RK4", "step": 1e-5}, "step"),
-])
+@pytest.mark.parametrize(
+    "req, field",
+    [
+        ({"t_end": 1000.0}, "t_end"),
+        ({"t_end": 10.0, "samples": DEFAULT_LIMITS.sync_samples + 1}, "samples"),
+        ({"t_end": 100.0, "method": "RK4", "step": 1e-5}, "step"),
+    ],
+)
 def test_costly_simulations_are_413_naming_the_limit(client, req, field):
     data = assert_error(client.post("/simulate", json={"scene": "default", **req}), 413, field, "POST /jobs")
     assert data["kind"] == "too-large"
@@ -235,25 +262,50 @@ def test_integration_failure_is_422_with_when_and_why(client, capsys):
     assert data["when"] > 0 and "energy" in data["why"]
     # the command says the same (exit 1, one line)
     capsys.readouterr()
-    assert cli(["simulate", "--scene", "small-rho-bounce", "--method", "RK4", "--step", "0.5", "--t-end", "5", "--samples", "5"]) == 1
+    assert (
+        cli(
+            [
+                "simulate",
+                "--scene",
+                "small-rho-bounce",
+                "--method",
+                "RK4",
+                "--step",
+                "0.5",
+                "--t-end",
+                "5",
+                "--samples",
+                "5",
+            ]
+        )
+        == 1
+    )
     assert data["why"] in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("req, field", [
-    ({"scene": "no-such-scene"}, "scene"),
-    ({"scene": "/etc/hostname"}, "scene"),
-    ({"scene": {"params": {"J": 1, "J3": 1}, "potential": {"name": "V3", "kappa": 1}, "thickness": None}}, "scene.state"),
-    ({"method": "Euler"}, "method"),
-    ({"method": "RK4"}, "step"),
-    ({"rtol": -1}, "rtol"),
-    ({"times": [0.0, 0.5, 0.25]}, "times"),
-])
+@pytest.mark.parametrize(
+    "req, field",
+    [
+        ({"scene": "no-such-scene"}, "scene"),
+        ({"scene": "/etc/hostname"}, "scene"),
+        (
+            {"scene": {"params": {"J": 1, "J3": 1}, "potential": {"name": "V3", "kappa": 1}, "thickness": None}},
+            "scene.state",
+        ),
+        ({"method": "Euler"}, "method"),
+        ({"method": "RK4"}, "step"),
+        ({"rtol": -1}, "rtol"),
+        ({"times": [0.0, 0.5, 0.25]}, "times"),
+    ],
+)
 def test_bad_simulations_are_422(client, req, field):
     assert_error(client.post("/simulate", json={"t_end": 1.0, **req}), 422, field)
 
 
 def test_bad_trajectory_is_422(client):
-    assert_error(client.post("/invariants", json={"t": [0.0, 1.0], "state": {"s1": [0.0, 0.0]}}), 422, "trajectory.state.s2")
+    assert_error(
+        client.post("/invariants", json={"t": [0.0, 1.0], "state": {"s1": [0.0, 0.0]}}), 422, "trajectory.state.s2"
+    )
     assert_error(client.post("/invariants", json={"state": {}}), 422, "t")
 
 
@@ -278,13 +330,19 @@ def test_simulate_job_matches_the_request_answer(client):
 
 
 def test_family_and_stability_map_jobs_are_the_commands_answers(client, capsys):
-    fam = client.post("/jobs", json={"kind": "family", "params": {"body": V1_BODY, "from": 0.5, "to": 2.0, "seeds": 3, "p_theta": 0.5}})
+    fam = client.post(
+        "/jobs",
+        json={"kind": "family", "params": {"body": V1_BODY, "from": 0.5, "to": 2.0, "seeds": 3, "p_theta": 0.5}},
+    )
     smap = client.post("/jobs", json={"kind": "stability-map", "params": {"grid": 6}})
     fam_job, map_job = wait_job(client.get, fam.json()["id"]), wait_job(client.get, smap.json()["id"])
     assert fam_job["status"] == "done", fam_job["error"]
-    expected = cli_json(capsys, "family", *V1_FLAGS, "--from", "0.5", "--to", "2", "--seeds", "3", "--p-theta", "0.5", "--json")
-    assert {k: v for k, v in fam_job["result"].items() if k not in ("csv", "plot")} == \
-        {k: v for k, v in expected.items() if k not in ("csv", "plot")}
+    expected = cli_json(
+        capsys, "family", *V1_FLAGS, "--from", "0.5", "--to", "2", "--seeds", "3", "--p-theta", "0.5", "--json"
+    )
+    assert {k: v for k, v in fam_job["result"].items() if k not in ("csv", "plot")} == {
+        k: v for k, v in expected.items() if k not in ("csv", "plot")
+    }
     assert fam_job["artifacts"] == ["family.png", "family.csv"]
     png = client.get(f"/jobs/{fam_job['id']}/artifact")
     assert png.headers["content-type"] == "image/png" and png.content[:8] == b"\x89PNG\r\n\x1a\n"
@@ -348,12 +406,15 @@ def test_cancel_a_running_job(client):
     assert wait_job(client.get, small)["status"] == "done"
 
 
-@pytest.mark.parametrize("params, field, words", [
-    ({"from": 3.0, "to": 1.0}, "params.to", ("must be greater than from (3)", "got 1")),
-    ({"from": 2.0, "to": 2.0}, "params.to", ("must be greater than from (2)",)),
-    ({"vary": "kappa", "from": 0.0, "to": 2.0}, "params.from", ("kappa must stay > 0",)),
-    ({"vary": "k", "from": 1.0, "to": 2.0}, "params.vary", ("not a constant of this body",)),
-])
+@pytest.mark.parametrize(
+    "params, field, words",
+    [
+        ({"from": 3.0, "to": 1.0}, "params.to", ("must be greater than from (3)", "got 1")),
+        ({"from": 2.0, "to": 2.0}, "params.to", ("must be greater than from (2)",)),
+        ({"vary": "kappa", "from": 0.0, "to": 2.0}, "params.from", ("kappa must stay > 0",)),
+        ({"vary": "k", "from": 1.0, "to": 2.0}, "params.vary", ("not a constant of this body",)),
+    ],
+)
 def test_a_family_range_is_checked_when_submitted_in_the_requests_words(client, params, field, words):
     """from > to (and a body constant's range reaching 0) is refused at submission, naming from/to, never
     accepted and then failed inside the job as start/stop."""
@@ -395,23 +456,34 @@ def test_a_data_dir_of_an_older_service_gets_the_new_columns(tmp_path):
     from flatbody_env.service.store import JobStore
 
     with sqlite3.connect(tmp_path / "jobs.sqlite3") as db:  # the first schema, without `stage`
-        db.execute("CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT NULL, params TEXT NOT NULL, status TEXT NOT NULL, "
-                   "progress REAL NOT NULL DEFAULT 0, result TEXT, error TEXT, artifacts TEXT NOT NULL DEFAULT '[]', "
-                   "created REAL NOT NULL, started REAL, finished REAL, pid INTEGER)")
-        db.execute("INSERT INTO jobs (id, kind, params, status, created) VALUES ('old', 'simulate', '{}', 'queued', 1.0)")
+        db.execute(
+            "CREATE TABLE jobs (id TEXT PRIMARY KEY, kind TEXT NOT NULL, params TEXT NOT NULL, status TEXT NOT NULL, "
+            "progress REAL NOT NULL DEFAULT 0, result TEXT, error TEXT, artifacts TEXT NOT NULL DEFAULT '[]', "
+            "created REAL NOT NULL, started REAL, finished REAL, pid INTEGER)"
+        )
+        db.execute(
+            "INSERT INTO jobs (id, kind, params, status, created) VALUES ('old', 'simulate', '{}', 'queued', 1.0)"
+        )
     store = JobStore(tmp_path)
     job = store.get("old")
     assert job["stage"] is None and job["elapsed"] is None and job["status"] == "queued"
 
 
-@pytest.mark.parametrize("req, status, field", [
-    ({"kind": "train", "params": {}}, 422, "kind"),
-    ({"kind": "stability-map", "params": {"grid": 1000}}, 422, "params.grid"),
-    ({"kind": "family", "params": {"body": {**DEFAULT_BODY, "thickness": {"a": 0, "b": 1}}}}, 422, "params.body.thickness.a"),
-    ({"kind": "simulate", "params": {"scene": "default", "t_end": 1e6}}, 413, "params.t_end"),
-    ({"kind": "record", "params": {"scene": "nowhere"}}, 422, "params.scene"),
-    ({"kind": "evaluate", "params": {"model": "/tmp/evil.zip"}}, 422, "params.model"),
-])
+@pytest.mark.parametrize(
+    "req, status, field",
+    [
+        ({"kind": "train", "params": {}}, 422, "kind"),
+        ({"kind": "stability-map", "params": {"grid": 1000}}, 422, "params.grid"),
+        (
+            {"kind": "family", "params": {"body": {**DEFAULT_BODY, "thickness": {"a": 0, "b": 1}}}},
+            422,
+            "params.body.thickness.a",
+        ),
+        ({"kind": "simulate", "params": {"scene": "default", "t_end": 1e6}}, 413, "params.t_end"),
+        ({"kind": "record", "params": {"scene": "nowhere"}}, 422, "params.scene"),
+        ({"kind": "evaluate", "params": {"model": "/tmp/evil.zip"}}, 422, "params.model"),
+    ],
+)
 def test_bad_jobs_are_refused_before_they_queue(client, req, status, field):
     before = len(client.get("/jobs").json()["jobs"])
     assert_error(client.post("/jobs", json=req), status, field)
@@ -435,8 +507,18 @@ def test_the_page_and_its_files_are_served(client):
     assert js.status_code == 200 and "/ellipses" in js.text and "rerun " in js.text
     assert client.get("/page/page.css").status_code == 200
     doc = client.get("/openapi.json").json()
-    assert {"/health", "/scenes", "/methods", "/ellipses", "/stability", "/simulate", "/invariants", "/jobs", "/jobs/{job_id}",
-            "/jobs/{job_id}/artifact"} <= set(doc["paths"])
+    assert {
+        "/health",
+        "/scenes",
+        "/methods",
+        "/ellipses",
+        "/stability",
+        "/simulate",
+        "/invariants",
+        "/jobs",
+        "/jobs/{job_id}",
+        "/jobs/{job_id}/artifact",
+    } <= set(doc["paths"])
     assert client.get("/docs").status_code == 200
 
 
@@ -477,7 +559,9 @@ def test_docs_pages_load_their_scripts_from_the_service(client):
             got = client.get(f"{DOCS_ASSETS}/{name}")
             assert got.status_code == 200 and len(got.content) > 10_000
     assert "/openapi.json" in client.get("/docs").text
-    assert "cdn.redoc.ly" not in client.get(f"{DOCS_ASSETS}/redoc.standalone.js").text  # ReDoc's footer logo, the one outside address
+    assert (
+        "cdn.redoc.ly" not in client.get(f"{DOCS_ASSETS}/redoc.standalone.js").text
+    )  # ReDoc's footer logo, the one outside address
 
 
 def test_favicon_is_served(client):
@@ -507,14 +591,31 @@ def test_a_used_up_integration_budget_is_413_with_when_and_why():
     other = error_data(IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"))
     assert other["kind"] == "integration" and other["method"] == "RK4"
     # an answer names the field: the horizon the budget did not reach, the scene whose integration failed
-    budget = error_data(IntegrationError("wall-clock budget of 60 s used up", t=12.5, method="DOP853", kind="budget"), endpoint="simulate")
-    assert budget["field"] == "t_end" and budget["detail"].startswith("t_end: not reached") and "POST /jobs" in budget["detail"]
-    other = error_data(IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"), endpoint="simulate")
+    budget = error_data(
+        IntegrationError("wall-clock budget of 60 s used up", t=12.5, method="DOP853", kind="budget"),
+        endpoint="simulate",
+    )
+    assert (
+        budget["field"] == "t_end"
+        and budget["detail"].startswith("t_end: not reached")
+        and "POST /jobs" in budget["detail"]
+    )
+    other = error_data(
+        IntegrationError("non-finite state", t=1.0, method="RK4", kind="non-finite"), endpoint="simulate"
+    )
     assert other["field"] == "scene" and other["detail"].startswith("scene: ")
 
 
-@pytest.mark.parametrize("endpoint, field", [("simulate", "scene"), ("ellipses", "body"), ("stability", "body"),
-                                             ("invariants-json", "trajectory"), ("check-job", "params")])
+@pytest.mark.parametrize(
+    "endpoint, field",
+    [
+        ("simulate", "scene"),
+        ("ellipses", "body"),
+        ("stability", "body"),
+        ("invariants-json", "trajectory"),
+        ("check-job", "params"),
+    ],
+)
 def test_a_computation_that_fails_names_its_input(endpoint, field):
     """No 4xx without a field: a failure no narrower field explains names what the endpoint computes with."""
     from flatbody_env.service.answers import error_data

@@ -70,10 +70,18 @@ def _numeric_bounds(node) -> list[tuple]:
     """Every (low, low exclusive, high, high exclusive) of a numeric schema under ``node`` (anyOf, items, prefixItems)."""
     found = []
     if isinstance(node, dict):
-        if node.get("type") in ("number", "integer") and any(k in node for k in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum")):
+        if node.get("type") in ("number", "integer") and any(
+            k in node for k in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum")
+        ):
             lo_x, hi_x = "exclusiveMinimum" in node, "exclusiveMaximum" in node
-            found.append((node.get("exclusiveMinimum" if lo_x else "minimum", -math.inf), lo_x,
-                          node.get("exclusiveMaximum" if hi_x else "maximum", math.inf), hi_x))
+            found.append(
+                (
+                    node.get("exclusiveMinimum" if lo_x else "minimum", -math.inf),
+                    lo_x,
+                    node.get("exclusiveMaximum" if hi_x else "maximum", math.inf),
+                    hi_x,
+                )
+            )
         for key in ("anyOf", "prefixItems"):
             for sub in node.get(key, ()):
                 found += _numeric_bounds(sub)
@@ -133,8 +141,12 @@ def _body_with(field: str, x: float) -> Body:
     elif field in ("a", "b"):
         data["thickness"][field] = x
     else:
-        data["potential"] = {"k": {"name": "V1", "k": x}, "c": {"name": "V2", "c": x, "d": 1.0}, "d": {"name": "V2", "c": 1.0, "d": x},
-                             "kappa": {"name": "V3", "kappa": x}}[field]
+        data["potential"] = {
+            "k": {"name": "V1", "k": x},
+            "c": {"name": "V2", "c": x, "d": 1.0},
+            "d": {"name": "V2", "c": 1.0, "d": x},
+            "kappa": {"name": "V3", "kappa": x},
+        }[field]
     return Body.from_dict(data)
 
 
@@ -167,13 +179,17 @@ def test_the_work_limits_are_the_cost_checks(in_job):
     model = "SimulateJobParams" if in_job else "SimulateRequest"
     _, _, t_max, _ = library_bound(model, "t_end")
     assert not _refuses(lambda t: check_integration_cost(t_end=t, samples=2, step=None, in_job=in_job), t_max)
-    assert _refuses(lambda t: check_integration_cost(t_end=t, samples=2, step=None, in_job=in_job), math.nextafter(t_max, math.inf))
+    assert _refuses(
+        lambda t: check_integration_cost(t_end=t, samples=2, step=None, in_job=in_job), math.nextafter(t_max, math.inf)
+    )
     _, _, n_max, _ = library_bound(model, "samples")
     assert not _refuses(lambda n: check_integration_cost(t_end=1.0, samples=n, step=None, in_job=in_job), n_max)
     assert _refuses(lambda n: check_integration_cost(t_end=1.0, samples=n, step=None, in_job=in_job), n_max + 1)
     h_min, _, _, _ = library_bound(model, "step")
     assert not _refuses(lambda h: check_integration_cost(t_end=t_max, samples=2, step=h, in_job=in_job), h_min)
-    assert _refuses(lambda h: check_integration_cost(t_end=t_max, samples=2, step=h, in_job=in_job), math.nextafter(h_min, 0.0))
+    assert _refuses(
+        lambda h: check_integration_cost(t_end=t_max, samples=2, step=h, in_job=in_job), math.nextafter(h_min, 0.0)
+    )
 
 
 def test_the_analysis_refuses_beyond_the_named_grid_and_seeds():

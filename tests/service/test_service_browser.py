@@ -19,8 +19,10 @@ import pytest
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
-                                reason="needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None or DRIVER is None,
+    reason="needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)",
+)
 
 
 def _chrome(*extra: str, size: str = "1200,1700"):
@@ -30,7 +32,14 @@ def _chrome(*extra: str, size: str = "1200,1700"):
 
     opts = Options()
     opts.binary_location = CHROMIUM
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", f"--window-size={size}", *extra):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        f"--window-size={size}",
+        *extra,
+    ):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
     driver.set_page_load_timeout(60)
@@ -66,8 +75,15 @@ def test_api_docs_render_without_internet_access(offline_browser, live_service):
     _, url, _ = live_service
     wait = WebDriverWait(offline_browser, 60)
     offline_browser.get(url + "/docs")
-    wait.until(lambda d: "flatbody analysis service" in " ".join(e.text for e in d.find_elements(By.CSS_SELECTOR, ".swagger-ui .info .title")))
-    paths = {e.text.replace("\u200b", "") for e in offline_browser.find_elements(By.CSS_SELECTOR, ".opblock-summary-path")}
+    wait.until(
+        lambda d: (
+            "flatbody analysis service"
+            in " ".join(e.text for e in d.find_elements(By.CSS_SELECTOR, ".swagger-ui .info .title"))
+        )
+    )
+    paths = {
+        e.text.replace("\u200b", "") for e in offline_browser.find_elements(By.CSS_SELECTOR, ".opblock-summary-path")
+    }
     assert {"/health", "/ellipses", "/jobs"} <= paths
     offline_browser.get(url + "/redoc")
     wait.until(lambda d: "flatbody analysis service" in d.find_element(By.TAG_NAME, "body").text)
@@ -114,7 +130,9 @@ def _full_height(driver) -> None:
 def _in_viewport(driver, element) -> bool:
     return driver.execute_script(
         "const r = arguments[0].getBoundingClientRect();"
-        "return r.width > 0 && r.top >= 0 && r.left >= 0 && r.bottom <= window.innerHeight && r.right <= window.innerWidth;", element)
+        "return r.width > 0 && r.top >= 0 && r.left >= 0 && r.bottom <= window.innerHeight && r.right <= window.innerWidth;",
+        element,
+    )
 
 
 def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a_reload(window, live_service, tmp_path):
@@ -134,7 +152,10 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     assert method.first_selected_option.get_attribute("value") == "auto"  # the API's default, offered and chosen
     assert "DOP853" in [o.get_attribute("value") for o in method.options]
     # the icon is served (no 404 on every load)
-    assert browser.execute_script("return fetch('/favicon.ico').then(r => r.status + ' ' + r.headers.get('content-type'))") == "200 image/x-icon"
+    assert (
+        browser.execute_script("return fetch('/favicon.ico').then(r => r.status + ' ' + r.headers.get('content-type'))")
+        == "200 image/x-icon"
+    )
 
     # a V1 body with s3 p_theta > 0: the closed form has exactly one stationary ellipse; Enter in a field finds it
     Select(browser.find_element(By.ID, "potential")).select_by_value("V1")
@@ -171,7 +192,10 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     from flatbody_env.env.rendering import COLORS
 
     palette = {"λ": "lambda", "μ": "mu", "ϱ": "rho", "s₃": "s3", "H": "energy"}
-    drawn = {p.get_attribute("data-name"): browser.execute_script("return getComputedStyle(arguments[0]).stroke", p) for p in lines}
+    drawn = {
+        p.get_attribute("data-name"): browser.execute_script("return getComputedStyle(arguments[0]).stroke", p)
+        for p in lines
+    }
     assert drawn == {name: "rgb(%d, %d, %d)" % COLORS[key] for name, key in palette.items()}, drawn
     assert all(len(p.get_attribute("d")) > 100 for p in lines)
     assert card.find_element(By.CSS_SELECTOR, "svg.chart").size["width"] > 400
@@ -199,13 +223,17 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     loaded = "return [...document.querySelectorAll('#pictures img')].map(i => i.complete ? i.naturalWidth : 0)"
     wait.until(lambda d: len(d.execute_script(loaded)) == 2 and all(w > 0 for w in d.execute_script(loaded)))
     captions = [c.text for c in browser.find_elements(By.CSS_SELECTOR, "#pictures figcaption")]
-    assert any("Family of stationary ellipses over s3 from 0.05 to 4" in c and "p_θ = 1.77" in c for c in captions), captions
+    assert any("Family of stationary ellipses over s3 from 0.05 to 4" in c and "p_θ = 1.77" in c for c in captions), (
+        captions
+    )
     assert any("Stability map of 8 × 8 shapes" in c for c in captions), captions
     img = browser.find_element(By.CSS_SELECTOR, "#pictures img")
     assert img.size["width"] > 900  # the section's full width, not capped at 500 px
     img.click()  # click to enlarge
     zoom = browser.find_element(By.ID, "zoom")
-    assert zoom.is_displayed() and zoom.find_element(By.TAG_NAME, "img").get_attribute("src") == img.get_attribute("src")
+    assert zoom.is_displayed() and zoom.find_element(By.TAG_NAME, "img").get_attribute("src") == img.get_attribute(
+        "src"
+    )
     zoom.find_element(By.CSS_SELECTOR, "button.close").click()
     assert not zoom.is_displayed()
     assert not browser.find_element(By.ID, "error").is_displayed()
@@ -317,8 +345,11 @@ def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(wind
     _type(browser, "map-grid", "60")  # about 3 s on an idle core, reported row by row
     browser.find_element(By.ID, "start-map").click()
     row = WebDriverWait(browser, 30).until(
-        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]"))
-    assert "its progress is in Jobs below" in browser.find_element(By.ID, "map-error").text  # said where the user clicked
+        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]")
+    )
+    assert (
+        "its progress is in Jobs below" in browser.find_element(By.ID, "map-error").text
+    )  # said where the user clicked
     WebDriverWait(browser, 30).until(lambda d: "left" in row.text)
     browser.execute_script("arguments[0].scrollIntoView({block: 'end'})", row)
     _shot(browser, tmp_path, "progress")
@@ -333,13 +364,16 @@ def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(wind
     _type(browser, "map-grid", "200")
     browser.find_element(By.ID, "start-map").click()
     row = WebDriverWait(browser, 30).until(
-        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]"))
+        lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]")
+    )
     # the page redraws a row's buttons as progress comes in: look the button up afresh until a click lands
     row_id = row.get_attribute("id")
     WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
-        lambda d: d.find_element(By.CSS_SELECTOR, f"#{row_id} button.cancel").click() is None)
+        lambda d: d.find_element(By.CSS_SELECTOR, f"#{row_id} button.cancel").click() is None
+    )
     WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
-        lambda d: d.find_element(By.ID, row_id).get_attribute("data-status") == "cancelled")
+        lambda d: d.find_element(By.ID, row_id).get_attribute("data-status") == "cancelled"
+    )
     jobs = browser.execute_script("return fetch('/jobs').then(r => r.json())")["jobs"]
     assert [j["status"] for j in jobs] == ["done"]
 

@@ -31,11 +31,14 @@ def test_serve_elsewhere_is_said_in_the_log(fake_uvicorn, capsys, tmp_path):
     assert "0.0.0.0:8123" in err and "reachable from other machines" in err and "no authentication" in err
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["serve", "--port", "70000"], "port: must be an integer in [0, 65535]"),
-    (["serve", "--workers", "0"], "argument --workers: workers: must be an integer in [1, 256], got 0"),
-    (["bench", "service", "--clients", "0,8"], "clients: each must be an integer in [1, 256]"),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["serve", "--port", "70000"], "port: must be an integer in [0, 65535]"),
+        (["serve", "--workers", "0"], "argument --workers: workers: must be an integer in [1, 256], got 0"),
+        (["bench", "service", "--clients", "0,8"], "clients: each must be an integer in [1, 256]"),
+    ],
+)
 def test_bad_options_exit_2_with_one_line(fake_uvicorn, capsys, argv, words):
     with pytest.raises(SystemExit) as exc:
         cli(argv)
@@ -57,10 +60,30 @@ def test_one_service_per_data_dir(fake_uvicorn, capsys, tmp_path):
 
 @pytest.mark.slow  # the command itself runs in the smoke test (tests/cli/test_smoke.py)
 def test_bench_service_writes_its_figures(tmp_path, capsys):
-    assert cli(["bench", "service", "--clients", "1,2", "--requests", "4", "--seconds", "5", "--workers", "1", "--out-dir", str(tmp_path)]) == 0
+    assert (
+        cli(
+            [
+                "bench",
+                "service",
+                "--clients",
+                "1,2",
+                "--requests",
+                "4",
+                "--seconds",
+                "5",
+                "--workers",
+                "1",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     data = json.loads((tmp_path / "service_benchmark.json").read_text())
     rows = data["rows"]
-    assert [(r["endpoint"], r["clients"]) for r in rows] == [(e, c) for e in ("GET /health", "POST /ellipses", "POST /simulate") for c in (1, 2)]
+    assert [(r["endpoint"], r["clients"]) for r in rows] == [
+        (e, c) for e in ("GET /health", "POST /ellipses", "POST /simulate") for c in (1, 2)
+    ]
     assert all(r["errors"] == 0 and 1 <= r["requests"] <= 4 and r["p50_ms"] <= r["p99_ms"] for r in rows)
     assert data["long_job"]["status_at_start"] in ("queued", "running")
     assert (tmp_path / "service_benchmark.csv").read_text().count("\n") == len(rows) + 1

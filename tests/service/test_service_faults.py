@@ -41,13 +41,26 @@ def test_missing_or_corrupt_database_is_503(tmp_path, damage):
             _is_fault(http.delete(f"/jobs/{job}"))
             _is_fault(http.post("/jobs", json={"kind": "stability-map", "params": {"grid": 4}}))
             assert http.get("/health").status_code == 200
-            assert http.post("/ellipses", json={"body": {"params": {"J": 1, "J3": 1}, "potential": {"name": "V1", "k": 1}},
-                                                "s3": 2, "p_theta": 0.5}).status_code == 200
+            assert (
+                http.post(
+                    "/ellipses",
+                    json={
+                        "body": {"params": {"J": 1, "J3": 1}, "potential": {"name": "V1", "k": 1}},
+                        "s3": 2,
+                        "p_theta": 0.5,
+                    },
+                ).status_code
+                == 200
+            )
     finally:
         stop_service(proc)
     if damage == "corrupt":  # a service started on a corrupt database refuses with one line
-        run = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "serve", "--port", "0", "--data-dir", str(data)],
-                             capture_output=True, text=True, timeout=60)
+        run = subprocess.run(
+            [sys.executable, "-m", "flatbody_env.cli", "serve", "--port", "0", "--data-dir", str(data)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert run.returncode != 0 and "Traceback" not in run.stderr, run.stderr[-800:]
         assert "jobs.sqlite3" in run.stderr and len(run.stderr.strip().splitlines()) <= 3, run.stderr[-800:]
 
@@ -55,13 +68,18 @@ def test_missing_or_corrupt_database_is_503(tmp_path, damage):
 def _limit_files(size: int):
     def apply() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
+
     return apply
 
 
 def test_full_disk_is_503(tmp_path):
     data = tmp_path / "data"
-    proc, url = start_service(data, workers=1, preexec_fn=_limit_files(1_500_000),
-                              env={"FLATBODY_LIMIT_MAX_QUEUED_PER_CLIENT": "200", "FLATBODY_LIMIT_MAX_QUEUED_JOBS": "200"})
+    proc, url = start_service(
+        data,
+        workers=1,
+        preexec_fn=_limit_files(1_500_000),
+        env={"FLATBODY_LIMIT_MAX_QUEUED_PER_CLIENT": "200", "FLATBODY_LIMIT_MAX_QUEUED_JOBS": "200"},
+    )
     try:
         with httpx.Client(base_url=url, timeout=120) as http:
             # jobs whose stored parameters fill the rest of the allowed size: 503 (one line), never 422 or 500
@@ -69,7 +87,9 @@ def test_full_disk_is_503(tmp_path):
             times = [i * (10.0 / (n - 1)) * (1 - 1e-13) for i in range(n)]
             seen = []
             for _ in range(120):
-                r = http.post("/jobs", json={"kind": "simulate", "params": {"scene": "default", "t_end": 10.0, "times": times}})
+                r = http.post(
+                    "/jobs", json={"kind": "simulate", "params": {"scene": "default", "t_end": 10.0, "times": times}}
+                )
                 seen.append(r.status_code)
                 if r.status_code == 503:
                     _is_fault(r)
@@ -92,7 +112,9 @@ def test_record_job_over_the_file_size_limit_fails_with_one_line(tmp_path):
     proc, url = start_service(data, workers=1, preexec_fn=_limit_files(300_000))
     try:
         with httpx.Client(base_url=url, timeout=60) as http:
-            r = http.post("/jobs", json={"kind": "record", "params": {"scene": "default", "t_end": 50.0, "samples": 5001}})
+            r = http.post(
+                "/jobs", json={"kind": "record", "params": {"scene": "default", "t_end": 50.0, "samples": 5001}}
+            )
             assert r.status_code == 202, r.text[:300]
             job_id = r.json()["id"]
             deadline = time.monotonic() + 90

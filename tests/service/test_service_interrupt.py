@@ -25,9 +25,28 @@ def test_ctrl_c_stops_the_service_and_its_workers_quietly(tmp_path):
         port = s.getsockname()[1]
     env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
     # its own session, so that the signal can go to the whole process group, as a terminal's Ctrl-C does
-    proc = subprocess.Popen([sys.executable, "-m", "flatbody_env.cli", "serve", "--port", str(port), "--workers", "2",
-                             "--data-dir", str(tmp_path / "data"), "--log-level", "warning"],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "flatbody_env.cli",
+            "serve",
+            "--port",
+            str(port),
+            "--workers",
+            "2",
+            "--data-dir",
+            str(tmp_path / "data"),
+            "--log-level",
+            "warning",
+        ],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + 90

@@ -77,9 +77,13 @@ class HealthProbe:
         assert len(self.ms) >= 5, self.ms
         worst = max(self.ms)
         ranked = sorted(self.ms)
-        print(f"\n/health during the flood: worst {worst:.1f} ms, p50 {ranked[len(ranked) // 2]:.1f} ms, "
-              f"p99 {ranked[min(len(ranked) - 1, int(0.99 * len(ranked)))]:.1f} ms ({len(ranked)} probes)")
-        assert worst <= HEALTH_MS, f"/health took {worst:.1f} ms (p50 {sorted(self.ms)[len(self.ms) // 2]:.1f} ms, {len(self.ms)} probes)"
+        print(
+            f"\n/health during the flood: worst {worst:.1f} ms, p50 {ranked[len(ranked) // 2]:.1f} ms, "
+            f"p99 {ranked[min(len(ranked) - 1, int(0.99 * len(ranked)))]:.1f} ms ({len(ranked)} probes)"
+        )
+        assert worst <= HEALTH_MS, (
+            f"/health took {worst:.1f} ms (p50 {sorted(self.ms)[len(self.ms) // 2]:.1f} ms, {len(self.ms)} probes)"
+        )
 
 
 def _big_simulate_job() -> dict:
@@ -88,18 +92,24 @@ def _big_simulate_job() -> dict:
     scene = json.loads(open(__import__("flatbody_env").__path__[0] + "/scenes/default.json").read())
     scene["description"] = "x" * DEFAULT_LIMITS.max_string
     n = DEFAULT_LIMITS.max_times
-    return {"kind": "simulate", "params": {"scene": scene, "t_end": 10.0, "times": [i * (10.0 / (n - 1)) * (1 - 1e-13) for i in range(n)]}}
+    return {
+        "kind": "simulate",
+        "params": {"scene": scene, "t_end": 10.0, "times": [i * (10.0 / (n - 1)) * (1 - 1e-13) for i in range(n)]},
+    }
 
 
 def test_flood_of_jobs_is_bounded_and_health_stays_fast(small_service):
     url = small_service
     with httpx.Client(base_url=url, timeout=30.0) as http:
-        blocker = http.post("/jobs", json={"kind": "stability-map", "params": {"grid": 200}}).json()["id"]  # holds the one worker
+        blocker = http.post("/jobs", json={"kind": "stability-map", "params": {"grid": 200}}).json()[
+            "id"
+        ]  # holds the one worker
         big = _big_simulate_job()
         assert len(json.dumps(big)) > 40_000
         statuses: list[int] = []
         retry = set()
         with HealthProbe(url) as probe:
+
             def flood() -> None:
                 with httpx.Client(base_url=url, timeout=30.0) as c:
                     deadline = time.monotonic() + 8.0
@@ -111,6 +121,7 @@ def test_flood_of_jobs_is_bounded_and_health_stays_fast(small_service):
                         if r.status_code == 429:
                             retry.add(r.headers.get("retry-after"))
                             assert r.json()["kind"] == "too-many-jobs" and "\n" not in r.json()["detail"]
+
             threads = [threading.Thread(target=flood) for _ in range(2)]
             for t in threads:
                 t.start()
@@ -123,16 +134,25 @@ def test_flood_of_jobs_is_bounded_and_health_stays_fast(small_service):
                 time.sleep(0.05)
             for t in threads:
                 t.join()
+
             # large bodies: four of them at once, over the limit or at it
             def post_big(i: int) -> None:
                 with httpx.Client(base_url=url, timeout=30.0) as c:
                     if i % 2:
-                        r = c.post("/invariants", content=b"[" * (DEFAULT_LIMITS.max_trajectory_body_bytes - 10),
-                                   headers={"content-type": "application/json"})
+                        r = c.post(
+                            "/invariants",
+                            content=b"[" * (DEFAULT_LIMITS.max_trajectory_body_bytes - 10),
+                            headers={"content-type": "application/json"},
+                        )
                         assert r.status_code == 422, r.text[:200]
                     else:
-                        r = c.post("/ellipses", content=b" " * (DEFAULT_LIMITS.max_body_bytes + 10), headers={"content-type": "application/json"})
+                        r = c.post(
+                            "/ellipses",
+                            content=b" " * (DEFAULT_LIMITS.max_body_bytes + 10),
+                            headers={"content-type": "application/json"},
+                        )
                         assert r.status_code == 413
+
             bodies = [threading.Thread(target=post_big, args=(i,)) for i in range(4)]
             for t in bodies:
                 t.start()

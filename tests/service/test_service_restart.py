@@ -29,7 +29,9 @@ def _alive(pid: int) -> bool:
 def test_killed_service_reports_the_running_job_failed_and_keeps_finished_results(live_service):
     proc, url, data_dir = live_service
     http = httpx.Client(base_url=url, timeout=60)
-    finished = wait_job(http.get, http.post("/jobs", json={"kind": "stability-map", "params": {"grid": 5}}).json()["id"])
+    finished = wait_job(
+        http.get, http.post("/jobs", json={"kind": "stability-map", "params": {"grid": 5}}).json()["id"]
+    )
     assert finished["status"] == "done"
     long_params = {"scene": "long-horizon", "t_end": 10000.0, "samples": 20001, "rtol": 1e-13, "atol": 1e-13}
     long_id = http.post("/jobs", json={"kind": "simulate", "params": long_params}).json()["id"]

@@ -55,7 +55,9 @@ def _computed_refusal(response) -> bool:
         return field in INPUT_FIELDS and data.get("why") is not None
     if kind == "too-large" and field == "request":
         return detail.startswith("request: took longer than")
-    if kind == "too-large" and field == "t_end" and data.get("why") is not None:  # the integration's budget ran out before t_end
+    if (
+        kind == "too-large" and field == "t_end" and data.get("why") is not None
+    ):  # the integration's budget ran out before t_end
         return True
     if field in INPUT_FIELDS and "the computation failed" in detail:
         return True
@@ -89,7 +91,9 @@ def _call(case) -> None:
         httpx.delete(f"{url.scheme}://{url.netloc}/jobs/{response.json()['id']}", timeout=60)
 
 
-@pytest.mark.parametrize("mode", ["positive", pytest.param("negative", marks=pytest.mark.slow)])  # negative inputs: also the HTTP corpus
+@pytest.mark.parametrize(
+    "mode", ["positive", pytest.param("negative", marks=pytest.mark.slow)]
+)  # negative inputs: also the HTTP corpus
 def test_api_matches_its_openapi_document(api_schema, mode):
     operations = [result.ok() for result in api_schema.get_all_operations()]
     assert len(operations) >= 8, "the document lists the service's operations"
@@ -98,7 +102,13 @@ def test_api_matches_its_openapi_document(api_schema, mode):
     for operation in operations:
         strategy = operation.as_strategy(generation_mode=generation_mode)
 
-        @settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True, database=None)
+        @settings(
+            max_examples=EXAMPLES_PER_OPERATION,
+            deadline=None,
+            suppress_health_check=list(HealthCheck),
+            derandomize=True,
+            database=None,
+        )
         @given(case=strategy)
         def check(case):
             _call(case)

@@ -55,14 +55,40 @@ def dask_cluster(tmp_path_factory):
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     env = worktree_env()
-    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
-                              cwd=ROOT, env=env, stdout=(log / "scheduler.log").open("w"), stderr=subprocess.STDOUT)]
+    procs = [
+        subprocess.Popen(
+            [dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            cwd=ROOT,
+            env=env,
+            stdout=(log / "scheduler.log").open("w"),
+            stderr=subprocess.STDOUT,
+        )
+    ]
     try:
         time.sleep(1.0)
         for i in range(2):
-            procs.append(subprocess.Popen([dask, "worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
-                                           "--host", "127.0.0.1", "--name", f"w{i}"],
-                                          cwd=ROOT, env=env, stdout=(log / f"worker{i}.log").open("w"), stderr=subprocess.STDOUT))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        dask,
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                        "--name",
+                        f"w{i}",
+                    ],
+                    cwd=ROOT,
+                    env=env,
+                    stdout=(log / f"worker{i}.log").open("w"),
+                    stderr=subprocess.STDOUT,
+                )
+            )
         from distributed import Client
 
         with Client(address, timeout=60) as client:
@@ -125,8 +151,14 @@ def cli():
     """``cli(*argv)``: ``python -m flatbody_env.cli ARGV`` from this source tree (a fresh process)."""
 
     def run(*argv: str, timeout: float = 600) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-m", "flatbody_env.cli", *argv], cwd=ROOT, env=worktree_env(), capture_output=True,
-                              text=True, timeout=timeout)
+        return subprocess.run(
+            [sys.executable, "-m", "flatbody_env.cli", *argv],
+            cwd=ROOT,
+            env=worktree_env(),
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
 
     return run
 
@@ -136,7 +168,13 @@ def spawn():
     """``spawn(*argv)``: start ``python -m flatbody_env.cli ARGV`` without waiting (a Popen)."""
 
     def start(*argv: str) -> subprocess.Popen:
-        return subprocess.Popen([sys.executable, "-m", "flatbody_env.cli", *argv], cwd=ROOT, env=worktree_env(),
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        return subprocess.Popen(
+            [sys.executable, "-m", "flatbody_env.cli", *argv],
+            cwd=ROOT,
+            env=worktree_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
 
     return start

@@ -25,9 +25,13 @@ MAP = ["sweep", "stability-map", "--grid", "6", "--workers", "0", "--no-progress
 def _run(args, *, fsize=None, timeout=120):
     pre = None
     if fsize is not None:
+
         def pre():
             resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
-    return subprocess.run([*FLATBODY, *args], check=False, capture_output=True, text=True, timeout=timeout, env=ENV, preexec_fn=pre)
+
+    return subprocess.run(
+        [*FLATBODY, *args], check=False, capture_output=True, text=True, timeout=timeout, env=ENV, preexec_fn=pre
+    )
 
 
 def _one_line(r, codes):
@@ -69,7 +73,21 @@ def test_sweep_refuses_a_bad_results_database_and_keeps_it(tmp_path, kind):
 def test_tune_refuses_a_bad_sqlite_storage(tmp_path, kind):
     db = tmp_path / "optuna.sqlite3"
     before = _bad_store(kind, db)
-    r = _run(["tune", "--algo", "ppo", "--trials", "1", "--storage", f"sqlite:///{db}", "--out", str(tmp_path / "t"), "--workers", "1"])
+    r = _run(
+        [
+            "tune",
+            "--algo",
+            "ppo",
+            "--trials",
+            "1",
+            "--storage",
+            f"sqlite:///{db}",
+            "--out",
+            str(tmp_path / "t"),
+            "--workers",
+            "1",
+        ]
+    )
     assert "storage" in _one_line(r, {2})
     if before is not None:
         assert db.read_bytes() == before
@@ -77,7 +95,9 @@ def test_tune_refuses_a_bad_sqlite_storage(tmp_path, kind):
 
 def test_sweep_on_a_full_disk_is_one_line_and_keeps_the_stored_rows(tmp_path):
     out = tmp_path / "sweep"
-    r = _run([*MAP[:2], "--grid", "40", "--chunk", "1", "--workers", "0", "--no-progress", "--out", str(out)], fsize=40_000)
+    r = _run(
+        [*MAP[:2], "--grid", "40", "--chunk", "1", "--workers", "0", "--no-progress", "--out", str(out)], fsize=40_000
+    )
     line = _one_line(r, {1})
     assert "I/O error" in line
     db = sqlite3.connect(out / "results.sqlite")
@@ -99,10 +119,14 @@ def test_record_on_a_disk_that_fills_mid_run_is_one_line(tmp_path):
     itself: flatbody_env.recording.sink), the file already under that name kept, no temporary file left."""
     target = tmp_path / "run.rrd"
     target.write_bytes(b"the previous recording")
-    code = ("import resource, sys; from flatbody_env.cli import record; record.check_space = lambda *a, **k: None; "
-            "resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); from flatbody_env.cli.main import main; "
-            f"sys.exit(main(['record', '--scene', 'default', '--t-end', '5', '--out', {str(target)!r}]))")
-    r = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=60, env=ENV)  # hang guard
+    code = (
+        "import resource, sys; from flatbody_env.cli import record; record.check_space = lambda *a, **k: None; "
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000)); from flatbody_env.cli.main import main; "
+        f"sys.exit(main(['record', '--scene', 'default', '--t-end', '5', '--out', {str(target)!r}]))"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=60, env=ENV
+    )  # hang guard
     line = _one_line(r, {1})
     assert str(target) in line and "file-size limit" in line, line
     assert target.read_bytes() == b"the previous recording"
@@ -116,9 +140,35 @@ def test_killed_tune_worker_trial_is_marked_failed_by_the_heartbeat(tmp_path):
     pytest.importorskip("optuna")
     db = tmp_path / "optuna.sqlite3"
     env = {**ENV, "FLATBODY_TUNE_HEARTBEAT": "1"}
-    args = [*FLATBODY, "tune", "--algo", "ppo", "--trials", "1", "--n-timesteps", "200000", "--n-envs", "2", "--evaluations", "2",
-            "--eval-episodes", "2", "--search-file", SMALL, "--hyperparams", "n_steps=64", "batch_size=64",
-            "--storage", f"sqlite:///{db}", "--study", "k", "--out", str(tmp_path / "t"), "--workers", "1"]
+    args = [
+        *FLATBODY,
+        "tune",
+        "--algo",
+        "ppo",
+        "--trials",
+        "1",
+        "--n-timesteps",
+        "200000",
+        "--n-envs",
+        "2",
+        "--evaluations",
+        "2",
+        "--eval-episodes",
+        "2",
+        "--search-file",
+        SMALL,
+        "--hyperparams",
+        "n_steps=64",
+        "batch_size=64",
+        "--storage",
+        f"sqlite:///{db}",
+        "--study",
+        "k",
+        "--out",
+        str(tmp_path / "t"),
+        "--workers",
+        "1",
+    ]
     proc = subprocess.Popen(args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 60
@@ -137,8 +187,10 @@ def test_killed_tune_worker_trial_is_marked_failed_by_the_heartbeat(tmp_path):
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
     time.sleep(3.5)  # > grace period (3 heartbeats of 1 s)
-    code = ("import json, sys; from agents.tune import summary; "
-            f"print(json.dumps([t['state'] for t in summary('k', {f'sqlite:///{db}'!r})['trials']]))")
+    code = (
+        "import json, sys; from agents.tune import summary; "
+        f"print(json.dumps([t['state'] for t in summary('k', {f'sqlite:///{db}'!r})['trials']]))"
+    )
     r = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, env=env, timeout=60)
     assert r.returncode == 0, r.stderr[-2000:]
     states = json.loads(r.stdout.strip().splitlines()[-1])

@@ -15,8 +15,21 @@ import pytest
 from flatbody_env.cli.main import main
 
 MAP = ["--grid", "10", "--lam-range", "1.02,3", "--mu-range", "0.3,3", "--potential", "V1", "--k", "1.3"]
-SEEDS = ["--algo", "ppo", "--seeds", "0-1", "--n-timesteps", "128", "--n-envs", "2", "--episodes", "3",
-         "--hyperparams", "n_steps=64", "batch_size=64"]
+SEEDS = [
+    "--algo",
+    "ppo",
+    "--seeds",
+    "0-1",
+    "--n-timesteps",
+    "128",
+    "--n-envs",
+    "2",
+    "--episodes",
+    "3",
+    "--hyperparams",
+    "n_steps=64",
+    "batch_size=64",
+]
 
 
 def _ok(r):
@@ -27,8 +40,12 @@ def _ok(r):
 def test_stability_map_identical_serial_workers_and_cluster(cli, dask_cluster, tmp_path):
     serial = _ok(cli("stability-map", *MAP, "--json"))
     assert len(json.loads(serial)["rows"]) > 10
-    modes = {"no-dask": ["--workers", "0"], "in-process": ["--workers", "1"], "2-processes": ["--workers", "2"],
-             "cluster": ["--scheduler", dask_cluster]}
+    modes = {
+        "no-dask": ["--workers", "0"],
+        "in-process": ["--workers", "1"],
+        "2-processes": ["--workers", "2"],
+        "cluster": ["--scheduler", dask_cluster],
+    }
     for name, mode in modes.items():
         out = _ok(cli("sweep", "stability-map", *MAP, "--chunk", "3", "--out", str(tmp_path / name), *mode, "--json"))
         assert out == serial, name
@@ -41,7 +58,11 @@ def test_stability_map_identical_serial_workers_and_cluster(cli, dask_cluster, t
 @pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_two_seed_training_sweep_identical_everywhere(cli, dask_cluster, tmp_path):
     runs = {}
-    for name, mode in {"serial": ["--workers", "0"], "2-processes": ["--workers", "2"], "cluster": ["--scheduler", dask_cluster]}.items():
+    for name, mode in {
+        "serial": ["--workers", "0"],
+        "2-processes": ["--workers", "2"],
+        "cluster": ["--scheduler", dask_cluster],
+    }.items():
         runs[name] = json.loads(_ok(cli("sweep", "seeds", *SEEDS, "--out", str(tmp_path / name), *mode, "--json")))
     rows = runs["serial"]["rows"]
     assert [r["seed"] for r in rows] == [0, 1]
@@ -57,8 +78,20 @@ def test_two_seed_training_sweep_identical_everywhere(cli, dask_cluster, tmp_pat
     fd = np.array([r["final_distance"] for r in rows])
     assert s["mean"] == pytest.approx(fd.mean()) and s["std"] == pytest.approx(fd.std(ddof=1)) and s["n"] == 2
     # a row is the evaluation 'flatbody evaluate' gives for that model on the same episodes
-    ev = json.loads(_ok(cli("evaluate", str(tmp_path / "serial" / "models" / "seed-1"), "--episodes", "3", "--seed", "10000",
-                            "--no-baselines", "--json")))
+    ev = json.loads(
+        _ok(
+            cli(
+                "evaluate",
+                str(tmp_path / "serial" / "models" / "seed-1"),
+                "--episodes",
+                "3",
+                "--seed",
+                "10000",
+                "--no-baselines",
+                "--json",
+            )
+        )
+    )
     assert {k: v for k, v in rows[1].items() if k not in ("seed", "model")} == ev["agent"]
 
 
@@ -102,9 +135,26 @@ def test_killed_sweep_resumes_without_duplicate_or_loss(cli, spawn, tmp_path):
 @pytest.mark.slow  # a long equality/training check (pytest -m slow); shorter ones of the same path run by default
 def test_failure_study_rows_match_serial(cli, tmp_path):
     methods = ["--methods", "RK4", "DOP853-numba"]
-    serial = json.loads(_ok(cli("failure-study", "--studies", "gap", "--quick", *methods, "--out", str(tmp_path / "s"), "--json")))
-    swept = json.loads(_ok(cli("sweep", "failure-study", "--studies", "gap", "--quick", *methods, "--out", str(tmp_path / "p"),
-                               "--workers", "2", "--json")))
+    serial = json.loads(
+        _ok(cli("failure-study", "--studies", "gap", "--quick", *methods, "--out", str(tmp_path / "s"), "--json"))
+    )
+    swept = json.loads(
+        _ok(
+            cli(
+                "sweep",
+                "failure-study",
+                "--studies",
+                "gap",
+                "--quick",
+                *methods,
+                "--out",
+                str(tmp_path / "p"),
+                "--workers",
+                "2",
+                "--json",
+            )
+        )
+    )
     strip = lambda rows: [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]  # noqa: E731  (timings differ)
     assert strip(swept["rows"]) == strip(serial["rows"])
     assert [r["method"] for r in serial["rows"]] == ["RK4"] * 4 + ["DOP853-numba"] * 4
@@ -119,22 +169,45 @@ def test_failing_family_is_recorded_and_the_sweep_goes_on(cli, tmp_path):
     assert [e["key"] for e in data["errors"]] == ["001-00-000"] and "not a constant" in data["errors"][0]["error"]
     (row,) = data["rows"]
     assert row["body"] == "V1:k=1" and (tmp_path / "f" / row["csv"]).exists()
-    serial = json.loads(_ok(cli("family", "--potential", "V1", "--k", "1", "--vary", "k", "--from", "0.5", "--to", "1.5",
-                                "--seeds", "2", "--grid", "40", "--json")))
+    serial = json.loads(
+        _ok(
+            cli(
+                "family",
+                "--potential",
+                "V1",
+                "--k",
+                "1",
+                "--vary",
+                "k",
+                "--from",
+                "0.5",
+                "--to",
+                "1.5",
+                "--seeds",
+                "2",
+                "--grid",
+                "40",
+                "--json",
+            )
+        )
+    )
     assert {k: v for k, v in row.items() if k not in ("body", "csv")} == {k: v for k, v in serial.items() if k != "csv"}
 
 
-@pytest.mark.parametrize("argv,field", [
-    (["sweep", "stability-map", "--grid", "3", "--out", "X"], "--grid"),
-    (["sweep", "stability-map", "--grid", "10", "--chunk", "11", "--out", "X"], "--chunk"),
-    (["sweep", "stability-map", "--scheduler", "localhost", "--out", "X"], "scheduler"),
-    (["sweep", "stability-map", "--workers", "2", "--scheduler", "tcp://h:1", "--out", "X"], "--scheduler"),
-    (["sweep", "seeds", "--algo", "ppo", "--seeds", "5-2", "--out", "X"], "seeds"),
-    (["sweep", "family", "--vary", "q", "--out", "X"], "--vary"),
-    (["sweep", "family", "--bodies", "V4:k=1", "--out", "X"], "bodies"),
-    (["sweep", "work-precision", "--workers", "4"], "stays serial"),
-    (["sweep", "stability-map", "--out", "X", "--resume"], "resume"),
-])
+@pytest.mark.parametrize(
+    "argv,field",
+    [
+        (["sweep", "stability-map", "--grid", "3", "--out", "X"], "--grid"),
+        (["sweep", "stability-map", "--grid", "10", "--chunk", "11", "--out", "X"], "--chunk"),
+        (["sweep", "stability-map", "--scheduler", "localhost", "--out", "X"], "scheduler"),
+        (["sweep", "stability-map", "--workers", "2", "--scheduler", "tcp://h:1", "--out", "X"], "--scheduler"),
+        (["sweep", "seeds", "--algo", "ppo", "--seeds", "5-2", "--out", "X"], "seeds"),
+        (["sweep", "family", "--vary", "q", "--out", "X"], "--vary"),
+        (["sweep", "family", "--bodies", "V4:k=1", "--out", "X"], "bodies"),
+        (["sweep", "work-precision", "--workers", "4"], "stays serial"),
+        (["sweep", "stability-map", "--out", "X", "--resume"], "resume"),
+    ],
+)
 def test_bad_input_is_one_line_exit_2(capsys, tmp_path, monkeypatch, argv, field):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as exc:

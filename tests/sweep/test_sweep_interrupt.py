@@ -40,8 +40,15 @@ def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
     out = tmp_path / "map"
     db_path = out / "results.sqlite"
     # its own session, so that the signal can go to the whole process group, as a terminal's Ctrl-C does
-    proc = subprocess.Popen([sys.executable, "-m", "flatbody_env.cli", "sweep", "stability-map", *MAP, "--out", str(out), "--workers", "2"],
-                            cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "flatbody_env.cli", "sweep", "stability-map", *MAP, "--out", str(out), "--workers", "2"],
+        cwd=ROOT,
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 120
         while len(_rows(db_path)) < 2:
@@ -59,8 +66,26 @@ def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
     assert not alive, [p.cmdline()[:3] for p in alive]
     before = _rows(db_path)
     assert 2 <= len(before) < 40
-    resumed = subprocess.run([sys.executable, "-m", "flatbody_env.cli", "sweep", "stability-map", *MAP, "--out", str(out), "--workers", "0",
-                              "--resume"], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
+    resumed = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "flatbody_env.cli",
+            "sweep",
+            "stability-map",
+            *MAP,
+            "--out",
+            str(out),
+            "--workers",
+            "0",
+            "--resume",
+        ],
+        cwd=ROOT,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert f"({40 - len(before)} run now)" in resumed.stdout
     after = _rows(db_path)

@@ -14,7 +14,14 @@ BODY = {"params": {"J": 1.0, "J3": 1.0}, "potential": {"name": "V3", "kappa": 1.
 
 
 def _map_spec(grid, chunk):
-    return {"kind": "stability-map", "body": BODY, "lam_range": [1.02, 3.0], "mu_range": [0.3, 3.0], "grid": grid, "chunk": chunk}
+    return {
+        "kind": "stability-map",
+        "body": BODY,
+        "lam_range": [1.02, 3.0],
+        "mu_range": [0.3, 3.0],
+        "grid": grid,
+        "chunk": chunk,
+    }
 
 
 @pytest.mark.parametrize("grid,chunk", [(7, 1), (30, 4), (33, 32), (1000, default_chunk(1000))])
@@ -44,15 +51,27 @@ def test_task_is_a_pure_function_of_its_key():
 
 
 def test_failing_task_becomes_an_error_record():
-    bad = Task(kind="stability-map", key="lam-000000-000001",
-               params={**plan(_map_spec(8, 1), "out")[0].params, "body": {**BODY, "potential": {"name": "V3", "kappa": -1.0}}})
+    bad = Task(
+        kind="stability-map",
+        key="lam-000000-000001",
+        params={**plan(_map_spec(8, 1), "out")[0].params, "body": {**BODY, "potential": {"name": "V3", "kappa": -1.0}}},
+    )
     out = execute(bad)
     assert out.payload is None and out.error.startswith("ValueError: ") and "kappa" in out.error
 
 
 def test_seeds_come_from_keys():
-    spec = {"kind": "seeds", "algo": "ppo", "seeds": [0, 3, 12], "n_timesteps": 10, "n_envs": 1, "overrides": [],
-            "hyperparams_file": None, "episodes": 1, "eval_seed": 10_000}
+    spec = {
+        "kind": "seeds",
+        "algo": "ppo",
+        "seeds": [0, 3, 12],
+        "n_timesteps": 10,
+        "n_envs": 1,
+        "overrides": [],
+        "hyperparams_file": None,
+        "episodes": 1,
+        "eval_seed": 10_000,
+    }
     tasks = plan(spec, "out")
     assert [seed_of(t.key) for t in tasks] == [0, 3, 12]
     assert "seed" not in tasks[0].params

@@ -14,8 +14,21 @@ optuna = pytest.importorskip("optuna")
 from agents.tune import TuneConfig, as_overrides, load_search_space, objective, open_storage  # noqa: E402
 
 SMALL = str(Path(__file__).with_name("ppo_search_small.yml"))
-FIXED = ["--n-timesteps", "128", "--n-envs", "2", "--evaluations", "2", "--eval-episodes", "2", "--search-file", SMALL,
-         "--hyperparams", "n_steps=64", "batch_size=64"]
+FIXED = [
+    "--n-timesteps",
+    "128",
+    "--n-envs",
+    "2",
+    "--evaluations",
+    "2",
+    "--eval-episodes",
+    "2",
+    "--search-file",
+    SMALL,
+    "--hyperparams",
+    "n_steps=64",
+    "batch_size=64",
+]
 
 
 def _ok(r):
@@ -45,12 +58,15 @@ def eval_key(hp, dotted):
     return hp
 
 
-@pytest.mark.parametrize("entry,match", [
-    ({"x": {"type": "uniform", "low": 0, "high": 1}}, "type"),
-    ({"x": {"type": "float", "low": 1, "high": 1}}, "low < high"),
-    ({"x": {"type": "float", "low": 0, "high": 1, "log": True}}, "log scale"),
-    ({"x": {"type": "categorical", "choices": []}}, "choices"),
-])
+@pytest.mark.parametrize(
+    "entry,match",
+    [
+        ({"x": {"type": "uniform", "low": 0, "high": 1}}, "type"),
+        ({"x": {"type": "float", "low": 1, "high": 1}}, "low < high"),
+        ({"x": {"type": "float", "low": 0, "high": 1, "log": True}}, "log scale"),
+        ({"x": {"type": "categorical", "choices": []}}, "choices"),
+    ],
+)
 def test_bad_search_space_names_the_entry(tmp_path, entry, match):
     f = tmp_path / "s.yml"
     f.write_text(yaml.safe_dump({"FlatBody-v0": entry}))
@@ -59,8 +75,19 @@ def test_bad_search_space_names_the_entry(tmp_path, entry, match):
 
 
 def test_pruned_trial_stops_training_early(tmp_path):
-    cfg = TuneConfig(algo="ppo", study="prune", storage=str(tmp_path / "j.log"), trials=1, n_timesteps=512, evaluations=4,
-                     eval_episodes=2, n_envs=2, search_file=SMALL, overrides=("n_steps=64", "batch_size=64"), out=str(tmp_path))
+    cfg = TuneConfig(
+        algo="ppo",
+        study="prune",
+        storage=str(tmp_path / "j.log"),
+        trials=1,
+        n_timesteps=512,
+        evaluations=4,
+        eval_episodes=2,
+        n_envs=2,
+        search_file=SMALL,
+        overrides=("n_steps=64", "batch_size=64"),
+        out=str(tmp_path),
+    )
     # a final distance is > 0, so this pruner prunes at the first report
     study = optuna.create_study(pruner=optuna.pruners.ThresholdPruner(upper=0.0), direction="minimize")
     study.optimize(lambda t: objective(t, cfg, load_search_space("ppo", path=SMALL)), n_trials=1)
@@ -88,15 +115,48 @@ def _check_study(storage: str, name: str, trials: int) -> list:
 @pytest.mark.slow  # trains agents: a training check (pytest -m slow)
 def test_journal_study_shared_by_two_workers_and_retrained(cli, tmp_path):
     journal = str(tmp_path / "optuna.log")
-    rep = json.loads(_ok(cli("tune", "--algo", "ppo", "--trials", "3", *FIXED, "--storage", journal, "--study", "j",
-                             "--out", str(tmp_path / "runs"), "--workers", "2", "--json")))
+    rep = json.loads(
+        _ok(
+            cli(
+                "tune",
+                "--algo",
+                "ppo",
+                "--trials",
+                "3",
+                *FIXED,
+                "--storage",
+                journal,
+                "--study",
+                "j",
+                "--out",
+                str(tmp_path / "runs"),
+                "--workers",
+                "2",
+                "--json",
+            )
+        )
+    )
     assert len(rep["trials"]) == 3
     done = _check_study(journal, "j", 3)
     best = min((t for t in done if t.state == optuna.trial.TrialState.COMPLETE), key=lambda t: t.value)
     assert rep["best"]["number"] == best.number
     out = tmp_path / "retrain"
-    _ok(cli("train", "--study", "j", "--trial-id", str(best.number), "--storage", journal, "--n-timesteps", "64",
-            "--out", str(out), "--no-progress"))
+    _ok(
+        cli(
+            "train",
+            "--study",
+            "j",
+            "--trial-id",
+            str(best.number),
+            "--storage",
+            journal,
+            "--n-timesteps",
+            "64",
+            "--out",
+            str(out),
+            "--no-progress",
+        )
+    )
     hp = yaml.safe_load((out / "config.yml").read_text())["hyperparams"]
     assert hp["learning_rate"] == best.params["learning_rate"]
     assert hp["policy_kwargs"]["log_std_init"] == best.params["policy_kwargs.log_std_init"]
@@ -106,8 +166,27 @@ def test_journal_study_shared_by_two_workers_and_retrained(cli, tmp_path):
 
 
 def test_postgresql_study_shared_by_two_workers(cli, postgres_url, tmp_path):
-    rep = json.loads(_ok(cli("tune", "--algo", "ppo", "--trials", "2", *FIXED, "--storage", postgres_url, "--study", "pg",
-                             "--out", str(tmp_path / "runs"), "--workers", "2", "--json")))
+    rep = json.loads(
+        _ok(
+            cli(
+                "tune",
+                "--algo",
+                "ppo",
+                "--trials",
+                "2",
+                *FIXED,
+                "--storage",
+                postgres_url,
+                "--study",
+                "pg",
+                "--out",
+                str(tmp_path / "runs"),
+                "--workers",
+                "2",
+                "--json",
+            )
+        )
+    )
     assert rep["study"] == "pg" and len(rep["trials"]) == 2
     _check_study(postgres_url, "pg", 2)
 
