@@ -19,7 +19,7 @@ from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
 
 class FlatBodySB3VecEnv(VecEnv):
-    """SB3 view of N batched ``FlatBody-v0`` bodies.
+    """SB3 view of N batched bodies of any id of docs/tasks.md (``FlatBody-v1`` by default).
 
     Parameters
     ----------
@@ -55,8 +55,8 @@ class FlatBodySB3VecEnv(VecEnv):
                 "is_success": bool(info["is_success"][i]),
                 "energy": float(info["energy"][i]),
                 "reward_terms": {k: float(x[i]) for k, x in info["reward_terms"].items()},
-                "integrator_failure": info["integrator_failure"][i] or None,
-                "left_domain": info["left_domain"][i] or None,
+                "status": int(info["status"][i]),
+                "domain_code": int(info["domain_code"][i]),
                 "TimeLimit.truncated": bool(truncated[i] and not terminated[i]),
             }
             if dones[i]:
@@ -68,16 +68,13 @@ class FlatBodySB3VecEnv(VecEnv):
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices=None) -> list[Any]:
-        return [getattr(self.venv.single_env, attr_name) for _ in self._get_indices(indices)]
+        return [getattr(self.venv, attr_name) for _ in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        setattr(self.venv.single_env, attr_name, value)
+        setattr(self.venv, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
-        return [
-            getattr(self.venv.single_env, method_name)(*method_args, **method_kwargs)
-            for _ in self._get_indices(indices)
-        ]
+        return [getattr(self.venv, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
 
     def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]

@@ -169,6 +169,21 @@ def documented_reward_terms(y, target, action, ended, body: Body, *, weights=Non
     return terms
 
 
+DOCUMENTED_TOLERANCE_REWARD = {"beta": 0.2, "margin": 0.5}
+"""docs/env.md, the v1 ids' reward: ``success`` = (1 − β) within the tolerance, ``proximity`` = β·g(d), g = 1 within
+the tolerance and exp(−ln 10·((d − tol)/m)²) outside; both 0 on a step that ends the episode by failure."""
+
+
+def documented_tolerance_terms(y, target, ended, body: Body) -> dict[str, np.ndarray]:
+    """The v1 ids' reward terms (:data:`DOCUMENTED_TOLERANCE_REWARD`) of the state(s) ``y`` the step keeps, arrays (N,);
+    ``ended``: the step ends the episode by failure (integrator, domain, or the hold task's ball)."""
+    b, m, tol = DOCUMENTED_TOLERANCE_REWARD["beta"], DOCUMENTED_TOLERANCE_REWARD["margin"], DOCUMENTED_TOLERANCE
+    d = documented_distance(y, target, body)
+    alive = ~np.broadcast_to(np.asarray(ended, dtype=bool), d.shape)
+    g = np.where(d <= tol, 1.0, 10.0 ** (-(((d - tol) / m) ** 2)))
+    return {"success": np.where(alive & (d <= tol), 1.0 - b, 0.0), "proximity": np.where(alive, b * g, 0.0)}
+
+
 def documented_in_domain(y, *, two_polar: bool) -> np.ndarray:
     """Whether state(s) ``y`` lie in docs/env.md's domain, shape (N,)."""
     Y = _columns(y)

@@ -11,20 +11,21 @@ default shape on a regular orbit with perturbed momenta, on
 * ``cuda`` — :func:`~flatbody_env.integrators.cuda.env_step`: the same source compiled for the GPU, one thread
   per body, one launch per step, state kept on the device.
 
-The whole env step (``what`` = :data:`WHAT_ENV`): random actions in [−1, 1], the controls, the dynamics, the
-task's observation, reward terms, termination and autoresets, ``FlatBody-v0``'s defaults (its DOP853), 400-step
-episodes started with staggered clocks so that resets fall in every step, on
+The whole env step (``what`` = :data:`WHAT_ENV`, ``env`` the id): random actions in [−1, 1], the controls, the
+dynamics, the task's observation, reward, termination and autoresets (the transition,
+:mod:`flatbody_env.env.transition`), the id's defaults (its DOP853), 400-step episodes started with staggered clocks
+so that resets fall in every step, on
 
 * ``cpu-serial`` — :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` (SAME_STEP) ``step``, one thread (the
-  CPU env as users run it);
-* ``cuda`` — :class:`~flatbody_env.env.device.DeviceBatch` on CUDA: one launch per step
-  (:func:`flatbody_env.integrators.cuda.env_step` with ``task=``), actions and every array on the device, with the
-  per-step read of the two-integer error flag (the kernels ``FlatBodyTorchVectorEnv(device="cuda")`` launches; its
-  tensor wrapping is not timed).
+  CPU env as users run it), ``FlatBody-v1``;
+* ``cuda`` — :class:`~flatbody_env.env.core.EnvCore` on CUDA: one launch per step, actions and every array on the
+  device, with the per-step read of the two-integer error flag (the kernels ``FlatBodyTorchVectorEnv(device="cuda")``
+  launches; its tensor wrapping is not timed), every v1 id.
 
 Each figure is N · steps / seconds, the best of ``repeats`` timed blocks of ``steps`` steps (:func:`.harness.best_of`),
 after one untimed step (compilation); a CUDA block ends with a device synchronisation. numba's CUDA simulator is
-never timed. Rows: ``{"what", "backend", "method", "n", "steps_per_s", "device_name"}``.
+never timed. Rows: ``{"what", "env", "backend", "method", "n", "steps_per_s", "device_name"}`` (``env`` "" for the
+dynamics rows).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ BACKENDS = ("cpu-serial", "cpu-parallel", "cuda")
 """Every backend a row can come from (module docstring); those present here: :func:`backends`."""
 ENV_BACKENDS = ("cpu-serial", "cuda")
 """The backends with whole-env rows."""
-ROW_KEYS = ("what", "backend", "method", "n", "steps_per_s", "device_name")
+ROW_KEYS = ("what", "env", "backend", "method", "n", "steps_per_s", "device_name")
 """A row's keys: the CSV's columns."""
 DT = 0.05
 RK4_STEP = DT / 4
@@ -138,15 +139,18 @@ def measure(backend: str, method: str, n: int, *, steps: int, repeats: int) -> f
     return n * steps / best_of(block, repeats, warm=False)
 
 
-def measure_env(backend: str, n: int, *, steps: int, repeats: int) -> tuple[str, float]:
-    """(method, body-steps per second) of the whole env step of ``n`` bodies on ``backend`` (module docstring)."""
+def measure_env(backend: str, n: int, *, steps: int, repeats: int, env_id: str = "FlatBody-v1") -> tuple[str, float]:
+    """(method, body-steps per second) of the whole env step of ``n`` bodies of ``env_id`` on ``backend`` (module docstring)."""
+    from flatbody_env.env.registration import task_spec
+
+    kwargs = dict(task_spec(env_id).kwargs)
     rng = np.random.default_rng(0)
     if backend == "cpu-serial":
         from gymnasium.vector import AutoresetMode
 
         from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
-        env = FlatBodyVectorEnv(num_envs=n, autoreset_mode=AutoresetMode.SAME_STEP)
+        env = FlatBodyVectorEnv(num_envs=n, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs)
         env.reset(seed=0, options={"stagger": True})
         blocks = [
             rng.uniform(-1, 1, (steps + 1, n) + env.single_action_space.shape).astype(np.float32)
@@ -165,29 +169,35 @@ def measure_env(backend: str, n: int, *, steps: int, repeats: int) -> tuple[str,
         env.close()
         return method, n * steps / seconds
     if backend == "cuda":
-        from flatbody_env.env.device import DeviceBatch
-        from flatbody_env.env.env import FlatBodyEnv
+        from flatbody_env.env.core import EnvCore, configure
         from flatbody_env.integrators import cuda
 
         dev = cuda.require()
-        p = FlatBodyEnv()
-        batch = DeviceBatch(p, n, 400, same_step=True, backend="cuda")
-        batch.reset(seed=0, stagger=True)
-        dA = dev.to_device(rng.uniform(-1, 1, (steps, n) + p.action_space.shape).astype(np.float32))
-        batch.step(dA[0])  # compile / warm
+        config = configure(**kwargs)
+        core = EnvCore(config, n, max_episode_steps=400, autoreset="same", backend="cuda")
+        core.reset(seeds=list(range(n)), stagger=True)
+        dA = dev.to_device(rng.uniform(-1, 1, (steps, n) + config.action_space.shape).astype(np.float32))
+        core.step(dA[0])  # compile / warm
         dev.synchronize()
 
         def block() -> None:
             for k in range(steps):
-                batch.step(dA[k])
+                core.step(dA[k])
             dev.synchronize()
 
-        return batch.method, n * steps / best_of(block, repeats, warm=False)
+        return config.stepper.method, n * steps / best_of(block, repeats, warm=False)
     raise ValueError(f"backend: no whole-env row for {backend!r} (allowed: {', '.join(ENV_BACKENDS)})")
 
 
 def run(
-    *, sizes=DEFAULT_SIZES, methods=DEFAULT_METHODS, steps: int = 10, repeats: int = 3, only=None, progress=None
+    *,
+    sizes=DEFAULT_SIZES,
+    methods=DEFAULT_METHODS,
+    steps: int = 10,
+    repeats: int = 3,
+    only=None,
+    progress=None,
+    envs=None,
 ) -> dict:
     """Every backend here (or those of ``only`` among them) × ``methods`` × ``sizes`` (dynamics only), then the
     whole env step on those of :data:`ENV_BACKENDS` × ``sizes``: ``{"rows", "settings", "left_out"}``;
@@ -207,9 +217,10 @@ def run(
         device_names["cuda"] = cuda.device_name()
     rows = []
 
-    def add(what, backend, method, n, rate):
+    def add(what, backend, method, n, rate, env=""):
         row = {
             "what": what,
+            "env": env,
             "backend": backend,
             "method": method,
             "n": n,
@@ -224,10 +235,13 @@ def run(
         for method in methods:
             for n in sizes:
                 add(WHAT, backend, method, int(n), measure(backend, method, int(n), steps=steps, repeats=repeats))
+    from flatbody_env.env.registration import V1_IDS
+
     for backend in [b for b in names if b in ENV_BACKENDS]:
-        for n in sizes:
-            method, rate = measure_env(backend, int(n), steps=steps, repeats=repeats)
-            add(WHAT_ENV, backend, method, int(n), rate)
+        for env_id in envs or (V1_IDS if backend == "cuda" else ("FlatBody-v1",)):
+            for n in sizes:
+                method, rate = measure_env(backend, int(n), steps=steps, repeats=repeats, env_id=env_id)
+                add(WHAT_ENV, backend, method, int(n), rate, env_id)
     settings = {
         "dt": DT,
         "rk4_step": RK4_STEP,
@@ -260,10 +274,14 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
 
     result = json.loads(Path(json_path).read_text(encoding="utf-8"))
     fig, ax = plt.subplots(figsize=(10, 4.8))
-    keys = sorted({(r["what"], r["backend"], r["method"]) for r in result["rows"]})
-    for what, backend, method in keys:
+    keys = sorted({(r["what"], r.get("env", ""), r["backend"], r["method"]) for r in result["rows"]})
+    for what, env, backend, method in keys:
         rows = sorted(
-            (r for r in result["rows"] if r["what"] == what and r["backend"] == backend and r["method"] == method),
+            (
+                r
+                for r in result["rows"]
+                if (r["what"], r.get("env", ""), r["backend"], r["method"]) == (what, env, backend, method)
+            ),
             key=lambda r: r["n"],
         )
         whole = what != WHAT
@@ -272,7 +290,7 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
             [r["steps_per_s"] for r in rows],
             marker="s" if whole else "o",
             linestyle=":" if whole else ("-" if method == "RK4" else "--"),
-            label=f"{'whole env, ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})",
+            label=f"{env + ', ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})",
         )
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")

@@ -227,7 +227,7 @@ def _record_shots(args) -> int:
 
 
 def _frame_shot(args) -> int:
-    """``record-shots --frames 0,120``: FlatBody-v0's rgb_array frames after 0 and 120 seeded random actions,
+    """``record-shots --frames 0,120``: FlatBody-v1's rgb_array frames after 0 and 120 seeded random actions,
     side by side (:func:`flatbody_env.env.rendering.frame_strip`), written to OUT/PREFIX.png."""
     from PIL import Image
 
@@ -245,7 +245,7 @@ def _frame_shot(args) -> int:
         Image.fromarray(strip).save(tmp, format="PNG", optimize=True)
     _compact_png(path, args.colors)
     print(
-        f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v0, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)"
+        f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v1, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)"
     )
     return 0
 
@@ -361,7 +361,7 @@ def register(sub) -> None:
     p.set_defaults(handler=_record)
 
     p = sub.add_parser("record-env", help="run episodes of a flat-body environment and record them (.rrd)")
-    p.add_argument("--env-id", default="FlatBody-v0", help="gymnasium id (default FlatBody-v0)")
+    p.add_argument("--env-id", default="FlatBody-v1", help="gymnasium id (default FlatBody-v1)")
     p.add_argument(
         "--episodes",
         type=int_at_least("episodes", 1, validation.MAX_EPISODES),
@@ -447,7 +447,7 @@ def register(sub) -> None:
         type=_step_list,
         default=None,
         metavar="K1,K2,...",
-        help="instead of a recording: FlatBody-v0's rgb_array frames after K1, K2, ... seeded random actions, side by side, "
+        help="instead of a recording: FlatBody-v1's rgb_array frames after K1, K2, ... seeded random actions, side by side, "
         "in OUT/PREFIX.png (default prefix frame-rgb_array)",
     )
     p.add_argument(

@@ -56,10 +56,8 @@ def body_constants(body: Body) -> np.ndarray:
 class ReachAnyBody(ReachStationaryEllipse):
     """Reach a stationary ellipse of a body drawn per episode (module docstring)."""
 
-    compiled_targets: ClassVar[bool] = False
     compiled_resets: ClassVar[bool] = False
     varies_body: ClassVar[bool] = True
-    observation_extra_names: ClassVar[tuple[str, ...]] = BODY_OBSERVATION_NAMES
 
     inertia_range: tuple[float, float] = (0.5, 2.0)
     """Range of J (= J1 = J2) and of J3."""
@@ -67,8 +65,22 @@ class ReachAnyBody(ReachStationaryEllipse):
     """Range of the V3 constant κ."""
     thickness_range: tuple[float, float] = (0.5, 2.0)
     """Range of the thickness constants a and b."""
+    observe_body: bool = True
+    """Append the body's constants to the observation (``FlatBodyAnyBody-v0``); False: the policy must infer the body
+    from the motion (``FlatBodyAnyBody-v1``)."""
+
+    @property
+    def compiled_targets(self) -> bool:
+        """The episode sampler's kernels draw this task's targets only without the settling-rate filter (the shipped
+        table holds the default body alone): the v1 id, with ``min_settling_rate=0``."""
+        return self.min_settling_rate == 0
+
+    @property
+    def observation_extra_names(self) -> tuple[str, ...]:
+        return BODY_OBSERVATION_NAMES if self.observe_body else ()
 
     def __post_init__(self) -> None:
+        validation.boolean("observe_body", self.observe_body)  # first: the properties below read it
         super().__post_init__()
         for name in ("inertia_range", "kappa_range", "thickness_range"):
             object.__setattr__(
@@ -109,9 +121,11 @@ class ReachAnyBody(ReachStationaryEllipse):
         )
 
     def observation_extra(self, body: Body) -> np.ndarray:
-        return body_constants(body)
+        return body_constants(body) if self.observe_body else np.zeros(0)
 
     def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.observe_body:
+            return np.zeros(0), np.zeros(0)
         r = self.ranges()
         return r[:, 0].copy(), r[:, 1].copy()
 

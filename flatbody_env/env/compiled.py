@@ -3,9 +3,9 @@
 
 The same plain-float code, compiled by :func:`flatbody_env.integrators.jit.retarget` with every
 function it calls (the physics kernels included) re-bound to its compiled copy, recursively — no
-formula is restated, no callee listed by hand. Used by
-:class:`~flatbody_env.env.env.FlatBodyEnv` and :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv`
-whenever the integrator runs compiled (:attr:`flatbody_env.integrators.steppers.EnvStepper.compiled`).
+formula is restated, no callee listed by hand. Used by the v0 ids' host draws (the episode sampler,
+:mod:`flatbody_env.env.sampling`) and by :meth:`flatbody_env.env.core.EnvCore.rollout`; the transition's own loops
+are compiled by :func:`flatbody_env.env.transition.cpu`.
 """
 
 from __future__ import annotations

@@ -1,64 +1,37 @@
-"""``FlatBody-v0``: steer a flat affinely-rigid body with thickness onto a stationary ellipse.
+"""``FlatBody-v1`` (and the other ids of docs/tasks.md): steer a flat affinely-rigid body with thickness onto a
+stationary ellipse — the single-environment face.
 
-The environment only composes three parts (dm_control's Environment/Task split): the body
+The environment composes three parts (dm_control's Environment/Task split): the body
 (:class:`~flatbody_env.physics.body.Body`, physics of [1] with the corrections of [2]), an integrator
 chosen by name through the seam :func:`flatbody_env.integrators.steppers.make_env_step`, and the task
-:class:`~flatbody_env.env.task.ReachStationaryEllipse` (observation, reward terms, termination).
-There is one step path: the seam's stepper (compiled where the method has a compiled environment
-stepper, the generic one otherwise), then the bookkeeping kernel
-:func:`flatbody_env.env.kernels.post_step` (its compiled twin when the stepper is compiled), then
-:func:`build_info`.
+(:mod:`flatbody_env.env.task`: draws, observation, reward, termination), resolved once by
+:func:`~flatbody_env.env.core.configure`. A step is the transition of :mod:`flatbody_env.env.transition` for a
+batch of one body (:class:`~flatbody_env.env.core.EnvCore`), as on every other face.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
-from flatbody_env.env import kernels as python_kernels
-from flatbody_env.env.registration import TASK_CLASSES
-from flatbody_env.env.task import (
-    CONTROLS,
-    OBSERVATION_NAMES,
-    OBSERVATION_SIZE,
-    REWARD_TERMS,
-    TARGET_NAMES,
-    Episode,
-    ReachStationaryEllipse,
-    control_mask,
-    domain_code,
-    target_row,
+from flatbody_env.env import transition as tr
+from flatbody_env.env.core import (
+    DEFAULT_INTEGRATOR,
+    DEFAULT_TOLERANCE,
+    ROTATION_INTEGRATOR,
+    EnvCore,
+    configure,
+    end_reason,
+    target_of,
 )
-from flatbody_env.integrators import Tolerances, get_method
-from flatbody_env.integrators.steppers import make_env_step
-from flatbody_env.physics import validation
-from flatbody_env.physics.body import Body, default_body
-from flatbody_env.physics.equilibria import StationaryEllipse, stationary_from_shape
-from flatbody_env.physics.potentials import KIND_CUSTOM
-from flatbody_env.physics.state import STATE_NAMES, STATE_SIZE, pack, unpack, validate_state
+from flatbody_env.env.task import CONTROLS, OBSERVATION_NAMES, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse
+from flatbody_env.physics.body import Body
+from flatbody_env.physics.state import unpack
 
-DEFAULT_INTEGRATOR = "DOP853-numba"
-"""Default integrator: compiled DOP853 at rtol = atol = :data:`DEFAULT_TOLERANCE`, first step guessed
-as one env step — the fastest method measured to keep the episode state error ≤ 1e-8 and to survive
-close approaches to λ = μ. Measured against scipy DOP853 at 1e-13 restarted every step with the
-same actions, 16 episodes × 400 random-action steps: max error 2.0e-9 (median 2e-11); at 1e-10 one
-chaotic episode reached 1.0e-7, hence 1e-11. Through a close approach (|λ − μ| = 7.7e-3) the error
-stays below 1e-9 while RK4 at h = dt fails ("under-resolved") and fixed-step methods of similar cost
-err by 1e-4…1e-1. ``flatbody bench env`` re-measures the episode error."""
-
-DEFAULT_TOLERANCE = 1e-11
-"""rtol = atol of the default integrator (see :data:`DEFAULT_INTEGRATOR`)."""
-
-ROTATION_INTEGRATOR = "DOP853"
-"""Integrator used when R must be carried (rendering, recording) and the chosen method refuses to
-step this body at all (e.g. a compiled method with a custom potential); ``info["integrator"]["method"]``
-then names it. The compiled two-polar methods carry R themselves
-(:mod:`flatbody_env.integrators.rotation_kernels`), so rendering and recording run the method asked for."""
+_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 class FlatBodyEnv(gym.Env):
@@ -110,7 +83,11 @@ class FlatBodyEnv(gym.Env):
 
     ## Rewards
 
-    The reward is the sum of named terms, each ≤ 0 and each returned in ``info["reward_terms"]``
+    The reward is the sum of named terms, each returned in ``info["reward_terms"]``. The v1 ids
+    (``FlatBody-v1`` …): a reward in [0, 1] per step on the task distance d alone (dm_control's ``tolerance``
+    form, :mod:`flatbody_env.env.transition`): ``success`` = (1 − β) when d ≤ tol, ``proximity`` = β·g(d)
+    with g = 1 within the tolerance and a Gaussian of the excess outside (β = ``w_proximity`` = 0.2,
+    margin ``proximity_margin`` = 0.5); 0 on a step that ends the episode by failure. The v0 ids: terms ≤ 0
     (weights are keyword arguments, see :class:`~flatbody_env.env.task.ReachStationaryEllipse`):
     ``shape`` −w‖(Δλ, Δμ, Δϱ)‖, ``spin`` −w|Δs3|, ``tumble`` −w‖(ω1, ω2)‖, ``rest``
     −w‖(p_λ, p_μ, p_ϱ)‖, ``action`` −w‖a‖², ``failure`` −penalty when the step ends the episode by
@@ -126,24 +103,29 @@ class FlatBodyEnv(gym.Env):
     within the episode: its settling rate r (the slowest closed-loop pole of the cheap-control LQR
     about the target, :func:`flatbody_env.physics.controllability.settling_rate`) is at least
     ``min_settling_rate`` = 0.15 s⁻¹, so that under such feedback the slowest mode shrinks
-    e³ ≈ 20-fold or more in 20 s (``"torque+dilatation"``; see :mod:`flatbody_env.env.task`, "Reachable within the episode");
-    or the one given by ``reset(options={"target": {"lambda": ..., "mu": ...}})`` (not filtered). The initial state has the target's
+    e³ ≈ 20-fold or more in 20 s (``"torque+dilatation"``; see :mod:`flatbody_env.env.task`, "Reachable within the
+    episode"); or the one given by ``reset(options={"target": {"lambda": ..., "mu": ...}})`` (not filtered). The
+    initial state has the target's
     p_θ (conserved by every control), shape and spin within ``initial_noise`` (15 %) of the target,
     small momenta and a uniform θ; without torque |s| equals |s3*| (the Casimir is conserved).
     ``reset(options={"state": {...eleven names...}})`` sets the state exactly.
 
     ## Info
 
-    Built in one place (:func:`build_info`) for ``reset``, ``step`` and the vector env: ``t``,
+    One schema on every face (this env, the vector envs, the torch env on the CPU and CUDA): ``t``,
     ``distance``, ``is_success``, ``energy`` (H, eq. (41)), ``casimir`` (|s|²), ``p_theta``,
-    ``integrator`` ({"method": the method that really ran, "nfev": its right-hand-side
-    evaluations in this step}), ``integrator_failure``, ``left_domain`` and (``step``) ``reward_terms``.
+    ``integrator`` ({"method": the method that really ran, "nfev": its right-hand-side evaluations in this
+    step}), ``status`` (the integrator's status, 0 = success, :data:`flatbody_env.integrators.failure.KINDS`),
+    ``domain_code`` (0 inside; what ended the episode otherwise: :data:`~flatbody_env.env.core.END_REASONS`,
+    :func:`~flatbody_env.env.core.end_reason` says it in words) and (``step``) ``reward_terms``. The vector
+    faces, which end episodes themselves, add Gymnasium-style episode statistics (``episode``, ``_episode``)
+    and an rsl_rl-style ``log``.
 
     ## Episode End
 
-    Termination: the integrator failed (``info["integrator_failure"]`` says why: non-finite state,
+    Termination: the integrator failed (``info["status"]`` says why: non-finite state,
     step-size collapse, chart singularity, energy error), or the state left the domain
-    (``info["left_domain"]`` names the variable): λ, μ outside ``stretch_bounds``, ϱ outside
+    (``info["domain_code"]`` names the variable): λ, μ outside ``stretch_bounds``, ϱ outside
     ``rho_bounds``, a momentum beyond ``momentum_bound``, or |λ − μ|/(λ + μ) < ``gap_min`` for a
     two-polar-chart integrator. The returned observation is then the last valid state (never NaN).
     Truncation: after 400 steps (t = 20 at dt = 0.05) through ``TimeLimit`` (registration).
@@ -161,13 +143,19 @@ class FlatBodyEnv(gym.Env):
     weights and ranges of the task (:class:`~flatbody_env.env.task.ReachStationaryEllipse` and its subclasses).
     The other registered ids (``FlatBodySlow-v0``, ``FlatBodyHoldUnstable-v0``, ``FlatBodyTorque-v0``,
     ``FlatBodyDilatation-v0``, ``FlatBodyAnyBody-v0``) are this class with another task; a task may add reward
-    terms, end episodes of its own accord and append observation entries (:attr:`observation_size`). ``integrator`` is any name of
+    terms, end episodes of its own accord and append observation entries (:attr:`observation_size`). ``integrator``
+    is any name of
     ``flatbody methods``; the default :data:`DEFAULT_INTEGRATOR` is the fastest method measured to keep
     the episode state error ≤ 1e-8 (``docs/env.md``).
 
     ## Version History
 
-    * v0: initial version (unchanged when the other tasks were added: same draws, numbers bit for bit).
+    * v1: the tolerance reward in [0, 1] on the task distance; counter-based draws in the transition, the same
+      episodes for a seed on every face and device (a shape the settling-rate table is unsure about is drawn
+      again); the task suite's ladder (docs/tasks.md).
+    * v0: initial version (the other tasks added with the same draws, numbers bit for bit; the settling-rate
+      filter of ``FlatBody-v0`` was introduced without a version bump, before v1 existed). Deprecated: kept bit
+      for bit so that saved reports reproduce.
 
     References
     ----------
@@ -198,616 +186,194 @@ class FlatBodyEnv(gym.Env):
         gap_min: float = 1e-3,
         **task_kwargs: Any,
     ) -> None:
-        self.mask = control_mask(control)
-        self.control = control
-        self.task = _as_task(task, task_kwargs)
-        if self.task.varies_body and body is not None:
-            raise ValueError("body: this task draws its own body at every reset (leave body unset)")
-        self.body = _as_body(body)
-        self.custom_potential = (
-            self.body.potential if getattr(self.body.potential, "kind", None) == KIND_CUSTOM else None
-        )
-        """The body's custom (Python) potential, whose part of H the bookkeeping kernels leave out
-        (:meth:`energy_left_out`); None for a built-in potential."""
-        if not self.body.inertia.is_isotropic:
-            raise ValueError("body: the task's stationary ellipses need J1 = J2 (isotropic in the plane)")
-        for name, value in (
-            ("torque_limit", torque_limit),
-            ("force_limit", force_limit),
-            ("momentum_bound", momentum_bound),
-        ):
-            validation.number(name, value, low=validation.PARAM_RANGE[0], high=validation.MOMENTUM_MAX)
-        for name, pair in (("stretch_bounds", stretch_bounds), ("rho_bounds", rho_bounds)):
-            validation.interval(name, pair, low=validation.STRETCH_RANGE[0], high=validation.STRETCH_RANGE[1])
-        validation.number("gap_min", gap_min, low=0.0, high=0.5)
-        if render_mode is not None:
-            validation.string("render_mode", render_mode, choices=self.metadata["render_modes"])
-        validation.boolean("track_rotation", track_rotation)
-        self.dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
-        self.integrator = validation.string("integrator", integrator)
-        info = get_method(integrator, where="integrator").info  # ValueError naming integrator for an unknown name
+        self.config = c = configure(
+            control=control, task=task, body=body, dt=dt, integrator=integrator, rtol=rtol, atol=atol, step=step,
+            torque_limit=torque_limit, force_limit=force_limit, render_mode=render_mode, track_rotation=track_rotation,
+            stretch_bounds=stretch_bounds, rho_bounds=rho_bounds, momentum_bound=momentum_bound, gap_min=gap_min,
+            **task_kwargs,
+        )  # fmt: skip
+        self.core = EnvCore(c, 1)
+        """The batch of one body this env steps (:class:`~flatbody_env.env.core.EnvCore`)."""
+        self.core.action_field = "action"
         self.render_mode = render_mode
-        self.track_rotation = bool(track_rotation or render_mode is not None)
-        if not info.adaptive and step is None:
-            step = self.dt  # one fixed step per env step unless step= asks for sub-steps
-        if (
-            step is not None
-        ):  # bounded work: a floor (never replaced) and at most ENV_MAX_SUBSTEPS sub-steps per env step
-            step = validation.fixed_step("step", step, high=self.dt)
-            if math.ceil(self.dt / step) > validation.ENV_MAX_SUBSTEPS:
-                raise ValueError(
-                    f"step: at most {validation.ENV_MAX_SUBSTEPS} sub-steps per env step (step >= dt / "
-                    f"{validation.ENV_MAX_SUBSTEPS} = {self.dt / validation.ENV_MAX_SUBSTEPS:g}), got step = {step!r}"
-                )
-        # the per-step budget (docs/reliability.md): every env step stops within these
-        self.tolerances = Tolerances(
-            rtol=rtol,
-            atol=atol,
-            step=step,
-            max_nfev=validation.ENV_STEP_MAX_NFEV,
-            max_wall_time=validation.ENV_STEP_MAX_SECONDS,
-        )
-        # adaptive methods: the first step guessed as one whole env step (accepted in one step at
-        # the default tolerance; rejected and halved where needed)
-        first_step = 0.0 if not info.adaptive else self.dt
-        try:
-            self.stepper = make_env_step(
-                integrator, self.body, self.tolerances, with_rotation=self.track_rotation, first_step=first_step
-            )
-        except ValueError:
-            if not self.track_rotation:
-                raise
-            # methods that do not carry R: drawing/recording integrates with the reference (info names it)
-            self.stepper = make_env_step(
-                ROTATION_INTEGRATOR,
-                self.body,
-                Tolerances(
-                    rtol=rtol,
-                    atol=atol,
-                    max_nfev=validation.ENV_STEP_MAX_NFEV,
-                    max_wall_time=validation.ENV_STEP_MAX_SECONDS,
-                ),
-                with_rotation=True,
-            )
-        self.limits = np.array([torque_limit, torque_limit, torque_limit, force_limit])
-        self.stretch_bounds = (float(stretch_bounds[0]), float(stretch_bounds[1]))
-        self.rho_bounds = (float(rho_bounds[0]), float(rho_bounds[1]))
-        self.momentum_bound = float(momentum_bound)
-        self.gap_min = float(gap_min)
-        self._cfg = self.task.kernel_config(
-            stretch_bounds=self.stretch_bounds,
-            rho_bounds=self.rho_bounds,
-            momentum_bound=self.momentum_bound,
-            gap_min=self.gap_min,
-            check_gap=info.chart == "two-polar",
-        )
-        self._P = np.array(self.body.kernel_params(), dtype=np.float64)
-        self._mask_u8 = self.mask.astype(np.uint8)
+        self.action_space = c.action_space
+        self.observation_space = c.observation_space
+        self.integrator = c.integrator
+        self._names = c.reward_names
+        self._terms = tuple((name, tr.R_TERMS + i) for i, name in enumerate(self._names))
+        self._shape = (c.n_act,)
+        self._A = np.zeros((1, c.n_act))
+        self._method = c.stepper.method
+        self._tol = c.task.success_tolerance
+        self._started = False
 
-        n_act = int(self.mask.sum()) or 1
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(n_act,), dtype=np.float32)
-        m, (slo, shi), (rlo, rhi) = self.momentum_bound, self.stretch_bounds, self.rho_bounds
-        xlo, xhi = self.task.observation_extra_bounds()
-        low = np.array([-m] * 7 + [slo, slo, rlo, -1.0, -1.0, slo, slo, rlo, -m, *xlo], dtype=np.float32)
-        high = np.array([m] * 7 + [shi, shi, rhi, 1.0, 1.0, shi, shi, rhi, m, *xhi], dtype=np.float32)
-        self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self.observation_size = OBSERVATION_SIZE + len(self.task.observation_extra_names)
-        """Entries of the observation: the 16 of :data:`~flatbody_env.env.task.OBSERVATION_NAMES` and the task's own."""
-        self.reward_names = self.task.reward_names
-        """The names of ``info["reward_terms"]`` (the task's)."""
-        self._own_terms = bool(self.task.extra_reward_names)
-        self._obs_extra = self.task.observation_extra(self.body).astype(np.float32)
-        self._witness: np.ndarray | None = None
+    # --- composition (read only) -------------------------------------------------------------------
+    body = property(lambda self: self.core.body_of(0), doc="The body (the episode's, for a task that draws one).")
+    task = property(lambda self: self.config.task, doc="The task (:mod:`flatbody_env.env.task`).")
+    control = property(lambda self: self.config.control)
+    mask = property(lambda self: self.config.mask, doc="Which of (τ1, τ2, τ3, f_ϱ) the action drives (4,) bool.")
+    limits = property(lambda self: self.config.limits, doc="(τ1, τ2, τ3, f_ϱ) limits (4,).")
+    dt = property(lambda self: self.config.dt)
+    stepper = property(lambda self: self.config.stepper, doc="The integrator's env stepper (the seam's).")
+    tolerances = property(lambda self: self.config.tolerances)
+    stretch_bounds = property(lambda self: self.config.stretch_bounds)
+    rho_bounds = property(lambda self: self.config.rho_bounds)
+    momentum_bound = property(lambda self: self.config.momentum_bound)
+    gap_min = property(lambda self: self.config.gap_min)
+    track_rotation = property(lambda self: self.config.track_rotation)
+    custom_potential = property(lambda self: self.config.custom_potential)
+    observation_size = property(lambda self: self.config.observation_size)
+    reward_names = property(lambda self: self._names, doc='The names of ``info["reward_terms"]`` (the task\'s).')
+    sampler = property(
+        lambda self: self.core.sampler, doc="The episode sampler of the v0 draws (:mod:`flatbody_env.env.sampling`)."
+    )
+    stepping_integrator = property(lambda self: self._method, doc="The method that really integrates.")
+    kernel_config = property(lambda self: self.config.kcfg, doc="The task's kernel configuration ``cfg`` (read only).")
 
-        # work arrays of the one step path
-        self._a = np.zeros(n_act)
-        self._u = np.zeros(4)
-        self._views()
-        self._ynew = np.empty(STATE_SIZE)
-        self._yout = np.empty(STATE_SIZE)
-        self._terms = np.empty(len(self.reward_names))
-        self._sc = np.empty(4)
-        self._vel = np.empty(7)
-        self._force = np.empty(4)
-        self._counters = np.zeros(4, np.int64)  # [nfev, steps, rejected, nfev budget of one env step (compiled DOP853)]
-        self._counters[3] = validation.ENV_STEP_MAX_NFEV
-        self._Rnew = np.eye(3)
+    @property
+    def kernel_params(self) -> np.ndarray:
+        """The body's kernel parameters P (9,) (the episode's body)."""
+        return self.core.S[tr.P0 : tr.P0 + 9, 0].copy()
 
-        self._y = np.zeros(STATE_SIZE)
-        self._R: np.ndarray | None = np.eye(3) if self.track_rotation else None
-        self._target: StationaryEllipse | None = None
-        self._target_shape: tuple[float, float, float] | None = (
-            None  # (λ*, μ*, sign) of a target drawn by the sampler, built on demand
-        )
-        self._sampler = None
-        self._tvec = np.zeros(4)
-        self.time = 0.0
-
-    # --- public state and configuration ---------------------------------------------------------------
+    # --- state ---------------------------------------------------------------------------------------
     @property
     def state(self) -> dict[str, float]:
         """The body's state as the eleven named fields (float64)."""
-        return unpack(self._y)
+        return unpack(self.core.S[:11, 0].copy())
 
     @property
     def physics_state(self) -> np.ndarray:
         """The body's packed state y (11,) float64 (a copy; layout :mod:`flatbody_env.physics.state`)."""
-        return self._y.copy()
+        return self.core.S[:11, 0].copy()
+
+    @property
+    def time(self) -> float:
+        """Simulated time of the episode (steps × dt)."""
+        return float(self.core.K[tr.K_CLOCK, 0]) * self.config.dt
 
     @property
     def rotation(self) -> np.ndarray | None:
         """R(t) (3×3) when tracked (``track_rotation`` or a render mode), else None."""
-        return None if self._R is None else self._R.copy()
+        return None if self.core.R is None else self.core.R.copy()
 
     @property
     def witness(self) -> np.ndarray | None:
         """The current episode's witness — actions (steps, n) that take the start into the success ball at the
         last step — for tasks that draw one (:class:`~flatbody_env.env.witness.ReachWithWitness`); else None."""
-        return None if self._witness is None else self._witness.copy()
+        if self.config.task.kind != tr.TASK_WITNESS or not self._started:
+            return None
+        from flatbody_env.env.witness import witness_actions
 
-    @property
-    def sampler(self):
-        """The :class:`~flatbody_env.env.sampling.EpisodeSampler` of this configuration (compiled when the
-        stepper is), which draws a reset's target and initial state without Python per draw."""
-        if self._sampler is None:
-            from flatbody_env.env import sampling
-            from flatbody_env.env.sampling import EpisodeSampler
-
-            self._sampler = EpisodeSampler(
-                self.task, self.body, self.limits, self.control, self.kernels if self.stepper.compiled else sampling
-            )
-        return self._sampler
+        return witness_actions(self.core.S[tr.W0 : tr.W0 + 9, 0], self.config.task.witness_steps, self.config.n_act)
 
     @property
     def target(self) -> dict[str, float]:
         """The target stationary ellipse: lambda, mu, rho, s3, p_theta, omega3, theta_dot, energy."""
-        if self._target is None and self._target_shape is not None:
-            lam, mu, sign = self._target_shape
-            self._target = stationary_from_shape(self.body, lam, mu, branch=self.task.target_branch, sign=sign)
-        t = self._target
-        if t is None:
+        if not self._started:
             return {}
-        return {
-            "lambda": t.lam,
-            "mu": t.mu,
-            "rho": t.rho,
-            "s3": t.s3,
-            "p_theta": t.p_theta,
-            "omega3": t.omega3,
-            "theta_dot": t.theta_dot,
-            "energy": t.energy,
-        }
+        t = target_of(self.core, 0)
+        return {"lambda": t.lam, "mu": t.mu, "rho": t.rho, "s3": t.s3, "p_theta": t.p_theta, "omega3": t.omega3,
+                "theta_dot": t.theta_dot, "energy": t.energy}  # fmt: skip
 
     @property
     def target_vector(self) -> np.ndarray:
         """The target entries of the observation (λ*, μ*, ϱ*, s3*) (4,) (a copy)."""
-        return self._tvec.copy()
+        return self.core.S[tr.TG0 : tr.TG0 + 4, 0].copy()
 
-    @property
-    def stepping_integrator(self) -> str:
-        """The method that really integrates (``integrator``, or :data:`ROTATION_INTEGRATOR` when R
-        must be carried and ``integrator`` cannot)."""
-        return self.stepper.method
-
-    @property
-    def kernels(self):
-        """The bookkeeping kernels matching the stepper: :mod:`flatbody_env.env.compiled` when the
-        stepper runs compiled, else :mod:`flatbody_env.env.kernels` (same source)."""
-        if self.stepper.compiled:
-            from flatbody_env.env import compiled
-
-            return compiled
-        return python_kernels
-
-    @property
-    def kernel_params(self) -> np.ndarray:
-        """The body's kernel parameters P (9,) as the kernels take them (read only)."""
-        return self._P
-
-    @property
-    def kernel_config(self) -> np.ndarray:
-        """The task/domain configuration vector ``cfg`` of the kernels (:mod:`flatbody_env.env.task`; read only)."""
-        return self._cfg
-
-    # --- gymnasium API ---------------------------------------------------------------------------------
-    def sample_episode(
-        self, rng: np.random.Generator, options: Mapping[str, Any] | None = None
-    ) -> tuple[np.ndarray, StationaryEllipse]:
-        """The initial state y (11,) and the target that :meth:`reset` draws from ``rng`` with ``options``
-        (the env itself is not changed; ``rng`` advances exactly as in ``reset``). :meth:`draw_episodes`
-        gives the task's whole draw (body and witness included)."""
-        ep = self.draw_episodes([rng], options)[0]
-        target = ep.ellipse
-        if target is None:
-            body = ep.body or self.body
-            target = stationary_from_shape(
-                body, float(ep.target[0]), float(ep.target[1]), branch=self.task.target_branch, sign=float(ep.target[5])
-            )
-        return ep.state, target
-
-    def draw_episodes(self, rngs, options: Mapping[str, Any] | None = None) -> list[Episode]:
-        """What :meth:`reset` draws for each generator in ``rngs`` with ``options`` — the task's draws
-        (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.draw_batch`; each generator advances exactly as
-        in a reset of its own), or the target and state the options give. The env itself is not changed."""
-        options = _checked_options(options)
-        if not options:
-            episodes = self.task.draw_batch(
-                list(rngs), self.body, limits=self.limits, control=self.control, simulator=self
-            )
-        else:
-            episodes = [self._draw_with_options(rng, options) for rng in rngs]
-        for ep in episodes:
-            self.check_start(ep.state, "options.state" if "state" in options else "initial_noise")
-        return episodes
-
-    def _draw_with_options(self, rng: np.random.Generator, options: Mapping[str, Any]) -> Episode:
-        """The target and/or state that ``options`` give; what they do not give is drawn by the task for the env's
-        current body (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target`,
-        :meth:`~flatbody_env.env.task.ReachStationaryEllipse.start_near`), without a witness."""
-        if "target" in options:
-            target = self.task.target_from(options["target"], self.body)
-        else:
-            target = self.task.sample_target(rng, self.body, limits=self.limits, control=self.control)
-        if "state" in options:
-            try:
-                validate_state(options["state"], where="options.state")
-            except ValueError as exc:
-                raise ValueError(str(exc)) from None
-            y = pack(options["state"], validate=False)
-        else:
-            y = self.task.start_near(rng, target, self.control, body=self.body)
-        return Episode(state=y, target=target_row(target), ellipse=target)
-
-    def rollout(self, Y: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance N bodies from the states ``Y`` (11, N) under the normalised actions ``actions`` (steps, N, n)
-        with this env's integrator and body; returns the final states (11, N) and whether each body stayed
-        inside the domain without an integrator failure (N,) bool (a failed body keeps its last valid state).
-        The task's simulations at reset use it (:class:`~flatbody_env.env.witness.ReachWithWitness`)."""
-        from flatbody_env.env import task as task_module
-
-        Y = np.array(Y, dtype=np.float64, order="C")
-        n = Y.shape[1]
-        actions = np.asarray(actions, dtype=np.float64)
-        if actions.ndim != 3 or actions.shape[1] != n or actions.shape[2] != self._a.size:
-            raise ValueError(f"actions: expected shape (steps, {n}, {self._a.size}), got {actions.shape}")
-        codes_of = self.kernels.domain_codes if self.stepper.compiled else task_module.domain_codes
-        out, status, nfev, codes = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
-        U, A = np.empty((4, n)), np.empty((n, self._a.size))
-        ok = np.ones(n, dtype=bool)
-        for k in range(actions.shape[0]):
-            if not self.kernels.controls_batch(np.ascontiguousarray(actions[k]), self._mask_u8, self.limits, A, U):
-                raise ValueError("actions: must be finite numbers")
-            self.stepper.advance_batch(Y, U, self.dt, out, status, nfev)
-            codes_of(out, self._cfg, codes)
-            ok &= (status == 0) & (codes == 0)
-            np.copyto(Y, out, where=ok)
-        return Y, ok
-
-    def use_body(self, body: Body) -> None:
-        """Make ``body`` the env's body (a task that draws its body per episode): the stepper, the kernel
-        parameters and the observation's body entries follow."""
-        if body is self.body:
-            return
-        self.body = body
-        self.stepper = self.stepper.with_body(body)
-        self._P = np.array(body.kernel_params(), dtype=np.float64)
-        self._obs_extra = self.task.observation_extra(body).astype(np.float32)
-        self._sampler = None
-
-    def energy_left_out(self, Y: np.ndarray) -> np.ndarray | float:
-        """The part of H (eq. (41)) that the bookkeeping kernels leave out of ``info["energy"]`` at the
-        states ``Y`` (11,) or (11, N): a custom in-plane potential's value (the kernels know the
-        built-in potentials only), 0 otherwise. The single and the batched env add it."""
-        pot = self.custom_potential
-        if pot is None:
-            return 0.0
-        if np.ndim(Y) == 1:
-            return float(pot.value(float(Y[7]), float(Y[8]), float(Y[9])))
-        return np.array([float(pot.value(float(a), float(b), float(c))) for a, b, c in zip(Y[7], Y[8], Y[9])])
+    def left_domain(self, y: np.ndarray) -> str | None:
+        """None inside the documented domain, else what left it."""
+        return self.config.left_domain(y)
 
     def check_start(self, y: np.ndarray, field: str) -> None:
         """ValueError naming ``field`` when the initial state ``y`` lies outside the domain."""
-        left = self.left_domain(y)
-        if left:
-            raise ValueError(f"{field}: the initial state starts outside the domain ({left})")
-
-    def observe(self, y: np.ndarray, target_vector: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
-        """The observation (:attr:`observation_size`,) float32 and the reset ``info`` of state ``y`` with target
-        (λ*, μ*, ϱ*, s3*) (the env's current body)."""
-        obs = np.empty(self.observation_size, dtype=np.float32)
-        self.kernels.post_step(
-            y,
-            y,
-            0,
-            self._a,
-            0,
-            target_vector,
-            self._cfg,
-            self._P,
-            self._yout,
-            obs,
-            self._terms,
-            self._sc,
-            self._vel,
-            self._force,
-        )
-        obs[OBSERVATION_SIZE:] = self._obs_extra
-        if self.custom_potential is not None:
-            self._sc[1] += self.energy_left_out(self._yout)
-        return obs, build_info(
-            t=0.0,
-            scalars=self._sc,
-            p_theta=y[3],
-            ended=False,
-            failure=None,
-            left=None,
-            method=self.stepper.method,
-            nfev=0,
-            terms=None,
-            success_tolerance=self.task.success_tolerance,
-        )
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        if (
-            not options and self.task.compiled_resets and self.sampler.applies
-        ):  # the task's draws, through the sampler's kernels
-            Y = np.empty((STATE_SIZE, 1))
-            tg = self.sampler.sample([self.np_random], Y, [0])[0]
-            y = Y[:, 0].copy()
-            self.check_start(y, "initial_noise")
-            self._y, self._target, self._target_shape = y, None, (float(tg[0]), float(tg[1]), float(tg[5]))
-            self._tvec = tg[:4].copy()
-            self._witness = None
-        else:
-            self.start_episode(self.draw_episodes([self.np_random], options)[0])
-        self._R = np.eye(3) if self.track_rotation else None
-        self.time = 0.0
-        return self.observe(self._y, self._tvec)
-
-    def start_episode(self, episode: Episode) -> None:
-        """Set the state, target, body and witness of a drawn episode (:meth:`draw_episodes`)."""
-        if episode.body is not None:
-            self.use_body(episode.body)
-        self._y = np.array(episode.state, dtype=np.float64)
-        self._target = episode.ellipse
-        tg = episode.target
-        self._target_shape = (float(tg[0]), float(tg[1]), float(tg[5]))
-        self._tvec = np.array(tg[:4], dtype=np.float64)
-        self._witness = episode.witness
+        self.config.check_start(y, field)
 
     def controls(self, action) -> tuple[np.ndarray, np.ndarray]:
-        """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies
-        (:func:`flatbody_env.env.kernels.controls_batch`). ValueError for a non-finite or wrong-sized action."""
-        self._set_controls(action)
-        return self._a.copy(), self._u.copy()
+        """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies. ValueError for a
+        non-finite or wrong-sized action."""
+        a = self._action(action)
+        if not np.isfinite(a).all():
+            raise ValueError(f"action: must be {a.size} finite real numbers in [-1, 1], got {action!r:.80}")
+        clipped = np.clip(a, -1.0, 1.0) if self.config.mask.any() else np.zeros_like(a)
+        u = np.zeros(4)
+        u[self.config.mask] = clipped[: int(self.config.mask.sum())] * self.config.limits[self.config.mask]
+        return clipped, u
 
-    def _views(self) -> None:
-        """``self._a`` and ``self._u`` as one body's (1, n) and (4, 1) arrays for controls_batch (views: rebuilt after unpickling)."""
-        self._a_row, self._u_col = self._a.reshape(1, -1), self._u.reshape(4, 1)
-
-    def __setstate__(self, state) -> None:
-        self.__dict__.update(state)
-        self._views()
-
-    def _set_controls(self, action) -> None:
-        """Clip and scale ``action`` into ``self._a``, ``self._u`` (the step's controls)."""
+    def _action(self, action) -> np.ndarray:
+        """``action`` as (n,) float64 real numbers, or ``ValueError`` naming ``action`` (finiteness is checked by the
+        transition itself, before the body moves)."""
+        n = self.config.n_act
         try:
-            a = np.asarray(action, dtype=np.float64)
+            a = np.asarray(action)
+            a = None if a.dtype.kind not in "fiu" or a.dtype == np.bool_ else a.astype(np.float64, copy=False)
         except (TypeError, ValueError, OverflowError):
             a = None
-        if (
-            a is None
-            or a.size != self._a.size
-            or not self.kernels.controls_batch(a.reshape(1, -1), self._mask_u8, self.limits, self._a_row, self._u_col)
-        ):
-            raise ValueError(f"action: must be {self._a.size} finite numbers in [-1, 1], got {action!r:.80}")
+        if a is None or a.shape not in ((n,), (1, n)):
+            raise ValueError(f"action: must be {n} finite real numbers in [-1, 1], got {action!r:.80}")
+        return a.reshape(n)
+
+    # --- gymnasium API ---------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        if seed is not None:
+            from flatbody_env.physics import validation
+
+            validation.integer("seed", seed, low=0, high=validation.MAX_SEED)
+        self.core.reset(seeds=None if seed is None else [seed], options=options)
+        self._started = True
+        return self.core.OBS[0].copy(), self._info(False)
 
     def step(self, action):
-        if self._target is None and self._target_shape is None:
+        if not self._started:
             raise RuntimeError("FlatBodyEnv: call reset() before step()")
-        k = self.kernels
-        self._set_controls(action)
-        y = self._y
-        self._counters[:3] = 0
-        st = self.stepper.advance(y, self._u, self.dt, self._ynew, self._counters, self._R, self._Rnew)
-        obs = np.empty(self.observation_size, dtype=np.float32)
-        terms = self._terms
-        ended = k.post_step(
-            y,
-            self._ynew,
-            st,
-            self._a,
-            self._a.size,
-            self._tvec,
-            self._cfg,
-            self._P,
-            self._yout,
-            obs,
-            terms,
-            self._sc,
-            self._vel,
-            self._force,
-        )
-        obs[OBSERVATION_SIZE:] = self._obs_extra
-        if self.custom_potential is not None:
-            self._sc[1] += self.energy_left_out(self._yout)
-        failure = left = None
-        leaves = False
-        if self._own_terms:  # the task's own termination and terms (e.g. leaving the tolerance of an unstable target)
-            leaves = self.task.leaves(float(self._sc[0]), bool(ended))
-            self.task.extra_terms(bool(ended or leaves), leaves, terms)
-        if leaves:  # the new state is valid physics: kept, the episode ends
-            left = self.describe_leaving(float(self._sc[0]))
-            ended = 1
-            y[:] = self._yout
-            if self._R is not None:
-                self._R = self._Rnew.copy()
-            self.time += self.dt
-        elif ended:
-            if st != 0:
-                failure = self.stepper.describe(st)
-            else:
-                left = self.left_domain(self._ynew)
+        if type(action) is np.ndarray and action.shape == self._shape and action.dtype in _FLOATS:
+            self._A[0] = action  # the fast path of a well-formed action (finiteness: the transition checks it)
         else:
-            y[:] = self._yout
-            if self._R is not None:
-                self._R = self._Rnew.copy()
-            self.time += self.dt
-        tl = terms.tolist()
-        info = build_info(
-            t=self.time,
-            scalars=self._sc,
-            p_theta=y[3],
-            ended=bool(ended),
-            failure=failure,
-            left=left,
-            method=self.stepper.method,
-            nfev=int(self._counters[0]),
-            terms=dict(zip(self.reward_names, tl)),
-            success_tolerance=self.task.success_tolerance,
-        )
-        return obs, sum(tl), bool(ended), False, info
+            self._A[0] = self._action(action)
+        core = self.core
+        core.step(self._A)
+        s = core.S[:, 0].tolist()
+        k = core.K[:, 0].tolist()
+        info = self._info_of(s, k)
+        info["reward_terms"] = {name: s[i] for name, i in self._terms}
+        return core.OBS[0].copy(), s[tr.R_REWARD], k[tr.K_TERMINATED] != 0, False, info
+
+    def _info(self, step: bool) -> dict[str, Any]:
+        return self._info_of(self.core.S[:, 0].tolist(), self.core.K[:, 0].tolist())
+
+    def _info_of(self, s: list, k: list) -> dict[str, Any]:
+        d = s[tr.R_DISTANCE]
+        return {
+            "t": k[tr.K_CLOCK] * self.config.dt,
+            "distance": d,
+            "is_success": d <= self._tol and not k[tr.K_TERMINATED],
+            "energy": s[tr.R_ENERGY],
+            "casimir": s[tr.R_CASIMIR],
+            "p_theta": s[3],
+            "integrator": {"method": self._method, "nfev": k[tr.K_NFEV]},
+            "status": k[tr.K_STATUS],
+            "domain_code": k[tr.K_CODE],
+        }
+
+    def end_reason(self, info: Mapping[str, Any]) -> str:
+        """What ended the episode of a step's ``info``, in words ("" when nothing did)."""
+        return end_reason(int(info["status"]), int(info["domain_code"]), self._method)
 
     def render(self):
         if self.render_mode != "rgb_array":
             return None
         from flatbody_env.env.rendering import render_frame
 
-        return render_frame(self._y, self._R if self._R is not None else np.eye(3), self.target, self.time)
-
-    def describe_leaving(self, distance: float) -> str:
-        """``info["left_domain"]`` of a step the task ends because the body left the target's tolerance."""
-        return f"distance = {distance:.4g} > success_tolerance = {self.task.success_tolerance:g} (left the target's neighbourhood)"
-
-    def left_domain(self, y: np.ndarray) -> str | None:
-        """None inside the documented domain, else what left it (the test itself is the task's
-        :func:`~flatbody_env.env.task.domain_code`)."""
-        code = domain_code(y, self._cfg)
-        if code == 0:
-            return None
-        if code == 1:
-            return "non-finite state"
-        lo, hi = self.stretch_bounds
-        if code in (2, 3):
-            name, k = ("lambda", 7) if code == 2 else ("mu", 8)
-            return f"{name} = {y[k]:.4g} outside [{lo:g}, {hi:g}]"
-        if code == 4:
-            return f"rho = {y[9]:.4g} outside [{self.rho_bounds[0]:g}, {self.rho_bounds[1]:g}]"
-        if code == 5:
-            k = int(np.argmax(np.abs(y[:7]) > self.momentum_bound))
-            return f"{STATE_NAMES[k]} = {y[k]:.4g} beyond the momentum bound {self.momentum_bound:g}"
-        return f"|lambda - mu|/(lambda + mu) < gap_min = {self.gap_min:g} (two-polar chart singular at lambda = mu)"
-
-
-def build_info(
-    *, t, scalars, p_theta, ended, failure, left, method: str, nfev, terms, success_tolerance: float
-) -> dict[str, Any]:
-    """The ``info`` of ``reset`` and ``step`` (the one builder; class docstring, "Info").
-
-    One body: floats, ``failure``/``left`` a str or None, ``terms`` a dict of floats or None (reset).
-    N bodies (the vector env): ``t``, ``scalars`` (4, N), ``p_theta``, ``ended``, ``nfev`` arrays,
-    ``failure``/``left`` object arrays of str ("" for none), ``terms`` a dict of (N,) arrays.
-    ``scalars``: distance, energy, |s|², (domain code) from :func:`flatbody_env.env.kernels.post_step`.
-    """
-    batched = np.ndim(scalars) == 2
-    if batched:
-        distance = scalars[0].copy()
-        info: dict[str, Any] = {
-            "t": np.asarray(t, dtype=np.float64).copy(),
-            "distance": distance,
-            "is_success": (distance <= success_tolerance) & ~np.asarray(ended, dtype=bool),
-            "energy": scalars[1].copy(),
-            "casimir": scalars[2].copy(),
-            "p_theta": np.asarray(p_theta, dtype=np.float64).copy(),
-            "integrator": {"method": method, "nfev": np.asarray(nfev, dtype=np.int64).copy()},
-            "integrator_failure": failure,
-            "left_domain": left,
-        }
-    else:
-        distance = float(scalars[0])
-        info = {
-            "t": float(t),
-            "distance": distance,
-            "is_success": bool(distance <= success_tolerance and not ended),
-            "energy": float(scalars[1]),
-            "casimir": float(scalars[2]),
-            "p_theta": float(p_theta),
-            "integrator": {"method": method, "nfev": int(nfev)},
-            "integrator_failure": failure,
-            "left_domain": left,
-        }
-    if terms is not None:
-        info["reward_terms"] = terms
-    return info
-
-
-def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any]) -> ReachStationaryEllipse:
-    """The task of ``task=`` (a name of :data:`~flatbody_env.env.registration.TASK_CLASSES` with its fields in
-    ``task_kwargs``, or a task instance)."""
-    if isinstance(task, ReachStationaryEllipse):
-        if task_kwargs:
-            raise ValueError(
-                f"{sorted(task_kwargs)[0]}: give the task's fields to its constructor, not beside a task instance"
-            )
-        return task
-    if not isinstance(task, str) or task not in TASK_CLASSES:
-        raise ValueError(f"task: must be one of {', '.join(TASK_CLASSES)} or a task instance, got {task!r}")
-    import importlib
-
-    module, name = TASK_CLASSES[task].split(":")
-    cls = getattr(importlib.import_module(module), name)
-    try:
-        return cls(**task_kwargs)
-    except TypeError as exc:  # an unknown keyword: name it
-        raise ValueError(f"task: {exc}") from None
-
-
-def _as_body(body: Body | Mapping[str, Any] | None) -> Body:
-    if body is None:
-        return default_body()
-    if isinstance(body, Body):
-        return body
-    if isinstance(body, Mapping):
-        return Body.from_dict(body, where="body")
-    raise ValueError(f"body: expected a Body or a dict with params/potential/thickness, got {type(body).__name__}")
+        R = self.core.R if self.core.R is not None else np.eye(3)
+        return render_frame(self.physics_state, R, self.target, self.time)
 
 
 __all__ = [
-    "FlatBodyEnv",
-    "DEFAULT_INTEGRATOR",
-    "OBSERVATION_NAMES",
     "CONTROLS",
+    "DEFAULT_INTEGRATOR",
+    "FlatBodyEnv",
+    "OBSERVATION_NAMES",
     "REWARD_TERMS",
+    "ROTATION_INTEGRATOR",
     "TARGET_NAMES",
-    "build_info",
 ]
-
-
-def _checked_options(options: Any) -> dict[str, Any]:
-    """``reset(options=...)`` validated before use: types, finite numbers within the documented
-    ranges (:mod:`flatbody_env.physics.validation`); ``ValueError`` naming ``options.…``."""
-    from flatbody_env.physics import validation as v
-
-    if options is None:
-        return {}
-    options = dict(v.mapping("options", options))
-    v.keys("options", options, ("target", "state"))
-    target = options.get("target")
-    if target is not None and not isinstance(target, StationaryEllipse):
-        target = v.mapping("options.target", target)
-        v.keys("options.target", target, ("lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"), ("lambda", "mu"))
-        checked = {
-            k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1])
-            for k in ("lambda", "mu")
-        }
-        if "branch" in target:
-            checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
-        if "sign" in target:
-            checked["sign"] = v.number("options.target.sign", target["sign"], low=-1.0, high=1.0)
-            if checked["sign"] not in (-1.0, 1.0):
-                raise ValueError(f"options.target.sign: must be +1 or -1, got {checked['sign']!r}")
-        options["target"] = checked
-    if "state" in options:
-        options["state"] = v.mapping("options.state", options["state"])
-    return options

@@ -51,7 +51,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from flatbody_env.env.sampling import BALL_DRAWS, HYPERBOLIC, START_BALL, ball_state_kernel
-from flatbody_env.env.task import DEFAULT_LIMITS, Episode, ReachStationaryEllipse, target_row
+from flatbody_env.env.task import DEFAULT_LIMITS, TASK_HOLD, Episode, ReachStationaryEllipse, target_row
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equilibria import StationaryEllipse
@@ -63,6 +63,7 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
 
     target_branch: ClassVar[str] = "rotation"
     extra_reward_names: ClassVar[tuple[str, ...]] = ("alive",)
+    kind: ClassVar[int] = TASK_HOLD
 
     target_lambda: tuple[float, float] = (1.3, 2.5)
     target_aspect: tuple[float, float] = (1.5, 3.5)

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-ENV_ID = "FlatBody-v0"
+ENV_ID = "FlatBody-v1"
 MAX_EPISODE_STEPS = 400
 """Steps of every registered task (t = 20 at dt = 0.05)."""
 
@@ -40,43 +40,89 @@ class TaskSpec:
     """Keyword arguments of :class:`~flatbody_env.env.env.FlatBodyEnv` (``task``, ``control`` and the task's fields)."""
     max_episode_steps: int = MAX_EPISODE_STEPS
     summary: str = ""
+    rung: str = ""
+    """The v1 suite's ladder: ``"easy"``, ``"medium"`` or ``"hard"`` (docs/tasks.md says why); "" for the v0 ids."""
 
+    @property
+    def version(self) -> int:
+        """The id's version (``-vN``)."""
+        return int(self.env_id.rsplit("-v", 1)[1])
+
+
+V1 = {"reward": "tolerance", "draws": "philox"}
+"""What every v1 id adds to its task: the tolerance reward and the transition's counter-based draws."""
 
 TASKS = (
     TaskSpec(
-        env_id=ENV_ID,
-        kwargs={"task": "reach"},
+        env_id="FlatBody-v1",
+        kwargs={"task": "reach", **V1},
+        rung="easy",
         summary="reach a stable stationary ellipse that linear feedback settles fast (settling rate r >= 0.15/s)",
     ),
     TaskSpec(
+        env_id="FlatBodySlow-v1",
+        kwargs={"task": "reach", "min_settling_rate": 0.05, **V1},
+        rung="medium",
+        summary="reach a stable ellipse whose slowest mode settles at r >= 0.05/s under linear feedback",
+    ),
+    TaskSpec(
+        env_id="FlatBodySlowHard-v1",
+        kwargs={"task": "reach", "min_settling_rate": 0.0, **V1},
+        rung="hard",
+        summary="reach any stable ellipse of the circulation family in the same shapes (no settling-rate floor)",
+    ),
+    TaskSpec(
+        env_id="FlatBodyHoldUnstable-v1",
+        kwargs={"task": "hold-unstable", **V1},
+        rung="medium",
+        summary="stay within the tolerance of a hyperbolic (unstable) stationary ellipse for the whole episode",
+    ),
+    TaskSpec(
+        env_id="FlatBodyTorque-v1",
+        kwargs={
+            "task": "reach-witnessed",
+            "control": "torque",
+            "min_uncontrolled_offset": 0.05,
+            "max_witness_attempts": 64,
+            **V1,
+        },
+        rung="hard",
+        summary="reach a stable ellipse with torque only, from witnessed starts off in the uncontrolled thickness",
+    ),
+    TaskSpec(
+        env_id="FlatBodyAnyBody-v1",
+        kwargs={"task": "any-body", "observe_body": False, "min_settling_rate": 0.0, **V1},
+        rung="hard",
+        summary="reach a stable ellipse of a body drawn per episode whose constants are not observed",
+    ),
+    TaskSpec(env_id="FlatBody-v0", kwargs={"task": "reach"}, summary="deprecated: FlatBody-v1"),
+    TaskSpec(
         env_id="FlatBodySlow-v0",
         kwargs={"task": "reach", "min_settling_rate": 0.0},
-        summary="reach any stable ellipse of the circulation family in the same shape ranges (no settling-rate filter)",
+        summary="deprecated: FlatBodySlowHard-v1",
     ),
     TaskSpec(
         env_id="FlatBodyHoldUnstable-v0",
         kwargs={"task": "hold-unstable"},
-        summary="stay within the tolerance of a hyperbolic stationary ellipse (rotation about the intermediate axis)",
+        summary="deprecated: FlatBodyHoldUnstable-v1",
     ),
     TaskSpec(
         env_id="FlatBodyTorque-v0",
         kwargs={"task": "reach-witnessed", "control": "torque", "min_uncontrolled_offset": 0.05},
-        summary="reach a stable ellipse with torque only (thickness uncontrolled), from witnessed starts",
+        summary="deprecated: FlatBodyTorque-v1",
     ),
     TaskSpec(
         env_id="FlatBodyDilatation-v0",
         kwargs={"task": "reach-witnessed", "control": "dilatation"},
-        summary="reach a stable ellipse with the thickness force only, from witnessed starts",
+        summary="retired in v1 (breathing cannot move the shape within an episode: the passivity law solves it)",
     ),
-    TaskSpec(
-        env_id="FlatBodyAnyBody-v0",
-        kwargs={"task": "any-body"},
-        summary="FlatBody-v0 for a body drawn per episode (J, J3, kappa, a, b), the constants in the observation",
-    ),
+    TaskSpec(env_id="FlatBodyAnyBody-v0", kwargs={"task": "any-body"}, summary="deprecated: FlatBodyAnyBody-v1"),
 )
 """The registered tasks, in the order of ``docs/tasks.md``."""
 
 TASK_IDS = tuple(spec.env_id for spec in TASKS)
+V1_IDS = tuple(spec.env_id for spec in TASKS if spec.version == 1)
+"""The v1 suite, in the order of its ladder (docs/tasks.md)."""
 
 
 def task_spec(env_id: str) -> TaskSpec:

@@ -322,7 +322,7 @@ FRAME_GAP = 8
 """White pixels between the frames of :func:`frame_strip`."""
 
 
-def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v0", gap: int = FRAME_GAP) -> np.ndarray:
+def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v1", gap: int = FRAME_GAP) -> np.ndarray:
     """The ``rgb_array`` frames of one episode side by side, as ``env.render()`` returns them: the env
     reset with ``seed``, then seeded random actions (``env.action_space.seed(seed)``), a frame after
     each number of actions in ``steps`` (increasing, ≥ 0), ``gap`` white pixels between two frames.
@@ -330,14 +330,12 @@ def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v0", g
     ``frame_strip()`` (``flatbody record-shots --frames 0,120``)."""
     import gymnasium as gym
 
-    import flatbody_env  # noqa: F401  (registers the ids)
-
     steps = [int(s) for s in steps]
     if not steps or steps[0] < 0 or any(b <= a for a, b in zip(steps, steps[1:])):
         raise ValueError(f"frames: expected increasing step counts ≥ 0, got {steps!r}")
     if gap < 0:
         raise ValueError(f"gap: must be ≥ 0, got {gap!r}")
-    env = gym.make(env_id, render_mode="rgb_array")
+    env = gym.make(f"flatbody_env:{env_id}", render_mode="rgb_array")  # (the prefix imports the package: the ids)
     try:
         env.reset(seed=seed)
         env.action_space.seed(seed)

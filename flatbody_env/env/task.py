@@ -145,6 +145,16 @@ OBS_TARGET = slice(12, 16)
 """Observation entries of the target (λ*, μ*, ϱ*, s3*)."""
 CFG_SIZE = 14
 DOMAIN_CODES = ("inside", "non-finite state", "lambda", "mu", "rho", "momentum", "gap")
+TASK_REACH, TASK_HOLD, TASK_WITNESS = 0, 1, 2
+"""Task kinds of the transition (:mod:`flatbody_env.env.transition`): reach a stable ellipse from a noisy start, hold
+an unstable one (the episode ends outside the tolerance), reach from a witnessed start."""
+REWARDS = ("terms", "tolerance")
+"""``reward``: the named terms of the v0 ids (module docstring), or the v1 ids' tolerance reward in [0, 1]
+(:mod:`flatbody_env.env.transition`, "Rewards")."""
+TOLERANCE_TERMS = ("success", "proximity")
+"""The named terms of the tolerance reward (:mod:`flatbody_env.env.transition`, "Rewards")."""
+DRAWS = ("numpy", "philox")
+"""``draws``: the v0 ids' numpy generators on the host, or the v1 ids' counter-based draws in the transition."""
 DEFAULT_LIMITS = (0.5, 0.5, 0.5, 1.0)
 """(τ1, τ2, τ3, f_ϱ) limits of :class:`~flatbody_env.env.env.FlatBodyEnv`'s defaults (torque_limit, force_limit)."""
 
@@ -162,9 +172,10 @@ class Episode:
     """The target's full record where the draw built it (else the environment builds it from the shape when asked)."""
     body: Body | None = None
     """The episode's body when the task draws one (:class:`~flatbody_env.env.any_body.ReachAnyBody`); None: the env's."""
-    witness: np.ndarray | None = None
-    """A sequence of normalised actions (steps, n) that takes the initial state into the success ball at the
-    last step (:class:`~flatbody_env.env.witness.ReachWithWitness`); None where the task has none."""
+    witness_params: np.ndarray | None = None
+    """The witness's parameters (9,) — amplitude, then half-period and phase per driven control — from which
+    :func:`~flatbody_env.env.witness.witness_actions` gives the actions that take the initial state into the success
+    ball at the last step (:class:`~flatbody_env.env.witness.ReachWithWitness`); None where the task has none."""
 
 
 def control_mask(control: str) -> np.ndarray:
@@ -199,6 +210,8 @@ class ReachStationaryEllipse:
     """Reward terms beyond the kernels' six (:data:`REWARD_TERMS`), computed by :meth:`extra_terms`."""
     observation_extra_names: ClassVar[tuple[str, ...]] = ()
     """Observation entries after the 16 of :data:`OBSERVATION_NAMES` (:meth:`observation_extra`)."""
+    kind: ClassVar[int] = TASK_REACH
+    """The transition's task kind (:data:`TASK_REACH`, :data:`TASK_HOLD`, :data:`TASK_WITNESS`)."""
 
     w_shape: float = 1.0
     w_spin: float = 0.5
@@ -218,6 +231,14 @@ class ReachStationaryEllipse:
     settling_table: bool = True
     """Decide the filter from the shipped settling-rate table where it applies
     (:mod:`flatbody_env.env.targets`: the same targets, without a Riccati solve per draw); False: always solve."""
+    reward: str = "terms"
+    """:data:`REWARDS`: ``"terms"`` (the v0 ids) or ``"tolerance"`` (the v1 ids)."""
+    draws: str = "numpy"
+    """:data:`DRAWS`: ``"numpy"`` (the v0 ids) or ``"philox"`` (the v1 ids)."""
+    w_proximity: float = 0.2
+    """β of the tolerance reward: the weight of its shaping term ``proximity`` (the ``success`` term has 1 − β)."""
+    proximity_margin: float = 0.5
+    """m of the tolerance reward: the excess distance beyond the tolerance where ``proximity`` falls to 0.1 β."""
 
     def __post_init__(self) -> None:
         for name in (
@@ -250,21 +271,23 @@ class ReachStationaryEllipse:
         if self.target_aspect[0] <= 1.0:
             raise ValueError(f"target_aspect: must exceed 1 (λ* > μ*, away from λ = μ), got {self.target_aspect!r}")
         validation.boolean("settling_table", self.settling_table)
+        validation.string("reward", self.reward, choices=REWARDS)
+        validation.string("draws", self.draws, choices=DRAWS)
+        validation.number("w_proximity", self.w_proximity, low=0.0, high=1.0)
+        validation.number("proximity_margin", self.proximity_margin, low=1e-6, high=validation.PARAM_RANGE[1])
 
     # --- what the environment asks --------------------------------------------------------------
     @property
     def reward_names(self) -> tuple[str, ...]:
         """The names of the reward terms, in the order of ``info["reward_terms"]`` (their sum is the reward)."""
+        if self.reward == "tolerance":
+            return TOLERANCE_TERMS
         return REWARD_TERMS + self.extra_reward_names
 
     @property
-    def no_target_message(self) -> str:
-        """The ``ValueError`` of a reset that finds no target in the ranges."""
-        return (
-            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
-            "found for this body in the target ranges (the settling rate grows with torque_limit and force_limit: "
-            "raise them, lower min_settling_rate, or widen the ranges)"
-        )
+    def no_witness_message(self) -> str:
+        """The ``ValueError`` of a reset that finds no witnessed start (tasks with witnesses)."""
+        return "start_distance: no witnessed start found (widen start_distance or witness_amplitude)"
 
     def accepts(self, target: StationaryEllipse) -> bool:
         """The stability class of a target: spectrally stable (q < 0, shape Hessian positive definite)."""

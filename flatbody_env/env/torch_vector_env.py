@@ -1,33 +1,24 @@
 """``FlatBodyTorchVectorEnv``: the batched env with torch tensors at its boundary (ManiSkill3 / Isaac Lab style).
 
-Actions, observations, rewards, ``terminated``/``truncated`` and the numeric arrays of ``info`` are torch
-tensors on ``device``: float32 observations and actions, float32 rewards, bool ends; the state inside stays
-float64. Autoreset is SAME_STEP by default (a body whose episode ends is reset within the step that ended
-it, its last observation in ``info["final_obs"]``, rows flagged by ``info["_final_obs"]``), so a trainer
-never sees a transition from one episode into the next.
+Actions, observations, rewards, ``terminated``/``truncated`` and the numeric entries of ``info`` are torch tensors on
+``device``: float32 observations, float32 rewards, bool ends; the state inside stays float64. Autoreset is SAME_STEP
+by default (a body whose episode ends is reset within the step that ended it, its last observation in
+``info["final_obs"]``, rows flagged by ``info["_final_obs"]``), so a trainer never sees a transition from one episode
+into the next. It runs every id of docs/tasks.md on the CPU and every v1 id on CUDA, from the one transition
+(:mod:`flatbody_env.env.transition`):
 
-On the CPU (``device="cpu"``) a step *is* :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv`'s fused
-batch step: the action tensor's memory is handed to it as a numpy array (``Tensor.numpy()``, no copy) and
-the arrays it returns are wrapped as tensors (``torch.from_numpy``, no copy). It therefore equals
-``FlatBodyVectorEnv`` step for step, bit for bit, for every task of the task suite (tested), with its
-episode clocks (``reset(options={"stagger": True})``, :meth:`set_episode_steps`) and partial resets
-(``reset(options={"reset_mask": m})``, ``m`` a bool tensor or array).
+* ``device="cpu"``: Gymnasium's ``NumpyToTorch`` over :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` —
+  the action tensor's memory handed to it as a numpy array (no copy), its arrays wrapped as tensors (no copy). It
+  equals ``FlatBodyVectorEnv`` step for step, bit for bit.
+* ``device="cuda"``: one kernel launch per step (:func:`~flatbody_env.env.transition.step_body`, one thread per
+  body) on arrays that are torch CUDA tensors (``numba.cuda.as_cuda_array``, no copies); the same draws for a seed as
+  the CPU (counter-based, per body), the same ``info`` schema (:func:`~flatbody_env.env.vector_env.episode_info` on
+  tensors). Without a GPU (or without numba-cuda or torch's CUDA build) it raises one
+  :class:`~flatbody_env.integrators.cuda.CudaUnavailableError`. Tested under numba's CUDA simulator.
 
-``device="cuda"``: one kernel launch per step (:func:`flatbody_env.integrators.cuda.env_step` with ``task=``) with the
-controls, the dynamics, the task's observation, reward terms, termination, truncation and autoresets on the GPU
-(:mod:`flatbody_env.env.device`); targets and starts are drawn there from a counter-based generator (Philox) per
-body, seeded from ``reset(seed=)``: the same distributions as ``FlatBody-v0``, other draws (docs/gpu.md). The state
-and every array live in torch CUDA tensors that the kernels read and write in place (``numba.cuda.as_cuda_array``,
-no copies); this module is only that glue (:class:`_CudaBatch`), the kernels are tested under numba's CUDA
-simulator. Without a GPU (or without numba-cuda or torch's CUDA build) it raises one
-:class:`~flatbody_env.integrators.cuda.CudaUnavailableError`. Differences from the CPU device: ``reset(seed=)``
-takes one int (no list); the options are ``reset_mask`` and ``stagger`` only; ``info`` carries the integer tensors
-``status`` (:data:`flatbody_env.integrators.failure.KINDS`) and ``domain_code`` instead of the strings
-``integrator_failure`` and ``left_domain``; ``final_obs`` rows are valid where ``_final_obs``; tasks whose draws or
-terms run in Python (witness, any-body, hold-unstable's extra terms, a custom potential) raise ``ValueError``.
-
-Non-numeric infos (``integrator_failure``, ``left_domain``: strings) stay numpy object arrays;
-``info["integrator"]["method"]`` stays a str.
+The contract on both devices: actions of exactly shape (N, n) and a real floating dtype (float16, bfloat16, float32,
+float64; anything else is refused naming ``actions``), finite, clipped to [−1, 1]; ``reset`` before ``step``; after
+``close()`` every call is refused; ``options`` booleans are booleans.
 """
 
 from __future__ import annotations
@@ -37,32 +28,31 @@ from typing import Any
 import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
 
+from flatbody_env.env import transition as tr
+from flatbody_env.env.core import EnvCore, configure
 from flatbody_env.env.registration import MAX_EPISODE_STEPS
-from flatbody_env.env.vector_env import FlatBodyVectorEnv, batch_arguments
+from flatbody_env.env.vector_env import FlatBodyVectorEnv, batch_arguments, episode_info, seed_list
+
+_FLOATS = (torch.float16, torch.bfloat16, torch.float32, torch.float64)
+MAX_DEVICE_BATCH = 1 << 22
+"""Largest ``num_envs`` on CUDA (4,194,304 bodies: ≈ 2.5 GB of arrays)."""
 
 
 def _to_torch(x: Any) -> Any:
     """Numeric numpy arrays as tensors sharing their memory (dicts recursively); anything else as it is."""
     if isinstance(x, np.ndarray):
         return x if x.dtype == object else torch.from_numpy(x)
+    if isinstance(x, np.generic):
+        return torch.as_tensor(x)
     if isinstance(x, dict):
         return {k: _to_torch(v) for k, v in x.items()}
     return x
 
 
-def _as_numpy(x: Any, dtype=None) -> np.ndarray:
-    """A tensor's memory as a numpy array (no copy for a CPU tensor), or ``np.asarray`` of anything else."""
-    if isinstance(x, torch.Tensor):
-        x = x.detach()
-        if x.device.type != "cpu":
-            x = x.cpu()
-        x = x.numpy()
-    return np.asarray(x) if dtype is None else np.asarray(x, dtype=dtype)
-
-
 class FlatBodyTorchVectorEnv(VectorEnv):
-    """N bodies of ``FlatBody-v0`` (or any task of docs/tasks.md) with torch tensors at the boundary.
+    """N bodies of any id of docs/tasks.md with torch tensors at the boundary (module docstring).
 
     Parameters
     ----------
@@ -73,7 +63,7 @@ class FlatBodyTorchVectorEnv(VectorEnv):
     autoreset_mode : AutoresetMode
         ``SAME_STEP`` (default) or ``NEXT_STEP``.
     num_threads : int or None
-        As :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv`.
+        As :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` (CPU only).
     **env_kwargs
         The keyword arguments of :class:`~flatbody_env.env.env.FlatBodyEnv` (a task's, e.g. ``task="hold-unstable"``).
     """
@@ -92,16 +82,18 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         try:
             dev = torch.device(device)
         except (RuntimeError, TypeError):
-            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r}") from None
+            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r:.60}") from None
         if dev.type not in ("cpu", "cuda"):
-            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r}")
+            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r:.60}")
         self.device = dev
         """The device of every tensor this env returns."""
-        self._gpu: _CudaBatch | None = None
+        self._closed = False
+        self._started = False
         if dev.type == "cuda":
-            _cuda_ready()
             self._gpu = _CudaBatch(self, num_envs, dev, max_episode_steps, autoreset_mode, env_kwargs)
+            self.venv = None
             return
+        self._gpu = None
         self.venv = FlatBodyVectorEnv(
             num_envs=num_envs,
             max_episode_steps=max_episode_steps,
@@ -110,6 +102,7 @@ class FlatBodyTorchVectorEnv(VectorEnv):
             **env_kwargs,
         )
         """The batched env that steps the bodies (its arrays are the tensors' memory)."""
+        self.config = self.venv.config
         self.metadata = {**self.metadata, "autoreset_mode": self.venv.metadata["autoreset_mode"]}
         self.num_envs = num_envs
         self.max_episode_steps = max_episode_steps
@@ -117,58 +110,109 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         self.single_action_space = self.venv.single_action_space
         self.observation_space = self.venv.observation_space
         self.action_space = self.venv.action_space
-        self.single_env = self.venv.single_env
-        self.body, self.task, self.control, self.limits, self.dt = (
-            self.venv.body,
-            self.venv.task,
-            self.venv.control,
-            self.venv.limits,
-            self.venv.dt,
-        )
         self.reward_names = self.venv.reward_names
+
+    body = property(lambda self: self.config.body)
+    task = property(lambda self: self.config.task)
+    control = property(lambda self: self.config.control)
+    limits = property(lambda self: self.config.limits)
+    dt = property(lambda self: self.config.dt)
+
+    def _open(self) -> None:
+        if self._closed:
+            raise RuntimeError("FlatBodyTorchVectorEnv: the env is closed")
 
     # --- state ---------------------------------------------------------------------------------------------
     @property
     def states(self) -> torch.Tensor:
         """The N packed states (N, 11) float64 (a copy)."""
+        self._open()
         if self._gpu is not None:
-            return self._gpu.t["Y"].T.clone()
+            return self._gpu.t["S"][tr.Y0 : tr.Y0 + 11].T.clone()
         return torch.from_numpy(self.venv.states)
 
     @property
     def target_vectors(self) -> torch.Tensor:
         """The N targets (λ*, μ*, ϱ*, s3*) (N, 4) float64 (a copy)."""
+        self._open()
         if self._gpu is not None:
-            return self._gpu.t["T"].T.clone()
+            return self._gpu.t["S"][tr.TG0 : tr.TG0 + 4].T.clone()
         return torch.from_numpy(self.venv.target_vectors)
 
     @property
     def episode_steps(self) -> torch.Tensor:
         """Each body's steps into its episode (N,) int64 (a copy)."""
+        self._open()
         if self._gpu is not None:
-            return self._gpu.t["I"][0].clone()
+            return self._gpu.t["K"][tr.K_CLOCK].clone()
         return torch.from_numpy(self.venv.episode_steps)
 
     def set_episode_steps(self, steps) -> None:
         """Set each body's episode clock (N,) integers in [0, ``max_episode_steps``) (a tensor or an array)."""
+        self._open()
+        s = torch.as_tensor(steps)
+        n, top = self.num_envs, self.max_episode_steps
+        if (
+            tuple(s.shape) != (n,)
+            or s.dtype.is_floating_point
+            or s.dtype.is_complex
+            or s.dtype == torch.bool
+            or bool((s < 0).any())
+            or bool((s >= top).any())
+        ):
+            raise ValueError(f"steps: must be {n} integers in [0, {top})")
         if self._gpu is not None:
-            self._gpu.set_episode_steps(steps)
-            return
-        self.venv.set_episode_steps(_as_numpy(steps))
+            self._gpu.t["K"][tr.K_CLOCK].copy_(s.to(self.device))
+        else:
+            self.venv.set_episode_steps(s.cpu().numpy())
 
     # --- VectorEnv API -------------------------------------------------------------------------------------
+    def _actions(self, actions) -> torch.Tensor:
+        """``actions`` as a tensor of exactly (N, n) with a real floating dtype (module docstring), or ValueError."""
+        shape = (self.num_envs, *self.single_action_space.shape)
+        try:
+            a = torch.as_tensor(actions)
+        except (TypeError, ValueError, RuntimeError, OverflowError):
+            raise ValueError(
+                f"actions: must be a tensor of shape {shape} with a real floating dtype, got {actions!r:.80}"
+            ) from None
+        if tuple(a.shape) != shape:
+            raise ValueError(f"actions: must have shape {shape}, got {tuple(a.shape)}")
+        if a.dtype not in _FLOATS:
+            raise ValueError(
+                f"actions: must have a real floating dtype (float16, bfloat16, float32, float64), got {a.dtype}"
+            )
+        return a
+
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+        self._open()
+        options = dict(options or {})
+        if "stagger" in options and not isinstance(options["stagger"], (bool, np.bool_)):
+            raise ValueError(f"options.stagger: must be true or false, got {options['stagger']!r:.60}")
+        if "reset_mask" in options:
+            m = torch.as_tensor(options["reset_mask"])
+            if tuple(m.shape) != (self.num_envs,) or m.dtype != torch.bool:
+                raise ValueError(f"options.reset_mask: must be a bool array of shape ({self.num_envs},)")
+            options["reset_mask"] = m
+        self._started = True
         if self._gpu is not None:
             return self._gpu.reset(seed, options)
-        if options and "reset_mask" in options:
-            options = {**options, "reset_mask": _as_numpy(options["reset_mask"])}
-        obs, info = self.venv.reset(seed=seed, options=options)
+        if "reset_mask" in options:
+            options["reset_mask"] = options["reset_mask"].cpu().numpy()
+        obs, info = self.venv.reset(seed=seed, options=options or None)
         return torch.from_numpy(obs), _to_torch(info)
 
     def step(self, actions):
+        self._open()
+        if not self._started:
+            raise RuntimeError("FlatBodyTorchVectorEnv: call reset() before step()")
+        a = self._actions(actions)
         if self._gpu is not None:
-            return self._gpu.step(actions)
-        obs, rewards, terminated, truncated, info = self.venv.step(_as_numpy(actions))
+            return self._gpu.step(a)
+        a = a.detach().cpu()
+        if a.dtype not in (torch.float32, torch.float64):
+            a = a.to(torch.float64)
+        obs, rewards, terminated, truncated, info = self.venv.step(a.numpy())
         return (
             torch.from_numpy(obs),
             torch.from_numpy(rewards.astype(np.float32)),
@@ -178,20 +222,9 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         )
 
     def close_extras(self, **kwargs: Any) -> None:
-        if self._gpu is None:
+        if self.venv is not None and not self._closed:
             self.venv.close()
-
-
-def _cuda_ready() -> None:
-    """One :class:`~flatbody_env.integrators.cuda.CudaUnavailableError` when the CUDA device cannot run here."""
-    from flatbody_env.integrators import cuda
-
-    if not torch.cuda.is_available():
-        raise cuda.CudaUnavailableError(
-            f"device: 'cuda' needs a CUDA GPU and torch's CUDA build (torch.cuda.is_available() is False); "
-            f"use device='cpu', or {cuda.INSTALL_HINT}"
-        )
-    cuda.require()
+        self._closed = True
 
 
 _TORCH_DTYPES = {
@@ -203,27 +236,30 @@ _TORCH_DTYPES = {
 
 
 class _CudaBatch:
-    """The torch side of ``device="cuda"``: a :class:`~flatbody_env.env.device.DeviceBatch` whose arrays are torch CUDA tensors,
-    handed to the kernels as numba views of the same memory (``numba.cuda.as_cuda_array``, zero-copy). Needs a real GPU
-    (tests marked ``gpu``); the kernels themselves are tested under numba's CUDA simulator."""
+    """The torch side of ``device="cuda"``: an :class:`~flatbody_env.env.core.EnvCore` on CUDA whose arrays are torch
+    CUDA tensors, handed to the kernels as numba views of the same memory (``numba.cuda.as_cuda_array``, zero-copy).
+    Needs a real GPU (tests marked ``gpu``); the kernels are tested under numba's CUDA simulator."""
 
-    NAMES = ("Y", "T", "OBS", "FINAL", "INFO", "I", "ENDS", "FLAGS")
+    NAMES = ("S", "K", "OBS", "FINAL", "FLAGS")
 
     def __init__(
         self, env: FlatBodyTorchVectorEnv, num_envs, dev, max_episode_steps, autoreset_mode, env_kwargs
     ) -> None:
-        from gymnasium.vector.utils import batch_space
-
-        from flatbody_env.env.device import DeviceBatch
-        from flatbody_env.env.env import FlatBodyEnv
         from flatbody_env.integrators import cuda
 
-        num_envs, max_episode_steps, mode = batch_arguments(num_envs, max_episode_steps, autoreset_mode)
+        num_envs, max_episode_steps, mode = batch_arguments(
+            num_envs, max_episode_steps, autoreset_mode, max_batch=MAX_DEVICE_BATCH
+        )
         if env_kwargs.get("render_mode") is not None or env_kwargs.get("track_rotation"):
-            raise ValueError("render_mode: FlatBodyTorchVectorEnv does not render; use FlatBody-v0 for frames")
+            raise ValueError("render_mode: FlatBodyTorchVectorEnv does not render; use FlatBody-v1 for frames")
+        config = configure(**env_kwargs)
+        if not torch.cuda.is_available():
+            raise cuda.CudaUnavailableError(
+                "device: 'cuda' needs a CUDA GPU and torch's CUDA build (torch.cuda.is_available() is False); "
+                f"use device='cpu', or {cuda.INSTALL_HINT}"
+            )
+        cuda.require()
         self.cuda, self.dev = cuda, dev
-        p = FlatBodyEnv(**env_kwargs)
-        self.p = p
         keep: list[torch.Tensor] = []
 
         def alloc(shape, dtype):
@@ -232,92 +268,61 @@ class _CudaBatch:
             return cuda.cuda.as_cuda_array(t)
 
         with torch.cuda.device(dev):
-            self.batch = DeviceBatch(
-                p, num_envs, max_episode_steps, same_step=mode == AutoresetMode.SAME_STEP, backend="cuda", alloc=alloc
+            reset = "same" if mode == AutoresetMode.SAME_STEP else "next"
+            self.core = EnvCore(
+                config, num_envs, max_episode_steps=max_episode_steps, autoreset=reset, backend="cuda", alloc=alloc
             )
         self._keep = keep
-        self.t = {name: torch.as_tensor(getattr(self.batch, name), device=dev) for name in self.NAMES}
-        """The batch's arrays as torch tensors (the same memory)."""
+        self.t = {name: torch.as_tensor(getattr(self.core, name), device=dev) for name in self.NAMES}
+        """The core's arrays as torch tensors (the same memory)."""
+        self.config = config
+        env.config = config
         env.metadata = {**env.metadata, "autoreset_mode": mode}
         env.num_envs, env.max_episode_steps = num_envs, max_episode_steps
-        env.single_observation_space, env.single_action_space = p.observation_space, p.action_space
-        env.observation_space, env.action_space = (
-            batch_space(p.observation_space, num_envs),
-            batch_space(p.action_space, num_envs),
+        env.single_observation_space, env.single_action_space = config.observation_space, config.action_space
+        env.observation_space = batch_space(config.observation_space, num_envs)
+        env.action_space = batch_space(config.action_space, num_envs)
+        env.reward_names = config.reward_names
+
+    def _info(self, *, step: bool) -> dict:
+        c = self.config
+        return episode_info(
+            self.t["S"],
+            self.t["K"],
+            dt=c.dt,
+            tol=c.task.success_tolerance,
+            method=c.stepper.method,
+            names=c.reward_names,
+            step=step,
+            xp=torch,
         )
-        env.single_env, env.venv = p, None
-        env.body, env.task, env.control, env.limits, env.dt = p.body, p.task, p.control, p.limits, p.dt
-        env.reward_names = p.reward_names
-        self.reward_names = p.reward_names
-
-    def _info(self, *, t, terms: bool) -> dict:
-        INFO, I = self.t["INFO"], self.t["I"]
-        info = {
-            "distance": INFO[7].clone(),
-            "is_success": INFO[7] <= self.p.task.success_tolerance,
-            "energy": INFO[8].clone(),
-            "casimir": INFO[9].clone(),
-            "p_theta": self.t["Y"][3].clone(),
-            "t": t,
-            "integrator": {"method": self.batch.method, "nfev": I[3].clone()},
-            "status": I[2].clone(),
-            "domain_code": INFO[10].to(torch.int64),
-        }
-        if terms:
-            info["reward_terms"] = {name: INFO[1 + k].clone() for k, name in enumerate(self.reward_names)}
-        return info
-
-    def _mask(self, mask):
-        m = torch.as_tensor(mask, device=self.dev)
-        if tuple(m.shape) != (self.batch.num_envs,) or m.dtype != torch.bool:
-            raise ValueError(f"options.reset_mask: must be a bool array of shape ({self.batch.num_envs},)")
-        return m
 
     def reset(self, seed, options):
-        options = dict(options or {})
+        options = dict(options)
         mask = options.pop("reset_mask", None)
         stagger = bool(options.pop("stagger", False))
         if options:
             raise ValueError(
                 f"options.{sorted(options)[0]}: not supported on device='cuda' (reset_mask and stagger are)"
             )
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
-            raise ValueError(
-                f"seed: device='cuda' takes one int >= 0 (the bodies' generators are counters under one key), got {seed!r}"
-            )
-        m = None if mask is None else self._mask(mask)
-        view = None if m is None else self.cuda.cuda.as_cuda_array(m.to(torch.uint8).contiguous())
-        self.batch.reset(seed=seed, mask=view, stagger=stagger)
-        info = self._info(t=self.t["I"][0] * self.p.dt, terms=False)
-        return self.t["OBS"].clone(), info
+        n = self.core.num_envs
+        m = np.ones(n, dtype=bool) if mask is None else mask.cpu().numpy()
+        self.core.reset(seeds=seed_list(seed, n), mask=m, stagger=stagger)
+        return self.t["OBS"].clone(), self._info(step=False)
 
     def step(self, actions):
-        A = torch.as_tensor(actions, device=self.dev)
+        A = actions.to(self.dev)
         if A.dtype not in (torch.float32, torch.float64):
             A = A.to(torch.float32)
-        A = A.reshape((self.batch.num_envs,) + self.p.action_space.shape).contiguous()
-        self.batch.step(self.cuda.cuda.as_cuda_array(A))
-        t, ENDS, INFO = self.t, self.t["ENDS"], self.t["INFO"]
-        terminated, truncated = ENDS[0].bool(), ENDS[1].bool()
-        info = self._info(t=INFO[11].clone(), terms=True)
-        if self.batch.same_step:
-            done = terminated | truncated
-            info["final_obs"] = t["FINAL"].clone()
-            info["_final_obs"] = done
-        return t["OBS"].clone(), INFO[0].to(torch.float32), terminated, truncated, info
-
-    def set_episode_steps(self, steps) -> None:
-        s = torch.as_tensor(steps, device=self.dev)
-        n, top = self.batch.num_envs, self.batch.max_episode_steps
-        if (
-            tuple(s.shape) != (n,)
-            or s.dtype.is_floating_point
-            or s.dtype == torch.bool
-            or bool((s < 0).any())
-            or bool((s >= top).any())
-        ):
-            raise ValueError(f"steps: must be {n} integers in [0, {top})")
-        self.t["I"][0].copy_(s)
+        A = A.contiguous()
+        self.core.step(self.cuda.cuda.as_cuda_array(A))
+        K = self.t["K"]
+        terminated, truncated = K[tr.K_TERMINATED] != 0, K[tr.K_TRUNCATED] != 0
+        info = self._info(step=True)
+        if self.core.autoreset == "same":
+            info["final_obs"] = self.t["FINAL"].clone()
+            info["_final_obs"] = terminated | truncated
+        return self.t["OBS"].clone(), self.t["S"][tr.R_REWARD].to(torch.float32), terminated, truncated, info
 
 
-__all__ = ["FlatBodyTorchVectorEnv"]
+__all__ = ["FlatBodyTorchVectorEnv", "MAX_DEVICE_BATCH"]

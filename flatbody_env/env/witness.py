@@ -68,7 +68,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from flatbody_env.env.sampling import BALL_DRAWS, START_NONE, ball_state_kernel
-from flatbody_env.env.task import DEFAULT_LIMITS, Episode, ReachStationaryEllipse, control_mask, target_row
+from flatbody_env.env.task import (
+    DEFAULT_LIMITS,
+    TASK_WITNESS,
+    Episode,
+    ReachStationaryEllipse,
+    control_mask,
+    omega12_kernel,
+    target_row,
+)
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 
@@ -76,11 +84,45 @@ REVERSAL = np.array([-1.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.
 """The reversal map 𝓡 on the packed state: the momenta s1, s2, s3, p_θ, p_λ, p_μ, p_ϱ negated (module docstring)."""
 
 
+def square_wave(k, amplitude, half, phase):
+    """The reversed run's action on one control at its step ``k``: ±amplitude, switching every ``half`` steps from
+    ``phase`` (module docstring, "The draw", step 3)."""
+    return amplitude if ((k + phase) // half) % 2 == 0 else -amplitude
+
+
+def witness_actions(params, steps: int, n_act: int) -> np.ndarray:
+    """The witness (steps, n) from its parameters (9,) — amplitude, then half-period and phase per driven control:
+    the reversed run's square waves, reversed in time (module docstring, step 4)."""
+    amp = float(params[0])
+    out = np.empty((steps, n_act))
+    for c in range(n_act):
+        half, phase = int(params[1 + 2 * c]), int(params[2 + 2 * c])
+        k = np.arange(steps)[::-1]  # the witness's step i is the reversed run's step steps - 1 - i
+        out[:, c] = np.where(((k + phase) // half) % 2 == 0, amp, -amp)
+    return out
+
+
+def uncontrolled_offset(y, tg, J, J3, no_dilatation, no_torque):
+    """The offset of state(s) ``y`` (11,) or (11, N) from the target (λ*, μ*, ϱ*, s3*) in the distance coordinates that
+    the controls do not drive at linear order: ‖(Δϱ, p_ϱ)‖ without dilatation, ‖(Δλ, Δμ, Δs3, ω1, ω2, p_λ, p_μ)‖
+    without torque (both without either, 0 with both); the flags are 0 or 1. Arithmetic and numpy ufuncs only: on
+    scalars in the transition's draws, on arrays here."""
+    w1, w2 = omega12_kernel(y, J, J3)
+    dr = y[9] - tg[2]
+    dl = y[7] - tg[0]
+    dm = y[8] - tg[1]
+    ds = y[2] - tg[3]
+    thick = dr * dr + y[6] * y[6]
+    shape = dl * dl + dm * dm + ds * ds + w1 * w1 + w2 * w2 + y[4] * y[4] + y[5] * y[5]
+    return np.sqrt(no_dilatation * thick + no_torque * shape)
+
+
 @dataclass(frozen=True, kw_only=True)
 class ReachWithWitness(ReachStationaryEllipse):
     """Reach a stationary ellipse from a start that comes with a witness (module docstring)."""
 
     compiled_resets: ClassVar[bool] = False
+    kind: ClassVar[int] = TASK_WITNESS
 
     min_settling_rate: float = 0.0
     """Off: under-actuated controls settle no target at linear order (r = 0)."""
@@ -170,7 +212,7 @@ class ReachWithWitness(ReachStationaryEllipse):
         steps = self.witness_steps
         tol = self.success_tolerance
         starts = np.empty((11, m))
-        witnesses = np.empty((m, steps, n_act))
+        params = np.zeros((m, 9))
         pending = np.arange(m)
         attempts = 0
         J, J3 = body.inertia.J1, body.inertia.J3
@@ -186,6 +228,7 @@ class ReachWithWitness(ReachStationaryEllipse):
             k = pending.size
             YB = np.empty((11, k))
             actions = np.empty((steps, k, n_act))
+            drawn = np.zeros((k, 9))
             for j, b in enumerate(pending):
                 u = rngs[b].random(self.attempt_draws(n_act))
                 tg = targets[b]
@@ -203,9 +246,11 @@ class ReachWithWitness(ReachStationaryEllipse):
                     YB[:, j],
                 )
                 amplitude = a_lo + (a_hi - a_lo) * u[BALL_DRAWS]
+                drawn[j, 0] = amplitude
                 for c in range(n_act):
                     half = h_lo + min(int((h_hi - h_lo + 1) * u[BALL_DRAWS + 1 + 2 * c]), h_hi - h_lo)
                     phase = min(int(2 * half * u[BALL_DRAWS + 2 + 2 * c]), 2 * half - 1)
+                    drawn[j, 1 + 2 * c], drawn[j, 2 + 2 * c] = half, phase
                     actions[:, j, c] = np.where(((k_steps + phase) // half) % 2 == 0, amplitude, -amplitude)
             Z, ok = simulator.rollout(REVERSAL[:, None] * YB, actions)
             Y0 = REVERSAL[:, None] * Z
@@ -220,10 +265,10 @@ class ReachWithWitness(ReachStationaryEllipse):
             for j in np.flatnonzero(keep):
                 b = pending[j]
                 starts[:, b] = Y0[:, j]
-                witnesses[b] = actions[::-1, j]
+                params[b] = drawn[j]
             pending = pending[~keep]
         return [
-            Episode(state=starts[:, b].copy(), target=targets[b].copy(), ellipse=ellipses[b], witness=witnesses[b])
+            Episode(state=starts[:, b].copy(), target=targets[b].copy(), ellipse=ellipses[b], witness_params=params[b])
             for b in range(m)
         ]
 
@@ -233,24 +278,10 @@ class ReachWithWitness(ReachStationaryEllipse):
         that ``control`` does not drive at linear order: ‖(Δϱ, p_ϱ)‖ without dilatation, ‖(Δλ, Δμ, Δs3, ω1, ω2,
         p_λ, p_μ)‖ without torque, both without either, 0 with both."""
         mask = control_mask(control)
-        Y = np.asarray(Y, dtype=np.float64)
-        target = np.asarray(target, dtype=np.float64)
-        total = np.zeros(Y.shape[1:]) if Y.ndim > 1 else 0.0
-        if not mask[3]:
-            total = total + (Y[9] - target[2]) ** 2 + Y[6] ** 2
-        if not mask[2]:
-            w1, w2 = ReachStationaryEllipse.omega12(Y, body)
-            total = (
-                total
-                + (Y[7] - target[0]) ** 2
-                + (Y[8] - target[1]) ** 2
-                + (Y[2] - target[3]) ** 2
-                + w1**2
-                + w2**2
-                + Y[4] ** 2
-                + Y[5] ** 2
-            )
-        return np.sqrt(total)
+        return uncontrolled_offset(
+            np.asarray(Y, dtype=np.float64), np.asarray(target, dtype=np.float64), body.inertia.J1, body.inertia.J3,
+            0.0 if mask[3] else 1.0, 0.0 if mask[2] else 1.0,
+        )  # fmt: skip
 
     def attempt_draws(self, n_act: int) -> int:
         """Uniforms one attempt draws: y_b (:data:`~flatbody_env.env.sampling.BALL_DRAWS`), α, and a half-period and a
@@ -258,4 +289,4 @@ class ReachWithWitness(ReachStationaryEllipse):
         return BALL_DRAWS + 1 + 2 * n_act
 
 
-__all__ = ["REVERSAL", "ReachWithWitness"]
+__all__ = ["REVERSAL", "ReachWithWitness", "square_wave", "uncontrolled_offset", "witness_actions"]

@@ -276,7 +276,7 @@ def _kernels():
 @functools.cache
 def kernel(func):
     """The CUDA kernel compiled from ``func``, a module-level plain-Python kernel from outside this module (the env's,
-    :mod:`flatbody_env.env.device`) whose ``cuda`` global is bound here, with the same device twins as :func:`env_step`'s."""
+    :mod:`flatbody_env.env.transition`) whose ``cuda`` global is bound here, with the same device twins as :func:`env_step`'s."""
     target, constants = _target()
     return constants["cuda"].jit(rebound(func, target, **constants))
 
@@ -308,7 +308,6 @@ def env_step(
     STATUS=None,
     NFEV=None,
     threads_per_block=THREADS_PER_BLOCK,
-    task=None,
     max_nfev=_bs.NO_BUDGET,
 ):
     """One environment step of N bodies on the GPU, one kernel launch.
@@ -318,44 +317,8 @@ def env_step(
     given/allocated (device arrays unless host arrays were passed in, which are then filled). ``max_nfev``: each
     body's budget of RHS evaluations in this step (DOP853; a body past it gets the ``budget`` status and keeps its
     state, as in :func:`~.batch_solve.batch_env_step`); the launch's work is bounded by it, since a kernel cannot
-    read the clock. The env's step (``task=``) always has the env's budget,
-    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`.
-
-    With ``task`` (a :class:`flatbody_env.env.device.DeviceBatch` on CUDA) the same single launch is the whole env step:
-    ``U`` is then the actions (N, n) (clipped and scaled on the device), ``Y`` the batch's states, advanced in place, and
-    the task's observation, reward terms, termination, truncation and autoresets land in the batch's arrays
-    (:func:`flatbody_env.env.device.step_body`); returns None."""
-    if task is not None:
-        blocks, threads = _blocks(Y.shape[1], threads_per_block)
-        task.cuda_kernels()[0][blocks, threads](
-            task.kind,
-            task.coeffs,
-            U,
-            Y,
-            task.T,
-            task.OBS,
-            task.FINAL,
-            task.INFO,
-            task.I,
-            task.ENDS,
-            task.FLAGS,
-            P,
-            task.kcfg,
-            task.scfg,
-            task.limits,
-            task.mask,
-            float(dt),
-            float(h),
-            float(rtol),
-            float(atol),
-            float(energy_tol),
-            task.max_episode_steps,
-            1 if task.same_step else 0,
-            task.key[0],
-            task.key[1],
-            *task.table,
-        )
-        return None
+    read the clock. The env's whole step (:mod:`flatbody_env.env.transition`) has the env's budget,
+    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`."""
     kind, coeffs = _method(method)
     kernel, _ = _kernels()
     n = Y.shape[1]

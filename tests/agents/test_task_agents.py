@@ -20,7 +20,7 @@ TASK_AGENTS = sorted(p for p in MODELS_DIR.glob("ppo-*") if p.name != "ppo-FlatB
 def test_every_task_has_ppo_hyperparameters():
     from agents.train import load_hyperparams
 
-    for env_id in TASK_IDS:
+    for env_id in [i for i in TASK_IDS if i.endswith("-v0")]:  # the v0 ids' residual agents (the prior track)
         hp = load_hyperparams("ppo", env_id)
         assert hp["residual"] if env_id != "FlatBodyDilatation-v0" else not hp.get("residual")  # no LQR exists there
 

@@ -1,4 +1,5 @@
-"""FlatBody-v0 and FlatBodyVectorEnv: API checks, reward terms, determinism, failures, batching."""
+"""FlatBody-v1 (and the v0 ids kept bit for bit) and FlatBodyVectorEnv: API checks, reward terms, determinism,
+failures, batching."""
 
 from __future__ import annotations
 
@@ -10,10 +11,24 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+import flatbody_env  # noqa: F401  (registers the ids)
+from flatbody_env.env.core import EnvCore
 from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.env.task import CONTROLS
 from oracles import documented_reward_terms
+
+pytestmark = pytest.mark.filterwarnings("ignore:.*out of date:DeprecationWarning")  # the v0 ids' deprecation
+V1 = {"reward": "tolerance", "draws": "philox"}
+
+
+def _with_stepper(env: FlatBodyEnv, stepper) -> FlatBodyEnv:
+    """``env`` stepping through ``stepper`` (a stepper of the seam's interface) instead of its own."""
+    import dataclasses
+
+    env.config = dataclasses.replace(env.config, stepper=stepper)
+    env.core = EnvCore(env.config, 1)
+    env.core.action_field = "action"
+    return env
 
 
 @pytest.mark.parametrize("control", CONTROLS)
@@ -22,12 +37,12 @@ def test_env_checkers_pass_without_warnings(control):
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        check_env(gym.make("FlatBody-v0", control=control).unwrapped, skip_render_check=True)
-        sb3_check_env(FlatBodyEnv(control=control))
+        check_env(gym.make("FlatBody-v1", control=control).unwrapped, skip_render_check=True)
+        sb3_check_env(FlatBodyEnv(control=control, **V1))
 
 
 def test_render_rgb_array():
-    env = gym.make("FlatBody-v0", render_mode="rgb_array")
+    env = gym.make("FlatBody-v1", render_mode="rgb_array")
     env.reset(seed=0)
     env.step(env.action_space.sample())
     frame = env.render()
@@ -35,11 +50,11 @@ def test_render_rgb_array():
     assert frame.std() > 5  # something is drawn
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        check_env(gym.make("FlatBody-v0", render_mode="rgb_array").unwrapped)
+        check_env(gym.make("FlatBody-v1", render_mode="rgb_array").unwrapped)
 
 
 def test_registered_through_module_prefix():
-    env = gym.make("flatbody_env:FlatBody-v0")
+    env = gym.make("flatbody_env:FlatBody-v1")
     assert env.spec.max_episode_steps == 400
     assert isinstance(env.unwrapped, FlatBodyEnv)
 
@@ -145,28 +160,24 @@ def test_leaving_the_domain_terminates_with_a_finite_observation():
         obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
         if term:
             break
-    assert term and "rho" in info["left_domain"]
+    assert term and info["domain_code"] == 4 and env.end_reason(info) == "rho" and info["status"] == 0
     assert np.all(np.isfinite(obs)) and env.observation_space.contains(obs)
     assert info["reward_terms"]["failure"] == -env.task.failure_penalty
 
 
 def test_integrator_failure_is_flagged_not_returned():
-    env = FlatBodyEnv(integrator="DOP853")  # the generic (seam) path
-    obs0, _ = env.reset(seed=0)
-
     class Failing:  # a stepper through the seam's interface that always reports a step-size collapse
         method, compiled, carries_rotation = "failing", False, False
 
-        def advance(self, y, u, dt, out, counters, R=None, R_out=None):
-            out[:] = np.nan
-            return 2
+        def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV):
+            OUT[:] = np.nan
+            STATUS[:] = 2
+            NFEV[:] = 0
 
-        def describe(self, status, lane=None):
-            return "step-collapse: step size collapsed"
-
-    env.stepper = Failing()
+    env = _with_stepper(FlatBodyEnv(integrator="DOP853"), Failing())  # the generic (seam) path
+    obs0, _ = env.reset(seed=0)
     obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
-    assert term and info["integrator_failure"].startswith("step-collapse")
+    assert term and info["status"] == 2 and env.end_reason(info).startswith("integrator failure (step-collapse")
     np.testing.assert_array_equal(obs, obs0)
     assert not info["is_success"]
 
@@ -249,7 +260,7 @@ def test_fixed_step_failure_near_lambda_equals_mu_terminates_cleanly():
         obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
         if term:
             break
-    assert term and info["integrator_failure"].startswith("under-resolved")
+    assert term and info["status"] == 7 and "under-resolved" in env.end_reason(info)
     np.testing.assert_array_equal(obs, previous)  # the last valid state, not the failed one
     assert np.all(np.isfinite(obs)) and info["reward_terms"]["failure"] < 0
     # the default integrator goes through the same approach without failing
@@ -264,10 +275,7 @@ def test_generic_stepper_agrees_with_the_compiled_one_for_the_same_method():
     from flatbody_env.integrators.steppers import GenericEnvStep
 
     fast = FlatBodyEnv()
-    slow = FlatBodyEnv()
-    slow.stepper = GenericEnvStep(
-        slow.integrator, slow.body, slow.tolerances
-    )  # the seam's generic stepper, same method
+    slow = _with_stepper(FlatBodyEnv(), GenericEnvStep("DOP853-numba", FlatBodyEnv().body, FlatBodyEnv().tolerances))
     assert fast.stepper.compiled and not slow.stepper.compiled
     o1, _ = fast.reset(seed=4)
     o2, _ = slow.reset(seed=4)

@@ -49,8 +49,12 @@ def test_env_step_carries_the_per_step_budget():
 def test_compiled_step_past_its_nfev_budget_ends_the_episode_with_the_reason():
     env = FlatBodyEnv()
     env.reset(seed=3)
-    env._counters[3] = 0  # no evaluations left: the compiled DOP853 stops inside the step (checked before each step)
+    from flatbody_env.env import transition as tr
+
+    env.core.CFG[tr.X_MAX_NFEV] = (
+        0  # no evaluations left: the compiled DOP853 stops inside the step (checked before each step)
+    )
     y0 = env.physics_state.copy()
     obs, reward, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
-    assert terminated and info["integrator_failure"].startswith("budget")
+    assert terminated and info["status"] == 8 and "budget" in env.end_reason(info)
     assert np.array_equal(env.physics_state, y0) and np.all(np.isfinite(obs))

@@ -36,7 +36,7 @@ def test_single_env_with_a_custom_potential_reports_the_whole_energy():
     _, info = env.reset(seed=3)
     y = np.array(list(env.state.values()))
     assert abs(info["energy"] - hamiltonian(env.state, body)) < 1e-12
-    _, twin_info = twin.observe(y, np.ones(4))  # (the energy does not depend on the target)
+    _, twin_info = twin.reset(seed=3, options={"state": env.state})  # (the energy does not depend on the target)
     assert abs(info["energy"] - twin_info["energy"]) < 1e-12 * abs(twin_info["energy"])
     zero = np.zeros(env.action_space.shape)
     energies = [env.step(zero)[4]["energy"] for _ in range(20)]

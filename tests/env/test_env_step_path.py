@@ -175,8 +175,8 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
     n = 97
     venv = FlatBodyVectorEnv(num_envs=n)
     venv.reset(seed=1)
-    p = venv.single_env
-    P = p.kernel_params.copy()
+    p = venv.config
+    P = np.array(p.body.kernel_params())
     P[1] = J2
     rng = np.random.default_rng(2)
     Y_old = venv.states.T.copy()
@@ -202,7 +202,7 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
         A,
         4,
         T,
-        p.kernel_config,
+        p.kcfg,
         P,
         Y_out,
         OBS,
@@ -229,7 +229,7 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
             A[i].copy(),
             4,
             T[i].copy(),
-            p.kernel_config,
+            p.kcfg,
             P,
             y,
             obs,

@@ -1,5 +1,6 @@
 """``FlatBodyTorchVectorEnv`` on the CPU: Gymnasium's vector-env checks, equality with ``FlatBodyVectorEnv`` for
-every task, and the episode clocks and partial resets of both vector envs."""
+every task, its contract (action shapes and dtypes, reset before step, closed means closed, booleans), and the episode
+clocks and partial resets of both vector envs."""
 
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ from flatbody_env.env.env import FlatBodyEnv  # noqa: E402
 from flatbody_env.env.registration import TASK_IDS, task_spec  # noqa: E402
 from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv  # noqa: E402
 from flatbody_env.env.vector_env import FlatBodyVectorEnv  # noqa: E402
+
+pytestmark = pytest.mark.filterwarnings("ignore:.*out of date:DeprecationWarning")  # the v0 ids' deprecation
 
 
 def _np(x):
@@ -35,7 +38,7 @@ def _actions(rng, n, k):
 def test_gymnasium_vector_checks():
     """What Gymnasium checks of a vector env: spaces, types, seeded determinism of reset and step, no data reused."""
     n = 3
-    env = FlatBodyTorchVectorEnv(n, max_episode_steps=4)
+    env = FlatBodyTorchVectorEnv(n, max_episode_steps=4, **task_spec("FlatBody-v1").kwargs)
     assert env.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     assert env.observation_space.shape == (n, 16) and env.action_space.shape == (n, 4)
     obs, info = env.reset(seed=5)
@@ -54,7 +57,7 @@ def test_gymnasium_vector_checks():
         check_obs(o.numpy(), env.observation_space, "step")
         assert r.dtype == torch.float32 and r.shape == (n,)
         assert te.dtype == torch.bool and tr.dtype == torch.bool and te.shape == tr.shape == (n,)
-        assert isinstance(inf["distance"], torch.Tensor) and isinstance(inf["reward_terms"]["shape"], torch.Tensor)
+        assert isinstance(inf["distance"], torch.Tensor) and isinstance(inf["reward_terms"]["success"], torch.Tensor)
         assert isinstance(inf["integrator"]["method"], str)
         assert not np.shares_memory(steps[0][0].numpy(), steps[1][0].numpy())  # returned data not reused
     for s1, s2 in zip(*runs):

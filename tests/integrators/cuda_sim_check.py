@@ -53,14 +53,14 @@ def _device_functions() -> dict:
     runs numpy itself, so only this check sees it without a GPU)."""
     from numba.core.dispatcher import Dispatcher
 
-    from flatbody_env.env import device
+    from flatbody_env.env import transition
     from flatbody_env.integrators.jit import _names
 
     seen: set[int] = set()
     left: list[str] = []
     ufuncs: set[str] = set()
     todo = [kernel.py_func for kernel in cuda._kernels()]
-    todo += [cuda.kernel(k).py_func for k in (device._step_kernel, device._reset_kernel, device._restart_kernel)]
+    todo += [cuda.kernel(k).py_func for k in (transition._step_kernel, transition._reset_kernel)]
     while todo:
         fn = todo.pop()
         for name in _names(fn.__code__):
