@@ -183,6 +183,31 @@ def test_a_full_disk_removes_the_temporary_and_names_the_file(tmp_path, monkeypa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
 
 
+def test_a_writer_killed_mid_write_leaves_no_truncated_file_under_the_final_name(tmp_path):
+    """A checkpoint whose save dies half-way (an exception inside the writer, as a kill would stop it) leaves neither a
+    truncated file under a final name nor a temporary; the model is written last, so a checkpoint is whole or absent."""
+    from agents.train import _save_checkpoint, checkpoints
+
+    class Model:
+        num_timesteps = 256
+
+        def save(self, path):
+            with open(path, "wb") as fh:
+                fh.write(b"PK\x03\x04 half a zip")
+            raise KeyboardInterrupt  # killed while writing
+
+    class Env:
+        def save(self, path):
+            with open(path, "wb") as fh:
+                fh.write(b"statistics")
+
+    folder = tmp_path / "checkpoints"
+    with pytest.raises(KeyboardInterrupt):
+        _save_checkpoint(Model(), Env(), folder, True, "ppo")
+    assert checkpoints(folder) == []  # no model under its final name: no checkpoint to resume from
+    assert not any(p.name.startswith(".") for p in folder.iterdir())  # no temporary left
+
+
 def test_append_line_refuses_a_link_and_appends_whole_lines(tmp_path):
     import os
 
