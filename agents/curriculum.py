@@ -138,8 +138,6 @@ def curriculum_callback(
 
 
 def main(argv: list[str] | None = None) -> int:
-    from agents.train import train
-
     ap = argparse.ArgumentParser(prog="python -m agents.curriculum", description=__doc__.split("\n\n")[0])
     ap.add_argument("--env", required=True)
     ap.add_argument("--out", required=True)
@@ -169,13 +167,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--trained-agent", metavar="RUN", help="fine-tune this run's model (flatbody train --trained-agent)"
     )
+    ap.add_argument(
+        "--trust",
+        action="store_true",
+        help="allow unpickling --trained-agent from outside the shipped agent and your own runs (docs/reliability.md)",
+    )
     args = ap.parse_args(argv)
+    from agents.numpy_policy import trust_policy
+
+    try:
+        with trust_policy(not args.trust):  # pickles only from trusted folders, as flatbody's commands
+            return _main(args, argv)
+    except ValueError as exc:
+        print(f"python -m agents.curriculum: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+
+
+def _main(args, argv) -> int:
+    from agents.train import train
+    from flatbody_env.physics import validation
+
     stages = [float(s) for s in args.stages.split(",")]
     from agents.train import apply_overrides, load_hyperparams
 
     hp = apply_overrides(load_hyperparams("ppo", args.env), args.hyperparams)
     per_action = [float(x) for x in args.log_std_per_action.split(",")] if args.log_std_per_action else None
-    train_kw = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.train_env_kwargs)}
+    train_kw = {
+        k: validation.parse_yaml(f"train_env_kwargs.{k[:60]}", v)
+        for k, v in (item.split("=", 1) for item in args.train_env_kwargs)
+    }
     cb = curriculum_callback(
         args.env,
         args.key,
@@ -204,8 +224,10 @@ def main(argv: list[str] | None = None) -> int:
         checkpoint_freq=0,
         trained_agent=args.trained_agent,
     )
+    from agents.numpy_policy import read_run_config
+
     cfg_file = Path(res.out) / "config.yml"
-    cfg = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
+    cfg = read_run_config(res.out)  # the one reading door
     cfg["curriculum"] = {
         "key": args.key,
         "stages": stages,

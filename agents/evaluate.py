@@ -119,8 +119,9 @@ class Agent:
 
         self.config: dict[str, Any] = read_run_config(folder)  # a mapping, or a ValueError naming config.yml
         algo = self.config.get("algo") or ("sac" if "sac" in model_file.name.lower() else "ppo")
-        if algo not in ("ppo", "sac"):
-            raise ValueError(f"config.yml.algo: must be ppo or sac, got {algo!r:.60}")
+        from flatbody_env.physics import validation
+
+        validation.string("config.yml.algo", algo, choices=("ppo", "sac"))
         self.algo = algo
         self.path = folder
         self.policy = None
@@ -148,7 +149,6 @@ class Agent:
         if self.env_id != "FlatBody-v0":  # another task: its registered keywords (task, control, ...) come with it
             self.env_kwargs = env_kwargs_for(self.env_id, self.env_kwargs)
         self.residual = hp.get("residual") or None
-        from flatbody_env.physics import validation
 
         self.residual_scale = validation.number(
             "config.yml.hyperparams.residual_scale", hp.get("residual_scale", 1.0), low=0.0, high=1e6
@@ -169,27 +169,19 @@ class Agent:
             )
 
     def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
-        import pickle
+        from agents.numpy_policy import check_trusted, load_sb3, load_vecnormalize
 
-        from agents.numpy_policy import check_trusted, load_sb3
-
-        check_trusted(folder, "model.zip (a pickle-based SB3 file)")  # docs/reliability.md, Trust model
+        check_trusted(folder, "model.zip (a pickle-based SB3 file)")  # before torch is imported (docs/reliability.md)
         import torch
         from stable_baselines3 import PPO, SAC
 
         torch.set_num_threads(1)
         cls = {"ppo": PPO, "sac": SAC}[algo]
-        self.model = load_sb3(cls, model_file)
+        self.model = load_sb3(cls, model_file)  # the one trust check again, on the file itself, and the reading door
         vn = folder / "vecnormalize.pkl"
         if vn.exists():
-            try:
-                with vn.open("rb") as fh:
-                    self.vecnormalize = pickle.load(fh)
-                self.vecnormalize.training = False
-            except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
-                raise ValueError(
-                    f"model: cannot load {str(vn)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
-                ) from None
+            self.vecnormalize = load_vecnormalize(vn)
+            self.vecnormalize.training = False
 
     @property
     def residual_action(self):

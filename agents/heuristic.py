@@ -263,17 +263,21 @@ def build_gain_table(
 
 
 def save_gain_table(table: dict, path: str | Path = GAIN_TABLE_PATH) -> None:
+    import io
+
+    from flatbody_env.output import atomic_write
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.npz")
+    buf = io.BytesIO()
     np.savez_compressed(
-        tmp,
+        buf,
         lambdas=table["lambdas"],
         ws=table["ws"],
         K=table["K"],
         meta=np.array(json.dumps(table["meta"], sort_keys=True)),
     )
-    tmp.replace(path)
+    atomic_write(path, buf.getvalue())  # the one writing door (no fixed temporary name, no planted link followed)
 
 
 _GAIN_TABLES: dict[str, dict | None] = {}
@@ -285,8 +289,10 @@ def shipped_gain_table() -> dict | None:
     if key not in _GAIN_TABLES:
         table = None
         if GAIN_TABLE_PATH.exists():
-            with np.load(GAIN_TABLE_PATH, allow_pickle=False) as f:
-                table = {"lambdas": f["lambdas"], "ws": f["ws"], "K": f["K"], "meta": json.loads(str(f["meta"]))}
+            from flatbody_env.physics import validation
+
+            f = validation.read_npz("gain_table", GAIN_TABLE_PATH)  # the one reading door
+            table = {"lambdas": f["lambdas"], "ws": f["ws"], "K": f["K"], "meta": json.loads(str(f["meta"]))}
             if table["meta"].get("version") != GAIN_TABLE_VERSION:
                 table = None
         _GAIN_TABLES[key] = table

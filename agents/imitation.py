@@ -32,7 +32,6 @@ Plans are saved as ``.npz`` without pickles (:class:`Plans`).
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -126,17 +125,19 @@ class Plans:
 
     @classmethod
     def load(cls, path: str | Path) -> Plans:
+        """Plans saved by :meth:`save`, read through the one reading door (:func:`validation.read_npz`: a regular file,
+        every array's declared shape checked before it is read, no pickles); ``ValueError`` naming ``plans``."""
+        d = validation.read_npz("plans", path)
         try:
-            with np.load(path, allow_pickle=False) as d:
-                return cls(
-                    env_id=str(d["env_id"]),
-                    model=str(d["model"]),
-                    seeds=d["seeds"].astype(np.int64),
-                    final_distance=d["final_distance"].astype(np.float64),
-                    knots=d["knots"].astype(np.float64),
-                    on_policy=bool(d["on_policy"]) if "on_policy" in d.files else False,
-                )
-        except (OSError, KeyError, ValueError) as exc:
+            return cls(
+                env_id=str(d["env_id"]),
+                model=str(d["model"]),
+                seeds=d["seeds"].astype(np.int64),
+                final_distance=d["final_distance"].astype(np.float64),
+                knots=d["knots"].astype(np.float64),
+                on_policy=bool(d["on_policy"]) if "on_policy" in d else False,
+            )
+        except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(
                 f"plans: cannot read {str(path)[:80]!r} as plans ({type(exc).__name__}: {str(exc)[:80]})"
             ) from None
@@ -318,6 +319,7 @@ def clone(
     validation.integer("epochs", epochs, low=1, high=10_000)
     validation.integer("batch_size", batch_size, low=1, high=1 << 20)
     validation.number("learning_rate", learning_rate, low=1e-8, high=1.0)
+    out = check_out(out, force=False)  # before any work: never a folder holding a run, /, or the home folder
     folder = Path(model)
     agent = _residual_agent(model, backend="sb3")  # SB3's own model and VecNormalize (pickles: a trusted folder only)
     if agent.algo != "ppo" or agent.vecnormalize is None:
@@ -332,7 +334,6 @@ def clone(
     keep = plans.final_distance <= tol
     if not keep.any():
         raise ValueError(f"plans: none ends within {tol:g}; nothing to clone")
-    out = check_out(out, force=False)
     venv = FlatBodyVectorEnv(num_envs=int(keep.sum()), autoreset_mode="SameStep", **agent.env_kwargs)
     if plans.on_policy and Path(plans.model).resolve() != folder.resolve():
         raise ValueError(
@@ -373,13 +374,17 @@ def clone(
             opt.step()
     with torch.no_grad():
         mse_end = float(((mean_action(x) - y) ** 2).mean())
-    out.mkdir(parents=True, exist_ok=True)
-    for name in ("config.yml", "vecnormalize.pkl"):
-        shutil.copy(folder / name, out / name)
-    ppo.save(str(out / "model.zip"))
-    from agents.numpy_policy import remember_run
+    from agents.numpy_policy import read_pickled, remember_run
+    from flatbody_env.output import atomic_path, atomic_write
 
+    out.mkdir(parents=True, exist_ok=True)
+    # every file through the one writing door (atomic, no planted link followed); the folder is trusted once the
+    # first is in place, the start run's files copied byte for byte through the reading door
+    atomic_write(out / "config.yml", validation.read_bytes("config.yml", folder / "config.yml"))
     remember_run(out)
+    atomic_write(out / "vecnormalize.pkl", read_pickled(folder / "vecnormalize.pkl", "vecnormalize.pkl"))
+    with atomic_path(out / "model.zip") as tmp:
+        ppo.save(str(tmp))
     return {
         "plans": int(keep.sum()),
         "pairs": int(len(x)),
@@ -400,6 +405,12 @@ def _seed_range(text: str) -> list[int]:
     return list(range(lo, hi))
 
 
+_TRUST_HELP = (
+    "allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; "
+    "docs/reliability.md)"
+)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m agents.imitation", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="step", required=True)
@@ -415,43 +426,54 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--init-std", type=float, default=PlanSettings.init_std)
     p.add_argument("--reach", type=float, default=PlanSettings.reach)
     p.add_argument("--on-policy", action="store_true", help="plan corrections of the run's own policy (a second round)")
+    p.add_argument("--trust", action="store_true", help=_TRUST_HELP)
     c = sub.add_parser("clone", help="fit a PPO run's policy to the successful plans")
     c.add_argument("--plans", required=True, nargs="+", help="plans files (joined)")
     c.add_argument("--model", required=True, help="the PPO run folder to start from")
     c.add_argument("--out", required=True, help="the new run folder")
     c.add_argument("--epochs", type=int, default=20)
+    c.add_argument("--trust", action="store_true", help=_TRUST_HELP)
     args = ap.parse_args(argv)
+    from agents.numpy_policy import trust_policy
+    from flatbody_env.output import OutputError
+
     try:
-        if args.step == "plan":
-            settings = PlanSettings(
-                knots=args.knots,
-                samples=args.samples,
-                iterations=args.iterations,
-                elite=args.elite,
-                init_std=args.init_std,
-                reach=args.reach,
-                chunk=args.chunk,
-                seed=args.seed,
-            )
-            plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
-            plans.save(args.out)
-            tol = _residual_agent(args.model).residual_action.task.success_tolerance
-            print(
-                f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
-                f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}"
-            )
-        else:
-            plans = Plans.load(args.plans[0])
-            for f in args.plans[1:]:
-                plans = plans + Plans.load(f)
-            res = clone(plans, args.model, args.out, epochs=args.epochs)
-            print(
-                f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
-                f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
-            )
+        with trust_policy(
+            not args.trust
+        ):  # pickles only from trusted folders, as flatbody's commands (docs/reliability.md)
+            if args.step == "plan":
+                settings = PlanSettings(
+                    knots=args.knots,
+                    samples=args.samples,
+                    iterations=args.iterations,
+                    elite=args.elite,
+                    init_std=args.init_std,
+                    reach=args.reach,
+                    chunk=args.chunk,
+                    seed=args.seed,
+                )
+                plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
+                plans.save(args.out)
+                tol = _residual_agent(args.model).residual_action.task.success_tolerance
+                print(
+                    f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
+                    f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}"
+                )
+            else:
+                plans = Plans.load(args.plans[0])
+                for f in args.plans[1:]:
+                    plans = plans + Plans.load(f)
+                res = clone(plans, args.model, args.out, epochs=args.epochs)
+                print(
+                    f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
+                    f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
+                )
     except ValueError as exc:
-        print(f"python -m agents.imitation: {exc}", file=sys.stderr)
+        print(f"python -m agents.imitation: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
+    except OutputError as exc:  # a full disk, an unwritable folder, a planted link: one line naming the file
+        print(f"python -m agents.imitation: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
     return 0
 
 

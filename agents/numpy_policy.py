@@ -35,6 +35,8 @@ import numpy as np
 FORMAT_VERSION = 1
 """Version of the ``policy.npz`` layout; a file of another version is refused (re-export it)."""
 POLICY_FILE = "policy.npz"
+MAX_POLICY_BYTES = 64 * 1024 * 1024
+"""Largest ``policy.npz``, and most bytes its arrays may declare (an MLP of 2 000 × 2 000 float64 layers)."""
 ACTIVATIONS = ("tanh", "relu")
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 """Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...); also :data:`agents.evaluate.MODELS_DIR`."""
@@ -81,6 +83,11 @@ class trust_policy:
         _TRUST["required"] = self._old
 
 
+MAX_MODEL_BYTES = 1 << 30
+"""Largest pickle-based file read (``model.zip``, ``vecnormalize.pkl``, a checkpoint, a replay buffer), through
+:func:`flatbody_env.physics.validation.read_bytes` like every other file."""
+
+
 def _trust_file() -> Path:
     import os
 
@@ -90,63 +97,128 @@ def _trust_file() -> Path:
     return Path(base) / "trusted-runs.txt"
 
 
-def trusted_roots() -> list[Path]:
-    """Folders whose pickles load without ``--trust``: the shipped agents (``agents/models``), the run
-    folders this user created with ``flatbody train`` / ``flatbody sweep`` (:func:`remember_run`) and
-    the folders listed in ``$FLATBODY_TRUSTED_DIRS`` (``os.pathsep``-separated)."""
+def _homes() -> set[Path]:
+    """The user's home folder, as ``$HOME`` and as the password database give it."""
     import os
 
-    roots = [MODELS_DIR.resolve()]
-    roots += [
-        Path(x).expanduser().resolve()
-        for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep)
-        if x.strip()
-    ]
+    homes = {Path(os.path.expanduser("~"))}
     try:
-        text = _trust_file().read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError):
-        text = ""
-    roots += [Path(line) for line in text.splitlines() if line.strip()]
+        import pwd
+
+        homes.add(Path(pwd.getpwuid(os.getuid()).pw_dir))
+    except (ImportError, KeyError, OSError):
+        pass
+    return {h.resolve() for h in homes if str(h) and h.is_absolute()}
+
+
+def trust_refusal(folder: str | Path) -> str | None:
+    """Why ``folder`` can never be trusted (None: it can be): the root folder, the user's home folder or a folder
+    above it (trusting one would trust every pickle below it), or a path with a line break (the list of trusted
+    folders holds one per line)."""
+    text = str(folder)
+    if any(c in text for c in "\n\r\0"):
+        return "holds a line break or NUL"
+    f = Path(folder).resolve()
+    if f == Path(f.anchor):
+        return "is the root folder"
+    if any(f == h or f in h.parents for h in _homes()):
+        return "is your home folder or a folder above it"
+    return None
+
+
+def trusted_roots() -> list[Path]:
+    """Folders whose pickles load without ``--trust``: the shipped agents (``agents/models``), the run
+    folders this user's runs have written to (:func:`remember_run`) and the folders listed in
+    ``$FLATBODY_TRUSTED_DIRS`` (``os.pathsep``-separated). A listed folder that can never be trusted
+    (:func:`trust_refusal`: ``/``, the home folder or above) or is not an absolute path is ignored."""
+    import os
+
+    from flatbody_env.physics import validation
+
+    listed = [x for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep) if x.strip()]
+    try:  # the one reading door: a regular file of bounded size (a FIFO or device planted here is never read)
+        listed += validation.read_text("trusted-runs", _trust_file(), max_bytes=validation.MAX_TEXT_BYTES).splitlines()
+    except ValueError:
+        pass
+    roots = [MODELS_DIR.resolve()]
+    for line in listed:
+        p = Path(line.strip()).expanduser()
+        if line.strip() and p.is_absolute() and trust_refusal(p) is None:
+            roots.append(p.resolve())
     return roots
 
 
 def trusted(folder: str | Path) -> bool:
-    """Whether ``folder`` lies in one of :func:`trusted_roots`."""
+    """Whether ``folder`` (or a file) lies in one of :func:`trusted_roots`, its links resolved."""
     f = Path(folder).resolve()
     return any(f == r or r in f.parents for r in trusted_roots())
 
 
-def remember_run(folder: str | Path) -> None:
-    """Record ``folder`` as one of this user's run folders (best effort: an unwritable config is ignored)."""
+def remember_run(folder: str | Path) -> bool:
+    """Record ``folder`` as one of this user's run folders, so that its pickles load later without ``--trust``.
+
+    Called by the code that writes a run's first file, once that file is in place (``config.yml`` of
+    ``flatbody train``, of ``python -m agents.imitation clone``): a run refused before it wrote anything
+    trusts nothing. Returns whether the folder is trusted now; a list that cannot be written (a read-only
+    configuration folder, a link planted in its place) is a note on stderr, not an error of the run.
+
+    Raises
+    ------
+    ValueError
+        Naming ``out`` when the folder can never be trusted (:func:`trust_refusal`).
+    """
+    import sys
+
+    from flatbody_env.output import OutputError, append_line
+
+    reason = trust_refusal(folder)
+    if reason is not None:
+        raise ValueError(
+            f"out: {str(folder)[:80]!r} {reason}, so it is never trusted; give the run a folder of its own"
+        )
     f = Path(folder).resolve()
+    if trusted(f):
+        return True
+    path = _trust_file()
     try:
-        if trusted(f):
-            return
-        path = _trust_file()
         path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("a", encoding="utf-8") as fh:
-            fh.write(f"{f}\n")
-    except OSError:
-        pass
+        append_line(path, str(f))
+    except (OSError, OutputError) as exc:
+        sys.stderr.write(
+            f"flatbody: note: {str(f)[:80]!r} not recorded as trusted ({' '.join(str(exc).split())[:160]}); "
+            "its model loads with --trust\n"
+        )
+        return False
+    return True
 
 
-def check_trusted(folder: str | Path, what: str) -> None:
-    """Refuse (``ValueError`` naming ``model``) to unpickle ``what`` from an untrusted folder while
-    :func:`require_trust` is on."""
+def check_trusted(folder: str | Path, what: str, where: str = "model") -> None:
+    """The one trust check: refuse (``ValueError`` naming ``where``) to unpickle ``what`` from ``folder`` (a folder or
+    a file; links resolved) outside :func:`trusted_roots` while :func:`require_trust` is on."""
     if _TRUST["required"] and not trusted(folder):
         raise ValueError(
-            f"model: loading {what} from {str(folder)[:80]!r} unpickles it, which can run arbitrary code, and the folder is "
+            f"{where}: loading {what} from {str(folder)[:80]!r} unpickles it, which can run arbitrary code, and it is "
             "neither the shipped agent nor one of your runs (flatbody train, sweep); pass --trust if you trust its source "
             "(docs/reliability.md, Trust model)"
         )
 
 
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with Path(path).open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+def read_pickled(path: str | Path, what: str, where: str = "model") -> bytes:
+    """The bytes of a pickle-based file (``model.zip``, ``vecnormalize.pkl``, a checkpoint, a replay buffer), through
+    the one trust check (:func:`check_trusted`, on the file itself) and the one reading door (a regular file of at most
+    :data:`MAX_MODEL_BYTES`; a FIFO or device is refused). Every unpickling in the package starts here
+    (:func:`load_sb3`, :func:`load_vecnormalize`, :func:`load_replay_buffer`)."""
+    from flatbody_env.physics import validation
+
+    check_trusted(path, what, where)
+    return validation.read_bytes(where, path, max_bytes=MAX_MODEL_BYTES)
+
+
+def sha256(path: Path, where: str = "model") -> str:
+    """SHA-256 of a file read through the one reading door (a regular file of at most :data:`MAX_MODEL_BYTES`)."""
+    from flatbody_env.physics import validation
+
+    return hashlib.sha256(validation.read_bytes(where, path, max_bytes=MAX_MODEL_BYTES)).hexdigest()
 
 
 def _sources(folder: Path) -> dict[str, str | None]:
@@ -171,19 +243,12 @@ def model_folder(path: str | Path | None) -> Path:
 def read_run_config(folder: Path) -> dict:
     """A run folder's ``config.yml`` (safe YAML) as a mapping ({} when absent); a damaged or non-mapping
     file, or a non-mapping ``hyperparams`` / ``env_kwargs``, is a ``ValueError`` naming ``config.yml``."""
-    import yaml
+    from flatbody_env.physics import validation
 
     cfg_file = Path(folder) / "config.yml"
     if not cfg_file.exists():
         return {}
-    try:
-        if not cfg_file.is_file() or cfg_file.stat().st_size > 1 << 20:
-            raise ValueError("not a regular file of at most 1 MiB")
-        config = yaml.safe_load(cfg_file.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, yaml.YAMLError) as exc:
-        raise ValueError(
-            f"config.yml: cannot read {str(cfg_file)[:80]!r} ({' '.join(str(exc).split())[:120]})"
-        ) from None
+    config = validation.read_yaml("config.yml", cfg_file)  # the one reading door: bounded, no alias bombs
     if config is None:
         return {}
     if not isinstance(config, dict):
@@ -198,21 +263,61 @@ def read_run_config(folder: Path) -> dict:
             f"config.yml.hyperparams.env_kwargs: must be a mapping, got a {type(hp['env_kwargs']).__name__}"
         )
     for key in ("algo", "env_id"):
-        if config.get(key) is not None and not isinstance(config[key], str):
-            raise ValueError(f"config.yml.{key}: must be a string, got {config[key]!r:.60}")
+        if config.get(key) is not None:
+            validation.string(f"config.yml.{key}", config[key])
     return config
 
 
-def load_sb3(cls, model_file: Path):
-    """``cls.load(model_file)`` on the CPU; a file SB3 cannot read (empty, truncated, not a model) is a
-    one-line ``ValueError`` naming ``model``."""
+def load_sb3(
+    cls, model_file: Path, *, where: str = "model", what: str = "model.zip (a pickle-based SB3 file)", **kwargs
+):
+    """``cls.load`` of ``model_file`` on the CPU, read through :func:`read_pickled` (trusted folders only, a regular
+    file); a file SB3 cannot read (empty, truncated, not a model) is a one-line ``ValueError`` naming ``where``.
+    ``kwargs`` go to ``cls.load`` (``env``, ``custom_objects``)."""
+    import io
+
+    data = read_pickled(model_file, what, where)
     try:
-        if Path(model_file).stat().st_size == 0:
+        if not data:
             raise ValueError("the file is empty")
-        return cls.load(str(model_file), device="cpu")
+        return cls.load(io.BytesIO(data), device="cpu", **kwargs)
     except Exception as exc:  # noqa: BLE001 - zipfile.BadZipFile, KeyError, pickle errors, RuntimeError of torch.load
         raise ValueError(
-            f"model: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+            f"{where}: cannot load {str(model_file)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
+
+
+def load_vecnormalize(path: Path, venv=None, *, where: str = "model"):
+    """The ``VecNormalize`` statistics pickled in ``path`` (read through :func:`read_pickled`), wrapped around ``venv``
+    when given (SB3's ``VecNormalize.load``); a file that does not unpickle into one is a ``ValueError`` naming ``where``."""
+    import pickle
+
+    data = read_pickled(path, "vecnormalize.pkl (a pickle)", where)
+    try:
+        from stable_baselines3.common.vec_env import VecNormalize
+
+        vn = pickle.loads(data)
+        if not isinstance(vn, VecNormalize):
+            raise TypeError(f"it holds a {type(vn).__name__}, not VecNormalize statistics")
+        if venv is not None:
+            vn.set_venv(venv)
+        return vn
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
+        raise ValueError(
+            f"{where}: cannot load {str(path)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
+
+
+def load_replay_buffer(model, path: Path, *, where: str = "resume") -> None:
+    """SAC's replay buffer pickled in ``path`` into ``model`` (read through :func:`read_pickled`)."""
+    import io
+
+    data = read_pickled(path, "the replay buffer (a pickle)", where)
+    try:
+        model.load_replay_buffer(io.BytesIO(data))
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
+        raise ValueError(
+            f"{where}: cannot load {str(path)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
         ) from None
 
 
@@ -264,8 +369,6 @@ def export_policy(path: str | Path | None = None) -> Path:
     Imports torch and SB3 (this is the one step that needs them). ValueError for a model whose
     policy is not an MLP of linear layers with tanh/ReLU (the only kind this evaluator runs).
     """
-    import pickle
-
     folder = model_folder(path)
     config = read_run_config(folder)
     algo = config.get("algo") or "ppo"
@@ -315,8 +418,7 @@ def export_policy(path: str | Path | None = None) -> Path:
     clip_obs = 0.0
     vn_file = folder / "vecnormalize.pkl"
     if vn_file.exists():
-        with vn_file.open("rb") as fh:
-            vn = pickle.load(fh)
+        vn = load_vecnormalize(vn_file)
         if vn.norm_obs:
             arrays["obs_mean"] = np.asarray(vn.obs_rms.mean, dtype=np.float64)
             arrays["obs_scale"] = np.sqrt(np.asarray(vn.obs_rms.var, dtype=np.float64) + vn.epsilon)
@@ -335,11 +437,13 @@ def export_policy(path: str | Path | None = None) -> Path:
         "torch": torch.__version__,
     }
     arrays["meta"] = np.array(json.dumps(meta))
-    out = folder / POLICY_FILE
-    tmp = out.with_suffix(".tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(out)
-    return out
+    import io
+
+    from flatbody_env.output import atomic_write
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return atomic_write(folder / POLICY_FILE, buf.getvalue())  # the one writing door (no fixed temporary name)
 
 
 def load_policy(path: str | Path | None = None) -> NumpyPolicy:
@@ -354,13 +458,17 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
     redo = f"run: flatbody export-policy {folder}"
     if not file.exists():
         raise StalePolicyError(f"policy: no {POLICY_FILE} beside {folder / 'model.zip'}; {redo}")
+    from flatbody_env.physics import validation
+
+    try:  # the one reading door: every member's declared shape and dtype checked before it is read
+        arrays = validation.read_npz("policy", file, max_bytes=MAX_POLICY_BYTES, max_array_bytes=MAX_POLICY_BYTES)
+    except ValueError as exc:  # not a regular file, truncated, pickled arrays, a lying header, too large
+        raise DamagedPolicyError(f"{exc}; {redo}") from None
     try:
-        with np.load(file, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
         meta = json.loads(str(arrays.pop("meta")))
         if not isinstance(meta, dict):
             raise ValueError("meta is not an object")
-    except Exception as exc:  # noqa: BLE001 - truncated, not an npz, pickled arrays, bad JSON: an error, never a fall-back
+    except Exception as exc:  # noqa: BLE001 - no meta, bad JSON: an error, never a fall-back
         raise DamagedPolicyError(
             f"policy: {file} is damaged ({type(exc).__name__}: {' '.join(str(exc).split())[:120]}); {redo}"
         ) from None
@@ -419,8 +527,14 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
 
 __all__ = [
     "DamagedPolicyError",
+    "MAX_MODEL_BYTES",
+    "MAX_POLICY_BYTES",
     "check_trusted",
+    "load_replay_buffer",
+    "load_vecnormalize",
+    "read_pickled",
     "trust_policy",
+    "trust_refusal",
     "load_sb3",
     "read_run_config",
     "remember_run",

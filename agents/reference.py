@@ -61,9 +61,16 @@ def load_reports(folder: str | Path = REFERENCE_DIR) -> list[dict[str, Any]]:
             "'flatbody evaluate --env all --out-dir DIR'"
         )
     reports = []
+    from flatbody_env.physics import validation
+
     for f in files:
-        data = json.loads(f.read_text(encoding="utf-8"))
-        if data.get("version") != REPORT_VERSION or "env_id" not in data or "policies" not in data:
+        data = validation.read_json("--from", f)  # the one reading door: a regular file, bounded
+        if (
+            not isinstance(data, dict)
+            or data.get("version") != REPORT_VERSION
+            or "env_id" not in data
+            or "policies" not in data
+        ):
             raise ValueError(f"--from: {str(f)!r} is not a task report of version {REPORT_VERSION}")
         reports.append(data)
     order = {k: i for i, k in enumerate(TASK_IDS)}

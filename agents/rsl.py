@@ -27,12 +27,13 @@ LQR residual and the policy's tensors on one torch device, and no hand-written P
 
 The run folder is the SB3 path's (agents/train.py): ``model.zip``, ``config.yml`` (env id, algo, seed,
 hyperparameters, trainer), ``run.json`` (command, git hash, versions, wall time), ``progress.csv`` (one row per
-PPO iteration), ``policy.npz`` (the numpy policy), plus ``rsl_model.pt`` (rsl_rl's own checkpoint).
+PPO iteration), ``policy.npz`` (the numpy policy), plus ``rsl_model.pt`` (rsl_rl's own checkpoint) and, while the
+run goes on, ``checkpoints/rsl_model_N_steps.pt`` every ``checkpoint_freq`` steps (the newest kept; every file
+written atomically through :mod:`flatbody_env.output`).
 """
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -436,19 +437,27 @@ def train_rsl(
     command: list[str] | None = None,
     force: bool = False,
     callback=None,
+    checkpoint_freq: int = 50_000,
+    keep_checkpoints: bool = False,
 ):
     """Train rsl_rl's PPO on ``FlatBody-v0`` with the LQR residual and write the run folder ``out`` (module docstring).
 
-    ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps. ``callback``
+    Every ``checkpoint_freq`` environment steps (rounded up to whole iterations; 0: never) rsl_rl's state (actor,
+    critic, optimiser, iterations) is saved as ``out/checkpoints/rsl_model_N_steps.pt``, atomically through the one
+    writing door; the newest :data:`agents.train.KEEP_CHECKPOINTS` are kept, and the folder is removed after a
+    completed run unless ``keep_checkpoints``. ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x
+    ``num_steps_per_env`` steps. ``callback``
     (optional) is called after each iteration as ``callback(runner, row)`` (``row``: the progress row); a true return
     value stops the training there, and the time spent in it is left out of the wall time (a benchmark's evaluations).
     Returns :class:`agents.train.TrainResult`.
     """
     import yaml
 
-    from agents.train import ENV_ID, TrainResult, apply_overrides, check_out
+    from agents.numpy_policy import remember_run
+    from agents.train import ENV_ID, KEEP_CHECKPOINTS, TrainResult, _rotate_checkpoints, apply_overrides, check_out
+    from flatbody_env.output import atomic_path, atomic_write, write_csv
+    from flatbody_env.physics import validation
     from flatbody_env.provenance import git_hash
-    from flatbody_env.output import atomic_path, atomic_write
 
     env_id = env_id or ENV_ID
     if env_id != ENV_ID:
@@ -457,6 +466,7 @@ def train_rsl(
         raise ValueError(f"device: must be one of {', '.join(DEVICES)}, got {device!r}")
     if not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads: must be an integer >= 1, got {threads!r}")
+    validation.integer("checkpoint_freq", checkpoint_freq, low=0, high=validation.MAX_TIMESTEPS)
     out = check_out(out, force=force)
     hp = apply_overrides(json.loads(json.dumps(DEFAULTS)), overrides or [])
     unknown = sorted(set(hp) - set(DEFAULTS))
@@ -508,7 +518,13 @@ def train_rsl(
         "trainer": {"name": ALGO, "library": "rsl_rl", "version": version("rsl-rl-lib"), "device": device},
     }
     out.mkdir(parents=True, exist_ok=True)
+    ckpt_dir = out / "checkpoints"
+    if force and ckpt_dir.exists():
+        import shutil
+
+        shutil.rmtree(ckpt_dir)  # an old run's checkpoints are not this run's
     atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
+    remember_run(out)  # the run's first file is in place: its folder is this user's (docs/reliability.md)
     import contextlib
     import io
 
@@ -542,6 +558,12 @@ def train_rsl(
         )
         if bar is not None:
             bar.update(nenv * steps)
+        done = (it + 1) * nenv * steps
+        if checkpoint_freq and done // checkpoint_freq > it * nenv * steps // checkpoint_freq:
+            ckpt_dir.mkdir(exist_ok=True)
+            with atomic_path(ckpt_dir / f"rsl_model_{done}_steps.pt") as tmp:
+                torch.save(_rsl_state(runner, hp, len(rows)), str(tmp))
+            _rotate_checkpoints(ckpt_dir, KEEP_CHECKPOINTS)
         if callback is not None:
             tc = time.perf_counter()
             stop = callback(runner, rows[-1])
@@ -551,21 +573,9 @@ def train_rsl(
     wall = time.perf_counter() - t0
     if bar is not None:
         bar.close()
-    with atomic_path(out / "progress.csv") as tmp:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+    write_csv(out / "progress.csv", list(rows[0]), ([r[k] for k in rows[0]] for r in rows))
     with atomic_path(out / "rsl_model.pt") as tmp:
-        torch.save(
-            {
-                "actor": runner.alg.actor.state_dict(),
-                "critic": runner.alg.critic.state_dict(),
-                "iterations": len(rows),
-                "runner_cfg": runner_config(hp),
-            },
-            str(tmp),
-        )
+        torch.save(_rsl_state(runner, hp, len(rows), optimizer=False), str(tmp))
     with atomic_path(out / "model.zip") as tmp:
         export_sb3(runner.alg.actor, runner.alg.critic, Path(str(tmp)), hp, seed)
     import gymnasium
@@ -600,8 +610,25 @@ def train_rsl(
     from agents.numpy_policy import export_policy
 
     export_policy(out)
+    if ckpt_dir.exists() and not keep_checkpoints:
+        import shutil
+
+        shutil.rmtree(ckpt_dir)
     env.close()
     return TrainResult(out=out, timesteps=len(rows) * nenv * steps, wall_time_s=wall, resumed_from=None)
+
+
+def _rsl_state(runner, hp: dict[str, Any], iterations: int, *, optimizer: bool = True) -> dict[str, Any]:
+    """rsl_rl's state as saved in ``rsl_model.pt`` and the checkpoints (these with the optimiser's state)."""
+    state = {
+        "actor": runner.alg.actor.state_dict(),
+        "critic": runner.alg.critic.state_dict(),
+        "iterations": iterations,
+        "runner_cfg": runner_config(hp),
+    }
+    if optimizer:
+        state["optimizer"] = runner.alg.optimizer.state_dict()
+    return state
 
 
 # --- from scratch (no LQR prior): success and final distance against wall time -------------------------------
@@ -696,9 +723,9 @@ def plot_curve(
 
     from flatbody_env.chart_text import add_caption
     from flatbody_env.output import save_figure
+    from flatbody_env.physics import validation
 
-    with open(csv_path, newline="", encoding="utf-8") as fh:
-        data = list(csv.DictReader(fh))
+    data = validation.read_csv("csv", csv_path)  # the one reading door
     w = [float(r["wall_s"]) for r in data]
     fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
     ax_d.plot(

@@ -8,8 +8,14 @@ beside the model::
     OUT/config.yml         the hyperparameters actually used (after overrides), env id, algo, seed
     OUT/run.json           command line, git hash, versions, wall time, timesteps
     OUT/progress.csv       SB3's training log (episode return, success rate, losses)
-    OUT/checkpoints/       periodic checkpoints (model + VecNormalize) for ``--resume``;
-                           removed after a completed run unless ``--keep-checkpoints``
+    OUT/checkpoints/       periodic checkpoints (model + VecNormalize), the newest KEEP_CHECKPOINTS kept, for
+                           ``--resume``; removed after a completed run unless ``--keep-checkpoints``
+
+Every file is written through :mod:`flatbody_env.output` (atomic, no planted link followed): SB3's own writers
+are given a temporary name (``model.save``), ``progress.csv`` comes from a logger format of ours and the
+checkpoints from a callback of ours. The folder becomes trusted (its pickles load without ``--trust``) once
+``config.yml``, the run's first file, is written. Every file read goes through
+:mod:`flatbody_env.physics.validation`'s reading door, every pickle through :func:`agents.numpy_policy.read_pickled`.
 
 Training uses :class:`agents.vec_env.FlatBodySB3VecEnv` (the natively batched env) wrapped in
 ``VecMonitor`` and ``VecNormalize``; nothing integrator-specific is passed: the env's default
@@ -21,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import platform
 import re
@@ -61,10 +68,17 @@ def load_hyperparams(algo: str, env_id: str = ENV_ID, path: str | Path | None = 
     """The YAML entry of ``env_id`` in ``hyperparams/<algo>.yml`` (or ``path``), deep-copied."""
     if algo not in ALGOS:
         raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {algo!r}")
+    from flatbody_env.physics import validation
+
     file = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    if not file.exists():
-        raise ValueError(f"hyperparams: no file {str(file)!r}")
-    data = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
+    where = "hyperparams_file" if path else "hyperparams"
+    data = validation.read_yaml(where, file) or {}  # the one reading door: bounded, no alias bombs
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: {str(file)!r} must hold a mapping of environment ids, got a {type(data).__name__}")
+    if not isinstance(data.get(env_id, {}), dict):
+        raise ValueError(
+            f"{where}: the entry {env_id!r} in {file} must be a mapping, got a {type(data[env_id]).__name__}"
+        )
     if env_id not in data:
         raise ValueError(f"env: no hyperparameters for {env_id!r} in {file} (has: {', '.join(data) or 'none'})")
     return copy.deepcopy(data[env_id])
@@ -77,7 +91,9 @@ def apply_overrides(hp: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
         if "=" not in item:
             raise ValueError(f"hyperparams: expected key=value, got {item!r}")
         key, text = item.split("=", 1)
-        value = yaml.safe_load(text)
+        from flatbody_env.physics import validation
+
+        value = validation.parse_yaml(f"hyperparams.{key.strip()[:60]}", text)  # no alias bombs in a value either
         node = hp
         parts = key.strip().split(".")
         for p in parts[:-1]:
@@ -193,37 +209,36 @@ def _algo_class(algo: str):
 
 
 def _load_saved(
-    cls, model_path: Path, vn_path: Path | None, env, norm, what: str, custom_objects: dict[str, Any] | None = None
+    cls,
+    model_path: Path,
+    vn_path: Path | None,
+    env,
+    norm,
+    where: str,
+    custom_objects: dict[str, Any] | None = None,
 ):
     """A saved model on ``env`` (wrapped in its saved VecNormalize statistics when the run normalises, in training
-    mode): the one loading of a resumed checkpoint and of a fine-tuned run. ``what`` starts the error message."""
-    from stable_baselines3.common.vec_env import VecNormalize
+    mode): the one loading of a resumed checkpoint and of a fine-tuned run, through the one trust check and reading
+    door (:func:`agents.numpy_policy.load_sb3`, :func:`~agents.numpy_policy.load_vecnormalize`). ``ValueError``
+    naming ``where`` for a file that is missing or cannot be loaded."""
+    from agents.numpy_policy import load_sb3, load_vecnormalize
 
     if norm:
         if vn_path is None or not vn_path.is_file():
-            raise ValueError(f"{what} has no VecNormalize statistics beside it (this run normalises)")
-        env = VecNormalize.load(str(vn_path), env)
+            raise ValueError(
+                f"{where}: {str(model_path)[:80]!r} has no VecNormalize statistics beside it (this run normalises)"
+            )
+        env = load_vecnormalize(vn_path, env, where=where)
         env.training = True
-    return cls.load(str(model_path), env=env, device="cpu", custom_objects=custom_objects), env
+    return load_sb3(cls, model_path, where=where, env=env, custom_objects=custom_objects), env
 
 
 def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_kwargs: dict[str, Any], seed: int):
     """The model and (normalised) env of a fine-tuning run (:func:`train`'s ``trained_agent``): the run's weights,
     optimiser state and statistics; this run's rollout and update settings (not its network)."""
-    from agents.numpy_policy import check_trusted
-
-    if not (folder / "model.zip").is_file():
-        raise ValueError(f"trained_agent: {str(folder)[:80]!r} holds no model.zip")
-    check_trusted(folder, "model.zip")
     keep = {k: v for k, v in algo_kwargs.items() if k != "policy_kwargs"}  # the network is the loaded one's
     model, env = _load_saved(
-        cls,
-        folder / "model.zip",
-        folder / "vecnormalize.pkl",
-        env,
-        norm,
-        f"trained_agent: {str(folder)[:80]!r}",
-        custom_objects=keep,
+        cls, folder / "model.zip", folder / "vecnormalize.pkl", env, norm, "trained_agent", custom_objects=keep
     )
     if norm:
         env.norm_reward, env.gamma = bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
@@ -231,21 +246,25 @@ def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_k
     return model, env
 
 
-def latest_checkpoint(folder: Path) -> tuple[Path, Path | None, Path | None, int] | None:
-    """(model.zip, vecnormalize.pkl or None, replay_buffer.pkl or None, timesteps) of the newest checkpoint."""
+KEEP_CHECKPOINTS = 3
+"""Checkpoints kept during a run (the newest; older ones are removed as new ones are written): enough that a newest
+one damaged by a crash leaves a good one to ``--resume`` from."""
+
+
+def checkpoints(folder: Path) -> list[tuple[Path, Path | None, Path | None, int]]:
+    """(model.zip, vecnormalize.pkl or None, replay_buffer.pkl or None, timesteps) of every checkpoint in ``folder``,
+    the newest first (names as :func:`_save_checkpoint` writes them; temporary files are never listed)."""
     if not folder.is_dir():
-        return None
-    best = None
+        return []
+    found = []
     for f in folder.glob("rl_model_*_steps.zip"):
         m = re.fullmatch(r"rl_model_(\d+)_steps\.zip", f.name)
-        if m and (best is None or int(m.group(1)) > best[1]):
-            best = (f, int(m.group(1)))
-    if best is None:
-        return None
-    f, steps = best
-    vn = folder / f"rl_model_vecnormalize_{steps}_steps.pkl"
-    rb = folder / f"rl_model_replay_buffer_{steps}_steps.pkl"
-    return f, (vn if vn.exists() else None), (rb if rb.exists() else None), steps
+        if m:
+            steps = int(m.group(1))
+            vn = folder / f"rl_model_vecnormalize_{steps}_steps.pkl"
+            rb = folder / f"rl_model_replay_buffer_{steps}_steps.pkl"
+            found.append((f, (vn if vn.exists() else None), (rb if rb.exists() else None), steps))
+    return sorted(found, key=lambda c: -c[3])
 
 
 @dataclass
@@ -254,6 +273,75 @@ class TrainResult:
     timesteps: int
     wall_time_s: float
     resumed_from: int | None
+
+
+def _csv_logger(folder: Path):
+    """SB3's logger writing ``folder/progress.csv`` through the one writing door (:func:`flatbody_env.output.write_csv`:
+    atomic, no planted link followed) instead of SB3's own CSV format, which writes into the final name as it goes.
+
+    The table is kept in memory and the file rewritten after a dump once the last rewrite is a while ago (at least
+    2 s, and ten times as long as the rewrite took, so the cost stays a small share of the run however long it is),
+    and when the logger is closed: a killed run leaves the table of its last rewrite, never a half-written file.
+    Columns are added, in sorted order, as they appear; earlier rows leave them empty (as SB3's format does)."""
+    from stable_baselines3.common.logger import KVWriter, Logger, filter_excluded_keys
+
+    from flatbody_env.output import write_csv
+
+    class AtomicCSV(KVWriter):
+        def __init__(self, path: Path) -> None:
+            self.path, self.keys, self.rows = path, [], []
+            self.written, self.cost, self.dirty = -math.inf, 0.0, False
+
+        def write(self, key_values, key_excluded, step: int = 0) -> None:
+            values = filter_excluded_keys(key_values, key_excluded, "csv")
+            self.keys.extend(sorted(k for k in values if k not in self.keys))
+            self.rows.append({k: v for k, v in values.items() if v is not None})
+            self.dirty = True
+            if time.monotonic() - self.written >= max(2.0, 10.0 * self.cost):
+                self.flush()
+
+        def flush(self) -> None:
+            if not self.dirty:
+                return
+            t0 = time.monotonic()
+            write_csv(self.path, self.keys, ([row.get(k, "") for k in self.keys] for row in self.rows))
+            self.written, self.dirty = time.monotonic(), False
+            self.cost = self.written - t0
+
+        def close(self) -> None:
+            self.flush()
+
+    folder.mkdir(parents=True, exist_ok=True)
+    return Logger(folder=str(folder), output_formats=[AtomicCSV(folder / "progress.csv")])
+
+
+def _checkpoint_callback(every: int, folder: Path, norm: bool, algo: str, keep: int = KEEP_CHECKPOINTS):
+    """Save a checkpoint (:func:`_save_checkpoint`: atomic, through the one writing door) every ``every`` calls of the
+    callback (``every × n_envs`` steps) and keep the ``keep`` newest (SB3's ``CheckpointCallback`` wrote into the final
+    names, so a run killed mid-write left a truncated newest checkpoint)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class AtomicCheckpoints(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.n_calls % every == 0:
+                _save_checkpoint(self.model, self.model.get_vec_normalize_env(), folder, norm, algo)
+                _rotate_checkpoints(folder, keep)
+            return True
+
+    return AtomicCheckpoints()
+
+
+def _rotate_checkpoints(folder: Path, keep: int) -> None:
+    """Remove all but the ``keep`` newest checkpoints in ``folder``: every file of a checkpoint (SB3's model, statistics
+    and replay buffer ``rl_model_[KIND_]N_steps.*``, rsl-ppo's ``rsl_model_N_steps.pt``), grouped by its step count N."""
+    steps: dict[int, list[Path]] = {}
+    for f in folder.glob("*_steps.*") if folder.is_dir() else ():
+        m = re.fullmatch(r"rs?l_model_(?:[a-z_]+_)?(\d+)_steps\.(?:zip|pkl|pt)", f.name)
+        if m:
+            steps.setdefault(int(m.group(1)), []).append(f)
+    for n in sorted(steps, reverse=True)[keep:]:
+        for f in steps[n]:
+            f.unlink(missing_ok=True)
 
 
 def _progress_callback(total: int, start: int, enabled: bool):
@@ -314,11 +402,20 @@ def check_out(out: str | Path, *, force: bool = False) -> Path:
     Raises
     ------
     ValueError
-        ``out`` is the shipped agent's folder (``agents/models/…``), or already holds a run (its
+        ``out`` can never be trusted (:func:`agents.numpy_policy.trust_refusal`: ``/``, the home folder or a folder
+        above it), or ``out`` is the shipped agent's folder (``agents/models/…``), or already holds a run (its
         ``model.zip``, ``config.yml``, ``run.json`` or ``checkpoints/``), and ``force`` is False: one
         line naming the folder and saying that ``--force`` overwrites it.
     """
+    from agents.numpy_policy import trust_refusal
+
     out = Path(out)
+    reason = trust_refusal(out)
+    if reason is not None:  # the run would make the folder trusted (agents.numpy_policy.remember_run)
+        raise ValueError(
+            f"out: {str(out)[:80]!r} {reason}; a run's folder becomes trusted (its pickles load without --trust), "
+            "so give the run a folder of its own, e.g. runs/ppo"
+        )
     shipped = Path(__file__).resolve().parent / "models"
     if not force:
         if out.resolve().is_relative_to(shipped):
@@ -337,18 +434,51 @@ def check_out(out: str | Path, *, force: bool = False) -> Path:
 
 def _save_checkpoint(model, env, folder: Path, norm: bool, algo: str) -> Path:
     """Save ``model`` (and its VecNormalize statistics, SAC's replay buffer) as the checkpoint of its
-    current step count in ``folder``, under the names :func:`latest_checkpoint` reads, atomically."""
+    current step count in ``folder``, under the names :func:`checkpoints` reads, each file atomically
+    (:func:`flatbody_env.output.atomic_path`) and the model last: a checkpoint whose model is there is whole."""
     steps = int(model.num_timesteps)
     folder.mkdir(parents=True, exist_ok=True)
-    with atomic_path(folder / f"rl_model_{steps}_steps.zip") as tmp:
-        model.save(str(tmp))
     if norm:
         with atomic_path(folder / f"rl_model_vecnormalize_{steps}_steps.pkl") as tmp:
             env.save(str(tmp))
     if algo == "sac" and hasattr(model, "save_replay_buffer"):
         with atomic_path(folder / f"rl_model_replay_buffer_{steps}_steps.pkl") as tmp:
             model.save_replay_buffer(str(tmp))
+    with atomic_path(folder / f"rl_model_{steps}_steps.zip") as tmp:
+        model.save(str(tmp))
     return folder / f"rl_model_{steps}_steps.zip"
+
+
+def _wall_time(run: dict) -> float:
+    """The ``wall_time_s`` of an earlier ``run.json`` (0 when it has none that is a finite number >= 0)."""
+    value = run.get("wall_time_s", 0.0)
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
+    return float(value) if ok else 0.0
+
+
+def _resume_from(cls, candidates: list, env, norm):
+    """(model, env, steps) of the newest checkpoint of ``candidates`` (:func:`checkpoints`) that loads; a newer one that
+    does not (truncated by a crash, unreadable) is passed over with a one-line note on stderr. ``ValueError`` naming
+    ``resume`` when none loads."""
+    from agents.numpy_policy import load_replay_buffer
+
+    for k, (model_path, vn_path, rb_path, steps) in enumerate(candidates):
+        try:
+            model, wrapped = _load_saved(cls, model_path, vn_path, env, norm, "resume")
+            if rb_path is not None and hasattr(model, "load_replay_buffer"):
+                load_replay_buffer(model, rb_path)
+        except ValueError as exc:
+            if k + 1 == len(candidates):
+                why = str(exc).removeprefix("resume: ")
+                raise ValueError(f"resume: no checkpoint in {model_path.parent} loads (the oldest: {why})") from None
+            print(
+                f"flatbody: note: checkpoint {model_path.name} cannot be loaded "
+                f"({' '.join(str(exc).split())[:160]}); resuming from {candidates[k + 1][0].name}",
+                file=sys.stderr,
+            )
+            continue
+        return model, wrapped, steps
+    raise ValueError("resume: no checkpoint")  # unreachable: candidates is not empty
 
 
 def train(
@@ -407,28 +537,44 @@ def train(
 
     task_spec(env_id)  # ValueError naming env for an id that is not a registered flatbody task
     out = Path(out) if resume else check_out(out, force=force)  # before the heavy imports: a refusal is immediate
+    from agents.numpy_policy import check_trusted, read_run_config, remember_run
+
+    ckpt_dir = out / "checkpoints"
+    if resume:  # the checkpoints are pickles: only from one of your runs, or with --trust
+        check_trusted(ckpt_dir, "the checkpoints (pickle-based SB3 files)", where="resume")
+    elif trained_agent is not None:
+        if not (Path(trained_agent) / "model.zip").is_file():
+            raise ValueError(f"trained_agent: {str(trained_agent)[:80]!r} holds no model.zip")
+        check_trusted(trained_agent, "model.zip and vecnormalize.pkl (pickles)", where="trained_agent")
 
     import torch
-    from stable_baselines3.common.callbacks import CheckpointCallback
-    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecNormalize
 
     if not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads: must be an integer >= 1, got {threads!r}")
     torch.set_num_threads(threads)
-    ckpt_dir = out / "checkpoints"
     resumed_from = None
+    previous: dict[str, Any] = {}
     if resume:
-        found = latest_checkpoint(ckpt_dir)
-        if found is None:
+        candidates = checkpoints(ckpt_dir)
+        if not candidates:
             raise ValueError(f"resume: no checkpoint in {ckpt_dir}")
-        cfg = yaml.safe_load((out / "config.yml").read_text(encoding="utf-8"))
-        if cfg["algo"] != algo:
-            raise ValueError(f"algo: the run in {out} was trained with {cfg['algo']!r}, not {algo!r}")
-        hp = cfg["hyperparams"]
-        seed = cfg["seed"]
+        cfg = read_run_config(out)  # the one reading door (config.yml: bounded, no alias bombs)
+        if not cfg:
+            raise ValueError(f"resume: {str(out)[:80]!r} holds no config.yml (the run's hyperparameters)")
+        if cfg.get("algo") != algo:
+            raise ValueError(f"algo: the run in {out} was trained with {cfg.get('algo')!r}, not {algo!r}")
+        hp = cfg.get("hyperparams")
+        if not isinstance(hp, dict):
+            raise ValueError("config.yml.hyperparams: missing (the run's hyperparameters)")
+        from flatbody_env.physics import validation
+
+        seed = validation.integer("config.yml.seed", cfg.get("seed"), low=0, high=validation.MAX_SEED)
         if n_timesteps is not None:
             hp["n_timesteps"] = int(n_timesteps)
+        if (out / "run.json").exists():  # the run so far (its wall time adds up), read through the door up front
+            previous = validation.read_json("run.json", out / "run.json")
+            previous = previous if isinstance(previous, dict) else {}
     else:
         hp = apply_overrides(load_hyperparams(algo, env_id, hyperparams_file), overrides or [])
         if n_timesteps is not None:
@@ -444,17 +590,6 @@ def train(
         norm = {"norm_obs": True, "norm_reward": True}
     algo_kwargs = algo_kwargs_of(hp)
     unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
-    start = found[3] if resume else 0
-    planned = (
-        start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
-    )  # what SB3 will train
-    if planned > total and notes:
-        what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
-        print(
-            f"flatbody: note: n_timesteps {total} rounds up to {planned} ({algo.upper()} trains whole {what} = "
-            f"{nenv} x {unit // nenv} = {unit} steps)",
-            file=sys.stderr,
-        )
 
     if force and not resume and ckpt_dir.exists():
         shutil.rmtree(ckpt_dir)  # an old run's checkpoints would be what a later --resume continues
@@ -472,45 +607,52 @@ def train(
         env_id=env_id,
     )
     cls = _algo_class(algo)
+    start = 0
     if resume:
-        model_path, vn_path, rb_path, start = found
-        model, env = _load_saved(cls, model_path, vn_path, env, norm, f"resume: checkpoint {model_path.name}")
-        if rb_path is not None and hasattr(model, "load_replay_buffer"):
-            model.load_replay_buffer(str(rb_path))
+        model, env, start = _resume_from(cls, candidates, env, norm)
         resumed_from = start
-    elif trained_agent is not None:
-        model, env = _load_trained_agent(cls, Path(trained_agent), env, norm, hp, algo_kwargs, seed)
-        cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp, "trained_agent": str(trained_agent)}
-        atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
     else:
-        if norm:
-            env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
-        model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
-        cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp}
+        if trained_agent is not None:
+            model, env = _load_trained_agent(cls, Path(trained_agent), env, norm, hp, algo_kwargs, seed)
+            cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp, "trained_agent": str(trained_agent)}
+        else:
+            if norm:
+                env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
+            model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
+            cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp}
         atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
-    model.set_logger(configure(str(out), ["csv"]) if not resume else configure(str(out / f"resumed-{start}"), ["csv"]))
+        remember_run(out)  # the run's first file is in place: its folder is this user's (docs/reliability.md)
+    planned = (
+        start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
+    )  # what SB3 will train
+    if planned > total and notes:
+        what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
+        print(
+            f"flatbody: note: n_timesteps {total} rounds up to {planned} ({algo.upper()} trains whole {what} = "
+            f"{nenv} x {unit // nenv} = {unit} steps)",
+            file=sys.stderr,
+        )
+    model.set_logger(_csv_logger(out if not resume else out / f"resumed-{start}"))
 
     bar = _progress_callback(planned, start, progress)
     callbacks = [bar, *(extra_callbacks or [])]
     if checkpoint_freq and checkpoint_freq > 0:
-        callbacks.append(
-            CheckpointCallback(
-                save_freq=max(checkpoint_freq // nenv, 1),
-                save_path=str(ckpt_dir),
-                name_prefix="rl_model",
-                save_vecnormalize=bool(norm),
-                save_replay_buffer=algo == "sac",
-            )
-        )
+        callbacks.append(_checkpoint_callback(max(checkpoint_freq // nenv, 1), ckpt_dir, bool(norm), algo))
     t0 = time.perf_counter()
     remaining = max(total - start, 0)
     try:
-        model.learn(total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False)
+        try:
+            model.learn(
+                total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False
+            )
+        finally:
+            model.logger.close()  # progress.csv rewritten with every row (the one writing door)
     except KeyboardInterrupt:
         bar.close()
         steps = int(model.num_timesteps)
         if checkpoint_freq and checkpoint_freq > 0 and steps > start:
             kept = _save_checkpoint(model, env, ckpt_dir, bool(norm), algo)
+            _rotate_checkpoints(ckpt_dir, KEEP_CHECKPOINTS)
             raise KeyboardInterrupt(
                 f"training stopped at {steps} steps; checkpoint {kept}: "
                 f"flatbody train --algo {algo} --out {out} --resume continues"
@@ -524,9 +666,6 @@ def train(
     if norm:
         with atomic_path(out / "vecnormalize.pkl") as tmp:
             env.save(str(tmp))
-    previous = {}
-    if resume and (out / "run.json").exists():
-        previous = json.loads((out / "run.json").read_text(encoding="utf-8"))
     import gymnasium
     import numpy
     import stable_baselines3
@@ -541,7 +680,7 @@ def train(
         "n_timesteps": int(model.num_timesteps),
         "n_envs": nenv,
         "torch_threads": threads,
-        "wall_time_s": round(wall + float(previous.get("wall_time_s", 0.0)), 1),
+        "wall_time_s": round(wall + _wall_time(previous), 1),
         "resumed_from": resumed_from,
         "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "versions": {

@@ -131,11 +131,11 @@ def load_search_space(algo: str, env_id: str = ENV_ID, path: str | Path | None =
     """
     if algo not in ALGOS:
         raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {algo!r}")
+    from flatbody_env.physics import validation
+
     file = Path(path) if path else HYPERPARAMS_DIR / f"{algo}_search.yml"
-    if not file.exists():
-        raise ValueError(f"search_file: no file {str(file)!r}")
-    data = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
-    if env_id not in data or not isinstance(data[env_id], dict) or not data[env_id]:
+    data = validation.read_yaml("search_file", file) or {}  # the one reading door: bounded, no alias bombs
+    if not isinstance(data, dict) or env_id not in data or not isinstance(data[env_id], dict) or not data[env_id]:
         raise ValueError(f"search_file: no search space for {env_id!r} in {file}")
     space = data[env_id]
     for name, spec in space.items():

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.output import atomic_open
 from flatbody_env.physics.body import Body, Inertia
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, V3, ThicknessPotential
@@ -725,24 +726,25 @@ def write_family_csv(family: Family, path: str | Path) -> Path:
 
 def read_family_csv(path: str | Path) -> list[dict[str, Any]]:
     """Load a table written by :func:`write_family_csv` (numbers as floats, ``branch`` as int)."""
+    import io
+
     path = Path(path)
     if not path.exists():
         raise ValueError(f"family: no file {str(path)!r}")
     out = []
-    with path.open(newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        if reader.fieldnames is None or "param" not in reader.fieldnames:
-            raise ValueError(f"family: {path} is not a family table (columns {', '.join(CSV_COLUMNS)})")
-        for row in reader:
-            rec: dict[str, Any] = {}
-            for k, v in row.items():
-                if k in ("event", "param_name", "classification", "nonlinear", "kind"):
-                    rec[k] = v
-                elif k == "branch":
-                    rec[k] = int(v)
-                else:
-                    rec[k] = float(v) if v != "" else math.nan
-            out.append(rec)
+    reader = csv.DictReader(io.StringIO(validation.read_text("family", path), newline=""))  # the one reading door
+    if reader.fieldnames is None or "param" not in reader.fieldnames:
+        raise ValueError(f"family: {path} is not a family table (columns {', '.join(CSV_COLUMNS)})")
+    for row in reader:
+        rec: dict[str, Any] = {}
+        for k, v in row.items():
+            if k in ("event", "param_name", "classification", "nonlinear", "kind"):
+                rec[k] = v
+            elif k == "branch":
+                rec[k] = int(v)
+            else:
+                rec[k] = float(v) if v != "" else math.nan
+        out.append(rec)
     return out
 
 

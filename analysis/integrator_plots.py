@@ -11,13 +11,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 from analysis.work_precision import read_csv
 from flatbody_env.chart_text import add_caption
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 _STYLE = {
     "RK23": ("#bbbbbb", "v"),
@@ -65,7 +65,7 @@ def plot_work_precision(csv_path, png_path, references_json=None) -> Path:
     rows = read_csv(csv_path)
     refs = {}
     if references_json and Path(references_json).exists():
-        refs = {r["scene"]: r for r in json.loads(Path(references_json).read_text(encoding="utf-8"))}
+        refs = {r["scene"]: r for r in validation.read_json("--plot-only", references_json)}
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     fig, axes = plt.subplots(2, len(scenes), figsize=(4.6 * len(scenes), 9.4), squeeze=False)
@@ -217,7 +217,7 @@ def plot_bench(json_path, png_path) -> Path:
     """``bench_integrators.json`` → three bar panels (speed-up, close approach, one short step), x axes
     labelled, the 100x reference line in a legend, the jargon in :data:`BENCH_CAPTION`."""
     plt = _plt()
-    data = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    data = validation.read_json("--plot-only", json_path)
     fig, axes = plt.subplots(1, 3, figsize=(16, 6.6))
     reg = data["regular"]
     sp = reg["at_target"]

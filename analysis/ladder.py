@@ -46,6 +46,7 @@ import numpy as np
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.integrators.ladder import LADDER_RUNGS, check_rung, rung_model
 from flatbody_env.output import atomic_open
+from flatbody_env.physics import validation
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import Scene, builtin_scenes
 from flatbody_env.simulation import explain_model
@@ -363,14 +364,13 @@ def write_scenes(records, path) -> Path:
 def read_csv(path) -> list[dict]:
     """Rows of a CSV written by :func:`write_csv` or :func:`write_scenes` (numbers as floats)."""
     out = []
-    with Path(path).open(encoding="utf-8") as fh:
-        for row in csv.DictReader(fh):
-            for k in ("t_end", "error", "wall_time", "floor"):
-                if k in row:
-                    row[k] = float(row[k])
-            if "nfev" in row:
-                row["nfev"] = int(row["nfev"])
-            out.append(row)
+    for row in validation.read_csv("csv", path):  # the one reading door: a regular file, bounded
+        for k in ("t_end", "error", "wall_time", "floor"):
+            if k in row:
+                row[k] = float(row[k])
+        if "nfev" in row:
+            row["nfev"] = int(row["nfev"])
+        out.append(row)
     return out
 
 

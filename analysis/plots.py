@@ -17,6 +17,7 @@ import numpy as np
 from analysis.families import read_family_csv
 from flatbody_env.chart_text import add_caption
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 COLOURS = {"elliptic": "#1f77b4", "hyperbolic": "#d62728", "degenerate": "#7f7f7f"}
 LABELS = {
@@ -117,7 +118,6 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
     """Draw a shape stability map (CSV of :func:`analysis.families.shape_stability_grid`): one panel per kind
     (rigid-like, circulating), each shape (λ, μ) coloured by classification; energy–Casimir certified
     stable points filled, spectrally stable but uncertified ones hollow."""
-    import csv
 
     import matplotlib
 
@@ -127,8 +127,7 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
     path = Path(csv_path)
     if not path.exists():
         raise ValueError(f"map: no file {str(path)!r}")
-    with path.open(newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = validation.read_csv("map", path)  # the one reading door
     if not rows or "classification" not in rows[0]:
         raise ValueError(f"map: {path} holds no shape rows")
     fig, axes = plt.subplots(1, 2, figsize=(10, 5.5), sharey=True)

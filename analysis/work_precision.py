@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.output import atomic_open, atomic_write
 from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import IntegrationError, Tolerances, get_method
@@ -333,18 +334,17 @@ def write_json(records, path: str | Path) -> Path:
 def read_csv(path: str | Path) -> list[dict]:
     """Rows of a CSV written by :func:`write_records`, numbers parsed."""
     out = []
-    with Path(path).open(encoding="utf-8") as fh:
-        for row in csv.DictReader(fh):
-            parsed = {}
-            for k, v in row.items():
-                if v in ("True", "False"):
-                    parsed[k] = v == "True"
-                    continue
-                try:
-                    parsed[k] = float(v)
-                except ValueError:
-                    parsed[k] = v
-            out.append(parsed)
+    for row in validation.read_csv("csv", path):  # the one reading door: a regular file, bounded
+        parsed = {}
+        for k, v in row.items():
+            if v in ("True", "False"):
+                parsed[k] = v == "True"
+                continue
+            try:
+                parsed[k] = float(v)
+            except ValueError:
+                parsed[k] = v
+        out.append(parsed)
     return out
 
 

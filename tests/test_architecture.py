@@ -78,3 +78,75 @@ def test_package_never_cites_the_source_folder():
     if "shared/" in readme:
         offenders.append("README.md")
     assert not offenders, offenders
+
+
+# -- the one reading door, the one trust check ----------------------------------------------------------------------
+_PICKLE_LOADS = (
+    r"pickle\.loads?\(",
+    r"torch\.load\(",
+    r"cloudpickle",
+    r"\b(PPO|SAC|cls)\.load\(",
+    r"VecNormalize\.load",
+)
+_FILE_READS = (
+    r"np\.load\(",
+    r"yaml\.(safe_)?load\(",
+    r"json\.load\(",
+    r"(?<!validation)\.read_text\(",
+    r"(?<!validation)\.read_bytes\(",
+    r"csv\.(Dict)?[Rr]eader\((?!io\.StringIO\(validation)",
+    r"\bopen\([^)]*\)",
+)
+_READ_EXCEPTIONS = {
+    # the package's own data and system files, never a user's file (package resources, not paths)
+    "flatbody_env/scene.py": r"entry\.read_text",
+    "flatbody_env/service/models.py": r"entry\.read_text",
+    "flatbody_env/service/app.py": r"\.read_text\(",
+    "flatbody_env/provenance.py": r"/proc/cpuinfo",
+    # the env layer is another wing's (its shipped settling-rate table)
+    "flatbody_env/env/targets.py": r"np\.load\(",
+    # the service's own log file and lock, a screenshot it just took, rerun's own pipe
+    "flatbody_env/service/launch.py": r"log_path|proc\.stderr",
+    "flatbody_env/service/store.py": r"service\.lock",
+    "flatbody_env/recording/viewer.py": r"Image\.open|Popen|fdopen|client\.open",
+    "flatbody_env/recording/sink.py": r"open\(tmp, \"wb\"\)|os\.open\(fifo",
+}
+
+
+def _source_lines(pattern: str):
+    import re
+
+    rx = re.compile(pattern)
+    for package in ("agents", "analysis", "flatbody_env"):
+        for path in sorted((ROOT / package).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                code = line.split("#", 1)[0]
+                if rx.search(code) and not code.strip().startswith(('"', "'")):
+                    yield rel, n, line.strip()
+
+
+def test_every_pickle_is_loaded_behind_the_one_trust_check():
+    """Nothing is unpickled outside agents/numpy_policy.py, where every load reads its bytes through read_pickled
+    (the trust check, then the reading door)."""
+    found = [hit for p in _PICKLE_LOADS for hit in _source_lines(p) if hit[0] != "agents/numpy_policy.py"]
+    assert found == [], found
+
+
+def test_every_file_is_read_through_the_one_door():
+    """No module reads a file itself: validation.read_bytes and the readers built on it are the one door (the few
+    exceptions read the package's own data or files the program itself just made)."""
+    import re
+
+    found = []
+    for p in _FILE_READS:
+        for rel, n, line in _source_lines(p):
+            if rel == "flatbody_env/physics/validation.py":
+                continue
+            allowed = _READ_EXCEPTIONS.get(rel)
+            if allowed and re.search(allowed, line):
+                continue
+            if re.search(r"open\((tmp|held|name|target|self\.data_dir)|atomic_open|os\.open\(target|Popen|pidfd", line):
+                continue  # writers (the writing door, a temporary of ours), processes
+            found.append((rel, n, line))
+    assert found == [], found

@@ -17,7 +17,6 @@ chart and the ``<!-- bench:env -->`` docs block.
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 
 from flatbody_env.bench.harness import Report, alternate
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 SINGLE = ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1")
 """The single environments, timed in alternation."""
@@ -279,8 +279,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
     from flatbody_env.chart_text import add_caption
 
-    with open(csv_path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["name"] for r in rows]
     rates = [float(r["env_steps_per_s"]) for r in rows]
     colours = ["tab:blue" if "FlatBody" in n else "tab:gray" for n in names]

@@ -30,13 +30,13 @@ dynamics rows).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from flatbody_env.bench.harness import Report, best_of
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 from flatbody_env.provenance import cpu_name
 
 WHAT = "env step, dynamics only"
@@ -272,7 +272,7 @@ def plot(json_path: str | Path, png_path: str | Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    result = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    result = validation.read_json("--plot-only", json_path)
     fig, ax = plt.subplots(figsize=(10, 4.8))
     keys = sorted({(r["what"], r.get("env", ""), r["backend"], r["method"]) for r in result["rows"]})
     for what, env, backend, method in keys:

@@ -32,7 +32,6 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +39,7 @@ from analysis.failure_study import gap_scene
 from analysis.work_precision import timed_run
 from flatbody_env.bench.harness import Report, best_of
 from flatbody_env.integrators import Tolerances, get_method
+from flatbody_env.physics import validation
 from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import load_scene
@@ -643,7 +643,7 @@ def write_docs(json_path: str | os.PathLike, docs: str | os.PathLike) -> list[st
     from flatbody_env.output import replace_marked_block
 
     done = []
-    for name, table in docs_tables(json.loads(Path(json_path).read_text(encoding="utf-8"))).items():
+    for name, table in docs_tables(validation.read_json("--plot-only", json_path)).items():
         try:
             replace_marked_block(docs, name, table)
         except ValueError:

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from flatbody_env.bench.harness import Report
+from flatbody_env.physics import validation
 
 NAME = "recording"
 """The file stem of the saved figures, and the docs block's name."""
@@ -310,7 +311,6 @@ RECORDING_CAPTION = (
 
 def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
     """Draw the chart of a saved ``recording.json`` (never from a fresh run) to ``png_path``."""
-    import json
 
     import matplotlib
 
@@ -320,7 +320,7 @@ def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    result = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    result = validation.read_json("--plot-only", json_path)
     steps = [r["steps"] for r in result["sizes"]]
     med = [r["median_s"] for r in result["sizes"]]
     lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]

@@ -14,7 +14,6 @@ saved JSON (:func:`plot`; ``flatbody bench service --plot-only`` redraws it).
 from __future__ import annotations
 
 import asyncio
-import json
 import os
 import tempfile
 import time
@@ -26,6 +25,7 @@ import numpy as np
 
 from flatbody_env.bench.harness import Report
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
     "GET /health": ("GET", "/health", None),
@@ -196,7 +196,7 @@ def report(result: ServiceBenchmark) -> Report:
 
 def load(json_path: str | Path) -> ServiceBenchmark:
     """A saved ``service_benchmark.json`` read back."""
-    data = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    data = validation.read_json("--plot-only", json_path)
     return ServiceBenchmark(
         rows=[LoadRow(**r) for r in data["rows"]],
         workers=int(data["workers"]),

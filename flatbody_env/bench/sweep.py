@@ -30,7 +30,6 @@ chart ``scaling.png`` drawn from the saved JSON (:func:`plot`; ``--plot-only`` r
 from __future__ import annotations
 
 import heapq
-import json
 import math
 import os
 import time
@@ -39,6 +38,7 @@ from typing import Any
 
 from flatbody_env.bench.harness import Report
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 from flatbody_env.provenance import machine
 from flatbody_env.sweep.tasks import Task, execute, plan
 
@@ -317,7 +317,7 @@ def plot(json_path: str | Path, png_path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rep = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    rep = validation.read_json("--plot-only", json_path)
     costs = rep["task_costs_s"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     ws = [1, 2, 4, 8, 16, 32, 64, 128]

@@ -15,7 +15,6 @@ same seeds as a line), and the ``<!-- bench:time-to-goal -->`` docs block when a
 
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
@@ -25,6 +24,7 @@ import numpy as np
 
 from flatbody_env.bench.harness import Report, write_report
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 TRAINERS = ("sb3-ppo", "rsl-ppo")
 
@@ -301,7 +301,7 @@ CAPTION = (
 
 def load(json_path: str | Path) -> GoalBenchmark:
     """A :class:`GoalBenchmark` from its saved ``time_to_goal.json``."""
-    data = json.loads(Path(json_path).read_text(encoding="utf-8"))
+    data = validation.read_json("--plot-only", json_path)
     curves = {k: Curve(**{**data[k], "points": [tuple(p) for p in data[k]["points"]]}) for k in ("sb3", "rsl")}
     return GoalBenchmark(
         **{k: v for k, v in data.items() if k not in ("ratio", "ratio_lqr", "machine", "sb3", "rsl")}, **curves

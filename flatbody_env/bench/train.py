@@ -16,13 +16,13 @@ docs block when asked).
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from flatbody_env.bench.harness import Report, alternate, best_of, write_report
 from flatbody_env.output import save_figure
+from flatbody_env.physics import validation
 
 FLATBODY_ONLY = ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")
 """The PPO settings that only FlatBody-v0 takes (left out of the Pendulum-v1 run)."""
@@ -257,8 +257,7 @@ def plot(csv_path: Path, png_path: Path) -> None:
 
     from flatbody_env.chart_text import add_caption
 
-    with open(csv_path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["env_id"] for r in rows]
     env = [float(r["env_s"]) for r in rows]
     rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]

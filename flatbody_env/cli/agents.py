@@ -21,16 +21,13 @@ def _train_rsl(args) -> int:
         raise ValueError(
             "--algo rsl-ppo: --study, --resume, --trained-agent and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)"
         )
-    from agents.numpy_policy import remember_run
-
     command = (
         ["flatbody", *sys.argv[1:]]
         if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
         else None
     )
     out = args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}"
-    remember_run(out)  # a run folder this user creates: its model loads later without --trust
-    result = train_rsl(
+    result = train_rsl(  # trusts the folder once its first file is written (agents.numpy_policy.remember_run)
         out,
         seed=args.seed,
         n_timesteps=args.n_timesteps,
@@ -42,6 +39,8 @@ def _train_rsl(args) -> int:
         progress=not args.no_progress,
         command=command,
         force=args.force,
+        checkpoint_freq=args.checkpoint_freq,
+        keep_checkpoints=args.keep_checkpoints,
     )
     print(f"trained {ALGO} for {result.timesteps} steps in {result.wall_time_s:.0f} s; saved in {result.out}")
     return 0
@@ -88,15 +87,11 @@ def _train(args) -> int:
         if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
         else None
     )
-    from agents.numpy_policy import check_trusted, remember_run
-
     out = args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}"
     if args.trained_agent is not None and args.resume:
         raise ValueError("--trained-agent: not with --resume (a resumed run continues its own model)")
-    if args.resume:  # the checkpoints are pickles: only from one of your runs, or with --trust
-        check_trusted(out, "the checkpoints (pickle-based SB3 files)")
-    else:
-        remember_run(out)  # a run folder this user creates: its model loads later without --trust
+    # train() checks the trust of --resume's checkpoints and --trained-agent's model before it loads a pickle, and
+    # trusts --out once the run's first file is written there (never on a refusal before it)
     result = train(
         args.algo,
         out,

@@ -203,9 +203,7 @@ def _seeds(args) -> int:
         "episodes": args.episodes,
         "eval_seed": args.eval_seed,
     }
-    from agents.numpy_policy import remember_run
-
-    remember_run(args.out)  # the seeds' run folders are this user's own: their models load without --trust
+    # each seed's run folder becomes trusted once its first file is written (agents.train.train), never before
     return _run(args, spec)
 
 

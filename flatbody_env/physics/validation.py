@@ -54,7 +54,16 @@ MIN_SAMPLES = 2
 TOL_RANGE = (1e-16, 1.0)
 """Allowed range of rtol and atol."""
 MAX_JSON_BYTES = 256 * 1024 * 1024
-"""Largest JSON file :func:`read_json` reads (a trajectory of :data:`MAX_SAMPLES` rows is ~40 MB)."""
+"""Largest JSON file :func:`read_json` reads (a trajectory of :data:`MAX_SAMPLES` rows is ~40 MB); also the default
+cap of :func:`read_bytes` and :func:`read_npz`."""
+MAX_TEXT_BYTES = 16 * 1024 * 1024
+"""Largest text file :func:`read_text` reads by default (a Markdown page, a CSV table, the trusted-runs list)."""
+MAX_YAML_BYTES = 1024 * 1024
+"""Largest YAML file :func:`read_yaml` reads (hyperparameters, search spaces, a run's ``config.yml``)."""
+YAML_MAX_NODES = 100_000
+"""Most YAML nodes of one document, counted with its aliases expanded (:func:`parse_yaml`)."""
+MAX_ARRAY_BYTES = 256 * 1024 * 1024
+"""Most bytes the arrays of one ``.npz`` file may declare (:func:`read_npz`), checked before any is read."""
 
 # --- bounded work: every size, count and step a user can give (docs/reliability.md, "Bounded work") ---
 STEP_MIN = 1e-6
@@ -257,36 +266,221 @@ def parse_json(where: str, text: str | bytes) -> Any:
         raise ValueError(f"{where}: not valid JSON ({_short(str(exc))})") from None
 
 
+def _path_of(where: str, path: Any):
+    import os
+    from pathlib import Path
+
+    if not isinstance(path, (str, os.PathLike)) or not str(path) or "\0" in str(path):
+        raise ValueError(f"{where}: expected a file path, got {_short(path)}")
+    return Path(path)
+
+
+def _check_regular(where: str, p, info, max_bytes: int) -> None:
+    import stat
+
+    if stat.S_ISDIR(info.st_mode):
+        raise ValueError(f"{where}: {_short(str(p))} is a directory, not a file")
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{where}: {_short(str(p))} is not a regular file (a FIFO, socket or device is never read)")
+    if info.st_size > max_bytes:
+        raise ValueError(f"{where}: {_short(str(p))} is larger than {_size_text(max_bytes)}")
+
+
+def read_bytes(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> bytes:
+    """The one door through which the package reads a file: its bytes, when it is a regular, readable file of
+    at most ``max_bytes``.
+
+    The file is looked at (``stat``) before it is opened, then opened without blocking and looked at
+    again through the open descriptor (``fstat``), so a FIFO, socket or device — also one swapped in
+    between — is refused without a read that could block or never end; at most ``max_bytes + 1`` bytes
+    are read, so a file that grows meanwhile is refused too.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` and the path: missing, a directory, not a regular file, unreadable, larger
+        than ``max_bytes``.
+    """
+    import os
+
+    p = _path_of(where, path)
+    try:
+        _check_regular(where, p, p.stat(), max_bytes)
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise ValueError(f"{where}: no file {_short(str(p))}") from None
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read {_short(str(p))} ({exc.strerror or exc})") from None
+    try:
+        _check_regular(where, p, os.fstat(fd), max_bytes)
+        chunks, left = [], max_bytes + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 24))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read {_short(str(p))} ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:
+        raise ValueError(f"{where}: {_short(str(p))} is larger than {_size_text(max_bytes)}")
+    return data
+
+
+def read_text(where: str, path: Any, *, max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """A UTF-8 text file read through :func:`read_bytes` (at most ``max_bytes``); not UTF-8 is a ``ValueError`` naming ``where``."""
+    data = read_bytes(where, path, max_bytes=max_bytes)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{where}: {_short(str(path))} is not UTF-8 text (byte {exc.start})") from None
+
+
+def read_csv(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> list[dict[str, str]]:
+    """The rows of a CSV table with a header row (as ``csv.DictReader`` gives them), read through :func:`read_text`."""
+    import csv
+    import io
+
+    text = read_text(where, path, max_bytes=max_bytes)
+    try:
+        return list(csv.DictReader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise ValueError(f"{where}: {_short(str(path))} is not a CSV table ({_short_text(str(exc))})") from None
+
+
 def read_json(where: str, path: Any) -> Any:
-    """Read and parse a JSON file: a regular, readable file of at most :data:`MAX_JSON_BYTES`.
+    """Read and parse a JSON file: a regular, readable file of at most :data:`MAX_JSON_BYTES` (:func:`read_bytes`).
 
     Missing files, directories, special files (FIFOs, devices), unreadable or oversized files and
     malformed JSON all raise ``ValueError`` naming ``where`` and the path.
     """
-    import os
-    import stat
-    from pathlib import Path
+    data = read_bytes(where, path, max_bytes=MAX_JSON_BYTES)
+    return parse_json(f"{where} ({path})", data)
 
-    if not isinstance(path, (str, os.PathLike)):
-        raise ValueError(f"{where}: expected a file path, got {_short(path)}")
-    p = Path(path)
+
+def parse_yaml(where: str, text: str | bytes, *, max_nodes: int = YAML_MAX_NODES) -> Any:
+    """YAML text → Python value with the safe loader (plain data only, no Python objects), within a node budget.
+
+    Every node counts as often as aliases repeat it: the document's size *with its aliases expanded* must
+    stay within ``max_nodes``. It is counted while the document is composed, before any Python object is
+    built, in time linear in the text, so a few hundred bytes of nested aliases ("billion laughs") are
+    refused at once instead of growing into gigabytes wherever the data are walked (printed, copied,
+    validated). Recursive aliases, nesting beyond Python's recursion limit and malformed YAML are refused too.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where``.
+    """
+    import yaml
+
+    sizes: dict[int, int] = {}
+
+    class _Loader(yaml.SafeLoader):
+        def compose_node(self, parent, index):
+            alias = self.check_event(yaml.AliasEvent)
+            node = super().compose_node(parent, index)
+            size = sizes.get(id(node))
+            if size is None:
+                if alias:  # an alias of a node still being composed: an ancestor of itself
+                    raise ValueError(f"{where}: a recursive YAML alias (an alias inside the node it names)")
+                if isinstance(node, yaml.MappingNode):
+                    size = 1 + sum(sizes[id(k)] + sizes[id(v)] for k, v in node.value)
+                elif isinstance(node, yaml.SequenceNode):
+                    size = 1 + sum(sizes[id(v)] for v in node.value)
+                else:
+                    size = 1
+                sizes[id(node)] = size
+            if size > max_nodes:
+                raise ValueError(
+                    f"{where}: YAML larger than {max_nodes} nodes with its aliases expanded (nested aliases, "
+                    "a 'billion laughs' document?)"
+                )
+            return node
+
     try:
-        info = p.stat()
-    except FileNotFoundError:
-        raise ValueError(f"{where}: no file {str(p)!r}") from None
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise ValueError(f"{where}: {str(p)!r} is a directory, not a JSON file")
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"{where}: {str(p)!r} is not a regular file")
-    if info.st_size > MAX_JSON_BYTES:
-        raise ValueError(f"{where}: {str(p)!r} is larger than {MAX_JSON_BYTES // (1024 * 1024)} MiB")
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{where}: not valid YAML ({_short_text(str(exc))})") from None
+    except RecursionError:
+        raise ValueError(f"{where}: not valid YAML (nested too deeply)") from None
+    except ValueError as exc:  # ours above, or an integer beyond Python's digit limit
+        if str(exc).startswith(f"{where}: "):
+            raise
+        raise ValueError(f"{where}: not valid YAML ({_short_text(str(exc))})") from None
+
+
+def read_yaml(where: str, path: Any, *, max_bytes: int = MAX_YAML_BYTES, max_nodes: int = YAML_MAX_NODES) -> Any:
+    """A YAML file read through :func:`read_bytes` (at most ``max_bytes``) and parsed by :func:`parse_yaml`."""
+    text = read_text(where, path, max_bytes=max_bytes)
+    return parse_yaml(f"{where} ({path})", text, max_nodes=max_nodes)
+
+
+def read_npz(
+    where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES, max_array_bytes: int = MAX_ARRAY_BYTES
+) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file, its members checked before any of them is decompressed into an array.
+
+    The file is read through :func:`read_bytes` (at most ``max_bytes``). Each member must be an ``.npy``
+    array whose header (read alone, a few hundred bytes) declares a plain dtype (no pickled objects) and a
+    shape whose data fill the member exactly as the archive declares it; the arrays together may declare at
+    most ``max_array_bytes``. Only then are the arrays read — so a small file whose headers declare huge
+    arrays (or a compressed member that would inflate beyond what it claims) is refused before anything of
+    that size is allocated.
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` and the path: not an npz, a member that is not an array, a pickled (object) array,
+        a header that does not match its member, or more than ``max_array_bytes`` declared.
+    """
+    import io
+    import zipfile
+
+    data = read_bytes(where, path, max_bytes=max_bytes)
+    name = _short(str(path))
+    declared = 0
     try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise ValueError(f"{where}: cannot read {str(p)!r} ({exc.strerror or exc})") from None
-    return parse_json(f"{where} ({p})", data)
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            infos = zf.infolist()
+            if len(infos) > 4096:
+                raise ValueError(f"{len(infos)} members (at most 4096)")
+            for info in infos:
+                if not info.filename.endswith(".npy"):
+                    raise ValueError(f"member {info.filename[:40]!r} is not an .npy array")
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    if version == (1, 0):
+                        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+                    elif version in ((2, 0), (3, 0)):
+                        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+                    else:
+                        raise ValueError(f"member {info.filename[:40]!r} has npy format {version}")
+                    header = fh.tell()
+                if dtype.hasobject:
+                    raise ValueError(f"member {info.filename[:40]!r} holds Python objects (pickles are never loaded)")
+                nbytes = dtype.itemsize
+                for n in shape:
+                    nbytes *= int(n)
+                if header + nbytes != info.file_size:
+                    raise ValueError(
+                        f"member {info.filename[:40]!r} declares {_size_text(nbytes)} of {dtype} {tuple(shape)}, "
+                        f"its data hold {_size_text(max(info.file_size - header, 0))}"
+                    )
+                declared += nbytes
+                if declared > max_array_bytes:
+                    raise ValueError(f"its arrays declare more than {_size_text(max_array_bytes)}")
+            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+                return {k: npz[k] for k in npz.files}
+    except ValueError as exc:
+        raise ValueError(f"{where}: {name} is damaged or not an array file ({_short_text(str(exc), 200)})") from None
+    except (OSError, EOFError, KeyError, zipfile.BadZipFile, RuntimeError, NotImplementedError) as exc:
+        raise ValueError(
+            f"{where}: {name} is damaged or not an array file ({type(exc).__name__}: {_short_text(str(exc))})"
+        ) from None
 
 
 def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
@@ -349,12 +543,38 @@ def _range_text(positive: bool, low: float | None, high: float | None) -> str:
     return " (allowed range (0, inf))" if positive else ""
 
 
+_REPR = None
+
+
 def _short(value: Any) -> str:
+    """``value``'s repr in at most 60 characters, its size bounded *before* it is built: containers are shown to a
+    few levels and items (:mod:`reprlib`), long strings and numbers cut first — never the whole repr of a
+    huge or self-similar value (a YAML alias bomb, a list of a million items) cut afterwards."""
+    global _REPR
+    if _REPR is None:
+        import reprlib
+
+        _REPR = reprlib.Repr()
+        _REPR.maxlevel, _REPR.maxstring, _REPR.maxlong, _REPR.maxother = 3, 60, 60, 60
+        _REPR.maxlist = _REPR.maxtuple = _REPR.maxdict = _REPR.maxset = _REPR.maxfrozenset = _REPR.maxdeque = 6
+        _REPR.maxarray = 6
     try:
-        text = repr(value)
+        text = _REPR.repr(value)
     except (ValueError, RecursionError):  # integers beyond the digit limit, self-referencing containers
         return f"a {type(value).__name__} too large to print"
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _short_text(text: str, limit: int = 120) -> str:
+    """A message of a library's exception on one line of at most ``limit`` characters."""
+    return " ".join(text[: 4 * limit].split())[:limit]
+
+
+def _size_text(n: int) -> str:
+    for unit, size in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
 
 
 __all__ = [
@@ -383,7 +603,17 @@ __all__ = [
     "finite_result",
     "fixed_step",
     "sqlite_file",
+    "MAX_ARRAY_BYTES",
     "MAX_JSON_BYTES",
+    "MAX_TEXT_BYTES",
+    "MAX_YAML_BYTES",
+    "YAML_MAX_NODES",
+    "parse_yaml",
+    "read_bytes",
+    "read_csv",
+    "read_npz",
+    "read_text",
+    "read_yaml",
     "MAX_SAMPLES",
     "MOMENTUM_MAX",
     "PARAM_RANGE",

@@ -182,3 +182,40 @@ def test_fine_tuning_starts_from_the_given_run(tmp_path):
             notes=False,
             trained_agent=tmp_path / "nothing",
         )
+
+
+def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_line(tmp_path, monkeypatch, capsys):
+    """clone's files go through the writing door: a full disk is one line naming the file (exit 1, no traceback, no
+    temporary left, the folder not trusted), a link planted at one of its names is refused, never written through."""
+    import errno
+    import os
+
+    from agents import numpy_policy as npp
+    from flatbody_env import output
+
+    monkeypatch.setenv("FLATBODY_CONFIG_HOME", str(tmp_path / "config"))
+    plans = Plans(env_id="FlatBodySlow-v0", model=str(SLOW), seeds=np.array([0]), final_distance=np.zeros(1),
+                  knots=np.zeros((1, 4, 4)))  # fmt: skip
+    plans.save(tmp_path / "p.npz")
+    argv = ["clone", "--plans", str(tmp_path / "p.npz"), "--model", str(SLOW), "--epochs", "1", "--out"]
+
+    def full(*args):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    with monkeypatch.context() as m:
+        m.setattr(output.os, "write", full)
+        assert main([*argv, str(tmp_path / "bc")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"python -m agents.imitation: cannot write {str(tmp_path / 'bc' / 'config.yml')!r}: No space left on device"
+    ]
+    assert list((tmp_path / "bc").iterdir()) == [] and not npp.trusted(tmp_path / "bc")
+
+    victim = tmp_path / "victim.pkl"
+    victim.write_bytes(b"unchanged")
+    (tmp_path / "bc2").mkdir()
+    os.symlink(victim, tmp_path / "bc2" / "vecnormalize.pkl")
+    assert main([*argv, str(tmp_path / "bc2")]) == 1
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "vecnormalize.pkl" in line and "symbolic link" in line
+    assert victim.read_bytes() == b"unchanged"

@@ -398,3 +398,20 @@ def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tm
     text = caption_text(fig)
     assert "held-out" in text and "goal" in text and "no LQR" in text
     assert len(fig.axes[0].lines[0].get_xdata()) == len(table.read_text().splitlines()) - 1
+
+
+def test_periodic_checkpoints_are_atomic_and_rotated(tmp_path):
+    """rsl-ppo saves rsl_rl's state every checkpoint_freq steps through the writing door, keeps the newest three
+    (loadable without unpickling code: weights_only), and removes them after a completed run unless kept."""
+    import torch
+
+    from agents.rsl import train_rsl
+
+    kw = dict(seed=0, n_timesteps=320, n_envs=8, overrides=["num_steps_per_env=8"], progress=False)
+    train_rsl(tmp_path / "kept", checkpoint_freq=64, keep_checkpoints=True, **kw)
+    names = sorted(p.name for p in (tmp_path / "kept" / "checkpoints").iterdir())
+    assert names == ["rsl_model_192_steps.pt", "rsl_model_256_steps.pt", "rsl_model_320_steps.pt"]
+    state = torch.load(tmp_path / "kept" / "checkpoints" / "rsl_model_256_steps.pt", weights_only=True)
+    assert state["iterations"] == 4 and {"actor", "critic", "optimizer"} <= set(state)
+    train_rsl(tmp_path / "done", checkpoint_freq=64, **kw)
+    assert not (tmp_path / "done" / "checkpoints").exists()

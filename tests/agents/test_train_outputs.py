@@ -4,6 +4,7 @@ continues from."""
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import subprocess
@@ -134,3 +135,53 @@ def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert f"resumed from {steps} steps" in r.stdout
     assert json.loads((out / "run.json").read_text())["n_timesteps"] == steps + 128
+
+
+def test_checkpoints_are_atomic_rotated_and_resume_falls_back_past_a_truncated_one(tmp_path, capsys):
+    """The checkpoint callback writes each checkpoint through the writing door and keeps the newest three; a newest
+    checkpoint truncated by a crash is passed over by --resume with a one-line note (the next good one continues)."""
+    from agents.train import KEEP_CHECKPOINTS, checkpoints
+
+    out = tmp_path / "run"
+    argv = ["train", *TINY[:-3], "--checkpoint-freq", "128", "--no-progress", "--out", str(out)]
+    assert main([*argv, "--n-timesteps", "640", "--keep-checkpoints"]) == 0
+    kept = checkpoints(out / "checkpoints")
+    assert [c[3] for c in kept] == [640, 512, 384][:KEEP_CHECKPOINTS]
+    assert all(c[1] is not None for c in kept)  # each with its VecNormalize statistics
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(
+        name for s in (384, 512, 640) for name in (f"rl_model_{s}_steps.zip", f"rl_model_vecnormalize_{s}_steps.pkl")
+    )  # nothing else: no temporary, no older checkpoint
+    newest = out / "checkpoints" / "rl_model_640_steps.zip"
+    newest.write_bytes(newest.read_bytes()[:1000])  # a crash while the disk wrote it
+    capsys.readouterr()
+    assert main([*argv, "--resume", "--n-timesteps", "768"]) == 0
+    captured = capsys.readouterr()
+    notes = [line for line in captured.err.splitlines() if "cannot be loaded" in line]
+    assert (
+        len(notes) == 1 and "rl_model_640_steps.zip" in notes[0] and "resuming from rl_model_512_steps.zip" in notes[0]
+    )
+    assert "resumed from 512 steps" in captured.out
+    assert json.loads((out / "run.json").read_text())["n_timesteps"] == 768
+    rows = list(csv.DictReader((out / "resumed-512" / "progress.csv").open()))  # the logger of ours wrote it
+    assert [int(r["time/total_timesteps"]) for r in rows] == [640, 768]
+
+
+def test_progress_csv_is_written_through_the_door_never_through_a_planted_link(tmp_path, capsys):
+    """SB3's logger writes progress.csv through a format of ours (atomic, no link followed): a link planted there
+    before the run is refused with one line naming the file, and its target is left alone."""
+    import os
+
+    out = tmp_path / "run"
+    out.mkdir()
+    victim = tmp_path / "victim.csv"
+    victim.write_text("unchanged\n")
+    os.symlink(victim, out / "progress.csv")
+    assert main(["train", *TINY, "--n-timesteps", "128", "--out", str(out)]) == 1
+    line = _one_error_line(capsys)
+    assert "progress.csv" in line and "symbolic link" in line, line
+    assert victim.read_text() == "unchanged\n"
+    out2 = tmp_path / "run2"
+    assert main(["train", *TINY, "--n-timesteps", "256", "--out", str(out2)]) == 0
+    rows = list(csv.DictReader((out2 / "progress.csv").open()))
+    assert [int(r["time/total_timesteps"]) for r in rows] == [128, 256]
+    assert not any(p.name.startswith(".") for p in out2.iterdir())  # no temporary left
