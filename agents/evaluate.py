@@ -45,6 +45,8 @@ and the service's evaluate job — held apart from the training seeds (0, 1, …
 BASELINES = ("zero", "random", "heuristic", "passivity")
 """``heuristic``: LQR about the target (:class:`agents.heuristic.HeuristicController`);
 ``passivity``: the energy-based damping law (:class:`agents.heuristic.PassivityController`)."""
+PLANNER = "planner"
+"""The model-predictive reference of the v1 ids (:mod:`agents.planner`): MPPI over the env's own transition."""
 WITNESS = "witness"
 """The baseline of the tasks with witnessed starts: each episode's witness replayed open loop."""
 GROWTH_FLOOR = 1e-4
@@ -84,7 +86,8 @@ def baselines_for(env_id: str) -> tuple[str, ...]:
     from flatbody_env.env.registration import task_spec
 
     spec = task_spec(env_id)
-    return BASELINES + ((WITNESS,) if spec.kwargs.get("task") == "reach-witnessed" else ())
+    extra = (PLANNER,) if spec.version >= 1 else ()
+    return BASELINES + extra + ((WITNESS,) if spec.kwargs.get("task") == "reach-witnessed" else ())
 
 
 POLICY_BACKENDS = ("auto", "numpy", "sb3")
@@ -238,6 +241,7 @@ def run_episodes(
     batch: int = 50,
     progress: bool = False,
     label: str = "",
+    compute: dict | None = None,
 ) -> list[dict[str, Any]]:
     """Roll out ``episodes`` seeded episodes of ``env_id`` (batched ``batch`` at a time); one record per episode.
 
@@ -276,8 +280,12 @@ def run_episodes(
                 pol = heuristic_policy(env, policy)
             elif policy == WITNESS:
                 pol = None  # after the reset, which draws the witnesses
+            elif policy == PLANNER:
+                pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute)
             else:
-                raise ValueError(f"baseline: must be one of {', '.join(BASELINES + (WITNESS,))}, got {policy!r}")
+                raise ValueError(
+                    f"baseline: must be one of {', '.join(BASELINES + (PLANNER, WITNESS))}, got {policy!r}"
+                )
         else:
             pol = policy
         tol = env.task.success_tolerance
@@ -333,6 +341,26 @@ def run_episodes(
     if bar is not None:
         bar.close()
     return records
+
+
+def _planner_policy(env, env_id: str, kwargs: dict[str, Any], n: int, seed: int, compute: dict | None) -> Policy:
+    """The planner (:mod:`agents.planner`) of ``env_id`` for the ``n`` episodes of ``env``, which it reads each body's
+    kernel parameters from (the true model, also where the observation hides them); its compute into ``compute``."""
+    from agents.planner import Planner, label, settings_for
+
+    planner = Planner(kwargs, n, settings_for(env_id), seed=seed)
+
+    def act(obs):
+        a = planner.act(obs, env.body_params)
+        if compute is not None:
+            compute["seconds"] = compute.get("seconds", 0.0) + planner.seconds
+            compute["episode_steps"] = compute.get("episode_steps", 0) + n
+            compute["body_steps_per_step"] = planner.settings.body_steps
+            compute["label"] = label(planner.settings)
+            planner.seconds = 0.0
+        return a
+
+    return act
 
 
 def _witness_policy(env, step_index: list[int]) -> Policy:
@@ -429,11 +457,19 @@ def evaluate_all(
 def _summary_or_status(name: str, **kwargs) -> tuple[dict[str, Any], list[dict[str, Any]] | None]:
     """A baseline's summary and records, or ``{"status": CANNOT_BE_BUILT, "reason": ...}`` (and no records)
     where it does not exist for the task (the LQR where the Riccati equation has no stabilising solution)."""
+    compute: dict = {}
     try:
-        records = run_episodes(name, label=name, **kwargs)
+        records = run_episodes(name, label=name, compute=compute, **kwargs)
     except np.linalg.LinAlgError as exc:
         return {"status": CANNOT_BE_BUILT, "reason": f"LinAlgError: {' '.join(str(exc).split())}"}, None
-    return summarize(records), records
+    summary = summarize(records)
+    if compute:  # the planner: what each of its control steps cost (the batch's wall time shared by its episodes)
+        summary["compute"] = {
+            "label": compute["label"],
+            "body_steps_per_step": compute["body_steps_per_step"],
+            "seconds_per_step": compute["seconds"] / max(compute["episode_steps"], 1),
+        }
+    return summary, records
 
 
 def evaluate_task(

@@ -86,7 +86,7 @@ import numpy as np
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
-from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
 from flatbody_env.env.task import DEFAULT_LIMITS, OBS_TARGET, OBSERVATION_SIZE, control_mask, state_from_observation  # noqa: F401  (re-exported)
 
 
@@ -167,12 +167,39 @@ class PassivityController:
         a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
         return a.astype(np.float32)
 
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised actions (N, n) float32 for observations (N, 16), one vectorised call (J1 = J2: the
+        velocities by :func:`~flatbody_env.physics.hamiltonian.kinetic_iso` on arrays, the law of :meth:`control`
+        row by row); other observations row by row (:meth:`action`)."""
+        obs = np.asarray(obs)
+        P = self._P
+        if obs.shape[-1] != OBSERVATION_SIZE or P[0] != P[1]:
+            return np.stack([self.action(o) for o in obs])
+        if not self.mask.any():
+            return np.zeros((obs.shape[0], 1), dtype=np.float32)
+        g = self.gains
+        Y, T = state_from_observation(obs)
+        J, J3 = P[0], P[2]
+        v = kinetic_iso(Y[0], Y[1], Y[2], Y[3], Y[4], Y[5], Y[6], Y[7], Y[8], Y[9], J, J3)
+        z = np.zeros_like(Y[0])
+        vt = kinetic_iso(z, z, T[3], Y[3], z, z, z, T[0], T[1], T[2], J, J3)
+        U = np.stack(
+            [
+                -g.k_omega * v[1],
+                -g.k_omega * v[2],
+                -g.k_s3 * (v[3] - vt[3] + g.c_s3 * (Y[2] - T[3])),
+                -g.k_rho * (Y[9] - T[2]) - g.d_rho * v[7],
+            ],
+            axis=1,
+        )
+        return np.clip(U[:, self.mask] / self.limits[self.mask], -1.0, 1.0).astype(np.float32)
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
         obs = np.asarray(observation)
         if obs.ndim == 1:
             return self.action(obs), None
-        return np.stack([self.action(o) for o in obs]), None
+        return self.act(obs), None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -713,6 +713,20 @@ class EnvCore:
             self.S[tr.R_ENERGY, i] += float(pot.value(float(y[7]), float(y[8]), float(y[9])))
 
     # --- simulation without episodes (the witness of the v0 ids, planners) -----------------------
+    def set_bodies(self, Y: np.ndarray, TG: np.ndarray, P: np.ndarray | None = None) -> None:
+        """Put every body at the state ``Y`` (11, N) with the target ``TG`` (6, N) (λ*, μ*, ϱ*, s3*, p_θ*, sign) and,
+        when given, the body's kernel parameters ``P`` (9, N); clocks and ends cleared, nothing drawn or observed (CPU).
+        A planner then steps the batch from there (:mod:`agents.planner`)."""
+        if self.backend != "cpu":
+            raise ValueError("device: set_bodies runs on the CPU batch")
+        self.S[tr.Y0 : tr.Y0 + 11] = Y
+        self.S[tr.TG0 : tr.TG0 + 6] = TG
+        if P is not None:
+            self.S[tr.P0 : tr.P0 + 9] = P
+        self.S[tr.R_RETURN] = 0.0
+        self.K[[tr.K_CLOCK, tr.K_TERMINATED, tr.K_TRUNCATED, tr.K_PENDING, tr.K_HOST, tr.K_EP_DONE]] = 0
+        self._seam = None
+
     def rollout(self, Y: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Advance N bodies from the states ``Y`` (11, N) under the normalised actions ``actions`` (steps, N, n) with
         this

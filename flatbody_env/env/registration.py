@@ -73,7 +73,7 @@ TASKS = (
     ),
     TaskSpec(
         env_id="FlatBodyHoldUnstable-v1",
-        kwargs={"task": "hold-unstable", **V1},
+        kwargs={"task": "hold-unstable", "min_growth_rate": 0.25, "start_radius": (0.5, 0.9), **V1},
         rung="medium",
         summary="stay within the tolerance of a hyperbolic (unstable) stationary ellipse for the whole episode",
     ),

@@ -250,6 +250,12 @@ class FlatBodyVectorEnv(VectorEnv):
         return [core.body_of(i) for core in self.cores for i in range(core.num_envs)]
 
     @property
+    def body_params(self) -> np.ndarray:
+        """Each body's kernel parameters (9, N) (:meth:`flatbody_env.physics.body.Body.kernel_params`; a copy): the
+        model of the episode's body, also where the observation hides it (``FlatBodyAnyBody-v1``)."""
+        return self._gather("S", slice(tr.P0, tr.P0 + 9))
+
+    @property
     def episode_steps(self) -> np.ndarray:
         """Each body's steps into its current episode (N,) int64 (a copy); it truncates at ``max_episode_steps``."""
         return self._gather("K", tr.K_CLOCK)

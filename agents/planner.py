@@ -1,0 +1,222 @@
+"""A causal sampling planner over the environment's own transition: the suite's model-predictive reference.
+
+MuJoCo MPC's sampling planners are the anchor (Howell et al., "Predictive Sampling: Real-time Behaviour
+Synthesis with MuJoCo", arXiv:2212.00541, 2022; Williams et al., MPPI, ICRA 2016): at every control step,
+from the state the observation gives (the state entries and θ = atan2(sin θ, cos θ); the target from its
+entries), K candidate action sequences over a horizon of H env steps are rolled out with the environment's
+own batched transition (:class:`flatbody_env.env.core.EnvCore`: the same integrator, domain and reward —
+no formula is restated), scored by the env's own reward summed over the horizon (a body whose episode ends
+stops earning), and combined by MPPI's exponential weights (temperature ``temperature`` × the spread of
+the returns); the plan's first action is applied, the plan is shifted by one step and warm-starts the next.
+
+Candidates are the nominal plan plus Gaussian noise on ``knots`` control points linearly interpolated over
+the horizon (smooth actions, few dimensions), clipped to [−1, 1]; one candidate is the nominal plan itself
+and one the all-zero plan. ``iterations`` refinements per control step (MPPI with iterations: a
+cross-entropy flavour). The planner is causal: it sees the observation only — never the episode's witness
+or future draws. It uses the true model of the episode's body (for ``FlatBodyAnyBody-v1``, whose constants
+the observation hides, that is privileged: the row says "true model").
+
+Compute per control step: ``samples`` × ``horizon`` × ``iterations`` body-steps (:attr:`Planner.body_steps`);
+episodes are planned together (their candidates in one batch), so the Python overhead is paid once per
+planning step for the whole batch.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from flatbody_env.env import transition as tr
+from flatbody_env.env.core import EnvCore, configure
+from flatbody_env.env.task import state_from_observation
+
+
+LOG_FLOOR = 1e-3
+"""ε of the ``"distance"`` objective's log(d + ε): relative progress counts, so precision near the target pays."""
+FAILED_DISTANCE = 10.0
+"""The distance a candidate scores after its episode ended by failure (the ``"distance"`` objective)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlannerSettings:
+    """The planner's knobs (module docstring); defaults measured on the v1 suite (docs/tasks.md)."""
+
+    samples: int = 48
+    """Candidate action sequences per control step (K), the nominal and the zero plan among them."""
+    horizon: int = 60
+    """Env steps each candidate is rolled out (H; 3 s at dt = 0.05)."""
+    knots: int = 4
+    """Control points of a candidate's noise, interpolated linearly over the horizon."""
+    noise: float = 0.3
+    """Standard deviation of the noise on the knots (normalised actions), far from the target; it shrinks with the
+    task distance d of the current state as min(1, max(``noise_floor``, d / ``noise_distance``)) (fine control near
+    the target, where broad noise would only jitter the plan)."""
+    noise_floor: float = 0.05
+    noise_distance: float = 0.2
+    temperature: float = 0.1
+    """MPPI's temperature as a fraction of the spread (max − min) of the candidates' returns."""
+    iterations: int = 1
+    """Refinements of the plan per control step."""
+    prior: str = "none"
+    """A feedback law the candidates perturb: ``"none"`` (open-loop action sequences), ``"lqr"`` or
+    ``"passivity"`` (closed-loop rollouts: the action at each step is clip(law(observation) + the candidate's
+    perturbation); :mod:`agents.heuristic`). The row's label names it."""
+    objective: str = "distance"
+    """What a candidate scores: ``"distance"`` — minus log(d + :data:`LOG_FLOOR`) of the task distance d summed over
+    the horizon (the env's own distance, so no formula is restated; a body whose episode ends scores
+    :data:`FAILED_DISTANCE` for the rest of the horizon) — or ``"reward"``, the env's reward summed."""
+
+    def __post_init__(self) -> None:
+        from flatbody_env.physics import validation
+
+        for name, hi in (("samples", 4096), ("horizon", 400), ("knots", 400), ("iterations", 16)):
+            validation.integer(name, getattr(self, name), low=2 if name in ("samples", "knots") else 1, high=hi)
+        validation.number("noise", self.noise, low=0.0, high=2.0)
+        validation.number("temperature", self.temperature, low=1e-6, high=1e6)
+        validation.string("objective", self.objective, choices=("distance", "reward"))
+        validation.string("prior", self.prior, choices=("none", "lqr", "passivity"))
+
+    @property
+    def body_steps(self) -> int:
+        """Body-steps of simulation per control step and episode."""
+        return self.samples * self.horizon * self.iterations
+
+
+class Planner:
+    """Plans for B episodes of one configuration at once (module docstring).
+
+    Parameters
+    ----------
+    env_kwargs : dict
+        The id's keyword arguments (``agents.evaluate.env_kwargs_for``): the model the planner rolls out.
+    episodes : int
+        B, the episodes planned together.
+    settings : PlannerSettings
+    seed : int
+        Of the planner's own noise.
+    """
+
+    def __init__(self, env_kwargs: dict, episodes: int, settings: PlannerSettings | None = None, seed: int = 0) -> None:
+        self.settings = s = settings or PlannerSettings()
+        self.config = configure(**env_kwargs)
+        self.episodes = int(episodes)
+        self.n_act = self.config.n_act
+        self.core = EnvCore(self.config, self.episodes * s.samples, max_episode_steps=None, autoreset="none")
+        self.rng = np.random.default_rng(seed)
+        self.law = None
+        if s.prior != "none":
+            from agents.heuristic import HeuristicController, PassivityController
+
+            cls = HeuristicController if s.prior == "lqr" else PassivityController
+            self.law = cls(self.config.body, self.config.control, self.config.limits)
+        self.plan = np.zeros((self.episodes, s.horizon, self.n_act))
+        t = np.linspace(0.0, 1.0, s.horizon)
+        knots = np.linspace(0.0, 1.0, s.knots)
+        # (H, knots): linear interpolation weights of the knots at each step of the horizon
+        self._interp = np.stack([np.interp(t, knots, np.eye(s.knots)[k]) for k in range(s.knots)], axis=1)
+        self.seconds = 0.0
+        """Wall time spent planning (all calls)."""
+        self.calls = 0
+
+    def reset(self) -> None:
+        """Forget the plans (new episodes)."""
+        self.plan[:] = 0.0
+
+    def act(self, obs: np.ndarray, bodies_P: np.ndarray | None = None) -> np.ndarray:
+        """The next action (B, n) float32 of each episode from its observation (B, d); ``bodies_P`` (9, B): each
+        episode's body (its kernel parameters; None: the configuration's body)."""
+        t0 = time.perf_counter()
+        s, B, K, n = self.settings, self.episodes, self.settings.samples, self.n_act
+        self._obs = obs
+        Y, T = state_from_observation(np.asarray(obs, dtype=np.float64)[:, :16])
+        d = self._distance(Y, T, bodies_P)
+        scale = (s.noise * np.clip(d / s.noise_distance, s.noise_floor, 1.0))[:, None, None, None]
+        for _ in range(s.iterations):
+            noise = scale * self.rng.standard_normal((B, K, s.knots, n))
+            noise[:, 0] = 0.0  # the nominal plan itself
+            cand = self.plan[:, None] + np.einsum("hk,bjkn->bjhn", self._interp, noise)
+            cand[:, 1] = 0.0  # the zero plan
+            np.clip(cand, -1.0, 1.0, out=cand)
+            returns = self._rollout(Y, T, bodies_P, cand)
+            spread = returns.max(axis=1, keepdims=True) - returns.min(axis=1, keepdims=True)
+            w = np.exp((returns - returns.max(axis=1, keepdims=True)) / (s.temperature * np.maximum(spread, 1e-9)))
+            w /= w.sum(axis=1, keepdims=True)
+            self.plan = np.einsum("bj,bjhn->bhn", w, cand)
+        action = self.plan[:, 0].copy()
+        if self.law is not None:
+            action = np.clip(self.law.predict(np.asarray(obs))[0] + action, -1.0, 1.0)
+        self.plan = np.concatenate([self.plan[:, 1:], self.plan[:, -1:]], axis=1)  # shift; hold the last action
+        self.seconds += time.perf_counter() - t0
+        self.calls += 1
+        return action.astype(np.float32)
+
+    def _distance(self, Y: np.ndarray, T: np.ndarray, bodies_P) -> np.ndarray:
+        """The task distance (B,) of the states Y (11, B) to the targets T (4, B) (the task's own scoring kernel)."""
+        if bodies_P is None:
+            return np.asarray(self.config.task.distance(Y, self.config.body, T), dtype=float).reshape(-1)
+        from flatbody_env.env.any_body import body_from_constants
+
+        out = np.empty(Y.shape[1])
+        for b in range(Y.shape[1]):
+            P = bodies_P[:, b]
+            body = body_from_constants((P[0], P[2], P[4], P[6], P[7]))
+            out[b] = self.config.task.distance(Y[:, b], body, T[:, b])
+        return out
+
+    def _rollout(self, Y: np.ndarray, T: np.ndarray, bodies_P, cand: np.ndarray) -> np.ndarray:
+        """The returns (B, K) of the candidates (B, K, H, n) from the states Y (11, B) with targets T (4, B)."""
+        s, B, K = self.settings, self.episodes, self.settings.samples
+        core = self.core
+        TG = np.zeros((6, B))
+        TG[:4] = T
+        TG[4] = Y[3]
+        core.set_bodies(
+            np.repeat(Y, K, axis=1),
+            np.repeat(TG, K, axis=1),
+            None if bodies_P is None else np.repeat(bodies_P, K, axis=1),
+        )
+        alive = np.ones(B * K, dtype=bool)
+        total = np.zeros(B * K)
+        A = np.empty((B * K, self.n_act))
+        reward = s.objective == "reward"
+        obs0 = None
+        if self.law is not None:
+            obs0 = np.repeat(np.asarray(self._obs, dtype=np.float32), K, axis=0)
+        for h in range(s.horizon):
+            A[:] = cand[:, :, h].reshape(B * K, self.n_act)
+            if self.law is not None:
+                A[:] = np.clip(self.law.predict(obs0 if h == 0 else core.OBS)[0] + A, -1.0, 1.0)
+            core.step(A)
+            if reward:
+                total += np.where(alive, core.S[tr.R_REWARD], 0.0)
+            else:
+                total -= np.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
+            alive &= core.K[tr.K_TERMINATED] == 0
+        return total.reshape(B, K)
+
+
+PRIORS = {"FlatBodyHoldUnstable-v1": "passivity", "FlatBodyTorque-v1": "passivity"}
+"""The feedback law each v1 id's planner perturbs: the LQR where it exists and is the better law, else the passivity
+law (torque only: no LQR exists; the unstable ellipse: passivity holds more starts than the LQR, docs/tasks.md)."""
+
+
+def settings_for(env_id: str) -> PlannerSettings:
+    """The planner of a registered id (:data:`PRIORS`; the v0 ids: the LQR's, passivity where it cannot be built)."""
+    prior = PRIORS.get(env_id)
+    if prior is None:
+        from flatbody_env.env.registration import task_spec
+
+        control = task_spec(env_id).kwargs.get("control", "torque+dilatation")
+        hold = task_spec(env_id).kwargs.get("task") == "hold-unstable"
+        prior = "lqr" if control == "torque+dilatation" and not hold else "passivity"
+    return PlannerSettings(prior=prior)
+
+
+def label(settings: PlannerSettings) -> str:
+    """The report's name of the planner row."""
+    return f"planner (MPPI on {'the ' + settings.prior if settings.prior != 'none' else 'open-loop plans'}, true model)"
+
+
+__all__ = ["PRIORS", "Planner", "PlannerSettings", "label", "settings_for"]
