@@ -23,7 +23,9 @@ from typing import Any
 REFERENCE_DIR = Path(__file__).resolve().parent / "data" / "reference"
 """The shipped reference reports (one JSON per task)."""
 DOCS_BLOCK = "tasks"
-"""The name of the docs block (``<!-- bench:tasks -->``)."""
+"""The name of the docs block of the v1 suite (``<!-- bench:tasks -->``)."""
+DOCS_BLOCK_V0 = "tasks-v0"
+"""The name of the docs block of the deprecated v0 ids (``<!-- bench:tasks-v0 -->``), where the page has one."""
 REPORT_VERSION = 1
 """Layout version of a saved report (``"version"``)."""
 
@@ -82,7 +84,8 @@ POLICY_LABELS = {
     "random": "random",
     "passivity": "passivity",
     "heuristic": "LQR",
-    "witness": "witness (open loop)",
+    "planner": "planner (MPPI)",
+    "witness": "witness (certificate, open loop)",
 }
 """Row labels of the baselines; agents are labelled ``agent (<algo>)``."""
 
@@ -94,41 +97,77 @@ def _label(name: str, entry: dict[str, Any]) -> str:
 
 
 def markdown(reports: list[dict[str, Any]]) -> str:
-    """The reference table: one row per task and policy (module docstring)."""
+    """The reference table: one row per task and policy (module docstring); for the v1 suite also each policy's
+    normalised score (:mod:`agents.scores`), the anchors of each task, the planner's compute and the suite's IQM."""
+    from agents.scores import suite_table
+    from flatbody_env.env.registration import TASK_IDS, TASKS
+
+    rungs = {spec.env_id: spec.rung for spec in TASKS}
+    v1 = [r for r in reports if rungs.get(r["env_id"])]
+    table = suite_table(v1) if v1 else {"anchors": {}, "scores": {}, "iqm": {}}
     head = (
-        "| task | policy | success (95 % interval) | final distance (mean) | final distance (median) | return (mean) "
+        "| task | rung | policy | success (95 % interval) | normalised score | final distance (median) | return (mean) "
         "| episode length (median, s) |"
     )
-    lines = [head, "|" + "---|" * 7]
+    lines = [head, "|" + "---|" * 8]
+    compute = []
     for rep in reports:
         dt = rep.get("dt", 0.05)
+        env_id = rep["env_id"]
         for name, entry in rep["policies"].items():
             label = _label(name, entry)
             s = entry["summary"]
+            rung = rungs.get(env_id) or "v0"
             if s.get("status"):
-                lines.append(
-                    f"| {rep['env_id']} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |"
-                )
+                lines.append(f"| {env_id} | {rung} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |")
                 continue
             lo, hi = s["success_ci95"]
+            score = table["scores"].get(name, {}).get(env_id)
+            score_text = "—" if score is None else f"{score:.2f}"
             lines.append(
-                f"| {rep['env_id']} | {label} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {s['final_distance']:.4f} | "
+                f"| {env_id} | {rung} | {label} | {s['success_rate']:.0%} ({lo:.0%}–{hi:.0%}) | {score_text} | "
                 f"{s['final_distance_median']:.4f} | {s['return']:.1f} | {s['length_median'] * dt:.2f} |"
             )
+            if "compute" in s:
+                c = s["compute"]
+                compute.append(
+                    f"{env_id}: {c['label']}, {c['body_steps_per_step']:,} body-steps and "
+                    f"{1e3 * c['seconds_per_step']:.1f} ms per control step"
+                )
     first = reports[0] if reports else {"episodes": 0, "seed": 0}
     lines.append("")
     lines.append(
         f"{first['episodes']} seeded episodes per task (episode i reset with seed {first['seed']} + i; the same targets and "
         "starts for every policy); regenerate with `flatbody evaluate --env all --out-dir agents/data/reference --docs docs/tasks.md`."
     )
+    if table["anchors"]:
+        lines += ["", "Normalised score = (success − lo)/(hi − lo) per task (agents/scores.py):", ""]
+        lines += ["| task | lo | from | hi | from |", "|---|---|---|---|---|"]
+        order = {k: i for i, k in enumerate(TASK_IDS)}
+        for env_id in sorted(table["anchors"], key=order.get):
+            a = table["anchors"][env_id]
+            lines.append(f"| {env_id} | {a['lo']:.0%} | {a['lo_from']} | {a['hi']:.0%} | {a['hi_from']} |")
+    if table["iqm"]:
+        lines += ["", "The suite's interquartile mean of the normalised score (every v1 task):", ""]
+        lines += ["| policy | IQM (95 % stratified bootstrap interval) | runs × tasks |", "|---|---|---|"]
+        for name, q in sorted(table["iqm"].items(), key=lambda kv: -kv[1]["iqm"]):
+            interval = f" ({q['lo']:.2f}–{q['hi']:.2f})" if q["runs"] > 1 else " (one run)"
+            lines.append(f"| {POLICY_LABELS.get(name, name)} | {q['iqm']:.2f}{interval} | {q['runs']} × {q['tasks']} |")
+    if compute:
+        lines += ["", "Planner compute (per episode, 2 shared CPU cores): " + "; ".join(compute) + "."]
     return "\n".join(lines)
 
 
 def update_docs(path: str | Path, folder: str | Path = REFERENCE_DIR) -> None:
     """Regenerate the ``<!-- bench:tasks -->`` block of ``path`` from the reports saved in ``folder``."""
+    from flatbody_env.env.registration import V1_IDS
     from flatbody_env.output import replace_marked_block
 
-    replace_marked_block(path, DOCS_BLOCK, markdown(load_reports(folder)))
+    reports = load_reports(folder)
+    replace_marked_block(path, DOCS_BLOCK, markdown([r for r in reports if r["env_id"] in V1_IDS]))
+    v0 = [r for r in reports if r["env_id"] not in V1_IDS]
+    if v0 and f"<!-- bench:{DOCS_BLOCK_V0} -->" in Path(path).read_text(encoding="utf-8"):
+        replace_marked_block(path, DOCS_BLOCK_V0, markdown(v0))
 
 
 __all__ = [

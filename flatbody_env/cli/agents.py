@@ -161,13 +161,13 @@ def _evaluate_tasks(args) -> int:
     """``evaluate --env ID|all``: the reference report of each task (agents.reference), saved with --out-dir, the docs block with --docs."""
     from agents.evaluate import evaluate_task, format_table
     from agents.reference import REFERENCE_DIR, save_report, update_docs
-    from flatbody_env.env.registration import TASK_IDS, task_spec
+    from flatbody_env.env.registration import V1_IDS, task_spec
 
     if args.env is None and not args.out_dir:  # --docs alone: the table from the saved reports, no evaluation
         update_docs(args.docs, REFERENCE_DIR)
         print(f"updated the table in {args.docs} from {REFERENCE_DIR}")
         return 0
-    ids = TASK_IDS if args.env == "all" else (task_spec(args.env or "FlatBody-v0").env_id,)
+    ids = V1_IDS if args.env == "all" else (task_spec(args.env or "FlatBody-v1").env_id,)
     if args.model is not None and len(ids) > 1:
         raise ValueError("--env: give one task id with MODEL (all evaluates the shipped agents)")
     reports = []

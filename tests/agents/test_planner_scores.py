@@ -1,0 +1,98 @@
+"""The planner reference (agents/planner.py) and the suite's normalised scores and IQM (agents/scores.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.evaluate import env_kwargs_for
+
+
+def test_the_planners_model_is_the_env_itself():
+    """A plan rolled out by the planner's batch from the observed state lands where the env lands (float32
+    observations: to 1e-6), so the planner restates no formula and is causal (it reads the observation only)."""
+    from agents.planner import Planner, PlannerSettings
+    from flatbody_env.env import transition as tr
+    from flatbody_env.env.task import state_from_observation
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kw = env_kwargs_for("FlatBody-v1")
+    env = FlatBodyVectorEnv(1, **kw)
+    obs, _ = env.reset(seed=10001)
+    planner = Planner(kw, 1, PlannerSettings(samples=4, horizon=20))
+    y, t = state_from_observation(obs.astype(np.float64))
+    tg = np.zeros((6, 1))
+    tg[:4], tg[4] = t, y[3]
+    planner.core.set_bodies(np.repeat(y, 4, axis=1), np.repeat(tg, 4, axis=1))
+    actions = np.random.default_rng(0).uniform(-1, 1, (20, 4))
+    for a in actions:
+        planner.core.step(np.repeat(a[None], 4, axis=0))
+        _, _, _, _, info = env.step(a[None])
+        assert planner.core.S[tr.R_DISTANCE, 0] == pytest.approx(info["distance"][0], abs=1e-6)
+
+
+def test_the_planner_acts_and_counts_its_compute():
+    from agents.evaluate import run_episodes, summarize
+
+    compute: dict = {}
+    records = run_episodes("planner", episodes=2, seed=10000, env_id="FlatBodyHoldUnstable-v1", compute=compute)
+    assert len(records) == 2 and compute["body_steps_per_step"] == 48 * 60
+    assert compute["episode_steps"] >= 2 and compute["seconds"] > 0
+    assert "passivity" in compute["label"] and "true model" in compute["label"]
+    assert summarize(records)["success_rate"] in (0.0, 0.5, 1.0)
+
+
+@pytest.mark.slow
+def test_the_planner_holds_more_unstable_starts_than_the_passivity_law_it_perturbs():
+    from agents.evaluate import run_episodes
+
+    planner = run_episodes("planner", episodes=20, seed=10000, env_id="FlatBodyHoldUnstable-v1")
+    law = run_episodes("passivity", episodes=20, seed=10000, env_id="FlatBodyHoldUnstable-v1")
+    assert sum(r["success"] for r in planner) > sum(r["success"] for r in law)
+
+
+def test_planner_settings_are_checked():
+    from agents.planner import PlannerSettings
+
+    for kw, field in (({"samples": 1}, "samples"), ({"noise": -1.0}, "noise"), ({"prior": "pid"}, "prior")):
+        with pytest.raises(ValueError, match=f"^{field}"):
+            PlannerSettings(**kw)
+
+
+# --------------------------------------------------------------------------------------------- scores
+def _report(env_id, **success):
+    return {"env_id": env_id, "policies": {k: {"summary": {"success_rate": v}} for k, v in success.items()}}
+
+
+def test_anchors_follow_the_documented_rule():
+    from agents.scores import anchors
+
+    torque = anchors(_report("FlatBodyTorque-v1", zero=0.0, random=0.0, passivity=0.01, heuristic=0.03, planner=0.0, witness=1.0))
+    assert (torque.lo, torque.lo_from, torque.hi) == (0.03, "heuristic", 1.0) and "witness" in torque.hi_from
+    hold = anchors(_report("FlatBodyHoldUnstable-v1", zero=0.0, random=0.0, passivity=0.8, heuristic=0.7, planner=0.9))
+    assert (hold.lo, hold.hi, hold.hi_from) == (0.8, 0.9, "planner")
+    assert hold.normalise(0.85) == pytest.approx(0.5) and hold.normalise(0.8) == pytest.approx(0.0)
+    slow = anchors(_report("FlatBodySlowHard-v1", zero=0.0, random=0.0, passivity=0.15, heuristic=0.64, planner=0.6))
+    assert (slow.lo, slow.hi) == (0.64, 1.0) and "ideal" in slow.hi_from
+    easy = anchors(_report("FlatBody-v1", zero=0.0, random=0.0, passivity=0.28, heuristic=1.0, planner=0.5))
+    assert (easy.lo, easy.lo_from, easy.hi) == (0.0, "zero", 1.0)  # a classic law solves it: anchored on zero
+
+
+def test_iqm_is_the_mean_of_the_middle_half_with_a_stratified_bootstrap_interval():
+    from agents.scores import iqm
+
+    rng = np.random.default_rng(3)
+    scores = rng.uniform(0, 1, (8, 5))
+    q = iqm(scores, reps=500)
+    flat = np.sort(scores.ravel())
+    assert q["iqm"] == pytest.approx(flat[10:30].mean())  # 40 scores: drop 10 at each end
+    assert q["lo"] < q["iqm"] < q["hi"] and (q["runs"], q["tasks"]) == (8, 5)
+    same = iqm(np.full((4, 3), 0.7), reps=200)
+    assert same["iqm"] == pytest.approx(0.7) and same["lo"] == pytest.approx(0.7) and same["hi"] == pytest.approx(0.7)
+    one = iqm(scores[:1])
+    assert one["lo"] == one["iqm"] == one["hi"]
+    # stratified: each task keeps its own runs — a task that is constant across runs adds no spread
+    wide = np.column_stack([rng.uniform(0, 1, 8), np.full(8, 0.5)])
+    assert iqm(wide, reps=500)["hi"] - iqm(wide, reps=500)["lo"] > 0
+    with pytest.raises(ValueError, match="^scores"):
+        iqm(np.array([[np.nan]]))
