@@ -1,9 +1,9 @@
 """``flatbody bench env``: environment step rates, measured side by side in one run.
 
 Single environments (``gym.make``, so each carries the same PassiveEnvChecker, OrderEnforcing and
-TimeLimit wrappers): ``FlatBody-v0`` against gymnasium's ``Pendulum-v1`` and ``Acrobot-v1`` — the
+TimeLimit wrappers): ``FlatBody-v1`` against gymnasium's ``Pendulum-v1`` and ``Acrobot-v1`` — the
 figure of merit is the ratio of ``env.step`` rates, the three timed in alternation (resets are timed
-apart and reported, since ``FlatBody-v0``'s reset samples a reachable target; the machine is noisy,
+apart and reported, since ``FlatBody-v1``'s reset samples a reachable target; the machine is noisy,
 absolute times vary with load, the ratios are the reliable part; the figures: docs/env.md, "Benchmark").
 Batched: ``FlatBodyVectorEnv`` against gymnasium's ``CartPoleVectorEnv`` at N = 1024 in env-steps per
 second (the vector env as constructed by default and with one thread per core, timed in alternation
@@ -27,7 +27,7 @@ from flatbody_env.bench.harness import Report, alternate
 from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
 
-SINGLE = ("FlatBody-v0", "Pendulum-v1", "Acrobot-v1")
+SINGLE = ("FlatBody-v1", "Pendulum-v1", "Acrobot-v1")
 """The single environments, timed in alternation."""
 
 
@@ -54,7 +54,7 @@ class EnvBenchmark:
     episode_error: float
     integrator: str
     reset_ratio_vs_pendulum: float = float("nan")
-    """ms per ``FlatBody-v0`` reset / ms per ``Pendulum-v1`` reset (target ≤ 5)."""
+    """ms per ``FlatBody-v1`` reset / ms per ``Pendulum-v1`` reset (target ≤ 5)."""
     ratio_batched_threads_vs_cartpole: float = float("nan")
     """The batched ratio with ``num_threads=None`` (one thread per available core)."""
     threads: int = 1
@@ -115,8 +115,11 @@ def _time_batched(
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
     rng = np.random.default_rng(0)
-    fb = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps)
-    fbt = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps, num_threads=None)
+    from flatbody_env.env.registration import task_spec
+
+    kw = dict(task_spec("FlatBody-v1").kwargs)
+    fb = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps, **kw)
+    fbt = FlatBodyVectorEnv(num_envs=n, max_episode_steps=episode_steps, num_threads=None, **kw)
     cp = CartPoleVectorEnv(num_envs=n)
     actions = rng.uniform(-1, 1, size=fb.action_space.shape).astype(np.float32)
     cp_actions = cp.action_space.sample()
@@ -234,14 +237,14 @@ def run(
     return EnvBenchmark(
         single=single,
         batched=batched,
-        ratio_vs_pendulum=by["Pendulum-v1"].us_per_env_step / by["FlatBody-v0"].us_per_env_step,
-        ratio_vs_acrobot=by["Acrobot-v1"].us_per_env_step / by["FlatBody-v0"].us_per_env_step,
+        ratio_vs_pendulum=by["Pendulum-v1"].us_per_env_step / by["FlatBody-v1"].us_per_env_step,
+        ratio_vs_acrobot=by["Acrobot-v1"].us_per_env_step / by["FlatBody-v1"].us_per_env_step,
         ratio_batched_vs_cartpole=batched[0].env_steps_per_s / batched[2].env_steps_per_s,
         ratio_batched_threads_vs_cartpole=batched[1].env_steps_per_s / batched[2].env_steps_per_s,
         threads=t,
         episode_error=results["err"],
         integrator=DEFAULT_INTEGRATOR,
-        reset_ratio_vs_pendulum=by["FlatBody-v0"].ms_per_reset / by["Pendulum-v1"].ms_per_reset,
+        reset_ratio_vs_pendulum=by["FlatBody-v1"].ms_per_reset / by["Pendulum-v1"].ms_per_reset,
     )
 
 
@@ -311,9 +314,9 @@ def markdown(bench: EnvBenchmark) -> str:
         "",
         "| ratio (same run) | measured | target |",
         "|---|---|---|",
-        f"| `FlatBody-v0` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
-        f"| `FlatBody-v0` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
-        f"| `FlatBody-v0` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
+        f"| `FlatBody-v1` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
+        f"| `FlatBody-v1` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
+        f"| `FlatBody-v1` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
         f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
         f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
         f"| the same with `num_threads=None` ({bench.threads} thread{'s' if bench.threads > 1 else ''}) | {bench.ratio_batched_threads_vs_cartpole:.2f} | — |",

@@ -27,9 +27,9 @@ def _cmd(args) -> int:
         )
     for r in bench.batched:
         print(f"{r.name:<38} {r.us_per_env_step:10.4f} µs/env-step {r.env_steps_per_s:14,.0f} env-steps/s")
-    print(f"ratio FlatBody-v0 vs Pendulum-v1 step rate: {bench.ratio_vs_pendulum:.2f} (target >= 1.0)")
-    print(f"ratio FlatBody-v0 vs Acrobot-v1 step rate:  {bench.ratio_vs_acrobot:.2f}")
-    print(f"ratio FlatBody-v0 vs Pendulum-v1 reset time: {bench.reset_ratio_vs_pendulum:.2f} (target <= 5)")
+    print(f"ratio FlatBody-v1 vs Pendulum-v1 step rate: {bench.ratio_vs_pendulum:.2f} (target >= 1.0)")
+    print(f"ratio FlatBody-v1 vs Acrobot-v1 step rate:  {bench.ratio_vs_acrobot:.2f}")
+    print(f"ratio FlatBody-v1 vs Pendulum-v1 reset time: {bench.reset_ratio_vs_pendulum:.2f} (target <= 5)")
     print(
         f"ratio batched FlatBody vs CartPoleVectorEnv: {bench.ratio_batched_vs_cartpole:.2f} (target >= 0.5; resets included; "
         f"with num_threads=None, {bench.threads} thread{'s' if bench.threads > 1 else ''}: {bench.ratio_batched_threads_vs_cartpole:.2f})"
@@ -43,7 +43,7 @@ def _cmd(args) -> int:
 
 
 def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser("env", help="FlatBody-v0 step rates vs Pendulum/Acrobot; batched vs CartPoleVectorEnv")
+    p = bench_sub.add_parser("env", help="FlatBody-v1 step rates vs Pendulum/Acrobot; batched vs CartPoleVectorEnv")
     p.add_argument(
         "--steps",
         type=int_at_least("steps", 1, validation.MAX_EPISODE_STEPS),

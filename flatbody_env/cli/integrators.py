@@ -88,10 +88,14 @@ def _ladder(args) -> int:
 def _chart(args) -> int:
     if args.tasks:  # the tasks' reference chart (agents.reference_chart), from the saved reports
         from agents.reference import REFERENCE_DIR
-        from agents.reference_chart import plot_task_success
+        from agents.reference_chart import plot_ladder, plot_task_success
 
-        png = plot_task_success(Path(args.out) / "tasks_success.png", args.reports or REFERENCE_DIR)
-        print(f"wrote {png}")
+        folder = args.reports or REFERENCE_DIR
+        for png in (
+            plot_ladder(Path(args.out) / "tasks_ladder.png", folder),
+            plot_task_success(Path(args.out) / "tasks_success.png", folder),
+        ):
+            print(f"wrote {png}")
         return 0
     if args.ladder:
         return _ladder(args)
