@@ -119,7 +119,9 @@ def markdown(reports: list[dict[str, Any]]) -> str:
             s = entry["summary"]
             rung = rungs.get(env_id) or "v0"
             if s.get("status"):
-                lines.append(f"| {env_id} | {rung} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |")
+                lines.append(
+                    f"| {env_id} | {rung} | {label} | {s['status']} ({s['reason'].split(':')[0]}) | — | — | — | — |"
+                )
                 continue
             lo, hi = s["success_ci95"]
             score = table["scores"].get(name, {}).get(env_id)

@@ -65,6 +65,8 @@ ROTATION_INTEGRATOR = "DOP853"
 """Integrator used when R must be carried (rendering, recording) and the chosen method refuses to
 step this body at all (e.g. a compiled method with a custom potential); ``info["integrator"]["method"]``
 then names it."""
+HOST_DRAW_CHUNK = 1024
+"""Bodies whose v0 draws run together (the witnessed starts' reversed runs hold witness_steps × chunk × n actions)."""
 FUSED_MIN_BODIES = 32
 """Batches of at least this many bodies step through the fused structure-of-arrays DOP853 where it applies
 (below, the per-body loop is as fast)."""
@@ -589,7 +591,11 @@ class EnvCore:
             Y = np.empty((11, m))
             TG = self.sampler.sample(rngs, Y, np.arange(m))
             return [Episode(state=Y[:, k].copy(), target=TG[k].copy()) for k in range(m)]
-        return c.task.draw_batch(rngs, c.body, limits=c.limits, control=c.control, simulator=self)
+        episodes: list[Episode] = []
+        for k in range(0, len(rngs), HOST_DRAW_CHUNK):  # bounded memory: the reversed runs of a chunk at a time
+            chunk = rngs[k : k + HOST_DRAW_CHUNK]
+            episodes += c.task.draw_batch(chunk, c.body, limits=c.limits, control=c.control, simulator=self)
+        return episodes
 
     def _draw_with_options(self, i: int, options: Mapping[str, Any]) -> Episode:
         """The target and/or state that ``options`` give; what they do not give is drawn by the task (the v0 ids: from

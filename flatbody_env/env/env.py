@@ -28,6 +28,7 @@ from flatbody_env.env.core import (
     target_of,
 )
 from flatbody_env.env.task import CONTROLS, OBSERVATION_NAMES, REWARD_TERMS, TARGET_NAMES, ReachStationaryEllipse
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.state import unpack
 
@@ -293,7 +294,9 @@ class FlatBodyEnv(gym.Env):
         non-finite or wrong-sized action."""
         a = self._action(action)
         if not np.isfinite(a).all():
-            raise ValueError(f"action: must be {a.size} finite real numbers in [-1, 1], got {action!r:.80}")
+            raise ValueError(
+                f"action: must be {a.size} finite real numbers in [-1, 1], got {validation._short(action)}"
+            )
         clipped = np.clip(a, -1.0, 1.0) if self.config.mask.any() else np.zeros_like(a)
         u = np.zeros(4)
         u[self.config.mask] = clipped[: int(self.config.mask.sum())] * self.config.limits[self.config.mask]
@@ -309,7 +312,7 @@ class FlatBodyEnv(gym.Env):
         except (TypeError, ValueError, OverflowError):
             a = None
         if a is None or a.shape not in ((n,), (1, n)):
-            raise ValueError(f"action: must be {n} finite real numbers in [-1, 1], got {action!r:.80}")
+            raise ValueError(f"action: must be {n} finite real numbers in [-1, 1], got {validation._short(action)}")
         return a.reshape(n)
 
     # --- gymnasium API ---------------------------------------------------------------------------------

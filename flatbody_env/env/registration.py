@@ -142,7 +142,7 @@ def register_envs() -> None:
         gymnasium.register(
             id=spec.env_id,
             entry_point="flatbody_env.env.env:FlatBodyEnv",
-            vector_entry_point="flatbody_env.env.vector_env:FlatBodyVectorEnv",
+            vector_entry_point="flatbody_env.env.vector_env:make_vector_env",
             max_episode_steps=spec.max_episode_steps,
             kwargs=dict(spec.kwargs),
         )

@@ -46,9 +46,9 @@ from pathlib import Path
 import numpy as np
 
 from flatbody_env.physics.body import Body, default_body
-from flatbody_env.physics.potentials import KIND_CUSTOM
 from flatbody_env.physics.controllability import CHEAP_CONTROL_R, settling_rate, target_state
 from flatbody_env.physics.equilibria import stationary_from_shape
+from flatbody_env.physics.potentials import KIND_CUSTOM
 
 TABLE_VERSION = 1
 """Layout version of the table file (its name carries it)."""

@@ -34,6 +34,7 @@ from flatbody_env.env import transition as tr
 from flatbody_env.env.core import EnvCore, configure
 from flatbody_env.env.registration import MAX_EPISODE_STEPS
 from flatbody_env.env.vector_env import FlatBodyVectorEnv, batch_arguments, episode_info, seed_list
+from flatbody_env.physics import validation
 
 _FLOATS = (torch.float16, torch.bfloat16, torch.float32, torch.float64)
 MAX_DEVICE_BATCH = 1 << 22
@@ -174,7 +175,7 @@ class FlatBodyTorchVectorEnv(VectorEnv):
             a = torch.as_tensor(actions)
         except (TypeError, ValueError, RuntimeError, OverflowError):
             raise ValueError(
-                f"actions: must be a tensor of shape {shape} with a real floating dtype, got {actions!r:.80}"
+                f"actions: must be a tensor of shape {shape} with a real floating dtype, got {validation._short(actions)}"
             ) from None
         if tuple(a.shape) != shape:
             raise ValueError(f"actions: must have shape {shape}, got {tuple(a.shape)}")

@@ -75,6 +75,7 @@ from flatbody_env.env.sampling import (
     candidate_kernel,
     initial_state_kernel,
 )
+from flatbody_env.env.targets import REJECT, UNSURE
 from flatbody_env.env.task import (  # noqa: F401  (TOLERANCE_TERMS: the reward's names, read from here too)
     TASK_HOLD,
     TASK_REACH,
@@ -83,7 +84,6 @@ from flatbody_env.env.task import (  # noqa: F401  (TOLERANCE_TERMS: the reward'
     domain_code,
     omega12_kernel,
 )
-from flatbody_env.env.targets import REJECT, UNSURE
 from flatbody_env.env.witness import square_wave, uncontrolled_offset
 from flatbody_env.integrators.twopolar_kernels import env_step_into
 

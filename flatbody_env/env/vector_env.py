@@ -38,6 +38,7 @@ from gymnasium.vector.utils import batch_space
 from flatbody_env.env import transition as tr
 from flatbody_env.env.core import EnvCore, configure, target_of
 from flatbody_env.env.registration import MAX_EPISODE_STEPS
+from flatbody_env.physics import validation
 
 LANES_PER_THREAD = 256
 """Fewest bodies per thread of the automatic split (below that a thread costs more than it saves)."""
@@ -284,7 +285,9 @@ class FlatBodyVectorEnv(VectorEnv):
         except (TypeError, ValueError, OverflowError):
             a = None
         if a is None or not np.isfinite(a).all():
-            raise ValueError(f"actions: must be {shape} finite real numbers in [-1, 1], got {actions!r:.80}")
+            raise ValueError(
+                f"actions: must be {shape} finite real numbers in [-1, 1], got {validation._short(actions)}"
+            )
         return a
 
     def controls(self, actions) -> np.ndarray:
@@ -375,4 +378,16 @@ class FlatBodyVectorEnv(VectorEnv):
             self._pool = None
 
 
-__all__ = ["FlatBodyVectorEnv", "batch_arguments", "episode_info", "seed_list"]
+def make_vector_env(num_envs: int = 1, device=None, **kwargs: Any) -> VectorEnv:
+    """The vector entry point of every registered id (``gym.make_vec(ID, n, vectorization_mode="vector_entry_point",
+    device=...)``): :class:`FlatBodyVectorEnv` (numpy) without ``device``, else
+    :class:`~flatbody_env.env.torch_vector_env.FlatBodyTorchVectorEnv` on that device (``"cpu"`` or ``"cuda"``; torch
+    tensors, SAME_STEP autoreset unless ``autoreset_mode`` says otherwise)."""
+    if device is None:
+        return FlatBodyVectorEnv(num_envs, **kwargs)
+    from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv
+
+    return FlatBodyTorchVectorEnv(num_envs, device=device, **kwargs)
+
+
+__all__ = ["FlatBodyVectorEnv", "batch_arguments", "episode_info", "make_vector_env", "seed_list"]

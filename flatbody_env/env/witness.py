@@ -151,8 +151,14 @@ class ReachWithWitness(ReachStationaryEllipse):
             object.__setattr__(
                 self, name, validation.interval(name, getattr(self, name), low=0.0, high=upper, strict=False)
             )
-        for name in ("witness_steps", "max_witness_attempts"):
-            validation.integer(name, getattr(self, name), low=1, high=validation.MAX_EPISODE_STEPS)
+        validation.integer("witness_steps", self.witness_steps, low=1, high=validation.WITNESS_MAX_STEPS)
+        validation.integer("max_witness_attempts", self.max_witness_attempts, low=1, high=validation.RESET_MAX_STEPS)
+        if self.witness_steps * self.max_witness_attempts > validation.RESET_MAX_STEPS:
+            raise ValueError(
+                f"max_witness_attempts: witness_steps × max_witness_attempts must be <= {validation.RESET_MAX_STEPS:,} "
+                f"env steps (a reset's work; each step has its own budget), got {self.witness_steps} × "
+                f"{self.max_witness_attempts}"
+            )
         pair = self.witness_half_period
         if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
             raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {pair!r:.60}")

@@ -78,6 +78,11 @@ ENV_STEP_MAX_NFEV = 1_000_000
 """Per-env-step budget of right-hand-side evaluations (``max_nfev`` of the env's integrator)."""
 MAX_EPISODE_STEPS = 1_000_000
 """Largest ``max_episode_steps`` (vector env, ``--max-steps``, ``--episode-steps``)."""
+RESET_MAX_STEPS = 200_000
+"""Most env steps one body's reset may simulate (a witnessed start: ``witness_steps`` × ``max_witness_attempts``),
+checked before the first reset; each of those steps has the per-step budget :data:`ENV_STEP_MAX_NFEV`."""
+WITNESS_MAX_STEPS = 10_000
+"""Largest ``witness_steps`` (the reversed run of a witnessed start; the registered episodes have 400)."""
 MAX_BATCH = 65_536
 """Most bodies in one batch or vector env (``num_envs``, ``--batch``, ``--n-envs``)."""
 MAX_WORKERS = 256
@@ -578,6 +583,8 @@ def _size_text(n: int) -> str:
 
 
 __all__ = [
+    "RESET_MAX_STEPS",
+    "WITNESS_MAX_STEPS",
     "boolean",
     "interval",
     "ENV_DT_RANGE",

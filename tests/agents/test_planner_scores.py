@@ -67,7 +67,9 @@ def _report(env_id, **success):
 def test_anchors_follow_the_documented_rule():
     from agents.scores import anchors
 
-    torque = anchors(_report("FlatBodyTorque-v1", zero=0.0, random=0.0, passivity=0.01, heuristic=0.03, planner=0.0, witness=1.0))
+    torque = anchors(
+        _report("FlatBodyTorque-v1", zero=0.0, random=0.0, passivity=0.01, heuristic=0.03, planner=0.0, witness=1.0)
+    )
     assert (torque.lo, torque.lo_from, torque.hi) == (0.03, "heuristic", 1.0) and "witness" in torque.hi_from
     hold = anchors(_report("FlatBodyHoldUnstable-v1", zero=0.0, random=0.0, passivity=0.8, heuristic=0.7, planner=0.9))
     assert (hold.lo, hold.hi, hold.hi_from) == (0.8, 0.9, "planner")

@@ -58,3 +58,19 @@ def test_compiled_step_past_its_nfev_budget_ends_the_episode_with_the_reason():
     obs, reward, terminated, truncated, info = env.step(np.zeros(env.action_space.shape))
     assert terminated and info["status"] == 8 and "budget" in env.end_reason(info)
     assert np.array_equal(env.physics_state, y0) and np.all(np.isfinite(obs))
+
+
+def test_a_resets_work_is_bounded_before_the_first_reset():
+    """A witnessed start simulates at most RESET_MAX_STEPS env steps per body (steps × attempts), refused up front
+    naming the keyword; the reversed runs of many bodies are drawn a chunk at a time (bounded memory)."""
+    from flatbody_env.env.core import HOST_DRAW_CHUNK
+
+    for kw, field in (
+        ({"max_witness_attempts": 10**6}, "max_witness_attempts"),
+        ({"witness_steps": 10**6}, "witness_steps"),
+        ({"witness_steps": 4000, "max_witness_attempts": 100}, "max_witness_attempts"),
+    ):
+        with pytest.raises(ValueError, match=f"^{field}"):
+            FlatBodyEnv(task="reach-witnessed", control="torque", **kw)
+    assert validation.RESET_MAX_STEPS >= 400 * 400  # the registered v0 witness (400 steps, 400 attempts) fits
+    assert HOST_DRAW_CHUNK <= 4096

@@ -158,3 +158,53 @@ def test_reset_mask_resets_those_bodies_only(cls):
         assert float(info["distance"][i]) == inf["distance"]
     with pytest.raises(ValueError, match="reset_mask"):
         env.reset(options={"reset_mask": np.ones(n - 1, bool)})
+
+
+def test_the_torch_env_contract():
+    """Exact action shapes (a transposed or reshaped batch is refused, never reinterpreted), real floating dtypes
+    (float16 and bfloat16 accepted, integers, booleans and complex refused naming actions), reset before step, closed
+    means closed, booleans that are booleans; out-of-range actions are clipped (docs/reliability.md)."""
+    env = FlatBodyTorchVectorEnv(4, **task_spec("FlatBody-v1").kwargs)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(torch.zeros(4, 4))
+    env.reset(seed=0)
+    for bad in (
+        torch.zeros(4, 3),
+        torch.zeros(3, 4).T.contiguous().T,
+        torch.zeros(16),
+        torch.zeros(2, 2, 2, 2),
+        torch.zeros(4, 1),
+    ):
+        if tuple(bad.shape) == (4, 4):
+            continue
+        with pytest.raises(ValueError, match="^actions: must have shape"):
+            env.step(bad)
+    for dtype in (torch.int64, torch.bool, torch.complex64):
+        with pytest.raises(ValueError, match="^actions: must have a real floating dtype"):
+            env.step(torch.zeros(4, 4, dtype=dtype))
+    ref = FlatBodyTorchVectorEnv(4, **task_spec("FlatBody-v1").kwargs)
+    ref.reset(seed=0)
+    half = env.step(torch.full((4, 4), 0.5, dtype=torch.bfloat16))
+    full = ref.step(torch.full((4, 4), 0.5, dtype=torch.float64))
+    np.testing.assert_array_equal(half[0].numpy(), full[0].numpy())  # 0.5 is exact in bfloat16
+    big = env.step(torch.full((4, 4), 7.0))  # clipped to 1
+    one = ref.step(torch.ones(4, 4))
+    np.testing.assert_array_equal(big[0].numpy(), one[0].numpy())
+    with pytest.raises(ValueError, match="^actions: must be .*finite"):
+        env.step(torch.full((4, 4), float("nan")))
+    with pytest.raises(ValueError, match="^options.stagger"):
+        env.reset(options={"stagger": "no"})
+    env.close()
+    for call in (lambda: env.step(torch.zeros(4, 4)), lambda: env.reset(seed=0), lambda: env.states):
+        with pytest.raises(RuntimeError, match="closed"):
+            call()
+
+
+def test_make_vec_takes_a_device():
+    import gymnasium as gym
+
+    env = gym.make_vec("FlatBody-v1", 2, vectorization_mode="vector_entry_point", device="cpu")
+    assert isinstance(env, FlatBodyTorchVectorEnv)
+    obs, _ = env.reset(seed=3)
+    ref = gym.make_vec("FlatBody-v1", 2, vectorization_mode="vector_entry_point")
+    np.testing.assert_array_equal(obs.numpy(), ref.reset(seed=3)[0])
