@@ -207,6 +207,75 @@ def _seeds(args) -> int:
     return _run(args, spec)
 
 
+def _benchmark(args) -> int:
+    """``flatbody benchmark``: the benchmark table (:mod:`agents.benchmark`) on the sweep engine, then its report."""
+    from agents.benchmark import ALGOS, BUDGETS, report
+    from agents.reference import REFERENCE_DIR, load_reports
+    from flatbody_env.env.registration import V1_IDS, task_spec
+    from flatbody_env.sweep.report import rows_of
+    from flatbody_env.sweep.runner import run_sweep
+    from flatbody_env.sweep.tasks import parse_seeds
+
+    algos = [a.strip() for a in args.algos.split(",") if a.strip()]
+    for a in algos:
+        validation.string("--algos", a, choices=ALGOS)
+    envs = (
+        list(V1_IDS) if args.envs == "all" else [task_spec(e.strip()).env_id for e in args.envs.split(",") if e.strip()]
+    )
+    budgets = dict(BUDGETS)
+    for item in args.budget or []:
+        name, _, value = item.partition("=")
+        validation.string("--budget", name, choices=ALGOS)
+        budgets[name] = validation.integer(f"--budget.{name}", _number(value), low=1_000, high=validation.MAX_TIMESTEPS)
+    seeds = parse_seeds(args.seeds)
+    if len(seeds) < 2:
+        raise ValueError(f"--seeds: a benchmark needs at least 2 training seeds for its intervals, got {args.seeds!r}")
+    spec = {
+        "kind": "benchmark",
+        "algos": algos,
+        "envs": envs,
+        "seeds": seeds,
+        "budgets": budgets,
+        "eval_seed": args.eval_seed,
+    }
+    command = (
+        f"flatbody benchmark --algos {','.join(algos)} --envs {args.envs} --seeds {args.seeds} "
+        + " ".join(f"--budget {a}={budgets[a]}" for a in algos)
+        + f" --out {args.out}"
+    )
+    result = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
+                       progress=not args.no_progress)  # fmt: skip
+    rows = [r for r in rows_of(result) if isinstance(r, dict) and "curve" in r]
+    references = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] in envs]
+    paths = report(rows, args.out, references) if rows else {}
+    for path in paths.values():
+        print(f"wrote {path}")
+    if args.docs and paths:
+        from agents.benchmark import markdown
+        from flatbody_env.output import replace_marked_block
+
+        replace_marked_block(args.docs, "benchmark", markdown(json.loads(paths["json"].read_text()), command))
+        print(f"updated the table in {args.docs}")
+    if result.failed:
+        sys.stderr.write(
+            f"flatbody: {len(result.failed)} of {result.total} runs failed (recorded in "
+            f"{Path(args.out) / 'results.sqlite'}; --resume retries them)\n"
+        )
+        return 1
+    return 0
+
+
+def _number(text: str) -> int:
+    """An integer budget written as 500000, 5e5 or 500_000; ValueError naming --budget otherwise."""
+    try:
+        value = float(text.replace("_", ""))
+    except ValueError:
+        raise ValueError(f"--budget: expected ALGO=STEPS (e.g. ppo=5e5), got {text!r:.40}") from None
+    if not math.isfinite(value) or value != int(value):
+        raise ValueError(f"--budget: steps must be a whole number, got {text!r:.40}")
+    return int(value)
+
+
 class _SerialOnly(argparse.ArgumentParser):
     """Accepts any arguments: its handler only says why the timing study stays serial."""
 
@@ -455,6 +524,34 @@ def register(sub) -> None:
     )
     _engine_arguments(p)
     p.set_defaults(handler=_seeds)
+
+    p = sub.add_parser(
+        "benchmark",
+        help="train algorithms from scratch on the v1 suite over seeds, learning curves and normalised scores (Dask, resumable)",
+    )
+    p.add_argument(
+        "--algos", default="ppo,sac,td3,rsl-ppo", metavar="A,B", help="algorithms (default ppo,sac,td3,rsl-ppo)"
+    )
+    p.add_argument("--envs", default="all", metavar="ID,ID", help="v1 ids, or all (default)")
+    p.add_argument("--seeds", default="0-4", metavar="RANGE", help="training seeds, e.g. 0-4 (default; at least 2)")
+    p.add_argument(
+        "--budget",
+        action="append",
+        metavar="ALGO=STEPS",
+        help="env steps of ALGO's runs (default: agents.benchmark.BUDGETS)",
+    )
+    p.add_argument(
+        "--eval-seed",
+        type=int_at_least("eval_seed", 0, validation.MAX_SEED),
+        default=EVAL_SEED,
+        metavar="S",
+        help=f"held-out evaluation episode i is reset with seed S + i (default {EVAL_SEED})",
+    )
+    p.add_argument(
+        "--docs", metavar="FILE.md", help="regenerate the table between <!-- bench:benchmark --> markers in FILE.md"
+    )
+    _engine_arguments(p)
+    p.set_defaults(handler=_benchmark)
 
     for name in ("work-precision", "chart"):
         p = kinds.add_parser(name, help="timing study: stays serial (run 'flatbody chart')")

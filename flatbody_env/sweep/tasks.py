@@ -20,6 +20,9 @@ kind                    one task                                    key (sorts l
 ``seeds``               train one seed, evaluate it on held-apart   ``seed-000003``
                         episodes (:mod:`agents.train`, :mod:`agents.evaluate`); the seed is read
                         from the key
+``benchmark``           train one algorithm on one task with one    ``ppo.FlatBody-v1.000003``
+                        seed from scratch, evaluated along the way
+                        (:func:`agents.benchmark.run_case`)
 ======================= =========================================== ============================
 """
 
@@ -36,7 +39,7 @@ from typing import Any, Callable
 from agents.evaluate import EVAL_SEED  # the first evaluation seed of a seeds sweep (re-exported)
 from flatbody_env.physics.validation import SWEEP_GRID_RANGE
 
-KINDS = ("stability-map", "failure-study", "family", "seeds")
+KINDS = ("stability-map", "failure-study", "family", "seeds", "benchmark")
 SERIAL_ONLY = ("work-precision", "chart", "bench")
 """Timing studies: they stay serial (concurrent runs on shared cores skew wall time)."""
 MAX_GRID = SWEEP_GRID_RANGE[1]
@@ -167,11 +170,29 @@ def seed_case(task: Task) -> dict[str, Any]:
     return {"seed": seed, "model": p["model_name"], **summary}
 
 
+def benchmark_case(task: Task) -> dict[str, Any]:
+    """One case of the benchmark table (:func:`agents.benchmark.run_case`): its algorithm, task and seed from the
+    parameters, its run folder under the benchmark's folder."""
+    from agents.benchmark import run_case
+
+    p = task.params
+    return run_case(
+        p["algo"],
+        p["env_id"],
+        p["seed"],
+        p["budget"],
+        p["run_dir"],
+        eval_seed=p["eval_seed"],
+        command=["flatbody", "benchmark", f"--algos={p['algo']}", f"--envs={p['env_id']}", f"--seeds={p['seed']}"],
+    )
+
+
 RUNNERS: dict[str, Callable[[Task], Any]] = {
     "stability-map": stability_map_chunk,
     "failure-study": failure_case,
     "family": family_case,
     "seeds": seed_case,
+    "benchmark": benchmark_case,
 }
 
 
@@ -274,6 +295,25 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
                                 "step": spec["step"],
                                 "csv": str(out / name),
                                 "csv_name": name,
+                            },
+                        )
+                    )
+    elif kind == "benchmark":
+        for algo in spec["algos"]:
+            for env_id in spec["envs"]:
+                for seed in spec["seeds"]:
+                    key = f"{algo}.{env_id}.{seed:06d}"
+                    tasks.append(
+                        Task(
+                            kind=kind,
+                            key=key,
+                            params={
+                                "algo": algo,
+                                "env_id": env_id,
+                                "seed": seed,
+                                "budget": spec["budgets"][algo],
+                                "eval_seed": spec["eval_seed"],
+                                "run_dir": str(out / "runs" / key),
                             },
                         )
                     )

@@ -1,0 +1,366 @@
+"""The benchmark table: algorithms trained from scratch on the v1 suite over several seeds, their learning curves and
+their normalised scores — what an RL user reads to know what an algorithm does at a budget.
+
+One *case* is one (algorithm, task, training seed) (:func:`run_case`): the algorithm trained from scratch, without any
+controller prior, with its task's hyperparameters (``agents/hyperparams/ALGO.yml``) for a fixed budget of env steps into
+a run folder of its own (:mod:`agents.train`), evaluated along the way — at :data:`EVAL_POINTS` fractions of the budget —
+on held-out episodes (seeds :data:`~agents.evaluate.EVAL_SEED` …, never trained on), the deterministic policy as it is at
+that moment; the wall time of each point is training time alone (the evaluations are not counted). The last point is the
+final evaluation on :data:`FINAL_EPISODES` episodes. ``flatbody benchmark`` runs the cases on the sweep engine (Dask:
+an embedded local cluster, or ``--scheduler`` for more machines; rows stored by key, so ``--resume`` continues a killed
+benchmark) and :func:`report` turns the stored rows into the saved tables (JSON, CSV), the learning curves over env
+steps and over wall time (mean and 95 % t-interval over the training seeds) and the final table of normalised scores
+(:mod:`agents.scores`: per task, 0 the best classic controller and 1 the best known, from the reference reports; the
+suite's interquartile mean with its stratified bootstrap interval per algorithm).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+EVAL_POINTS = (0.1, 0.2, 0.3, 0.45, 0.6, 0.8, 1.0)
+"""Fractions of the budget where a case is evaluated (the learning curve's points)."""
+CURVE_EPISODES = 40
+"""Held-out episodes of each intermediate evaluation."""
+FINAL_EPISODES = 100
+"""Held-out episodes of the final evaluation (the table's)."""
+ALGOS = ("ppo", "sac", "td3", "rsl-ppo")
+BUDGETS = {"ppo": 500_000, "sac": 30_000, "td3": 30_000, "rsl-ppo": 2_000_000}
+"""Env steps per run at the stated budgets for 2 CPU cores (docs/tasks.md, "Trained agents": on-policy algorithms take
+many cheap steps, the off-policy ones few expensive ones — about the same minutes each)."""
+
+
+def _sb3_policy(model):
+    """The deterministic action of an SB3 model as a batch policy (its VecNormalize statistics applied, frozen)."""
+    vn = model.get_vec_normalize_env()
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        o = vn.normalize_obs(np.asarray(obs, dtype=np.float32)) if vn is not None else obs
+        return model.predict(o, deterministic=True)[0]
+
+    return policy
+
+
+def _evaluate(policy, env_id: str, episodes: int, seed: int) -> dict[str, float]:
+    from agents.evaluate import run_episodes, summarize
+
+    s = summarize(run_episodes(policy, episodes=episodes, seed=seed, env_id=env_id))
+    return {k: s[k] for k in ("success_rate", "return", "final_distance", "final_distance_median")}
+
+
+class _Curve:
+    """The evaluations of one case along its training: points (env steps, training seconds, figures)."""
+
+    def __init__(self, env_id: str, budget: int, eval_seed: int, episodes: int) -> None:
+        self.env_id, self.eval_seed, self.episodes = env_id, eval_seed, episodes
+        self.at = [max(1, int(round(f * budget))) for f in EVAL_POINTS[:-1]]
+        self.points: list[dict[str, Any]] = []
+        self.t0 = time.perf_counter()
+        self.eval_seconds = 0.0
+
+    def due(self, steps: int) -> bool:
+        return bool(self.at) and steps >= self.at[0]
+
+    def add(self, steps: int, policy, episodes: int | None = None) -> None:
+        while self.at and steps >= self.at[0]:
+            self.at.pop(0)
+        train_s = time.perf_counter() - self.t0 - self.eval_seconds
+        t = time.perf_counter()
+        figures = _evaluate(policy, self.env_id, episodes or self.episodes, self.eval_seed)
+        self.eval_seconds += time.perf_counter() - t
+        self.points.append({"env_steps": int(steps), "train_seconds": float(train_s), **figures})
+
+
+def _sb3_callback(curve: _Curve):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class Evaluations(BaseCallback):
+        """The benchmark's evaluations along an SB3 run (:class:`_Curve`)."""
+
+        def _on_step(self) -> bool:
+            if curve.due(self.num_timesteps):
+                curve.add(self.num_timesteps, _sb3_policy(self.model))
+            return True
+
+    return Evaluations()
+
+
+def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *, eval_seed: int, curve_episodes: int = CURVE_EPISODES,
+             final_episodes: int = FINAL_EPISODES, command: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+    """Train ``algo`` from scratch on ``env_id`` with ``seed`` for ``budget`` env steps into ``out`` and evaluate it
+    along the way (module docstring); the row: ``{"algo", "env_id", "seed", "budget", "curve": [...], "final": {...},
+    "train_seconds", "run"}``."""
+    from agents.train import train
+
+    curve = _Curve(env_id, budget, eval_seed, curve_episodes)
+    kwargs: dict[str, Any] = {}
+    if algo == "rsl-ppo":
+        from agents.rsl import live_policy
+
+        def on_iteration(runner, row) -> None:
+            steps = int(row.get("env_steps", row.get("timesteps", 0)))
+            if curve.due(steps):
+                curve.add(steps, live_policy(runner.alg.actor, None, "cpu"))
+
+        kwargs["callback"] = on_iteration
+    else:
+        kwargs["extra_callbacks"] = [_sb3_callback(curve)]
+    result = train(
+        algo, out, seed=seed, n_timesteps=int(budget), env_id=env_id, checkpoint_freq=0, threads=1, progress=False,
+        force=True, notes=False, command=command, **kwargs,
+    )  # fmt: skip
+    from agents.evaluate import Agent
+
+    agent = Agent(out)
+    train_s = time.perf_counter() - curve.t0 - curve.eval_seconds
+    final = _evaluate(agent, env_id, final_episodes, eval_seed)
+    curve.points.append({"env_steps": int(result.timesteps), "train_seconds": float(train_s), **final})
+    return {
+        "algo": algo,
+        "env_id": env_id,
+        "seed": int(seed),
+        "budget": int(budget),
+        "curve": curve.points,
+        "final": final,
+        "train_seconds": float(train_s),
+        "run": str(out),
+    }
+
+
+# --------------------------------------------------------------------------------------------- the report
+def _t95(n: int) -> float:
+    """The two-sided 95 % Student t quantile with n − 1 degrees of freedom (n ≥ 2)."""
+    from scipy.stats import t
+
+    return float(t.ppf(0.975, n - 1))
+
+
+def mean_interval(values) -> tuple[float, float, float]:
+    """(mean, lo, hi): the mean of ``values`` and its 95 % t-interval (one value: the value itself)."""
+    v = np.asarray(values, dtype=float)
+    m = float(v.mean())
+    if v.size < 2:
+        return m, m, m
+    half = _t95(v.size) * float(v.std(ddof=1)) / math.sqrt(v.size)
+    return m, m - half, m + half
+
+
+def curves(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per ``algo|env_id``: the learning curve over the seeds (points aligned by their index along the budget):
+    env steps, training seconds (means), success and return (mean, lo, hi)."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(f"{r['algo']}|{r['env_id']}", []).append(r)
+    out = {}
+    for key, rs in groups.items():
+        k = min(len(r["curve"]) for r in rs)
+        pts = []
+        for i in range(k):
+            col = [r["curve"][i] for r in rs]
+            succ = mean_interval([c["success_rate"] for c in col])
+            ret = mean_interval([c["return"] for c in col])
+            pts.append({
+                "env_steps": float(np.mean([c["env_steps"] for c in col])),
+                "train_seconds": float(np.mean([c["train_seconds"] for c in col])),
+                "success": succ, "return": ret,
+            })  # fmt: skip
+        out[key] = {"seeds": sorted(r["seed"] for r in rs), "points": pts}
+    return out
+
+
+def final_table(rows: list[dict[str, Any]], reports: list[dict[str, Any]]) -> dict[str, Any]:
+    """The final table: per ``algo|env_id`` the success over the seeds (mean and interval), the normalised score and
+    the training compute; per algorithm the suite's IQM (tasks × seeds, stratified bootstrap); the anchors used."""
+    from agents.scores import anchors, iqm
+
+    anchor = {r["env_id"]: anchors(r) for r in reports}
+    table: dict[str, Any] = {"cells": {}, "iqm": {}, "anchors": {k: vars(a) for k, a in anchor.items()}}
+    by_algo: dict[str, dict[str, dict[int, float]]] = {}
+    for r in rows:
+        key = f"{r['algo']}|{r['env_id']}"
+        cell = table["cells"].setdefault(key, {"algo": r["algo"], "env_id": r["env_id"], "seeds": [], "success": [],
+                                               "train_seconds": [], "budget": r["budget"]})  # fmt: skip
+        cell["seeds"].append(r["seed"])
+        cell["success"].append(r["final"]["success_rate"])
+        cell["train_seconds"].append(r["train_seconds"])
+        if r["env_id"] in anchor:
+            by_algo.setdefault(r["algo"], {}).setdefault(r["env_id"], {})[r["seed"]] = float(
+                anchor[r["env_id"]].normalise(r["final"]["success_rate"])
+            )
+    for cell in table["cells"].values():
+        cell["success_mean"] = mean_interval(cell["success"])
+        if cell["env_id"] in anchor:
+            cell["score_mean"] = mean_interval(anchor[cell["env_id"]].normalise(cell["success"]))
+    tasks = sorted(anchor)
+    for algo, per_task in by_algo.items():
+        if set(per_task) != set(tasks):
+            continue
+        seeds = sorted(set.intersection(*(set(v) for v in per_task.values())))
+        if not seeds:
+            continue
+        scores = np.array([[per_task[t][s] for t in tasks] for s in seeds])
+        table["iqm"][algo] = iqm(scores)
+    return table
+
+
+def report(rows: list[dict[str, Any]], out: str | Path, reports: list[dict[str, Any]]) -> dict[str, Path]:
+    """Write ``benchmark.json`` (rows, curves, the final table), ``benchmark.csv`` (one row per case) and the charts
+    (``benchmark_curves.png``: success against env steps and against training time per task; ``benchmark_iqm.png``)
+    into ``out``; returns the paths."""
+    from flatbody_env.output import atomic_write, write_csv
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = {"rows": rows, "curves": curves(rows), "final": final_table(rows, reports)}
+    paths = {"json": atomic_write(out / "benchmark.json", json.dumps(data, indent=1) + "\n")}
+    header = ["algo", "env_id", "seed", "budget", "success", "return", "final_distance", "train_seconds"]
+    paths["csv"] = write_csv(
+        out / "benchmark.csv",
+        header,
+        [
+            [
+                r["algo"],
+                r["env_id"],
+                r["seed"],
+                r["budget"],
+                r["final"]["success_rate"],
+                r["final"]["return"],
+                r["final"]["final_distance"],
+                r["train_seconds"],
+            ]
+            for r in rows
+        ],  # fmt: skip
+    )
+    paths["curves"] = plot_curves(data, out / "benchmark_curves.png")
+    if data["final"]["iqm"]:
+        paths["iqm"] = plot_iqm(data, out / "benchmark_iqm.png")
+    return paths
+
+
+COLOURS = {"ppo": "#1f77b4", "sac": "#2ca02c", "td3": "#9467bd", "rsl-ppo": "#d62728"}
+
+
+def plot_curves(data: dict[str, Any], png: str | Path) -> Path:
+    """Success against env steps (top row) and against training time (bottom row), one column per task: mean over the
+    seeds and its 95 % t-interval, one line per algorithm."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flatbody_env.env.registration import V1_IDS
+    from flatbody_env.output import save_figure
+
+    envs = [e for e in V1_IDS if any(k.endswith(f"|{e}") for k in data["curves"])]
+    fig, axes = plt.subplots(2, len(envs), figsize=(3.2 * len(envs), 6.2), squeeze=False, sharey=True)
+    for j, env_id in enumerate(envs):
+        for key, c in sorted(data["curves"].items()):
+            algo, env = key.split("|")
+            if env != env_id:
+                continue
+            for i, x in enumerate(("env_steps", "train_seconds")):
+                xs = [p[x] for p in c["points"]]
+                m = [p["success"][0] for p in c["points"]]
+                lo = [p["success"][1] for p in c["points"]]
+                hi = [p["success"][2] for p in c["points"]]
+                ax = axes[i][j]
+                ax.plot(
+                    xs, m, color=COLOURS.get(algo), lw=1.6, marker="o", ms=3, label=f"{algo} ({len(c['seeds'])} seeds)"
+                )
+                ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=COLOURS.get(algo), alpha=0.15)
+        axes[0][j].set_title(env_id, fontsize=9)
+        axes[0][j].set_xlabel("env steps", fontsize=8)
+        axes[1][j].set_xlabel("training time (s, 2 shared cores)", fontsize=8)
+        for i in range(2):
+            axes[i][j].set_ylim(-0.02, 1.0)
+            axes[i][j].grid(alpha=0.3)
+            axes[i][j].tick_params(labelsize=7)
+    for i in range(2):
+        axes[i][0].set_ylabel("success on held-out episodes", fontsize=8)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.suptitle("Learning curves from scratch: mean over training seeds, 95 % t-interval", fontsize=10)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.96))
+    path = save_figure(fig, png, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_iqm(data: dict[str, Any], png: str | Path) -> Path:
+    """The suite's IQM of the normalised score per algorithm with its 95 % stratified bootstrap interval."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from flatbody_env.output import save_figure
+
+    q = data["final"]["iqm"]
+    algos = sorted(q, key=lambda a: q[a]["iqm"])
+    fig, ax = plt.subplots(figsize=(6.5, 0.6 + 0.45 * len(algos)))
+    for i, a in enumerate(algos):
+        ax.errorbar([q[a]["iqm"]], [i], xerr=[[q[a]["iqm"] - q[a]["lo"]], [q[a]["hi"] - q[a]["iqm"]]], fmt="o",
+                    color=COLOURS.get(a), capsize=4)  # fmt: skip
+    ax.set_yticks(range(len(algos)), [f"{a} ({q[a]['runs']} seeds × {q[a]['tasks']} tasks)" for a in algos], fontsize=8)
+    ax.axvline(0.0, color="#555", lw=0.8, ls=":")
+    ax.axvline(1.0, color="#555", lw=0.8, ls=":")
+    ax.set_xlabel("IQM of the normalised score (0: best classic controller, 1: best known)", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    path = save_figure(fig, png, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def markdown(data: dict[str, Any], command: str) -> str:
+    """The docs block of the final table (the command that made it beside it)."""
+    from flatbody_env.env.registration import V1_IDS
+
+    f = data["final"]
+    algos = sorted({c["algo"] for c in f["cells"].values()}, key=lambda a: ALGOS.index(a) if a in ALGOS else 99)
+    lines = ["| task | " + " | ".join(algos) + " |", "|---|" + "---|" * len(algos)]
+    for env_id in [e for e in V1_IDS if any(c["env_id"] == e for c in f["cells"].values())]:
+        row = [env_id]
+        for a in algos:
+            c = f["cells"].get(f"{a}|{env_id}")
+            if c is None:
+                row.append("—")
+                continue
+            m, lo, hi = c["success_mean"]
+            score = c.get("score_mean")
+            extra = f"; score {score[0]:.2f}" if score is not None else ""
+            row.append(f"{m:.0%} ({max(lo, 0):.0%}–{min(hi, 1):.0%}){extra}; {c['budget']:,} steps, "
+                       f"{np.mean(c['train_seconds']) / 60:.1f} min")  # fmt: skip
+        lines.append("| " + " | ".join(row) + " |")
+    if f["iqm"]:
+        lines += [
+            "",
+            "| algorithm | IQM of the normalised score (95 % stratified bootstrap) | seeds × tasks |",
+            "|---|---|---|",
+        ]
+        for a in algos:
+            if a in f["iqm"]:
+                q = f["iqm"][a]
+                lines.append(f"| {a} | {q['iqm']:.2f} ({q['lo']:.2f}–{q['hi']:.2f}) | {q['runs']} × {q['tasks']} |")
+    lines += ["", f"Success on {FINAL_EPISODES} held-out episodes, mean over the training seeds with its 95 % t-interval; "
+              f"training time per run on 2 shared cores. Regenerate: `{command}`."]  # fmt: skip
+    return "\n".join(lines)
+
+
+__all__ = [
+    "ALGOS",
+    "BUDGETS",
+    "EVAL_POINTS",
+    "curves",
+    "final_table",
+    "markdown",
+    "mean_interval",
+    "report",
+    "run_case",
+]
