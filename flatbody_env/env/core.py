@@ -73,11 +73,11 @@ FUSED_MIN_BODIES = 32
 END_REASONS = {
     0: "",
     1: "non-finite state",
-    2: "lambda",
-    3: "mu",
-    4: "rho",
-    5: "momentum",
-    6: "gap",
+    2: "lambda left the domain",
+    3: "mu left the domain",
+    4: "rho left the domain",
+    5: "a momentum beyond its bound",
+    6: "lambda = mu (the two-polar chart's gap)",
     tr.CODE_LEFT_TOLERANCE: "left the target's tolerance",
 }
 """``info["domain_code"]`` → what ended the episode (:func:`end_reason`)."""

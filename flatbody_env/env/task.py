@@ -289,6 +289,15 @@ class ReachStationaryEllipse:
         """The ``ValueError`` of a reset that finds no witnessed start (tasks with witnesses)."""
         return "start_distance: no witnessed start found (widen start_distance or witness_amplitude)"
 
+    @property
+    def no_target_message(self) -> str:
+        """The ``ValueError`` of a reset that finds no target in the ranges."""
+        return (
+            "target_lambda/target_aspect: no stable stationary ellipse with settling rate >= min_settling_rate "
+            "found for this body in the target ranges (the settling rate grows with torque_limit and force_limit: "
+            "raise them, lower min_settling_rate, or widen the ranges)"
+        )
+
     def accepts(self, target: StationaryEllipse) -> bool:
         """The stability class of a target: spectrally stable (q < 0, shape Hessian positive definite)."""
         return bool(target.stable)

@@ -160,7 +160,7 @@ def test_leaving_the_domain_terminates_with_a_finite_observation():
         obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
         if term:
             break
-    assert term and info["domain_code"] == 4 and env.end_reason(info) == "rho" and info["status"] == 0
+    assert term and info["domain_code"] == 4 and env.end_reason(info) == "rho left the domain" and info["status"] == 0
     assert np.all(np.isfinite(obs)) and env.observation_space.contains(obs)
     assert info["reward_terms"]["failure"] == -env.task.failure_penalty
 
