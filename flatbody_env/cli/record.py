@@ -166,15 +166,19 @@ def _record_env(args) -> int:
     zero = np.clip(np.zeros(space.shape, dtype=space.dtype), space.low, space.high) if hasattr(space, "low") else None
     if args.policy == "zero" and zero is None:
         raise ValueError("policy: 'zero' needs a Box action space; use --policy random")
+    heuristic = _heuristic_policy() if args.policy == "heuristic" else None
     total_steps = 0
     try:
         for ep in range(args.episodes):
-            env.reset(seed=args.seed + ep)
+            obs, _ = env.reset(seed=args.seed + ep)
             done = False
             with progress_bar(desc=f"episode {ep}", unit="step", leave=False) as bar:
                 while not done:
-                    action = zero if args.policy == "zero" else space.sample()
-                    _, _, terminated, truncated, _ = env.step(action)
+                    if heuristic is not None:
+                        action = heuristic(env, obs)
+                    else:
+                        action = zero if args.policy == "zero" else space.sample()
+                    obs, _, terminated, truncated, _ = env.step(action)
                     done = terminated or truncated
                     total_steps += 1
                     bar.update()
@@ -227,16 +231,20 @@ def _record_shots(args) -> int:
 
 
 def _heuristic_policy():
-    """The LQR baseline (:class:`agents.heuristic.HeuristicController`) as ``policy(env, obs)`` for frame_strip."""
+    """The LQR baseline (:class:`agents.heuristic.HeuristicController`) as ``policy(env, obs)`` (record-env, and
+    frame_strip for record-shots --frames)."""
+    import numpy as np
+
     from agents.heuristic import HeuristicController
 
     made: dict = {}
 
     def policy(env, obs):
         u = env.unwrapped
-        if "h" not in made:
-            made["h"] = HeuristicController(u.body, u.control, u.limits)
-        return made["h"].act(obs[None])[0]
+        key = (id(u), u.body)  # a task that draws its body per episode gets its controller anew
+        if made.get("key") != key:
+            made["key"], made["h"] = key, HeuristicController(u.body, u.control, u.limits)
+        return made["h"].act(np.asarray(obs)[None])[0]
 
     return policy
 
@@ -390,9 +398,9 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--policy",
-        choices=("zero", "random"),
+        choices=("zero", "random", "heuristic"),
         default="zero",
-        help="actions: zero control or uniform random (default zero)",
+        help="actions: zero control, uniform random or the LQR baseline (agents.heuristic) (default zero)",
     )
     p.add_argument(
         "--seed",

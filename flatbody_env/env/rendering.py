@@ -194,11 +194,14 @@ RHO_KEY = (0.5, 1.5)
 """The ϱ range of the fill key (the shade saturates outside it)."""
 
 
-def _legend() -> tuple[np.ndarray, np.ndarray]:
-    """The static legend (λ axis, μ axis, target, fibre e₁) as coverage and colours, built once."""
-    got = _STATIC.get("legend")
+def _legend(target: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The static legend (λ axis, μ axis, the target's shape when there is one, fibre e₁) as coverage and colours,
+    built once."""
+    key = "legend" if target else "legend-no-target"
+    got = _STATIC.get(key)
     if got is None:
-        rows = (("lambda", "λ axis"), ("mu", "μ axis"), ("target", "target shape"), ("fibre", "fibre e₁"))
+        rows = (("lambda", "λ axis"), ("mu", "μ axis")) + ((("target", "target shape"),) if target else ())
+        rows += (("fibre", "fibre e₁"),)
         h, w = 15 * len(rows), 96
         alpha = np.zeros((h, w), dtype=np.float32)
         colors = np.zeros((h, w, 3), dtype=np.float32)
@@ -211,7 +214,7 @@ def _legend() -> tuple[np.ndarray, np.ndarray]:
                 alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]], tm
             )
             colors[y : y + tm.shape[0], 18 : 18 + tm.shape[1]][tm > 0] = _INK
-        got = _STATIC["legend"] = (alpha, colors)
+        got = _STATIC[key] = (alpha, colors)
     return got
 
 
@@ -387,8 +390,11 @@ def render_frame(
     j = int(round((min(max(rho, RHO_KEY[0]), RHO_KEY[1]) - RHO_KEY[0]) / (RHO_KEY[1] - RHO_KEY[0]) * (KEY_W - 1)))
     frame[strip_y - 2 : strip_y + 10, kx + max(j - 1, 0) : kx + j + 1] = (20, 20, 20)
     value = _text_alpha(f"ϱ = {rho:.3f}", 12)
-    _blend(frame, value, _INK, SIZE - value.shape[1] - 4, strip_y + 24)
-    alpha, colors = _legend()
+    vx, vy = SIZE - value.shape[1] - 4, strip_y + 24
+    box = frame[vy : vy + value.shape[0], vx - 2 : SIZE - 2]  # over the plate: a light box behind the value
+    box[:] = (box * 0.25 + np.array(_BACKGROUND) * 0.75).astype(np.uint8)
+    _blend(frame, value, _INK, vx, vy)
+    alpha, colors = _legend(bool(target))
     _blend(frame, alpha, colors, 4, SIZE - alpha.shape[0] - 3)
     # scale bar: one length unit, the undeformed plate's radius
     bar_px = int(round(scale))

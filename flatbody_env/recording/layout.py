@@ -10,8 +10,10 @@ The window (time panel collapsed, side panels closed)::
     │ plate, top    │ 3-D view /    │ G tensor │ G, C: numbers  │
     │ view (lab +z) │ material frame│ C tensor │ and eigenvalues│
     ├───────────────┴──┬────────────┴─────┬────┴────────────────┤
-    │ λ, μ, ϱ (+ λ*,…) │ episode: reward,  │ s₃ · p_θ · drift ·  │
-    │                  │ distance, actions │ H · θ · G · C · text│
+    │ λ, μ, ϱ (+ λ*,…) │ episode: distance │ episode: energy     │
+    │                  │ · reward · actions│ balance H − H₀ = W  │
+    │                  │ free: drift · H   │ ─────────────────── │
+    │                  │                   │ residual · P̄ · s₃ … │
     └──────────────────┴───────────────────┴─────────────────────┘
 
 Colours come from :data:`flatbody_env.env.rendering.COLORS`, the same as the ``rgb_array`` frames:
@@ -380,7 +382,7 @@ def _notes(base: str, paths: tuple[str, ...], ranges: dict | None) -> str:
     if "/series/reward" in paths:
         const = constant_terms(ranges)
         if const:
-            terms = ", ".join(f"{p.rsplit('/', 1)[-1]} ≡ {v:g}" for p, v in sorted(const.items()))
+            terms = ", ".join(f"{p.rsplit('/', 1)[-1]} ≡ {v + 0.0:g}" for p, v in sorted(const.items()))  # no -0
             return f"{NOTE_SEP}not drawn: {terms}"
     return ""
 
@@ -620,10 +622,14 @@ def blueprint(
         views[0], rrb.Tabs(views[1], views[2], active_tab=0), views[3], views[4], column_shares=[3, 3, 2.2, 2.6]
     )
     shape, rest = views[5], views[6:]
-    # episode: distance (the criterion, in front), reward, actions | balance, residual, power, …; free: drift, H | …
+    # episode: distance (the criterion, in front), reward, actions | the balance over its residual (both on screen),
+    # power, …; free: drift, H | s₃, …
     k = 3 if episode else 2
     middle = rrb.Tabs(*rest[:k], active_tab=0)
-    right = rrb.Tabs(*rest[k:], active_tab=0)
+    if episode:
+        right = rrb.Vertical(rest[k], rrb.Tabs(*rest[k + 1 :], active_tab=0), row_shares=[1.5, 1])
+    else:
+        right = rrb.Tabs(*rest[k:], active_tab=0)
     bottom_row = rrb.Horizontal(shape, middle, right, column_shares=[1, 1, 1])
     return rrb.Blueprint(
         rrb.Vertical(top_row, bottom_row, row_shares=[1, BOTTOM_ROW_SHARE]),

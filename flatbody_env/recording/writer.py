@@ -98,35 +98,45 @@ from flatbody_env.recording.layout import (
     time_unit,
 )
 
-LABEL_CHAR = 0.056
+LABEL_CHAR = 0.059
 """The width of one character of an arrow's label, a fraction of the body's size (``extent``), as the views show it
-at 1600 × 1000 (rerun draws labels at a fixed size in pixels, centred on their point)."""
+at 1600 × 1000 (rerun draws labels at a fixed size in pixels)."""
 LABEL_HALF_HEIGHT = 0.085
 """Half the height of a label's box, the same way."""
+LABEL_DROP = LABEL_HALF_HEIGHT + 0.025
+"""rerun draws a point's label under the point: the box's centre lies this far below it on screen (a fraction of
+``extent``; in the top view, −y)."""
 LABEL_MARGIN = 0.06
 """Room between an arrow's tip and the nearest edge of its label's box."""
 
 
-def label_offsets(frames: np.ndarray, labels: np.ndarray, extent: float) -> np.ndarray:
-    """How far beyond each arrow's tip its label's centre goes along the arrow (n, 3), so that the label's box
-    clears the arrow, the spokes and the rim: seen down the lab's z axis (the top view) the box of an in-plane arrow
-    (columns 0, 1 of ``frames``) must reach past the tip by half its width or half its height, whichever the
-    arrow's direction meets first; the normal (column 2) is seen from above the plate in the 3-D views, where it
-    points up the screen foreshortened to about 0.8."""
+def label_points(vectors: np.ndarray, frames: np.ndarray, labels: np.ndarray, extent: float) -> np.ndarray:
+    """Where each arrow's label is logged (n, 3 arrows, 3) so that its box clears the arrow, the spokes and the rim.
+
+    rerun draws a label as a box of fixed pixel size centred under its point (:data:`LABEL_DROP`). Seen down the
+    lab's z axis (the top view) the box of an in-plane arrow (columns 0, 1 of ``frames``) must reach past the tip
+    by half its width or half its height, whichever the arrow's direction meets first, plus a margin: its centre
+    goes there and the point :data:`LABEL_DROP` above it. The normal (column 2) is labelled in the 3-D views, seen
+    from above the plate, where it points up the screen (foreshortened to about 0.8): its point goes beyond the
+    tip by the box's whole height, so that the box hangs above the tip."""
+    vectors = np.asarray(vectors, dtype=np.float64)
     frames = np.asarray(frames, dtype=np.float64)
     n = frames.shape[0]
     widths = np.vectorize(len)(np.asarray(labels, dtype=object).reshape(n, 3)).astype(float)
     half_w = (0.5 * widths * LABEL_CHAR + 0.05) * extent
     half_h = LABEL_HALF_HEIGHT * extent
-    out = np.empty((n, 3))
+    out = np.empty((n, 3, 3))
     for col in range(2):
         d = frames[:, :, col]  # the axis in the lab (unit); its picture in the top view is (x, y)
         flat = np.hypot(d[:, 0], d[:, 1])
         ux = np.abs(d[:, 0]) / np.maximum(flat, 1e-12)
         uy = np.abs(d[:, 1]) / np.maximum(flat, 1e-12)
         reach = np.minimum(half_w[:, col] / np.maximum(ux, 1e-12), half_h / np.maximum(uy, 1e-12))
-        out[:, col] = np.minimum((reach + LABEL_MARGIN * extent) / np.maximum(flat, 0.2), 1.5 * extent)
-    out[:, 2] = half_h / 0.8 + LABEL_MARGIN * extent
+        along = np.minimum((reach + LABEL_MARGIN * extent) / np.maximum(flat, 0.2), 1.5 * extent)
+        out[:, col] = vectors[:, col] + along[:, None] * d
+        out[:, col, 1] += LABEL_DROP * extent  # the box hangs under its point
+    up = (2.0 * half_h + LABEL_MARGIN * extent) / 0.8
+    out[:, 2] = vectors[:, 2] + up * frames[:, :, 2]
     return out
 
 
@@ -981,8 +991,7 @@ class Recorder:
             vectors = principal_axes(frames, half)  # (n, 3 arrows, 3)
             self._send(ent, idx, rr.Arrows3D.columns(vectors=vectors.reshape(3 * n, 3)).partition(np.full(n, 3)))
             # labels beyond the arrows' tips, their boxes clear of the arrows, the spokes, the fibre and each other
-            gap = label_offsets(frames, labels, self._extent)
-            tips = vectors + gap[:, :, None] * np.swapaxes(frames, 1, 2)
+            tips = label_points(vectors, frames, labels, self._extent)
             if ent == "/world/axes_C":
                 self._send(
                     "/world/labels/in_plane",

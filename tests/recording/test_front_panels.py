@@ -19,7 +19,7 @@ from flatbody_env.recording.layout import (
     time_unit,
 )
 from flatbody_env.recording.reader import read_blueprint, read_recording
-from flatbody_env.recording.writer import LABEL_CHAR, LABEL_HALF_HEIGHT, record_trajectory
+from flatbody_env.recording.writer import LABEL_CHAR, LABEL_DROP, LABEL_HALF_HEIGHT, record_trajectory
 
 strict_rerun = oracles.strict_rerun
 scene = oracles.scene
@@ -77,7 +77,8 @@ def test_a_failing_episode_says_so_first(torque):
     # on screen at first open: the distance (the task's criterion) and the energy balance, not the reward or a tab
     front = [base_title(n) for n in bp.front]
     assert "distance, tolerance" in front and "energy balance H − H₀ = W" in front, front
-    assert not any(n.startswith(("reward", "actions", "residual")) for n in front), front
+    assert "residual H − H₀ − W" in front, front  # under the balance, on screen with it
+    assert not any(n.startswith(("reward", "actions")) for n in front), front
     d = np.asarray(data["/series/distance"].components[SCALARS], dtype=float).ravel()
     tol = np.asarray(data["/series/distance_tolerance"].components[SCALARS], dtype=float).ravel()
     assert d.min() > tol.max()  # what the outcome says is what the plot shows
@@ -170,20 +171,22 @@ def test_series_colours_keep_away_from_the_variables_and_from_each_other():
 
 
 def test_arrow_labels_sit_clear_of_their_arrows(torque):
-    """Seen down the lab's z axis a label's box (its characters' width, its height: the writer's sizes) holds
-    neither its arrow's tip nor any point of the arrow: the label sits wholly beyond the tip."""
-    _, data, _, _ = torque
+    """Seen down the lab's z axis a label's box — its characters' width and its height, hung under its point as rerun
+    draws it (the writer's sizes, measured in the viewer at 1600 × 1000) — holds no point of its arrow."""
+    _, data, bp, _ = torque
     arrows = np.asarray(data["/world/axes_C"].components["Arrows3D:vectors"], dtype=float)
     pts = np.asarray(data["/world/labels/in_plane"].components["Points3D:positions"], dtype=float)
     labels = data["/world/labels/in_plane"].components["Points3D:labels"]
-    extent = 2.0 * float(np.asarray(data["/world/body"].components["Ellipsoids3D:half_sizes"]).max())
+    top = bp.view("plate, top view (lab +z)")  # its eye is 2.6 × the recording's extent above the plate
+    extent = float(np.asarray(top.properties["EyeControls3D:position"], dtype=float).ravel()[2]) / 2.6
     n = min(arrows.shape[0], pts.shape[0])
     checked = 0
     for k in range(0, n, 7):
         for j in range(2):
-            tip, c = arrows[k, j, :2], pts[k, j, :2]
+            tip = arrows[k, j, :2]
+            c = pts[k, j, :2] - np.array([0.0, LABEL_DROP * extent])  # the box's centre, under the point
             text = labels[k][j] if isinstance(labels[k], (list, np.ndarray)) else labels[2 * k + j]
-            half = np.array([0.5 * len(str(text)) * LABEL_CHAR, LABEL_HALF_HEIGHT]) * extent / 2.0
+            half = np.array([0.5 * len(str(text)) * LABEL_CHAR, LABEL_HALF_HEIGHT]) * extent
             for s in np.linspace(0.0, 1.0, 11):  # the arrow from the centre to its tip
                 p = s * tip
                 assert not np.all(np.abs(p - c) < half), (k, j, text)

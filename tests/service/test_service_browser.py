@@ -3,8 +3,8 @@ user sees it: results drawn, errors next to the field at fault and inside the wi
 reload, progress that moves while a job runs.
 
 Skipped with the reason when chromium, its driver or selenium is missing. Saves screenshots
-``page-*.png`` under ``FLATBODY_SCREENSHOT_DIR`` (``docs/img`` refreshes the documentation's), else
-under the test's tmp dir.
+``page-*.png`` under ``FLATBODY_SCREENSHOT_DIR`` (``docs/img`` refreshes the documentation's, in a 256-colour
+palette), else under the test's tmp dir.
 """
 
 from __future__ import annotations
@@ -116,6 +116,10 @@ def _shot(driver, tmp_path: Path, name: str) -> Path:
     path = folder / f"page-{name}.png"
     driver.save_screenshot(str(path))
     assert path.stat().st_size > 10_000
+    if os.environ.get("FLATBODY_SCREENSHOT_DIR"):  # the documentation's copies: a 256-colour palette, as record-shots
+        from flatbody_env.recording.viewer import _compact_png
+
+        _compact_png(path, 256)
     return path
 
 
@@ -510,6 +514,8 @@ def test_a_long_run_is_drawn_as_its_envelope_zooms_and_shows_its_energy_drift(wi
         card,
     )
     assert not out, out
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", card)
+    time.sleep(0.3)
     _shot(browser, tmp_path, "long-sim")
     # drag across the spin plot from 40 % to 45 % of its width: every plot shows that window
     chart = card.find_elements(By.CSS_SELECTOR, "svg.chart")[1]
@@ -524,6 +530,8 @@ def test_a_long_run_is_drawn_as_its_envelope_zooms_and_shows_its_energy_drift(wi
     ]
     assert max(ticks) < 3000 * 0.6 and min(ticks) > 3000 * 0.2, ticks  # the time axis shows the window
     assert not card.find_elements(By.CSS_SELECTOR, "svg.chart path.band")  # zoomed in, every sample drawn
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", card)
+    time.sleep(0.3)
     _shot(browser, tmp_path, "long-sim-zoom")
     card.find_element(By.CSS_SELECTOR, "button.whole-run").click()
     WebDriverWait(browser, 10).until(lambda d: not card.find_elements(By.CSS_SELECTOR, "button.whole-run"))
@@ -571,8 +579,10 @@ def test_a_family_over_decades_a_recording_preview_and_the_ellipse_table_actions
     browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", rec)
     time.sleep(0.5)
     _shot(browser, tmp_path, "record-preview")
-    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", fig)
-    time.sleep(0.3)
+    browser.set_window_size(1400, 1400)  # the chart and what is said under it
+    figure = browser.find_element(By.CSS_SELECTOR, "#pictures figure[data-kind=family]")
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", figure)
+    time.sleep(0.5)
     _shot(browser, tmp_path, "family-decades")
     _full_height(browser)
     _shot(browser, tmp_path, "1400")
