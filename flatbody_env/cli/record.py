@@ -27,8 +27,8 @@ from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
 def _rrd_path(text: str) -> str:
     try:
         check_output_path("out", text.replace("{episode}", "0"), (".rrd",))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (a rerun recording file must end in .rrd)") from None
+    except ValueError as exc:  # "expected a file ending in .rrd" or the folder that is missing: said once
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return text
 
 
