@@ -9,6 +9,7 @@ through :class:`flatbody_env.recording.wrapper.RerunRecorder` (the one way an en
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -52,8 +53,11 @@ def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, 
     import gymnasium as gym
 
     import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+    from flatbody_env.env.core import end_reason
 
-    env = gym.make(env_id, track_rotation=True, **(env_kwargs or {}))
+    with warnings.catch_warnings():  # a v0 id (the shipped agent's) is deprecated: the summary says so, once
+        warnings.simplefilter("ignore", DeprecationWarning)
+        env = gym.make(env_id, track_rotation=True, **(env_kwargs or {}))
     wrapper = None
     if record_to is not None:
         from flatbody_env.recording.wrapper import RerunRecorder
@@ -88,7 +92,7 @@ def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, 
         "energy": np.array(energy),
         "target": target,
         "success": bool(info["is_success"]),
-        "failure": info.get("integrator_failure") or info.get("left_domain"),
+        "failure": end_reason(int(info["status"]), int(info["domain_code"]), info["integrator"]["method"]) or None,
         "tolerance": u.task.success_tolerance,
         "body": u.body,
         "env_id": env_id,
@@ -96,14 +100,40 @@ def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, 
     }
 
 
-def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9) -> str:
-    """The short summary printed by ``flatbody demo``."""
+def _task(env_id: str) -> str:
+    """The task's id, marked when it is a deprecated v0 id (kept for the agents trained on it)."""
+    return f"{env_id} (deprecated v0 id)" if env_id.endswith("-v0") else env_id
+
+
+def outcome(ep: dict[str, Any]) -> str:
+    """How the episode ended, in words: on the target or not, when it first came within the tolerance, and what
+    ended it early (an integrator failure, leaving the domain or the tolerance)."""
+    t, d, tol = ep["t"], ep["distance"], ep["tolerance"]
+    reached = np.flatnonzero(d <= tol)
+    first = (
+        f"first within tolerance {tol:g} at t = {t[reached[0]]:.2f}"
+        if reached.size
+        else f"never within tolerance {tol:g}"
+    )
+    if ep["success"]:
+        text = f"SUCCESS: on the target ellipse at t = {t[-1]:.2f} ({first})"
+    else:
+        text = f"MISSED: not on the target at t = {t[-1]:.2f} ({first}; distance {d[0]:.4f} -> {d[-1]:.4f})"
+    if ep["failure"]:
+        text += f"; the episode ended early at t = {t[-1]:.2f}: {ep['failure']}"
+    return text
+
+
+def format_demo(ep: dict[str, Any], *, seed: int, label: str, rows: int = 9, command: str = "flatbody demo") -> str:
+    """The short summary printed by ``flatbody demo`` (and ``flatbody record --agent``, ``command``): a first line
+    that says who steered which task and how it ended (:func:`outcome`), the target, a table of the distance and the
+    state over time, and the distance's first and last values."""
     tg = ep["target"]
     t, d, y = ep["t"], ep["distance"], ep["states"]
     tol = ep["tolerance"]
     reached = np.flatnonzero(d <= tol)
     lines = [
-        f"flatbody demo: {label} steers the body onto a stationary ellipse ({ep.get('env_id', 'FlatBody-v0')}, seed {seed})",
+        f"{command}: {label} on {_task(ep.get('env_id', 'FlatBody-v0'))}, seed {seed}: {outcome(ep)}",
         f"target: lambda* = {tg['lambda']:.4f}, mu* = {tg['mu']:.4f}, rho* = {tg['rho']:.4f}, s3* = {tg['s3']:+.4f}, "
         f"p_theta = {tg['p_theta']:+.4f} (omega3* = {tg['omega3']:+.4f}, theta_dot* = {tg['theta_dot']:+.4f})",
         "",

@@ -9,6 +9,14 @@ continuation passes folds (turning points in p), where two solutions meet and di
 is detected where p turns back along the branch and is reported only when {F = 0, det F_z = 0}
 has a solution there (so a sharp bend near the circle λ = μ is not mistaken for a fold).
 
+The continuation never evaluates the equations outside the requested range [start, stop] (the
+Jacobian's difference quotient is one-sided at the range's ends, a step that would leave the range
+lands on its end instead), so a range whose ends are a constant's allowed bounds works. A range over
+two or more decades is followed in a scaled coordinate — ln p for a constant of the body, asinh(p/σ)
+for a spin (σ = max(1, |the held spin|)) — with seeds evenly spaced in it, so each decade gets its
+share of steps and seeds. Where each branch ends, and why (the range's end, the search box's edge, the
+circle λ = μ, a step that found no solution), is kept in :attr:`Family.ends`.
+
 Seeds: all solutions at several parameter values (the root finder of :mod:`analysis.stationary`);
 a seed already on a traced branch is skipped (checked by a Newton solve from the branch). Along
 every branch each point is verified (residual) and classified (:mod:`analysis.stability`); changes
@@ -130,6 +138,26 @@ class FamilyEvent:
 
 
 @dataclass(frozen=True, kw_only=True)
+class FamilyEnd:
+    """Where a branch stops, and why (two per branch: one at each end)."""
+
+    branch: int
+    param: float
+    lam: float
+    mu: float
+    reason: str
+    """One of :data:`END_REASONS`."""
+    detail: str
+    """The reason in words, with the bound or the step that stopped the branch."""
+
+
+END_REASONS = ("range", "box", "circle", "no-solution", "points")
+"""Why a branch ends: ``range`` the end of the requested range; ``box`` the edge of the search box (λ or μ
+would leave it); ``circle`` the circle λ = μ (outside the two-polar chart); ``no-solution`` no solution
+found within the smallest continuation step; ``points`` the point limit (``max_points``)."""
+
+
+@dataclass(frozen=True, kw_only=True)
 class Family:
     """Branches of stationary ellipses over a parameter range."""
 
@@ -140,6 +168,14 @@ class Family:
     body: Body
     branches: tuple[tuple[FamilyPoint, ...], ...]
     events: tuple[FamilyEvent, ...]
+    ends: tuple[FamilyEnd, ...] = ()
+    """Where and why each branch stops (:class:`FamilyEnd`), two per branch, in branch order."""
+    scale: str = "linear"
+    """The continuation coordinate: ``"linear"`` (p), ``"log"`` (ln p) or ``"asinh"`` (a spin over decades)."""
+    seeds: tuple[float, ...] = ()
+    """The parameter values at which all solutions were sought."""
+    empty_seeds: tuple[float, ...] = ()
+    """The seeds at which the search box held no stationary ellipse and no branch passes."""
 
     @property
     def folds(self) -> tuple[FamilyEvent, ...]:
@@ -148,25 +184,33 @@ class Family:
 
 # --------------------------------------------------------------------------------------------
 def body_with(body: Body, name: str, value: float) -> Body:
-    """A copy of ``body`` with one constant replaced (ValueError if the body has no such constant)."""
+    """A copy of ``body`` with one constant replaced (ValueError if the body has no such constant, or naming
+    ``name`` when ``value`` is outside the constant's allowed range)."""
     J, J3 = body.inertia.J1, body.inertia.J3
     pot, th = body.potential, body.thickness
-    if name == "J":
-        return replace(body, inertia=Inertia.isotropic(value, J3))
-    if name == "J3":
-        return replace(body, inertia=Inertia.isotropic(J, value))
-    if name in ("a", "b"):
-        if th is None:
-            raise ValueError(f"param: the body has no thickness potential, cannot vary {name!r}")
-        return replace(
-            body, thickness=ThicknessPotential(a=value if name == "a" else th.a, b=value if name == "b" else th.b)
-        )
-    if name == "k" and isinstance(pot, V1):
-        return replace(body, potential=V1(k=value))
-    if name in ("c", "d") and isinstance(pot, V2):
-        return replace(body, potential=V2(c=value if name == "c" else pot.c, d=value if name == "d" else pot.d))
-    if name == "kappa" and isinstance(pot, V3):
-        return replace(body, potential=V3(kappa=value))
+    try:
+        if name == "J":
+            return replace(body, inertia=Inertia.isotropic(value, J3))
+        if name == "J3":
+            return replace(body, inertia=Inertia.isotropic(J, value))
+        if name in ("a", "b"):
+            if th is None:
+                raise ValueError(f"param: the body has no thickness potential, cannot vary {name!r}")
+            return replace(
+                body, thickness=ThicknessPotential(a=value if name == "a" else th.a, b=value if name == "b" else th.b)
+            )
+        if name == "k" and isinstance(pot, V1):
+            return replace(body, potential=V1(k=value))
+        if name in ("c", "d") and isinstance(pot, V2):
+            return replace(body, potential=V2(c=value if name == "c" else pot.c, d=value if name == "d" else pot.d))
+        if name == "kappa" and isinstance(pot, V3):
+            return replace(body, potential=V3(kappa=value))
+    except ValueError as exc:
+        text = str(exc)
+        if text.startswith("param:"):
+            raise
+        # the body's own check names its field (params.J1, potential.kappa): name the constant varied instead
+        raise ValueError(f"{name}:{text.split(':', 1)[1] if ':' in text else ' ' + text}") from None
     raise ValueError(
         f"param: {name!r} is not a constant of this body ({body.describe()}); allowed: {', '.join(_allowed(body))}"
     )
@@ -181,15 +225,71 @@ def _allowed(body: Body) -> list[str]:
     return out
 
 
-class _Problem:
-    """F(z, p) for the continuation; z = (λ, μ) or (λ, μ, ϱ)."""
+DECADES = 2.0
+"""A range that spans this many decades or more is followed in a scaled coordinate (:func:`family_scale`)."""
 
-    def __init__(self, body: Body, name: str, s3: float, p_theta: float, rho: float | None) -> None:
+
+def family_scale(param: str, start: float, stop: float, *, s3: float = DEFAULT_S3, p_theta: float = DEFAULT_P_THETA):
+    """The continuation coordinate of a family: ``("linear", 1)``, ``("log", 1)`` for a constant of the body whose
+    range spans :data:`DECADES` or more (stop/start ≥ 100), or ``("asinh", σ)`` for a spin whose largest |value|
+    is ≥ 100 σ, σ = max(1, |the spin held fixed|) (a range through 0 over decades)."""
+    if param in BODY_PARAMETERS:
+        return ("log", 1.0) if start > 0 and stop / start >= 10.0**DECADES else ("linear", 1.0)
+    sigma = max(1.0, abs(p_theta if param == "s3" else s3))
+    return ("asinh", sigma) if max(abs(start), abs(stop)) >= 10.0**DECADES * sigma else ("linear", 1.0)
+
+
+class _OutsideRange(ValueError):
+    """A continuation coordinate outside the requested range: the equations are not evaluated there."""
+
+
+class _Problem:
+    """F(z, q) for the continuation; z = (λ, μ) or (λ, μ, ϱ), q the continuation coordinate of the parameter
+    (p itself, ln p or asinh(p/σ): :func:`family_scale`), which never leaves [q(start), q(stop)]."""
+
+    def __init__(
+        self,
+        body: Body,
+        name: str,
+        s3: float,
+        p_theta: float,
+        rho: float | None,
+        start: float,
+        stop: float,
+        scale: tuple[str, float] = ("linear", 1.0),
+    ) -> None:
         self.body0, self.name, self.s3, self.pt, self.rho = body, name, s3, p_theta, rho
         self.coupled = body.potential.kind == KIND_CUSTOM
         self._cache: dict[float, Body] = {}
+        self.start, self.stop = float(start), float(stop)
+        self.scale, self.sigma = scale
+        self.q_lo, self.q_hi = self.coord(self.start), self.coord(self.stop)
+        self.calls: list[float] = []
+        """Every parameter value the equations were evaluated at (kept only while ``record`` is set; tests)."""
+        self.record = False
+
+    # the continuation coordinate q of a parameter value p, and back (clamped into [start, stop])
+    def coord(self, p: float) -> float:
+        if self.scale == "log":
+            return math.log(p)
+        if self.scale == "asinh":
+            return math.asinh(p / self.sigma)
+        return float(p)
+
+    def value(self, q: float) -> float:
+        q = float(q)
+        if not (self.q_lo <= q <= self.q_hi):
+            raise _OutsideRange(f"{self.name}: outside the range [{self.start:g}, {self.stop:g}]")
+        if q == self.q_lo:
+            return self.start
+        if q == self.q_hi:
+            return self.stop
+        p = math.exp(q) if self.scale == "log" else self.sigma * math.sinh(q) if self.scale == "asinh" else q
+        return min(max(p, self.start), self.stop)
 
     def body(self, p: float) -> Body:
+        if self.record:
+            self.calls.append(p)
         if self.name in SPIN_PARAMETERS:
             return self.body0
         b = self._cache.get(p)
@@ -218,25 +318,31 @@ class _Problem:
         return 1.0 if self.rho is None else self.rho
 
     def F(self, X: np.ndarray) -> np.ndarray:
-        z, p = X[:-1], float(X[-1])
+        z, p = X[:-1], self.value(X[-1])
         b = self.body(p)
         f = equilibrium_equations(b, "N", self.spins(p), z[0], z[1], self.rho_of(z, p))
         return np.array(f if self.coupled else f[:2], float)
 
     def jac(self, X: np.ndarray) -> np.ndarray:
+        """∂F/∂(z, q) by difference quotients: central, and one-sided in q at the ends of the range."""
         n = X.size
         out = np.empty((n - 1, n))
         for i in range(n):
             h = 1e-6 * max(abs(X[i]), 1e-2)
+            hp = hm = h
+            if i == n - 1:
+                hp, hm = min(h, self.q_hi - X[i]), min(h, X[i] - self.q_lo)
+                if hp + hm <= 0.0:
+                    raise _OutsideRange(f"{self.name}: the range is a single point")
             Xp = X.copy()
             Xm = X.copy()
-            Xp[i] += h
-            Xm[i] -= h
-            out[:, i] = (self.F(Xp) - self.F(Xm)) / (2.0 * h)
+            Xp[i] += hp
+            Xm[i] -= hm
+            out[:, i] = (self.F(Xp) - self.F(Xm)) / (Xp[i] - Xm[i])
         return out
 
     def point(self, X: np.ndarray, tol: float) -> FamilyPoint | None:
-        z, p = X[:-1], float(X[-1])
+        z, p = X[:-1], self.value(X[-1])
         b = self.body(p)
         s3, pt = self.spins(p)
         ell = build_ellipse(b, "N", (s3, pt), float(z[0]), float(z[1]), self.rho_of(z, p), "continuation")
@@ -272,28 +378,31 @@ def _tangent(prob: _Problem, X: np.ndarray, prev: np.ndarray | None, direction: 
     return T / np.linalg.norm(T)
 
 
-def _correct(prob: _Problem, Xp: np.ndarray, T: np.ndarray, tol: float) -> tuple[np.ndarray | None, int]:
+def _correct(prob: _Problem, Xp: np.ndarray, T: np.ndarray, tol: float) -> tuple[np.ndarray | None, int, bool]:
+    """Newton on {F = 0, T·(X − Xp) = 0} from the predictor Xp: (X or None, iterations, whether an iterate
+    left the range)."""
     X = Xp.copy()
     for it in range(1, 12):
         try:
             f = prob.F(X)
-        except (ValueError, ZeroDivisionError, FloatingPointError):
-            return None, it
-        g = np.concatenate([f, [T @ (X - Xp)]])
-        if not np.all(np.isfinite(g)):
-            return None, it
-        A = np.vstack([prob.jac(X), T])
-        try:
+            g = np.concatenate([f, [T @ (X - Xp)]])
+            if not np.all(np.isfinite(g)):
+                return None, it, False
+            A = np.vstack([prob.jac(X), T])
             dX = np.linalg.solve(A, -g)
-        except np.linalg.LinAlgError:
-            return None, it
+        except _OutsideRange:
+            return None, it, True
+        except (ValueError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError):
+            return None, it, False
         X = X + dX
         if np.any(X[:-1] <= 0):
-            return None, it
+            return None, it, False
+        if not (prob.q_lo <= X[-1] <= prob.q_hi):
+            return None, it, True
         if np.max(np.abs(dX)) < 1e-13 * max(1.0, np.max(np.abs(X))):
-            return X, it
+            return X, it, False
     f = prob.F(X)
-    return (X, 12) if np.max(np.abs(f)) < tol else (None, 12)
+    return (X, 12, False) if np.max(np.abs(f)) < tol else (None, 12, False)
 
 
 def _in_domain(X: np.ndarray, box: SearchBox, prob: _Problem) -> bool:
@@ -303,9 +412,20 @@ def _in_domain(X: np.ndarray, box: SearchBox, prob: _Problem) -> bool:
     return abs(lam - mu) / (lam + mu) >= GAP_MIN
 
 
-def _solve_at(prob: _Problem, z0: np.ndarray, p: float) -> np.ndarray | None:
+def _why_outside(X: np.ndarray, box: SearchBox) -> tuple[str, str]:
+    """(reason, detail) of a continuation point outside the domain (:func:`_in_domain`)."""
+    lam, mu = float(X[0]), float(X[1])
+    for sym, v, (lo, hi) in (("λ", lam, box.lam), ("μ", mu, box.mu)):
+        if v > hi:
+            return "box", f"{sym} would exceed {hi:g}, the search box's edge (lam_range, mu_range widen it)"
+        if v < lo:
+            return "box", f"{sym} would fall below {lo:g}, the search box's edge (lam_range, mu_range widen it)"
+    return "circle", "it reaches the circle λ = μ, outside the two-polar chart"
+
+
+def _solve_at(prob: _Problem, z0: np.ndarray, q: float) -> np.ndarray | None:
     def f(z):
-        return prob.F(np.concatenate([z, [p]]))
+        return prob.F(np.concatenate([z, [q]]))
 
     from scipy.optimize import root  # here, not at import: flatbody --help reads the defaults without scipy
 
@@ -323,51 +443,60 @@ def _trace(
     prob: _Problem,
     X0: np.ndarray,
     direction: float,
-    p_lo: float,
-    p_hi: float,
     box: SearchBox,
     h0: float,
     h_max: float,
     max_points: int,
     tol: float,
-) -> list[np.ndarray]:
+) -> tuple[list[np.ndarray], tuple[str, str]]:
+    """Follow the branch through X0 in ``direction``: its points, and (reason, detail) of where it stops
+    (:data:`END_REASONS`). A step that would leave the range lands on the range's end instead."""
+    p_lo, p_hi = prob.q_lo, prob.q_hi
     pts = [X0]
     X = X0
     T = _tangent(prob, X, None, direction)
     h = h0
     while len(pts) < max_points:
-        Xn, its = _correct(prob, X + h * T, T, tol)
+        Xp = X + h * T
+        outside = not (p_lo <= Xp[-1] <= p_hi)
+        Xn = None
+        if not outside:
+            Xn, its, outside = _correct(prob, Xp, T, tol)
+        if outside:
+            # land exactly on the end of the parameter range the step would cross
+            pb = p_hi if Xp[-1] > X[-1] else p_lo
+            if abs(pb - X[-1]) <= 1e-12 * max(1.0, abs(pb)):
+                return pts, ("range", "the end of the requested range")
+            frac = (pb - X[-1]) / (Xp[-1] - X[-1]) if Xp[-1] != X[-1] else 1.0
+            zb = _solve_at(prob, X[:-1] + min(max(frac, 0.0), 1.0) * (Xp[:-1] - X[:-1]), pb)
+            if zb is not None:
+                Xb = np.concatenate([zb, [pb]])
+                if not _in_domain(Xb, box, prob) or (Xb[0] - Xb[1]) * (X0[0] - X0[1]) <= 0:
+                    return pts, _why_outside(Xb, box)
+                pts.append(Xb)
+                return pts, ("range", "the end of the requested range")
         if Xn is None or np.linalg.norm(Xn - X) > 3 * h:
             h *= 0.5
             if h < 1e-6 * h_max:
-                break
+                return pts, (
+                    "no-solution",
+                    f"no solution within a continuation step of {h:.2g} (a fold or a singularity?)",
+                )
             continue
-        if not (p_lo <= Xn[-1] <= p_hi):
-            # land exactly on the boundary of the parameter range
-            pb = p_hi if Xn[-1] > p_hi else p_lo
-            if abs(pb - X[-1]) <= 1e-12 * max(1.0, abs(pb)):
-                break
-            frac = (pb - X[-1]) / (Xn[-1] - X[-1])
-            zb = _solve_at(prob, X[:-1] + frac * (Xn[:-1] - X[:-1]), pb)
-            if zb is not None:
-                Xb = np.concatenate([zb, [pb]])
-                if _in_domain(Xb, box, prob) and (Xb[0] - Xb[1]) * (X0[0] - X0[1]) > 0:
-                    pts.append(Xb)
-            break
         if not _in_domain(Xn, box, prob) or (Xn[0] - Xn[1]) * (X0[0] - X0[1]) <= 0:
-            break
+            return pts, _why_outside(Xn, box)
         if _ends_at_circle(prob, X, Xn):
-            break
+            return pts, ("circle", "it reaches the circle λ = μ where s3 = p_θ (outside the two-polar chart)")
         T = _tangent(prob, Xn, T, direction)
         pts.append(Xn)
         X = Xn
         if its <= 3:
             h = min(1.5 * h, h_max)
-    return pts
+    return pts, ("points", f"the point limit ({max_points} points per direction)")
 
 
-def _sigma_minus(prob: _Problem, p: float) -> float:
-    s3, pt = prob.spins(p)
+def _sigma_minus(prob: _Problem, q: float) -> float:
+    s3, pt = prob.spins(prob.value(q))
     return s3 - pt
 
 
@@ -384,10 +513,10 @@ def _ends_at_circle(prob: _Problem, X: np.ndarray, Xn: np.ndarray) -> bool:
     a, b = _sigma_minus(prob, X[-1]), _sigma_minus(prob, Xn[-1])
     if a * b > 0:
         return False
-    p_star = prob.pt if prob.name == "s3" else prob.s3
-    w = 0.5 if Xn[-1] == X[-1] else (p_star - X[-1]) / (Xn[-1] - X[-1])
+    q_star = prob.coord(prob.pt if prob.name == "s3" else prob.s3)
+    w = 0.5 if Xn[-1] == X[-1] else (q_star - X[-1]) / (Xn[-1] - X[-1])
     zi = X[:-1] + w * (Xn[:-1] - X[:-1])
-    zs = _solve_at(prob, zi, p_star)
+    zs = _solve_at(prob, zi, q_star)
     if zs is None or abs(zs[0] - zs[1]) / (zs[0] + zs[1]) < GAP_MIN:
         return True
     return bool(np.linalg.norm(zs - zi) > 0.5 * np.linalg.norm(Xn[:-1] - X[:-1]) + 1e-9)
@@ -395,7 +524,7 @@ def _ends_at_circle(prob: _Problem, X: np.ndarray, Xn: np.ndarray) -> bool:
 
 def _refine_fold(prob: _Problem, Xa: np.ndarray, Xm: np.ndarray, Xb: np.ndarray) -> np.ndarray | None:
     """Solve {F = 0, det F_z = 0} from the extreme point Xm of the parameter; None unless it converges
-    to a genuine fold (F ≈ 0, F_z singular) between the neighbours Xa, Xb."""
+    to a genuine fold (F ≈ 0, F_z singular) between the neighbours Xa, Xb (and inside the range)."""
 
     def g(X):
         Jz = prob.jac(X)[:, :-1]
@@ -409,7 +538,7 @@ def _refine_fold(prob: _Problem, Xa: np.ndarray, Xm: np.ndarray, Xb: np.ndarray)
     except (ValueError, ZeroDivisionError):
         return None
     X = sol.x
-    if not np.all(np.isfinite(X)) or np.any(X[:-1] <= 0):
+    if not np.all(np.isfinite(X)) or np.any(X[:-1] <= 0) or not (prob.q_lo <= X[-1] <= prob.q_hi):
         return None
     span = np.linalg.norm(Xb - Xa) + 1e-12
     if np.linalg.norm(X - Xm) > span:
@@ -443,6 +572,28 @@ def _refine_change(prob: _Problem, Xa: np.ndarray, Xb: np.ndarray, cls_a: str, i
     return 0.5 * (lo + hi)
 
 
+def check_range(
+    param: str, start: Any, stop: Any, *, names: tuple[str, str] = ("start", "stop")
+) -> tuple[float, float]:
+    """A family's range [start, stop], checked before any work: finite numbers, start < stop and, for a constant
+    of the body, both within its allowed range (:data:`~flatbody_env.physics.validation.PARAM_RANGE`). ``names``:
+    the fields' names in the caller's words (``("from", "to")`` for the service, ``("--from", "--to")`` for the
+    command), which the messages start with."""
+    if param not in PARAMETERS:
+        raise ValueError(f"param: must be one of {', '.join(PARAMETERS)}, got {param!r}")
+    lo_name, hi_name = names
+    if param in BODY_PARAMETERS:
+        low, high = validation.PARAM_RANGE
+        start = validation.number(lo_name, start, low=low, high=high)
+        stop = validation.number(hi_name, stop, low=low, high=high)
+    else:
+        start = validation.number(lo_name, start, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
+        stop = validation.number(hi_name, stop, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
+    if not start < stop:
+        raise ValueError(f"{hi_name}: must be greater than {lo_name.lstrip('-')} ({start:g}), got {stop:g}")
+    return start, stop
+
+
 def follow_family(
     body: Body,
     param: str,
@@ -458,8 +609,12 @@ def follow_family(
     tol: float = DEFAULT_TOL,
     rho: float | None = None,
     progress: bool = False,
+    _problem: list | None = None,
 ) -> Family:
     """Follow every branch-N family while ``param`` runs over [start, stop].
+
+    The equations are never evaluated outside [start, stop] (module docstring); a range over two or more
+    decades is followed in a scaled coordinate (:func:`family_scale`).
 
     Parameters
     ----------
@@ -468,65 +623,84 @@ def follow_family(
     param : str
         ``"s3"``, ``"p_theta"`` or a constant of the body (:data:`BODY_PARAMETERS`).
     start, stop : float
-        The parameter range (start < stop; constants > 0).
+        The parameter range (start < stop; a constant's within its allowed range, :func:`check_range`).
     s3, p_theta : float
         The spins held fixed (the varied one is ignored).
     seeds : int
-        Parameter values (evenly spaced, ends included) at which all solutions are sought.
+        Parameter values (evenly spaced in the continuation coordinate, ends included) at which all
+        solutions are sought.
     box : SearchBox, optional
         Search box of the root finder; branches stop at its edges.
     step : float, optional
-        Largest continuation step (arclength); default (stop − start)/60.
+        Largest continuation step (arclength, in the continuation coordinate: p, ln p or asinh(p/σ));
+        default its range/60.
     tol : float
         Residual every point must meet.
 
     Returns
     -------
     Family
+        With :attr:`Family.ends`: where and why each branch stops.
     """
     check_isotropic(body)
-    if param not in PARAMETERS:
-        raise ValueError(f"param: must be one of {', '.join(PARAMETERS)}, got {param!r}")
-    for nm, v in (("start", start), ("stop", stop), ("s3", s3), ("p_theta", p_theta)):
+    for nm, v in (("s3", s3), ("p_theta", p_theta)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise ValueError(f"{nm}: must be a finite number, got {v!r}")
-    if not start < stop:
-        raise ValueError(f"stop: must be greater than start ({start!r}), got {stop!r}")
+    start, stop = check_range(param, start, stop)
     if param in BODY_PARAMETERS:
-        if start <= 0:
-            raise ValueError(f"start: the constant {param} must stay > 0 (allowed range (0, inf)), got {start!r}")
         body_with(body, param, start)  # raises if the body has no such constant
     seeds_lo, seeds_hi = FAMILY_SEEDS_RANGE
     if not (isinstance(seeds, int) and seeds_lo <= seeds <= seeds_hi):
         raise ValueError(f"seeds: must be an integer in [{seeds_lo}, {seeds_hi}], got {seeds!r}")
     box = box or SearchBox()
-    prob = _Problem(body, param, float(s3), float(p_theta), rho)
-    h_max = step if step is not None else (stop - start) / 60.0
+    scale = family_scale(param, start, stop, s3=float(s3), p_theta=float(p_theta))
+    prob = _Problem(body, param, float(s3), float(p_theta), rho, start, stop, scale)
+    if _problem is not None:  # tests: every parameter value the equations see
+        prob.record = True
+        _problem.append(prob)
+    h_max = step if step is not None else (prob.q_hi - prob.q_lo) / 60.0
     if not h_max > 0:
         raise ValueError(f"step: must be > 0, got {step!r}")
     traced: list[list[np.ndarray]] = []
-    seed_params = np.linspace(start, stop, seeds)
-    iterator = seed_params
+    ends_of: list[tuple[tuple[str, str], tuple[str, str]]] = []
+    seed_q = np.linspace(prob.q_lo, prob.q_hi, seeds)
+    seed_q[0], seed_q[-1] = prob.q_lo, prob.q_hi
+    seed_params = [prob.value(q) for q in seed_q]
+    empty: list[float] = []
+    iterator = list(zip(seed_q, seed_params))
     if progress:
         from flatbody_env.progress import progress_bar
 
-        iterator = progress_bar(seed_params, desc=f"family over {param}", unit="seed")
-    for ps in iterator:
-        b = prob.body(float(ps))
-        s3_p, pt_p = prob.spins(float(ps))
-        for ell in stationary_ellipses(
+        iterator = progress_bar(iterator, desc=f"family over {param}", unit="seed")
+    for qs, ps in iterator:
+        b = prob.body(ps)
+        s3_p, pt_p = prob.spins(ps)
+        found = stationary_ellipses(
             b, s3_p, pt_p, box=box, tol=tol, method="numeric" if prob.coupled else "auto", rho=rho
-        ):
+        )
+        if not found:
+            empty.append(ps)
+        for ell in found:
             z = np.array([ell.lam, ell.mu, ell.rho] if prob.coupled else [ell.lam, ell.mu])
-            if _on_branch(prob, traced, z, float(ps)):
+            if _on_branch(prob, traced, z, float(qs)):
                 continue
-            X0 = np.concatenate([z, [float(ps)]])
-            back = _trace(prob, X0, -1.0, start, stop, box, 0.2 * h_max, h_max, max_points, 1e-10)
-            fwd = _trace(prob, X0, +1.0, start, stop, box, 0.2 * h_max, h_max, max_points, 1e-10)
+            X0 = np.concatenate([z, [float(qs)]])
+            back, back_end = _trace(prob, X0, -1.0, box, 0.2 * h_max, h_max, max_points, 1e-10)
+            fwd, fwd_end = _trace(prob, X0, +1.0, box, 0.2 * h_max, h_max, max_points, 1e-10)
             traced.append(back[::-1] + fwd[1:])
+            ends_of.append((back_end, fwd_end))
+    spans = [(min(X[-1] for X in pts), max(X[-1] for X in pts)) for pts in traced]
+    empty = [ps for ps in empty if not any(lo <= prob.coord(ps) <= hi for lo, hi in spans)]
     branches: list[tuple[FamilyPoint, ...]] = []
     events: list[FamilyEvent] = []
+    ends: list[FamilyEnd] = []
     for bi, pts in enumerate(traced):
+        for X, (reason, detail) in ((pts[0], ends_of[bi][0]), (pts[-1], ends_of[bi][1])):
+            ends.append(
+                FamilyEnd(
+                    branch=bi, param=prob.value(X[-1]), lam=float(X[0]), mu=float(X[1]), reason=reason, detail=detail
+                )
+            )
         fam = [prob.point(X, tol) for X in pts]
         keep = [k for k, fp in enumerate(fam) if fp is not None]
         pts = [pts[k] for k in keep]
@@ -541,7 +715,7 @@ def follow_family(
                         FamilyEvent(
                             kind="fold",
                             branch=bi,
-                            param=float(Xf[-1]),
+                            param=prob.value(Xf[-1]),
                             lam=float(Xf[0]),
                             mu=float(Xf[1]),
                             detail="turning point in the parameter: two stationary ellipses merge",
@@ -555,7 +729,7 @@ def follow_family(
                     FamilyEvent(
                         kind="stability-change",
                         branch=bi,
-                        param=float(Xs[-1]),
+                        param=prob.value(Xs[-1]),
                         lam=float(Xs[0]),
                         mu=float(Xs[1]),
                         detail=f"{a.classification} -> {c.classification}",
@@ -569,6 +743,10 @@ def follow_family(
         body=body,
         branches=tuple(branches),
         events=tuple(events),
+        ends=tuple(ends),
+        scale=scale[0],
+        seeds=tuple(seed_params),
+        empty_seeds=tuple(empty),
     )
 
 
@@ -760,7 +938,11 @@ __all__ = [
     "MAP_MU_RANGE",
     "Family",
     "FamilyEvent",
+    "FamilyEnd",
     "FamilyPoint",
+    "END_REASONS",
+    "check_range",
+    "family_scale",
     "PARAMETERS",
     "SPIN_PARAMETERS",
     "body_with",

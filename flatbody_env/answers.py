@@ -108,7 +108,9 @@ def stability_answer(
 
 
 def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> dict:
-    """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row)."""
+    """The ``family --json`` object of a :class:`analysis.families.Family` (also a ``sweep family`` row): the range,
+    the branches' points and events, where and why each branch ends (``ends``), the continuation's ``scale`` and the
+    seeds (``empty_seeds``: those where the search box held no stationary ellipse)."""
     return {
         "param": fam.param_name,
         "range": list(fam.param_range),
@@ -120,6 +122,13 @@ def family_summary(fam, *, csv: str | None = None, plot: str | None = None) -> d
             {"kind": e.kind, "branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "detail": e.detail}
             for e in fam.events
         ],
+        "ends": [
+            {"branch": e.branch, "param": e.param, "lambda": e.lam, "mu": e.mu, "reason": e.reason, "detail": e.detail}
+            for e in getattr(fam, "ends", ())
+        ],
+        "scale": getattr(fam, "scale", "linear"),
+        "seeds": list(getattr(fam, "seeds", ())),
+        "empty_seeds": list(getattr(fam, "empty_seeds", ())),
         "csv": csv,
         "plot": plot,
     }
@@ -139,31 +148,40 @@ def family_run(
     out=None,
     plot=None,
     progress=False,
+    names=("start", "stop"),
+    on_stage=None,
 ):
     """Follow a family of stationary ellipses over ``vary`` (:func:`analysis.families.follow_family`); returns
     ``(family, family_summary)``, writing the CSV and the chart when ``out`` / ``plot`` are given. ``s3``,
     ``p_theta``, ``seeds`` None: the library's defaults (:data:`analysis.families.DEFAULT_S3`, ``DEFAULT_P_THETA``,
-    ``DEFAULT_SEEDS``)."""
+    ``DEFAULT_SEEDS``). ``names``: the range's fields in the caller's words (``("--from", "--to")``,
+    ``("from", "to")``), which a refused range is named by (:func:`analysis.families.check_range`). ``on_stage``:
+    called with ``"csv"`` and ``"plot"`` before each file is written (a job's progress)."""
     from analysis.families import (
         DEFAULT_P_THETA,
         DEFAULT_S3,
         DEFAULT_SEEDS,
         PARAMETERS,
+        check_range,
         follow_family,
         write_family_csv,
     )
 
     if vary not in PARAMETERS:
         raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {vary!r}")
+    start, stop = check_range(vary, start, stop, names=names)
     s3 = DEFAULT_S3 if s3 is None else float(s3)
     pt = DEFAULT_P_THETA if p_theta is None else float(p_theta)
     seeds = DEFAULT_SEEDS if seeds is None else seeds
     fam = follow_family(body, vary, start, stop, s3=s3, p_theta=pt, seeds=seeds, box=box, step=step, progress=progress)
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
+    stage = on_stage or (lambda _: None)
     if out is not None:
+        stage("csv")
         atomic_write(out, lambda tmp: write_family_csv(fam, tmp))
     if plot is not None:
+        stage("plot")
         from analysis.plots import plot_family
 
         atomic_write(plot, lambda tmp: plot_family(out, tmp))
@@ -175,9 +193,12 @@ def family_answer(body, vary: str, start: float, stop: float, **options) -> dict
     return family_run(body, vary, start, stop, **options)[1]
 
 
-def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot=None, progress: bool = False) -> dict:
+def stability_map_answer(
+    body, lam_range, mu_range, grid: int, *, out=None, plot=None, progress: bool = False, on_stage=None
+) -> dict:
     """What ``flatbody stability-map --json`` prints: ``{"rows": [...]}`` (files written when asked;
-    ``progress``: a bar over the grid's rows on stderr)."""
+    ``progress``: a bar over the grid's rows on stderr; ``on_stage``: called with ``"csv"`` and ``"plot"``
+    before each file is written)."""
     import numpy as np
 
     from analysis.families import shape_stability_grid, write_table_csv
@@ -186,9 +207,12 @@ def stability_map_answer(body, lam_range, mu_range, grid: int, *, out=None, plot
     rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, grid), np.linspace(lo_m, hi_m, grid), progress=progress)
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
+    stage = on_stage or (lambda _: None)
     if out is not None:
+        stage("csv")
         atomic_write(out, lambda tmp: write_table_csv(rows, tmp))
     if plot is not None:
+        stage("plot")
         from analysis.plots import plot_shape_map
 
         atomic_write(

@@ -181,7 +181,7 @@ def test_cli_simulate_json(tmp_path, capsys):
     "args, fragment",
     [
         (["simulate", "--scene", "nope"], "no built-in scene"),
-        (["simulate", "--scene", "default", "--t-end", "-2"], "t_end"),
+        (["simulate", "--scene", "default", "--t-end", "-2"], "--t-end: must be"),
         (["simulate", "--scene", "default", "--method", "Euler"], "method"),
         (["simulate", "--scene", "default", "--times", "1,x"], "times"),
     ],

@@ -128,7 +128,7 @@ def _export_after_training(out) -> None:
         export_policy(out)
     except ValueError as exc:
         sys.stderr.write(
-            f"flatbody: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n"
+            f"flatbody train: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n"
         )
 
 

@@ -256,6 +256,7 @@ def _family(args) -> int:
         out=args.out,
         plot=args.plot,
         progress=True,
+        names=("--from", "--to"),
     )
     start, stop, s3, pt, out, npts = (
         answer["range"][0],
@@ -284,6 +285,20 @@ def _family(args) -> int:
     for e in fam.events:
         print(
             f"  {e.kind} on branch {e.branch} at {args.vary} = {e.param:.6g} (lambda = {e.lam:.6g}, mu = {e.mu:.6g}) {e.detail}"
+        )
+    for e in fam.ends:
+        if e.reason != "range":
+            print(
+                f"  branch {e.branch} ends at {args.vary} = {e.param:.6g} (lambda = {e.lam:.4g}, mu = {e.mu:.4g}): {e.detail}"
+            )
+    if fam.empty_seeds:
+        print(
+            f"  no stationary ellipse in the search box at {args.vary} = "
+            + ", ".join(f"{v:.6g}" for v in fam.empty_seeds)
+        )
+    if fam.scale != "linear":
+        print(
+            f"  the range spans decades: followed in {'ln' if fam.scale == 'log' else 'asinh'}({args.vary}), seeds evenly spaced in it"
         )
     if out is not None:
         print(f"wrote {out}" + (f" and {args.plot}" if args.plot else ""))

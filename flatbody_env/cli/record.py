@@ -27,8 +27,8 @@ from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
 def _rrd_path(text: str) -> str:
     try:
         check_output_path("out", text.replace("{episode}", "0"), (".rrd",))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (a rerun recording file must end in .rrd)") from None
+    except ValueError as exc:  # "expected a file ending in .rrd" or the folder that is missing: said once
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return text
 
 
@@ -123,7 +123,7 @@ def _record_agent(args) -> int:
         title=args.title or f"agent {agent.path.name} (seed {args.seed})",
         env_id=agent.env_id,
     )
-    print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}"))
+    print(format_demo(ep, seed=args.seed, label=f"agent {agent.path}", command="flatbody record"))
     msg = f"wrote {ep['path']} ({ep['t'].size} steps)"
     if args.verify:
         from flatbody_env.recording.reader import verify_recording
@@ -166,24 +166,28 @@ def _record_env(args) -> int:
     zero = np.clip(np.zeros(space.shape, dtype=space.dtype), space.low, space.high) if hasattr(space, "low") else None
     if args.policy == "zero" and zero is None:
         raise ValueError("policy: 'zero' needs a Box action space; use --policy random")
+    heuristic = _heuristic_policy() if args.policy == "heuristic" else None
     total_steps = 0
     try:
         for ep in range(args.episodes):
-            env.reset(seed=args.seed + ep)
+            obs, _ = env.reset(seed=args.seed + ep)
             done = False
             with progress_bar(desc=f"episode {ep}", unit="step", leave=False) as bar:
                 while not done:
-                    action = zero if args.policy == "zero" else space.sample()
-                    _, _, terminated, truncated, _ = env.step(action)
+                    if heuristic is not None:
+                        action = heuristic(env, obs)
+                    else:
+                        action = zero if args.policy == "zero" else space.sample()
+                    obs, _, terminated, truncated, _ = env.step(action)
                     done = terminated or truncated
                     total_steps += 1
                     bar.update()
     finally:
         env.close()
-    for path in env.recorded_paths:
+    for path, outcome in zip(env.recorded_paths, env.outcomes):
         if args.verify:
             verify_recording(path)
-        print(f"wrote {path}" + ("; rerun rrd verify: ok" if args.verify else ""))
+        print(f"wrote {path}" + (f": {outcome}" if outcome else "") + ("; rerun rrd verify: ok" if args.verify else ""))
     print(f"{args.episodes} episode(s), {total_steps} steps, policy {args.policy}", file=sys.stderr)
     return 0
 
@@ -226,9 +230,29 @@ def _record_shots(args) -> int:
     return 0
 
 
+def _heuristic_policy():
+    """The LQR baseline (:class:`agents.heuristic.HeuristicController`) as ``policy(env, obs)`` (record-env, and
+    frame_strip for record-shots --frames)."""
+    import numpy as np
+
+    from agents.heuristic import HeuristicController
+
+    made: dict = {}
+
+    def policy(env, obs):
+        u = env.unwrapped
+        key = (id(u), u.body)  # a task that draws its body per episode gets its controller anew
+        if made.get("key") != key:
+            made["key"], made["h"] = key, HeuristicController(u.body, u.control, u.limits)
+        return made["h"].act(np.asarray(obs)[None])[0]
+
+    return policy
+
+
 def _frame_shot(args) -> int:
-    """``record-shots --frames 0,120``: FlatBody-v1's rgb_array frames after 0 and 120 seeded random actions,
-    side by side (:func:`flatbody_env.env.rendering.frame_strip`), written to OUT/PREFIX.png."""
+    """``record-shots --frames 0,120``: the env's rgb_array frames after 0 and 120 actions (seeded random ones, or
+    the LQR baseline's with ``--policy heuristic``), side by side with the episode's status
+    (:func:`flatbody_env.env.rendering.frame_strip`), written to OUT/PREFIX.png."""
     from PIL import Image
 
     from flatbody_env.env.rendering import frame_strip
@@ -237,15 +261,18 @@ def _frame_shot(args) -> int:
 
     if args.file is not None:
         raise ValueError("file: --frames draws the env's rgb_array frames; give a recording or --frames, not both")
-    strip = frame_strip(args.frames, seed=args.seed)
+    policy = _heuristic_policy() if args.policy == "heuristic" else None
+    strip = frame_strip(args.frames, seed=args.seed, env_id=args.env_id, policy=policy)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{args.prefix or 'frame-rgb_array'}.png"
     with atomic_path(path) as tmp:
         Image.fromarray(strip).save(tmp, format="PNG", optimize=True)
     _compact_png(path, args.colors)
+    actions = "random actions" if args.policy == "random" else "actions of the LQR baseline"
     print(
-        f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: FlatBody-v1, seed {args.seed}, after {', '.join(map(str, args.frames))} random actions)"
+        f"wrote {path}  ({strip.shape[1]}x{strip.shape[0]}: {args.env_id}, seed {args.seed}, after "
+        f"{', '.join(map(str, args.frames))} {actions})"
     )
     return 0
 
@@ -371,9 +398,9 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--policy",
-        choices=("zero", "random"),
+        choices=("zero", "random", "heuristic"),
         default="zero",
-        help="actions: zero control or uniform random (default zero)",
+        help="actions: zero control, uniform random or the LQR baseline (agents.heuristic) (default zero)",
     )
     p.add_argument(
         "--seed",
@@ -456,6 +483,13 @@ def register(sub) -> None:
         default=7,
         help="with --frames: the episode's seed (default 7)",
     )
+    p.add_argument(
+        "--policy",
+        choices=("random", "heuristic"),
+        default="random",
+        help="with --frames: seeded random actions or the LQR baseline's, which reaches the target (default random)",
+    )
+    p.add_argument("--env-id", default="FlatBody-v1", help="with --frames: the task (default FlatBody-v1)")
     p.set_defaults(handler=_record_shots)
 
 

@@ -34,38 +34,46 @@ def _run(args, spec) -> int:
         resume=args.resume,
         progress=not args.no_progress,
     )
-    _write_table(spec, report, Path(args.out), getattr(args, "plot", None))
+    written = _write_table(spec, report, Path(args.out), getattr(args, "plot", None))
     if args.json:
         print(json.dumps(as_json(report)))
     else:
         print(format_report(report))
+        print("wrote " + ", ".join(map(str, written)))
     if report.failed:
         sys.stderr.write(
-            f"flatbody: {len(report.failed)} of {report.total} tasks failed (recorded in {Path(args.out) / 'results.sqlite'};"
+            f"flatbody sweep: {len(report.failed)} of {report.total} tasks failed (recorded in {Path(args.out) / 'results.sqlite'};"
             " --resume retries them)\n"
         )
         return 1
     return 0
 
 
-def _write_table(spec, report, out: Path, plot: str | None) -> None:
+def _write_table(spec, report, out: Path, plot: str | None) -> list[Path]:
+    """Write the sweep's table (and chart); the files the sweep holds, the results database first."""
     from flatbody_env.sweep.report import rows_of
 
     rows = rows_of(report)
     kind = spec["kind"]
+    written = [out / "results.sqlite"]
     if kind == "stability-map":
         from analysis.families import write_table_csv
 
         csv = write_table_csv(rows, out / "stability_map.csv")
+        written.append(csv)
         if plot is not None:
             from analysis.plots import plot_shape_map
             from flatbody_env.physics.body import Body
 
             plot_shape_map(csv, plot, title=f"Stationary ellipses by shape, {Body.from_dict(spec['body']).describe()}")
+            written.append(Path(plot))
     elif kind in ("failure-study", "seeds") and rows:
         from analysis.families import write_table_csv
 
-        write_table_csv(rows, out / f"{kind.replace('-', '_')}.csv", columns=tuple(rows[0]))
+        written.append(write_table_csv(rows, out / f"{kind.replace('-', '_')}.csv", columns=tuple(rows[0])))
+    elif kind == "family":
+        written += sorted({out / r["csv"] for r in rows if r.get("csv")})
+    return written
 
 
 # ---------------------------------------------------------------------------------------------

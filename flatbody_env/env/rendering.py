@@ -5,8 +5,16 @@ Drawn with aggdraw on Pillow images (both declared in pyproject for this module)
 the ellipse Φ·(unit disc) = R·diag(λ, μ)·(unit circle) projected on the laboratory x–y plane
 (eq. (23) of the paper), filled with a shade that darkens with the thickness ϱ; its principal
 semi-axes are drawn in the colours of λ (red) and μ (green), the material fibre Φe₁ in gold (it
-turns inside the ellipse with U(θ), eq. (24)), and the target ellipse (λ*, μ*) is outlined in
-magenta along the current principal axes — the same colours as the top-down view of a recording.
+turns inside the ellipse with U(θ), eq. (24)), and the target ellipse (λ*, μ*) as a wide magenta line
+along the body's current principal axes (the target is a shape, λ*, μ*, ϱ*, not an
+orientation), with a dot in λ's red at the end of λ* and one in μ's green at the end of μ* — so a target whose
+λ* is the longer axis while the body's λ is the shorter one reads as what it is, not as a turn by 90°. The
+plate's edge is drawn over the target, so on target both are seen — the same colours as the top-down view of a
+recording.
+
+The status of the episode (:func:`frame_status`: the task, the step, the distance to the target against the
+task's tolerance, and what ended the episode, in red) is written in the top left corner when the caller gives
+it (``render_frame(..., status=...)``).
 
 Anti-aliasing: the shapes are drawn with aggdraw (Anti-Grain Geometry, sub-pixel coverage) — a
 supersampled Pillow drawing cost several milliseconds a frame. The text is DejaVu Sans (Greek
@@ -186,12 +194,15 @@ RHO_KEY = (0.5, 1.5)
 """The ϱ range of the fill key (the shade saturates outside it)."""
 
 
-def _legend() -> tuple[np.ndarray, np.ndarray]:
-    """The static legend (λ axis, μ axis, target, fibre e₁) as coverage and colours, built once."""
-    got = _STATIC.get("legend")
+def _legend(target: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The static legend (λ axis, μ axis, the target's shape when there is one, fibre e₁) as coverage and colours,
+    built once."""
+    key = "legend" if target else "legend-no-target"
+    got = _STATIC.get(key)
     if got is None:
-        rows = (("lambda", "λ axis"), ("mu", "μ axis"), ("target", "target"), ("fibre", "fibre e₁"))
-        h, w = 15 * len(rows), 84
+        rows = (("lambda", "λ axis"), ("mu", "μ axis")) + ((("target", "target shape"),) if target else ())
+        rows += (("fibre", "fibre e₁"),)
+        h, w = 15 * len(rows), 96
         alpha = np.zeros((h, w), dtype=np.float32)
         colors = np.zeros((h, w, 3), dtype=np.float32)
         for i, (name, label) in enumerate(rows):
@@ -203,7 +214,7 @@ def _legend() -> tuple[np.ndarray, np.ndarray]:
                 alpha[y : y + tm.shape[0], 18 : 18 + tm.shape[1]], tm
             )
             colors[y : y + tm.shape[0], 18 : 18 + tm.shape[1]][tm > 0] = _INK
-        got = _STATIC["legend"] = (alpha, colors)
+        got = _STATIC[key] = (alpha, colors)
     return got
 
 
@@ -249,8 +260,67 @@ def _scale_bar() -> tuple[np.ndarray, np.ndarray]:
     return got
 
 
+STATUS_INK = {"ok": (20, 120, 40), "ended": (190, 30, 30)}
+"""Colours of the status lines: the distance within the tolerance (green), the end of the episode (red)."""
+
+
+def frame_status(env, info: dict | None = None) -> dict:
+    """The status a frame writes (:func:`render_frame`'s ``status``) of a :class:`~flatbody_env.env.env.FlatBodyEnv`
+    (or a wrapper of one): its id, the step, the distance to the target, the task's tolerance, whether the distance
+    is within it, and what ended the episode ("" when nothing did). ``info``: the last step's, when the caller has it
+    (else the env's current one)."""
+    from flatbody_env.env.core import end_reason
+
+    u = getattr(env, "unwrapped", env)
+    if info is None:
+        info = u._info(False)
+    spec = getattr(u, "spec", None) or getattr(env, "spec", None)
+    dt = float(getattr(u, "dt", 0.0) or 0.0)
+    tol = getattr(getattr(u, "task", None), "success_tolerance", None)
+    return {
+        "env_id": getattr(spec, "id", None) or type(u).__name__,
+        "step": int(round(float(info.get("t", 0.0)) / dt)) if dt > 0 else None,
+        "distance": info.get("distance"),
+        "tolerance": None if tol is None else float(tol),
+        "ended": end_reason(int(info.get("status", 0)), int(info.get("domain_code", 0))),
+    }
+
+
+def _status_lines(t: float, status: dict | None) -> list[tuple[str, int, tuple[int, int, int]]]:
+    """The text of the top-left corner: (line, size, colour)."""
+    ink = tuple(int(v) for v in _INK)
+    if not status:
+        return [(f"t = {t:.2f}", 13, ink)]
+    step = status.get("step")
+    lines = [(f"t = {t:.2f}" + (f", step {step}" if step is not None else ""), 13, ink)]
+    if status.get("env_id"):
+        lines.append((str(status["env_id"]), 11, ink))
+    d, tol = status.get("distance"), status.get("tolerance")
+    if d is not None and math.isfinite(float(d)):
+        if tol is not None:
+            on = float(d) <= float(tol)
+            lines.append(
+                (
+                    f"distance {float(d):.3f} {'≤' if on else '>'} tol {float(tol):g}",
+                    11,
+                    STATUS_INK["ok"] if on else ink,
+                )
+            )
+        else:
+            lines.append((f"distance {float(d):.3f}", 11, ink))
+    if status.get("ended"):
+        lines.append((f"ended: {status['ended']}", 11, STATUS_INK["ended"]))
+    return lines
+
+
 def render_frame(
-    y: np.ndarray, R: np.ndarray, target: dict, t: float, *, half_width: float | None = None
+    y: np.ndarray,
+    R: np.ndarray,
+    target: dict,
+    t: float,
+    *,
+    half_width: float | None = None,
+    status: dict | None = None,
 ) -> np.ndarray:
     """An RGB frame of the plate seen from +z, shape (256, 256, 3), dtype uint8.
 
@@ -266,6 +336,9 @@ def render_frame(
         Simulated time, printed in the corner.
     half_width : float, optional
         Half-width of the view in length units (default :func:`view_half_width`).
+    status : dict, optional
+        The episode's status (:func:`frame_status`: ``env_id``, ``step``, ``distance``, ``tolerance``, ``ended``),
+        written under the time in the top left corner; without it the frame says the time only.
     """
     import aggdraw
 
@@ -281,9 +354,12 @@ def render_frame(
     canvas = aggdraw.Draw("RGB", (SIZE, SIZE), _BACKGROUND)
     # plate: R·diag(λ, μ)·circle, shaded darker for a thicker plate (the key in the corner)
     fill = plate_fill(rho)
-    canvas.polygon(
-        px(R2 @ (np.array([[lam], [mu]]) * _CIRCLE)), aggdraw.Pen(COLORS["plate_edge"], 1.2), aggdraw.Brush(fill)
-    )
+    plate = px(R2 @ (np.array([[lam], [mu]]) * _CIRCLE))
+    canvas.polygon(plate, aggdraw.Brush(fill))
+    if target:  # the target's shape along the body's axes: wide and translucent, under the plate's edge
+        lt, mt = float(target["lambda"]), float(target["mu"])
+        canvas.polygon(px(R2 @ (np.array([[lt], [mt]]) * _CIRCLE)), aggdraw.Pen(COLORS["target"], 3.0))
+    canvas.polygon(plate, aggdraw.Pen(COLORS["plate_edge"], 1.2))
     # principal semi-axes (columns of R, lengths λ, μ) in the colours of λ and μ
     for col, (length, name) in enumerate(((lam, "lambda"), (mu, "mu"))):
         end = R2[:, col] * length
@@ -291,11 +367,21 @@ def render_frame(
     # material fibre Φe₁ = R D U(θ)⁻¹ e₁ (eqs. (23)–(24)), both halves
     fib = R2 @ np.array([lam * math.cos(theta), -mu * math.sin(theta)])
     canvas.line(px(np.array([[-fib[0], fib[0]], [-fib[1], fib[1]]])), aggdraw.Pen(COLORS["fibre"], 1.4))
-    if target:
-        tgt = R2 @ (np.array([[float(target["lambda"])], [float(target["mu"])]]) * _CIRCLE)
-        canvas.polygon(px(tgt), aggdraw.Pen(COLORS["target"], 1.6))
+    if target:  # which target axis is which: a dot in λ's colour at the end of λ*, in μ's at the end of μ*
+        for col, (length, name) in enumerate(((lt, "lambda"), (mt, "mu"))):
+            for sign in (1.0, -1.0):
+                cx, cy = px(sign * R2[:, col : col + 1] * length)
+                canvas.ellipse((cx - 3, cy - 3, cx + 3, cy + 3), aggdraw.Pen("white", 1.0), aggdraw.Brush(COLORS[name]))
     frame = np.frombuffer(canvas.tobytes(), dtype=np.uint8).reshape(SIZE, SIZE, 3).copy()
-    _blend(frame, _text_alpha(f"t = {t:.2f}", 13), _INK, 5, 3)
+    y0 = 3
+    for text, size, color in _status_lines(t, status):
+        alpha = _text_alpha(text, size)
+        if status:  # over the plate: a light box behind the words
+            h, w = alpha.shape
+            box = frame[y0 : y0 + h, 3 : 3 + min(w + 4, SIZE - 3)]
+            box[:] = (box * 0.25 + np.array(_BACKGROUND) * 0.75).astype(np.uint8)
+        _blend(frame, alpha, color, 5, y0)
+        y0 += alpha.shape[0] - (3 if size < 13 else 2)
     # the fill's key (top right) with a mark at the current ϱ
     alpha, colors = _rho_key()
     kx = SIZE - alpha.shape[1] - 4
@@ -304,8 +390,11 @@ def render_frame(
     j = int(round((min(max(rho, RHO_KEY[0]), RHO_KEY[1]) - RHO_KEY[0]) / (RHO_KEY[1] - RHO_KEY[0]) * (KEY_W - 1)))
     frame[strip_y - 2 : strip_y + 10, kx + max(j - 1, 0) : kx + j + 1] = (20, 20, 20)
     value = _text_alpha(f"ϱ = {rho:.3f}", 12)
-    _blend(frame, value, _INK, SIZE - value.shape[1] - 4, strip_y + 24)
-    alpha, colors = _legend()
+    vx, vy = SIZE - value.shape[1] - 4, strip_y + 24
+    box = frame[vy : vy + value.shape[0], vx - 2 : SIZE - 2]  # over the plate: a light box behind the value
+    box[:] = (box * 0.25 + np.array(_BACKGROUND) * 0.75).astype(np.uint8)
+    _blend(frame, value, _INK, vx, vy)
+    alpha, colors = _legend(bool(target))
     _blend(frame, alpha, colors, 4, SIZE - alpha.shape[0] - 3)
     # scale bar: one length unit, the undeformed plate's radius
     bar_px = int(round(scale))
@@ -322,12 +411,21 @@ FRAME_GAP = 8
 """White pixels between the frames of :func:`frame_strip`."""
 
 
-def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v1", gap: int = FRAME_GAP) -> np.ndarray:
-    """The ``rgb_array`` frames of one episode side by side, as ``env.render()`` returns them: the env
-    reset with ``seed``, then seeded random actions (``env.action_space.seed(seed)``), a frame after
-    each number of actions in ``steps`` (increasing, ≥ 0), ``gap`` white pixels between two frames.
-    Shape (256, k·256 + (k−1)·gap, 3), uint8. The picture of the frame in docs/recording.md is
-    ``frame_strip()`` (``flatbody record-shots --frames 0,120``)."""
+def frame_strip(
+    steps=(0, 120),
+    *,
+    seed: int = 7,
+    env_id: str = "FlatBody-v1",
+    gap: int = FRAME_GAP,
+    policy=None,
+    with_status: bool = True,
+) -> np.ndarray:
+    """The ``rgb_array`` frames of one episode side by side: the env reset with ``seed``, then actions
+    (``policy(env, obs)``; default seeded random actions, ``env.action_space.seed(seed)``), a frame after each
+    number of actions in ``steps`` (increasing, ≥ 0), ``gap`` white pixels between two frames. Each frame is the
+    env's :func:`render_frame` of its state, with the episode's status (:func:`frame_status`) when ``with_status``.
+    Shape (256, k·256 + (k−1)·gap, 3), uint8. The pictures of the frame in docs/recording.md are
+    ``flatbody record-shots --frames 0,120`` and ``--frames 0,120,300 --policy heuristic``."""
     import gymnasium as gym
 
     steps = [int(s) for s in steps]
@@ -337,16 +435,20 @@ def frame_strip(steps=(0, 120), *, seed: int = 7, env_id: str = "FlatBody-v1", g
         raise ValueError(f"gap: must be ≥ 0, got {gap!r}")
     env = gym.make(f"flatbody_env:{env_id}", render_mode="rgb_array")  # (the prefix imports the package: the ids)
     try:
-        env.reset(seed=seed)
+        obs, info = env.reset(seed=seed)
         env.action_space.seed(seed)
+        u = env.unwrapped
         frames, done = [], 0
         for want in steps:
             while done < want:
-                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                action = env.action_space.sample() if policy is None else policy(env, obs)
+                obs, _, terminated, truncated, info = env.step(action)
                 done += 1
-                if terminated or truncated:
+                if (terminated or truncated) and done < want:
                     raise ValueError(f"frames: the episode (seed {seed}) ended after {done} actions, before {want}")
-            frames.append(np.array(env.render(), dtype=np.uint8))
+            R = u.rotation if u.rotation is not None else np.eye(3)
+            status = frame_status(env, info) if with_status else None
+            frames.append(render_frame(u.physics_state, R, u.target, u.time, status=status))
     finally:
         env.close()
     height = max(f.shape[0] for f in frames)

@@ -59,8 +59,12 @@ method's ``(kind, coefficients)`` from the method table (:mod:`.specs`), no Pyth
 from __future__ import annotations
 
 import functools
+import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -123,6 +127,48 @@ _COMPILED_RATE = 2e5
 """Evaluations per second below which a probe is taken to have included loading the kernel (compiled
 kernels run far faster: the per-step costs of ``flatbody bench integrators``, docs/integrators.md), so a
 second probe measures the rate."""
+
+
+_WATCHERS: list[tuple[Callable[[float, float, float], None], float]] = []
+"""The watchers of this process's compiled integrations (:func:`watching_kernels`), innermost last."""
+
+
+@contextmanager
+def watching_kernels(watch: Callable[[float, float, float], None], *, every: float = 0.05) -> Iterator[None]:
+    """While inside, ``watch(t, t_first, t_last)`` is called every ``every`` seconds from a thread while a compiled
+    integration of this process runs: ``t`` is the time its kernel has reached (written by the kernel as it goes;
+    the kernels release the GIL), ``t_first, t_last`` its first and last output times. A long integration is one
+    call into compiled code; this is how a caller (a service job's progress) sees it move."""
+    entry = (watch, float(every))
+    _WATCHERS.append(entry)
+    try:
+        yield
+    finally:
+        _WATCHERS.remove(entry)
+
+
+def _watched(run: Callable[[], Any], times: np.ndarray, fail: np.ndarray) -> Any:
+    """``run()`` (a compiled kernel writing the time it has reached to ``fail[0]``), watched by the innermost
+    :func:`watching_kernels` watcher when there is one."""
+    if not _WATCHERS:
+        return run()
+    watch, every = _WATCHERS[-1]
+    t0, t1 = float(times[0]), float(times[-1])
+    done = threading.Event()
+
+    def look() -> None:
+        while not done.wait(every):
+            t = float(fail[0])
+            if t0 <= t <= t1:
+                watch(t, t0, t1)
+
+    watcher = threading.Thread(target=look, name="flatbody-kernel-watch", daemon=True)
+    watcher.start()
+    try:
+        return run()
+    finally:
+        done.set()
+        watcher.join()
 
 
 def _run_within_budget(run, counters: np.ndarray, tol: Tolerances) -> tuple[int, bool]:
@@ -228,7 +274,7 @@ class CompiledTwoPolar:
                 fail[:] = 0.0
                 return dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
 
-            st, wall = _run_within_budget(run, counters, tol)  # max_nfev and max_wall_time
+            st, wall = _watched(lambda: _run_within_budget(run, counters, tol), times, fail)  # max_nfev, max_wall_time
         else:
 
             def probe() -> int:  # a few hundred steps from the first time: the cost of one RHS evaluation
@@ -250,7 +296,11 @@ class CompiledTwoPolar:
                 return int(c[0])
 
             _check_fixed_wall_time(name, probe, total, tol, float(times[0]))
-            st = fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail)
+            st = _watched(
+                lambda: fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail),
+                times,
+                fail,
+            )
         if KINDS[st] == "budget":
             used = f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {time.perf_counter() - start:.3g} s"
             raise budget_error(
@@ -319,8 +369,12 @@ class CompiledRattle:
         fail = np.zeros(2)
         from flatbody_env.integrators.rattle_kernels import rattle_solve
 
-        st = rattle_solve(
-            self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail
+        st = _watched(
+            lambda: rattle_solve(
+                self.coeffs, z0, dec0, times, uu, P, h, keep_order, float(tol.energy_tol), Z, DEC, counters, fail
+            ),
+            times,
+            fail,
         )
         if KINDS[st] == "chart-singularity":
             raise IntegrationError(
@@ -459,4 +513,5 @@ __all__ = [
     "kernel_params",
     "paper_states",
     "warm_up",
+    "watching_kernels",
 ]

@@ -10,8 +10,10 @@ The window (time panel collapsed, side panels closed)::
     │ plate, top    │ 3-D view /    │ G tensor │ G, C: numbers  │
     │ view (lab +z) │ material frame│ C tensor │ and eigenvalues│
     ├───────────────┴──┬────────────┴─────┬────┴────────────────┤
-    │ λ, μ, ϱ (+ λ*,…) │ episode: reward,  │ s₃ · p_θ · drift ·  │
-    │                  │ distance, actions │ H · θ · G · C · text│
+    │ λ, μ, ϱ (+ λ*,…) │ episode: distance │ episode: energy     │
+    │                  │ · reward · actions│ balance H − H₀ = W  │
+    │                  │ free: drift · H   │ ─────────────────── │
+    │                  │                   │ residual · P̄ · s₃ … │
     └──────────────────┴───────────────────┴─────────────────────┘
 
 Colours come from :data:`flatbody_env.env.rendering.COLORS`, the same as the ``rgb_array`` frames:
@@ -55,38 +57,45 @@ DRIFT_SERIES = (("energy", "ΔH/|H₀|"), ("casimir", "Δ|s|²/|s|²₀"), ("p_t
 """Relative drift of the conserved quantities, (Q − Q₀)/|Q₀| (absolute Q − Q₀ where Q₀ = 0)."""
 
 SERIES_COLORS: dict[str, tuple[int, int, int]] = {
-    # the controls u = (τ₁, τ₂, τ₃, f_ϱ): light tints, none of them a state variable's colour
-    "action/tau1": (255, 152, 150),
-    "action/tau2": (152, 223, 138),
-    "action/tau3": (174, 199, 232),
-    "action/f_rho": (255, 187, 120),
-    # the energy balance of an episode
-    "power": (0, 255, 255),
-    "balance/work": (255, 255, 0),
+    # the controls u = (τ₁, τ₂, τ₃, f_ϱ): hues of their own, no pale tint of a variable's colour (a tint reads as
+    # that variable or as its target's faint band)
+    "action/tau1": (255, 225, 0),
+    "action/tau2": (255, 75, 165),
+    "action/tau3": (0, 225, 165),
+    "action/f_rho": (180, 120, 255),
+    # the energy balance of an episode: H − H₀ wide in H's colour, the work W thin and light on top of it, the
+    # residual H − H₀ − W and the control's power on their own
+    "power": (255, 240, 165),
+    "balance/work": (150, 210, 255),
     "balance/delta_energy": COLORS["energy"],
-    # reward terms of FlatBody-v0 (others take the spare colours below, in order of appearance)
-    "reward/shape": (247, 182, 210),
-    "reward/spin": (219, 219, 141),
-    "reward/tumble": (160, 120, 60),
-    "reward/rest": (0, 200, 160),
-    "reward/action": (120, 80, 255),
-    "reward/failure": (255, 80, 160),
-    "reward/total": (180, 255, 80),
-    "distance_tolerance": (250, 250, 250),
+    "residual": (255, 150, 150),
+    # the reward terms of the v1 tasks (success, proximity) and of FlatBody-v0 (others take the spare colours)
+    "reward/success": (0, 255, 105),
+    "reward/proximity": (255, 180, 75),
+    "reward/shape": (255, 165, 210),
+    "reward/spin": (180, 240, 240),
+    "reward/tumble": (195, 120, 60),
+    "reward/rest": (0, 165, 105),
+    "reward/action": (195, 75, 255),
+    "reward/failure": (255, 45, 105),
+    "reward/alive": (150, 150, 90),
+    "reward/total": (195, 195, 210),
+    "distance_tolerance": (255, 255, 255),
 }
-"""Colours of the series that are not state variables (actions, reward terms, the energy balance,
-the tolerance line): each differs from every variable's colour in :data:`COLORS` and from the
-others by a CIE ΔE ≥ 20 (``tests/recording/test_layout.py`` checks it in the files)."""
+"""Colours of the series that are not state variables (actions, reward terms, the energy balance, the tolerance
+line): each differs from every variable's colour in :data:`COLORS` by a CIE ΔE ≥ 27 and from the others by ΔE ≥ 21
+(``tests/recording/test_layout.py`` checks ≥ 19 in the files)."""
 
-SPARE_COLORS = ((230, 140, 255), (110, 130, 60), (50, 255, 119), (187, 50, 255), (255, 0, 0), (84, 255, 50))
+SPARE_COLORS = ((195, 255, 0), (225, 195, 255), (150, 165, 240), (255, 135, 90), (90, 240, 240), (210, 210, 180))
 """Colours for reward terms or actions this layout does not name, in order of appearance."""
 
 TENSOR_ENTRY_COLORS = np.array(
-    [(140, 255, 216), (140, 235, 255), (140, 178, 255), (216, 140, 255), (255, 140, 216), (255, 187, 50)],
+    [(255, 135, 90), (90, 240, 240), (210, 210, 180), (255, 0, 255), (135, 255, 135), (255, 255, 105)],
     dtype=np.uint8,
 )
 """Colours of the entries 11, 22, 33, 12, 13, 23 of G and C (the same entry the same colour in both
-views; none of them a variable's colour)."""
+views; none of them a variable's colour, each far from the others: 11 salmon, 22 aqua, 33 beige, 12 magenta,
+13 light green, 23 yellow)."""
 
 AXIS_COLORS = np.array([(*COLORS["lambda"], 255), (*COLORS["mu"], 255), (*COLORS["rho"], 255)], dtype=np.uint8)
 """Principal-axis arrows e₁, e₂, e₃ (semi-axes λ, μ, ϱ) in the colours of λ, μ, ϱ."""
@@ -94,6 +103,8 @@ AXIS_COLORS = np.array([(*COLORS["lambda"], 255), (*COLORS["mu"], 255), (*COLORS
 LINE_WIDTH = 2.0
 TARGET_WIDTH = 6.0
 TARGET_ALPHA = 90
+BALANCE_WIDTH = 5.0
+"""Width of H − H₀ in the energy balance: the work W (1.5 wide, light) is drawn inside it, so both are seen."""
 
 FLAT_RTOL = 1e-8
 """A panel whose values spread by less than this, relative to the panel's scale, is round-off: it is
@@ -128,8 +139,10 @@ def series_style(path: str, index: int = 0) -> tuple[str, list[int], float]:
     if len(parts) == 2 and parts[1] in COLORS:
         return display_name(parts[1]), rgba(COLORS[parts[1]]), LINE_WIDTH
     if key in SERIES_LABELS:
-        if key == "balance/delta_energy":  # a wide faint band under the work W that should cover it
-            return SERIES_LABELS[key], rgba(SERIES_COLORS[key], 150), TARGET_WIDTH
+        if key == "balance/delta_energy":  # wide, in H's colour: the work W, thin and light, runs inside it
+            return SERIES_LABELS[key], rgba(SERIES_COLORS[key]), BALANCE_WIDTH
+        if key == "balance/work":
+            return SERIES_LABELS[key], rgba(SERIES_COLORS[key]), 1.5
         return SERIES_LABELS[key], rgba(SERIES_COLORS[key]), (3.0 if key == "reward/total" else LINE_WIDTH)
     group, name = parts[1], "/".join(parts[2:])
     if group == "target" and name in COLORS:
@@ -146,8 +159,9 @@ def series_style(path: str, index: int = 0) -> tuple[str, list[int], float]:
 
 SERIES_LABELS = {
     "power": "P̄ = ω·τ + ϱ̇ f_ϱ (mean over the step)",
-    "balance/work": "W = ∫ P dt (work of the control)",
-    "balance/delta_energy": "H − H₀",
+    "balance/work": "W = ∫ P dt (work of the control), inside",
+    "balance/delta_energy": "H − H₀ (wide)",
+    "residual": "H − H₀ − W",
     "distance_tolerance": "success tolerance",
     "reward/total": "total reward",
 }
@@ -195,6 +209,7 @@ def _series_view(
     legend: bool,
     t_range: tuple[float, float] | None,
     end: float | None,
+    scale: float = 1.0,
 ):
     import rerun as rr
     import rerun.blueprint as rrb
@@ -204,7 +219,8 @@ def _series_view(
     if t_range is not None and end is not None:  # the whole run, and room on the right for the last tick label
         axis_x = rrb.TimeAxis(
             view_range=rr.TimeRange(
-                start=rr.TimeRangeBoundary.absolute(seconds=t_range[0]), end=rr.TimeRangeBoundary.absolute(seconds=end)
+                start=rr.TimeRangeBoundary.absolute(seconds=t_range[0] * scale),
+                end=rr.TimeRangeBoundary.absolute(seconds=end * scale),
             )
         )
     return rrb.TimeSeriesView(
@@ -214,6 +230,36 @@ def _series_view(
         plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend),
         axis_y=axis_y,
         axis_x=axis_x,
+    )
+
+
+TIME_UNITS = ((1.0, "s"), (1e-3, "ms"), (1e-6, "µs"))
+"""Seconds of the ``sim_time`` timeline per model time unit, and rerun's name of that duration, tried in turn
+(:func:`time_unit`)."""
+
+
+def time_unit(t_end: float) -> tuple[float, str]:
+    """(seconds per model time unit, unit) of a recording whose run ends at ``t_end``.
+
+    rerun 0.41 prints a duration axis in the largest unit that reaches a whole one: seconds up to a minute, then
+    minutes — so 1 model unit = 1 s read a 200-unit run as ``+1m +2m +3m``. A run is logged with the first unit
+    of :data:`TIME_UNITS` under which its whole time axis (with :data:`TIME_MARGIN`) stays below a minute: model
+    time then reads as rerun's number, in powers of ten: ``+150ms`` is t = 150 and ``+2s`` t = 2000 in a run
+    logged in milliseconds (the description says so)."""
+    end = abs(float(t_end)) * (1.0 + TIME_MARGIN)
+    for scale, name in TIME_UNITS:
+        if end * scale < 60.0:
+            return scale, name
+    return TIME_UNITS[-1]
+
+
+def time_note(scale: float, name: str) -> str:
+    """How to read a recording's time axes, for its description."""
+    if scale == 1.0:
+        return "model time on the time axis: 1 model time unit is shown as 1 s (+10s is t = 10)"
+    return (
+        f"model time on the time axis, logged as 1 model time unit = 1 {name} so that rerun never prints minutes: "
+        f"+150{name} is t = 150" + (", +2s is t = 2000" if name == "ms" else ", +2ms is t = 2000")
     )
 
 
@@ -256,15 +302,18 @@ def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
     The scale rule names what a spread is compared with (:func:`y_axis`): ``"self"`` the largest
     value shown, ``"spin"`` |s| (for s₃, p_θ), ``"angle"`` π, ``"relative"`` 1 (a relative drift),
     ``"energy"`` the largest |H| (the energy balance), ``"power"`` the largest |H| per unit time,
-    ``"unit"`` 1 (actions in [−1, 1])."""
+    ``"unit"`` 1 (actions in [−1, 1]), ``"residual"`` its own largest value (the balance's residual, always
+    drawn as a signal, however small). Titles are short (they are tab labels) and hold no " · ", which
+    starts the notes :func:`view_specs` adds from the values."""
     views = [(SHAPE_TITLE + (SHAPE_TARGETS if episode else ""), _shape_paths(episode), "self")]
     if episode:
         views += [
+            ("distance, tolerance", ("/series/distance", "/series/distance_tolerance"), "self"),
             ("reward terms", ("/series/reward",), "self"),
-            ("distance to the target, tolerance", ("/series/distance", "/series/distance_tolerance"), "self"),
-            ("actions u = (τ₁, τ₂, τ₃, f_ϱ) in [−1, 1]", ("/series/action",), "unit"),
-            ("energy balance: H − H₀ = W (control work)", ("/series/balance",), "energy"),
-            ("control power P̄ = ω·τ + ϱ̇ f_ϱ", ("/series/power",), "power"),
+            ("actions in [−1, 1]", ("/series/action",), "unit"),
+            ("energy balance H − H₀ = W", ("/series/balance",), "energy"),
+            ("residual H − H₀ − W", ("/series/residual",), "residual"),
+            ("control power P̄", ("/series/power",), "power"),
         ]
     else:
         views += [
@@ -284,10 +333,58 @@ def series_views(*, episode: bool) -> list[tuple[str, tuple[str, ...], str]]:
     views += [
         ("|s|² (Casimir)", ("/series/casimir",), "self"),
         ("θ (material angle)", ("/series/theta",), "angle"),
-        ("G = ΦᵀΦ entries 11 22 33 12 13 23", ("/series/G",), "self"),
+        ("G = ΦᵀΦ entries 11 22 33 12 (13 = 23 = 0)", ("/series/G",), "self"),
         ("C = Φ⁻ᵀΦ⁻¹ entries 11 22 33 12 13 23", ("/series/C",), "self"),
     ]
     return views
+
+
+NOTE_SEP = " · "
+"""Starts a note that :func:`view_specs` adds to a title from the logged values (a magnitude, the reward terms left
+out); :func:`base_title` strips it."""
+
+
+def base_title(name: str) -> str:
+    """The title :func:`series_views` gives a view whose name carries notes (:data:`NOTE_SEP`, :data:`FLAT_NOTE`)."""
+    return name.removesuffix(FLAT_NOTE).split(NOTE_SEP)[0]
+
+
+def _short(x: float) -> str:
+    return f"{x:.2g}" if x != 0 else "0"
+
+
+def constant_terms(ranges: dict[str, tuple[float, float, int]] | None) -> dict[str, float]:
+    """Reward terms that keep one value over the whole recording (``alive``: 1 at every step), by entity path: they
+    are left out of the reward view, which would otherwise be scaled to them and flatten the terms that move, and
+    its title names them (:func:`view_specs`). The total is always drawn."""
+    out = {}
+    for path, (lo, hi, _) in (ranges or {}).items():
+        if path.startswith("/series/reward/") and path != "/series/reward/total" and lo == hi:
+            out[path] = lo
+    return out
+
+
+def _notes(base: str, paths: tuple[str, ...], ranges: dict | None) -> str:
+    """The notes of a view from the logged values: the largest relative drift of each conserved quantity, the
+    balance's residual, the reward terms left out (:func:`constant_terms`)."""
+    if not ranges:
+        return ""
+    if "/series/drift" in paths:
+        parts = []
+        for name, _ in DRIFT_SERIES:
+            r = ranges.get(f"/series/drift/{name}")
+            if r is not None:
+                parts.append(f"{GREEK.get(name, name)} {_short(max(abs(r[0]), abs(r[1])))}")
+        return f"{NOTE_SEP}largest: " + ", ".join(parts) if parts else ""
+    if "/series/residual" in paths:
+        r = ranges.get("/series/residual")
+        return f"{NOTE_SEP}largest {_short(max(abs(r[0]), abs(r[1])))}" if r else ""
+    if "/series/reward" in paths:
+        const = constant_terms(ranges)
+        if const:
+            terms = ", ".join(f"{p.rsplit('/', 1)[-1]} ≡ {v + 0.0:g}" for p, v in sorted(const.items()))  # no -0
+            return f"{NOTE_SEP}not drawn: {terms}"
+    return ""
 
 
 def _members(paths: tuple[str, ...], ranges: dict[str, tuple[float, float, int]]) -> list[str]:
@@ -364,7 +461,7 @@ def y_axis(
     False: the title names the colours), the lower margin widened to keep a labelled tick off the lower
     edge (:func:`_clear_bottom`). None when nothing is logged.
     """
-    members = _members(paths, ranges)
+    members = [m for m in _members(paths, ranges) if m not in constant_terms(ranges)]
     if not members:
         return None, False, 0
     lo = min(ranges[m][0] for m in members)
@@ -387,8 +484,10 @@ def y_axis(
         h = ranges.get("/series/energy")
         if h and t_range and t_range[1] > t_range[0]:
             big = max(big, max(abs(h[0]), abs(h[1])) / (t_range[1] - t_range[0]))
-    if hi - lo <= FLAT_RTOL * big:
-        half = nice_range(0.1 * big) if big > 0 else 1.0
+    if rule == "residual":
+        big = 0.0  # drawn as a signal however small: its size is the point (the title says it)
+    if hi - lo <= FLAT_RTOL * big or hi == lo:
+        half = nice_range(0.1 * big) if big > 0 else (nice_range(0.1 * abs(hi)) if hi else 1.0)
         step = half / 5.0
         c = round(0.5 * (lo + hi) / step) * step
         pad = FLAT_PAD * half  # the end ticks (c ± half) sit inside the view: their labels are not cut by its edges
@@ -438,7 +537,7 @@ def view_specs(
     ]
     for name, paths, rule in series_views(episode=episode):
         flat = bool(ranges) and y_axis(paths, rule, ranges, t_range)[1]
-        specs.append(("TimeSeries", name + (FLAT_NOTE if flat else ""), paths))
+        specs.append(("TimeSeries", name + _notes(name, paths, ranges) + (FLAT_NOTE if flat else ""), paths))
     return specs
 
 
@@ -449,7 +548,7 @@ def series_axes(*, episode: bool, ranges: dict | None, t_range: tuple[float, flo
     for cls, name, _ in view_specs(episode=episode, ranges=ranges, t_range=t_range):
         if cls != "TimeSeries":
             continue
-        base = name[: -len(FLAT_NOTE)] if name.endswith(FLAT_NOTE) else name
+        base = base_title(name)
         sp, rule = {n: (p, r) for n, p, r in series_views(episode=episode)}[base]
         legend = not base.startswith(SHAPE_TITLE)
         axis, entries = None, len(sp)
@@ -467,6 +566,7 @@ def blueprint(
     ranges: dict | None = None,
     t_range: tuple[float, float] | None = None,
     axes: list[tuple] | None = None,
+    time_scale: float = 1.0,
 ):
     """The default blueprint of a recording.
 
@@ -485,6 +585,8 @@ def blueprint(
     axes : list, optional
         The time-series views' axes when not :func:`series_axes` of ``ranges`` (a recording of several
         blocks: :func:`grow_axes`).
+    time_scale : float
+        Seconds of ``sim_time`` per model time unit (:func:`time_unit`).
     """
     import rerun.blueprint as rrb
 
@@ -509,23 +611,24 @@ def blueprint(
             )
         if cls == "TextDocument":
             return rrb.TextDocumentView(name=name, origin=paths[0])
-        base = name[: -len(FLAT_NOTE)] if name.endswith(FLAT_NOTE) else name
-        sp, _ = series[base]
+        sp, _ = series[base_title(name)]
         contents = [c for p in sp for c in (p, p + "/**")]
+        contents += [f"- {p}" for p in constant_terms(ranges) if any(p.startswith(q + "/") for q in sp)]
         axis, legend, end = axes[name]
-        return _series_view(name, contents, axis=axis, legend=legend, t_range=t_range, end=end)
+        return _series_view(name, contents, axis=axis, legend=legend, t_range=t_range, end=end, scale=time_scale)
 
     views = [view(*s) for s in specs]
     top_row = rrb.Horizontal(
         views[0], rrb.Tabs(views[1], views[2], active_tab=0), views[3], views[4], column_shares=[3, 3, 2.2, 2.6]
     )
     shape, rest = views[5], views[6:]
-    k = 5 if episode else 2  # episode: reward, distance, actions | balance, power, …; free: drift, H | …
+    # episode: distance (the criterion, in front), reward, actions | the balance over its residual (both on screen),
+    # power, …; free: drift, H | s₃, …
+    k = 3 if episode else 2
+    middle = rrb.Tabs(*rest[:k], active_tab=0)
     if episode:
-        middle = rrb.Tabs(*rest[:3], active_tab=0)
-        right = rrb.Tabs(*rest[3:], active_tab=0)
+        right = rrb.Vertical(rest[k], rrb.Tabs(*rest[k + 1 :], active_tab=0), row_shares=[1.5, 1])
     else:
-        middle = rrb.Tabs(*rest[:k], active_tab=0)
         right = rrb.Tabs(*rest[k:], active_tab=0)
     bottom_row = rrb.Horizontal(shape, middle, right, column_shares=[1, 1, 1])
     return rrb.Blueprint(
@@ -595,43 +698,46 @@ def axis_labels(half: np.ndarray) -> list[str]:
     ]
 
 
-def description_markdown(title: str, body, extra: str, *, episode: bool) -> str:
-    """The ``/description`` document: the model, the body, what each view shows."""
+def description_markdown(
+    title: str, body, extra: str, *, episode: bool, outcome: str | None = None, time_note: str = ""
+) -> str:
+    """The ``/description`` document: the title and, for an episode once it has ended, its outcome first (what a
+    reader looks for), then what is recorded (``extra``: the scene or the env and its target), the body and what
+    each view shows. ``time_note``: how to read the time axes (:func:`time_unit`)."""
     try:
         desc = body.describe()
     except AttributeError:  # a duck-typed body without describe()
         desc = repr(body)
+    head = f"# {title}\n\n" + (f"**{outcome}**\n\n" if outcome else "")
     balance = (
-        (
-            "\n  **Energy balance** — the controls u = (τ₁, τ₂, τ₃, f_ϱ) change H on purpose: H − H₀ is drawn with the work W = ∫P dt\n  of the control, P = ω·τ + ϱ̇ f_ϱ (ω = ∂H/∂s, ϱ̇ = ∂H/∂p_ϱ); the two curves coincide (checked to the\n  integrator's tolerance). **Control power** P̄ is its mean over each step. Reward terms, the distance to the\n  target with the success tolerance, and the actions (scaled to [−1, 1]) are drawn at the step they lead to."
-        )
+        "\n* **energy balance** — the controls u = (τ₁, τ₂, τ₃, f_ϱ) change H on purpose: H − H₀ (wide, olive) and the"
+        " work W = ∫P dt of the control (thin, light blue, inside it), P = ω·τ + ϱ̇ f_ϱ; **residual H − H₀ − W** on its"
+        " own scale (its largest size in the title); **control power** P̄, P's mean over each step. **distance** to the"
+        " target with the success tolerance (in front: the task's criterion), the **reward terms** (a term constant"
+        " over the episode is named in the title, not drawn) and the **actions** in [−1, 1], drawn at the step they"
+        " lead to."
         if episode
-        else ""
+        else "\n* **conserved: drift** — (Q − Q₀)/|Q₀| of H, |s|² and p_θ, which the free motion conserves; the title"
+        " gives the largest of each."
     )
-    text = f"""# {title}
-
-A flat affinely-rigid body with thickness (V. Kovalchuk & E. E. Rożko, arXiv:0902.3573; corrections in
+    when = f"**Time axis**: {time_note}.\n\n" if time_note and "1 s" not in time_note else ""
+    text = f"""{head}{extra.strip() + chr(10) + chr(10) if extra else ""}{when}A flat affinely-rigid body with thickness (V. Kovalchuk & E. E. Rożko, arXiv:0902.3573; corrections in
 `docs/physics.md`). Body: {desc}. Configuration Φ = R · diag(λ, μ, ϱ) · U(θ)⁻¹ (eqs. (23)–(24)).
-{("" if not extra else chr(10) + extra.strip() + chr(10))}
+
 **What each view shows** (scrub the time bar at the bottom; tabs hold more plots):
 
-* **plate, top view** — the body seen down the lab's z axis: the blue-grey wireframe ellipsoid has
-  semi-axes λ, μ, ϱ along the columns of R; grey material lines (rim, spokes; the gold spoke is the
-  fibre along e₁) are drawn under Φ, so the spokes turn inside the ellipse with U(θ). Arrows: the
-  principal axes (λ red, μ green; ϱ blue points at you and is labelled in the 3-D view), **length = the
-  number on their label**; they are the eigenvectors of C = Φ⁻ᵀΦ⁻¹ (eigenvalues 1/λ², 1/μ², 1/ϱ²).{" The magenta outline is the target ellipse (λ*, μ*)." if episode else ""}
-* **3-D view** — the same from above the plate; **material frame** — the undeformed body and
-  G^½(ball); arrows along the columns of U(θ), the principal axes of G = ΦᵀΦ (eigenvalues λ², μ², ϱ²).
-* **G, C: numbers** — both tensors and their eigenvalues at the current time.
-* **time plots** — time in seconds of model time; every plot shows the whole run, the white line is
-  the current time. A plot whose values are constant to 1 part in 10⁸ (round-off of the integrator) is
-  drawn flat on a fixed axis and says so in its title.
-  λ, μ, ϱ{" (the targets λ*, μ*, ϱ* as wide faint bands of the same colour)" if episode else ""}; s₃, p_θ, θ, the energy H (eq. (41)),
-  the Casimir |s|², the entries of G and C.{"" if episode else " **Conserved: relative drift** — (Q − Q₀)/|Q₀| of H, |s|² and p_θ, which the free motion conserves."}{balance}
+* **plate, top view** — the body seen down the lab's z axis: blue-grey wireframe ellipsoid with semi-axes λ, μ, ϱ
+  along the columns of R; grey material lines (the gold spoke is the fibre e₁) drawn under Φ. Arrows: the principal
+  axes of C = Φ⁻ᵀΦ⁻¹ (λ red, μ green; ϱ blue points at you and is labelled in the 3-D view), **length = the number on
+  their label**.{" Magenta: the target ellipse (λ*, μ*) along the body's current axes." if episode else ""}
+* **3-D view** — the same from above the plate; **material frame** — the undeformed body and G^½(ball).
+* **G, C: numbers** — both tensors and their eigenvalues (λ², μ², ϱ² and their inverses) at the current time.
+* **time plots** — {time_note or "model time on the time axis"}; every plot shows the whole run, the white line is the
+  current time; a plot constant to 1 part in 10⁸ (round-off) is drawn flat and says so.
+  λ, μ, ϱ{" (targets λ*, μ*, ϱ*: wide faint bands)" if episode else ""}; s₃, p_θ, θ, H (eq. (41)), |s|², G and C.{balance}
 
-One colour per variable in every view (λ red, μ green, ϱ blue, θ cyan, s₃ purple, p_θ orange, H olive,
-|s|² brown); actions, reward terms and the energy balance have colours of their own.
-Timelines: `sim_time` (model time, the default) and `step`.
+One colour per variable (λ red, μ green, ϱ blue, θ cyan, s₃ purple, p_θ orange, H olive, |s|² brown); actions,
+reward terms and the energy balance have colours of their own. Timelines: `sim_time` (model time) and `step`.
 """
     return text
 

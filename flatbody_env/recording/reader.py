@@ -16,7 +16,7 @@ class EntityData:
     """The temporal rows of one entity, sorted by ``step``: timelines and decoded components."""
 
     step: np.ndarray
-    sim_time: np.ndarray  # seconds (float64, from integer nanoseconds)
+    sim_time: np.ndarray  # model time (float64, from the timeline's integer nanoseconds and its time unit)
     components: dict[str, Any]
 
 
@@ -64,6 +64,32 @@ def _decode(column) -> Any:
     return column.to_pylist()
 
 
+def _latest_row(rb) -> int:
+    """The index of the row with the largest row id of a record batch (0 when it has no row ids)."""
+    if "rerun.controls.RowId" not in rb.schema.names:
+        return rb.num_rows - 1
+    ids = [bytes(v) if v is not None else b"" for v in rb.column("rerun.controls.RowId").to_pylist()]
+    return max(range(len(ids)), key=ids.__getitem__)
+
+
+def _last_row_id(rb) -> bytes:
+    """The largest row id of a chunk's record batch (rerun's row ids grow with time), b"" when it has none."""
+    if "rerun.controls.RowId" not in rb.schema.names:
+        return b""
+    ids = [bytes(v) for v in rb.column("rerun.controls.RowId").to_pylist() if v is not None]
+    return max(ids) if ids else b""
+
+
+def time_scale(static: dict[str, dict[str, Any]]) -> float:
+    """Seconds of the ``sim_time`` timeline per model time unit, from the recording's property ``time``
+    (:func:`flatbody_env.recording.layout.time_unit`); 1 for a recording made before it was written."""
+    try:
+        scale = float(np.asarray(static["/__properties/time"]["seconds_per_unit"], dtype=float).ravel()[0])
+    except (KeyError, IndexError, TypeError, ValueError):
+        return 1.0
+    return scale if np.isfinite(scale) and scale > 0 else 1.0
+
+
 def read_recording(path: str | Path) -> RecordingData:
     """Read an ``.rrd`` offline with :class:`rerun.chunk.RrdReader` (pyarrow chunk path).
 
@@ -83,15 +109,23 @@ def read_recording(path: str | Path) -> RecordingData:
     entry = recs[0]
     parts: dict[str, list[tuple[np.ndarray, np.ndarray, dict[str, Any]]]] = {}
     static: dict[str, dict[str, Any]] = {}
+    static_rows: dict[tuple[str, str], bytes] = {}
     for chunk in reader.stream(store=entry):
         rb = chunk.to_record_batch()
+        if chunk.is_static and rb.num_rows > 1:  # several writes of static data in one chunk: the latest holds
+            rb = rb.slice(_latest_row(rb), 1)
         comps = {}
         for i, f in enumerate(rb.schema):
             md = f.metadata or {}
             if md.get(b"rerun:kind") == b"data":
                 comps[md.get(b"rerun:component", f.name.encode()).decode()] = _decode(rb.column(i))
-        if chunk.is_static:
-            static.setdefault(chunk.entity_path, {}).update(comps)
+        if chunk.is_static:  # the latest write wins (its row id), as in the viewer, whatever the file's order
+            row = _last_row_id(rb)
+            mine = static.setdefault(chunk.entity_path, {})
+            for name, value in comps.items():
+                if name not in mine or row >= static_rows.get((chunk.entity_path, name), b""):
+                    mine[name] = value
+                    static_rows[(chunk.entity_path, name)] = row
             continue
         if "step" not in rb.schema.names:
             continue
@@ -116,10 +150,11 @@ def read_recording(path: str | Path) -> RecordingData:
                 for c, d in zip(cls, disp):
                     if c:
                         views.append((str(c[0]), str(d[0]) if d else ""))
+    scale = time_scale(static)
     entities = {}
     for ent, plist in parts.items():
         step = np.concatenate([p[0] for p in plist])
-        sim = np.concatenate([p[1] for p in plist])
+        sim = np.concatenate([p[1] for p in plist]) / scale  # model time (the timeline's seconds per unit apart)
         order = np.argsort(step, kind="stable")
         comps: dict[str, Any] = {}
         names = {k for p in plist for k in p[2]}
@@ -177,6 +212,9 @@ class BlueprintInfo:
     """What :func:`read_blueprint` returns: the default blueprint's views and panel states."""
 
     views: tuple[ViewInfo, ...]
+    front: tuple[str, ...] = ()
+    """The names of the views on screen at first open, in the layout's order: every view but those in a tab that is
+    not a group's active one."""
     panels: dict[str, str]
     """``"time_panel"``, ``"blueprint_panel"``, ``"selection_panel"`` → ``"hidden"``, ``"collapsed"`` or ``"expanded"``."""
     timeline: str | None
@@ -233,6 +271,32 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
                         last[0] if isinstance(last, list) and len(last) == 1 else last
                     )
     views = []
+    names = {ent.lstrip("/"): str(c.get("ViewBlueprint:display_name", "")) for ent, c in props.items()}
+    hidden: set[str] = set()
+    order: list[str] = []
+
+    def walk(node: str, shown: bool) -> None:  # the containers from the root: tabs hide all but their active one
+        comp = props.get("/" + node, {})
+        if "ViewBlueprint:class_identifier" in comp:
+            order.append(node)
+            if not shown:
+                hidden.add(node)
+            return
+        kids = comp.get("ContainerBlueprint:contents") or []
+        kids = [kids] if isinstance(kids, str) else list(kids)
+        active = comp.get("ContainerBlueprint:active_tab")
+        tabs = comp.get("ContainerBlueprint:container_kind") == 1
+        for kid in kids:
+            walk(str(kid), shown and (not tabs or kid == (active or (kids[0] if kids else None))))
+
+    root = props.get("/viewport", {}).get("ViewportBlueprint:root_container")
+    if isinstance(root, (list, tuple)) and len(root) == 16:  # a UUID as its 16 bytes: the container's entity
+        import uuid
+
+        walk(f"container/{uuid.UUID(bytes=bytes(int(b) for b in root))}", True)
+    elif root:
+        walk(str(root), True)
+    front = tuple(names.get(n, "") for n in order if n not in hidden)
     for ent, comp in props.items():
         if "ViewBlueprint:class_identifier" not in comp:
             continue
@@ -265,7 +329,7 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
             panels[name] = _PANEL_STATES.get(int(state), str(state))
     timeline = props.get("/time_panel", {}).get("TimePanelBlueprint:timeline")
     return BlueprintInfo(
-        views=tuple(sorted(views, key=lambda v: (v.view_class, v.name))), panels=panels, timeline=timeline
+        views=tuple(sorted(views, key=lambda v: (v.view_class, v.name))), front=front, panels=panels, timeline=timeline
     )
 
 
@@ -308,7 +372,7 @@ def summarize_recording(path: str | Path, *, rows: int = 3) -> str:
     ]
     if data.views:
         lines.append("default blueprint: " + "; ".join(f"{c} '{d}'" for c, d in data.views))
-    lines.append(f"{'entity':<26} {'rows':>6} {'steps':>13} {'sim_time [s]':>19}  components")
+    lines.append(f"{'entity':<26} {'rows':>6} {'steps':>13} {'model time':>19}  components")
     for ent in sorted(data.entities):
         e = data.entities[ent]
         lines.append(

@@ -141,7 +141,8 @@ def screenshots(
     rrd : str or Path
         A finished recording.
     times : list of float
-        ``sim_time`` values in seconds (≥ 0), paused at in turn.
+        Model times (≥ 0) paused at in turn (``sim_time`` is logged in the recording's time unit,
+        :func:`flatbody_env.recording.layout.time_unit`).
     out_dir : str or Path
         Folder of the PNGs ``PREFIX_tTT.TT.png`` (window) and ``PREFIX_tTT.TT_VIEW.png`` (views).
     size : (int, int)
@@ -180,6 +181,10 @@ def screenshots(
     if reason:
         raise ValueError(f"viewer: cannot render here — {reason}")
     from rerun.experimental import ViewerClient
+
+    from flatbody_env.recording.reader import read_recording, time_scale
+
+    scale = time_scale(read_recording(rrd).static)  # the timeline's seconds per model time unit
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -226,7 +231,7 @@ def screenshots(
             time.sleep(0.25)
         time.sleep(open_s)
         for t in times:
-            client.set_time("sim_time", duration=t, play_state="paused")
+            client.set_time("sim_time", duration=t * scale, play_state="paused")
             time.sleep(settle_s)
             state = client.get_state()
             path = out_dir / f"{stem}_t{t:05.2f}.png"

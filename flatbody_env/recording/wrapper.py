@@ -20,8 +20,14 @@ The contract the wrapped environment meets (``env.unwrapped``)
   (:data:`flatbody_env.env.task.CONTROLS`: the driven ones of τ1, τ2, τ3, f_ϱ);
 * ``step`` returns ``info["reward_terms"]`` — a dict name → float (plotted on
   ``/series/reward/NAME``, with the step's reward as ``total``); an optional ``info["distance"]``
-  (from ``reset`` and ``step``) is plotted on ``/series/distance``; a truthy
-  ``info["integrator_failure"]`` or ``info["left_domain"]`` is logged as a ``TextLog`` on ``/events``.
+  (from ``reset`` and ``step``) is plotted on ``/series/distance``; what ended the episode early (from
+  ``info["status"]`` and ``info["domain_code"]``, in words by :func:`flatbody_env.env.core.end_reason`: an
+  integrator failure, leaving the domain or the target's tolerance) is logged as a ``TextLog`` on ``/events``;
+  ``info["is_success"]`` (else the distance within the tolerance) decides the outcome.
+
+When an episode ends, its outcome — SUCCESS or MISSED, when the distance first and last came within the
+tolerance, what ended it early — is written first in the recording's description and after its name
+(:func:`outcome_text`), so that the viewer says at first sight how the episode went.
 """
 
 from __future__ import annotations
@@ -119,6 +125,58 @@ def _tolerance(u) -> float | None:
     return tol if tol is not None and math.isfinite(tol) and tol > 0 else None
 
 
+def _end_reason(info: dict) -> str:
+    """What ended the episode at this step, in words ("" when nothing did): :func:`flatbody_env.env.core.end_reason`
+    of ``info["status"]`` and ``info["domain_code"]`` (an env without them ends nothing early)."""
+    from flatbody_env.env.core import end_reason
+
+    try:
+        status, code = int(info.get("status", 0) or 0), int(info.get("domain_code", 0) or 0)
+    except (TypeError, ValueError):
+        return ""
+    method = info.get("integrator", {}).get("method", "") if isinstance(info.get("integrator"), dict) else ""
+    return end_reason(status, code, method) if status or code else ""
+
+
+def outcome_text(
+    t: list[float], distance: list[float], tolerance: float | None, *, success: bool | None, ended: str, finished: bool
+) -> tuple[str, str]:
+    """(outcome in a sentence, one word) of an episode from its times, distances to the target, the task's tolerance,
+    ``success`` (``info["is_success"]`` at the end, None if the env has none), what ended it early and whether it
+    finished (terminated or truncated) rather than being cut off by a reset or close."""
+    d = np.asarray(distance, dtype=float)
+    tt = np.asarray(t, dtype=float)
+    ok = np.isfinite(d)
+    d, tt = d[ok], tt[ok]
+    if not d.size:
+        return (f"recorded to t = {t[-1]:.2f}" if t else "no step recorded"), "recorded"
+    inside = d <= tolerance if tolerance is not None else np.zeros(d.size, bool)
+    if success is None:
+        success = bool(inside[-1]) if tolerance is not None else False
+    dist = f"distance {d[0]:.3g} → {d[-1]:.3g}"
+    if tolerance is not None:
+        if inside.any():
+            last_out = np.flatnonzero(~inside)
+            since = tt[last_out[-1] + 1] if last_out.size and last_out[-1] + 1 < d.size else tt[0]
+            first = f"within the tolerance {tolerance:g} from t = {tt[np.argmax(inside)]:.2f}"
+            if inside[-1]:
+                first += f" (and since t = {since:.2f} to the end)" if since > tt[np.argmax(inside)] else " to the end"
+            else:
+                first += ", not at the end"
+        else:
+            first = f"never within the tolerance {tolerance:g}"
+    else:
+        first = "no tolerance to reach"
+    word = "SUCCESS" if success else "MISSED"
+    text = f"{word} — {'on the target' if success else 'not on the target'} at t = {tt[-1]:.2f}: {first}; {dist}"
+    if ended:
+        text += f"; the episode ended early at t = {tt[-1]:.2f}: {ended}"
+        word += ", ended early"
+    elif not finished:
+        text += " (the recording stopped before the episode ended)"
+    return text, word
+
+
 def episode_file(path: str | Path, episode: int) -> Path:
     """The file :class:`RerunRecorder` writes episode ``episode`` to when given ``path``: ``path``
     formatted with ``episode`` if it holds ``{episode}``, else ``path`` itself for the first episode and
@@ -194,6 +252,9 @@ class RerunRecorder(gym.Wrapper):
         self._step = 0
         self._rec: Recorder | None = None
         self.recorded_paths: list[Path] = []
+        self.outcomes: list[str] = []
+        """The outcome of each recorded episode in words (:func:`outcome_text`), beside :attr:`recorded_paths`."""
+        self._track: dict[str, Any] = {}
 
     # ------------------------------------------------------------------------------------------
     def episode_path(self, episode: int) -> Path:
@@ -205,9 +266,18 @@ class RerunRecorder(gym.Wrapper):
         """Whether the current episode is being recorded."""
         return self._rec is not None
 
-    def _finish(self) -> None:
+    def _finish(self, *, finished: bool = False) -> None:
         if self._rec is not None:
             rec, self._rec = self._rec, None
+            k = self._track
+            if k.get("t"):
+                text, word = outcome_text(
+                    k["t"], k["d"], k["tol"], success=k.get("success"), ended=k.get("ended", ""), finished=finished
+                )
+                rec.set_outcome(text, short=word)
+                self.outcomes.append(text)
+            else:
+                self.outcomes.append("")
             self.recorded_paths.append(rec.close())
 
     def _append(self, *, action=None, control=None, reward: float | None = None, info: dict | None = None) -> None:
@@ -228,14 +298,19 @@ class RerunRecorder(gym.Wrapper):
             distance=info.get("distance") if isinstance(info, dict) else None,
             control=control,
         )
+        k = self._track
+        d = _number(info.get("distance")) if isinstance(info, dict) else None
+        k.setdefault("t", []).append(t)
+        k.setdefault("d", []).append(math.nan if d is None else d)
+        if isinstance(info, dict) and "is_success" in info:
+            k["success"] = bool(info["is_success"])
         if stepped:
-            for key in ("integrator_failure", "left_domain"):
-                if info.get(key):
-                    self._rec.note(
-                        f"{key.replace('_', ' ')}: {info[key]} (the env keeps the last valid state)",
-                        step=self._step,
-                        t=t,
-                    )
+            reason = _end_reason(info)
+            if reason:
+                k["ended"] = reason
+                self._rec.note(
+                    f"the episode ended: {reason} (the env keeps the last valid state)", step=self._step, t=t
+                )
 
     # ------------------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -254,6 +329,12 @@ class RerunRecorder(gym.Wrapper):
                 [float(state[k]) for k in ("lambda", "mu", "rho")]
                 + [target[k] for k in ("lambda", "mu", "rho") if k in target]
             )
+            steps = getattr(getattr(u, "spec", None), "max_episode_steps", None) or getattr(
+                getattr(self.env, "spec", None), "max_episode_steps", None
+            )
+            dt = _number(getattr(u, "dt", None))
+            t_end = float(steps) * dt if steps and dt else None
+            self._track = {"tol": _tolerance(u)}
             self._rec = Recorder(
                 self.episode_path(self._episode),
                 u.body,
@@ -272,6 +353,7 @@ class RerunRecorder(gym.Wrapper):
                 episode=True,
                 extent=extent if math.isfinite(extent) and extent > 0 else 2.0,
                 success_tolerance=_tolerance(u),
+                t_end=t_end,
             )
             self._append(info=info)
         return obs, info
@@ -285,7 +367,7 @@ class RerunRecorder(gym.Wrapper):
             self._step += 1
             self._append(action=action, control=control, reward=reward, info=info)
             if terminated or truncated:
-                self._finish()
+                self._finish(finished=True)
         return obs, reward, terminated, truncated, info
 
     def close(self) -> None:
@@ -295,4 +377,4 @@ class RerunRecorder(gym.Wrapper):
             super().close()
 
 
-__all__ = ["RerunRecorder", "episode_file"]
+__all__ = ["RerunRecorder", "episode_file", "outcome_text"]

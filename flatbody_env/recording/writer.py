@@ -94,10 +94,51 @@ from flatbody_env.recording.layout import (
     series_axes,
     series_style,
     tensor_text,
+    time_note,
+    time_unit,
 )
 
-LABEL_GAP = 0.12
-"""Gap between an arrow's tip and its label, a fraction of the body's size (``extent``)."""
+LABEL_CHAR = 0.059
+"""The width of one character of an arrow's label, a fraction of the body's size (``extent``), as the views show it
+at 1600 × 1000 (rerun draws labels at a fixed size in pixels)."""
+LABEL_HALF_HEIGHT = 0.085
+"""Half the height of a label's box, the same way."""
+LABEL_DROP = LABEL_HALF_HEIGHT + 0.025
+"""rerun draws a point's label under the point: the box's centre lies this far below it on screen (a fraction of
+``extent``; in the top view, −y)."""
+LABEL_MARGIN = 0.06
+"""Room between an arrow's tip and the nearest edge of its label's box."""
+
+
+def label_points(vectors: np.ndarray, frames: np.ndarray, labels: np.ndarray, extent: float) -> np.ndarray:
+    """Where each arrow's label is logged (n, 3 arrows, 3) so that its box clears the arrow, the spokes and the rim.
+
+    rerun draws a label as a box of fixed pixel size centred under its point (:data:`LABEL_DROP`). Seen down the
+    lab's z axis (the top view) the box of an in-plane arrow (columns 0, 1 of ``frames``) must reach past the tip
+    by half its width or half its height, whichever the arrow's direction meets first, plus a margin: its centre
+    goes there and the point :data:`LABEL_DROP` above it. The normal (column 2) is labelled in the 3-D views, seen
+    from above the plate, where it points up the screen (foreshortened to about 0.8): its point goes beyond the
+    tip by the box's whole height, so that the box hangs above the tip."""
+    vectors = np.asarray(vectors, dtype=np.float64)
+    frames = np.asarray(frames, dtype=np.float64)
+    n = frames.shape[0]
+    widths = np.vectorize(len)(np.asarray(labels, dtype=object).reshape(n, 3)).astype(float)
+    half_w = (0.5 * widths * LABEL_CHAR + 0.05) * extent
+    half_h = LABEL_HALF_HEIGHT * extent
+    out = np.empty((n, 3, 3))
+    for col in range(2):
+        d = frames[:, :, col]  # the axis in the lab (unit); its picture in the top view is (x, y)
+        flat = np.hypot(d[:, 0], d[:, 1])
+        ux = np.abs(d[:, 0]) / np.maximum(flat, 1e-12)
+        uy = np.abs(d[:, 1]) / np.maximum(flat, 1e-12)
+        reach = np.minimum(half_w[:, col] / np.maximum(ux, 1e-12), half_h / np.maximum(uy, 1e-12))
+        along = np.minimum((reach + LABEL_MARGIN * extent) / np.maximum(flat, 0.2), 1.5 * extent)
+        out[:, col] = vectors[:, col] + along[:, None] * d
+        out[:, col, 1] += LABEL_DROP * extent  # the box hangs under its point
+    up = (2.0 * half_h + LABEL_MARGIN * extent) / 0.8
+    out[:, 2] = vectors[:, 2] + up * frames[:, :, 2]
+    return out
+
 
 APP_ID = "flatbody"
 """rerun application id of every flatbody recording."""
@@ -163,7 +204,7 @@ def _check_finite(name: str, a: np.ndarray) -> None:
         raise ValueError(f"{name}: must be finite (first non-finite entry at step index {bad})")
 
 
-def _as_block(t, states, rotations, *, energy, step) -> _Block:
+def _as_block(t, states, rotations, *, energy, step, scale: float = 1.0) -> _Block:
     t = np.asarray(t, dtype=np.float64).ravel()
     n = t.size
     if n == 0:
@@ -196,7 +237,9 @@ def _as_block(t, states, rotations, *, energy, step) -> _Block:
     if energy.shape != (n,):
         raise ValueError(f"energy: expected shape ({n},), got {energy.shape}")
     _check_finite("energy", energy)
-    return _Block(step=step_arr, t=t, states=states, rotations=rotations, energy=energy, index=_timelines(step_arr, t))
+    return _Block(
+        step=step_arr, t=t, states=states, rotations=rotations, energy=energy, index=_timelines(step_arr, t, scale)
+    )
 
 
 def _optional_column(name: str, values, n: int, width: int | None = None) -> np.ndarray:
@@ -216,10 +259,12 @@ def _safe_name(name: str) -> str:
     return out or "_"
 
 
-def _timelines(step: np.ndarray, t: np.ndarray) -> list:
+def _timelines(step: np.ndarray, t: np.ndarray, scale: float = 1.0) -> list:
+    """The ``step`` and ``sim_time`` columns; ``sim_time`` is the model time ``t`` as a duration of ``scale`` seconds
+    per unit (:func:`~flatbody_env.recording.layout.time_unit`), in integer nanoseconds."""
     import rerun as rr
 
-    ns = np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64).astype("timedelta64[ns]")
+    ns = np.round(np.asarray(t, dtype=np.float64) * (1e9 * scale)).astype(np.int64).astype("timedelta64[ns]")
     return [rr.TimeColumn("step", sequence=np.asarray(step, dtype=np.int64)), rr.TimeColumn("sim_time", duration=ns)]
 
 
@@ -456,6 +501,7 @@ class Recorder:
         episode: bool = False,
         extent: float = 2.0,
         success_tolerance: float | None = None,
+        t_end: float | None = None,
     ) -> None:
         import rerun as rr
 
@@ -480,6 +526,9 @@ class Recorder:
         self._q0: dict[str, float] | None = None
         self._extent = float(extent)
         self._tolerance = None if success_tolerance is None else float(success_tolerance)
+        self._scale, self._unit = time_unit(t_end) if t_end is not None and math.isfinite(t_end) else (1.0, "s")
+        self._title = title
+        self._description = description
         self._ranges: dict[str, tuple[float, float, int]] = {}
         self._t_range: tuple[float, float] | None = None
         self._blocks = 0
@@ -498,6 +547,7 @@ class Recorder:
             )
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec.send_recording_name(title)
+        self.rec.send_property("time", rr.AnyValues(seconds_per_unit=self._scale, unit=self._unit))
         self._log_static(title, description, int(spokes))
 
     # -- static parts ------------------------------------------------------------------------------
@@ -506,8 +556,7 @@ class Recorder:
 
     def _log_static(self, title: str, description: str, spokes: int) -> None:
         rr = self._rr
-        text = description_markdown(title, self.body, description, episode=self.episode)
-        self._static_log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+        self._describe()
         self._static_log(
             "/tensors/numbers",
             _static(("numbers",), lambda: rr.TextDocument.from_fields(media_type=rr.MediaType.MARKDOWN)),
@@ -571,6 +620,25 @@ class Recorder:
             self._style("/series/balance/delta_energy")
             for name in TARGET_SERIES:
                 self._style(f"/series/target/{name}")
+
+    def _describe(self, outcome: str | None = None) -> None:
+        rr = self._rr
+        text = description_markdown(
+            self._title,
+            self.body,
+            self._description,
+            episode=self.episode,
+            outcome=outcome,
+            time_note=time_note(self._scale, self._unit),
+        )
+        self._static_log("/description", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
+    def set_outcome(self, outcome: str, *, short: str | None = None) -> None:
+        """An episode's outcome, once it is known: first in the description (a static log replaces the one logged at
+        the start) and, with ``short``, after the recording's name (``flatbody episode 0 — MISSED``)."""
+        self._describe(outcome)
+        if short:
+            self.rec.send_recording_name(f"{self._title} — {short}")
 
     def _style(self, path: str, index: int = 0) -> None:
         if path not in self._styled:
@@ -809,7 +877,7 @@ class Recorder:
                 raise ValueError(f"states: expected shape ({len(STATE_NAMES)}, n), got {Y.shape}")
             _check_finite("states", Y.T)
             energy = hamiltonian_series(Y, self.body)
-        block = _as_block(t, states, rotations, energy=energy, step=step)
+        block = _as_block(t, states, rotations, energy=energy, step=step, scale=self._scale)
         n = block.t.size
         episode = None
         if self.episode:
@@ -833,7 +901,7 @@ class Recorder:
         """Log one event (e.g. an integrator failure) as a ``TextLog`` on ``/events``."""
         rr = self._rr
         self.rec.set_time("step", sequence=int(step))
-        self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9)), "ns"))
+        self.rec.set_time("sim_time", duration=np.timedelta64(int(round(float(t) * 1e9 * self._scale)), "ns"))
         self.rec.log("/events", rr.TextLog(str(text), level=level), strict=True)
 
     def _send(self, path: str, timelines: list, columns) -> None:
@@ -859,7 +927,14 @@ class Recorder:
         if axes is None:
             return
         self._layout_key = axes
-        bp = blueprint(episode=self.episode, extent=self._extent, ranges=self._ranges, t_range=self._t_range, axes=axes)
+        bp = blueprint(
+            episode=self.episode,
+            extent=self._extent,
+            ranges=self._ranges,
+            t_range=self._t_range,
+            axes=axes,
+            time_scale=self._scale,
+        )
         self.rec.send_blueprint(bp, make_active=True, make_default=True)
 
     def _note(self, path: str, values: np.ndarray, per: int = 1) -> None:
@@ -881,6 +956,7 @@ class Recorder:
             extent=self._extent,
             ranges=self._ranges if one else None,
             t_range=self._t_range if one else None,
+            time_scale=self._scale,
         )
         from flatbody_env.recording.sink import FileSink
 
@@ -911,11 +987,11 @@ class Recorder:
         )
         self._send("/world/material", idx, [_matrix_column("Transform3D:mat3x3", Phi)])
         labels = np.array(axis_labels(half), dtype=object).reshape(n, 3)
-        gap = LABEL_GAP * self._extent  # labels just beyond the arrows' tips: off the spokes, the fibre and each other
         for ent, frames in (("/world/axes_C", R), ("/material/axes_G", U)):
             vectors = principal_axes(frames, half)  # (n, 3 arrows, 3)
             self._send(ent, idx, rr.Arrows3D.columns(vectors=vectors.reshape(3 * n, 3)).partition(np.full(n, 3)))
-            tips = vectors + gap * np.swapaxes(frames, 1, 2)
+            # labels beyond the arrows' tips, their boxes clear of the arrows, the spokes, the fibre and each other
+            tips = label_points(vectors, frames, labels, self._extent)
             if ent == "/world/axes_C":
                 self._send(
                     "/world/labels/in_plane",
@@ -962,7 +1038,7 @@ class Recorder:
                 self._note(f"/series/drift/{name}", drift)
         sel = np.flatnonzero(block.step % self.tensor_every == 0)
         if sel.size:
-            tidx = idx if sel.size == n else _timelines(block.step[sel], block.t[sel])
+            tidx = idx if sel.size == n else _timelines(block.step[sel], block.t[sel], self._scale)
             self._send(
                 "/tensors/numbers",
                 tidx,
@@ -1032,6 +1108,7 @@ class Recorder:
             W = self._work + np.cumsum(dW)
             self._work = float(W[-1])
             self._series("/series/balance/work", block.index, W)
+            self._series("/series/residual", block.index, dH - W)  # the balance's check, on its own scale
             if has.any():
                 h = block.t[has] - t_prev[has]
                 self._series(
@@ -1039,12 +1116,11 @@ class Recorder:
                 )
         self._last = (float(block.t[-1]), block.states[:, -1].copy())
 
-    @staticmethod
-    def _rows(block: _Block, has: np.ndarray) -> list:
+    def _rows(self, block: _Block, has: np.ndarray) -> list:
         """The timelines of the steps ``has`` of ``block`` (the block's own when it is all of them)."""
         if has.all():
             return block.index
-        return _timelines(block.step[has], block.t[has])
+        return _timelines(block.step[has], block.t[has], self._scale)
 
     def _series(self, path: str, idx: list, values: np.ndarray, *, group: str | None = None) -> None:
         if path not in self._styled:
@@ -1148,7 +1224,9 @@ def record_arrays(
         from flatbody_env.physics.hamiltonian import hamiltonian_series
 
         energy = hamiltonian_series(Y, body)
-    block = _as_block(t, Y, rotations, energy=energy, step=step)
+    t = np.asarray(t, dtype=np.float64).ravel()
+    t_end = float(np.max(np.abs(t))) if t.size and np.all(np.isfinite(t)) else None
+    block = _as_block(t, Y, rotations, energy=energy, step=step, scale=1.0 if t_end is None else time_unit(t_end)[0])
     extent = float(max(Y[_IDX["lambda"]].max(), Y[_IDX["mu"]].max(), Y[_IDX["rho"]].max()))
     with Recorder(
         path,
@@ -1158,6 +1236,7 @@ def record_arrays(
         tensor_every=tensor_every,
         recording_id=recording_id,
         extent=extent,
+        t_end=t_end,
     ) as rec:
         rec._send_block(block)
     return Path(path)

@@ -154,20 +154,15 @@ def methods(_: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
 
 
 def _check_family_range(params: Mapping[str, Any]) -> None:
-    """A family's range in the request's own words (``from``, ``to``): from < to, and from > 0 for a body
-    constant — refused when the job is submitted, not when it runs."""
-    from analysis.families import BODY_PARAMETERS
+    """A family's range in the request's own words (``from``, ``to``): from < to, and a body constant's range
+    within the constant's allowed bounds (:func:`analysis.families.check_range`) — refused when the job is
+    submitted, not when it runs."""
+    from analysis.families import BODY_PARAMETERS, body_with, check_range
 
-    lo, hi = params["from"], params["to"]
-    if not lo < hi:
-        raise ValueError(f"to: must be greater than from ({lo:g}), got {hi:g}")
+    check_range(params["vary"], params["from"], params["to"], names=("from", "to"))
     if params["vary"] in BODY_PARAMETERS:
-        from analysis.families import body_with
-
-        if not lo > 0:
-            raise ValueError(f"from: the constant {params['vary']} must stay > 0 (allowed range (0, inf)), got {lo:g}")
         try:
-            body_with(build_body(params["body"]), params["vary"], lo)
+            body_with(build_body(params["body"]), params["vary"], params["from"])
         except ValueError as exc:
             if str(exc).startswith("body"):
                 raise

@@ -46,7 +46,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Route
 
 from flatbody_env.service import models
-from flatbody_env.service.jobs import JobRunner, die_with_service, process_context
+from flatbody_env.service.jobs import JobRunner, die_with_service, download_name, process_context
 from flatbody_env.service.limits import DEFAULT_LIMITS, Limits
 from flatbody_env.service.store import JobStore, QueueFull
 
@@ -541,7 +541,8 @@ def create_app(
         },
     )
     async def get_artifact(job_id: str = PathParam(max_length=64), name: str | None = Query(None, max_length=64)):
-        """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json)."""
+        """Stream a job's file: ``name`` one of the job's ``artifacts`` (default the first: .rrd, .png or .json), offered
+        under a name that says what it holds (``flatbody-record-default-t5-1a2b3c4d.rrd``)."""
         job = await _store(service.store.get, job_id)
         if job is None:
             return error(404, "not-found", f"job_id: no job {job_id!r}", field="job_id")
@@ -564,7 +565,7 @@ def create_app(
         media = {".png": "image/png", ".csv": "text/csv", ".json": "application/json"}.get(
             path.suffix, "application/octet-stream"
         )
-        return FileResponse(path, media_type=media, filename=chosen)
+        return FileResponse(path, media_type=media, filename=download_name(job["kind"], job["params"], job_id, chosen))
 
     @app.delete("/jobs/{job_id}", tags=["jobs"], response_model=models.JobDeleted, responses=_JOB_ERRORS)
     async def delete_job(job_id: str = PathParam(max_length=64)):

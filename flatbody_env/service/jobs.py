@@ -9,8 +9,13 @@ job's work is :data:`WORK` [kind]; it calls the same functions as the ``flatbody
 Progress is the work's own: a job's process turns the command's progress bars
 (:func:`flatbody_env.progress.progress_bar`: the stability map's rows, the family's seeds, the
 evaluation's episodes) into the job's ``progress`` and ``stage`` (:func:`reporting_bars`), and an
-integration by a scipy method reports the time it has reached (:func:`reporting_integration`);
-each job kind splits 0 … 1 over its steps (:class:`Reporter`). Progress never decreases.
+integration reports the time it has reached (:func:`reporting_integration`: a scipy method through its
+right-hand side, a compiled method through the time its kernel has written, read while the kernel runs);
+each job kind splits 0 … 1 over its steps (:class:`Reporter`), the files it writes included, so that every
+job rises through several values before it is done. Progress never decreases.
+
+Each file a job writes is offered for download under a name that says what it holds (:func:`download_name`:
+``flatbody-record-default-t5-1a2b3c4d.rrd``), not under the same ``recording.rrd`` for every job.
 
 A worker process dies with the service (:func:`die_with_service`); a job found ``running``
 when the service starts is marked failed with :data:`~flatbody_env.service.store.RESTART_REASON`
@@ -49,9 +54,9 @@ class Reporter:
     reported value never decreases.
     """
 
-    def __init__(self, progress: Progress, *, every: float = REPORT_EVERY_S) -> None:
+    def __init__(self, progress: Progress, *, every: float | None = None) -> None:
         self._progress = progress
-        self.every = every
+        self.every = REPORT_EVERY_S if every is None else every
         self.lo, self.hi = 0.0, 0.0
         self.done = 0.0
         self._last = -1e9
@@ -96,7 +101,7 @@ def _bar_class(reporter: Reporter, bars: int):
 
         def close(self) -> None:
             if not self._closed and self.index == bars - 1 and (not self.total or self.n >= self.total):
-                reporter.part(1.0, "writing the files", force=True)
+                reporter.part(1.0, None, force=True)
             super().close()
 
         def _tell(self, force: bool = False) -> None:
@@ -130,10 +135,13 @@ def reporting_bars(reporter: Reporter, *, bars: int = 1) -> Iterator[None]:
 
 @contextmanager
 def reporting_integration(reporter: Reporter, t_end: float) -> Iterator[None]:
-    """While inside, an integration by a scipy method (``scipy.integrate.solve_ivp``) in this worker
-    process reports ``t / t_end``: the time its right-hand side has reached. (The compiled methods run
-    in one call and report when they are done: they take well under a second for the job limits.)"""
+    """While inside, an integration in this worker process reports ``t / t_end``, the time it has reached: a
+    scipy method (``scipy.integrate.solve_ivp``) from its right-hand side's calls, a compiled method (the
+    default ``auto``: DOP853-numba, RATTLE) from the time its kernel has written so far, read while the kernel
+    runs (:func:`flatbody_env.integrators.compiled_methods.watching_kernels`)."""
     import scipy.integrate
+
+    from flatbody_env.integrators.compiled_methods import watching_kernels
 
     saved = scipy.integrate.solve_ivp
 
@@ -150,11 +158,40 @@ def reporting_integration(reporter: Reporter, t_end: float) -> Iterator[None]:
 
         return saved(watched, t_span, y0, *args, **kwargs)
 
+    def kernel_reached(t: float, t0: float, t1: float) -> None:
+        reporter.part((t - t0) / ((t1 - t0) or 1.0), f"integrating: t = {t:.4g} of {t_end:g}")
+
     scipy.integrate.solve_ivp = solve_ivp
     try:
-        yield
+        with watching_kernels(kernel_reached):
+            yield
     finally:
         scipy.integrate.solve_ivp = saved
+
+
+def download_name(kind: str, params: Mapping[str, Any], job_id: str, artifact: str) -> str:
+    """The name a job's file ``artifact`` is offered under: what it holds and the job, e.g.
+    ``flatbody-record-default-t5-1a2b3c4d.rrd``, ``flatbody-family-J-1e-06-to-1e+06-1a2b3c4d.png`` (letters, digits
+    and ``.+-_`` only)."""
+    import re
+
+    def num(x: Any) -> str:
+        return f"{float(x):g}" if isinstance(x, (int, float)) else "default"
+
+    if kind in ("simulate", "record"):
+        scene = params.get("scene")
+        what = scene if isinstance(scene, str) else "custom"
+        what += f"-t{num(params['t_end'])}" if params.get("t_end") else ""
+    elif kind == "family":
+        what = f"{params.get('vary', 's3')}-{num(params.get('from'))}-to-{num(params.get('to'))}"
+    elif kind == "stability-map":
+        what = f"{params.get('grid', '')}x{params.get('grid', '')}"
+    else:
+        what = "agent"
+    stem, dot, suffix = artifact.rpartition(".")
+    part = "" if stem in ("recording", "trajectory", "family", "stability-map", "evaluation") else f"-{stem}"
+    name = f"flatbody-{kind}-{what}{part}-{job_id[:8]}{dot}{suffix}"
+    return re.sub(r"[^A-Za-z0-9.+_-]", "_", name)[:120]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -172,21 +209,66 @@ def _integrate(p: Mapping[str, Any], report: Reporter, lo: float, hi: float, **o
     return scene, traj
 
 
+def _job_id(out: Path) -> str:
+    """The job's id: the name of its folder (``DATA_DIR/jobs/ID``)."""
+    return out.name
+
+
+def _write_trajectory(traj, out: Path, report: Reporter, lo: float, hi: float) -> dict[str, Any]:
+    """``trajectory.json`` (``flatbody simulate --out``), reported over ``[lo, hi]``: the JSON form, then the file."""
+    report.step(lo, lo + 0.5 * (hi - lo), f"preparing trajectory.json ({traj.t.size} samples)")
+    answer = traj.to_dict()
+    text = json.dumps(answer) + "\n"
+    report.step(lo + 0.5 * (hi - lo), hi, f"writing trajectory.json ({len(text) / 1e6:.1f} MB)")
+    atomic_write(out / "trajectory.json", text)
+    return answer
+
+
 def _simulate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
     report = Reporter(progress)
-    _, traj = _integrate(p, report, 0.02, 0.9)
-    report.step(0.9, 1.0, "writing trajectory.json")
-    answer = traj.to_dict()
-    atomic_write(out / "trajectory.json", json.dumps(answer) + "\n")
+    _, traj = _integrate(p, report, 0.02, 0.8)
+    answer = _write_trajectory(traj, out, report, 0.8, 0.98)
     return answer, ["trajectory.json"]
+
+
+PREVIEW_FRAMES = 4
+"""Frames of a recording job's preview (``preview.png``): the body at evenly spaced times, first and last included."""
+
+
+def write_preview(traj, path: Path) -> Path:
+    """A recording's preview: :data:`PREVIEW_FRAMES` frames of the plate seen from +z (the ``rgb_array`` frame,
+    :func:`flatbody_env.env.rendering.render_frame`) at evenly spaced times of ``traj`` side by side, written to
+    ``path`` (PNG)."""
+    import numpy as np
+    from PIL import Image
+
+    from flatbody_env.env.rendering import FRAME_GAP, SIZE, render_frame
+
+    n = traj.t.size
+    picks = np.unique(np.linspace(0, n - 1, min(PREVIEW_FRAMES, n)).round().astype(int))
+    lam, mu = traj.state["lambda"], traj.state["mu"]
+    from flatbody_env.env.rendering import view_half_width
+
+    half = max(view_half_width(float(lam[k]), float(mu[k])) for k in range(n))  # one scale for every frame
+    strip = np.full((SIZE, len(picks) * SIZE + (len(picks) - 1) * FRAME_GAP, 3), 255, dtype=np.uint8)
+    for j, k in enumerate(picks):
+        strip[:, j * (SIZE + FRAME_GAP) : j * (SIZE + FRAME_GAP) + SIZE] = render_frame(
+            traj.y[:, k], traj.rotation[k], {}, float(traj.t[k]), half_width=half
+        )
+    with atomic_path(path) as tmp:
+        Image.fromarray(strip).save(tmp, format="PNG", optimize=True)
+    return path
 
 
 def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
     from flatbody_env.recording import record_trajectory
 
     report = Reporter(progress)
-    scene, traj = _integrate(p, report, 0.02, 0.5, with_rotation=True)
-    report.step(0.5, 0.98, f"writing recording.rrd ({traj.t.size} samples)")
+    scene, traj = _integrate(p, report, 0.02, 0.3, with_rotation=True)
+    report.step(0.3, 0.4, "loading the rerun SDK")
+    import rerun  # noqa: F401  (its import is the first second of a recording: reported on its own)
+
+    report.step(0.4, 0.75, f"writing recording.rrd ({traj.t.size} samples)")
     target = out / "recording.rrd"
     # a failed or killed job leaves no half-written recording.rrd (the runner removes the temporary file of a killed one);
     # a write that fails (disk full, file-size limit) is an OutputError here, never a hang (flatbody_env.recording.sink)
@@ -195,16 +277,21 @@ def _record(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
             record_trajectory(traj, scene.body, tmp, title=p.get("title"), tensor_every=p["tensor_every"])
     except OutputError as exc:  # the job's error names its file, not the service's folders
         raise OutputError(str(exc).replace(repr(str(target)), repr(target.name))) from None
-    path = target
+    report.step(0.75, 0.85, "drawing preview.png (the body at four times)")
+    write_preview(traj, out / "preview.png")
+    _write_trajectory(traj, out, report, 0.85, 0.98)
+    download = download_name("record", p, _job_id(out), target.name)
     return {
-        "recording": path.name,
+        "recording": target.name,
+        "download": download,
+        "preview": "preview.png",
         "samples": int(traj.t.size),
         "scene": scene.name,
         "t_end": float(traj.t[-1]),
         "method": traj.method,
         "model": traj.model,
-        "open_with": f"rerun {path.name}",
-    }, [path.name]
+        "open_with": f"rerun {download}",
+    }, [target.name, "preview.png", "trajectory.json"]
 
 
 def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
@@ -215,8 +302,9 @@ def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
 
     report = Reporter(progress)
     body = build_body(p["body"])
-    report.step(0.02, 0.9, f"following the family over {p['vary']}")
+    report.step(0.02, 0.75, f"following the family over {p['vary']}")
     box = SearchBox(lam=tuple(p["lam_range"]), mu=tuple(p["mu_range"]), n=p["grid"])
+    stages = {"csv": (0.75, 0.8, "writing family.csv"), "plot": (0.8, 0.98, "drawing family.png (matplotlib)")}
     with reporting_bars(report):
         answer = family_answer(
             body,
@@ -231,6 +319,8 @@ def _family(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, l
             out=str(out / "family.csv"),
             plot=str(out / "family.png"),
             progress=True,
+            names=("from", "to"),
+            on_stage=lambda stage: report.step(*stages[stage]),
         )
     answer["csv"], answer["plot"] = "family.csv", "family.png"
     return answer, ["family.png", "family.csv"]
@@ -242,7 +332,11 @@ def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple
 
     report = Reporter(progress)
     body = build_body(p["body"])
-    report.step(0.02, 0.92, f"stability map: {p['grid']} × {p['grid']} shapes")
+    report.step(0.02, 0.8, f"stability map: {p['grid']} × {p['grid']} shapes")
+    stages = {
+        "csv": (0.8, 0.84, "writing stability-map.csv"),
+        "plot": (0.84, 0.98, "drawing stability-map.png (matplotlib)"),
+    }
     with reporting_bars(report):
         answer = stability_map_answer(
             body,
@@ -252,6 +346,7 @@ def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple
             out=str(out / "stability-map.csv"),
             plot=str(out / "stability-map.png"),
             progress=True,
+            on_stage=lambda stage: report.step(*stages[stage]),
         )
     return answer, ["stability-map.png", "stability-map.csv"]
 
@@ -260,12 +355,13 @@ def _evaluate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any,
     from agents.evaluate import baselines_for, evaluate_all
 
     report = Reporter(progress)
-    report.step(0.02, 0.98, "evaluating the shipped agent")
+    report.step(0.02, 0.95, "evaluating the shipped agent")
     bars = 1 + (len(baselines_for("FlatBody-v0")) if p["baselines"] else 0)
     with reporting_bars(report, bars=bars):
         report_json = evaluate_all(
             None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"], progress=True
         )  # the shipped agent only
+    report.step(0.95, 0.98, "writing evaluation.json")
     atomic_write(out / "evaluation.json", json.dumps(report_json, indent=2) + "\n")
     return report_json, ["evaluation.json"]
 
@@ -506,10 +602,12 @@ __all__ = [
     "Reporter",
     "WORK",
     "die_with_service",
+    "download_name",
     "exit_reason",
     "process_context",
     "remove_partial_files",
     "reporting_bars",
     "reporting_integration",
     "run_job",
+    "write_preview",
 ]

@@ -117,7 +117,7 @@ def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
     last = rest.strip().splitlines()[-1]
     assert (
         "Traceback" not in rest
-        and last.startswith("flatbody: interrupted (training stopped at ")
+        and last.startswith("flatbody train: interrupted (training stopped at ")
         and "--resume continues" in last
     ), rest
     (kept,) = (out / "checkpoints").glob("rl_model_*_steps.zip")

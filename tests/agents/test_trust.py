@@ -280,7 +280,7 @@ def test_root_home_and_its_parents_are_never_trusted(tmp_path, config_home, monk
     for out in ("/", str(home)):
         assert main(["train", "--algo", "ppo", "--out", out, "--n-timesteps", "1", "--no-progress"]) == 2
         line = _one_line(capsys)
-        assert line.startswith("flatbody: error: out: ") and "folder of its own" in line, line
+        assert line.startswith("flatbody train: error: out: ") and "folder of its own" in line, line
     assert not (home / "config.yml").exists()
 
 

@@ -72,7 +72,7 @@ def test_scene_and_branch_a(capsys):
         (["ellipses", "--branch", "A", "--s3", "1", "--p-theta", "1"], "--spin"),
         (["family", "--vary", "q"], "--vary"),
         (["family", "--vary", "k"], "param"),
-        (["family", "--from", "2", "--to", "1"], "stop"),
+        (["family", "--from", "2", "--to", "1"], "--to"),
         (["invariants", "/nonexistent/traj.json"], "trajectory"),
     ],
 )

@@ -105,3 +105,59 @@ def test_bad_family_arguments():
         follow_family(body, "kappa", -1.0, 1.0)
     with pytest.raises(ValueError, match="param"):
         body_with(body, "c", 1.0)
+
+
+@pytest.mark.parametrize(
+    "param, start, stop",
+    [("J", 1e-6, 1e6), ("kappa", 1e-6, 1e-3), ("s3", -1e6, 1e6), ("p_theta", 0.05, 4.0)],
+)
+def test_a_family_never_evaluates_outside_the_requested_range(param, start, stop):
+    """The continuation may step past the range only in its arithmetic: every parameter value the equations are
+    evaluated at (difference quotients and Newton iterates included) lies in [start, stop], so a range whose ends
+    are a constant's allowed bounds (J from 1e-6 to 1e6) is followed, never refused at 9.9e-07."""
+    problems: list = []
+    fam = follow_family(default_body(), param, start, stop, _problem=problems)
+    calls = problems[0].calls
+    assert calls, "the equations were never evaluated"
+    assert min(calls) >= start and max(calls) <= stop, (min(calls), max(calls))
+    for branch in fam.branches:
+        assert all(start <= p.param <= stop for p in branch)
+    # where and why every branch stops is said: two ends per branch, each a known reason in words
+    assert len(fam.ends) == 2 * len(fam.branches)
+    assert all(e.reason in ("range", "box", "circle", "no-solution", "points") and e.detail for e in fam.ends)
+
+
+def test_a_family_over_decades_is_followed_in_ln_p_and_says_where_its_branches_end():
+    body = default_body()
+    fam = follow_family(body, "J", 1e-6, 1e6)
+    assert fam.scale == "log"
+    (branch,) = fam.branches
+    params = np.array([p.param for p in branch])
+    assert params[0] == 1e-6 and params[-1] == 1e6  # both ends of the range, reached exactly
+    # every decade gets points, not one linear step of 1.7e4 over J < 1e4
+    decades = np.floor(np.log10(params[:-1]))
+    assert set(range(-6, 6)) <= set(decades.astype(int).tolist())
+    assert [e.reason for e in fam.ends] == ["range", "range"]
+    # a spin over ±1e6: both branches are found (seeds spread over the decades) and each end is explained
+    fam = follow_family(body, "s3", -1e6, 1e6)
+    assert fam.scale == "asinh" and len(fam.branches) == 2
+    reasons = sorted(e.reason for e in fam.ends)
+    assert reasons == ["box", "box", "circle", "circle"], fam.ends
+    box_end = next(e for e in fam.ends if e.reason == "box")
+    assert "λ would exceed 50" in box_end.detail and abs(box_end.param) > 1000
+    assert fam.empty_seeds == (-1e6, 1e6)
+
+
+def test_a_family_range_is_refused_in_the_callers_words():
+    body = default_body()
+    with pytest.raises(ValueError, match=r"^start: must lie in .*1e-06.*got 9\.9e-07"):
+        follow_family(body, "J", 9.9e-7, 1.0)
+    from analysis.families import check_range
+
+    with pytest.raises(ValueError, match=r"^from: must lie in"):
+        check_range("J", 1e-7, 1.0, names=("from", "to"))
+    with pytest.raises(ValueError, match=r"^--to: must be greater than from \(4\), got 0\.05"):
+        check_range("s3", 4.0, 0.05, names=("--from", "--to"))
+    # the body's own check names the constant varied, never params.J1
+    with pytest.raises(ValueError, match=r"^J: must lie in"):
+        body_with(body, "J", 1e-7)

@@ -66,7 +66,12 @@ def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
     lines = loud.stderr.splitlines()
     assert lines[0].startswith("sweep stability-map: 1/4 tasks (25%)"), loud.stderr
     assert lines[-1].startswith("sweep stability-map: 4/4 tasks (100%)") and lines[-1].endswith("- done")
-    assert loud.stdout == quiet.stdout  # the report itself is unchanged
+    # the report itself is unchanged (its last line names the files written, each run in its own folder)
+    assert loud.stdout.replace(str(tmp_path / "b"), "OUT") == quiet.stdout.replace(str(tmp_path / "a"), "OUT")
+    assert (
+        quiet.stdout.splitlines()[-1]
+        == f"wrote {tmp_path / 'a' / 'results.sqlite'}, {tmp_path / 'a' / 'stability_map.csv'}"
+    )
     nobar = _run([*argv, "--out", str(tmp_path / "c"), "--no-progress"], FLATBODY_PROGRESS_S="0")
     assert nobar.returncode == 0 and nobar.stderr == ""
 

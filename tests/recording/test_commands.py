@@ -172,9 +172,11 @@ def test_bench_recording_with_a_tiny_budget(tmp_path, capsys):
 
 
 def test_record_shots_frames_writes_the_documented_picture_of_the_rgb_array_frames(tmp_path, capsys):
-    """``record-shots --frames 0,120`` (docs/recording.md's picture): two 256 px frames of FlatBody-v0, seed 7,
-    8 white pixels apart, exactly as ``env.render()`` returns them."""
+    """``record-shots --frames 0,120`` (docs/recording.md's picture): two 256 px frames of FlatBody-v1, seed 7,
+    8 white pixels apart: the env's frame of each state with the episode's status (task, step, distance)."""
     from PIL import Image
+
+    from flatbody_env.env.rendering import frame_status, render_frame
 
     assert main(["record-shots", "--frames", "0,3", "--seed", "7", "--out", str(tmp_path / "img")]) == 0
     path = tmp_path / "img" / "frame-rgb_array.png"
@@ -182,14 +184,21 @@ def test_record_shots_frames_writes_the_documented_picture_of_the_rgb_array_fram
     with Image.open(path) as img:
         assert img.format == "PNG" and img.size == (2 * 256 + 8, 256)
         strip = np.asarray(img.convert("RGB"))
-    env = gym.make("FlatBody-v0", render_mode="rgb_array")
-    env.reset(seed=7)
+    env = gym.make("FlatBody-v1", render_mode="rgb_array")
+    _, info = env.reset(seed=7)
     env.action_space.seed(7)
-    first = env.render()
+    u = env.unwrapped
+
+    def frame(info):
+        return render_frame(u.physics_state, u.rotation, u.target, u.time, status=frame_status(env, info))
+
+    first = frame(info)
+    without = env.render()  # the same drawing, the status apart: they differ only in the top left corner
+    assert np.array_equal(first[60:], without[60:]) and not np.array_equal(first[:60, :150], without[:60, :150])
     for _ in range(3):
-        env.step(env.action_space.sample())
+        _, _, _, _, info = env.step(env.action_space.sample())
     np.testing.assert_array_equal(strip[:, :256], first)
-    np.testing.assert_array_equal(strip[:, 264:], env.render())
+    np.testing.assert_array_equal(strip[:, 264:], frame(info))
     assert (strip[:, 256:264] == 255).all() and not np.array_equal(strip[:, :256], strip[:, 264:])
     # a recording and --frames together, or neither: one line, exit 2
     assert main(["record-shots", str(tmp_path / "x.rrd"), "--frames", "0,1", "--out", str(tmp_path)]) == 2

@@ -20,7 +20,7 @@ from flatbody_env.recording.geometry import (
     symmetric_from_entries,
 )
 from flatbody_env.recording.reader import read_recording
-from flatbody_env.recording.writer import BODY_ENTITIES, record_arrays, record_trajectory
+from flatbody_env.recording.writer import BODY_ENTITIES, LABEL_DROP, record_arrays, record_trajectory
 from recording_oracles import N, SCALARS, phi_of, series
 import recording_oracles as oracles
 
@@ -128,7 +128,11 @@ def test_transform_and_principal_axes(recorded):
         assert [lab.split(" = ")[0] for lab in labels[0]] == ["λ", "μ", "ϱ"]
         printed = np.array([[float(lab.split(" = ")[1]) for lab in row] for row in labels])
         np.testing.assert_allclose(printed, length, atol=5e-4 + 1e-6)
-        # each label lies on its arrow's line, beyond its tip
+        # each label's box lies on its arrow's line, beyond its tip: rerun hangs the box under its point, so an
+        # in-plane label's point sits LABEL_DROP above the box's centre (the top view's +y)
+        extent = float(np.max(half))  # the recorder's extent for a free scene: the largest semi-axis of the run
+        pos = pos.copy()
+        pos[:, :2, 1] -= LABEL_DROP * extent
         along = np.einsum("nki,nki->nk", pos, v) / length
         np.testing.assert_allclose(np.linalg.norm(pos, axis=2), along, rtol=1e-5)
         assert np.all(along > length)

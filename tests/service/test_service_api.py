@@ -358,9 +358,20 @@ def test_record_job_writes_a_recording_that_reads_back(client, tmp_path):
     r = client.post("/jobs", json={"kind": "record", "params": {"scene": "default", "t_end": 1.0, "samples": 11}})
     job = wait_job(client.get, r.json()["id"])
     assert job["status"] == "done", job["error"]
-    assert job["result"]["open_with"] == "rerun recording.rrd" and job["artifacts"] == ["recording.rrd"]
+    name = f"flatbody-record-default-t1-{job['id'][:8]}.rrd"  # what it holds, not recording.rrd for every job
+    assert job["result"]["open_with"] == f"rerun {name}" and job["result"]["download"] == name
+    assert job["artifacts"] == ["recording.rrd", "preview.png", "trajectory.json"]
     art = client.get(f"/jobs/{job['id']}/artifact")
     assert art.status_code == 200
+    assert f'filename="{name}"' in art.headers["content-disposition"]
+    # the preview: four frames of the plate side by side, and the trajectory the page draws
+    from PIL import Image
+
+    preview = tmp_path / "preview.png"
+    preview.write_bytes(client.get(f"/jobs/{job['id']}/artifact", params={"name": "preview.png"}).content)
+    assert Image.open(preview).size == (4 * 256 + 3 * 8, 256)
+    traj = client.get(f"/jobs/{job['id']}/artifact", params={"name": "trajectory.json"}).json()
+    assert len(traj["t"]) == 11 and traj["meta"]["scene"] == "default"
     path = tmp_path / "got.rrd"
     path.write_bytes(art.content)
     rec = read_recording(path)
@@ -411,16 +422,17 @@ def test_cancel_a_running_job(client):
     [
         ({"from": 3.0, "to": 1.0}, "params.to", ("must be greater than from (3)", "got 1")),
         ({"from": 2.0, "to": 2.0}, "params.to", ("must be greater than from (2)",)),
-        ({"vary": "kappa", "from": 0.0, "to": 2.0}, "params.from", ("kappa must stay > 0",)),
+        ({"vary": "kappa", "from": 0.0, "to": 2.0}, "params.from", ("must lie in", "1e-06", "got 0")),
+        ({"vary": "J", "from": 1e-7, "to": 1e6}, "params.from", ("must lie in", "1e-06", "got 1e-07")),
         ({"vary": "k", "from": 1.0, "to": 2.0}, "params.vary", ("not a constant of this body",)),
     ],
 )
 def test_a_family_range_is_checked_when_submitted_in_the_requests_words(client, params, field, words):
-    """from > to (and a body constant's range reaching 0) is refused at submission, naming from/to, never
-    accepted and then failed inside the job as start/stop."""
+    """from > to (and a body constant's range beyond its allowed bounds) is refused at submission, naming
+    from/to, never accepted and then failed inside the job as start/stop or J1."""
     before = len(client.get("/jobs").json()["jobs"])
     data = assert_error(client.post("/jobs", json={"kind": "family", "params": params}), 422, field, *words)
-    assert "start" not in data["detail"] and "stop" not in data["detail"]
+    assert "start" not in data["detail"] and "stop" not in data["detail"] and "J1" not in data["detail"]
     assert len(client.get("/jobs").json()["jobs"]) == before
 
 

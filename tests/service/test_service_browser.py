@@ -3,8 +3,8 @@ user sees it: results drawn, errors next to the field at fault and inside the wi
 reload, progress that moves while a job runs.
 
 Skipped with the reason when chromium, its driver or selenium is missing. Saves screenshots
-``page-*.png`` under ``FLATBODY_SCREENSHOT_DIR`` (``docs/img`` refreshes the documentation's), else
-under the test's tmp dir.
+``page-*.png`` under ``FLATBODY_SCREENSHOT_DIR`` (``docs/img`` refreshes the documentation's, in a 256-colour
+palette), else under the test's tmp dir.
 """
 
 from __future__ import annotations
@@ -116,6 +116,10 @@ def _shot(driver, tmp_path: Path, name: str) -> Path:
     path = folder / f"page-{name}.png"
     driver.save_screenshot(str(path))
     assert path.stat().st_size > 10_000
+    if os.environ.get("FLATBODY_SCREENSHOT_DIR"):  # the documentation's copies: a 256-colour palette, as record-shots
+        from flatbody_env.recording.viewer import _compact_png
+
+        _compact_png(path, 256)
     return path
 
 
@@ -167,11 +171,14 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     assert len(rows) == 1
     cells = [c.text for c in rows[0].find_elements(By.TAG_NAME, "td")]
     # the page shows what POST /ellipses answers: omega3 = 1 for this body (energy 3.5), and a stability class
-    assert float(cells[4]) == pytest.approx(1.0, abs=1e-5)
-    assert float(cells[6]) == pytest.approx(3.5, abs=1e-6)
-    assert cells[5] == "0"  # theta_dot: round-off (|x| < 1e-12) is shown as 0, never as 1.11022e-16
+    # columns: #, a drawing of the ellipse, λ, μ, ϱ, ω₃, θ̇, H, stability, max Re, the row's actions
+    assert rows[0].find_element(By.CSS_SELECTOR, "td.shape svg.ellipse-icon")
+    assert float(cells[5]) == pytest.approx(1.0, abs=1e-5)
+    assert float(cells[7]) == pytest.approx(3.5, abs=1e-6)
+    assert cells[6] == "0"  # theta_dot: round-off (|x| < 1e-12) is shown as 0, never as 1.11022e-16
     assert all("e-" not in c for c in cells)
-    assert cells[7] in ("elliptic", "hyperbolic", "degenerate")
+    assert cells[8] in ("elliptic", "hyperbolic", "degenerate")
+    assert "simulate from here" in cells[10] and "use as target" in cells[10]
     assert "V1, s3 = 2, p_θ = 0.5" in browser.find_element(By.ID, "ellipses-status").text
     assert "stale" not in browser.find_element(By.ID, "ellipses-table").get_attribute("class")
     assert "dimensionless" in browser.find_element(By.ID, "units-note").text
@@ -186,12 +193,12 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     _type(browser, "samples", "41")
     browser.find_element(By.ID, "t_end").send_keys(Keys.ENTER)  # Enter in the run form: a simulation job
     card = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=simulate]"))
-    lines = card.find_elements(By.CSS_SELECTOR, "svg.chart path.line")
-    assert {p.get_attribute("data-name") for p in lines} == {"λ", "μ", "ϱ", "s₃", "H"}
+    lines = wait.until(lambda d: card.find_elements(By.CSS_SELECTOR, "svg.chart path.line"))
+    assert {p.get_attribute("data-name") for p in lines} == {"λ", "μ", "ϱ", "s₃", "H", "H − H₀"}
     # each variable in the colour the recordings and the rgb_array frames give it: λ red, μ green, ϱ blue, ...
     from flatbody_env.env.rendering import COLORS
 
-    palette = {"λ": "lambda", "μ": "mu", "ϱ": "rho", "s₃": "s3", "H": "energy"}
+    palette = {"λ": "lambda", "μ": "mu", "ϱ": "rho", "s₃": "s3", "H": "energy", "H − H₀": "energy"}
     drawn = {
         p.get_attribute("data-name"): browser.execute_script("return getComputedStyle(arguments[0]).stroke", p)
         for p in lines
@@ -200,16 +207,20 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     assert all(len(p.get_attribute("d")) > 100 for p in lines)
     assert card.find_element(By.CSS_SELECTOR, "svg.chart").size["width"] > 400
     assert card.find_element(By.CSS_SELECTOR, "svg.ellipse ellipse.now").get_attribute("rx")
-    assert "t (model time unit)" in card.text and "(dimensionless)" in card.text
+    assert "t (model time unit)" in card.text and "energy drift H − H₀" in card.text
 
-    # a small recording job: says what to run and offers the file
+    # a small recording job: a preview (frames and the trajectory's plots), the file under a name of its own, what to run
     _type(browser, "t_end", "1")
     _type(browser, "samples", "11")
     browser.find_element(By.ID, "start-record").click()
     rec = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=record]"))
-    assert "rerun recording.rrd" in rec.text
-    link = rec.find_element(By.PARTIAL_LINK_TEXT, "Download recording.rrd")
+    link = rec.find_element(By.PARTIAL_LINK_TEXT, "Download flatbody-record-")
+    name = link.text.removeprefix("Download ")
+    assert name.startswith("flatbody-record-") and name.endswith(".rrd") and f"rerun {name}" in rec.text
     assert "/artifact?name=recording.rrd" in link.get_attribute("href")
+    wait.until(lambda d: rec.find_elements(By.CSS_SELECTOR, "svg.chart path.line"))
+    preview = rec.find_element(By.CSS_SELECTOR, "img.preview")
+    wait.until(lambda d: d.execute_script("return arguments[0].complete && arguments[0].naturalWidth", preview))
     row = browser.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind=record]")
     assert row.get_attribute("data-status") == "done", row.text
     assert "took" in row.text
@@ -278,7 +289,7 @@ def test_bad_input_is_refused_next_to_the_field_inside_the_window(window, live_s
     _type(browser, "J", "1e7")
     browser.find_element(By.ID, "start-map").click()
     text = message_for("J")
-    assert text.startswith("J: ") and "body.params" not in text and "1e+06" in text, text
+    assert text.startswith("J: ") and "body.params" not in text and "1×10⁶" in text and "e+" not in text, text
     summary = browser.find_element(By.ID, "map-error")
     assert summary.is_displayed() and "J" in summary.text
     _shot(browser, tmp_path, "field-error")
@@ -307,7 +318,7 @@ def test_bad_input_is_refused_next_to_the_field_inside_the_window(window, live_s
     _type(browser, "vary-from", "0")
     _type(browser, "vary-to", "2")
     browser.find_element(By.ID, "start-family").click()
-    assert "must stay > 0" in message_for("vary-from")
+    assert "must be at least 1×10⁻⁶" in message_for("vary-from")
     assert browser.execute_script(posted) == before
 
 
@@ -397,3 +408,187 @@ def test_progress_strictly_increases_during_a_ten_second_job(window, live_servic
     assert len(values) >= 10, values
     elapsed = [t for t in texts if "elapsed" in t]
     assert len(elapsed) >= 5, texts
+
+
+def _overflow(driver) -> int:
+    """How far the page reaches past the window's right edge (px; 0: nothing off screen)."""
+    return driver.execute_script("return document.documentElement.scrollWidth - window.innerWidth")
+
+
+def test_errors_go_when_their_fields_are_fixed_without_moving_the_form(window, live_service, tmp_path):
+    """A message under a field is a bubble (the row does not reflow), the summary beside the button goes once every
+    field it names is changed, and every number in a message is written one way (1×10⁶, never 1e+06 beside it)."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    browser = window
+    _, url, _ = live_service
+    _ready(browser, url)
+    grid = browser.find_element(By.CSS_SELECTOR, "#body-panel .grid:nth-of-type(2)")
+    before = grid.size["height"]
+    for field, value in (("J", "1e7"), ("J3", ""), ("a", "-1"), ("b", "1e300")):
+        _type(browser, field, value)
+    browser.find_element(By.ID, "find-ellipses").click()
+    summary = browser.find_element(By.ID, "ellipses-error")
+    # refused in the page: J3 empty and a < 0 (J and b are the service's to refuse)
+    assert summary.is_displayed() and summary.text.startswith("2 fields to fix"), summary.text
+    assert grid.size["height"] == before  # the messages float over what lies below: the row keeps its height
+    msgs = [m.text for m in browser.find_elements(By.CSS_SELECTOR, "label.bad .msg")]
+    assert len(msgs) == 2 and not any("e+" in m or "e-0" in m for m in msgs), msgs
+    _shot(browser, tmp_path, "field-error")
+    _type(browser, "J3", "1")
+    assert summary.is_displayed()  # a is still wrong: the summary stays
+    _type(browser, "a", "1")
+    WebDriverWait(browser, 5).until(lambda d: not summary.is_displayed())  # every field it named fixed: gone
+    assert not browser.find_elements(By.CSS_SELECTOR, "label.bad")
+    # the service's refusal of J, in the form's words and the page's number format
+    _type(browser, "b", "1")
+    browser.find_element(By.ID, "start-map").click()
+    msg = WebDriverWait(browser, 30).until(lambda d: d.find_element(By.CSS_SELECTOR, "label.bad .msg")).text
+    assert msg.startswith("J: ") and "at most 1×10⁶, got 1×10⁷" in msg and "e+" not in msg and "<=" not in msg, msg
+
+
+def test_the_page_on_a_phone_keeps_everything_on_screen_and_readable(live_service, tmp_path):
+    """At 390 px wide: nothing off screen (the jobs table becomes one card per job) and the plots' text stays
+    ≥ 10 px (the plots are drawn at the width they are shown at, not shrunk)."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    browser = _chrome("--host-resolver-rules=MAP * ~NOTFOUND , EXCLUDE 127.0.0.1", size="390,844")
+    try:
+        _, url, _ = live_service
+        _ready(browser, url)
+        _type(browser, "t_end", "20")
+        browser.find_element(By.ID, "start-simulate").click()
+        _type(browser, "map-grid", "6")
+        browser.find_element(By.ID, "start-map").click()
+        wait = WebDriverWait(browser, 180)
+        wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#runs article[data-kind=simulate] svg.chart text.tick"))
+        wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#jobs tr[data-status=done]")) == 2)
+        assert _overflow(browser) <= 0, _overflow(browser)
+        for sel in ("#jobs tr[data-kind=simulate] .files a", "#jobs tr[data-kind=simulate] button.delete"):
+            el = browser.find_element(By.CSS_SELECTOR, sel)
+            browser.execute_script("arguments[0].scrollIntoView({block: 'center'})", el)
+            assert _in_viewport(browser, el), sel
+        sizes = browser.execute_script(  # each text's font size on screen: its size in the drawing × the drawing's scale
+            "return [...document.querySelectorAll('#runs svg.chart text')].map(t => { const s = t.ownerSVGElement;"
+            " return parseFloat(getComputedStyle(t).fontSize) * s.getBoundingClientRect().width / s.viewBox.baseVal.width; })"
+        )
+        assert sizes and min(sizes) >= 10, sizes  # was ~4 px: a 640-wide drawing shrunk to the phone's width
+        browser.execute_script("window.scrollTo(0, 0)")
+        height = browser.execute_script("return document.documentElement.scrollHeight")
+        browser.set_window_size(390, min(int(height) + 120, 7000))
+        time.sleep(0.5)
+        _shot(browser, tmp_path, "390")
+    finally:
+        browser.quit()
+
+
+def test_a_long_run_is_drawn_as_its_envelope_zooms_and_shows_its_energy_drift(window, live_service, tmp_path):
+    """20 001 samples over t = 0 … 3000: a series faster than the pixels is a band of its range around its mean (no
+    aliasing pattern), the energy drift H − H₀ has a plot on its own scale with its size in the title, the last time
+    label stays inside the plot, and dragging across a plot zooms every plot to that window."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select, WebDriverWait
+
+    browser = window
+    _, url, _ = live_service
+    _ready(browser, url)
+    Select(browser.find_element(By.ID, "scene")).select_by_value("long-horizon")
+    _type(browser, "t_end", "3000")
+    _type(browser, "samples", "20001")
+    browser.find_element(By.ID, "start-simulate").click()
+    card = WebDriverWait(browser, 180).until(
+        lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=simulate]")
+    )
+    WebDriverWait(browser, 30).until(lambda d: card.find_elements(By.CSS_SELECTOR, "svg.chart path.band"))
+    titles = [t.text for t in card.find_elements(By.CSS_SELECTOR, "svg.chart text.title")]
+    assert any(t.startswith("energy drift H − H₀") for t in titles), titles
+    drift = next(t for t in titles if t.startswith("energy drift"))
+    assert "largest |H − H₀| =" in drift and "of |H₀|" in drift, drift
+    # every tick label inside its plot (no "1000(" cut at the right edge)
+    out = browser.execute_script(
+        "return [...arguments[0].querySelectorAll('svg.chart')].flatMap(s => [...s.querySelectorAll('text.tick')]"
+        ".filter(t => t.getBBox().x + t.getBBox().width > s.viewBox.baseVal.width + 0.5).map(t => t.textContent))",
+        card,
+    )
+    assert not out, out
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", card)
+    time.sleep(0.3)
+    _shot(browser, tmp_path, "long-sim")
+    # drag across the spin plot from 40 % to 45 % of its width: every plot shows that window
+    chart = card.find_elements(By.CSS_SELECTOR, "svg.chart")[1]
+    w = chart.size["width"]
+    ActionChains(browser).move_to_element_with_offset(chart, int(-0.1 * w), 0).click_and_hold().move_by_offset(
+        int(0.05 * w), 0
+    ).release().perform()
+    WebDriverWait(browser, 10).until(lambda d: card.find_elements(By.CSS_SELECTOR, "button.whole-run"))
+    ticks = [
+        float(t.text)
+        for t in card.find_elements(By.CSS_SELECTOR, "svg.chart")[0].find_elements(By.CSS_SELECTOR, "text.tick")[-3:]
+    ]
+    assert max(ticks) < 3000 * 0.6 and min(ticks) > 3000 * 0.2, ticks  # the time axis shows the window
+    assert not card.find_elements(By.CSS_SELECTOR, "svg.chart path.band")  # zoomed in, every sample drawn
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", card)
+    time.sleep(0.3)
+    _shot(browser, tmp_path, "long-sim-zoom")
+    card.find_element(By.CSS_SELECTOR, "button.whole-run").click()
+    WebDriverWait(browser, 10).until(lambda d: not card.find_elements(By.CSS_SELECTOR, "button.whole-run"))
+
+
+def test_a_family_over_decades_a_recording_preview_and_the_ellipse_table_actions(window, live_service, tmp_path):
+    """A family over J from 10⁻⁶ to 10⁶ (both ends allowed) is done, followed in ln J, and says where its branch
+    ends; a recording job shows its preview; an ellipse of the table starts a simulation from itself and can be
+    used as a target; the header says when the service has stopped."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select, WebDriverWait
+
+    browser = window
+    proc, url, _ = live_service
+    wait = WebDriverWait(browser, 240)
+    _ready(browser, url)
+    Select(browser.find_element(By.ID, "vary")).select_by_value("J")
+    _type(browser, "vary-from", "1e-6")
+    _type(browser, "vary-to", "1e6")
+    browser.find_element(By.ID, "start-family").click()
+    fig = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#pictures figure[data-kind=family] .family-ends"))
+    assert "the range spans decades: followed in ln J" in fig.text
+    assert "branch 0: from J = 1×10⁻⁶ (the range's end) to J = 1×10⁶ (the range's end)" in fig.text, fig.text
+    row = browser.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind=family]")
+    assert row.get_attribute("data-status") == "done" and "J1" not in row.text
+    # the ellipse table: a drawing of each ellipse, "simulate from here", "use as target"
+    browser.find_element(By.ID, "find-ellipses").click()
+    tr = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#ellipses-table tbody tr"))
+    assert tr.find_element(By.CSS_SELECTOR, "svg.ellipse-icon ellipse")
+    tr.find_element(By.CSS_SELECTOR, "button.as-target").click()
+    assert "Target: ellipse 0" in browser.find_element(By.ID, "target-note").text
+    _type(browser, "t_end", "10")
+    tr.find_element(By.CSS_SELECTOR, "button.from-here").click()
+    card = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=simulate]"))
+    assert "ellipse 0" in card.text
+    wait.until(lambda d: card.find_elements(By.CSS_SELECTOR, "svg.ellipse ellipse.target-shape"))
+    assert card.find_elements(By.CSS_SELECTOR, "svg.chart line.target")  # λ*, μ*, ϱ* as faint bands
+    # a recording job: the body at four times and the recorded trajectory
+    _type(browser, "t_end", "20")
+    browser.find_element(By.ID, "start-record").click()
+    rec = wait.until(lambda d: d.find_element(By.CSS_SELECTOR, "#runs article[data-kind=record]"))
+    preview = rec.find_element(By.CSS_SELECTOR, "img.preview")
+    wait.until(lambda d: d.execute_script("return arguments[0].complete && arguments[0].naturalWidth", preview) > 1000)
+    wait.until(lambda d: rec.find_elements(By.CSS_SELECTOR, "svg.chart path.line"))
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", rec)
+    time.sleep(0.5)
+    _shot(browser, tmp_path, "record-preview")
+    browser.set_window_size(1400, 1400)  # the chart and what is said under it
+    figure = browser.find_element(By.CSS_SELECTOR, "#pictures figure[data-kind=family]")
+    browser.execute_script("arguments[0].scrollIntoView({block: 'start'})", figure)
+    time.sleep(0.5)
+    _shot(browser, tmp_path, "family-decades")
+    _full_height(browser)
+    _shot(browser, tmp_path, "1400")
+    browser.set_window_size(1400, 900)
+    # the service stops: the header no longer says "service ok"
+    from flatbody_env.service.launch import stop_service
+
+    stop_service(proc)
+    WebDriverWait(browser, 20).until(lambda d: "unreachable" in d.find_element(By.ID, "health").text)

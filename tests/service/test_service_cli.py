@@ -35,7 +35,7 @@ def test_serve_elsewhere_is_said_in_the_log(fake_uvicorn, capsys, tmp_path):
     "argv, words",
     [
         (["serve", "--port", "70000"], "port: must be an integer in [0, 65535]"),
-        (["serve", "--workers", "0"], "argument --workers: workers: must be an integer in [1, 256], got 0"),
+        (["serve", "--workers", "0"], "flatbody serve: error: --workers: must be an integer in [1, 256], got 0"),
         (["bench", "service", "--clients", "0,8"], "clients: each must be an integer in [1, 256]"),
     ],
 )

@@ -68,6 +68,6 @@ def test_ctrl_c_stops_the_service_and_its_workers_quietly(tmp_path):
         _, stderr = interrupt(proc)
     assert proc.returncode == 130, stderr[-3000:]
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr[-3000:]
-    assert stderr.strip().splitlines()[-1] == "flatbody: interrupted"
+    assert stderr.strip().splitlines()[-1] == "flatbody serve: interrupted"
     _, alive = psutil.wait_procs(children, timeout=10)
     assert not alive, [p.cmdline()[:4] for p in alive]

@@ -61,7 +61,7 @@ def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
         stdout, stderr = interrupt(proc)
     assert proc.returncode == 130, stderr[-3000:]
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) <= 2, stderr[-3000:]
-    assert stderr.strip().splitlines()[-1] == "flatbody: interrupted"
+    assert stderr.strip().splitlines()[-1] == "flatbody sweep: interrupted"
     _, alive = psutil.wait_procs(children, timeout=10)
     assert not alive, [p.cmdline()[:3] for p in alive]
     before = _rows(db_path)

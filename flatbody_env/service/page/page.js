@@ -28,6 +28,31 @@ function fmt(x, digits = 6) {
   return `${mant}×10${String(Number(e)).split("").map((c) => SUPERSCRIPT[c] || c).join("")}`;
 }
 
+/** A tick label: `v` (a multiple of the axis' `step`) in the format of `fmt`, "0" only where it is 0 on the axis (a
+ * drift of 10⁻¹³ keeps its ticks instead of collapsing to round-off). */
+function fmtTick(v, step) {
+  if (Math.abs(v) < Math.abs(step) * 1e-9) return "0";
+  const a = Math.abs(v);
+  if (a >= 1e-4 && a < 1e6) return String(Number(v.toPrecision(6)));
+  const [m, e] = v.toExponential(5).split("e");
+  const mant = m.includes(".") ? m.replace(/\.?0+$/, "") : m;
+  return `${mant}×10${String(Number(e)).split("").map((c) => SUPERSCRIPT[c] || c).join("")}`;
+}
+
+// a number as Python writes it in a message (1e+06, -2.5, 9.9e-07): not inside a name such as J3, s3, V3 or t_end
+const NUMBER_IN_TEXT = /(^|[\s(\[,=<>≤≥:])(-?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?)(?=$|[\s)\],;:]|\.(?:\s|$))/gi;
+
+/** A message's numbers in the page's one format (`fmt`: 1×10⁶, not 1e+06 beside 1×10³⁰⁰), and the library's range
+ * wording in plain words. */
+function tidyMessage(text) {
+  return String(text)
+    .replace(/must lie in \(allowed range \[([^,\]]+), ([^\]]+)\]\)/g, "must lie between $1 and $2")
+    .replace(/ \(allowed range \(0, ([^\]]+)\]\)/g, " and at most $1")
+    .replace(/ \(allowed range \(0, inf\)\)/g, "")
+    .replace(/must be <= /g, "must be at most ").replace(/must be >= /g, "must be at least ")
+    .replace(NUMBER_IN_TEXT, (m, pre, num) => pre + fmt(Number(num)));
+}
+
 /** Seconds as "0.4 s", "12 s", "3 min 05 s", "1 h 02 min". */
 function fmtDuration(s) {
   if (s === null || s === undefined || !Number.isFinite(s)) return "—";
@@ -111,24 +136,36 @@ function readNumber(id, errors) {
   }
   const d = input.dataset;
   if (d.integer && !Number.isInteger(x)) errors.push([id, `${label}: must be a whole number, got ${fmt(x)}`]);
-  else if (d.minExcl !== undefined && !(x > Number(d.minExcl))) errors.push([id, `${label}: must be > ${d.minExcl}, got ${fmt(x)}`]);
+  else if (d.minExcl !== undefined && !(x > Number(d.minExcl))) errors.push([id, `${label}: must be > ${fmt(Number(d.minExcl))}, got ${fmt(x)}`]);
   else if (d.min !== undefined && x < Number(d.min)) errors.push([id, `${label}: must be at least ${fmt(Number(d.min))}, got ${fmt(x)}`]);
   else if (d.max !== undefined && x > Number(d.max)) errors.push([id, `${label}: must be at most ${fmt(Number(d.max))}, got ${fmt(x)}`]);
-  else if (input.min !== "" && x < Number(input.min)) errors.push([id, `${label}: must be at least ${input.min}, got ${fmt(x)}`]);
-  else if (input.max !== "" && x > Number(input.max)) errors.push([id, `${label}: must be at most ${input.max}, got ${fmt(x)}`]);
+  else if (input.min !== "" && x < Number(input.min)) errors.push([id, `${label}: must be at least ${fmt(Number(input.min))}, got ${fmt(x)}`]);
+  else if (input.max !== "" && x > Number(input.max)) errors.push([id, `${label}: must be at most ${fmt(Number(input.max))}, got ${fmt(x)}`]);
   return x;
 }
 
-function clearFieldErrors(scope) {
-  (scope || document).querySelectorAll("label.bad").forEach((l) => {
+/** Remove the error of the field `node` (an input or select): its mark, its message, and its name from every summary
+ * that lists it (a summary whose fields are all fixed goes). */
+function clearFieldError(node) {
+  const l = node.closest("label.bad");
+  if (l) {
     l.classList.remove("bad");
     const m = l.querySelector(".msg");
     if (m) m.remove();
-    const i = l.querySelector("input, select");
-    if (i) i.removeAttribute("aria-invalid");
+  }
+  node.removeAttribute("aria-invalid");
+  document.querySelectorAll(".action-error[data-fields]").forEach((box) => {
+    const left = box.dataset.fields.split(" ").filter((f) => f && f !== node.id);
+    box.dataset.fields = left.join(" ");
+    if (!left.length) { box.hidden = true; box.textContent = ""; }
   });
 }
 
+function clearFieldErrors(scope) {
+  (scope || document).querySelectorAll("label.bad input, label.bad select").forEach(clearFieldError);
+}
+
+/** The message of a field: a bubble under it that covers what lies below instead of pushing the row apart. */
 function setFieldError(id, message) {
   const input = $(id);
   const label = input.closest("label");
@@ -145,14 +182,17 @@ function inView(node) {
 }
 
 /** Show errors ([id, message] pairs): each next to its field (the first one scrolled into view and
- * focused), and a one-line summary next to the button that was pressed (`boxId`). */
+ * focused), and a one-line summary next to the button that was pressed (`boxId`), which goes once every field it
+ * names is changed. */
 function showErrors(errors, boxId) {
   for (const [id, msg] of errors) setFieldError(id, msg);
   const box = boxId ? $(boxId) : null;
   if (box) {
     const first = errors[0];
     const where = first[0] && !$(boxId).closest("form").contains($(first[0])) ? " (the field is marked above)" : "";
+    box.className = "action-error";
     box.textContent = (errors.length > 1 ? `${errors.length} fields to fix: ` : "") + first[1] + where;
+    box.dataset.fields = [...new Set(errors.map(([id]) => id))].join(" ");
     box.hidden = false;
   }
   const input = $(errors[0][0]);
@@ -165,6 +205,7 @@ function clearAction(boxId) {
   const box = $(boxId);
   box.className = "action-error";
   box.textContent = "";
+  delete box.dataset.fields;
   box.hidden = true;
 }
 
@@ -183,13 +224,13 @@ function fieldFor(path) {
   return null;
 }
 
-/** An API error in the form's words: the field's label instead of the request's path. */
+/** An API error in the form's words: the field's label instead of the request's path, numbers as the page writes
+ * them (`tidyMessage`). */
 function formMessage(err, id) {
   let detail = err.data.detail || err.message;
   const field = err.data.field;
   if (field && detail.startsWith(field)) detail = detail.slice(field.length).replace(/^:\s*/, "");
-  detail = detail.replace(/must lie in \(allowed range \[([^,\]]+), ([^\]]+)\]\)/, "must lie between $1 and $2")
-    .replace(/\bstart\b/g, "from").replace(/\bstop\b/g, "to").replace(/, got ([-0-9.e+]+)/, (m, v) => `, got ${fmt(Number(v))}`);
+  detail = tidyMessage(detail.replace(/\bstart\b/g, "from").replace(/\bstop\b/g, "to"));
   return id ? `${labelOf(id)}: ${detail}` : detail;
 }
 
@@ -200,6 +241,7 @@ function showApiError(err, boxId) {
   if (id) {
     showErrors([[id, formMessage(err, id)]], boxId);
   } else if (boxId) {
+    $(boxId).className = "action-error";
     $(boxId).textContent = formMessage(err, null);
     $(boxId).hidden = false;
     if (!inView($(boxId))) $(boxId).scrollIntoView({ block: "center" });
@@ -280,14 +322,22 @@ async function findEllipses() {
     const [ell, stab] = await Promise.all([api("POST", "/ellipses", req), api("POST", "/stability", req)]);
     const tbody = $("ellipses-table").querySelector("tbody");
     tbody.innerHTML = "";
+    const biggest = Math.max(...ell.solutions.map((e) => Math.max(e.state.lambda, e.state.mu)), 1);
     ell.solutions.forEach((e, i) => {
       const s = stab.solutions[i] || {};
       const cls = s.classification === "elliptic" ? "stable" : s.classification === "hyperbolic" ? "unstable" : "";
-      const tr = document.createElement("tr");
-      for (const v of [i, fmt(e.state.lambda), fmt(e.state.mu), fmt(e.state.rho), fmt(e.omega3), fmt(e.theta_dot), fmt(e.energy, 8)]) {
+      const tr = el("tr", { "data-index": String(i) });
+      tr.append(el("td", { text: String(i) }), el("td", { class: "shape" }, ellipseIcon(e.state.lambda, e.state.mu, biggest)));
+      for (const v of [fmt(e.state.lambda), fmt(e.state.mu), fmt(e.state.rho), fmt(e.omega3), fmt(e.theta_dot), fmt(e.energy, 8)]) {
         tr.append(el("td", { text: String(v) }));
       }
       tr.append(el("td", { class: `text ${cls}`, text: s.classification || "?" }), el("td", { text: fmt(s.max_real_part, 3) }));
+      const label = `ellipse ${i} (λ = ${fmt(e.state.lambda, 4)}, μ = ${fmt(e.state.mu, 4)})`;
+      tr.append(el("td", { class: "text act" },
+        el("button", { type: "button", class: "from-here", title: `a simulation job that starts on ${label}, with t_end, samples and method of 4.`,
+                       text: "simulate from here", onclick: () => simulateFrom(req, e, i) }),
+        el("button", { type: "button", class: "as-target", title: `draw ${label} as the target of the next simulations and recordings`,
+                       text: "use as target", onclick: () => useAsTarget(e, i) })));
       tbody.appendChild(tr);
     });
     $("ellipses-table").hidden = ell.solutions.length === 0;
@@ -299,6 +349,43 @@ async function findEllipses() {
     $("ellipses-status").textContent = "";
     showApiError(err, "ellipses-error");
   }
+}
+
+/** A small drawing of an ellipse with semi-axes λ, μ (to the scale of the largest in the table). */
+function ellipseIcon(lam, mu, biggest) {
+  const S = 34, C = S / 2, k = (C - 2) / biggest;
+  const root = svg("svg", { viewBox: `0 0 ${S} ${S}`, width: S, height: S, class: "ellipse-icon", role: "img", "aria-label": `λ = ${fmt(lam, 4)}, μ = ${fmt(mu, 4)}` });
+  root.append(svg("ellipse", { cx: C, cy: C, rx: lam * k, ry: mu * k, class: "now" }),
+              svg("line", { x1: C, y1: C, x2: C + lam * k, y2: C, class: "axis-line" }));
+  return root;
+}
+
+/** A simulation job that starts on stationary ellipse `e` of the table's request `req` (its body and state), with
+ * the run form's t_end, samples and method: an elliptic one stays put, a hyperbolic one leaves. */
+function simulateFrom(req, e, i) {
+  clearFieldErrors($("run-form"));
+  clearAction("run-error");
+  const errors = [];
+  const params = { scene: Object.assign({ name: `ellipse ${i}` }, JSON.parse(JSON.stringify(req.body)), { state: e.state }),
+                   t_end: readNumber("t_end", errors), samples: readNumber("samples", errors), method: $("method").value };
+  if (errors.length) { showErrors(errors, "run-error"); return; }
+  startJob("simulate", params, "run-error");
+  $("run-error").scrollIntoView({ block: "nearest" });
+}
+
+let TARGET = null;   // the stationary ellipse chosen as the target: drawn in the next simulations and recordings
+
+function useAsTarget(e, i) {
+  TARGET = { lambda: e.state.lambda, mu: e.state.mu, rho: e.state.rho, index: i };
+  document.querySelectorAll("#ellipses-table tbody tr").forEach((tr) => tr.classList.toggle("target", tr.dataset.index === String(i)));
+  $("target-note").replaceChildren(`Target: ellipse ${i}, λ* = ${fmt(TARGET.lambda)}, μ* = ${fmt(TARGET.mu)}, ϱ* = ${fmt(TARGET.rho)} — drawn in magenta and as faint bands in the next simulations and recordings. `,
+    el("button", { type: "button", text: "no target", onclick: () => { TARGET = null; $("target-note").textContent = "";
+      document.querySelectorAll("#ellipses-table tbody tr.target").forEach((tr) => tr.classList.remove("target")); } }));
+}
+
+/** The target a job was started with (kept in this browser: the service has no target). */
+function targetOf(id) {
+  try { return JSON.parse(localStorage.getItem(`flatbody-target-${id}`) || "null"); } catch (e) { return null; }
 }
 
 function sceneForRun(errors) {
@@ -314,7 +401,7 @@ function sceneForRun(errors) {
 // ---------------------------------------------------------------------------------------------
 const FILES = {
   "simulate": [["trajectory.json", "trajectory (JSON)"]],
-  "record": [["recording.rrd", "recording (.rrd)"]],
+  "record": [["recording.rrd", "recording (.rrd)"], ["preview.png", "preview (PNG)"], ["trajectory.json", "trajectory (JSON)"]],
   "family": [["family.png", "chart (PNG)"], ["family.csv", "table (CSV)"]],
   "stability-map": [["stability-map.png", "map (PNG)"], ["stability-map.csv", "table (CSV)"]],
   "evaluate": [["evaluation.json", "report (JSON)"]],
@@ -323,7 +410,11 @@ const ROWS = new Map();   // job id → its row in the jobs table
 
 const artifactUrl = (id, name) => `/jobs/${id}/artifact?name=${encodeURIComponent(name)}`;
 
-function sceneName(scene) { return typeof scene === "string" ? `scene “${scene}”` : `a custom body (${describeBody(scene)})`; }
+function sceneName(scene) {
+  if (typeof scene === "string") return `scene “${scene}”`;
+  const named = scene.name && scene.name !== "custom" ? `${scene.name} of ` : "";
+  return `${named}a custom body (${describeBody(scene)})`;
+}
 
 /** What a job computes, in words, from its parameters (the caption of its picture or plots). */
 function describeJob(job) {
@@ -398,7 +489,7 @@ function updateRow(job) {
   const status = tr.querySelector(".status");
   status.textContent = job.status;
   status.className = `text status ${job.status}`;
-  if (job.error) status.append(el("div", { class: "note err", text: job.error }));
+  if (job.error) status.append(el("div", { class: "note err", text: tidyMessage(job.error) }));
   const bar = tr.querySelector("progress");
   bar.value = job.progress;
   bar.dataset.value = String(job.progress);
@@ -423,9 +514,14 @@ async function cancelJob(id) {
   }
   const tr = ROWS.get(id);
   if (tr) {
+    const was = tr.dataset.status;
     tr.dataset.status = "cancelled";
-    tr.querySelector(".status").textContent = "cancelled and deleted";
+    tr.querySelector(".status").textContent = was === "queued" || was === "running" ? "cancelled and deleted" : "deleted";
     tr.querySelector(".act").innerHTML = "";
+    tr.querySelector(".pct").textContent = "";      // no estimate of a job that no longer runs
+    tr.querySelector(".stage").textContent = "";
+    tr.querySelector("progress").remove();
+    tr.querySelector(".files").innerHTML = "";
     tr.classList.add("gone");
   }
   document.querySelectorAll(`[data-job="${id}"]`).forEach((node) => node.remove());
@@ -435,6 +531,9 @@ async function startJob(kind, params, boxId) {
   showError("");
   try {
     const { id } = await api("POST", "/jobs", { kind, params });
+    if (TARGET && (kind === "simulate" || kind === "record")) {
+      try { localStorage.setItem(`flatbody-target-${id}`, JSON.stringify(TARGET)); } catch (e) { /* private mode: not kept */ }
+    }
     let job = { id, kind, params, status: "queued", progress: 0, created: Date.now() / 1000 };
     try { job = await api("GET", `/jobs/${id}`); } catch (e) { /* shown as sent; watch() fetches it again */ }
     updateRow(job);
@@ -472,11 +571,10 @@ function showResult(job) {
   cell.innerHTML = "";
   for (const [name, label] of FILES[job.kind] || []) {
     if (job.artifacts && !job.artifacts.includes(name)) continue;
-    cell.append(el("a", { href: artifactUrl(job.id, name), download: name, text: label }), " ");
+    cell.append(el("a", { href: artifactUrl(job.id, name), download: "", text: label }), " ");
   }
   if (document.querySelector(`[data-job="${job.id}"]`)) return;
   if (job.kind === "record") {
-    cell.append(el("div", { class: "note" }, "open it with: ", el("code", { class: "cmd", text: `rerun ${job.result.recording}` })));
     showRecording(job);
   } else if (job.kind === "family" || job.kind === "stability-map") {
     showPicture(job);
@@ -496,10 +594,33 @@ function showPicture(job) {
   const fig = el("figure", { "data-job": job.id, "data-kind": job.kind },
     img,
     el("figcaption", {}, el("span", { class: "cap", text: caption }), " — ",
-       el("a", { href: artifactUrl(job.id, png), download: png, text: "PNG" }), " · ",
-       el("a", { href: artifactUrl(job.id, csv), download: csv, text: "CSV table" })));
+       el("a", { href: artifactUrl(job.id, png), download: "", text: "PNG" }), " · ",
+       el("a", { href: artifactUrl(job.id, csv), download: "", text: "CSV table" })));
+  if (job.kind === "family" && job.result) fig.append(familyEnds(job));
   fig.dataset.created = job.created;
   insertByCreated($("pictures"), fig);
+}
+
+/** Where and why each branch of a family ends, and the seeds where nothing was found (a family is never cut short
+ * without a word). */
+function familyEnds(job) {
+  const r = job.result, sym = SYMBOL[r.param] || r.param;
+  const list = el("ul", { class: "note ends" });
+  const ends = r.ends || [];
+  const branches = [...new Set(ends.map((e) => e.branch))];
+  for (const bi of branches) {
+    const [lo, hi] = ends.filter((e) => e.branch === bi);
+    const end = (e) => `${sym} = ${fmt(e.param, 4)}` + (e.reason === "range" ? " (the range's end)" : ` (λ = ${fmt(e.lambda, 4)}, μ = ${fmt(e.mu, 4)}: ${e.detail})`);
+    list.append(el("li", { "data-branch": String(bi), text: `branch ${bi}: from ${end(lo)} to ${end(hi)}` }));
+  }
+  if (!branches.length) list.append(el("li", { text: "no stationary ellipse in the search box anywhere in the range" }));
+  if ((r.empty_seeds || []).length) {
+    list.append(el("li", { text: `no stationary ellipse in the search box at ${r.empty_seeds.map((v) => `${sym} = ${fmt(v, 4)}`).join(", ")}` }));
+  }
+  if (r.scale && r.scale !== "linear") {
+    list.append(el("li", { text: `the range spans decades: followed in ${r.scale === "log" ? "ln" : "asinh"} ${sym}, with seeds spread evenly over the decades` }));
+  }
+  return el("div", { class: "family-ends" }, el("span", { class: "note", text: "Where the branches end:" }), list);
 }
 
 function zoom(src, caption) {
@@ -511,22 +632,33 @@ function zoom(src, caption) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// a recording: what to run, and the file
+// a recording: a preview (the body at four times, the plots of its trajectory), the file, and what to run
 // ---------------------------------------------------------------------------------------------
 function showRecording(job) {
   const r = job.result;
-  const card = el("article", { class: "card", "data-job": job.id, "data-kind": "record" },
-    el("h3", { text: `Recording ready: ${r.recording}` }),
+  const name = r.download || r.recording;
+  const card = el("article", { class: "card recording", "data-job": job.id, "data-kind": "record" },
+    el("h3", { text: `Recording ready: ${name}` }),
     el("p", { class: "note", text: `${describeJob(job)} — ${r.samples} samples to t = ${fmt(r.t_end)}, integrated with ${r.method} (${r.model} chart).` }),
-    el("p", {}, el("a", { class: "button", href: artifactUrl(job.id, r.recording), download: r.recording, text: `Download ${r.recording}` })),
-    el("p", {}, "Then open it with the rerun viewer (0.41, the SDK's version): ",
-       el("code", { class: "cmd", text: r.open_with || `rerun ${r.recording}` })));
+    el("p", { class: "get" }, el("a", { class: "button", href: artifactUrl(job.id, r.recording), download: "", text: `Download ${name}` }),
+       " then open it with the rerun viewer (0.41, the SDK's version): ", el("code", { class: "cmd", text: r.open_with || `rerun ${name}` })));
+  if ((job.artifacts || []).includes("preview.png")) {
+    const src = artifactUrl(job.id, "preview.png");
+    const img = el("img", { class: "preview", src, alt: `the plate seen from +z at four times of the recording`, title: "click to enlarge" });
+    img.addEventListener("click", () => zoom(src, "the plate seen from +z (the env's rgb_array frame) at four times, first and last included"));
+    card.append(el("figure", { class: "preview" }, img,
+      el("figcaption", { class: "note", text: "Preview: the plate seen from +z at four times of the recording (first and last included), as the env's rgb_array frame draws it; below, the recorded trajectory." })));
+  }
   card.dataset.created = job.created;
   insertByCreated($("runs"), card);
+  if ((job.artifacts || []).includes("trajectory.json")) {
+    api("GET", artifactUrl(job.id, "trajectory.json")).then((traj) => trajectoryPlots(card, traj, { target: targetOf(job.id) }))
+      .catch(() => card.append(el("p", { class: "note", text: "(the recorded trajectory could not be read back for its plots)" })));
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
-// a trajectory: λ, μ, ϱ, s₃ and H against t, and the ellipse (plain SVG)
+// a trajectory: λ, μ, ϱ, s₃, H and the energy drift against t, and the ellipse (plain SVG)
 // ---------------------------------------------------------------------------------------------
 function svg(tag, attrs = {}, text) {
   const node = document.createElementNS(SVG_NS, tag);
@@ -535,15 +667,15 @@ function svg(tag, attrs = {}, text) {
   return node;
 }
 
-/** About `n` round tick values covering [lo, hi]. */
+/** About `n` round tick values covering [lo, hi], and their step. */
 function ticks(lo, hi, n = 5) {
   const span = hi - lo;
-  if (!(span > 0)) return [lo];
+  if (!(span > 0)) return { values: [lo], step: 1 };
   const raw = span / n, mag = Math.pow(10, Math.floor(Math.log10(raw)));
   const step = [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => span / s <= n) || 10 * mag;
-  const out = [];
-  for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(Math.abs(v) < step * 1e-9 ? 0 : v);
-  return out;
+  const values = [];
+  for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) values.push(Math.abs(v) < step * 1e-9 ? 0 : v);
+  return { values, step };
 }
 
 /** The colour of a variable (`lambda`, `mu`, `rho`, `s3`, `energy`, …): the CSS property --color-NAME that the service
@@ -553,57 +685,137 @@ function varColor(name) {
   return getComputedStyle(document.documentElement).getPropertyValue(`--color-${name}`).trim() || "#444";
 }
 
-/** A line chart of series [{name, values, color}] (color: a variable's name, see varColor) against t, with axes, ticks, a legend and a time marker. */
-function lineChart(t, series, { title, ylabel, note }) {
-  const W = 640, H = 230, L = 64, R = 12, T = 28, B = 40;
+/** The first index i with t[i] ≥ v (t increasing). */
+function lowerIndex(t, v) {
+  let lo = 0, hi = t.length;
+  while (lo < hi) { const mid = (lo + hi) >> 1; if (t[mid] < v) lo = mid + 1; else hi = mid; }
+  return lo;
+}
+
+/** The samples of `values` on [i0, i1] as the screen can show them, `columns` pixel columns wide: every sample when
+ * there are few, else per column the mean, min and max (a series that oscillates faster than a pixel is a band of its
+ * range around its mean, never the aliasing pattern of every k-th sample). */
+function columns(t, values, i0, i1, x, columns) {
+  const n = i1 - i0 + 1;
+  if (n <= 2 * columns) {
+    const pts = [];
+    for (let i = i0; i <= i1; i++) pts.push([x(t[i]), values[i], values[i], values[i]]);
+    return { pts, banded: false };
+  }
+  const pts = [];
+  const x0 = x(t[i0]), w = x(t[i1]) - x0;
+  let col = -1, sum = 0, cnt = 0, mn = Infinity, mx = -Infinity;
+  const flush = () => { if (cnt) pts.push([x0 + (col + 0.5) * w / columns, sum / cnt, mn, mx]); };
+  for (let i = i0; i <= i1; i++) {
+    const c = Math.min(columns - 1, Math.floor((x(t[i]) - x0) / w * columns));
+    if (c !== col) { flush(); col = c; sum = 0; cnt = 0; mn = Infinity; mx = -Infinity; }
+    const v = values[i];
+    sum += v; cnt++; if (v < mn) mn = v; if (v > mx) mx = v;
+  }
+  flush();
+  return { pts, banded: true };
+}
+
+const CHART_FONT = { title: 13, tick: 11, axis: 12 };   // px on screen, at every width (the SVG is drawn at its width)
+
+/** A line chart of series [{name, values, color, target?}] against t on the window [a, b] of t, `width` px wide:
+ * axes, ticks (the last one inside the frame), a legend, a time marker, and a band per series where it oscillates
+ * faster than the screen shows. `flat`: a spread below this (relative to the values' size) is drawn flat. Returns
+ * {node, mark(t), x(t) → px, inverse(px) → t}. */
+function lineChart(t, series, { title, ylabel, width, window: win, flat = 1e-9, flatPad = null, targets = [] }) {
+  const W = Math.max(300, Math.round(width)), narrow = W < 520;
+  const R = 16, B = 40, CHAR = 7.4;   // CHAR: the width of a 12–13 px character, about
+  // the title on one line, or two where it is long; the legend beside it, or on a row of its own when they do not fit
+  const legendW = series.length > 1 ? (narrow ? 44 : 60) * series.length : 0;
+  const lines = [""];
+  for (const word of title.split(" ")) {   // word-wrapped to the chart's width
+    const last = lines[lines.length - 1];
+    if (last && (last.length + 1 + word.length) * CHAR > W - 16) lines.push(word);
+    else lines[lines.length - 1] = last ? `${last} ${word}` : word;
+  }
+  const legendRow = legendW > 0 && (lines.length > 1 || lines[0].length * CHAR + legendW + 24 > W);
+  const T = 12 + 16 * lines.length + (legendRow ? 18 : 0) + 4;
+  const H = (narrow ? 170 : 200) + T - 30;
+  const [a, b] = win;
+  const i0 = Math.max(0, lowerIndex(t, a) - 1), i1 = Math.min(t.length - 1, lowerIndex(t, b));
   let lo = Infinity, hi = -Infinity;
-  for (const s of series) for (const v of s.values) { if (v < lo) lo = v; if (v > hi) hi = v; }
+  for (const s of series) for (let i = i0; i <= i1; i++) { const v = s.values[i]; if (v < lo) lo = v; if (v > hi) hi = v; }
+  for (const v of targets.map((g) => g.value)) { if (v < lo) lo = v; if (v > hi) hi = v; }
   const mid = (lo + hi) / 2;
-  if (!(hi - lo > 1e-9 * Math.max(1, Math.abs(mid)))) {   // constant within round-off: a flat line, not magnified noise
-    const pad = Math.max(1e-3 * Math.abs(mid), 1e-3);
-    lo = mid - pad; hi = mid + pad;
+  let isFlat = false;
+  if (!(hi - lo > flat * Math.max(1, Math.abs(mid)))) {   // constant within round-off: a flat line, not magnified noise
+    const pad = flatPad !== null ? flatPad : Math.max(1e-3 * Math.abs(mid), 1e-3);
+    lo = mid - pad; hi = mid + pad; isFlat = true;
   } else {
     const pad = 0.05 * (hi - lo); lo -= pad; hi += pad;
   }
-  const t0 = t[0], t1 = t[t.length - 1] > t0 ? t[t.length - 1] : t0 + 1;
-  const x = (v) => L + (W - L - R) * (v - t0) / (t1 - t0);
+  const yt = ticks(lo, hi, narrow ? 4 : 5);
+  const L = Math.min(96, Math.max(50, 24 + 6.6 * Math.max(...yt.values.map((v) => fmtTick(v, yt.step).length))));
+  const x = (v) => L + (W - L - R) * (v - a) / (b - a);
   const y = (v) => T + (H - T - B) * (1 - (v - lo) / (hi - lo));
-  const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, class: "chart", role: "img", "aria-label": title });
-  root.append(svg("text", { x: L, y: 16, class: "title" }, title));
-  for (const v of ticks(lo, hi)) {
+  const root = svg("svg", { viewBox: `0 0 ${W} ${H}`, width: W, height: H, class: "chart", role: "img", "aria-label": title });
+  const tx = lines.every((l) => l.length * CHAR + L + (legendRow ? 0 : legendW) < W) ? L : 8;
+  lines.forEach((line, k) => root.append(svg("text", { x: tx, y: 17 + 16 * k, class: "title" }, line)));
+  const legendY = legendRow ? 17 + 16 * lines.length : 13;
+  for (const v of yt.values) {
     root.append(svg("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), class: "grid" }));
-    root.append(svg("text", { x: L - 6, y: y(v) + 4, class: "tick", "text-anchor": "end" }, fmt(v, 5)));
+    root.append(svg("text", { x: L - 6, y: y(v) + 4, class: "tick", "text-anchor": "end" }, fmtTick(v, yt.step)));
   }
-  for (const v of ticks(t0, t1, 8)) {
+  const xt = ticks(a, b, narrow ? 4 : 8);
+  for (const v of xt.values) {
     root.append(svg("line", { x1: x(v), x2: x(v), y1: T, y2: H - B, class: "grid" }));
-    root.append(svg("text", { x: x(v), y: H - B + 16, class: "tick", "text-anchor": "middle" }, fmt(v, 5)));
+    const label = fmtTick(v, xt.step);
+    const px = x(v), half = 3.3 * label.length;   // the label stays inside the chart: no "1000(" at the right edge
+    const anchor = px + half > W - 2 ? "end" : px - half < L - 20 ? "start" : "middle";
+    root.append(svg("text", { x: anchor === "end" ? W - 2 : px, y: H - B + 16, class: "tick", "text-anchor": anchor }, label));
   }
   root.append(svg("rect", { x: L, y: T, width: W - L - R, height: H - T - B, class: "frame" }));
   root.append(svg("text", { x: (L + W - R) / 2, y: H - 6, class: "axis", "text-anchor": "middle" }, "t (model time unit)"));
   root.append(svg("text", { x: 14, y: (T + H - B) / 2, class: "axis", "text-anchor": "middle", transform: `rotate(-90 14 ${(T + H - B) / 2})` }, ylabel));
+  const clipId = `clip-${Math.random().toString(36).slice(2)}`;
+  root.append(svg("clipPath", { id: clipId }, undefined));
+  root.lastChild.append(svg("rect", { x: L, y: T, width: W - L - R, height: H - T - B }));
+  const plot = svg("g", { "clip-path": `url(#${clipId})` });
+  root.append(plot);
+  for (const g of targets) {   // a target value: a wide faint band in the variable's colour (as in the recordings)
+    plot.append(svg("line", { x1: L, x2: W - R, y1: y(g.value), y2: y(g.value), class: "target", stroke: varColor(g.color), "data-name": g.name }));
+  }
+  let banded = false;
   series.forEach((s, k) => {
-    const step = Math.max(1, Math.floor(t.length / 2000));
+    const { pts, banded: band } = columns(t, s.values, i0, i1, x, W - L - R);
+    banded = banded || band;
+    if (band) {
+      let d = "";
+      pts.forEach((p, j) => { d += `${j ? "L" : "M"}${p[0].toFixed(1)},${y(p[3]).toFixed(1)}`; });
+      for (let j = pts.length - 1; j >= 0; j--) d += `L${pts[j][0].toFixed(1)},${y(pts[j][2]).toFixed(1)}`;
+      plot.append(svg("path", { d: d + "Z", class: "band", fill: varColor(s.color), "data-name": s.name }));
+    }
     let d = "";
-    for (let i = 0; i < t.length; i += step) d += `${i ? "L" : "M"}${x(t[i]).toFixed(1)},${y(s.values[i]).toFixed(1)}`;
-    root.append(svg("path", { d, class: "line", stroke: varColor(s.color), "data-name": s.name }));
+    pts.forEach((p, j) => { d += `${j ? "L" : "M"}${p[0].toFixed(1)},${y(p[1]).toFixed(1)}`; });
+    plot.append(svg("path", { d, class: "line", stroke: varColor(s.color), "data-name": s.name }));
     if (series.length > 1) {
-      const lx = W - R - 70 * (series.length - k);
-      root.append(svg("line", { x1: lx, x2: lx + 18, y1: 14, y2: 14, stroke: varColor(s.color), "stroke-width": 2.5 }));
-      root.append(svg("text", { x: lx + 22, y: 18, class: "legend" }, s.name));
+      const lx = legendRow ? L + (narrow ? 44 : 60) * k : W - R - (narrow ? 44 : 60) * (series.length - k);
+      root.append(svg("line", { x1: lx, x2: lx + 16, y1: legendY - 4, y2: legendY - 4, stroke: varColor(s.color), "stroke-width": 2.5 }));
+      root.append(svg("text", { x: lx + 20, y: legendY, class: "legend" }, s.name));
     }
   });
-  const marker = svg("line", { x1: x(t0), x2: x(t0), y1: T, y2: H - B, class: "marker" });
+  const marker = svg("line", { x1: x(a), x2: x(a), y1: T, y2: H - B, class: "marker" });
   root.append(marker);
-  const box = el("figure", { class: "plot" }, root);
-  if (note) box.append(el("figcaption", { class: "note", text: note }));
-  return { node: box, mark: (v) => { marker.setAttribute("x1", x(v)); marker.setAttribute("x2", x(v)); } };
+  const sel = svg("rect", { x: L, y: T, width: 0, height: H - T - B, class: "zoom-sel" });
+  root.append(sel);
+  const inverse = (px) => a + (b - a) * (px - L) / (W - L - R);
+  return {
+    node: root, banded, flat: isFlat, x, inverse, sel, plotLeft: L, plotRight: W - R,
+    mark: (v) => { const px = Math.min(Math.max(x(v), L), W - R); marker.setAttribute("x1", px); marker.setAttribute("x2", px); },
+  };
 }
 
-/** The ellipse of the body's shape at sample i: semi-axes λ, μ turned by the material angle θ (R not shown). */
-function ellipseView(traj) {
+/** The ellipse of the body's shape at sample i: semi-axes λ, μ turned by the material angle θ (R not shown); a target
+ * ellipse (λ*, μ*) in magenta when one was chosen in the table of stationary ellipses. */
+function ellipseView(traj, target) {
   const S = 260, C = S / 2;
   const lam = traj.state.lambda, mu = traj.state.mu, th = traj.state.theta;
-  let r = 0;
+  let r = target ? Math.max(target.lambda, target.mu) : 0;
   for (let i = 0; i < lam.length; i++) r = Math.max(r, lam[i], mu[i]);
   const scale = (C - 16) / r;
   const root = svg("svg", { viewBox: `0 0 ${S} ${S}`, class: "ellipse", role: "img", "aria-label": "the ellipse" });
@@ -613,54 +825,131 @@ function ellipseView(traj) {
   const now = svg("ellipse", { cx: C, cy: C, class: "now" });
   const axis = svg("line", { x1: C, y1: C, class: "axis-line" });
   root.append(now, axis);
+  let goal = null;
+  if (target) {   // the target's shape, along the body's current axes (the table gives λ*, μ*, not an orientation)
+    goal = svg("ellipse", { cx: C, cy: C, rx: target.lambda * scale, ry: target.mu * scale, class: "target-shape" });
+    root.append(goal);
+  }
   const draw = (i) => {
     now.setAttribute("rx", lam[i] * scale);
     now.setAttribute("ry", mu[i] * scale);
     now.setAttribute("transform", `rotate(${deg(th[i])} ${C} ${C})`);
+    if (goal) goal.setAttribute("transform", `rotate(${deg(th[i])} ${C} ${C})`);
     axis.setAttribute("x2", C + lam[i] * scale * Math.cos(th[i]));
     axis.setAttribute("y2", C - lam[i] * scale * Math.sin(th[i]));
   };
   return { node: root, draw };
 }
 
-function showTrajectory(job) {
-  const traj = job.result;
+/** The plots of a trajectory in `host`: λ, μ, ϱ; s₃; H; the energy drift H − H₀ on its own scale; the ellipse at a
+ * time picked with a slider. Drag across a plot to zoom every plot to that time window; "whole run" goes back. The
+ * plots are drawn at the width they are shown at (the text stays readable on a phone) and again when it changes. */
+function trajectoryPlots(host, traj, { target = null } = {}) {
   const t = traj.t, st = traj.state;
   const H0 = traj.energy.length ? traj.energy[0] : 0;
+  const dH = traj.energy.map((h) => h - H0);
   let drift = 0;
-  for (const h of traj.energy) drift = Math.max(drift, Math.abs(h - H0));
-  const charts = [
-    lineChart(t, [{ name: "λ", values: st.lambda, color: "lambda" }, { name: "μ", values: st.mu, color: "mu" }, { name: "ϱ", values: st.rho, color: "rho" }],
-              { title: "shape: the stretches λ, μ and the thickness ϱ", ylabel: "λ, μ, ϱ (dimensionless)" }),
-    lineChart(t, [{ name: "s₃", values: st.s3, color: "s3" }], { title: "spin s₃", ylabel: "s₃ (dimensionless)" }),
-    lineChart(t, [{ name: "H", values: traj.energy, color: "energy" }],
-              { title: "energy H", ylabel: "H (dimensionless)", note: `H(0) = ${fmt(H0, 10)}; largest |H(t) − H(0)| = ${fmt(drift, 3)}` +
-                (drift < ZERO_TOL ? " (within round-off)" : "") }),
+  for (const v of dH) drift = Math.max(drift, Math.abs(v));
+  const rel = Math.abs(H0) > 0 ? drift / Math.abs(H0) : NaN;
+  const tg = target ? [{ name: "λ*", value: target.lambda, color: "lambda" }, { name: "μ*", value: target.mu, color: "mu" },
+                       { name: "ϱ*", value: target.rho, color: "rho" }] : [];
+  const specs = [
+    { series: [{ name: "λ", values: st.lambda, color: "lambda" }, { name: "μ", values: st.mu, color: "mu" }, { name: "ϱ", values: st.rho, color: "rho" }],
+      title: "shape: the stretches λ, μ and the thickness ϱ" + (target ? " (targets: faint bands)" : ""), ylabel: "λ, μ, ϱ", targets: tg },
+    { series: [{ name: "s₃", values: st.s3, color: "s3" }], title: "spin s₃", ylabel: "s₃" },
+    { series: [{ name: "H", values: traj.energy, color: "energy" }], title: `energy H (H₀ = ${fmt(H0, 10)})`, ylabel: "H" },
+    { series: [{ name: "H − H₀", values: dH, color: "energy" }], ylabel: "H − H₀", flat: 1e-14 * Math.max(1, Math.abs(H0)),
+      flatPad: 1e-12 * Math.max(1, Math.abs(H0)),
+      title: "energy drift H − H₀: " + (drift < ZERO_TOL ? "below 10⁻¹² everywhere (round-off: H is conserved)" :
+        `largest |H − H₀| = ${fmt(drift, 3)}` + (Number.isFinite(rel) ? ` (${fmt(rel, 3)} of |H₀|)` : "")) },
   ];
-  const ell = ellipseView(traj);
+  const series = el("div", { class: "series" });
+  const tools = el("p", { class: "note zoom-tools" });
+  const whole = el("button", { type: "button", class: "whole-run", text: "whole run" });
+  const ell = ellipseView(traj, target);
   const slider = el("input", { type: "range", min: "0", max: String(t.length - 1), value: "0", "aria-label": "time" });
   const readout = el("p", { class: "note readout" });
+  const view = { a: t[0], b: t[t.length - 1] > t[0] ? t[t.length - 1] : t[0] + 1, i: 0 };
+  let charts = [];
   const show = (i) => {
+    view.i = i;
     ell.draw(i);
     for (const c of charts) c.mark(t[i]);
     readout.textContent = `t = ${fmt(t[i], 5)}: λ = ${fmt(st.lambda[i])}, μ = ${fmt(st.mu[i])}, ϱ = ${fmt(st.rho[i])}, ` +
       `θ = ${fmt(st.theta[i], 4)} rad, s₃ = ${fmt(st.s3[i])}, H = ${fmt(traj.energy[i], 10)} (all dimensionless)`;
   };
+  const draw = () => {
+    const width = series.clientWidth || host.clientWidth || 640;
+    series.replaceChildren();
+    charts = specs.map((sp) => lineChart(t, sp.series, { ...sp, width, window: [view.a, view.b] }));
+    for (const [k, c] of charts.entries()) {
+      const fig = el("figure", { class: "plot", "data-chart": String(k) }, c.node);
+      series.append(fig);
+      zoomable(c, (a, b) => { view.a = a; view.b = b; draw(); });
+    }
+    const whole_ = view.a <= t[0] && view.b >= t[t.length - 1];
+    const banded = charts.some((c) => c.banded);
+    tools.replaceChildren(
+      whole_ ? `whole run, t = ${fmt(t[0])} … ${fmt(t[t.length - 1])}` : `t = ${fmt(view.a, 5)} … ${fmt(view.b, 5)} of ${fmt(t[0])} … ${fmt(t[t.length - 1])}`,
+      " — drag across a plot to zoom in. ",
+      ...(whole_ ? [] : [whole]),
+      banded ? " Shaded: the range of the samples behind each pixel, around their mean (the motion is faster than the plot's pixels)." : "",
+    );
+    show(view.i);
+  };
+  whole.addEventListener("click", () => { view.a = t[0]; view.b = t[t.length - 1]; draw(); });
   slider.addEventListener("input", () => show(Number(slider.value)));
+  host.append(el("div", { class: "plots" },
+    el("div", { class: "series-col" }, tools, series),
+    el("figure", { class: "shape" }, ell.node,
+       el("figcaption", { class: "note", text: "the ellipse at the time chosen below (solid) and at t = 0 (dashed): semi-axes λ, μ, turned by the material angle θ; the rotation R is not drawn" +
+         (target ? `; magenta: the target λ* = ${fmt(target.lambda)}, μ* = ${fmt(target.mu)}, drawn along the body's current axes` : "") }),
+       slider, readout)));
+  requestAnimationFrame(draw);
+  let last = 0;
+  new ResizeObserver(() => { const w = series.clientWidth; if (w && Math.abs(w - last) > 8) { last = w; draw(); } }).observe(series);
+  return { drift, rel };
+}
+
+/** Drag across chart `c` to pick a time window: `done(a, b)` with the window (at least 1 % of the shown one). */
+function zoomable(c, done) {
+  const svgNode = c.node;
+  let start = null;
+  const px = (e) => {
+    const r = svgNode.getBoundingClientRect();
+    const k = svgNode.viewBox.baseVal.width / r.width;
+    return Math.min(Math.max((e.clientX - r.left) * k, c.plotLeft), c.plotRight);
+  };
+  svgNode.addEventListener("pointerdown", (e) => { start = px(e); svgNode.setPointerCapture(e.pointerId); });
+  svgNode.addEventListener("pointermove", (e) => {
+    if (start === null) return;
+    const p = px(e);
+    c.sel.setAttribute("x", Math.min(p, start));
+    c.sel.setAttribute("width", Math.abs(p - start));
+  });
+  svgNode.addEventListener("pointerup", (e) => {
+    if (start === null) return;
+    const p = px(e), s0 = start;
+    start = null;
+    c.sel.setAttribute("width", 0);
+    if (Math.abs(p - s0) < 6) return;   // a click, not a drag
+    const a = c.inverse(Math.min(p, s0)), b = c.inverse(Math.max(p, s0));
+    if (b > a) done(a, b);
+  });
+}
+
+function showTrajectory(job) {
+  const traj = job.result;
+  const t = traj.t;
   const meta = traj.meta || {};
   const card = el("article", { class: "card trajectory", "data-job": job.id, "data-kind": "simulate" },
     el("h3", { text: `Simulation of ${sceneName(job.params.scene)}` }),
     el("p", { class: "note", text: `${t.length} samples, t = ${fmt(t[0])} … ${fmt(t[t.length - 1])}; ${meta.method || "?"} in the ` +
       `${meta.model || "?"} chart, ${meta.nfev !== undefined ? `${meta.nfev} right-hand-side evaluations, ` : ""}` +
-      `${fmtDuration(meta.wall_time)} of integration. ` }, el("a", { href: artifactUrl(job.id, "trajectory.json"), download: "trajectory.json", text: "trajectory (JSON)" })),
-    el("div", { class: "plots" },
-      el("div", { class: "series" }, ...charts.map((c) => c.node)),
-      el("figure", { class: "shape" }, ell.node,
-         el("figcaption", { class: "note", text: "the ellipse at the time chosen below (solid) and at t = 0 (dashed): semi-axes λ, μ, turned by the material angle θ; the rotation R is not drawn" }),
-         slider, readout)));
+      `${fmtDuration(meta.wall_time)} of integration. ` }, el("a", { href: artifactUrl(job.id, "trajectory.json"), download: "", text: "trajectory (JSON)" })));
   card.dataset.created = job.created;
-  show(0);
   insertByCreated($("runs"), card);
+  trajectoryPlots(card, traj, { target: targetOf(job.id) });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -680,6 +969,22 @@ function submitRun(kind) {
   startJob(kind, params, "run-error");
 }
 
+const PARAM_RANGE = [1e-6, 1e6];   // a constant of the body (J, J3, k, c, d, κ, a, b): the service's bounds
+const MOMENTUM_MAX = 1e6;          // a spin (s3, p_θ)
+
+/** The family's from/to fields take the range of what is varied: a constant of the body within [10⁻⁶, 10⁶], a spin
+ * within ±10⁶ (the service refuses the rest; the page says so before sending). */
+function varyBounds() {
+  const body = !["s3", "p_theta"].includes($("vary").value);
+  for (const id of ["vary-from", "vary-to"]) {
+    const d = $(id).dataset;
+    d.min = String(body ? PARAM_RANGE[0] : -MOMENTUM_MAX);
+    d.max = String(body ? PARAM_RANGE[1] : MOMENTUM_MAX);
+    const unit = $(id).closest("label").querySelector(".unit");
+    unit.textContent = (body ? "dimensionless, 10⁻⁶ … 10⁶" : "dimensionless, −10⁶ … 10⁶") + (id === "vary-to" ? ", > from" : "");
+  }
+}
+
 function submitFamily() {
   clearFieldErrors();
   clearAction("family-error");
@@ -690,9 +995,6 @@ function submitFamily() {
   if (vary !== "p_theta") params.p_theta = readNumber("p_theta", errors);
   if (!errors.some(([id]) => id === "vary-from" || id === "vary-to")) {
     if (!(params.to > params.from)) errors.push(["vary-to", `to: must be greater than from (${fmt(params.from)}), got ${fmt(params.to)}`]);
-    else if (!["s3", "p_theta"].includes(vary) && !(params.from > 0)) {
-      errors.push(["vary-from", `from: the constant ${SYMBOL[vary]} must stay > 0, got ${fmt(params.from)}`]);
-    }
   }
   if (errors.length) { showErrors(errors, "family-error"); return; }
   startJob("family", params, "family-error");
@@ -719,6 +1021,22 @@ async function loadJobs() {
   }
 }
 
+const HEALTH_MS = 5000;   // how often the header asks the service whether it is still there
+
+/** The header's word on the service, asked again every HEALTH_MS: "service ok" only while it answers. */
+async function checkHealth() {
+  const node = $("health");
+  try {
+    const h = await api("GET", "/health");
+    node.textContent = `service ${h.status}, version ${h.version}`;
+    node.className = "";
+  } catch (err) {
+    node.textContent = "service unreachable — stopped? (retrying)";
+    node.className = "down";
+  }
+  setTimeout(checkHealth, HEALTH_MS);
+}
+
 async function init() {
   showPotentialFields();
   $("potential").addEventListener("change", showPotentialFields);
@@ -731,15 +1049,18 @@ async function init() {
     node.addEventListener("input", markEllipsesStale);
     node.addEventListener("change", markEllipsesStale);
   });
-  document.querySelectorAll("input").forEach((node) => node.addEventListener("input", () => {
-    const l = node.closest("label.bad");
-    if (l) { l.classList.remove("bad"); const m = l.querySelector(".msg"); if (m) m.remove(); node.removeAttribute("aria-invalid"); }
-  }));
+  document.querySelectorAll("input, select").forEach((node) => {
+    node.addEventListener("input", () => clearFieldError(node));
+    node.addEventListener("change", () => clearFieldError(node));
+  });
+  $("vary").addEventListener("change", varyBounds);
+  varyBounds();
   $("scene").addEventListener("change", () => { fillFromScene($("scene").value); markEllipsesStale(); });
   $("zoom").addEventListener("click", (e) => { if (e.target === $("zoom")) $("zoom").close(); });
   try {
     const h = await api("GET", "/health");
     $("health").textContent = `service ${h.status}, version ${h.version}`;
+    setTimeout(checkHealth, HEALTH_MS);
     SCENES = await api("GET", "/scenes");
     for (const name of Object.keys(SCENES)) $("scene").append(el("option", { value: name, text: name }));
     const methods = await api("GET", "/methods");
