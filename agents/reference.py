@@ -148,7 +148,8 @@ def markdown(reports: list[dict[str, Any]]) -> str:
         order = {k: i for i, k in enumerate(TASK_IDS)}
         for env_id in sorted(table["anchors"], key=order.get):
             a = table["anchors"][env_id]
-            lines.append(f"| {env_id} | {a['lo']:.0%} | {a['lo_from']} | {a['hi']:.0%} | {a['hi_from']} |")
+            lo_from, hi_from = (POLICY_LABELS.get(a[k], a[k]) for k in ("lo_from", "hi_from"))
+            lines.append(f"| {env_id} | {a['lo']:.0%} | {lo_from} | {a['hi']:.0%} | {hi_from} |")
     if table["iqm"]:
         lines += ["", "The suite's interquartile mean of the normalised score (every v1 task):", ""]
         lines += ["| policy | IQM (95 % stratified bootstrap interval) | runs × tasks |", "|---|---|---|"]

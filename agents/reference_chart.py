@@ -187,18 +187,19 @@ def plot_ladder(png_path: str | Path, folder: str | Path = REFERENCE_DIR) -> Pat
             a, b = success_interval(int(ok.sum()), ok.size)
             xs.append(i - 0.4 + (k + 0.5) * width)
             ys.append(ok.mean())
-            lo.append(ok.mean() - a)
-            hi.append(b - ok.mean())
+            lo.append(max(ok.mean() - a, 0.0))
+            hi.append(max(b - ok.mean(), 0.0))
         entry = next(r["policies"][name] for r in reports if name in r["policies"])
         witness = name == "witness"
         ax.bar(xs, ys, width=width * 0.92, color=colours[name], label=_label(name, entry), yerr=[lo, hi], capsize=2,
                error_kw={"lw": 0.8}, hatch="//" if witness else None, edgecolor="#4b2d73" if witness else "white")  # fmt: skip
     ax.set_xticks(range(len(reports)), [f"{r['env_id']}\n({rungs[r['env_id']]})" for r in reports], fontsize=8)
-    ax.set_ylim(0, 1.0)
+    ax.set_ylim(0, 1.1)
+    ax.set_yticks(np.linspace(0, 1, 6))
     ax.set_ylabel("success rate (95 % interval)")
     ax.axhline(0.9, color="#555555", lw=0.8, ls=":")
-    ax.text(len(reports) - 0.5, 0.905, "90 %: no medium or hard task may be solved this well by a classic law", ha="right",
-            va="bottom", fontsize=7, color="#555555")  # fmt: skip
+    ax.text(-0.45, 0.915, "90 %: no medium or hard task may be solved this well by a classic law", ha="left",
+            va="bottom", fontsize=7, color="#555555", bbox={"facecolor": "white", "edgecolor": "none", "pad": 1})  # fmt: skip
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=7.5, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.16), frameon=False)
     first = reports[0]

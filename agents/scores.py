@@ -60,13 +60,13 @@ def anchors(report: dict[str, Any]) -> Anchors:
     known = {n: s for n in KNOWN if (s := _success(report, n)) is not None}
     lo_from = max(classic, key=classic.get)
     lo = classic[lo_from]
-    hi_from, hi = "100 % (the ideal; no reference reaches beyond the classic anchor)", 1.0
+    hi_from, hi = "the ideal (no reference beats the classic anchor)", 1.0
     if known:
         best = max(known, key=known.get)
         if known[best] > lo:
             hi_from, hi = best, known[best]
             if best == "witness":
-                hi_from = "witness (every start certified solvable)"
+                hi_from = "witness (every start certified)"
     if lo >= hi:  # a classic controller solves it as well as the best known (the easy rung): anchor on zero
         lo_from, lo = "zero", classic.get("zero", 0.0)
         if lo >= hi:

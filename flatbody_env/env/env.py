@@ -365,10 +365,10 @@ class FlatBodyEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from flatbody_env.env.rendering import render_frame
+        from flatbody_env.env.rendering import frame_status, render_frame
 
         R = self.core.R if self.core.R is not None else np.eye(3)
-        return render_frame(self.physics_state, R, self.target, self.time)
+        return render_frame(self.physics_state, R, self.target, self.time, status=frame_status(self))
 
 
 __all__ = [
