@@ -76,7 +76,8 @@ from flatbody_env.integrators.base import (
     check_step,
     register_method,
 )
-from flatbody_env.integrators.failure import KINDS, raise_for
+from flatbody_env.integrators.budget import WallClockBudget
+from flatbody_env.integrators.failure import BUDGET, KINDS, raise_for
 from flatbody_env.integrators.specs import BY_NAME, ENV_METHODS, SPECS, MethodSpec
 
 
@@ -117,61 +118,6 @@ def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol
     return steps * stages
 
 
-_PROBE_NFEV = 5_000
-"""Right-hand-side evaluations of a timing probe of the wall-clock budget (short against any budget when compiled)."""
-_COMPILED_RATE = 2e5
-"""Evaluations per second below which a probe is taken to have included loading the kernel (compiled
-kernels run far faster: the per-step costs of ``flatbody bench integrators``, docs/integrators.md), so a
-second probe measures the rate."""
-
-
-def _run_within_budget(run, counters: np.ndarray, tol: Tolerances) -> tuple[int, bool]:
-    """Run a compiled DOP853 kernel within ``tol.max_nfev`` *and* ``tol.max_wall_time``.
-
-    A compiled kernel cannot read the clock; it stops once it has used the evaluation budget in
-    ``counters[3]`` (checked before every step). ``run(budget)`` restarts the integration from its first
-    time with that budget. A short probe comes first: a run that ends within it is the answer;
-    otherwise it measures evaluations per second (a second probe when the first included loading the
-    kernel) and the last run gets the budget that the wall time left allows at that rate (at most
-    ``max_nfev``). The answer is bit for bit that of one call. Returns (status, whether the wall
-    clock, not ``max_nfev``, set the budget that stopped the run)."""
-    start = time.perf_counter()
-    if tol.max_nfev <= 2 * _PROBE_NFEV:
-        return run(tol.max_nfev), False
-    for _ in range(2):
-        t0 = time.perf_counter()
-        st = run(_PROBE_NFEV)
-        if KINDS[st] != "budget":
-            return st, False
-        rate = counters[0] / max(time.perf_counter() - t0, 1e-9)
-        if rate >= _COMPILED_RATE:
-            break
-    budget = int(min(tol.max_nfev, max(0.0, rate * (tol.max_wall_time - (time.perf_counter() - start)))))
-    if budget <= _PROBE_NFEV:
-        return st, True
-    st = run(budget)
-    return st, budget < tol.max_nfev and KINDS[st] == "budget"
-
-
-def _check_fixed_wall_time(name: str, run_probe, total_nfev: float, tol: Tolerances, t0: float) -> None:
-    """Fixed-step work is known up front: time ``run_probe()`` (a few hundred steps; returns the
-    evaluations it made; run twice, the first may load the kernel) and refuse a run whose predicted
-    time exceeds ``tol.max_wall_time`` (``kind="budget"``), before it starts."""
-    if total_nfev <= 4 * _PROBE_NFEV:
-        return
-    run_probe()
-    start = time.perf_counter()
-    n = max(1, int(run_probe()))
-    per_eval = (time.perf_counter() - start) / n
-    if total_nfev * per_eval > tol.max_wall_time:
-        raise budget_error(
-            t=t0,
-            method=name,
-            tol=tol,
-            used=f"~{total_nfev * per_eval:.3g} s predicted for {total_nfev:.6g} RHS evaluations",
-        )
-
-
 def _times(times) -> np.ndarray:
     times = np.array(times, dtype=np.float64).ravel()
     if times.size < 1 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
@@ -207,6 +153,8 @@ class CompiledTwoPolar:
         energy_tol = float(tol.energy_tol)
         if self.kind != "dop853":
             total = _check_fixed_budget(name, times, h, self.spec.stages, tol)
+        from flatbody_env.integrators import twopolar_kernels as _tk
+
         if with_rotation:
             # the same stepping code on z = (y, vec(R)) (rotation_kernels): y bit for bit as without R
             from flatbody_env.integrators import rotation_kernels as kernels
@@ -215,20 +163,25 @@ class CompiledTwoPolar:
             y0 = np.concatenate([y0, R0.ravel()])
             dop853, fixed = kernels.dop853_solve_R, kernels.fixed_solve_R
         else:
-            from flatbody_env.integrators import twopolar_kernels as kernels
-
-            dop853, fixed = kernels.dop853_solve, kernels.fixed_solve
+            dop853, fixed = _tk.dop853_solve, _tk.fixed_solve
         Z = np.empty((y0.size, times.size))
         start = time.perf_counter()
+        budget = WallClockBudget.of(tol)
         wall = False
         if self.kind == "dop853":
+            carry = np.zeros(_tk.carry_size(y0.size))
+            rtol, atol = float(tol.rtol), float(tol.atol)
+            status = [0]
 
-            def run(budget: int) -> int:  # from the first time, within ``budget`` RHS evaluations
-                counters[:] = (0, 0, 0, budget)
-                fail[:] = 0.0
-                return dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+            def advance(
+                limit: int,
+            ) -> tuple[int, int]:  # on from where the last piece stopped, to ``limit`` evaluations
+                counters[3] = limit
+                status[0] = dop853(y0, times, uu, P, rtol, atol, energy_tol, Z, counters, fail, carry)
+                return 1, int(status[0] == BUDGET)
 
-            st, wall = _run_within_budget(run, counters, tol)  # max_nfev and max_wall_time
+            wall = budget.run(advance)  # max_nfev and max_wall_time
+            st = status[0]
         else:
 
             def probe() -> int:  # a few hundred steps from the first time: the cost of one RHS evaluation
@@ -249,7 +202,7 @@ class CompiledTwoPolar:
                 )
                 return int(c[0])
 
-            _check_fixed_wall_time(name, probe, total, tol, float(times[0]))
+            budget.refuse_fixed(probe, total, t=float(times[0]), method=name)
             st = fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail)
         if KINDS[st] == "budget":
             used = f"{int(counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {time.perf_counter() - start:.3g} s"
@@ -257,13 +210,12 @@ class CompiledTwoPolar:
                 t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else "")
             )
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
+        Y = np.ascontiguousarray(Z[:11])
         stats = {"steps": int(counters[1])}
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
         rotation = np.ascontiguousarray(Z[11:].T).reshape(times.size, 3, 3) if with_rotation else None
-        return Solution(
-            t=times.copy(), Y=np.ascontiguousarray(Z[:11]), rotation=rotation, nfev=int(counters[0]), stats=stats
-        )
+        return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(counters[0]), stats=stats)
 
     def check_env(self, body: Body, tol: Tolerances) -> float:
         """The method's refusals (custom potential, step setting, J1 ≠ J2 for a splitting); returns the fixed step (0 if adaptive)."""
