@@ -269,10 +269,10 @@ def rotation_about_normal(R0: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 
 
 def _energy(Y: np.ndarray, P: np.ndarray, times: np.ndarray, tol: Tolerances, name: str, u: np.ndarray) -> np.ndarray:
-    from flatbody_env.integrators import ladder_kernels as _lk
+    from flatbody_env.integrators.twopolar_kernels import energy_series
 
     H = np.empty(Y.shape[1])
-    _lk.energy_series(np.ascontiguousarray(Y), P, H)
+    energy_series(np.ascontiguousarray(Y), P, H)
     if not np.any(u):
         err = np.abs(H - H[0])
         bad = err > tol.energy_tol

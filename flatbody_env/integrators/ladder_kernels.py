@@ -35,7 +35,7 @@ import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
 from flatbody_env.integrators.failure import MAX_STEPS, OK
-from flatbody_env.integrators.jit import energy_kernel, njit, retarget, rhs_kernel
+from flatbody_env.integrators.jit import njit, retarget, rhs_kernel
 from flatbody_env.integrators.twopolar_kernels import (
     CARRY_COUNTERS,
     CARRY_GAP_SIGN,
@@ -208,20 +208,7 @@ dop853_thickness = retarget(
 """DOP853 on the thickness oscillator (ϱ, p_ϱ): the arguments of :data:`dop853_inplane` (``check_gap`` False)."""
 
 
-@njit
-def energy_series(Y, P, out):
-    """H (eq. (41) of [1]) of every column of the packed states ``Y`` (11, m) into ``out`` (m,)."""
-    vel = np.empty(7)
-    force = np.empty(4)
-    y = np.empty(11)
-    for k in range(Y.shape[1]):
-        for i in range(11):
-            y[i] = Y[i, k]
-        out[k] = energy_kernel(y, P, vel, force)
-
-
 __all__ = [
-    "energy_series",
     "INPLANE_RATE",
     "INPLANE_STATE",
     "RATE_OMEGA3",

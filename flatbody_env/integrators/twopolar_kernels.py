@@ -727,6 +727,18 @@ def env_step(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, counters
 
 
 @njit
+def energy_series(Y, P, out):
+    """H (eq. (41) of [1]) of every column of the packed states ``Y`` (11, m) into ``out`` (m,)."""
+    vel = np.empty(7)
+    force = np.empty(4)
+    y = np.empty(11)
+    for k in range(Y.shape[1]):
+        for i in range(11):
+            y[i] = Y[i, k]
+        out[k] = energy_kernel(y, P, vel, force)
+
+
+@njit
 def rhs_compiled(y, u, P, out):
     """dy/dt by the jitted physics kernel (for tests: equals :func:`flatbody_env.physics.equations.rhs`)."""
     rhs_kernel(y, u, P, out, np.empty(7), np.empty(4))
