@@ -12,9 +12,9 @@ tables of docs/integrators.md).
    error (1e-8) of the regular-chart RATTLE methods and of every two-polar method; ratio = the
    cheapest two-polar time / the cheapest regular-chart time (methods that fail are left out).
 3. *long horizon*, t = 1e4: the energy error max|H − H₀| (101 samples) per method/setting.
-4. *one short step* dt = 0.05: µs per call through ``integrate`` (all methods) and through the
-   compiled environment stepper (compiled methods; single and batched over 1024 bodies), best of
-   repeated blocks (:func:`flatbody_env.bench.harness.best_of`).
+4. *one short step* dt = 0.05: µs per call through ``integrate`` (four scipy methods and every compiled one) and
+   through the compiled environment stepper (the methods the environment steps compiled; single and batched over
+   1024 bodies), best of repeated blocks (:func:`flatbody_env.bench.harness.best_of`).
 5. *compile time*: first call with an empty numba cache and the cached call, in fresh processes.
 6. *simulate vs the kernel*: ``simulate`` of the planar scene to t = 100 with the compiled DOP853 (a run longer than
    the wall-clock budget's probe, :mod:`flatbody_env.integrators.budget`) against the bare kernel call of the same run
@@ -260,7 +260,7 @@ def _long(bar, t_end):
 
 def _short_step(bar, n_batch=1024):
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper, kernel_params
-    from flatbody_env.physics.regular import regular_from_paper
+    from flatbody_env.integrators.specs import BY_NAME
 
     sc = load_scene("default")
     y = pack(sc.state)
@@ -269,7 +269,7 @@ def _short_step(bar, n_batch=1024):
     dt = 0.05
     out = []
     times = np.array([0.0, dt])
-    for m in ("RK45", "DOP853", "LSODA", "DOP853-regular") + ENV_METHODS:
+    for m in ("RK45", "DOP853", "LSODA", "DOP853-regular", *BY_NAME):
         meth = get_method(m)
         tol = Tolerances(rtol=1e-8, atol=1e-10) if meth.info.adaptive else Tolerances(step=dt)
         n = 30 if not meth.info.compiled else 300
@@ -283,17 +283,16 @@ def _short_step(bar, n_batch=1024):
         bar.update(1)
     for m in ENV_METHODS:
         st = env_stepper(m)
-        x = y if st.state == "paper" else regular_from_paper(y, sc.body)
-        o = np.empty_like(x)
+        o = np.empty_like(y)
         h = 0.0 if not st.fixed_step else dt
         n = 20000
 
-        def steps(st=st, x=x, o=o, h=h, n=n):
+        def steps(st=st, o=o, h=h, n=n):
             for _ in range(n):
-                st.step(x, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
+                st.step(y, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
 
         best = best_of(steps, 3, warm=False) / n
-        X = np.repeat(x[:, None], n_batch, axis=1)
+        X = np.repeat(y[:, None], n_batch, axis=1)
         U = np.zeros((4, n_batch))
         O = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
@@ -380,10 +379,11 @@ print(json.dumps(out))
 
 
 def compile_times(names=None) -> list[dict]:
-    """First-call time with an empty numba cache and with the cache filled, each in a fresh process."""
-    from flatbody_env.integrators.compiled_methods import ENV_METHODS
+    """First-call time with an empty numba cache and with the cache filled, each in a fresh process (default: every
+    compiled method)."""
+    from flatbody_env.integrators.specs import BY_NAME
 
-    names = list(names or ENV_METHODS)
+    names = list(names or BY_NAME)
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as cache:
         env["NUMBA_CACHE_DIR"] = cache
@@ -462,6 +462,7 @@ def measure(
     import platform
 
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
+    from flatbody_env.integrators.specs import BY_NAME
     from flatbody_env.progress import progress_bar
     from flatbody_env.provenance import machine
     from flatbody_env.scene import builtin_scenes
@@ -473,7 +474,8 @@ def measure(
         + len(deltas) * len(CLOSE_METHODS)
         + len(LONG_RUNS)
         + 4
-        + 2 * len(ENV_METHODS)
+        + len(BY_NAME)
+        + len(ENV_METHODS)
         + len(builtin_scenes())
         + 1
     )
