@@ -12,8 +12,8 @@ need not hold 0: the state at t = 0 is ``y0``), the energy tolerance of
 :func:`~flatbody_env.simulation.default_energy_tol`:
 ``FIXED_STEP_ENERGY_TOL · max(1, |H₀|)`` for fixed-step methods and
 ``max(1e-8, 1e4 · max(rtol, atol)) · max(1, |H₀|)`` for DOP853, the work budget ``max_nfev``
-per body and ``max_wall_time`` for the batch (on the GPU through launches of bounded work with the clock read
-between them: :func:`_launches_within_wall_time`). The model ladder is not consulted: every body runs the full
+per body and ``max_wall_time`` for the batch (pieces of bounded work with the clock read between them, each
+continuing the last: :class:`~flatbody_env.integrators.budget.WallClockBudget`). The model ladder is not consulted: every body runs the full
 two-polar equations.
 """
 
@@ -29,6 +29,8 @@ import numpy as np
 
 from flatbody_env.integrators import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, Tolerances, get_method
 from flatbody_env.integrators.base import check_step
+from flatbody_env.integrators.budget import GPU_GROWTH, WallClockBudget
+from flatbody_env.integrators.failure import BUDGET
 from flatbody_env.integrators.specs import BATCH_METHODS, BY_NAME
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
@@ -183,13 +185,13 @@ def simulate_batch(
     max_nfev : int
         Work budget per body: right-hand-side evaluations.
     max_wall_time : float
-        Seconds for the whole batch ((0, 86 400]). DOP853-numba: a timed probe on the first bodies measures
-        the evaluations per second, and every body then gets the budget of evaluations that the time left
-        allows (at most ``max_nfev``): a body past it ends with the ``budget`` status, the others bit for bit
-        as without this budget. On the GPU (``device="cuda"``) the kernel cannot read the clock either: the
-        integration is a series of launches, each with a per-body budget of evaluations sized to the time
-        left, the clock read between them, and only the bodies still out of budget launched again
-        (:func:`_launches_within_wall_time`; ``extra["launches"]`` counts them). Fixed-step methods: a run
+        Seconds for the whole batch ((0, 86 400]). DOP853-numba: a kernel cannot read the clock, so the
+        integration runs in pieces, each with a per-body budget of evaluations, the clock read between them
+        (:class:`~flatbody_env.integrators.budget.WallClockBudget`): a timed probe (on the CPU the first bodies,
+        on the GPU all of them, ``extra["launches"]`` counting the launches) measures the evaluations per
+        second, and each later piece continues the bodies still out of budget (and, on the CPU, starts the
+        others) with what the time left allows (at most ``max_nfev``). A body past it ends with the ``budget``
+        status, the others bit for bit as without this budget. Fixed-step methods: a run
         whose predicted time (a timed probe of a few hundred steps) exceeds it is refused before it starts
         (``IntegrationError``, ``kind="budget"``), on either device.
     device : {"cpu", "cuda"}
@@ -242,6 +244,7 @@ def simulate_batch(
 
     from flatbody_env.integrators import batch_solve as bs
     from flatbody_env.integrators.compiled_methods import _check_compiled_body, _check_fixed_budget, kernel_params
+    from flatbody_env.integrators.twopolar_kernels import carry_size
 
     _check_compiled_body(body, method)
     spec = BY_NAME[method]
@@ -260,6 +263,11 @@ def simulate_batch(
         etol = np.full(n, tol.energy_tol)
     u = np.zeros(4)
     extra: dict[str, Any] = {}
+    budget = WallClockBudget.of(tol, growth=GPU_GROWTH if device == "cuda" else math.inf)
+    fixed_total = (
+        n * spec.stages * float(np.sum(np.maximum(np.ceil(np.diff(grid) / h - 1e-9), 1.0))) if h else 0.0
+    )  # fixed steps: the batch's evaluations, known up front
+    probe_span = np.array([grid[0], grid[0] + min(256 * h, grid[-1] - grid[0])])  # fixed steps: a few hundred
     start = time.perf_counter()
     if grid.size == 1:  # only t = 0 asked for: the initial states
         OUT, STATUS = Y0[:, None, :].copy(), np.zeros(n, np.int64)
@@ -270,9 +278,7 @@ def simulate_batch(
         NFEV = np.zeros(n, np.int64)
         TFAIL = np.empty(n)
 
-        def run(
-            m: int, budget: int, span=grid
-        ) -> None:  # the first m bodies through ``span``, ``budget`` evaluations each
+        def run(m: int, limit: int, span=grid, CARRY=None) -> None:  # the first m bodies through ``span``
             bs.batch_solve(
                 kind,
                 coeffs,
@@ -284,50 +290,64 @@ def simulate_batch(
                 tol.rtol,
                 tol.atol,
                 etol[:m],
-                budget,
+                limit,
                 OUT[:m, : span.size],
                 STATUS[:m],
                 NFEV[:m],
                 TFAIL[:m],
+                None if CARRY is None else CARRY[:m],
             )
 
         if spec.info.adaptive:
-            _solve_within_wall_time(run, n, NFEV, STATUS, tol)
+            CARRY = np.zeros((n, carry_size()))
+            todo = {"first": _probe_bodies(n), "pending": n}
+
+            def advance(limit: int) -> tuple[int, int]:  # the probe: the first bodies; then every unfinished one
+                m = todo["first"]
+                ran = m if m < n else todo["pending"]
+                todo["first"] = n
+                run(m, limit, grid, CARRY)
+                todo["pending"] = int(np.count_nonzero(STATUS[:m] == BUDGET)) + (n - m)
+                return ran, todo["pending"]
+
+            budget.run(advance)
         else:
-            _refuse_fixed_over_wall_time(run, n, NFEV, grid, h, spec.stages, method, tol)
+            m = _probe_bodies(n)
+
+            def probe() -> int:
+                run(m, tol.max_nfev, probe_span)
+                return int(NFEV[:m].sum())
+
+            budget.refuse_fixed(probe, fixed_total, t=float(grid[0]), method=method, what=f" of {n} bodies")
             run(n, tol.max_nfev)
     else:
-        OUT = np.empty((n, grid.size, STATE_SIZE))
-        STATUS = np.zeros(n, np.int64)
-        NFEV = np.zeros(n, np.int64)
-        TFAIL = np.empty(n)
         launches = [0]
-
-        def launch(
-            idx, budget: int, span=grid
-        ) -> None:  # bodies ``idx`` through ``span`` in one kernel launch, ``budget`` evaluations each
-            o, s, nf, tf = cuda.solve(
-                method, Y0[idx], span, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol[idx], max_nfev=budget
-            )
-            OUT[idx, : span.size] = o
-            STATUS[idx], NFEV[idx], TFAIL[idx] = s, nf, tf
-            launches[0] += 1
-
         if spec.info.adaptive:
-            _launches_within_wall_time(launch, n, STATUS, tol)
+            series = cuda.Trajectories(method, Y0, grid, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol)
+            todo = {"pending": n}
+
+            def advance(limit: int) -> tuple[int, int]:  # a launch of every body, the unfinished ones go on
+                ran = todo["pending"]
+                todo["pending"] = int(np.count_nonzero(series.launch(limit) == BUDGET))
+                launches[0] += 1
+                return ran, todo["pending"]
+
+            budget.run(advance)
         else:
-            _refuse_fixed_over_wall_time(
-                lambda m, budget, span=grid: launch(slice(0, m), budget, span),
-                n,
-                NFEV,
-                grid,
-                h,
-                spec.stages,
-                method,
-                tol,
-                probe_bodies=n,
-            )
-            launch(slice(0, n), tol.max_nfev)
+
+            def probe() -> int:  # every body (they run at once)
+                _, _, nf, _ = cuda.solve(
+                    method, Y0, probe_span, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol,
+                    max_nfev=tol.max_nfev,
+                )  # fmt: skip
+                launches[0] += 1
+                return int(nf.sum())
+
+            budget.refuse_fixed(probe, fixed_total, t=float(grid[0]), method=method, what=f" of {n} bodies")
+            series = cuda.Trajectories(method, Y0, grid, u, P, h=h, rtol=tol.rtol, atol=tol.atol, energy_tol=etol)
+            series.launch(tol.max_nfev)
+            launches[0] += 1
+        OUT, STATUS, NFEV, TFAIL = series.result()
         extra["launches"] = launches[0]
     wall = time.perf_counter() - start
     keep = slice(1, None) if prepended else slice(None)
@@ -345,121 +365,13 @@ def simulate_batch(
     )
 
 
-_PROBE_NFEV = 5_000
-"""Evaluations per body of the timed probe of the wall-clock budget (as the scalar compiled DOP853's)."""
-
-
 def _probe_bodies(n: int) -> int:
-    """Bodies of a timed probe: enough chunks to keep every thread of the parallel kernel busy."""
+    """Bodies of the CPU's timing probe: enough chunks to keep every thread of the parallel kernel busy."""
     import numba
 
     from flatbody_env.integrators.batch_solve import CHUNK
 
     return min(n, CHUNK * max(1, numba.get_num_threads()))
-
-
-def _solve_within_wall_time(run, n: int, NFEV: np.ndarray, STATUS: np.ndarray, tol: Tolerances) -> None:
-    """DOP853 over the batch within ``tol.max_wall_time`` (module docstring of :mod:`.integrators.compiled_methods`
-    for one body): the kernel cannot read the clock, so a probe (the first bodies, :data:`_PROBE_NFEV` evaluations
-    each, run twice: the first call may load the kernel) measures evaluations per second, and the batch runs with the
-    per-body budget that the time left allows, capped by ``max_nfev``. A probe over the whole batch that ends is the
-    answer. Every run starts from t = 0, so a body that finishes is bit for bit that of one call."""
-    if tol.max_nfev <= 2 * _PROBE_NFEV:
-        run(n, tol.max_nfev)
-        return
-    from flatbody_env.integrators.failure import KINDS
-
-    budget_code = KINDS.index("budget")
-    start = time.perf_counter()
-    m = _probe_bodies(n)
-    rate = 0.0
-    for _ in range(2):  # the second probe's rate: the first may have loaded the kernel
-        t0 = time.perf_counter()
-        run(m, _PROBE_NFEV)
-        if m == n and not (STATUS[:m] == budget_code).any():
-            return
-        rate = float(NFEV[:m].sum()) / max(time.perf_counter() - t0, 1e-9)
-    left = tol.max_wall_time - (time.perf_counter() - start)
-    run(n, int(min(tol.max_nfev, max(1.0, rate * left / n))))
-
-
-GPU_GROWTH = 8
-"""On the GPU, how many times the previous launch's evaluations per body one launch of :func:`_launches_within_wall_time`
-may be given."""
-
-
-def _launches_within_wall_time(launch, n: int, STATUS: np.ndarray, tol: Tolerances) -> None:
-    """DOP853 on the GPU within ``tol.max_wall_time``. A kernel cannot read the clock, so the integration is a series of
-    launches, each with a per-body budget of evaluations, and the host checks the clock between them.
-    ``launch(idx, budget)`` integrates bodies ``idx`` from t = 0 with ``budget`` evaluations each (one thread per body).
-    The first launch gives every body :data:`_PROBE_NFEV` evaluations and is run twice (the first may compile the kernel)
-    to measure the seconds per evaluation of a launch; each later launch re-runs only the bodies still at the ``budget``
-    status, with at most :data:`GPU_GROWTH` times the previous budget, at most ``max_nfev``, and at most what the time
-    left allows at the measured rate. When the time left cannot take them further than the last launch did, those bodies
-    keep the ``budget`` status. Every launch starts from t = 0 with the same code, so a body that finishes is bit for bit
-    that of one launch with ``max_nfev`` (re-running costs at most 1 / (GPU_GROWTH − 1) of the last launch's work)."""
-    everyone = np.arange(n)
-    if tol.max_nfev <= 2 * _PROBE_NFEV:
-        launch(everyone, tol.max_nfev)
-        return
-    from flatbody_env.integrators.failure import KINDS
-
-    budget_code = KINDS.index("budget")
-    start = time.perf_counter()
-    idx, budget, measured = everyone, _PROBE_NFEV, False
-    while True:
-        t0 = time.perf_counter()
-        launch(idx, budget)
-        took = time.perf_counter() - t0
-        idx = idx[STATUS[idx] == budget_code]
-        if idx.size == 0 or budget >= tol.max_nfev:
-            return
-        if not measured:  # the first launch may have compiled the kernel: measure the second, with the same budget
-            measured = True
-            continue
-        per_eval = max(took, 1e-9) / budget  # seconds per evaluation of every body of the launch at once
-        left = tol.max_wall_time - (time.perf_counter() - start)
-        following = int(min(tol.max_nfev, GPU_GROWTH * budget, left / per_eval))
-        if following <= budget:
-            return
-        budget = following
-
-
-def _refuse_fixed_over_wall_time(
-    run,
-    n: int,
-    NFEV: np.ndarray,
-    grid: np.ndarray,
-    h: float,
-    stages: int,
-    method: str,
-    tol: Tolerances,
-    *,
-    probe_bodies: int | None = None,
-) -> None:
-    """Fixed-step work is known up front: time a few hundred steps of the first bodies (twice: the first call
-    may load the kernel) and refuse the batch whose predicted time exceeds ``tol.max_wall_time``. ``probe_bodies``:
-    how many bodies the probe runs (default: enough to keep the CPU's threads busy; on the GPU all of them, which
-    run at once)."""
-    from flatbody_env.integrators.base import budget_error
-
-    spans = np.diff(grid)
-    total = n * stages * float(np.sum(np.maximum(np.ceil(spans / h - 1e-9), 1.0))) if spans.size else 0.0
-    if total <= 4 * _PROBE_NFEV:
-        return
-    m = _probe_bodies(n) if probe_bodies is None else min(n, probe_bodies)
-    span = np.array([grid[0], grid[0] + min(256 * h, grid[-1] - grid[0])])
-    run(m, tol.max_nfev, span)
-    t0 = time.perf_counter()
-    run(m, tol.max_nfev, span)
-    per_eval = (time.perf_counter() - t0) / max(1, int(NFEV[:m].sum()))
-    if total * per_eval > tol.max_wall_time:
-        raise budget_error(
-            t=float(grid[0]),
-            method=method,
-            tol=tol,
-            used=f"~{total * per_eval:.3g} s predicted for {total:.6g} RHS evaluations of {n} bodies",
-        )
 
 
 __all__ = ["BATCH_METHODS", "BatchTrajectory", "DEVICES", "MAX_BODIES", "MAX_OUTPUT_FLOATS", "simulate_batch"]

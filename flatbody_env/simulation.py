@@ -47,7 +47,7 @@ import numpy as np
 
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.invariants import casimir, laboratory_spin
-from flatbody_env.physics.hamiltonian import hamiltonian
+from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.integrators import DEFAULT_MAX_NFEV, DEFAULT_MAX_WALL_TIME, IntegrationError, Tolerances, get_method
 from flatbody_env.integrators.base import Solution, check_step
 from flatbody_env.physics import validation
@@ -513,11 +513,7 @@ def simulate(
     Y = sol.Y[:, keep]
     state = unpack(Y)
     energy = sol.stats.get("energy")
-    energy = (
-        np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])])
-        if energy is None
-        else np.asarray(energy, float)[keep]
-    )
+    energy = hamiltonian_series(Y, body) if energy is None else np.asarray(energy, float)[keep]
     return Trajectory(
         t=np.asarray(sol.t, float)[keep],
         state=state,
@@ -586,11 +582,7 @@ def _simulate_auto(
     Y = sol.Y[:, keep]
     state = unpack(Y)
     energy = sol.stats.get("energy")
-    energy = (
-        np.array([hamiltonian(Y[:, k], body) for k in range(Y.shape[1])])
-        if energy is None
-        else np.asarray(energy, float)[keep]
-    )
+    energy = hamiltonian_series(Y, body) if energy is None else np.asarray(energy, float)[keep]
     return Trajectory(
         t=np.asarray(sol.t, float)[keep],
         state=state,

@@ -12,10 +12,13 @@ tables of docs/integrators.md).
    error (1e-8) of the regular-chart RATTLE methods and of every two-polar method; ratio = the
    cheapest two-polar time / the cheapest regular-chart time (methods that fail are left out).
 3. *long horizon*, t = 1e4: the energy error max|H − H₀| (101 samples) per method/setting.
-4. *one short step* dt = 0.05: µs per call through ``integrate`` (all methods) and through the
-   compiled environment stepper (compiled methods; single and batched over 1024 bodies), best of
-   repeated blocks (:func:`flatbody_env.bench.harness.best_of`).
+4. *one short step* dt = 0.05: µs per call through ``integrate`` (four scipy methods and every compiled one) and
+   through the compiled environment stepper (the methods the environment steps compiled; single and batched over
+   1024 bodies), best of repeated blocks (:func:`flatbody_env.bench.harness.best_of`).
 5. *compile time*: first call with an empty numba cache and the cached call, in fresh processes.
+6. *simulate vs the kernel*: ``simulate`` of the planar scene to t = 100 with the compiled DOP853 (a run longer than
+   the wall-clock budget's probe, :mod:`flatbody_env.integrators.budget`) against the bare kernel call of the same run
+   and against the method's ``integrate``, timed in alternation (:func:`flatbody_env.bench.harness.alternate`).
 
 :func:`measure` → :class:`BenchReport`; :func:`describe` prints it, :func:`report` hands it to
 :func:`flatbody_env.bench.harness.write_report` (``bench_integrators.json``, ``.csv``, and ``.png`` drawn
@@ -85,6 +88,8 @@ class BenchReport:
         Sections 1–5.
     auto : list
         Per built-in scene: simulate's default (method="auto") against scipy DOP853 (the former default), same run.
+    simulate_vs_kernel : dict
+        Section 6: seconds of ``simulate``, of ``integrate`` and of the bare kernel call, and their ratios.
     """
 
     machine: dict
@@ -94,6 +99,7 @@ class BenchReport:
     short_step: list
     compile_times: list = field(default_factory=list)
     auto: list = field(default_factory=list)
+    simulate_vs_kernel: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         """The record as saved in ``bench_integrators.json``."""
@@ -254,7 +260,7 @@ def _long(bar, t_end):
 
 def _short_step(bar, n_batch=1024):
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, env_stepper, kernel_params
-    from flatbody_env.physics.regular import regular_from_paper
+    from flatbody_env.integrators.specs import BY_NAME
 
     sc = load_scene("default")
     y = pack(sc.state)
@@ -263,7 +269,7 @@ def _short_step(bar, n_batch=1024):
     dt = 0.05
     out = []
     times = np.array([0.0, dt])
-    for m in ("RK45", "DOP853", "LSODA", "DOP853-regular") + ENV_METHODS:
+    for m in ("RK45", "DOP853", "LSODA", "DOP853-regular", *BY_NAME):
         meth = get_method(m)
         tol = Tolerances(rtol=1e-8, atol=1e-10) if meth.info.adaptive else Tolerances(step=dt)
         n = 30 if not meth.info.compiled else 300
@@ -277,17 +283,16 @@ def _short_step(bar, n_batch=1024):
         bar.update(1)
     for m in ENV_METHODS:
         st = env_stepper(m)
-        x = y if st.state == "paper" else regular_from_paper(y, sc.body)
-        o = np.empty_like(x)
+        o = np.empty_like(y)
         h = 0.0 if not st.fixed_step else dt
         n = 20000
 
-        def steps(st=st, x=x, o=o, h=h, n=n):
+        def steps(st=st, o=o, h=h, n=n):
             for _ in range(n):
-                st.step(x, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
+                st.step(y, u, P, dt, h, 1e-8, 1e-10, math.inf, o)
 
         best = best_of(steps, 3, warm=False) / n
-        X = np.repeat(x[:, None], n_batch, axis=1)
+        X = np.repeat(y[:, None], n_batch, axis=1)
         U = np.zeros((4, n_batch))
         O = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
@@ -307,6 +312,58 @@ def _short_step(bar, n_batch=1024):
     return out
 
 
+SIMULATE_SCENE = "planar-v3"
+SIMULATE_T_END = 100.0
+
+
+def simulate_vs_kernel(rounds: int = 30) -> dict:
+    """Section 6 (module docstring): ``simulate(SIMULATE_SCENE, t_end=100, method="DOP853-numba", model="two-polar")``
+    against its method's ``integrate`` and the bare :func:`~flatbody_env.integrators.twopolar_kernels.dop853_solve`
+    call of the same run (its arrays made beforehand), best of ``rounds`` alternated rounds."""
+    from flatbody_env.bench.harness import alternate
+    from flatbody_env.integrators import DEFAULT_MAX_NFEV
+    from flatbody_env.integrators import twopolar_kernels as tk
+    from flatbody_env.integrators.compiled_methods import kernel_params
+    from flatbody_env.simulation import default_energy_tol, simulate
+
+    sc = load_scene(SIMULATE_SCENE)
+    kw = dict(t_end=SIMULATE_T_END, method="DOP853-numba", model="two-polar")
+    run = simulate(sc, **kw)
+    y0, P, grid, u = pack(sc.state), kernel_params(sc.body), run.t, np.zeros(4)
+    etol = default_energy_tol(hamiltonian(y0, sc.body), 1e-10, 1e-10, adaptive=True)
+    tol = Tolerances(rtol=1e-10, atol=1e-10, energy_tol=etol)
+    meth = get_method("DOP853-numba")
+    Z, counters, fail = np.empty((11, grid.size)), np.zeros(4, np.int64), np.zeros(2)
+
+    def kernel() -> None:
+        counters[:] = (0, 0, 0, DEFAULT_MAX_NFEV)
+        tk.dop853_solve(y0, grid, u, P, 1e-10, 1e-10, etol, Z, counters, fail)
+
+    kernel()
+    if counters[0] != run.nfev or not np.array_equal(Z, run.y):
+        raise RuntimeError("simulate and the bare kernel call do not compute the same run")
+
+    def integrate() -> None:
+        meth.integrate(sc.body, y0, grid, tol=tol)
+
+    def simulate_run() -> None:
+        simulate(sc, **kw)
+
+    best = alternate({"kernel": kernel, "integrate": integrate, "simulate": simulate_run}, rounds)
+    return {
+        "scene": SIMULATE_SCENE,
+        "t_end": SIMULATE_T_END,
+        "method": "DOP853-numba",
+        "nfev": int(run.nfev),
+        "rounds": rounds,
+        "kernel_s": best["kernel"],
+        "integrate_s": best["integrate"],
+        "simulate_s": best["simulate"],
+        "integrate_over_kernel": best["integrate"] / best["kernel"],
+        "simulate_over_kernel": best["simulate"] / best["kernel"],
+    }
+
+
 _COMPILE_SNIPPET = """
 import time, json, sys
 t0 = time.perf_counter()
@@ -322,10 +379,11 @@ print(json.dumps(out))
 
 
 def compile_times(names=None) -> list[dict]:
-    """First-call time with an empty numba cache and with the cache filled, each in a fresh process."""
-    from flatbody_env.integrators.compiled_methods import ENV_METHODS
+    """First-call time with an empty numba cache and with the cache filled, each in a fresh process (default: every
+    compiled method)."""
+    from flatbody_env.integrators.specs import BY_NAME
 
-    names = list(names or ENV_METHODS)
+    names = list(names or BY_NAME)
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as cache:
         env["NUMBA_CACHE_DIR"] = cache
@@ -404,6 +462,7 @@ def measure(
     import platform
 
     from flatbody_env.integrators.compiled_methods import ENV_METHODS, warm_up
+    from flatbody_env.integrators.specs import BY_NAME
     from flatbody_env.progress import progress_bar
     from flatbody_env.provenance import machine
     from flatbody_env.scene import builtin_scenes
@@ -415,8 +474,10 @@ def measure(
         + len(deltas) * len(CLOSE_METHODS)
         + len(LONG_RUNS)
         + 4
-        + 2 * len(ENV_METHODS)
+        + len(BY_NAME)
+        + len(ENV_METHODS)
         + len(builtin_scenes())
+        + 1
     )
     bar = progress_bar(total=total, desc="bench integrators", unit="task", enabled=progress)
     regular = _regular(1 if quick else repeats, max_run_s, 20.0 if quick else 100.0, bar)
@@ -424,6 +485,9 @@ def measure(
     long_h = _long(bar, 1e3 if quick else 1e4)
     short = _short_step(bar)
     auto = _auto(1 if quick else repeats, bar, 20.0 if quick else 100.0)
+    bar.set_postfix_str("simulate vs kernel")
+    versus = simulate_vs_kernel(10 if quick else 10 * repeats)
+    bar.update(1)
     bar.close()
     comp = compile_times() if with_compile else []
     return BenchReport(
@@ -434,6 +498,7 @@ def measure(
         short_step=short,
         compile_times=comp,
         auto=auto,
+        simulate_vs_kernel=versus,
     )
 
 
@@ -491,6 +556,16 @@ def describe(rep: BenchReport) -> str:
                 else f"scipy DOP853 fails ({x.get('scipy_failure')})"
             )
             L.append(f"  {x['scene']:<20} {x['model']:<10} {x['method']:<18} {x['auto_s'] * 1e3:8.2f} ms | {vs}")
+    v = rep.simulate_vs_kernel
+    if v:
+        L.append(
+            f"simulate vs the bare kernel, {v['scene']} t = {v['t_end']:g}, {v['method']} ({v['nfev']} RHS evaluations; "
+            f"alternated, best of {v['rounds']})"
+        )
+        L.append(
+            f"  kernel {v['kernel_s'] * 1e3:.3f} ms   integrate {v['integrate_s'] * 1e3:.3f} ms "
+            f"({v['integrate_over_kernel']:.3f}x)   simulate {v['simulate_s'] * 1e3:.3f} ms ({v['simulate_over_kernel']:.3f}x)"
+        )
     if rep.compile_times:
         L.append("compile time (fresh processes): first call with empty numba cache / cached")
         for x in rep.compile_times:
@@ -547,6 +622,19 @@ def docs_tables(rep: dict) -> dict[str, str]:
                 f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}{step} | {x['auto_s'] * 1e3:.2f} ms | {vs} |"
             )
         tables["integrators-auto"] = "\n".join(lines)
+    v = rep.get("simulate_vs_kernel")
+    if v:
+        lines = [
+            f"| {v['scene']}, t = {v['t_end']:g}, {v['method']} ({v['nfev']} evaluations) | wall time | / kernel |",
+            "|---|---|---|",
+        ]
+        for what, key, ratio in (
+            ("bare kernel call", "kernel_s", 1.0),
+            ("`integrate`", "integrate_s", v["integrate_over_kernel"]),
+            ("`simulate(...)`", "simulate_s", v["simulate_over_kernel"]),
+        ):
+            lines.append(f"| {what} | {v[key] * 1e3:.3f} ms | {ratio:.3f}× |")
+        tables["integrators-simulate"] = "\n".join(lines)
     if rep.get("compile_times"):
         lines = ["| method | first call, empty cache | cached |", "|---|---|---|"]
         for x in rep["compile_times"]:
@@ -621,6 +709,13 @@ def csv_rows(rep: dict) -> list[tuple]:
                 x.get("scipy_s"),
             )
         )
+    v = rep.get("simulate_vs_kernel")
+    if v:
+        case = f"{v['scene']} t={v['t_end']:g}"
+        for path in ("kernel", "integrate", "simulate"):
+            rows.append(("simulate-vs-kernel", case, v["method"], path, "wall_time_s", v[f"{path}_s"]))
+        for path in ("integrate", "simulate"):
+            rows.append(("simulate-vs-kernel", case, v["method"], path, "ratio_vs_kernel", v[f"{path}_over_kernel"]))
     for x in rep["compile_times"]:
         rows.append(("compile", "", x["method"], "first call", "seconds", x["first_call_s"]))
         rows.append(("compile", "", x["method"], "cached", "seconds", x["cached_s"]))
@@ -662,6 +757,7 @@ __all__ = [
     "docs_tables",
     "measure",
     "report",
+    "simulate_vs_kernel",
     "wall_at",
     "write_docs",
 ]

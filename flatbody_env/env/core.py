@@ -194,7 +194,8 @@ def configure(
     validation.boolean("track_rotation", track_rotation)
     dt = validation.number("dt", dt, low=validation.ENV_DT_RANGE[0], high=validation.ENV_DT_RANGE[1])
     validation.string("integrator", integrator)
-    info = get_method(integrator, where="integrator").info
+    method = get_method(integrator, where="integrator")  # the one look-up: the seam gets the method itself
+    info = method.info
     track = bool(track_rotation or render_mode is not None)
     if not info.adaptive and step is None:
         step = dt  # one fixed step per env step unless step= asks for sub-steps
@@ -214,7 +215,7 @@ def configure(
     )
     first_step = dt if info.adaptive else 0.0  # adaptive methods: the first step guessed as one whole env step
     try:
-        stepper = make_env_step(integrator, body, tolerances, with_rotation=track, first_step=first_step)
+        stepper = make_env_step(method, body, tolerances, with_rotation=track, first_step=first_step)
     except ValueError:
         if not track:
             raise

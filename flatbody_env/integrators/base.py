@@ -135,8 +135,18 @@ def check_step(info: "MethodInfo", tol: Tolerances) -> float:
     return float(tol.step)
 
 
+def check_regular_body(body: Body) -> None:
+    """The regular-chart methods' refusal of a body (scipy's ``NAME-regular`` and RATTLE's): the regular formulation
+    is the corrected one (``ValueError`` naming ``spin_convention``)."""
+    if body.spin_convention != "corrected":
+        raise ValueError(
+            "spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method"
+        )
+
+
 def budget_error(*, t: float, method: str, used: str, tol: Tolerances) -> IntegrationError:
-    """The :class:`IntegrationError` (``kind="budget"``) for a run that ran out of its budget."""
+    """The :class:`IntegrationError` (``kind="budget"``) for a run that ran out of its budget; ``tol``: the budget
+    quoted (its ``max_nfev`` and ``max_wall_time``: a :class:`Tolerances` or a :class:`~.budget.WallClockBudget`)."""
     return IntegrationError(
         f"work budget exhausted ({used}; budget max_nfev = {tol.max_nfev}, max_wall_time = {tol.max_wall_time:g} s — "
         "raise them (max_nfev=, max_wall_time=; CLI --max-nfev, --max-seconds) or shorten t_end)",
@@ -147,7 +157,17 @@ def budget_error(*, t: float, method: str, used: str, tol: Tolerances) -> Integr
 
 
 class Method(Protocol):
+    """What every registered method declares: :attr:`info`, :attr:`spec`, :meth:`check` and :meth:`integrate`."""
+
     info: MethodInfo
+    spec: object | None
+    """A compiled method's row of the method table (a :class:`~.specs.MethodSpec`); None for the others."""
+
+    def check(self, body: Body, tol: Tolerances) -> float:
+        """The method's refusals of ``body`` and ``tol`` (``ValueError`` naming the field), before any run; returns
+        the fixed step (0.0 for an adaptive method). :meth:`integrate` calls it first; the environment at
+        construction (:func:`~.steppers.make_env_step`)."""
+        ...
 
     def integrate(
         self,

@@ -36,7 +36,15 @@ import numpy as np
 from flatbody_env.integrators.failure import OK
 from flatbody_env.integrators.jit import njit, energy_kernel
 from flatbody_env.integrators.specs import BATCH_METHODS, BY_NAME, DOP853_KIND, RK4_KIND, SPLIT_KIND
-from flatbody_env.integrators.twopolar_kernels import N, STRANG, dop853_solve_into, env_step_into, fixed_solve_into
+from flatbody_env.integrators.twopolar_kernels import (
+    CARRY_K,
+    CARRY_Y,
+    N,
+    STRANG,
+    dop853_solve_into,
+    env_step_into,
+    fixed_solve_into,
+)
 
 
 KIND = {name: (BY_NAME[name].code, BY_NAME[name].coeffs) for name in BATCH_METHODS}
@@ -74,10 +82,15 @@ def solve_body(
     force,
     counters,
     fail,
+    carry,
 ):
     """Body ``b``'s trajectory from ``y0`` (11,) through ``times`` into ``Y`` (11, T) (a view of the batch
     output); STATUS[b], NFEV[b], TFAIL[b] (t of the failure, NaN on success) receive its outcome.
-    Rows from the failing one on are NaN: a failed body's state is never returned as physics."""
+    Rows from the failing one on are NaN: a failed body's state is never returned as physics.
+    DOP853: ``carry`` is where the body stands (:func:`~.twopolar_kernels.dop853_solve_into`): zeros start it, a
+    body its budget stopped continues with the larger ``max_nfev``, a finished one is left as it is."""
+    if kind == DOP853_KIND and carry[CARRY_K] < 0.0:
+        return
     counters[0] = 0
     counters[1] = 0
     counters[2] = 0
@@ -87,7 +100,7 @@ def solve_body(
     fail[2] = 0.0
     if kind == DOP853_KIND:
         st = dop853_solve_into(
-            y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force
+            y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force, carry
         )
     else:
         st = fixed_solve_into(kind, coeffs, y0, times, u, P, h, energy_tol, Y, counters, fail, y, K, vel, force)
@@ -149,9 +162,13 @@ def env_step_body(
 
 # --------------------------------------------------------------------------------------------- CPU batch kernels
 @njit(parallel=True)
-def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
+def batch_solve(
+    kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL, CARRY=None
+):
     """Trajectories of N bodies: Y0 (N, 11) → OUT (N, T, 11), STATUS, NFEV (N,) int64, TFAIL (N,);
-    one energy tolerance per body (ENERGY_TOL (N,)); parallel over chunks of :data:`CHUNK` bodies."""
+    one energy tolerance per body (ENERGY_TOL (N,)); parallel over chunks of :data:`CHUNK` bodies.
+    DOP853: ``CARRY`` (N, :func:`~.twopolar_kernels.carry_size`), zeros at first, keeps where each body stands, so
+    that a call with a larger ``max_nfev`` continues the bodies their budget stopped (:func:`solve_body`)."""
     n = Y0.shape[0]
     for c in numba.prange((n + CHUNK - 1) // CHUNK):
         y = np.empty(N)
@@ -163,7 +180,13 @@ def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nf
         force = np.empty(4)
         counters = np.zeros(4, np.int64)
         fail = np.zeros(3)
+        fresh = np.zeros(CARRY_Y + 2 * N)
         for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+            if CARRY is None:
+                carry = fresh
+                carry[CARRY_K] = 0.0
+            else:
+                carry = CARRY[b]
             solve_body(
                 b,
                 kind,
@@ -190,6 +213,7 @@ def batch_solve(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nf
                 force,
                 counters,
                 fail,
+                carry,
             )
 
 

@@ -1,29 +1,19 @@
 """The compiled methods (numba, on-disk cache) behind the integrator seam, and the environment API.
 
-Registered methods (``flatbody methods``)
-
-=====================  ========  =====  =========  =================================================
-name                   adaptive  order  chart      algorithm
-=====================  ========  =====  =========  =================================================
-``DOP853-numba``       yes       8      two-polar  port of scipy's DOP853 (same steps)
-``RK4``                no        4      two-polar  classical Runge–Kutta
-``splitting-strang``   no        2      two-polar  Poisson splitting, exact flows (docs/physics.md §10), J1 = J2
-``splitting-suzuki4``  no        4      two-polar  Suzuki 5-stage composition of Strang
-``splitting-yoshida4`` no        4      two-polar  Yoshida triple-jump composition of Strang
-``RATTLE``             no        2      regular    RATTLE on Φ = [φ1, φ2, ψ] (docs/physics.md §7)
-``RATTLE-suzuki4``     no        4      regular    Suzuki 5-stage composition of RATTLE
-``RATTLE-kahanli6``    no        6      regular    Kahan–Li 9-stage composition of RATTLE
-=====================  ========  =====  =========  =================================================
-
-Their speed against scipy's methods is measured by ``flatbody bench integrators`` (docs/integrators.md).
+The methods are the rows of the method table, :data:`.specs.SPECS` (``flatbody methods`` lists them with their
+order, chart and what they preserve; docs/integrators.md compares them): a :class:`CompiledTwoPolar` for the two-polar
+kinds (DOP853, RK4, the splittings), a :class:`CompiledRattle` for RATTLE and its compositions. Their speed against
+scipy's methods is measured by ``flatbody bench integrators`` (docs/integrators.md).
 
 Fixed-step methods need ``Tolerances(step=h)`` (``simulate(..., step=h)``, ``--step H``); each
 output interval is cut into ⌈Δt/h⌉ equal steps. Adaptive ``DOP853-numba`` reads rtol/atol and
 steps exactly onto every output time. Compiled methods need a built-in potential (V1, V2, V3):
 a :class:`~flatbody_env.physics.potentials.CustomPotential` runs Python code and is refused with a
-ValueError (use the scipy methods). With ``with_rotation=True`` the two-polar methods carry R on
+ValueError (use the scipy methods). Each method's refusals of a body and settings are its ``check`` (the seam's
+:meth:`~.base.Method.check`). With ``with_rotation=True`` the two-polar methods carry R on
 their own steps (:mod:`.rotation_kernels`; the paper state is bit for bit the one without R); the
-regular-chart methods return R from the decomposition.
+regular-chart methods return R from the decomposition. The compiled DOP853 runs within ``max_nfev`` and
+``max_wall_time`` in pieces, each continuing the last (:class:`~.budget.WallClockBudget`).
 
 Failures raise :class:`~flatbody_env.integrators.base.IntegrationError` with ``kind`` from
 :mod:`.failure` (non-finite, step-collapse, chart-singularity, domain, energy, constraint,
@@ -31,25 +21,22 @@ under-resolved, budget, unsupported).
 
 Environment API
 ---------------
-The environment steps through :func:`flatbody_env.integrators.steppers.make_env_step` (it calls
-:meth:`CompiledTwoPolar.check_env` for the refusals). Underneath, :func:`env_stepper` (name) →
-:class:`EnvStepper`, the one compiled env step of :mod:`.twopolar_kernels` (or RATTLE's) bound to the
-method's ``(kind, coefficients)`` from the method table (:mod:`.specs`), no Python work per sub-step::
+The environment steps through :func:`flatbody_env.integrators.steppers.make_env_step`. Underneath, for the
+methods it steps compiled (``spec.env``, :data:`ENV_METHODS`), :func:`env_stepper` (the method's spec, or its
+name) → :class:`EnvStepper`, the one compiled env step of :mod:`.twopolar_kernels` bound to the method's
+``(kind, coefficients)`` from the method table, no Python work per sub-step::
 
     stepper = env_stepper("RK4")
     status = stepper.step(y, u, P, dt, h, rtol, atol, energy_tol, out)         # -> int
     stepper.batch(Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)         # in place
 
-* ``y``, ``out``: float64 (n,) with n = 11 (paper state, :mod:`flatbody_env.physics.state`) for two-polar
-  methods and n = 18 (regular state z, :mod:`flatbody_env.physics.regular`) for ``stepper.state ==
-  "regular"``; convert once with :func:`flatbody_env.physics.regular.regular_from_paper` /
-  :func:`~flatbody_env.physics.regular.paper_from_regular`.
+* ``y``, ``out``: float64 (11,), the paper state (:mod:`flatbody_env.physics.state`).
 * ``u`` (4,): controls (τ1, τ2, τ3, f_ϱ), constant over the step; ``P`` (9,): a *writable* float64
   copy of ``Body.kernel_params()`` (:func:`kernel_params`).
 * ``dt``: the env step; ``h``: the largest sub-step (fixed-step methods) or the first step guess
   (DOP853, 0 = automatic); ``rtol``, ``atol``: DOP853 only; ``energy_tol``: allowed |ΔH| over the
   step without controls (``inf`` = off).
-* batched: ``Y``, ``OUT`` (n, N) structure-of-arrays (row k = entry k of every body), ``U`` (4, N),
+* batched: ``Y``, ``OUT`` (11, N) structure-of-arrays (row k = entry k of every body), ``U`` (4, N),
   ``STATUS`` (N,) int64; one shared ``P``.
 * status 0 = success; otherwise :data:`flatbody_env.integrators.failure.KINDS` [status] names the
   failure (e.g. 3 ``"chart-singularity"``, 7 ``"under-resolved"``) — flags, never exceptions.
@@ -77,10 +64,12 @@ from flatbody_env.integrators.base import (
     Solution,
     Tolerances,
     budget_error,
+    check_regular_body,
     check_step,
     register_method,
 )
-from flatbody_env.integrators.failure import KINDS, raise_for
+from flatbody_env.integrators.budget import WallClockBudget
+from flatbody_env.integrators.failure import BUDGET, KINDS, raise_for
 from flatbody_env.integrators.specs import BY_NAME, ENV_METHODS, SPECS, MethodSpec
 
 
@@ -119,14 +108,6 @@ def _check_fixed_budget(name: str, times: np.ndarray, h: float, stages: int, tol
             used=f"{steps:.6g} steps of h = {h:g} x {stages} RHS evaluations needed over [{times[0]:g}, {times[-1]:g}]",
         )
     return steps * stages
-
-
-_PROBE_NFEV = 5_000
-"""Right-hand-side evaluations of a timing probe of the wall-clock budget (short against any budget when compiled)."""
-_COMPILED_RATE = 2e5
-"""Evaluations per second below which a probe is taken to have included loading the kernel (compiled
-kernels run far faster: the per-step costs of ``flatbody bench integrators``, docs/integrators.md), so a
-second probe measures the rate."""
 
 
 _WATCHERS: list[tuple[Callable[[float, float, float], None], float]] = []
@@ -171,56 +152,9 @@ def _watched(run: Callable[[], Any], times: np.ndarray, fail: np.ndarray) -> Any
         watcher.join()
 
 
-def _run_within_budget(run, counters: np.ndarray, tol: Tolerances) -> tuple[int, bool]:
-    """Run a compiled DOP853 kernel within ``tol.max_nfev`` *and* ``tol.max_wall_time``.
-
-    A compiled kernel cannot read the clock; it stops once it has used the evaluation budget in
-    ``counters[3]`` (checked before every step). ``run(budget)`` restarts the integration from its first
-    time with that budget. A short probe comes first: a run that ends within it is the answer;
-    otherwise it measures evaluations per second (a second probe when the first included loading the
-    kernel) and the last run gets the budget that the wall time left allows at that rate (at most
-    ``max_nfev``). The answer is bit for bit that of one call. Returns (status, whether the wall
-    clock, not ``max_nfev``, set the budget that stopped the run)."""
-    start = time.perf_counter()
-    if tol.max_nfev <= 2 * _PROBE_NFEV:
-        return run(tol.max_nfev), False
-    for _ in range(2):
-        t0 = time.perf_counter()
-        st = run(_PROBE_NFEV)
-        if KINDS[st] != "budget":
-            return st, False
-        rate = counters[0] / max(time.perf_counter() - t0, 1e-9)
-        if rate >= _COMPILED_RATE:
-            break
-    budget = int(min(tol.max_nfev, max(0.0, rate * (tol.max_wall_time - (time.perf_counter() - start)))))
-    if budget <= _PROBE_NFEV:
-        return st, True
-    st = run(budget)
-    return st, budget < tol.max_nfev and KINDS[st] == "budget"
-
-
-def _check_fixed_wall_time(name: str, run_probe, total_nfev: float, tol: Tolerances, t0: float) -> None:
-    """Fixed-step work is known up front: time ``run_probe()`` (a few hundred steps; returns the
-    evaluations it made; run twice, the first may load the kernel) and refuse a run whose predicted
-    time exceeds ``tol.max_wall_time`` (``kind="budget"``), before it starts."""
-    if total_nfev <= 4 * _PROBE_NFEV:
-        return
-    run_probe()
-    start = time.perf_counter()
-    n = max(1, int(run_probe()))
-    per_eval = (time.perf_counter() - start) / n
-    if total_nfev * per_eval > tol.max_wall_time:
-        raise budget_error(
-            t=t0,
-            method=name,
-            tol=tol,
-            used=f"~{total_nfev * per_eval:.3g} s predicted for {total_nfev:.6g} RHS evaluations",
-        )
-
-
 def _times(times) -> np.ndarray:
     times = np.array(times, dtype=np.float64).ravel()
-    if times.size < 1 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+    if times.size < 1 or not np.isfinite(times).all() or not (times[1:] > times[:-1]).all():
         raise ValueError("times: must be finite and strictly increasing")
     return times
 
@@ -243,7 +177,7 @@ class CompiledTwoPolar:
 
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        h = self.check_env(body, tol)
+        h = self.check(body, tol)
         y0 = np.array(y0, dtype=np.float64)
         times = _times(times)
         uu = _controls(u)
@@ -253,6 +187,8 @@ class CompiledTwoPolar:
         energy_tol = float(tol.energy_tol)
         if self.kind != "dop853":
             total = _check_fixed_budget(name, times, h, self.spec.stages, tol)
+        from flatbody_env.integrators import twopolar_kernels as _tk
+
         if with_rotation:
             # the same stepping code on z = (y, vec(R)) (rotation_kernels): y bit for bit as without R
             from flatbody_env.integrators import rotation_kernels as kernels
@@ -261,20 +197,25 @@ class CompiledTwoPolar:
             y0 = np.concatenate([y0, R0.ravel()])
             dop853, fixed = kernels.dop853_solve_R, kernels.fixed_solve_R
         else:
-            from flatbody_env.integrators import twopolar_kernels as kernels
-
-            dop853, fixed = kernels.dop853_solve, kernels.fixed_solve
+            dop853, fixed = _tk.dop853_solve, _tk.fixed_solve
         Z = np.empty((y0.size, times.size))
         start = time.perf_counter()
+        budget = WallClockBudget.of(tol)
         wall = False
         if self.kind == "dop853":
+            carry = np.zeros(_tk.carry_size(y0.size))
+            rtol, atol = float(tol.rtol), float(tol.atol)
+            status = [0]
 
-            def run(budget: int) -> int:  # from the first time, within ``budget`` RHS evaluations
-                counters[:] = (0, 0, 0, budget)
-                fail[:] = 0.0
-                return dop853(y0, times, uu, P, float(tol.rtol), float(tol.atol), energy_tol, Z, counters, fail)
+            def advance(
+                limit: int,
+            ) -> tuple[int, int]:  # on from where the last piece stopped, to ``limit`` evaluations
+                counters[3] = limit
+                status[0] = dop853(y0, times, uu, P, rtol, atol, energy_tol, Z, counters, fail, carry)
+                return 1, int(status[0] == BUDGET)
 
-            st, wall = _watched(lambda: _run_within_budget(run, counters, tol), times, fail)  # max_nfev, max_wall_time
+            wall = _watched(lambda: budget.run(advance), times, fail)  # max_nfev and max_wall_time
+            st = status[0]
         else:
 
             def probe() -> int:  # a few hundred steps from the first time: the cost of one RHS evaluation
@@ -295,7 +236,7 @@ class CompiledTwoPolar:
                 )
                 return int(c[0])
 
-            _check_fixed_wall_time(name, probe, total, tol, float(times[0]))
+            budget.refuse_fixed(probe, total, t=float(times[0]), method=name)
             st = _watched(
                 lambda: fixed(self.spec.code, self.coeffs, y0, times, uu, P, h, energy_tol, Z, counters, fail),
                 times,
@@ -307,16 +248,18 @@ class CompiledTwoPolar:
                 t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else "")
             )
         raise_for(st, t=fail[0], method=name, detail=_detail(st, fail, tol))
-        stats = {"steps": int(counters[1])}
+        Y = np.ascontiguousarray(Z[:11])
+        energy = np.empty(times.size)
+        _tk.energy_series(Y, P, energy)  # H of every row, compiled (the values of physics.hamiltonian)
+        stats = {"steps": int(counters[1]), "energy": energy}
         if self.kind == "dop853":
             stats["rejected"] = int(counters[2])
         rotation = np.ascontiguousarray(Z[11:].T).reshape(times.size, 3, 3) if with_rotation else None
-        return Solution(
-            t=times.copy(), Y=np.ascontiguousarray(Z[:11]), rotation=rotation, nfev=int(counters[0]), stats=stats
-        )
+        return Solution(t=times.copy(), Y=Y, rotation=rotation, nfev=int(counters[0]), stats=stats)
 
-    def check_env(self, body: Body, tol: Tolerances) -> float:
-        """The method's refusals (custom potential, step setting, J1 ≠ J2 for a splitting); returns the fixed step (0 if adaptive)."""
+    def check(self, body: Body, tol: Tolerances) -> float:
+        """The method's refusals (custom potential, step setting, J1 ≠ J2 for a splitting); returns the fixed step
+        (0 if adaptive)."""
         name = self.info.name
         _check_compiled_body(body, name)
         h = check_step(self.info, tol)
@@ -335,19 +278,23 @@ class CompiledRattle:
         self.info = spec.info
         self.coeffs = spec.coeffs
 
-    def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
+    def check(self, body: Body, tol: Tolerances) -> float:
+        """The method's refusals (custom potential, step setting, the paper spin convention, V2 with c ≠ d); returns
+        the fixed step. (Torques, which it cannot apply, are refused by :meth:`integrate`, with the controls.)"""
         name = self.info.name
         _check_compiled_body(body, name)
         h = check_step(self.info, tol)
-        if body.spin_convention != "corrected":
-            raise ValueError(
-                "spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method"
-            )
+        check_regular_body(body)
         if isinstance(body.potential, V2) and body.potential.c != body.potential.d:
             raise ValueError(
                 f"potential: V2 with c != d is no function of the invariants (erratum E9); {name} needs c = d — "
                 "use DOP853-regular"
             )
+        return h
+
+    def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
+        name = self.info.name
+        h = self.check(body, tol)
         uu = _controls(u)
         if np.any(uu[:3] != 0.0):
             raise ValueError(
@@ -439,40 +386,30 @@ class EnvStepper:
     name: str
     step: object
     batch: object
-    state: str
-    """``"paper"`` (11 entries) or ``"regular"`` (18 entries)."""
     fixed_step: bool
     step_counted: object = None
     """``step`` with a trailing ``counters`` (3,) int64 argument (accumulates [nfev, steps, rejected])."""
     batch_counted: object = None
     """``batch`` with a trailing ``NFEV`` (N,) int64 output (each body's function evaluations)."""
 
-    @property
-    def size(self) -> int:
-        return 11 if self.state == "paper" else 18
 
-
-def env_stepper(name: str) -> EnvStepper:
-    """The compiled per-step functions of method ``name`` (one of :data:`ENV_METHODS`)."""
-    if name not in ENV_METHODS:
-        raise ValueError(f"method: no environment stepper for {name!r} (allowed: {', '.join(ENV_METHODS)})")
-    spec = BY_NAME[name]
-    if spec.kind == "rattle":
-        from flatbody_env.integrators import rattle_kernels as _rk
-
-        return EnvStepper(
-            name=name, step=_rk.rattle_env_step, batch=_rk.batch_rattle_env_step, state="regular", fixed_step=True
-        )
+def env_stepper(spec: MethodSpec | str) -> EnvStepper:
+    """The compiled per-step functions of a method the environment steps compiled (``spec.env``,
+    :data:`ENV_METHODS`): its row of the method table, or its name."""
+    if isinstance(spec, str):
+        spec = BY_NAME.get(spec, spec)
+    if not isinstance(spec, MethodSpec) or not spec.env:
+        name = spec.name if isinstance(spec, MethodSpec) else spec
+        raise ValueError(f"method: no environment stepper for {name!r:.60} (allowed: {', '.join(ENV_METHODS)})")
     from flatbody_env.integrators.batch_solve import batch_env_step_serial
     from flatbody_env.integrators.twopolar_kernels import env_step
 
     step = functools.partial(env_step, spec.code, spec.coeffs)
     batch = functools.partial(batch_env_step_serial, spec.code, spec.coeffs)
     return EnvStepper(
-        name=name,
+        name=spec.name,
         step=functools.partial(_uncounted, step),
         batch=functools.partial(_uncounted, batch),
-        state="paper",
         fixed_step=not spec.info.adaptive,
         step_counted=step,
         batch_counted=batch,
@@ -480,28 +417,25 @@ def env_stepper(name: str) -> EnvStepper:
 
 
 def warm_up(names=None) -> None:
-    """Compile (or load from the on-disk cache) the kernels of the given methods (default: all)."""
+    """Compile (or load from the on-disk cache) the kernels of the given compiled methods (default: all): the
+    environment's steppers of those it steps compiled, and every method's ``integrate``."""
+    from flatbody_env.integrators.base import get_method
     from flatbody_env.physics.body import default_body
 
+    names = list(names or BY_NAME)
     body = default_body()
     P = kernel_params(body)
     y = np.array([0.05, 0.0, 1.45, 1.77, 0.02, 0.0, 0.05, 1.4, 0.9, 1.0, 0.0])
     u = np.zeros(4)
-    z = regular_from_paper(y, body)
-    for name in names or ENV_METHODS:
-        st = env_stepper(name)
-        x = y if st.state == "paper" else z
-        out = np.empty_like(x)
-        st.step(x, u, P, 0.05, 0.05, 1e-8, 1e-8, np.inf, out)
-        X = np.repeat(x[:, None], 2, axis=1)
-        st.batch(X, np.zeros((4, 2)), P, 0.05, 0.05, 1e-8, 1e-8, np.inf, np.empty_like(X), np.zeros(2, np.int64))
-    from flatbody_env.integrators.base import get_method
-
-    times = np.array([0.0, 0.1])
-    for name in names or [m for m in ENV_METHODS] + ["RATTLE", "RATTLE-kahanli6"]:
+    for name in names:
+        if name in ENV_METHODS:
+            st = env_stepper(name)
+            st.step(y, u, P, 0.05, 0.05, 1e-8, 1e-8, np.inf, np.empty(11))
+            X = np.repeat(y[:, None], 2, axis=1)
+            st.batch(X, np.zeros((4, 2)), P, 0.05, 0.05, 1e-8, 1e-8, np.inf, np.empty_like(X), np.zeros(2, np.int64))
         meth = get_method(name)
         tol = Tolerances(rtol=1e-8, atol=1e-8, step=None if meth.info.adaptive else 0.05)
-        meth.integrate(body, y, times, tol=tol)
+        meth.integrate(body, y, np.array([0.0, 0.1]), tol=tol)
 
 
 __all__ = [

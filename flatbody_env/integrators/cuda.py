@@ -21,7 +21,8 @@ kernels keep calling numpy ufuncs, so that the same source also scores N bodies 
   (11, N), ``U`` (4, N) structure-of-arrays (coalesced: thread b reads column b), ``STATUS`` (N,)
   with :mod:`.failure`'s codes. Device arrays stay on the device (no copy); host arrays are copied.
 * :func:`solve` — N trajectories through the output times, ``OUT`` (11, T, N) on the device,
-  returned as (N, T, 11); the kernel behind ``simulate_batch(..., device="cuda")``.
+  returned as (N, T, 11); :class:`Trajectories` keeps them on the device so that a series of launches continues the
+  bodies each launch's budget stopped: the kernel behind ``simulate_batch(..., device="cuda")``.
 
 numba's CUDA target comes from the ``numba-cuda`` package (``pip install "flatbody[gpu]"``). It is
 imported only when a CUDA function is first used, never by importing this module, so a machine
@@ -222,8 +223,8 @@ def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, max_n
         )
 
 
-def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL):
-    """One thread per body: :func:`~.batch_solve.solve_body`; Y0 (11, N), OUT (11, T, N)."""
+def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_nfev, OUT, STATUS, NFEV, TFAIL, CARRY):
+    """One thread per body: :func:`~.batch_solve.solve_body`; Y0 (11, N), OUT (11, T, N), CARRY (carry size, N)."""
     b = cuda.grid(1)
     if b < Y0.shape[1]:
         y = cuda.local.array(11, float64)
@@ -261,6 +262,7 @@ def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_
             force,
             counters,
             fail,
+            CARRY[:, b],
         )
 
 
@@ -348,44 +350,66 @@ def env_step(
     return OUT, STATUS, NFEV
 
 
+class Trajectories:
+    """N trajectories on the GPU whose arrays stay on the device between launches: each :meth:`launch` continues the
+    bodies the last one's budget of evaluations stopped (DOP853: :func:`~.twopolar_kernels.dop853_solve_into`'s
+    ``carry``, one column per body) and leaves the others as they are, so a body that finishes is bit for bit that of
+    one launch. Y0 (N, 11) host; ``energy_tol`` (N,); the other arguments as :func:`solve`'s."""
+
+    def __init__(self, method, Y0, times, u, P, *, h, rtol, atol, energy_tol, threads_per_block=THREADS_PER_BLOCK):
+        from flatbody_env.integrators.twopolar_kernels import carry_size
+
+        kind, coeffs = _method(method)
+        _, self._kernel = _kernels()
+        n, T = Y0.shape[0], times.size
+        self._grid = _blocks(n, threads_per_block)
+        self._inputs = (
+            kind,
+            cuda.to_device(coeffs),
+            cuda.to_device(np.ascontiguousarray(Y0.T)),
+            cuda.to_device(times),
+            cuda.to_device(u),
+            cuda.to_device(P),
+            float(h),
+            float(rtol),
+            float(atol),
+            cuda.to_device(energy_tol),
+        )
+        self._OUT = cuda.device_array((11, T, n), np.float64)
+        self._STATUS = cuda.device_array(n, np.int64)
+        self._NFEV = cuda.device_array(n, np.int64)
+        self._TFAIL = cuda.device_array(n, np.float64)
+        self._CARRY = cuda.to_device(np.zeros((carry_size(), n)))
+
+    def launch(self, max_nfev: int) -> np.ndarray:
+        """One launch, every body within ``max_nfev`` evaluations in all; returns the bodies' statuses (host)."""
+        blocks, threads = self._grid
+        self._kernel[blocks, threads](
+            *self._inputs, int(max_nfev), self._OUT, self._STATUS, self._NFEV, self._TFAIL, self._CARRY
+        )
+        return self._STATUS.copy_to_host()
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(OUT (N, T, 11), STATUS, NFEV, TFAIL) host arrays."""
+        OUT = np.ascontiguousarray(self._OUT.copy_to_host().transpose(2, 1, 0))
+        return OUT, self._STATUS.copy_to_host(), self._NFEV.copy_to_host(), self._TFAIL.copy_to_host()
+
+
 def solve(method, Y0, times, u, P, *, h, rtol, atol, energy_tol, max_nfev, threads_per_block=THREADS_PER_BLOCK):
     """N trajectories on the GPU: Y0 (N, 11) host → (OUT (N, T, 11), STATUS, NFEV, TFAIL) host arrays
-    (the batch analogue of :func:`~.batch_solve.batch_solve`; ``energy_tol`` (N,))."""
-    kind, coeffs = _method(method)
-    _, kernel = _kernels()
-    n = Y0.shape[0]
-    T = times.size
-    d_Y0 = cuda.to_device(np.ascontiguousarray(Y0.T))
-    d_OUT = cuda.device_array((11, T, n), np.float64)
-    d_STATUS = cuda.device_array(n, np.int64)
-    d_NFEV = cuda.device_array(n, np.int64)
-    d_TFAIL = cuda.device_array(n, np.float64)
-    blocks, threads = _blocks(n, threads_per_block)
-    kernel[blocks, threads](
-        kind,
-        cuda.to_device(coeffs),
-        d_Y0,
-        cuda.to_device(times),
-        cuda.to_device(u),
-        cuda.to_device(P),
-        float(h),
-        float(rtol),
-        float(atol),
-        cuda.to_device(energy_tol),
-        int(max_nfev),
-        d_OUT,
-        d_STATUS,
-        d_NFEV,
-        d_TFAIL,
+    (the batch analogue of :func:`~.batch_solve.batch_solve`; ``energy_tol`` (N,)); one launch of :class:`Trajectories`."""
+    run = Trajectories(
+        method, Y0, times, u, P, h=h, rtol=rtol, atol=atol, energy_tol=energy_tol, threads_per_block=threads_per_block
     )
-    OUT = np.ascontiguousarray(d_OUT.copy_to_host().transpose(2, 1, 0))
-    return OUT, d_STATUS.copy_to_host(), d_NFEV.copy_to_host(), d_TFAIL.copy_to_host()
+    run.launch(max_nfev)
+    return run.result()
 
 
 __all__ = [
     "INSTALL_HINT",
     "THREADS_PER_BLOCK",
     "CudaUnavailableError",
+    "Trajectories",
     "device_name",
     "device_twin",
     "env_step",

@@ -73,7 +73,6 @@ References
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -270,10 +269,10 @@ def rotation_about_normal(R0: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 
 
 def _energy(Y: np.ndarray, P: np.ndarray, times: np.ndarray, tol: Tolerances, name: str, u: np.ndarray) -> np.ndarray:
-    from flatbody_env.integrators import ladder_kernels as _lk
+    from flatbody_env.integrators.twopolar_kernels import energy_series
 
     H = np.empty(Y.shape[1])
-    _lk.energy_series(np.ascontiguousarray(Y), P, H)
+    energy_series(np.ascontiguousarray(Y), P, H)
     if not np.any(u):
         err = np.abs(H - H[0])
         bad = err > tol.energy_tol
@@ -310,11 +309,12 @@ def _small(
 ):
     """One small system through ``times`` within the run's budgets, ``tol.max_nfev`` and ``tol.max_wall_time``,
     less what the run has ``spent`` already (RHS evaluations, seconds): the compiled DOP853's budget of
-    evaluations checked before every step, and the wall clock through the timed probe of
-    :func:`~.compiled_methods._run_within_budget` (the result bit for bit that of one call). Out of budget:
-    ``IntegrationError(kind="budget")``."""
-    from flatbody_env.integrators.compiled_methods import _run_within_budget
-    from flatbody_env.integrators.failure import KINDS, raise_for
+    evaluations checked before every step, and the wall clock read between the pieces of
+    :class:`~.budget.WallClockBudget` (each piece continues the last: the result bit for bit that of one call). Out of
+    budget: ``IntegrationError(kind="budget")``."""
+    from flatbody_env.integrators.budget import WallClockBudget
+    from flatbody_env.integrators.failure import BUDGET, raise_for
+    from flatbody_env.integrators.twopolar_kernels import carry_size
 
     nfev_left = tol.max_nfev - int(spent[0])
     seconds_left = tol.max_wall_time - float(spent[1])
@@ -325,21 +325,23 @@ def _small(
             tol=tol,
             used=f"{int(spent[0])} RHS evaluations, {spent[1]:.3g} s before this part",
         )
-    budget = tol if spent == (0, 0.0) else dataclasses.replace(tol, max_nfev=nfev_left, max_wall_time=seconds_left)
     X = np.empty((x0.size, times.size))
     counters = np.zeros(4, np.int64)  # [nfev, accepted, rejected, budget of nfev]
     fail = np.zeros(1)
+    carry = np.zeros(carry_size(x0.size))
     x0 = np.ascontiguousarray(x0, dtype=np.float64)
     rtol, atol = float(tol.rtol), float(tol.atol)
+    status = [0]
 
-    def run(limit: int) -> int:  # from the first time, within ``limit`` RHS evaluations
-        counters[:] = (0, 0, 0, limit)
-        fail[:] = 0.0
-        return solve(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail)
+    def advance(limit: int) -> tuple[int, int]:  # on from where the last piece stopped, to ``limit`` evaluations
+        counters[3] = limit
+        status[0] = solve(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail, carry)
+        return 1, int(status[0] == BUDGET)
 
     start = time.perf_counter()
-    st, wall = _run_within_budget(run, counters, budget)
-    if KINDS[st] == "budget":
+    wall = WallClockBudget(max_nfev=nfev_left, max_wall_time=seconds_left).run(advance)
+    st = status[0]
+    if st == BUDGET:
         used = f"{int(spent[0] + counters[0])} RHS evaluations in {int(counters[1] + counters[2])} steps, {spent[1] + time.perf_counter() - start:.3g} s"
         raise budget_error(
             t=float(fail[0]), method=name, tol=tol, used=used + (" (the wall-clock budget)" if wall else "")

@@ -34,8 +34,17 @@ from __future__ import annotations
 import numpy as np
 
 from flatbody_env.integrators import twopolar_kernels as _tk
-from flatbody_env.integrators.failure import OK
-from flatbody_env.integrators.jit import energy_kernel, njit, retarget, rhs_kernel
+from flatbody_env.integrators.failure import MAX_STEPS, OK
+from flatbody_env.integrators.jit import njit, retarget, rhs_kernel
+from flatbody_env.integrators.twopolar_kernels import (
+    CARRY_COUNTERS,
+    CARRY_GAP_SIGN,
+    CARRY_H,
+    CARRY_K,
+    CARRY_REJECTED,
+    CARRY_T,
+    CARRY_Y,
+)
 
 RATE_OMEGA3 = 11
 """Index of ω3 in the extended rate vector (dy/dt (11,) followed by ω3)."""
@@ -99,31 +108,68 @@ def _subsystem_status(x, gap_sign, check_gap):
     return state_code(_finite(x), x[0], x[1] if POSITIVE > 1 else 1.0, 1.0, gap_sign, check_gap)
 
 
-def _dop853_subsystem(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail):
+def _dop853_subsystem(x0, times, template, u, P, rtol, atol, check_gap, X, counters, fail, carry=None):
     """DOP853 on one system of ``N`` variables (:data:`dop853_inplane`, :data:`dop853_thickness`): the two-polar DOP853's
     initial step and step control (:func:`~.twopolar_kernels.dop853_advance`) with ``N``, the index maps
-    ``STATE_IDX``, ``RATE_IDX``, the right-hand side (:func:`subsystem_rhs`) and the status rule re-bound."""
+    ``STATE_IDX``, ``RATE_IDX``, the right-hand side (:func:`subsystem_rhs`) and the status rule re-bound. ``carry``
+    (optional, :func:`~.twopolar_kernels.carry_size` (N)): where the run stands, so that a run its budget of
+    evaluations stopped continues with a larger one, bit for bit (as :func:`~.twopolar_kernels.dop853_solve_into`)."""
+    if carry is None:
+        where = np.zeros(CARRY_Y + 2 * N)
+    else:
+        where = carry
     K = np.empty((13, N))
-    x = x0.copy()
+    x = np.empty(N)
     xnew = np.empty(N)
     xtmp = np.empty(N)
     f = np.empty(N)
     force = np.empty(4)
     PT = (P, template, STATE_IDX, RATE_IDX)
     W = (np.empty(7), np.empty(11), np.empty(12))
-    rhs_kernel(x, u, PT, f, W, force)
-    counters[0] += 1
-    gap_sign = 1.0 if x[0] > x[1] else -1.0
-    for i in range(N):
-        X[i, 0] = x[i]
-    t = times[0]
-    fail[0] = t
-    h_abs = dop853_initial_step_into(x, f, t, times[times.size - 1], u, PT, rtol, atol, W, force, xtmp, xnew, counters)
-    for k in range(1, times.size):
-        st, t, h_abs = dop853_advance(
-            x, f, t, times[k], h_abs, u, PT, rtol, atol, gap_sign, check_gap, K, xnew, xtmp, W, force, counters
-        )
+    k0 = int(where[CARRY_K])
+    if k0 == 0:  # a fresh start at times[0]
+        for i in range(N):
+            x[i] = x0[i]
+        rhs_kernel(x, u, PT, f, W, force)
+        counters[0] += 1
+        gap_sign = 1.0 if x[0] > x[1] else -1.0
+        for i in range(N):
+            X[i, 0] = x[i]
+        t = times[0]
         fail[0] = t
+        h_abs = dop853_initial_step_into(
+            x, f, t, times[times.size - 1], u, PT, rtol, atol, W, force, xtmp, xnew, counters
+        )
+        rejected = False
+        k0 = 1
+    else:  # go on from where the budget stopped the run
+        for i in range(N):
+            x[i] = where[CARRY_Y + i]
+            f[i] = where[CARRY_Y + N + i]
+        for i in range(3):
+            counters[i] = int(where[CARRY_COUNTERS + i])
+        t = where[CARRY_T]
+        h_abs = where[CARRY_H]
+        rejected = where[CARRY_REJECTED] != 0.0
+        gap_sign = where[CARRY_GAP_SIGN]
+    where[CARRY_K] = -1.0
+    for k in range(k0, times.size):
+        st, t, h_abs, rejected = dop853_advance(
+            x, f, t, times[k], h_abs, rejected, u, PT, rtol, atol, gap_sign, check_gap, K, xnew, xtmp, W, force,
+            counters,
+        )  # fmt: skip
+        fail[0] = t
+        if st == MAX_STEPS:  # where to go on from
+            where[CARRY_T] = t
+            where[CARRY_H] = h_abs
+            where[CARRY_K] = k
+            where[CARRY_REJECTED] = 1.0 if rejected else 0.0
+            where[CARRY_GAP_SIGN] = gap_sign
+            for i in range(3):
+                where[CARRY_COUNTERS + i] = counters[i]
+            for i in range(N):
+                where[CARRY_Y + i] = x[i]
+                where[CARRY_Y + N + i] = f[i]
         if st != OK:
             return st
         for i in range(N):
@@ -144,11 +190,13 @@ dop853_inplane = retarget(
     _state_status=retarget(_subsystem_status, POSITIVE=2),
 )
 """DOP853 on the in-plane system from ``times[0]`` through every output time:
-``(x0 (6,), times (m,), template (11,), u, P, rtol, atol, check_gap, X (6, m), counters, fail) -> status``.
+``(x0 (6,), times (m,), template (11,), u, P, rtol, atol, check_gap, X (6, m), counters, fail[, carry]) -> status``.
 
 ``template``, ``u``, ``P`` as in :func:`sub_rhs`; ``check_gap``: whether λ − μ must keep its sign (the
 chart's barrier, σ₋ ≠ 0); ``counters`` (3,) int64 accumulates [RHS evaluations, accepted steps, rejected
-steps]; ``fail`` (1,) receives the time reached (the failure time on failure); the status is :mod:`.failure`'s."""
+steps]; ``fail`` (1,) receives the time reached (the failure time on failure); ``carry`` (optional,
+:func:`~.twopolar_kernels.carry_size` (6)): where the run stands, to continue one its budget stopped; the status
+is :mod:`.failure`'s."""
 dop853_thickness = retarget(
     _dop853_subsystem,
     N=2,
@@ -160,20 +208,7 @@ dop853_thickness = retarget(
 """DOP853 on the thickness oscillator (ϱ, p_ϱ): the arguments of :data:`dop853_inplane` (``check_gap`` False)."""
 
 
-@njit
-def energy_series(Y, P, out):
-    """H (eq. (41) of [1]) of every column of the packed states ``Y`` (11, m) into ``out`` (m,)."""
-    vel = np.empty(7)
-    force = np.empty(4)
-    y = np.empty(11)
-    for k in range(Y.shape[1]):
-        for i in range(11):
-            y[i] = Y[i, k]
-        out[k] = energy_kernel(y, P, vel, force)
-
-
 __all__ = [
-    "energy_series",
     "INPLANE_RATE",
     "INPLANE_STATE",
     "RATE_OMEGA3",

@@ -39,13 +39,9 @@ step is re-walked on the cubic Hermite interpolant of Φ with adaptive sub-inter
 times the method layer converts to the paper's state with
 :func:`flatbody_env.physics.regular.paper_from_regular` given that decomposition.
 
-Environment API (regular state z (18,), layout of :mod:`flatbody_env.physics.regular`)::
-
-    status = rattle_env_step(z, u, P, dt, h, rtol, atol, energy_tol, out)
-    batch_rattle_env_step(Z, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS)   # Z, OUT (18, N)
-
 Only the dilatation force f_ϱ = u[3] is applied; non-zero torques return status 9
-(``"unsupported"``): in Φ-space they depend on the chart's frame (singular at λ = μ for τ3).
+(``"unsupported"``): in Φ-space they depend on the chart's frame (singular at λ = μ for τ3). The environment
+steps these methods through ``integrate`` (:mod:`.steppers`), which converts to and from the paper state.
 
 References
 ----------
@@ -67,7 +63,6 @@ from flatbody_env.physics import regular as _regular
 from flatbody_env.physics.regular import MAX_CHART_JUMP
 from flatbody_env.integrators.failure import CHART_SINGULARITY, CONSTRAINT, DOMAIN, ENERGY, NON_FINITE, OK, UNSUPPORTED
 from flatbody_env.integrators.jit import njit, retarget
-from flatbody_env.integrators.compositions import SUZUKI4
 
 
 NZ = 18
@@ -282,47 +277,3 @@ def rattle_solve(coeffs, z0, dec0, times, u, P, h, keep_order, energy_tol, Z, DE
             if dH > energy_tol:
                 return ENERGY
     return OK
-
-
-@njit
-def _rattle_env(z, u, P, dt, h, energy_tol, out, F, qt, Fn):
-    for i in range(NZ):
-        out[i] = z[i]
-    if not _torque_free(u):
-        return UNSUPPORTED
-    forces(out, P, u[3], F)
-    n = max(1, int(math.ceil(dt / h - 1e-9)))
-    hs = dt / n
-    for j in range(n):
-        st = composed_step(out, hs, SUZUKI4, P, u[3], F, qt, Fn)
-        if st != OK:
-            return st
-    if energy_tol < np.inf and u[3] == 0.0:
-        if abs(regular_energy_kernel(out, P) - regular_energy_kernel(z, P)) > energy_tol:
-            return ENERGY
-    return OK
-
-
-@njit
-def rattle_env_step(z, u, P, dt, h, rtol, atol, energy_tol, out):
-    """One environment step of RATTLE-Suzuki4 on the regular state z (18,); returns the status."""
-    return _rattle_env(z, u, P, dt, h, energy_tol, out, np.empty(9), np.empty(9), np.empty(9))
-
-
-@njit
-def batch_rattle_env_step(Z, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS):
-    """:func:`rattle_env_step` for N bodies; Z, OUT (18, N), U (4, N), STATUS (N,)."""
-    F = np.empty(9)
-    qt = np.empty(9)
-    Fn = np.empty(9)
-    z = np.empty(NZ)
-    u = np.empty(4)
-    out = np.empty(NZ)
-    for b in range(Z.shape[1]):
-        for i in range(NZ):
-            z[i] = Z[i, b]
-        for i in range(4):
-            u[i] = U[i, b]
-        STATUS[b] = _rattle_env(z, u, P, dt, h, energy_tol, out, F, qt, Fn)
-        for i in range(NZ):
-            OUT[i, b] = out[i]

@@ -26,8 +26,8 @@ Kernels (arrays C-contiguous float64; z, zout (20,)):
     status = dop853_solve_R(z0, times, u, P, rtol, atol, energy_tol, Z, counters, fail)      # Z (20, n)
     status = fixed_solve_R(kind, coeffs, z0, times, u, P, h, energy_tol, Z, counters, fail)
 
-with the arguments of :mod:`.twopolar_kernels`. :data:`ENV_STEP_WITH_ROTATION` maps a method name
-(:data:`~.specs.ROTATION_METHODS`) to its env step.
+with the arguments of :mod:`.twopolar_kernels`. :func:`env_step_with_rotation` gives a method's env
+step (:data:`ENV_STEP_WITH_ROTATION` maps the names of :data:`~.specs.ROTATION_METHODS` to them).
 
 References
 ----------
@@ -100,16 +100,22 @@ fixed_solve_R = retarget(_tk.fixed_solve, **_ON_Z)
 env_step_R = retarget(_tk.env_step, **_ON_Z)
 """:func:`~.twopolar_kernels.env_step` on z = (y, vec(R)): ``(kind, coeffs, z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``."""
 
-ENV_STEP_WITH_ROTATION = {
-    name: functools.partial(env_step_R, BY_NAME[name].code, BY_NAME[name].coeffs) for name in ROTATION_METHODS
-}
-"""Method name → its compiled env step on z = (y, vec(R)): ``(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``
-(:data:`env_step_R` bound to the method's (kind, coefficients) from :mod:`.specs`)."""
+
+def env_step_with_rotation(spec):
+    """A method's compiled env step on z = (y, vec(R)) (its row of the method table, ``spec.carries_R``):
+    ``(z, u, P, dt, h, rtol, atol, energy_tol, zout, counters) -> status``, :data:`env_step_R` bound to the method's
+    (kind, coefficients)."""
+    return functools.partial(env_step_R, spec.code, spec.coeffs)
+
+
+ENV_STEP_WITH_ROTATION = {name: env_step_with_rotation(BY_NAME[name]) for name in ROTATION_METHODS}
+"""Method name → :func:`env_step_with_rotation` (the methods of :data:`~.specs.ROTATION_METHODS`)."""
 
 __all__ = [
     "ENV_STEP_WITH_ROTATION",
     "dop853_solve_R",
     "env_step_R",
+    "env_step_with_rotation",
     "fixed_solve_R",
     "flow_h1_with_rotation",
     "flow_h2_with_rotation",

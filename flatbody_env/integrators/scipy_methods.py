@@ -44,6 +44,7 @@ from flatbody_env.integrators.base import (
     Solution,
     Tolerances,
     budget_error,
+    check_regular_body,
     check_step,
     register_method,
 )
@@ -128,6 +129,8 @@ def _solve(fun, span, z0, *, tol: Tolerances, name: str, **kwargs):
 class ScipyTwoPolar:
     """``solve_ivp`` on the two-polar equations (eqs. (44)–(49) of [1])."""
 
+    spec = None
+
     def __init__(self, algorithm: str) -> None:
         self.algorithm = algorithm
         self.info = MethodInfo(
@@ -140,9 +143,13 @@ class ScipyTwoPolar:
             description=_DESCRIPTIONS[algorithm] + ", two-polar chart",
         )
 
+    def check(self, body: Body, tol: Tolerances) -> float:
+        """Adaptive: refuses ``step=`` (:func:`~.base.check_step`); any body."""
+        return check_step(self.info, tol)
+
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        check_step(self.info, tol)
+        self.check(body, tol)
         y0 = np.asarray(y0, float)
         times = np.asarray(times, float)
         if with_rotation:
@@ -212,6 +219,8 @@ class ScipyTwoPolar:
 class ScipyRegular:
     """``solve_ivp`` on the regular matrix formulation (docs/physics.md §7), output in the paper's state."""
 
+    spec = None
+
     def __init__(self, algorithm: str) -> None:
         self.algorithm = algorithm
         self.info = MethodInfo(
@@ -224,13 +233,15 @@ class ScipyRegular:
             description=_DESCRIPTIONS[algorithm] + ", regular matrix formulation (passes through lambda = mu)",
         )
 
+    def check(self, body: Body, tol: Tolerances) -> float:
+        """Adaptive: refuses ``step=``; and the ``'paper'`` spin convention (the regular formulation is the corrected one)."""
+        h = check_step(self.info, tol)
+        check_regular_body(body)
+        return h
+
     def integrate(self, body, y0, times, *, tol: Tolerances, u=None, R0=None, with_rotation=False) -> Solution:
         name = self.info.name
-        check_step(self.info, tol)
-        if body.spin_convention != "corrected":
-            raise ValueError(
-                "spin_convention: the regular formulation is the corrected one; 'paper' needs a two-polar method"
-            )
+        self.check(body, tol)
         y0 = np.asarray(y0, float)
         times = np.asarray(times, float)
         R0 = np.eye(3) if R0 is None else np.asarray(R0, float)

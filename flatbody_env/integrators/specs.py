@@ -2,11 +2,14 @@
 
 Each :class:`MethodSpec` names a method, what ``flatbody methods`` lists for it (:class:`MethodInfo`),
 the kernel family that runs it (``kind``: ``"dop853"``, ``"rk4"``, ``"split"``, ``"rattle"``) with its
-composition coefficients (:mod:`.compositions`), and where it runs: ``env`` (a compiled environment
-step), ``carries_R`` (the same stepping code on (y, vec(R)), :mod:`.rotation_kernels`),
+composition coefficients (:mod:`.compositions`), and where it runs: ``env`` (the environment steps it
+through its compiled stepper, :func:`.steppers.make_env_step`; the others through ``integrate``),
+``fused_batch`` (the environment's batch may run the fused structure-of-arrays DOP853 of
+:mod:`.batch_kernels`), ``carries_R`` (the same stepping code on (y, vec(R)), :mod:`.rotation_kernels`),
 ``batchable`` (``simulate_batch``, :mod:`.batch_solve`) and ``gpu`` (``flatbody bench gpu``,
-:mod:`.cuda`). Registration (:mod:`.compiled_methods`), the batch and rotation maps,
-``simulate_batch``'s methods and ``bench gpu``'s list all read this table.
+:mod:`.cuda`). Registration (:mod:`.compiled_methods`), the environment's steppers, the batch and
+rotation maps, ``simulate_batch``'s methods and ``bench gpu``'s list all read this table; ``flatbody
+methods`` lists it.
 
 numpy only: reading it (and registering the methods) compiles nothing and imports no numba.
 """
@@ -35,6 +38,10 @@ class MethodSpec:
     kind: str
     coeffs: np.ndarray = field(default_factory=lambda: STRANG)
     env: bool = False
+    """The environment steps it through its compiled stepper (one compiled call per step and per batch)."""
+    fused_batch: bool = False
+    """The environment's batch may run the fused structure-of-arrays DOP853 (:mod:`.batch_kernels`: first step dt,
+    J1 = J2; bit for bit the stepper's result)."""
     carries_R: bool = False
     batchable: bool = False
     gpu: bool = False
@@ -72,6 +79,7 @@ SPECS = (
             description="compiled port of scipy's DOP853 (Hairer's coefficients and step control), two-polar chart",
         ),
         "dop853",
+        fused_batch=True,
         **_TWO_POLAR_EVERYWHERE,
     ),
     MethodSpec(
@@ -154,7 +162,6 @@ SPECS = (
         ),
         "rattle",
         SUZUKI4,
-        env=True,
     ),
     MethodSpec(
         MethodInfo(
@@ -174,7 +181,7 @@ SPECS = (
 
 BY_NAME = {s.name: s for s in SPECS}
 ENV_METHODS = tuple(s.name for s in SPECS if s.env)
-"""Methods with a compiled environment step."""
+"""Methods the environment steps through their compiled stepper."""
 ROTATION_METHODS = tuple(s.name for s in SPECS if s.carries_R)
 """Methods whose compiled step carries R."""
 BATCH_METHODS = tuple(s.name for s in SPECS if s.batchable)

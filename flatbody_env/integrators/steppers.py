@@ -2,11 +2,11 @@
 
 :func:`make_env_step` is the seam an environment steps through. It returns
 
-* a :class:`CompiledEnvStep` when the method has a compiled environment stepper for the paper
-  state (:data:`flatbody_env.integrators.specs.ENV_METHODS`, two-polar chart): one
-  compiled call per env step (and one per batch of N), no Python per sub-step. For
-  ``DOP853-numba`` with the first step guessed as dt (the env's default) and J1 = J2 the batch runs
-  the fused SIMD structure-of-arrays step of :mod:`.batch_kernels` (bit for bit the scalar kernel's
+* a :class:`CompiledEnvStep` when the method table marks the method for it (``spec.env``,
+  :data:`flatbody_env.integrators.specs.ENV_METHODS`: the two-polar chart's compiled methods): one
+  compiled call per env step (and one per batch of N), no Python per sub-step. For a method marked
+  ``spec.fused_batch`` (``DOP853-numba``) with the first step guessed as dt (the env's default) and J1 = J2 the
+  batch runs the fused SIMD structure-of-arrays step of :mod:`.batch_kernels` (bit for bit the scalar kernel's
   result, faster per body: the figures of ``flatbody bench env`` and where a body-step goes, docs/env.md);
 * a :class:`CompiledRotationEnvStep` for the same methods when R must be carried (rendering,
   recording): the same compiled stepping code on z = (y, vec(R)) (:mod:`.rotation_kernels`), the
@@ -14,6 +14,10 @@
 * a :class:`GenericEnvStep` otherwise: one :meth:`Method.integrate` call over [0, dt] with the
   controls held constant (a fresh solver per step, so an adaptive method never carries its step
   history across an action change), for any registered method, with R when asked.
+
+The method is looked up once, by whoever has its name (the environment's configuration), and the seam is given the
+object (a name is accepted too); its refusals of the body and settings are its declared
+:meth:`~flatbody_env.integrators.base.Method.check`, called here before a stepper is built.
 
 Both have the same interface, so the environment has one step path::
 
@@ -39,12 +43,17 @@ import copy
 
 import numpy as np
 
-from flatbody_env.integrators.base import IntegrationError, Tolerances, get_method
+from flatbody_env.integrators.base import IntegrationError, Method, Tolerances, get_method
 from flatbody_env.integrators.failure import KINDS, failure_reason
 from flatbody_env.physics.body import Body
 
 _OTHER_FAILURE = len(KINDS)
 """Status of a failure whose kind is not one of :data:`KINDS` (e.g. a scipy solver's own message)."""
+
+
+def _method(method: Method | str) -> Method:
+    """A registered method, or the one of that name (``ValueError`` for an unknown name)."""
+    return get_method(method) if isinstance(method, str) else method
 
 
 class CompiledEnvStep:
@@ -53,12 +62,13 @@ class CompiledEnvStep:
     compiled = True
     carries_rotation = False
 
-    def __init__(self, name: str, body: Body, tol: Tolerances, *, first_step: float = 0.0) -> None:
+    def __init__(self, method: Method | str, body: Body, tol: Tolerances, *, first_step: float = 0.0) -> None:
         from flatbody_env.integrators.compiled_methods import kernel_params
 
-        self.method = name
+        meth = _method(method)
+        self.spec = meth.spec
+        self.method = meth.info.name
         self.P = kernel_params(body)
-        meth = get_method(name)
         fixed = not meth.info.adaptive
         # fixed-step methods: the largest sub-step; DOP853: the first step guess (0 = automatic)
         self.h = float(tol.step) if fixed else float(first_step)
@@ -71,11 +81,11 @@ class CompiledEnvStep:
     def _load(self) -> None:
         from flatbody_env.integrators.compiled_methods import env_stepper
 
-        st = env_stepper(self.method)
+        st = env_stepper(self.spec)
         self._step = st.step_counted
         self._batch = st.batch_counted
         self._fused = None
-        if self.method == "DOP853-numba" and self.h > 0.0 and self.P[0] == self.P[1]:
+        if self.spec.fused_batch and self.h > 0.0 and self.P[0] == self.P[1]:
             from flatbody_env.integrators.batch_kernels import DOP853Batch
 
             self._fused = DOP853Batch(1)  # the fused structure-of-arrays step (first step = dt), sized on first use
@@ -117,8 +127,9 @@ class GenericEnvStep:
 
     compiled = False
 
-    def __init__(self, name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> None:
-        self.method = name
+    def __init__(self, method: Method | str, body: Body, tol: Tolerances, *, with_rotation: bool = False) -> None:
+        self._meth = _method(method)
+        self.method = self._meth.info.name
         self.body = body
         self.tol = tol
         self.carries_rotation = bool(with_rotation)
@@ -134,7 +145,7 @@ class GenericEnvStep:
 
     def _run(self, y, u, dt, R):
         try:
-            sol = get_method(self.method).integrate(
+            sol = self._meth.integrate(
                 self.body, y, np.array([0.0, dt]), tol=self.tol, u=u, R0=R, with_rotation=self.carries_rotation
             )
         except IntegrationError as exc:
@@ -183,10 +194,10 @@ class CompiledRotationEnvStep(CompiledEnvStep):
     carries_rotation = True
 
     def _load(self) -> None:
-        from flatbody_env.integrators.rotation_kernels import ENV_STEP_WITH_ROTATION
+        from flatbody_env.integrators.rotation_kernels import env_step_with_rotation
 
         super()._load()
-        self._step_R = ENV_STEP_WITH_ROTATION[self.method]
+        self._step_R = env_step_with_rotation(self.spec)
         self._z = np.empty(20)
         self._zout = np.empty(20)
 
@@ -210,31 +221,22 @@ class CompiledRotationEnvStep(CompiledEnvStep):
 
 
 def make_env_step(
-    name: str, body: Body, tol: Tolerances, *, with_rotation: bool = False, first_step: float = 0.0
+    method: Method | str, body: Body, tol: Tolerances, *, with_rotation: bool = False, first_step: float = 0.0
 ) -> CompiledEnvStep | GenericEnvStep:
-    """The environment step of method ``name`` (module docstring).
+    """The environment step of ``method``, a registered method (:func:`~.base.get_method`) or its name (module
+    docstring).
 
     With ``with_rotation=True`` the compiled two-polar methods carry R in their own compiled step
     (:class:`CompiledRotationEnvStep`); other methods return R through :meth:`Method.integrate`.
-    Raises ValueError for an unknown name or a step setting or body the method refuses.
-    ``first_step`` is DOP853's first step guess (0 = automatic).
+    Raises ValueError for an unknown name or a step setting or body the method refuses (its
+    :meth:`~.base.Method.check`). ``first_step`` is DOP853's first step guess (0 = automatic).
     """
-    from flatbody_env.integrators.specs import BY_NAME
-
-    meth = get_method(name)  # ValueError for an unknown name
-    check = getattr(meth, "check_env", None)
-    if check is not None:
-        check(body, tol)  # the method's own refusals (step, body)
-    spec = BY_NAME.get(name)
-    if (
-        body.compiled
-        and spec is not None
-        and spec.env
-        and spec.kind != "rattle"
-        and (spec.carries_R or not with_rotation)
-    ):
-        return (CompiledRotationEnvStep if with_rotation else CompiledEnvStep)(name, body, tol, first_step=first_step)
-    return GenericEnvStep(name, body, tol, with_rotation=with_rotation)
+    meth = _method(method)
+    meth.check(body, tol)
+    spec = meth.spec
+    if body.compiled and spec is not None and spec.env and (spec.carries_R or not with_rotation):
+        return (CompiledRotationEnvStep if with_rotation else CompiledEnvStep)(meth, body, tol, first_step=first_step)
+    return GenericEnvStep(meth, body, tol, with_rotation=with_rotation)
 
 
 __all__ = ["CompiledEnvStep", "CompiledRotationEnvStep", "GenericEnvStep", "make_env_step"]

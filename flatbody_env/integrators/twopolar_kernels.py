@@ -82,6 +82,29 @@ _MAX_FACTOR = 10.0
 _ERROR_EXPONENT = -1.0 / 8.0  # scipy: -1/(error_estimator_order + 1), order 7
 DOP853_MAX_STEPS = 50_000_000
 
+# Where a DOP853 run stands when its budget of evaluations stopped it (:func:`dop853_solve_into`'s ``carry``, float64):
+CARRY_T = 0
+"""The time reached."""
+CARRY_H = 1
+"""The next step size |h|."""
+CARRY_K = 2
+"""The output row being integrated to (0: not started; -1: finished, nothing to continue)."""
+CARRY_REJECTED = 3
+"""1 when the next attempt follows a rejected one."""
+CARRY_GAP_SIGN = 4
+CARRY_CHECK_GAP = 5
+CARRY_H0 = 6
+"""H at the start (the energy check)."""
+CARRY_COUNTERS = 7
+"""The counts so far (nfev, accepted, rejected): three entries."""
+CARRY_Y = 10
+"""The state y (N entries), then its derivative f (N)."""
+
+
+def carry_size(n: int = 11) -> int:
+    """Entries of a ``carry`` for a state of ``n`` entries (11; 20 with R, :mod:`.rotation_kernels`)."""
+    return CARRY_Y + 2 * n
+
 
 # --------------------------------------------------------------------------------------------- checks
 @njit
@@ -236,23 +259,25 @@ def _dop853_error(y, ynew, K, h, rtol, atol):
 
 
 @njit
-def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters):
+def dop853_advance(
+    y, f, t, t_bound, h_abs, rejected, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters
+):
     """Advance ``y`` (and its derivative ``f``) in place from t to exactly t_bound.
 
-    counters: [nfev, accepted, rejected(, budget of nfev)]; past the budget (or
-    :data:`DOP853_MAX_STEPS` steps) the status is ``MAX_STEPS`` (kind ``"budget"``).
-    Returns (status, t reached, next |h|).
+    counters: [nfev, accepted, rejected(, budget of nfev)]; past the budget (checked before every attempt) or
+    :data:`DOP853_MAX_STEPS` steps the status is ``MAX_STEPS`` (kind ``"budget"``). ``rejected``: whether the attempt
+    at t follows a rejected one (False, except when continuing a run that stopped there: :func:`dop853_solve_into`).
+    Returns (status, t reached, next |h|, whether the next attempt follows a rejected one).
     """
     while t < t_bound:
         min_step = 10.0 * abs(next_up(t) - t)
-        if h_abs < min_step:
+        if not rejected and h_abs < min_step:  # a new step starts at t
             h_abs = min_step
-        rejected = False
         while True:
             if h_abs < min_step:
-                return STEP_COLLAPSE, t, h_abs
+                return STEP_COLLAPSE, t, h_abs, rejected
             if counters[1] + counters[2] > DOP853_MAX_STEPS or (counters.size > 3 and counters[0] > counters[3]):
-                return MAX_STEPS, t, h_abs
+                return MAX_STEPS, t, h_abs, rejected
             t_new = t + h_abs
             if t_new > t_bound:
                 t_new = t_bound
@@ -276,6 +301,7 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
             h_abs *= factor
             rejected = True
             counters[2] += 1
+        rejected = False
         counters[1] += 1
         t = t_new
         for i in range(N):
@@ -283,38 +309,79 @@ def dop853_advance(y, f, t, t_bound, h_abs, u, P, rtol, atol, gap_sign, check_ga
             f[i] = K[12, i]
         st = _state_status(y, gap_sign, check_gap)
         if st != OK:
-            return st, t, h_abs
-    return OK, t, h_abs
+            return st, t, h_abs, False
+    return OK, t, h_abs, False
 
 
 @njit
-def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force):
+def dop853_solve_into(
+    y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, y, f, K, ynew, ytmp, vel, force, carry
+):
     """:func:`dop853_solve` with work arrays ``y``, ``f``, ``ynew``, ``ytmp`` (11,), ``K`` (13, 11), ``vel``
     (7,), ``force`` (4,) passed in (allocates nothing: the CUDA target compiles it as a device
     function); ``counters`` (3,) or (4,) [nfev, accepted, rejected(, budget of nfev)]; ``fail`` (2,) or
-    (3,): [t of failure, last |H − H₀|(, failing row)]."""
-    for i in range(N):
-        y[i] = y0[i]
-    rhs_kernel(y, u, P, f, vel, force)
-    counters[0] += 1
-    gap_sign = 1.0 if y[7] > y[8] else -1.0
-    check_gap = not may_cross(y, u, P)
+    (3,): [t of failure, last |H − H₀|(, failing row)].
+
+    ``carry`` (:func:`carry_size`,) float64 is where the run stands (:data:`CARRY_T` …): all zeros, it starts at
+    ``times[0]`` from ``y0``; a run stopped by its budget of evaluations (``MAX_STEPS``) leaves there its state, time,
+    step size, output row and counts, and a call with a larger ``counters[3]`` continues from them (``y0`` unread,
+    ``counters[:3]`` restored): the result is bit for bit that of one call with the larger budget. Any other outcome
+    marks the run finished (``carry[CARRY_K] = -1``)."""
     check_energy = energy_tol < np.inf and no_control(u)
-    H0 = energy_kernel(y, P, vel, force)
-    for i in range(N):
-        Y[i, 0] = y[i]
-    t = times[0]
-    fail[0] = t
-    h_abs = dop853_initial_step_into(y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, ynew, counters)
-    for k in range(1, times.size):
+    k0 = int(carry[CARRY_K])
+    if k0 == 0:  # a fresh start at times[0]
+        for i in range(N):
+            y[i] = y0[i]
+        rhs_kernel(y, u, P, f, vel, force)
+        counters[0] += 1
+        gap_sign = 1.0 if y[7] > y[8] else -1.0
+        check_gap = not may_cross(y, u, P)
+        H0 = energy_kernel(y, P, vel, force)
+        for i in range(N):
+            Y[i, 0] = y[i]
+        t = times[0]
+        fail[0] = t
+        h_abs = dop853_initial_step_into(
+            y, f, t, times[times.size - 1], u, P, rtol, atol, vel, force, ytmp, ynew, counters
+        )
+        rejected = False
+        k0 = 1
+    else:  # go on from where the budget stopped the run
+        for i in range(N):
+            y[i] = carry[CARRY_Y + i]
+            f[i] = carry[CARRY_Y + N + i]
+        for i in range(3):
+            counters[i] = int(carry[CARRY_COUNTERS + i])
+        t = carry[CARRY_T]
+        h_abs = carry[CARRY_H]
+        rejected = carry[CARRY_REJECTED] != 0.0
+        gap_sign = carry[CARRY_GAP_SIGN]
+        check_gap = carry[CARRY_CHECK_GAP] != 0.0
+        H0 = carry[CARRY_H0]
+    carry[CARRY_K] = -1.0
+    for k in range(k0, times.size):
         if fail.size > 2:
             fail[2] = k
-        st, t, h_abs = dop853_advance(
-            y, f, t, times[k], h_abs, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force, counters
-        )
+        st, t, h_abs, rejected = dop853_advance(
+            y, f, t, times[k], h_abs, rejected, u, P, rtol, atol, gap_sign, check_gap, K, ynew, ytmp, vel, force,
+            counters,
+        )  # fmt: skip
         fail[0] = t
         for i in range(N):
             Y[i, k] = y[i]
+        if st == MAX_STEPS:  # where to go on from
+            carry[CARRY_T] = t
+            carry[CARRY_H] = h_abs
+            carry[CARRY_K] = k
+            carry[CARRY_REJECTED] = 1.0 if rejected else 0.0
+            carry[CARRY_GAP_SIGN] = gap_sign
+            carry[CARRY_CHECK_GAP] = 1.0 if check_gap else 0.0
+            carry[CARRY_H0] = H0
+            for i in range(3):
+                carry[CARRY_COUNTERS + i] = counters[i]
+            for i in range(N):
+                carry[CARRY_Y + i] = y[i]
+                carry[CARRY_Y + N + i] = f[i]
         if st != OK:
             return st
         if check_energy:
@@ -326,12 +393,17 @@ def dop853_solve_into(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail
 
 
 @njit
-def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
+def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail, carry=None):
     """DOP853 from ``times[0]`` through every output time; Y (11, len(times)) receives the states.
 
     counters (3,) or (4,) int64: [nfev, accepted, rejected(, budget of nfev)]; fail (2,): [t of failure, |H − H₀| at the
-    last check]. Returns the status. (:func:`dop853_solve_into` with its work arrays allocated.)
+    last check]; ``carry`` (optional): where the run stands, to continue a run its budget stopped
+    (:func:`dop853_solve_into`). Returns the status. (:func:`dop853_solve_into` with its work arrays allocated.)
     """
+    if carry is None:
+        where = np.zeros(CARRY_Y + 2 * N)
+    else:
+        where = carry
     return dop853_solve_into(
         y0,
         times,
@@ -350,6 +422,7 @@ def dop853_solve(y0, times, u, P, rtol, atol, energy_tol, Y, counters, fail):
         np.empty(N),
         np.empty(7),
         np.empty(4),
+        where,
     )
 
 
@@ -362,9 +435,10 @@ def _dop853_env(y, u, P, dt, h, rtol, atol, energy_tol, out, K, ynew, ytmp, vel,
     if h <= 0.0:
         h = dop853_initial_step(out, f, 0.0, dt, u, P, rtol, atol, vel, force, ytmp, counters)
     gap_sign = 1.0 if y[7] > y[8] else -1.0
-    st, t, h = dop853_advance(
-        out, f, 0.0, dt, h, u, P, rtol, atol, gap_sign, not may_cross(y, u, P), K, ynew, ytmp, vel, force, counters
-    )
+    st, t, h, _ = dop853_advance(
+        out, f, 0.0, dt, h, False, u, P, rtol, atol, gap_sign, not may_cross(y, u, P), K, ynew, ytmp, vel, force,
+        counters,
+    )  # fmt: skip
     if st != OK:
         return st
     if energy_tol < np.inf and no_control(u):
@@ -650,6 +724,18 @@ def env_step(kind, coeffs, y, u, P, dt, h, rtol, atol, energy_tol, out, counters
         np.empty(N),
         counters,
     )
+
+
+@njit
+def energy_series(Y, P, out):
+    """H (eq. (41) of [1]) of every column of the packed states ``Y`` (11, m) into ``out`` (m,)."""
+    vel = np.empty(7)
+    force = np.empty(4)
+    y = np.empty(11)
+    for k in range(Y.shape[1]):
+        for i in range(11):
+            y[i] = Y[i, k]
+        out[k] = energy_kernel(y, P, vel, force)
 
 
 @njit

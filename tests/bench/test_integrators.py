@@ -50,3 +50,27 @@ def test_csv_rows_and_docs_come_from_the_saved_report(tmp_path):
     page.write_text("<!-- bench:integrators-long -->\nstale\n<!-- /bench:integrators-long -->\n")
     assert write_docs(REPORT, page) == ["integrators-long"]
     assert "stale" not in page.read_text() and "| method and setting |" in page.read_text()
+
+
+def test_simulate_vs_kernel_row_comes_from_the_record():
+    """Section 6 (simulate against the bare kernel): its table and CSV rows carry the record's figures."""
+    from flatbody_env.bench.integrators import csv_rows
+
+    rep = json.loads(REPORT.read_text())
+    rep["simulate_vs_kernel"] = v = {
+        "scene": "planar-v3",
+        "t_end": 100.0,
+        "method": "DOP853-numba",
+        "nfev": 12554,
+        "rounds": 3,
+        "kernel_s": 0.00171,
+        "integrate_s": 0.00183,
+        "simulate_s": 0.00197,
+    }
+    v["integrate_over_kernel"] = v["integrate_s"] / v["kernel_s"]
+    v["simulate_over_kernel"] = v["simulate_s"] / v["kernel_s"]
+    table = docs_tables(rep)["integrators-simulate"]
+    assert f"{v['simulate_s'] * 1e3:.3f} ms | {v['simulate_over_kernel']:.3f}×" in table and "12554" in table
+    rows = [r for r in csv_rows(rep) if r[0] == "simulate-vs-kernel"]
+    assert {r[3] for r in rows} == {"kernel", "integrate", "simulate"}
+    assert ("ratio_vs_kernel", v["simulate_over_kernel"]) in [(r[4], r[5]) for r in rows if r[3] == "simulate"]

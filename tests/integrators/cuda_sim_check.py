@@ -190,9 +190,9 @@ def _wall_time(body, Y0) -> dict:
     a horizon far beyond the time ends every body with the ``budget`` status, soon after the time is up."""
     import time
 
-    from flatbody_env import batch
+    from flatbody_env.integrators import budget
 
-    batch._PROBE_NFEV = 100
+    budget.PROBE_NFEV = 100
     y = Y0[:3]
     cpu = simulate_batch(body, y, times=[0.3, 0.6], method="DOP853-numba", max_nfev=10**6)
     gpu = simulate_batch(

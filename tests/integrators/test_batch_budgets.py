@@ -217,7 +217,8 @@ def test_simulate_batch_stops_at_its_wall_time():
 def test_simulate_batch_ample_wall_time_is_bit_for_bit():
     """Bodies that need more evaluations than the probe allows (11 000–17 000 each): the probes, then the run with
     the budget from the measured rate; equal, bit for bit, to one plain call of the kernel."""
-    from flatbody_env.batch import _PROBE_NFEV, simulate_batch
+    from flatbody_env.batch import simulate_batch
+    from flatbody_env.integrators.budget import PROBE_NFEV
     from flatbody_env.integrators import batch_solve as bs
     from flatbody_env.integrators.compiled_methods import kernel_params
 
@@ -226,7 +227,7 @@ def test_simulate_batch_ample_wall_time_is_bit_for_bit():
     a = simulate_batch(
         body, Y0, times=times, method="DOP853-numba", energy_tol=1.0, max_nfev=10**9, max_wall_time=86_400
     )
-    assert a.kinds == ["ok"] * 100 and a.nfev.min() > _PROBE_NFEV
+    assert a.kinds == ["ok"] * 100 and a.nfev.min() > PROBE_NFEV
     kind, coeffs = bs.KIND["DOP853-numba"]
     grid = np.concatenate([[0.0], times])
     OUT, ST, NF, TF = np.empty((100, grid.size, 11)), np.zeros(100, np.int64), np.zeros(100, np.int64), np.empty(100)

@@ -40,3 +40,86 @@ def test_every_map_is_derived_from_the_table():
     assert tuple(rotation_kernels.ENV_STEP_WITH_ROTATION) == ROTATION_METHODS
     assert compiled_methods.ENV_METHODS == ENV_METHODS
     assert gpu._methods(",".join(GPU_METHODS)) == list(GPU_METHODS)
+
+
+def test_every_method_declares_its_check_and_spec():
+    """One declared ``check`` on every registered method (the seam calls it; ``integrate`` refuses what it refuses)."""
+    import numpy as np
+    import pytest
+
+    from flatbody_env.integrators import Tolerances
+    from flatbody_env.physics.body import Body, default_body
+    from flatbody_env.physics.potentials import CustomPotential
+
+    body = default_body()
+    custom = Body(
+        inertia=body.inertia,
+        potential=CustomPotential(value=lambda l, m, r: 0.5 * (l * l + m * m), gradient=lambda l, m, r: (l, m, 0.0)),
+        thickness=body.thickness,
+    )
+    y = np.array([0.05, 0.0, 1.45, 1.77, 0.02, 0.0, 0.05, 1.4, 0.9, 1.0, 0.0])
+    for info in available_methods():
+        meth = get_method(info.name)
+        assert meth.spec is (None if not info.compiled else next(s for s in SPECS if s.name == info.name))
+        tol = Tolerances(step=None if info.adaptive else 0.05)
+        assert meth.check(body, tol) == (0.0 if info.adaptive else 0.05)
+        with pytest.raises(ValueError, match="^step: "):
+            meth.check(body, Tolerances(step=0.05) if info.adaptive else Tolerances())
+        if info.compiled:  # a custom potential runs Python code: refused by check and by integrate alike
+            for call in (lambda: meth.check(custom, tol), lambda: meth.integrate(custom, y, [0.0, 0.1], tol=tol)):
+                with pytest.raises(ValueError, match="^potential: "):
+                    call()
+
+
+def test_the_env_steps_compiled_exactly_the_methods_the_table_marks():
+    """``spec.env`` decides the compiled stepper and ``spec.fused_batch`` the fused batch (no name checked in the seam);
+    RATTLE-suzuki4 steps through ``integrate``, as it always did."""
+    from flatbody_env.integrators import Tolerances
+    from flatbody_env.integrators.steppers import CompiledEnvStep, GenericEnvStep, make_env_step
+    from flatbody_env.physics.body import default_body
+
+    body = default_body()
+    assert "RATTLE-suzuki4" not in ENV_METHODS and {s.name for s in SPECS if s.fused_batch} == {"DOP853-numba"}
+    for spec in SPECS:
+        meth = get_method(spec.name)
+        tol = Tolerances(rtol=1e-11, atol=1e-11, step=None if spec.info.adaptive else 0.05)
+        st = make_env_step(meth, body, tol, first_step=0.05 if spec.info.adaptive else 0.0)
+        assert isinstance(st, CompiledEnvStep if spec.env else GenericEnvStep) and st.method == spec.name
+        if spec.env:
+            assert (st._fused is not None) == spec.fused_batch
+
+
+def test_the_env_looks_its_integrator_up_once(monkeypatch):
+    """From the env's construction through its steps the method is looked up by name once (its configuration) and
+    never in the method table by name: the seam is given the object."""
+    import gymnasium as gym
+    import numpy as np
+
+    from flatbody_env.integrators import base, compiled_methods, specs
+
+    class Counting(dict):
+        looked_up = 0
+
+        def __getitem__(self, key):
+            type(self).looked_up += 1
+            return super().__getitem__(key)
+
+        def get(self, key, default=None):
+            type(self).looked_up += 1
+            return super().get(key, default)
+
+    class Table(Counting):
+        pass
+
+    for name in ("DOP853-numba", "RK4", "DOP853"):
+        Counting.looked_up = Table.looked_up = 0
+        monkeypatch.setattr(base, "_REGISTRY", Counting(base._REGISTRY))
+        for module in (specs, compiled_methods):
+            monkeypatch.setattr(module, "BY_NAME", Table(specs.BY_NAME))
+        env = gym.make("FlatBody-v1", integrator=name).unwrapped
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(np.zeros(env.action_space.shape, np.float32))
+        monkeypatch.undo()
+        assert (Counting.looked_up, Table.looked_up) == (1, 0), name
+        assert env.stepping_integrator == name
