@@ -64,7 +64,16 @@ def _serve(args) -> int:
     )
     try:
         interrupted = _serve_until_stopped(
-            lambda: uvicorn.run(app, host=args.host, port=args.port, log_level=args.log_level)
+            lambda: uvicorn.run(
+                app,
+                host=args.host,
+                port=args.port,
+                log_level=args.log_level,
+                # the client's address is the connection's unless the user names the proxies in front of the service:
+                # a header any local client can set must not choose whose job quota a request counts against
+                proxy_headers=args.trusted_proxies is not None,
+                forwarded_allow_ips=args.trusted_proxies or "",
+            )
         )
     except SystemExit as exc:  # uvicorn exits 1 or 3 when it cannot start (e.g. the port was taken meanwhile)
         if exc.code in (0, None):
@@ -151,6 +160,21 @@ def _clients(text: str) -> list[int]:
     return values
 
 
+def _proxies(text: str) -> str:
+    """``--trusted-proxies``: comma-separated IP addresses (argparse type; one line naming the flag otherwise)."""
+    import ipaddress
+
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    if not parts or len(parts) > 64:
+        raise argparse.ArgumentTypeError(f"must be 1 to 64 comma-separated IP addresses, got {text[:60]!r}")
+    for part in parts:
+        try:
+            ipaddress.ip_address(part)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{part[:40]!r} is not an IP address") from None
+    return ",".join(parts)
+
+
 def register(sub) -> None:
     p = sub.add_parser("serve", help="the analysis service: HTTP API (/docs) and a web page on loopback")
     p.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1, loopback only)")
@@ -163,6 +187,13 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--data-dir", default="flatbody-data", metavar="DIR", help="job database and files (default ./flatbody-data)"
+    )
+    p.add_argument(
+        "--trusted-proxies",
+        metavar="IPS",
+        type=_proxies,
+        help="comma-separated addresses of reverse proxies whose X-Forwarded-For names the client (default: none; the "
+        "connection's address counts, so no header can dodge the per-client job quota)",
     )
     p.add_argument(
         "--log-level",
