@@ -4,11 +4,13 @@ invariants, the per-flag upper bounds (docs/reliability.md)."""
 from __future__ import annotations
 
 import json
+import re
 import socket
 
 import pytest
 
 from flatbody_env.cli.main import main
+from flatbody_env.integrators import Tolerances
 
 
 def test_negative_numbers_in_e_notation_are_values(capsys):
@@ -60,15 +62,17 @@ def test_invariants_refuse_non_finite_results(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra", [[], ["--with-rotation"]])
 def test_compiled_dop853_honours_the_wall_clock_budget(extra, capsys):
-    import time
-
-    start = time.perf_counter()
+    """The clock, not ``max_nfev``, sets the evaluation budget that stops the run: exit 1 with one line saying so, after
+    fewer evaluations than ``max_nfev`` (a kernel that ignored the clock ran t_end = 1e6 on to ``max_nfev``). Asserted
+    on what the run reports, not on how long it took (the suite runs on shared machines)."""
     assert (
         main(["simulate", "--scene", "default", "--t-end", "1e6", "--max-seconds", "0.5", "--samples", "3", *extra])
         == 1
     )
-    assert time.perf_counter() - start < 2.5  # it ran 4.2 s (58.8 s under load) before
-    assert "wall-clock budget" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "(the wall-clock budget)" in err, err
+    used = int(re.search(r"\((\d+) RHS evaluations", err).group(1))
+    assert 0 < used < Tolerances().max_nfev, err
 
 
 def test_compiled_fixed_step_refuses_a_run_predicted_past_the_wall_clock_budget(capsys):
