@@ -16,6 +16,11 @@ from pathlib import Path
 
 import pytest
 
+WAIT_S = 300.0
+"""Longest the tests wait for the page, a job's row or its end before they fail: a hang guard, not a speed check
+(each default test runs in 7–25 s on a quiet 2-core machine, a job in a few seconds; beside four busy processes
+and other work on the same two cores, 30 s waits and 120 s for a 3-s job ran out)."""
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 DRIVER = shutil.which("chromedriver")
 
@@ -42,7 +47,7 @@ def _chrome(*extra: str, size: str = "1200,1700"):
     ):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    driver.set_page_load_timeout(60)
+    driver.set_page_load_timeout(WAIT_S)
     return driver
 
 
@@ -73,7 +78,7 @@ def test_api_docs_render_without_internet_access(offline_browser, live_service):
     from selenium.webdriver.support.ui import WebDriverWait
 
     _, url, _ = live_service
-    wait = WebDriverWait(offline_browser, 60)
+    wait = WebDriverWait(offline_browser, WAIT_S)
     offline_browser.get(url + "/docs")
     wait.until(
         lambda d: (
@@ -98,7 +103,9 @@ def _ready(driver, url):
     from selenium.webdriver.support.ui import WebDriverWait
 
     driver.get(url + "/")
-    WebDriverWait(driver, 60).until(lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "yes")
+    WebDriverWait(driver, WAIT_S).until(
+        lambda d: d.find_element(By.TAG_NAME, "body").get_attribute("data-ready") == "yes"
+    )
 
 
 def _type(driver, field: str, value: str) -> None:
@@ -147,7 +154,7 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
 
     browser = window
     _, url, data_dir = live_service
-    wait = WebDriverWait(browser, 180)
+    wait = WebDriverWait(browser, WAIT_S)
     _ready(browser, url)
     assert "service ok" in browser.find_element(By.ID, "health").text
     scene_names = [o.get_attribute("value") for o in Select(browser.find_element(By.ID, "scene")).options]
@@ -269,7 +276,7 @@ def test_bad_input_is_refused_next_to_the_field_inside_the_window(window, live_s
 
     browser = window
     _, url, _ = live_service
-    wait = WebDriverWait(browser, 120)
+    wait = WebDriverWait(browser, WAIT_S)
     _ready(browser, url)
     # two pictures shown first, so that the page is long (the old error box landed far below the window)
     _type(browser, "map-grid", "6")
@@ -327,7 +334,9 @@ def _progress_seen(browser, kind: str, timeout: float) -> tuple[list[float], lis
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    WebDriverWait(browser, 30).until(lambda d: d.find_elements(By.CSS_SELECTOR, f"#jobs tbody tr[data-kind='{kind}']"))
+    WebDriverWait(browser, WAIT_S).until(
+        lambda d: d.find_elements(By.CSS_SELECTOR, f"#jobs tbody tr[data-kind='{kind}']")
+    )
     values: list[float] = []
     texts: list[str] = []
     deadline = time.monotonic() + timeout
@@ -355,16 +364,16 @@ def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(wind
     _ready(browser, url)
     _type(browser, "map-grid", "60")  # about 3 s on an idle core, reported row by row
     browser.find_element(By.ID, "start-map").click()
-    row = WebDriverWait(browser, 30).until(
+    row = WebDriverWait(browser, WAIT_S).until(
         lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]")
     )
     assert (
         "its progress is in Jobs below" in browser.find_element(By.ID, "map-error").text
     )  # said where the user clicked
-    WebDriverWait(browser, 30).until(lambda d: "left" in row.text)
+    WebDriverWait(browser, WAIT_S).until(lambda d: "left" in row.text)
     browser.execute_script("arguments[0].scrollIntoView({block: 'end'})", row)
     _shot(browser, tmp_path, "progress")
-    values, texts, status = _progress_seen(browser, "stability-map", 120)
+    values, texts, status = _progress_seen(browser, "stability-map", WAIT_S)
     assert status == "done"
     between = [v for v in values if 0 < v < 1]
     assert len(set(between)) >= 3, values  # the worker's own progress, seen by the page while it runs
@@ -374,15 +383,15 @@ def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(wind
     # cancel a running job from the page: it stops and goes
     _type(browser, "map-grid", "200")
     browser.find_element(By.ID, "start-map").click()
-    row = WebDriverWait(browser, 30).until(
+    row = WebDriverWait(browser, WAIT_S).until(
         lambda d: d.find_element(By.CSS_SELECTOR, "#jobs tr[data-kind='stability-map'][data-status=running]")
     )
     # the page redraws a row's buttons as progress comes in: look the button up afresh until a click lands
     row_id = row.get_attribute("id")
-    WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
+    WebDriverWait(browser, WAIT_S, ignored_exceptions=(StaleElementReferenceException,)).until(
         lambda d: d.find_element(By.CSS_SELECTOR, f"#{row_id} button.cancel").click() is None
     )
-    WebDriverWait(browser, 10, ignored_exceptions=(StaleElementReferenceException,)).until(
+    WebDriverWait(browser, WAIT_S, ignored_exceptions=(StaleElementReferenceException,)).until(
         lambda d: d.find_element(By.ID, row_id).get_attribute("data-status") == "cancelled"
     )
     jobs = browser.execute_script("return fetch('/jobs').then(r => r.json())")["jobs"]
@@ -400,7 +409,7 @@ def test_progress_strictly_increases_during_a_ten_second_job(window, live_servic
     _type(browser, "map-grid", "120")
     started = time.monotonic()
     browser.find_element(By.ID, "start-map").click()
-    values, texts, status = _progress_seen(browser, "stability-map", 300)
+    values, texts, status = _progress_seen(browser, "stability-map", WAIT_S)
     took = time.monotonic() - started
     assert status == "done"
     assert took > 8, f"the job took {took:.1f} s: too short to check"
