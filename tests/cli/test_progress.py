@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from flatbody_env import progress
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -26,25 +28,28 @@ def test_piped_progress_prints_periodic_lines_on_stderr():
     code = (
         "import time\n"
         "from flatbody_env.progress import progress_bar\n"
+        "t0 = time.monotonic()\n"
         "bar = progress_bar(total=20, desc='work', unit='task')\n"
         "for i in range(20):\n"
         "    time.sleep(0.02)\n"
         "    bar.set_postfix_str(f'item {i}')\n"
         "    bar.update(1)\n"
         "bar.close()\n"
-        "print(type(bar).__name__)\n"
+        "print(type(bar).__name__, time.monotonic() - t0)\n"
     )
     r = _run([sys.executable, "-c", code], FLATBODY_PROGRESS_S="0.1")
     assert r.returncode == 0, r.stderr
-    assert r.stdout == "LineProgress\n"  # stdout stays the command's
+    name, seconds = r.stdout.split()  # stdout stays the command's
+    assert name == "LineProgress" and r.stdout.count("\n") == 1, r.stdout
     lines = r.stderr.splitlines()
-    assert "\r" not in r.stderr and 2 <= len(lines) <= 8, r.stderr
+    # the work takes at least 20 x 0.02 s: lines every 0.1 s, at most one per interval it took, and the last one
+    assert "\r" not in r.stderr and 2 <= len(lines) <= float(seconds) / 0.1 + 1, (seconds, r.stderr)
     assert all(line.startswith("work: ") and " tasks (" in line for line in lines)
     assert "[item " in lines[0] and "left" in lines[0]
     assert lines[-1].startswith("work: 20/20 tasks (100%)") and lines[-1].endswith("- done")
 
 
-def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
+def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path, monkeypatch):
     argv = [
         sys.executable,
         "-m",
@@ -58,7 +63,9 @@ def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
         "--workers",
         "0",
     ]
-    quiet = _run([*argv, "--out", str(tmp_path / "a")])  # shorter than the 10 s interval: no progress line
+    # work shorter than the interval prints no progress line (an interval of an hour: on a busy machine this
+    # sweep can outlast the default 10 s, which FLATBODY_PROGRESS_S unset gives, as checked at the end)
+    quiet = _run([*argv, "--out", str(tmp_path / "a")], FLATBODY_PROGRESS_S="3600")
     assert quiet.returncode == 0, quiet.stderr
     assert quiet.stderr == ""
     loud = _run([*argv, "--out", str(tmp_path / "b")], FLATBODY_PROGRESS_S="0")
@@ -74,6 +81,8 @@ def test_short_piped_work_prints_nothing_and_long_work_is_reported(tmp_path):
     )
     nobar = _run([*argv, "--out", str(tmp_path / "c"), "--no-progress"], FLATBODY_PROGRESS_S="0")
     assert nobar.returncode == 0 and nobar.stderr == ""
+    monkeypatch.delenv("FLATBODY_PROGRESS_S", raising=False)
+    assert progress.interval_s() == progress.INTERVAL_S == 10.0
 
 
 def test_a_bad_interval_is_one_line(tmp_path):

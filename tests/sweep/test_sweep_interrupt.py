@@ -20,7 +20,8 @@ MAP = ["--grid", "40", "--chunk", "1"]
 
 
 def _env() -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "FLATBODY_PROGRESS_S"}
+    # no progress line however long the sweep takes on a busy machine (the default interval is 10 s)
+    env = {**os.environ, "FLATBODY_PROGRESS_S": "3600"}
     env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     env.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     return env
