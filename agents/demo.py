@@ -88,7 +88,8 @@ def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, 
         "energy": np.array(energy),
         "target": target,
         "success": bool(info["is_success"]),
-        "failure": info.get("integrator_failure") or info.get("left_domain"),
+        "failure": u.end_reason(info)
+        or None,  # what ended the episode early, in words (flatbody_env.env.core.end_reason)
         "tolerance": u.task.success_tolerance,
         "body": u.body,
         "env_id": env_id,
