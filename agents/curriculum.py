@@ -1,4 +1,4 @@
-"""A curriculum over one task keyword for ``flatbody train`` (PPO): stage by stage, the environments are
+"""A curriculum over one task keyword (``flatbody curriculum``): stage by stage, the training environments are
 rebuilt with the next value of the keyword when the training success rate holds.
 
 Used for ``FlatBodySlow-v0`` (docs/agents.md): a curriculum over the settling-rate filter
@@ -6,8 +6,8 @@ Used for ``FlatBodySlow-v0`` (docs/agents.md): a curriculum over the settling-ra
 down to the task's own 0 (every stable ellipse). The task definition is not changed: the last stage is
 the registered task, and the model is evaluated on it.
 
-Mechanics: :class:`CurriculumCallback` (an SB3 callback given to :func:`agents.train.train` through
-``extra_callbacks``) swaps the native batch inside the innermost :class:`agents.vec_env.FlatBodySB3VecEnv`
+Mechanics: :func:`curriculum_callback` (an SB3 callback :func:`agents.train.train_config` adds when the run's
+configuration has a ``curriculum``) swaps the native batch inside the innermost :class:`agents.vec_env.FlatBodySB3VecEnv`
 for one built with the stage's keywords, at the end of a rollout (after the advantages are computed), and
 resets the wrapper chain (residual, monitor, VecNormalize: its statistics are kept) so that the next
 rollout starts fresh episodes of the new stage. Each stage's environments are seeded ``seed + 7919·(stage + 1)``.
@@ -18,25 +18,21 @@ evaluated on.
 A stage ends when at least ``min_steps`` were trained in it and either the success rate of the episodes
 finished in the last ``window`` rollouts is ≥ ``advance_at`` or ``max_steps`` were trained in it; the
 last stage keeps the remaining budget. The stage of every rollout is logged (``curriculum/stage``,
-``curriculum/value`` in progress.csv) and the schedule is added to ``config.yml`` (``curriculum``; the
-hyperparameters are those of the run, without the curriculum).
+``curriculum/value`` in progress.csv); the settings are the run's ``prior.curriculum`` in ``config.yml``, with the
+stages reached (``history``) added at the end, so that ``flatbody train --config`` trains the same curriculum again.
+Checkpoints keep the stage (:meth:`state`), so ``--resume`` continues in it.
 
-    python -m agents.curriculum --env FlatBodySlow-v0 --out runs/tasks/slow-cur \\
+    flatbody curriculum --env FlatBodySlow-v0 --out runs/tasks/slow-cur \\
         --key min_settling_rate --stages 0.15,0.1,0.07,0.04,0 --n-timesteps 3000000 [--hyperparams K=V ...]
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections import deque
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-
-from flatbody_env.output import atomic_write
 
 
 def _inner(venv):
@@ -53,9 +49,9 @@ def _inner(venv):
 
 def curriculum_callback(
     env_id: str,
+    *,
     key: str,
     stages: list[float],
-    *,
     seed: int,
     env_kwargs: dict[str, Any] | None = None,
     advance_at: float = 0.8,
@@ -81,8 +77,25 @@ def curriculum_callback(
             self.recent: deque[list[bool]] = deque(maxlen=window)
             self.current: list[bool] = []
             self.history: list[dict[str, Any]] = []
+            self._restored: dict[str, Any] | None = None
 
-        def _switch(self, stage: int) -> None:
+        def state(self) -> dict[str, Any]:
+            """What a checkpoint keeps of the curriculum: the stage, the step it began at, the stages so far."""
+            return {"stage": self.stage, "stage_start": self.stage_start, "history": list(self.history)}
+
+        def restore(self, state: Any) -> None:
+            """Continue from a checkpoint's :meth:`state` (``--resume``): the training starts in that stage."""
+            from flatbody_env.physics import validation
+
+            validation.mapping("resume.curriculum", state)
+            validation.integer("resume.curriculum.stage", state.get("stage"), low=0, high=len(stages) - 1)
+            validation.integer("resume.curriculum.stage_start", state.get("stage_start"), low=0)
+            history = state.get("history")
+            if not isinstance(history, list):
+                validation.requirement("resume.curriculum.history", history, False, "be a list")
+            self._restored = dict(state)
+
+        def _switch(self, stage: int, *, resumed: bool = False) -> None:
             inner = _inner(self.training_env)
             kw = env_kwargs_for(env_id, {**(env_kwargs or {}), **(train_env_kwargs or {}), key: stages[stage]})
             old = inner.venv
@@ -94,15 +107,22 @@ def curriculum_callback(
             self.stage, self.stage_start = stage, int(self.model.num_timesteps)
             self.recent.clear()
             self.current = []
-            self.history.append(
-                {"stage": stage, "value": float(stages[stage]), "from_step": int(self.model.num_timesteps)}
-            )
+            if resumed:
+                self.stage_start = int(self._restored["stage_start"])
+                self.history = list(self._restored["history"])
+            else:
+                self.history.append(
+                    {"stage": stage, "value": float(stages[stage]), "from_step": int(self.model.num_timesteps)}
+                )
             print(
                 f"curriculum: stage {stage} ({key}={stages[stage]}) from step {self.model.num_timesteps}",
                 file=sys.stderr,
             )
 
         def _on_training_start(self) -> None:
+            if self._restored is not None:  # the loaded model has its own exploration already
+                self._switch(int(self._restored["stage"]), resumed=True)
+                return
             if log_std_per_action:  # exploration per action component (gSDE: columns of the log_std matrix)
                 import torch
 
@@ -135,114 +155,3 @@ def curriculum_callback(
                 self._switch(self.stage + 1)
 
     return CurriculumCallback()
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m agents.curriculum", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--env", required=True)
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--key", default="min_settling_rate")
-    ap.add_argument("--stages", required=True, help="comma-separated values of the keyword, the last the task's own")
-    ap.add_argument("--advance-at", type=float, default=0.8)
-    ap.add_argument("--min-stage-steps", type=int, default=100_000)
-    ap.add_argument("--max-stage-steps", type=int, default=500_000)
-    ap.add_argument("--window", type=int, default=2, help="rollouts whose finished episodes decide the success rate")
-    ap.add_argument(
-        "--train-env-kwargs",
-        nargs="*",
-        default=[],
-        metavar="KEY=VALUE",
-        help="task keywords of the training environments only (reward shaping, e.g. w_tumble=0); "
-        "the model is evaluated on the task's own",
-    )
-    ap.add_argument(
-        "--log-std-per-action",
-        help="comma-separated initial log std of each action component "
-        "(overrides policy_kwargs.log_std_init per component)",
-    )
-    ap.add_argument("--n-timesteps", type=int)
-    ap.add_argument("--hyperparams", nargs="*", default=[])
-    ap.add_argument("--force", action="store_true")
-    ap.add_argument(
-        "--trained-agent", metavar="RUN", help="fine-tune this run's model (flatbody train --trained-agent)"
-    )
-    ap.add_argument(
-        "--trust",
-        action="store_true",
-        help="allow unpickling --trained-agent from outside the shipped agent and your own runs (docs/reliability.md)",
-    )
-    args = ap.parse_args(argv)
-    from agents.numpy_policy import trust_policy
-
-    try:
-        with trust_policy(not args.trust):  # pickles only from trusted folders, as flatbody's commands
-            return _main(args, argv)
-    except ValueError as exc:
-        print(f"python -m agents.curriculum: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-
-
-def _main(args, argv) -> int:
-    from agents.train import train
-    from flatbody_env.physics import validation
-
-    stages = [float(s) for s in args.stages.split(",")]
-    from agents.train import apply_overrides, load_hyperparams
-
-    hp = apply_overrides(load_hyperparams("ppo", args.env), args.hyperparams)
-    per_action = [float(x) for x in args.log_std_per_action.split(",")] if args.log_std_per_action else None
-    train_kw = {
-        k: validation.parse_yaml(f"train_env_kwargs.{k[:60]}", v)
-        for k, v in (item.split("=", 1) for item in args.train_env_kwargs)
-    }
-    cb = curriculum_callback(
-        args.env,
-        args.key,
-        stages,
-        seed=args.seed,
-        env_kwargs=hp.get("env_kwargs"),
-        advance_at=args.advance_at,
-        min_steps=args.min_stage_steps,
-        max_steps=args.max_stage_steps,
-        window=args.window,
-        train_env_kwargs=train_kw,
-        log_std_per_action=per_action,
-    )
-    command = ["python", "-m", "agents.curriculum", *(argv if argv is not None else sys.argv[1:])]
-    res = train(
-        "ppo",
-        args.out,
-        seed=args.seed,
-        n_timesteps=args.n_timesteps,
-        overrides=args.hyperparams,
-        env_id=args.env,
-        progress=False,
-        command=command,
-        extra_callbacks=[cb],
-        force=args.force,
-        checkpoint_freq=0,
-        trained_agent=args.trained_agent,
-    )
-    from agents.numpy_policy import read_run_config
-
-    cfg_file = Path(res.out) / "config.yml"
-    cfg = read_run_config(res.out)  # the one reading door
-    cfg["curriculum"] = {
-        "key": args.key,
-        "stages": stages,
-        "advance_at": args.advance_at,
-        "min_stage_steps": args.min_stage_steps,
-        "max_stage_steps": args.max_stage_steps,
-        "window": args.window,
-        "train_env_kwargs": train_kw,
-        "log_std_per_action": per_action,
-        "history": cb.history,
-    }
-    atomic_write(cfg_file, yaml.safe_dump(cfg, sort_keys=False))
-    print(f"trained {res.timesteps} steps in {res.wall_time_s:.0f} s; stages: {cb.history}", file=sys.stderr)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -121,11 +121,12 @@ class Agent:
         from agents.numpy_policy import read_run_config
 
         self.config: dict[str, Any] = read_run_config(folder)  # a mapping, or a ValueError naming config.yml
-        algo = self.config.get("algo") or ("sac" if "sac" in model_file.name.lower() else "ppo")
+        from agents.numpy_policy import model_format_of
         from flatbody_env.physics import validation
 
-        validation.string("config.yml.algo", algo, choices=("ppo", "sac"))
+        algo = model_format_of(self.config, model_file.name)
         self.algo = algo
+        """The SB3 class of the model file (``ppo``, ``sac``, ``td3``; an rsl-ppo run's is ``ppo``)."""
         self.path = folder
         self.policy = None
         self.model = None
@@ -176,10 +177,10 @@ class Agent:
 
         check_trusted(folder, "model.zip (a pickle-based SB3 file)")  # before torch is imported (docs/reliability.md)
         import torch
-        from stable_baselines3 import PPO, SAC
+        from stable_baselines3 import PPO, SAC, TD3
 
         torch.set_num_threads(1)
-        cls = {"ppo": PPO, "sac": SAC}[algo]
+        cls = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo]
         self.model = load_sb3(cls, model_file)  # the one trust check again, on the file itself, and the reading door
         vn = folder / "vecnormalize.pkl"
         if vn.exists():

@@ -5,7 +5,7 @@ found only part of the strategy that reaches them (tumbling the body, s1, s2 ≠
 in-plane shape through the centrifugal terms; zero at linear order, so the LQR never uses it). Three
 steps, each a command:
 
-1. :func:`plan` (``python -m agents.imitation plan``): for each seeded training episode, a cross-entropy
+1. :func:`plan` (``flatbody imitate plan``): for each seeded training episode, a cross-entropy
    search over an open-loop residual u(t) — piecewise constant on ``knots`` equal intervals of the
    episode, every action component — executed exactly as the agent's own residual is
    (:class:`agents.heuristic.ResidualAction` of the run folder it will be cloned into: the LQR plus the
@@ -14,11 +14,13 @@ steps, each a command:
    then spend as little residual as possible; an episode the LQR alone ends within ``reach`` costs 0
    with the zero plan, the least possible, and is not searched. All seeds × samples of a chunk run as one batch of :class:`FlatBodyVectorEnv` (every
    sample of a seed is reset with that seed: the same target and start).
-2. :func:`clone` (``python -m agents.imitation clone``): the successful plans are replayed, their
+2. :func:`clone` (``flatbody imitate clone``): the successful plans are replayed, their
    (observation, residual) pairs recorded, and the policy mean of an SB3 PPO run (its weights as the
    start, its ``vecnormalize.pkl`` observation statistics) is fitted to them by least squares (Adam,
-   minibatches). The result is a run folder (``config.yml``, ``vecnormalize.pkl``, ``model.zip``).
-3. PPO fine-tunes it on the task (``flatbody train --trained-agent`` or ``python -m agents.curriculum
+   minibatches). The result is a run folder (:class:`agents.runs.RunFolder`: ``config.yml`` naming the start run and
+   the plans as its prior, ``run.json``, ``progress.csv`` of the fit, ``vecnormalize.pkl``, ``model.zip``,
+   ``policy.npz``).
+3. PPO fine-tunes it on the task (``flatbody train --trained-agent`` or ``flatbody curriculum
    --trained-agent``): the clone alone is worse than its start (an open-loop plan is a function of time,
    the policy of the state), but it starts PPO where the nonlinear strategy is used.
 
@@ -31,8 +33,7 @@ Plans are saved as ``.npz`` without pickles (:class:`Plans`).
 
 from __future__ import annotations
 
-import argparse
-import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -289,6 +290,9 @@ def clone(
     learning_rate: float = 3e-4,
     seed: int = 0,
     progress: bool = True,
+    force: bool = False,
+    command: list[str] | None = None,
+    plans_files: list[str] | None = None,
 ) -> dict:
     """Fit ``model``'s policy mean to the successful plans (module docstring, step 2); write the run folder ``out``.
 
@@ -299,7 +303,10 @@ def clone(
     model : str or Path
         The SB3 PPO run folder to start from (weights, ``vecnormalize.pkl``, ``config.yml``).
     out : str or Path
-        The new run folder (refused if it holds a run, as ``flatbody train`` refuses).
+        The new run folder (refused if it holds a run unless ``force``, as ``flatbody train`` refuses:
+        :meth:`agents.runs.RunFolder.new`).
+    plans_files : list of str, optional
+        The files the plans came from (recorded in ``config.yml``).
     tolerance : float, optional
         Plans whose final distance is at most this are cloned (default: the task's success tolerance).
 
@@ -312,15 +319,17 @@ def clone(
     """
     import torch
 
-    from agents.train import check_out
+    from agents.config import RunConfig
+    from agents.runs import RunFolder
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
     from flatbody_env.progress import progress_bar
 
     validation.integer("epochs", epochs, low=1, high=10_000)
     validation.integer("batch_size", batch_size, low=1, high=1 << 20)
     validation.number("learning_rate", learning_rate, low=1e-8, high=1.0)
-    out = check_out(out, force=False)  # before any work: never a folder holding a run, /, or the home folder
+    run = RunFolder.new(out, force=force)  # before any work: never a folder holding a run, /, or the home folder
     folder = Path(model)
+    start = RunConfig.read(folder, where="model")  # the start run's configuration, checked
     agent = _residual_agent(model, backend="sb3")  # SB3's own model and VecNormalize (pickles: a trusted folder only)
     if agent.algo != "ppo" or agent.vecnormalize is None:
         raise ValueError(f"model: {str(model)[:80]!r} is not a PPO run with normalised observations (vecnormalize.pkl)")
@@ -352,6 +361,7 @@ def clone(
     act = act.reshape(-1, act.shape[-1]).astype(np.float32)
 
     torch.manual_seed(seed)
+    t0 = time.perf_counter()
     ppo = agent.model
     x = torch.as_tensor(agent.vecnormalize.normalize_obs(obs), dtype=torch.float32)
     y = torch.as_tensor(act)
@@ -364,7 +374,8 @@ def clone(
         mse_start = float(((mean_action(x) - y) ** 2).mean())
     params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
     opt = torch.optim.Adam(params, lr=learning_rate)
-    for _ in progress_bar(range(epochs), desc="clone", unit="epoch", enabled=progress):
+    rows = []
+    for epoch in progress_bar(range(epochs), desc="clone", unit="epoch", enabled=progress):
         perm = torch.randperm(len(x))
         for i in range(0, len(x), batch_size):
             b = perm[i : i + batch_size]
@@ -372,19 +383,32 @@ def clone(
             opt.zero_grad()
             loss.backward()
             opt.step()
-    with torch.no_grad():
-        mse_end = float(((mean_action(x) - y) ** 2).mean())
-    from agents.numpy_policy import read_pickled, remember_run
-    from flatbody_env.output import atomic_path, atomic_write
+        with torch.no_grad():
+            rows.append({"epoch": epoch + 1, "mse": float(((mean_action(x) - y) ** 2).mean())})
+    mse_end = rows[-1]["mse"]
+    wall = time.perf_counter() - t0
+    from agents.numpy_policy import read_pickled
+    from flatbody_env.output import atomic_write
 
-    out.mkdir(parents=True, exist_ok=True)
-    # every file through the one writing door (atomic, no planted link followed); the folder is trusted once the
-    # first is in place, the start run's files copied byte for byte through the reading door
-    atomic_write(out / "config.yml", validation.read_bytes("config.yml", folder / "config.yml"))
-    remember_run(out)
-    atomic_write(out / "vecnormalize.pkl", read_pickled(folder / "vecnormalize.pkl", "vecnormalize.pkl"))
-    with atomic_path(out / "model.zip") as tmp:
-        ppo.save(str(tmp))
+    imitation = {
+        "plans": list(plans_files or []),
+        "plans_cloned": int(keep.sum()),
+        "pairs": int(len(x)),
+        "tolerance": float(tol),
+        "epochs": int(epochs),
+        "batch_size": int(batch_size),
+        "learning_rate": float(learning_rate),
+        "seed": int(seed),
+    }
+    config = start.replace(trained_agent=str(model), curriculum=None, imitation=imitation)
+    # every file through the run folder (atomic, no planted link followed); the folder is trusted once config.yml is in
+    # place; the start run's statistics copied byte for byte through the reading door
+    run.start(config, force=force)
+    atomic_write(run.path / "vecnormalize.pkl", read_pickled(folder / "vecnormalize.pkl", "vecnormalize.pkl"))
+    run.save("model.zip", lambda tmp: ppo.save(str(tmp)))
+    run.write_progress(rows)
+    run.write_run(config, timesteps=0, wall_time_s=wall, command=command, mse_start=mse_start, mse_end=mse_end)
+    run.export_policy()
     return {
         "plans": int(keep.sum()),
         "pairs": int(len(x)),
@@ -392,90 +416,3 @@ def clone(
         "mse_start": mse_start,
         "mse_end": mse_end,
     }
-
-
-def _seed_range(text: str) -> list[int]:
-    """``LO:HI`` (HI excluded) → the seeds."""
-    try:
-        lo, hi = (int(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds: expected LO:HI, got {text!r}") from None
-    if not 0 <= lo < hi <= validation.MAX_SEED or hi - lo > 100_000:
-        raise argparse.ArgumentTypeError(f"seeds: need 0 <= LO < HI, at most 100000 seeds, got {text!r}")
-    return list(range(lo, hi))
-
-
-_TRUST_HELP = (
-    "allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; "
-    "docs/reliability.md)"
-)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m agents.imitation", description=__doc__.split("\n\n")[0])
-    sub = ap.add_subparsers(dest="step", required=True)
-    p = sub.add_parser("plan", help="cross-entropy plans for seeded episodes of a residual agent's task")
-    p.add_argument("--model", required=True, help="run folder of an additive residual agent (its task and residual)")
-    p.add_argument("--seeds", required=True, type=_seed_range, help="LO:HI, training seeds (HI excluded)")
-    p.add_argument("--out", required=True, help="plans file (.npz)")
-    for name, default in (
-        (f, PlanSettings.__dataclass_fields__[f].default)
-        for f in ("knots", "samples", "iterations", "elite", "chunk", "seed")
-    ):
-        p.add_argument(f"--{name}", type=int, default=default)
-    p.add_argument("--init-std", type=float, default=PlanSettings.init_std)
-    p.add_argument("--reach", type=float, default=PlanSettings.reach)
-    p.add_argument("--on-policy", action="store_true", help="plan corrections of the run's own policy (a second round)")
-    p.add_argument("--trust", action="store_true", help=_TRUST_HELP)
-    c = sub.add_parser("clone", help="fit a PPO run's policy to the successful plans")
-    c.add_argument("--plans", required=True, nargs="+", help="plans files (joined)")
-    c.add_argument("--model", required=True, help="the PPO run folder to start from")
-    c.add_argument("--out", required=True, help="the new run folder")
-    c.add_argument("--epochs", type=int, default=20)
-    c.add_argument("--trust", action="store_true", help=_TRUST_HELP)
-    args = ap.parse_args(argv)
-    from agents.numpy_policy import trust_policy
-    from flatbody_env.output import OutputError
-
-    try:
-        with trust_policy(
-            not args.trust
-        ):  # pickles only from trusted folders, as flatbody's commands (docs/reliability.md)
-            if args.step == "plan":
-                settings = PlanSettings(
-                    knots=args.knots,
-                    samples=args.samples,
-                    iterations=args.iterations,
-                    elite=args.elite,
-                    init_std=args.init_std,
-                    reach=args.reach,
-                    chunk=args.chunk,
-                    seed=args.seed,
-                )
-                plans = plan(args.model, args.seeds, settings, on_policy=args.on_policy)
-                plans.save(args.out)
-                tol = _residual_agent(args.model).residual_action.task.success_tolerance
-                print(
-                    f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
-                    f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}"
-                )
-            else:
-                plans = Plans.load(args.plans[0])
-                for f in args.plans[1:]:
-                    plans = plans + Plans.load(f)
-                res = clone(plans, args.model, args.out, epochs=args.epochs)
-                print(
-                    f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the tolerance): "
-                    f"squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
-                )
-    except ValueError as exc:
-        print(f"python -m agents.imitation: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except OutputError as exc:  # a full disk, an unwritable folder, a planted link: one line naming the file
-        print(f"python -m agents.imitation: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -268,6 +268,24 @@ def read_run_config(folder: Path) -> dict:
     return config
 
 
+MODEL_FORMATS = ("ppo", "sac", "td3")
+"""The SB3 classes a ``model.zip`` is saved as (:data:`agents.config.MODEL_FORMATS`)."""
+
+
+def model_format_of(config: dict, model_name: str = "model.zip") -> str:
+    """The SB3 class (:data:`MODEL_FORMATS`) of a run's ``model.zip`` as its ``config.yml`` (``config``) says: its
+    ``model_format``; in the format of the shipped v0 agents its ``algo`` (rsl-ppo's actor is an SB3 PPO model); a
+    run without config.yml by the file's name (``sac`` in it: SAC). ``ValueError`` naming ``config.yml``."""
+    from flatbody_env.physics import validation
+
+    fmt = config.get("model_format")
+    if fmt is None:
+        algo = config.get("algo") or ("sac" if "sac" in model_name.lower() else "ppo")
+        fmt = "ppo" if algo == "rsl-ppo" else algo
+        return validation.string("config.yml.algo", fmt, choices=MODEL_FORMATS)
+    return validation.string("config.yml.model_format", fmt, choices=MODEL_FORMATS)
+
+
 def load_sb3(
     cls, model_file: Path, *, where: str = "model", what: str = "model.zip (a pickle-based SB3 file)", **kwargs
 ):
@@ -316,6 +334,26 @@ def load_replay_buffer(model, path: Path, *, where: str = "resume") -> None:
     try:
         model.load_replay_buffer(io.BytesIO(data))
     except Exception as exc:  # noqa: BLE001 - truncated or foreign pickle
+        raise ValueError(
+            f"{where}: cannot load {str(path)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
+        ) from None
+
+
+def load_torch_state(path: Path, *, where: str = "resume", map_location=None) -> dict:
+    """A torch checkpoint's state (rsl-ppo's ``rsl_model_N_steps.pt``: tensors and plain data), read through
+    :func:`read_pickled` and unpickled by ``torch.load(weights_only=True)`` (no code objects even then); a file that does
+    not load into a mapping is a ``ValueError`` naming ``where``."""
+    import io
+
+    import torch
+
+    data = read_pickled(path, "a checkpoint (a torch file)", where)
+    try:
+        state = torch.load(io.BytesIO(data), weights_only=True, map_location=map_location)
+        if not isinstance(state, dict):
+            raise TypeError(f"it holds a {type(state).__name__}, not a mapping")
+        return state
+    except Exception as exc:  # noqa: BLE001 - truncated or foreign file
         raise ValueError(
             f"{where}: cannot load {str(path)[:80]!r} ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})"
         ) from None
@@ -370,20 +408,22 @@ def export_policy(path: str | Path | None = None) -> Path:
     policy is not an MLP of linear layers with tanh/ReLU (the only kind this evaluator runs).
     """
     folder = model_folder(path)
-    config = read_run_config(folder)
-    algo = config.get("algo") or "ppo"
-    if algo not in ("ppo", "sac"):
-        raise ValueError(f"algo: export supports ppo and sac, got {algo!r}")
+    algo = model_format_of(read_run_config(folder))
     check_trusted(folder, "model.zip and vecnormalize.pkl")
     import torch
-    from stable_baselines3 import PPO, SAC
+    from stable_baselines3 import PPO, SAC, TD3
 
     torch.set_num_threads(1)
     sources = _sources(folder)
-    model = load_sb3({"ppo": PPO, "sac": SAC}[algo], folder / "model.zip")
+    model = load_sb3({"ppo": PPO, "sac": SAC, "td3": TD3}[algo], folder / "model.zip")
     policy = model.policy
     if algo == "sac":
         trunk, head = policy.actor.latent_pi, policy.actor.mu
+    elif algo == "td3":  # mu = MLP ending in tanh: the tanh is the squashing of the export (squash below)
+        layers = list(policy.actor.mu)
+        if not layers or not isinstance(layers[-1], torch.nn.Tanh):
+            raise ValueError("model: a TD3 actor whose last layer is not tanh cannot be exported")
+        trunk, head = torch.nn.Sequential(*layers[:-1]), torch.nn.Sequential()
     else:
         trunk, head = policy.mlp_extractor.policy_net, policy.action_net
     names = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
@@ -407,8 +447,9 @@ def export_policy(path: str | Path | None = None) -> Path:
             )
     if len(activations) > 1:
         raise ValueError(f"model: mixed activations {sorted(activations)} are not supported")
-    if type(policy.features_extractor).__name__ != "FlattenExtractor":
-        raise ValueError(f"model: cannot export the features extractor {type(policy.features_extractor).__name__}")
+    extractor = policy.features_extractor if algo == "ppo" else policy.actor.features_extractor
+    if type(extractor).__name__ != "FlattenExtractor":
+        raise ValueError(f"model: cannot export the features extractor {type(extractor).__name__}")
     arrays: dict[str, np.ndarray] = {}
     for k, (W, b) in enumerate(layers):
         arrays[f"W{k}"], arrays[f"b{k}"] = W, b
@@ -430,7 +471,7 @@ def export_policy(path: str | Path | None = None) -> Path:
         "algo": algo,
         "layers": len(layers),
         "activation": activations.pop() if activations else "tanh",
-        "squash": bool(policy.squash_output) if algo != "sac" else True,
+        "squash": bool(policy.squash_output) if algo == "ppo" else True,
         "clip_obs": clip_obs,
         "sources": sources,
         "stable_baselines3": stable_baselines3.__version__,
@@ -529,8 +570,11 @@ __all__ = [
     "DamagedPolicyError",
     "MAX_MODEL_BYTES",
     "MAX_POLICY_BYTES",
+    "MODEL_FORMATS",
+    "model_format_of",
     "check_trusted",
     "load_replay_buffer",
+    "load_torch_state",
     "load_vecnormalize",
     "read_pickled",
     "trust_policy",

@@ -1,8 +1,9 @@
 """PPO from rsl_rl (Isaac Lab's trainer) on :class:`~flatbody_env.env.torch_vector_env.FlatBodyTorchVectorEnv`.
 
-``flatbody train --algo rsl-ppo`` (:func:`train_rsl`): the same residual policy learning on the LQR as the SB3
-path (:class:`agents.heuristic.ResidualAction`, ``residual_mode`` ``gain`` or ``additive``), with the env, the
-LQR residual and the policy's tensors on one torch device, and no hand-written PPO. Pieces:
+``flatbody train --algo rsl-ppo --env ID`` (:func:`train_rsl`): rsl_rl's PPO, with the env, the policy's tensors (and,
+on the prior track, the LQR residual) on one torch device, and no hand-written PPO. The hyperparameters are the entry
+of ``ID`` in ``agents/hyperparams/rsl-ppo.yml`` (the keys it leaves out: :data:`agents.config.RSL_DEFAULTS`); the
+v1 ids train from scratch, ``FlatBody-v0``'s entry is the residual agent of docs/agents.md. Pieces:
 
 * :class:`TorchResidual` — the executed action of a residual agent, batched in torch on the env's device:
   a_LQR = clip(−K (x − x*), −1, 1) with the gain K (N, k, 9) of each body's target, then
@@ -18,27 +19,22 @@ LQR residual and the policy's tensors on one torch device, and no hand-written P
   divides the training rewards by the running std of the discounted returns (SB3's ``VecNormalize``).
 * :func:`live_policy` — the training actor as a batch policy of :func:`agents.evaluate.run_episodes` (the
   evaluations of ``flatbody bench train --to-goal``, through ``train_rsl``'s ``callback``).
-* ``residual: null`` (:data:`FROM_SCRATCH`): no LQR — the policy's output clipped to [−1, 1] is the control;
-  :func:`from_scratch_curve` trains it for a wall-time budget and writes its held-out success and final distance
-  against wall time, :func:`plot_curve` draws that table (docs/agents.md, "From scratch").
+* ``residual: null``: no LQR — the policy's output clipped to [−1, 1] is the control; :func:`from_scratch_curve`
+  trains ``FlatBody-v0``'s entry so (:data:`FROM_SCRATCH`) for a wall-time budget and writes its held-out success and
+  final distance against wall time, :func:`plot_curve` draws that table (docs/agents.md, "From scratch").
 * :func:`export_sb3` — the trained actor as an SB3 ``PPO`` ``model.zip`` (same MLP; rsl_rl's observation
   normaliser folded into the first layer, exactly), so ``flatbody evaluate`` and ``demo`` run it unchanged
-  (``config.yml`` says ``algo: ppo``, the format of the model file, and ``trainer: rsl-ppo``).
+  (``config.yml`` says ``algo: rsl-ppo`` and ``model_format: ppo``).
 
-The run folder is the SB3 path's (agents/train.py): ``model.zip``, ``config.yml`` (env id, algo, seed,
-hyperparameters, trainer), ``run.json`` (command, git hash, versions, wall time), ``progress.csv`` (one row per
-PPO iteration), ``policy.npz`` (the numpy policy), plus ``rsl_model.pt`` (rsl_rl's own checkpoint) and, while the
-run goes on, ``checkpoints/rsl_model_N_steps.pt`` every ``checkpoint_freq`` steps (the newest kept; every file
-written atomically through :mod:`flatbody_env.output`).
+The run folder is every trainer's (:class:`agents.runs.RunFolder`): ``model.zip``, ``config.yml``, ``run.json``,
+``progress.csv`` (one row per PPO iteration), ``policy.npz``, plus ``rsl_model.pt`` (rsl_rl's own actor and critic)
+and, while the run goes on, ``checkpoints/rsl_model_N_steps.pt`` every ``checkpoint_freq`` steps (actor, critic,
+optimiser, learning rate, reward normaliser: what ``--resume`` continues from; the newest kept).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import platform
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -46,56 +42,12 @@ from typing import Any
 
 import numpy as np
 
+from agents.config import RunConfig
+from agents.runs import RunFolder, TrainResult, stopped
+
 RSL_RL_VERSION = "5.5.1"
 """The rsl_rl release this trainer is written against (pinned in pyproject.toml: ``rsl-rl-lib``)."""
 ALGO = "rsl-ppo"
-DEVICES = ("cpu", "cuda")
-
-DEFAULTS: dict[str, Any] = {
-    "n_timesteps": 1_000_000,
-    "n_envs": 256,
-    # the executed action: the LQR's, scheduled by the policy (agents/heuristic.py ResidualAction; as the SB3 agent)
-    "residual": "heuristic",
-    "residual_mode": "gain",
-    "residual_scale": 1.0,
-    "env_kwargs": {},
-    # rsl_rl's runner and PPO (its names), but for noise_hold_steps, learn_std and normalize_reward
-    "num_steps_per_env": 64,  # 256 x 64 = 16,384 transitions per update
-    "stagger": True,  # init_at_random_ep_len: the bodies' episode clocks start spread over an episode
-    "hidden_dims": [64, 64],
-    "activation": "tanh",
-    "init_std": 1.5,  # wide exploration: the executed gain factor 1 + clip(a) spans [0, 2]
-    "learn_std": True,
-    "noise_hold_steps": 4,  # the exploration noise held for 4 rollout steps (HeldGaussianDistribution; SB3's gSDE)
-    "obs_normalization": True,
-    "normalize_reward": True,  # rewards / std of the discounted returns (SB3's VecNormalize norm_reward), training only
-    "num_learning_epochs": 5,
-    "num_mini_batches": 8,
-    "clip_param": 0.1,
-    "use_clipped_value_loss": False,
-    "gamma": 0.995,
-    "lam": 0.95,
-    "value_loss_coef": 1.0,
-    "entropy_coef": 0.0,
-    "learning_rate": 3.0e-4,  # the start: the adaptive schedule raises it to rsl_rl's cap 1e-2 within a few iterations
-    "max_grad_norm": 1.0,
-    "schedule": "adaptive",
-    "desired_kl": 0.01,
-}
-"""Default hyperparameters (docs/agents.md, "rsl_rl": how they were chosen — with them the residual policy beats the LQR
-on held-out seeds in 10^6 steps); ``--hyperparams KEY=VALUE`` overrides."""
-_FLOAT_KEYS = (
-    "residual_scale",
-    "init_std",
-    "clip_param",
-    "gamma",
-    "lam",
-    "value_loss_coef",
-    "entropy_coef",
-    "learning_rate",
-    "max_grad_norm",
-    "desired_kl",
-)
 
 
 # --- the LQR residual on the device ---------------------------------------------------------------------------
@@ -329,9 +281,12 @@ def live_policy(actor, residual: TorchResidual | None, device: str = "cpu"):
 
 
 # --- export to SB3's format ------------------------------------------------------------------------------------
-def export_sb3(actor, critic, path: Path, hp: dict[str, Any], seed: int) -> None:
+def export_sb3(
+    actor, critic, path: Path, hp: dict[str, Any], seed: int, env_kwargs: dict[str, Any] | None = None
+) -> None:
     """Write the rsl_rl ``actor`` (and ``critic``) as an SB3 ``PPO`` model file at ``path``: the same MLPs, with
-    rsl_rl's observation normaliser (x − m)/(s + ε) folded into each first layer, and log σ."""
+    rsl_rl's observation normaliser (x − m)/(s + ε) folded into each first layer, and log σ. ``env_kwargs``: the
+    keywords of the task the actor acts in (its spaces; default ``hp["env_kwargs"]``)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -340,7 +295,8 @@ def export_sb3(actor, critic, path: Path, hp: dict[str, Any], seed: int) -> None
 
     acts = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU}
     hidden = [int(h) for h in hp["hidden_dims"]]
-    venv = DummyVecEnv([lambda: FlatBodyEnv(**(hp.get("env_kwargs") or {}))])
+    kwargs = env_kwargs if env_kwargs is not None else (hp.get("env_kwargs") or {})
+    venv = DummyVecEnv([lambda: FlatBodyEnv(**kwargs)])
     model = PPO(
         "MlpPolicy",
         venv,
@@ -424,74 +380,46 @@ def runner_config(hp: dict[str, Any]) -> dict[str, Any]:
 
 
 def train_rsl(
-    out: str | Path,
+    config: RunConfig,
+    folder: RunFolder,
     *,
-    seed: int = 0,
-    n_timesteps: int | None = None,
-    n_envs: int | None = None,
-    device: str = "cpu",
-    overrides: list[str] | None = None,
-    env_id: str | None = None,
+    resume: bool = False,
+    checkpoint_freq: int = 50_000,
+    keep_checkpoints: bool = False,
     threads: int = 1,
     progress: bool = True,
     command: list[str] | None = None,
     force: bool = False,
     callback=None,
-    checkpoint_freq: int = 50_000,
-    keep_checkpoints: bool = False,
-):
-    """Train rsl_rl's PPO on ``FlatBody-v0`` with the LQR residual and write the run folder ``out`` (module docstring).
+) -> TrainResult:
+    """Train rsl_rl's PPO with the configuration ``config`` (``algo: rsl-ppo``) into the run folder ``folder`` (module
+    docstring); :func:`agents.train.train` and ``flatbody train --algo rsl-ppo`` come here.
 
-    Every ``checkpoint_freq`` environment steps (rounded up to whole iterations; 0: never) rsl_rl's state (actor,
-    critic, optimiser, iterations) is saved as ``out/checkpoints/rsl_model_N_steps.pt``, atomically through the one
-    writing door; the newest :data:`agents.train.KEEP_CHECKPOINTS` are kept, and the folder is removed after a
-    completed run unless ``keep_checkpoints``. ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x
-    ``num_steps_per_env`` steps. ``callback``
-    (optional) is called after each iteration as ``callback(runner, row)`` (``row``: the progress row); a true return
-    value stops the training there, and the time spent in it is left out of the wall time (a benchmark's evaluations).
-    Returns :class:`agents.train.TrainResult`.
+    ``n_timesteps`` rounds up to whole PPO iterations of ``n_envs`` x ``num_steps_per_env`` steps. Every
+    ``checkpoint_freq`` environment steps (rounded up to whole iterations; 0: never) rsl_rl's state (actor, critic,
+    optimiser, iterations, learning rate, the reward normaliser) is saved as ``checkpoints/rsl_model_N_steps.pt``
+    through the run folder; Ctrl-C saves one too and names the command that continues the run. ``resume``: continue
+    from the newest checkpoint that loads (the environments restart from the seed, so a resumed run is not bit-identical
+    to an uninterrupted one). ``callback`` (optional) is called after each iteration as ``callback(runner, row)``
+    (``row``: the progress row); a true return value stops the training there, and the time spent in it is left out of
+    the wall time (a benchmark's evaluations).
     """
-    import yaml
+    from agents.config import check_device
+    from agents.numpy_policy import check_trusted
 
-    from agents.numpy_policy import remember_run
-    from agents.train import ENV_ID, KEEP_CHECKPOINTS, TrainResult, _rotate_checkpoints, apply_overrides, check_out
-    from flatbody_env.output import atomic_path, atomic_write, write_csv
-    from flatbody_env.physics import validation
-    from flatbody_env.provenance import git_hash
-
-    env_id = env_id or ENV_ID
-    if env_id != ENV_ID:
-        raise ValueError(f"env: only {ENV_ID} is supported, got {env_id!r}")
-    if device not in DEVICES:
-        raise ValueError(f"device: must be one of {', '.join(DEVICES)}, got {device!r}")
-    if not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"threads: must be an integer >= 1, got {threads!r}")
-    validation.integer("checkpoint_freq", checkpoint_freq, low=0, high=validation.MAX_TIMESTEPS)
-    out = check_out(out, force=force)
-    hp = apply_overrides(json.loads(json.dumps(DEFAULTS)), overrides or [])
-    unknown = sorted(set(hp) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"hyperparams: unknown for rsl-ppo: {', '.join(unknown)} (known: {', '.join(DEFAULTS)})")
-    for key in _FLOAT_KEYS:  # YAML reads 3e-4 (no dot) as a string
-        try:
-            hp[key] = float(hp[key])
-        except (TypeError, ValueError):
-            raise ValueError(f"{key}: must be a number, got {hp[key]!r}") from None
-    hold = hp["noise_hold_steps"]
-    if not isinstance(hold, int) or isinstance(hold, bool) or hold < 1:
-        raise ValueError(f"noise_hold_steps: must be an integer >= 1, got {hold!r}")
-    if n_timesteps is not None:
-        hp["n_timesteps"] = int(n_timesteps)
-    if n_envs is not None:
-        hp["n_envs"] = int(n_envs)
-    nenv, total, steps = int(hp["n_envs"]), int(float(hp["n_timesteps"])), int(hp["num_steps_per_env"])
-    if nenv < 1 or total < 1 or steps < 1:
-        raise ValueError(f"n_envs, n_timesteps, num_steps_per_env: must be >= 1, got {nenv}, {total}, {steps}")
+    check_device(config.device)
+    hp, seed, device = config.hyperparams, config.seed, config.device
+    nenv, total, steps = config.n_envs, config.n_timesteps, int(hp["num_steps_per_env"])
     iterations = -(-total // (nenv * steps))
+    candidates = []
+    if resume:  # the checkpoints are pickles (torch's); read only from one of your runs, or with --trust
+        check_trusted(folder.checkpoint_dir, "the checkpoints (torch files)", where="resume")
+        candidates = folder.checkpoints()
+        if not candidates:
+            raise ValueError(f"resume: no checkpoint in {folder.checkpoint_dir}")
+    earlier = folder.previous_wall_time() if resume else 0.0  # the run so far, read up front
 
-    import rsl_rl
     import torch
-    from importlib.metadata import version
     from rsl_rl.runners import OnPolicyRunner
 
     from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv
@@ -499,127 +427,116 @@ def train_rsl(
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     np.random.seed(seed)
-    env = FlatBodyTorchVectorEnv(
-        nenv, device=device, **(hp.get("env_kwargs") or {})
-    )  # cuda: raises until the device env exists
+    from agents.evaluate import env_kwargs_for
+
+    env_kwargs = env_kwargs_for(config.env_id, config.env_kwargs)
+    if not resume:
+        folder.start(config, force=force)  # config.yml, the first file: the folder is trusted from here on
+    env = FlatBodyTorchVectorEnv(nenv, device=device, **env_kwargs)
     residual = None
     if hp.get("residual"):
-        if hp["residual"] != "heuristic":
-            raise ValueError(f"residual: must be 'heuristic' or empty, got {hp['residual']!r}")
-        residual = TorchResidual(
-            hp.get("env_kwargs"), float(hp["residual_scale"]), str(hp["residual_mode"]), env.device
-        )
+        residual = TorchResidual(env_kwargs, float(hp["residual_scale"]), str(hp["residual_mode"]), env.device)
     venv = RslVecEnv(env, residual, seed=seed, reward_gamma=float(hp["gamma"]) if hp["normalize_reward"] else None)
-    cfg = {
-        "env_id": env_id,
-        "algo": "ppo",
-        "seed": seed,
-        "hyperparams": hp,
-        "trainer": {"name": ALGO, "library": "rsl_rl", "version": version("rsl-rl-lib"), "device": device},
-    }
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_dir = out / "checkpoints"
-    if force and ckpt_dir.exists():
-        import shutil
-
-        shutil.rmtree(ckpt_dir)  # an old run's checkpoints are not this run's
-    atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
-    remember_run(out)  # the run's first file is in place: its folder is this user's (docs/reliability.md)
     import contextlib
     import io
 
     with contextlib.redirect_stdout(io.StringIO()):  # rsl_rl prints the models
         runner = OnPolicyRunner(venv, runner_config(hp), log_dir=None, device=device)
-    rows: list[dict[str, Any]] = []
+    done_it, resumed_from, rows = 0, None, []
+    if resume:
+        done_it = _load_rsl_state(runner, venv, candidates)
+        resumed_from = done_it * nenv * steps
     bar = None
     if progress:
-        from tqdm import tqdm
+        from flatbody_env.progress import progress_bar
 
-        bar = tqdm(total=iterations * nenv * steps, unit="step", desc=f"rsl-ppo {env_id}", file=sys.stderr)
-    t0 = time.perf_counter()
-    for it in range(iterations):  # one PPO iteration at a time: a progress row each
-        seen = len(venv.episodes)
-        ti = time.perf_counter()
-        runner.learn(1, init_at_random_ep_len=bool(hp["stagger"]) and it == 0)
-        new = venv.episodes[seen:]
-        rows.append(
-            {
-                "iteration": it + 1,
-                "timesteps": (it + 1) * nenv * steps,
-                "time_s": round(time.perf_counter() - t0, 3),
-                "fps": round(nenv * steps / (time.perf_counter() - ti), 1),
-                "episodes": len(new),
-                "ep_rew_mean": float(np.mean([e[0] for e in new])) if new else "",
-                "final_distance_mean": float(np.mean([e[1] for e in new])) if new else "",
-                "success_rate": float(np.mean([e[2] for e in new])) if new else "",
-                "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
-                "learning_rate": float(runner.alg.learning_rate),
-            }
+        bar = progress_bar(
+            total=iterations * nenv * steps,
+            initial=done_it * nenv * steps,
+            unit="step",
+            desc=f"rsl-ppo {config.env_id}",
         )
+    t0 = time.perf_counter()
+    it = done_it
+    try:
+        for it in range(done_it, iterations):  # one PPO iteration at a time: a progress row each
+            seen = len(venv.episodes)
+            ti = time.perf_counter()
+            runner.learn(1, init_at_random_ep_len=bool(hp["stagger"]) and it == done_it)
+            new = venv.episodes[seen:]
+            rows.append(
+                {
+                    "iteration": it + 1,
+                    "timesteps": (it + 1) * nenv * steps,
+                    "time_s": round(time.perf_counter() - t0, 3),
+                    "fps": round(nenv * steps / (time.perf_counter() - ti), 1),
+                    "episodes": len(new),
+                    "ep_rew_mean": float(np.mean([e[0] for e in new])) if new else "",
+                    "final_distance_mean": float(np.mean([e[1] for e in new])) if new else "",
+                    "success_rate": float(np.mean([e[2] for e in new])) if new else "",
+                    "action_std": float(runner.alg.get_policy().output_std.detach().mean()),
+                    "learning_rate": float(runner.alg.learning_rate),
+                }
+            )
+            if bar is not None:
+                bar.update(nenv * steps)
+            done = (it + 1) * nenv * steps
+            if checkpoint_freq and done // checkpoint_freq > it * nenv * steps // checkpoint_freq:
+                _save_rsl_checkpoint(folder, runner, venv, hp, it + 1, done)
+            if callback is not None:
+                tc = time.perf_counter()
+                stop = callback(runner, rows[-1])
+                t0 += time.perf_counter() - tc
+                if stop:
+                    break
+    except KeyboardInterrupt:
         if bar is not None:
-            bar.update(nenv * steps)
-        done = (it + 1) * nenv * steps
-        if checkpoint_freq and done // checkpoint_freq > it * nenv * steps // checkpoint_freq:
-            ckpt_dir.mkdir(exist_ok=True)
-            with atomic_path(ckpt_dir / f"rsl_model_{done}_steps.pt") as tmp:
-                torch.save(_rsl_state(runner, hp, len(rows)), str(tmp))
-            _rotate_checkpoints(ckpt_dir, KEEP_CHECKPOINTS)
-        if callback is not None:
-            tc = time.perf_counter()
-            stop = callback(runner, rows[-1])
-            t0 += time.perf_counter() - tc
-            if stop:
-                break
+            bar.close()
+        folder.write_progress(rows, "progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
+        reached = len(rows) + done_it
+        if checkpoint_freq and rows:
+            kept = _save_rsl_checkpoint(folder, runner, venv, hp, reached, reached * nenv * steps)
+            raise stopped(config, folder, reached * nenv * steps, kept) from None
+        why = "no iteration trained yet" if not rows else "--checkpoint-freq 0"
+        raise stopped(config, folder, reached * nenv * steps, None, why) from None
     wall = time.perf_counter() - t0
     if bar is not None:
         bar.close()
-    write_csv(out / "progress.csv", list(rows[0]), ([r[k] for k in rows[0]] for r in rows))
-    with atomic_path(out / "rsl_model.pt") as tmp:
-        torch.save(_rsl_state(runner, hp, len(rows), optimizer=False), str(tmp))
-    with atomic_path(out / "model.zip") as tmp:
-        export_sb3(runner.alg.actor, runner.alg.critic, Path(str(tmp)), hp, seed)
-    import gymnasium
-    import stable_baselines3
-
-    run = {
-        "command": command if command is not None else [sys.executable, *sys.argv],
-        "command_line": shlex.join(command if command is not None else sys.argv),
-        "git_hash": git_hash(),
-        "env_id": env_id,
-        "algo": ALGO,
-        "seed": seed,
-        "n_timesteps": len(rows) * nenv * steps,
-        "n_envs": nenv,
-        "device": device,
-        "torch_threads": threads,
-        "wall_time_s": round(wall, 1),
-        "resumed_from": None,
-        "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "versions": {
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "gymnasium": gymnasium.__version__,
-            "rsl_rl": version("rsl-rl-lib"),
-            "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__,
-        },
-        "cpu_count": os.cpu_count(),
-    }
-    del rsl_rl
-    atomic_write(out / "run.json", json.dumps(run, indent=2) + "\n")
-    from agents.numpy_policy import export_policy
-
-    export_policy(out)
-    if ckpt_dir.exists() and not keep_checkpoints:
-        import shutil
-
-        shutil.rmtree(ckpt_dir)
+    trained = (done_it + len(rows)) * nenv * steps
+    folder.write_progress(rows, "progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
+    folder.save(
+        "rsl_model.pt",
+        lambda tmp: torch.save(_rsl_state(runner, venv, hp, done_it + len(rows), optimizer=False), str(tmp)),
+    )
+    folder.save(
+        "model.zip", lambda tmp: export_sb3(runner.alg.actor, runner.alg.critic, Path(str(tmp)), hp, seed, env_kwargs)
+    )
+    if resume:  # the budget it was continued to
+        folder.write_config(config)
+    folder.write_run(
+        config,
+        timesteps=trained,
+        wall_time_s=wall + earlier,
+        command=command,
+        resumed_from=resumed_from,
+        threads=threads,
+    )
+    folder.export_policy()
+    folder.finish(keep_checkpoints=keep_checkpoints)
     env.close()
-    return TrainResult(out=out, timesteps=len(rows) * nenv * steps, wall_time_s=wall, resumed_from=None)
+    return TrainResult(out=folder.path, timesteps=trained, wall_time_s=wall, resumed_from=resumed_from)
 
 
-def _rsl_state(runner, hp: dict[str, Any], iterations: int, *, optimizer: bool = True) -> dict[str, Any]:
-    """rsl_rl's state as saved in ``rsl_model.pt`` and the checkpoints (these with the optimiser's state)."""
+def _save_rsl_checkpoint(folder: RunFolder, runner, venv, hp: dict[str, Any], iterations: int, steps: int) -> Path:
+    import torch
+
+    state = _rsl_state(runner, venv, hp, iterations)
+    return folder.save_checkpoint(steps, {"model": lambda tmp: torch.save(state, str(tmp))}, prefix="rsl_model")
+
+
+def _rsl_state(runner, venv, hp: dict[str, Any], iterations: int, *, optimizer: bool = True) -> dict[str, Any]:
+    """rsl_rl's state as saved in ``rsl_model.pt`` and the checkpoints (these with the optimiser's state, the
+    adaptive learning rate and the reward normaliser's statistics, what ``--resume`` needs)."""
     state = {
         "actor": runner.alg.actor.state_dict(),
         "critic": runner.alg.critic.state_dict(),
@@ -627,14 +544,52 @@ def _rsl_state(runner, hp: dict[str, Any], iterations: int, *, optimizer: bool =
         "runner_cfg": runner_config(hp),
     }
     if optimizer:
+        rms = venv._ret_rms
         state["optimizer"] = runner.alg.optimizer.state_dict()
+        state["learning_rate"] = float(runner.alg.learning_rate)
+        state["return_rms"] = [float(rms.mean), float(rms.var), float(rms.count)]
     return state
+
+
+def _load_rsl_state(runner, venv, candidates: list) -> int:
+    """Load the newest checkpoint of ``candidates`` that loads into ``runner`` (read through the one trust check and
+    reading door, unpickled by ``torch.load(weights_only=True)``: tensors and plain data only); a newer one that does
+    not is passed over with a note on stderr. Returns the iterations it had trained."""
+    from agents.numpy_policy import load_torch_state
+
+    for k, ckpt in enumerate(candidates):
+        try:
+            state = load_torch_state(ckpt.model, where="resume", map_location=runner.device)
+            try:
+                runner.alg.actor.load_state_dict(state["actor"])
+                runner.alg.critic.load_state_dict(state["critic"])
+                runner.alg.optimizer.load_state_dict(state["optimizer"])
+                runner.alg.learning_rate = float(state["learning_rate"])
+                mean, var, count = (float(x) for x in state["return_rms"])
+                iterations = int(state["iterations"])
+            except Exception as exc:  # noqa: BLE001 - another network's weights, missing entries
+                raise ValueError(
+                    f"resume: cannot load {str(ckpt.model)[:80]!r} ({type(exc).__name__}: "
+                    f"{' '.join(str(exc).split())[:120]})"
+                ) from None
+        except ValueError as exc:
+            if k + 1 == len(candidates):
+                raise ValueError(f"resume: no checkpoint in {ckpt.model.parent} loads (the oldest: {exc})") from None
+            print(
+                f"flatbody: note: checkpoint {ckpt.model.name} cannot be loaded "
+                f"({' '.join(str(exc).split())[:160]}); resuming from {candidates[k + 1].model.name}",
+                file=sys.stderr,
+            )
+            continue
+        venv._ret_rms.mean, venv._ret_rms.var, venv._ret_rms.count = mean, var, count
+        return iterations
+    raise ValueError("resume: no checkpoint")  # unreachable: candidates is not empty
 
 
 # --- from scratch (no LQR prior): success and final distance against wall time -------------------------------
 FROM_SCRATCH: list[str] = ["residual=null", "init_std=0.5", "hidden_dims=[128,128]"]
-"""``--hyperparams`` of the from-scratch agent (docs/agents.md, "From scratch": how they were chosen): no LQR, the
-policy's clipped output is the control."""
+"""``--hyperparams`` over ``FlatBody-v0``'s entry of the from-scratch agent of docs/agents.md ("From scratch": how they
+were chosen): no LQR, the policy's clipped output is the control."""
 CURVE_HEADER = ("timesteps", "wall_s", "success", "final_distance")
 
 
@@ -672,7 +627,9 @@ def from_scratch_curve(
         if row["time_s"] < min(due[0], budget_s):
             return False
         due[0] = row["time_s"] + eval_every_s
-        recs = run_episodes(live_policy(runner.alg.actor, None, device), episodes=episodes, seed=eval_seed)
+        recs = run_episodes(
+            live_policy(runner.alg.actor, None, device), episodes=episodes, seed=eval_seed, env_id="FlatBody-v0"
+        )
         rows.append(
             (
                 int(row["timesteps"]),
@@ -684,16 +641,19 @@ def from_scratch_curve(
         write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
         return row["time_s"] >= budget_s
 
-    train_rsl(
-        out,
+    from agents.config import resolve
+    from flatbody_env.physics.validation import MAX_TIMESTEPS
+
+    folder = RunFolder.new(out, force=force)
+    config = resolve(
+        ALGO,
+        "FlatBody-v0",
         seed=seed,
-        n_timesteps=10**12,
-        progress=False,
+        n_timesteps=MAX_TIMESTEPS,
         overrides=[*FROM_SCRATCH, *(overrides or [])],
-        callback=callback,
         device=device,
-        force=force,
     )
+    train_rsl(config, folder, progress=False, callback=callback, force=force)
     return rows
 
 
@@ -758,7 +718,6 @@ def plot_curve(
 __all__ = [
     "ALGO",
     "CURVE_HEADER",
-    "DEFAULTS",
     "FROM_SCRATCH",
     "HeldGaussianDistribution",
     "RSL_RL_VERSION",

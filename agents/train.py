@@ -1,53 +1,36 @@
-"""Train SB3 agents on the flatbody tasks (``FlatBody-v0`` and every id of docs/tasks.md) in the RL-Zoo spirit.
+"""Train Stable-Baselines3's PPO, SAC and TD3 (and, through :mod:`agents.rsl`, rsl_rl's PPO) on any flatbody task.
 
-Hyperparameters live in ``agents/hyperparams/<algo>.yml`` keyed by environment id; a run writes,
-beside the model::
+``flatbody train --algo ppo|sac|td3|rsl-ppo --env ID`` resolves the run's configuration
+(:func:`agents.config.resolve`: the entry of ``ID`` in ``agents/hyperparams/<algo>.yml``, the overrides, each
+hyperparameter checked) and trains it into one run folder (:class:`agents.runs.RunFolder`: ``config.yml``,
+``run.json``, ``progress.csv``, ``model.zip``, ``vecnormalize.pkl``, ``policy.npz``, rotated checkpoints).
+``--resume`` continues a run from its newest checkpoint that loads, with the configuration its ``config.yml`` holds;
+``--config FOLDER/config.yml`` trains that configuration again (:func:`train_config`).
 
-    OUT/model.zip          the SB3 model
-    OUT/vecnormalize.pkl   VecNormalize statistics (when ``normalize`` is set; frozen at evaluation)
-    OUT/config.yml         the hyperparameters actually used (after overrides), env id, algo, seed
-    OUT/run.json           command line, git hash, versions, wall time, timesteps
-    OUT/progress.csv       SB3's training log (episode return, success rate, losses)
-    OUT/checkpoints/       periodic checkpoints (model + VecNormalize), the newest KEEP_CHECKPOINTS kept, for
-                           ``--resume``; removed after a completed run unless ``--keep-checkpoints``
-
-Every file is written through :mod:`flatbody_env.output` (atomic, no planted link followed): SB3's own writers
-are given a temporary name (``model.save``), ``progress.csv`` comes from a logger format of ours and the
-checkpoints from a callback of ours. The folder becomes trusted (its pickles load without ``--trust``) once
-``config.yml``, the run's first file, is written. Every file read goes through
-:mod:`flatbody_env.physics.validation`'s reading door, every pickle through :func:`agents.numpy_policy.read_pickled`.
-
-Training uses :class:`agents.vec_env.FlatBodySB3VecEnv` (the natively batched env) wrapped in
-``VecMonitor`` and ``VecNormalize``; nothing integrator-specific is passed: the env's default
-integrator runs. ``torch.set_num_threads(1)`` by default (``--threads N``; more threads made no run faster and
-many slower on a loaded machine: measured figures in docs/agents.md, "One torch thread").
+Training uses :class:`agents.vec_env.FlatBodySB3VecEnv` (the natively batched env) wrapped in ``VecMonitor`` and
+``VecNormalize``; nothing integrator-specific is passed: the env's default integrator runs. The SB3 algorithms train
+on the CPU. ``torch.set_num_threads(1)`` by default (``--threads N``; more threads made no run faster and many slower
+on a loaded machine: measured figures in docs/agents.md, "One torch thread"). A run is deterministic for a given
+seed, configuration and versions on one thread (``--config`` reproduces it bit for bit, tested).
 """
 
 from __future__ import annotations
 
-import copy
 import json
-import math
-import os
-import platform
-import re
-import shlex
-import shutil
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from flatbody_env.output import atomic_path, atomic_write
-from flatbody_env.provenance import git_hash
+from agents.config import DEFAULT_ENV_ID, SB3_ALGOS, RunConfig, resolve
+from agents.runs import RunFolder, TrainResult, stopped
 
-ENV_ID = "FlatBody-v0"
-ALGOS = ("ppo", "sac")
-HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+ENV_ID = DEFAULT_ENV_ID
+"""The task of :func:`train` when none is named."""
+ALGOS = SB3_ALGOS
+"""The algorithms this module trains itself (rsl-ppo: :mod:`agents.rsl`)."""
 _META_KEYS = (
     "n_timesteps",
     "n_envs",
@@ -60,48 +43,10 @@ _META_KEYS = (
     "residual_mode",
     "success_bonus",
     "precision_bonus",
+    "noise_type",
+    "noise_std",
 )
-_ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
-
-
-def load_hyperparams(algo: str, env_id: str = ENV_ID, path: str | Path | None = None) -> dict[str, Any]:
-    """The YAML entry of ``env_id`` in ``hyperparams/<algo>.yml`` (or ``path``), deep-copied."""
-    if algo not in ALGOS:
-        raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {algo!r}")
-    from flatbody_env.physics import validation
-
-    file = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    where = "hyperparams_file" if path else "hyperparams"
-    data = validation.read_yaml(where, file) or {}  # the one reading door: bounded, no alias bombs
-    if not isinstance(data, dict):
-        raise ValueError(f"{where}: {str(file)!r} must hold a mapping of environment ids, got a {type(data).__name__}")
-    if not isinstance(data.get(env_id, {}), dict):
-        raise ValueError(
-            f"{where}: the entry {env_id!r} in {file} must be a mapping, got a {type(data[env_id]).__name__}"
-        )
-    if env_id not in data:
-        raise ValueError(f"env: no hyperparameters for {env_id!r} in {file} (has: {', '.join(data) or 'none'})")
-    return copy.deepcopy(data[env_id])
-
-
-def apply_overrides(hp: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
-    """``key=value`` overrides (value parsed as YAML; dotted keys reach into mappings)."""
-    hp = copy.deepcopy(hp)
-    for item in overrides:
-        if "=" not in item:
-            raise ValueError(f"hyperparams: expected key=value, got {item!r}")
-        key, text = item.split("=", 1)
-        from flatbody_env.physics import validation
-
-        value = validation.parse_yaml(f"hyperparams.{key.strip()[:60]}", text)  # no alias bombs in a value either
-        node = hp
-        parts = key.strip().split(".")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-            if not isinstance(node, dict):
-                raise ValueError(f"hyperparams: {key!r} reaches into a non-mapping")
-        node[parts[-1]] = value
-    return hp
+"""Keys of a hyperparameter entry that are not SB3 constructor keywords."""
 
 
 def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
@@ -109,9 +54,7 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
 
     kw = dict(raw or {})
     act = kw.get("activation_fn")
-    if isinstance(act, str):
-        if act not in _ACTIVATIONS:
-            raise ValueError(f"policy_kwargs.activation_fn: must be one of {', '.join(_ACTIVATIONS)}, got {act!r}")
+    if isinstance(act, str):  # checked by agents.config (one of ACTIVATIONS)
         kw["activation_fn"] = {
             "tanh": torch.nn.Tanh,
             "relu": torch.nn.ReLU,
@@ -122,16 +65,27 @@ def _policy_kwargs(raw: dict[str, Any] | None) -> dict[str, Any]:
 
 
 def algo_kwargs_of(hp: dict[str, Any]) -> dict[str, Any]:
-    """The SB3 constructor keywords of a hyperparameter entry (its meta keys removed, types fixed)."""
+    """The SB3 constructor keywords of a checked hyperparameter entry (:func:`agents.config.check_hyperparams`): its
+    meta keys removed, the activation's name made a torch module, ``train_freq`` a tuple."""
     algo_kwargs = {k: v for k, v in hp.items() if k not in _META_KEYS}
     algo_kwargs["policy_kwargs"] = _policy_kwargs(algo_kwargs.get("policy_kwargs"))
-    for key in ("learning_rate", "buffer_size", "learning_starts", "batch_size"):
-        if isinstance(algo_kwargs.get(key), str):
-            algo_kwargs[key] = float(algo_kwargs[key])
-    for key in ("buffer_size", "learning_starts", "batch_size", "n_steps", "n_epochs", "train_freq", "gradient_steps"):
-        if key in algo_kwargs and not isinstance(algo_kwargs[key], (list, tuple)):
-            algo_kwargs[key] = int(algo_kwargs[key])
+    if isinstance(algo_kwargs.get("train_freq"), list):
+        algo_kwargs["train_freq"] = tuple(algo_kwargs["train_freq"])
     return algo_kwargs
+
+
+def action_noise(hp: dict[str, Any], action_space):
+    """The exploration noise added to SAC's or TD3's actions (``noise_type``: ``normal`` or ``ornstein-uhlenbeck``,
+    of standard deviation ``noise_std``, default 0.1), as RL Zoo builds it; None without ``noise_type``."""
+    kind = hp.get("noise_type")
+    if kind is None:
+        return None
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+    n = action_space.shape[0]
+    std = float(hp.get("noise_std", 0.1)) * np.ones(n)
+    cls = NormalActionNoise if kind == "normal" else OrnsteinUhlenbeckActionNoise
+    return cls(mean=np.zeros(n), sigma=std)
 
 
 def make_vec_env(
@@ -203,9 +157,9 @@ def _success_bonus(venv, bonus: float, precision: float = 0.0, tol: float = 0.05
 
 
 def _algo_class(algo: str):
-    from stable_baselines3 import PPO, SAC
+    from stable_baselines3 import PPO, SAC, TD3
 
-    return {"ppo": PPO, "sac": SAC}[algo]
+    return {"ppo": PPO, "sac": SAC, "td3": TD3}[algo]
 
 
 def _load_saved(
@@ -244,104 +198,6 @@ def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_k
         env.norm_reward, env.gamma = bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
     model.set_random_seed(seed)
     return model, env
-
-
-KEEP_CHECKPOINTS = 3
-"""Checkpoints kept during a run (the newest; older ones are removed as new ones are written): enough that a newest
-one damaged by a crash leaves a good one to ``--resume`` from."""
-
-
-def checkpoints(folder: Path) -> list[tuple[Path, Path | None, Path | None, int]]:
-    """(model.zip, vecnormalize.pkl or None, replay_buffer.pkl or None, timesteps) of every checkpoint in ``folder``,
-    the newest first (names as :func:`_save_checkpoint` writes them; temporary files are never listed)."""
-    if not folder.is_dir():
-        return []
-    found = []
-    for f in folder.glob("rl_model_*_steps.zip"):
-        m = re.fullmatch(r"rl_model_(\d+)_steps\.zip", f.name)
-        if m:
-            steps = int(m.group(1))
-            vn = folder / f"rl_model_vecnormalize_{steps}_steps.pkl"
-            rb = folder / f"rl_model_replay_buffer_{steps}_steps.pkl"
-            found.append((f, (vn if vn.exists() else None), (rb if rb.exists() else None), steps))
-    return sorted(found, key=lambda c: -c[3])
-
-
-@dataclass
-class TrainResult:
-    out: Path
-    timesteps: int
-    wall_time_s: float
-    resumed_from: int | None
-
-
-def _csv_logger(folder: Path):
-    """SB3's logger writing ``folder/progress.csv`` through the one writing door (:func:`flatbody_env.output.write_csv`:
-    atomic, no planted link followed) instead of SB3's own CSV format, which writes into the final name as it goes.
-
-    The table is kept in memory and the file rewritten after a dump once the last rewrite is a while ago (at least
-    2 s, and ten times as long as the rewrite took, so the cost stays a small share of the run however long it is),
-    and when the logger is closed: a killed run leaves the table of its last rewrite, never a half-written file.
-    Columns are added, in sorted order, as they appear; earlier rows leave them empty (as SB3's format does)."""
-    from stable_baselines3.common.logger import KVWriter, Logger, filter_excluded_keys
-
-    from flatbody_env.output import write_csv
-
-    class AtomicCSV(KVWriter):
-        def __init__(self, path: Path) -> None:
-            self.path, self.keys, self.rows = path, [], []
-            self.written, self.cost, self.dirty = -math.inf, 0.0, False
-
-        def write(self, key_values, key_excluded, step: int = 0) -> None:
-            values = filter_excluded_keys(key_values, key_excluded, "csv")
-            self.keys.extend(sorted(k for k in values if k not in self.keys))
-            self.rows.append({k: v for k, v in values.items() if v is not None})
-            self.dirty = True
-            if time.monotonic() - self.written >= max(2.0, 10.0 * self.cost):
-                self.flush()
-
-        def flush(self) -> None:
-            if not self.dirty:
-                return
-            t0 = time.monotonic()
-            write_csv(self.path, self.keys, ([row.get(k, "") for k in self.keys] for row in self.rows))
-            self.written, self.dirty = time.monotonic(), False
-            self.cost = self.written - t0
-
-        def close(self) -> None:
-            self.flush()
-
-    folder.mkdir(parents=True, exist_ok=True)
-    return Logger(folder=str(folder), output_formats=[AtomicCSV(folder / "progress.csv")])
-
-
-def _checkpoint_callback(every: int, folder: Path, norm: bool, algo: str, keep: int = KEEP_CHECKPOINTS):
-    """Save a checkpoint (:func:`_save_checkpoint`: atomic, through the one writing door) every ``every`` calls of the
-    callback (``every × n_envs`` steps) and keep the ``keep`` newest (SB3's ``CheckpointCallback`` wrote into the final
-    names, so a run killed mid-write left a truncated newest checkpoint)."""
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class AtomicCheckpoints(BaseCallback):
-        def _on_step(self) -> bool:
-            if self.n_calls % every == 0:
-                _save_checkpoint(self.model, self.model.get_vec_normalize_env(), folder, norm, algo)
-                _rotate_checkpoints(folder, keep)
-            return True
-
-    return AtomicCheckpoints()
-
-
-def _rotate_checkpoints(folder: Path, keep: int) -> None:
-    """Remove all but the ``keep`` newest checkpoints in ``folder``: every file of a checkpoint (SB3's model, statistics
-    and replay buffer ``rl_model_[KIND_]N_steps.*``, rsl-ppo's ``rsl_model_N_steps.pt``), grouped by its step count N."""
-    steps: dict[int, list[Path]] = {}
-    for f in folder.glob("*_steps.*") if folder.is_dir() else ():
-        m = re.fullmatch(r"rs?l_model_(?:[a-z_]+_)?(\d+)_steps\.(?:zip|pkl|pt)", f.name)
-        if m:
-            steps.setdefault(int(m.group(1)), []).append(f)
-    for n in sorted(steps, reverse=True)[keep:]:
-        for f in steps[n]:
-            f.unlink(missing_ok=True)
 
 
 def _progress_callback(total: int, start: int, enabled: bool):
@@ -383,8 +239,8 @@ def _progress_callback(total: int, start: int, enabled: bool):
 
 def rollout_steps(algo: str, hp: dict[str, Any]) -> int | None:
     """Environment steps SB3 collects between two looks at the step budget, so the steps trained are
-    a multiple of it: PPO's rollout of ``n_envs × n_steps``; SAC's ``n_envs × train_freq`` (``train_freq``
-    in steps). None where it is not a fixed number of steps (SAC with ``train_freq`` in episodes)."""
+    a multiple of it: PPO's rollout of ``n_envs × n_steps``; SAC's and TD3's ``n_envs × train_freq`` (``train_freq``
+    in steps). None where it is not a fixed number of steps (``train_freq`` in episodes)."""
     nenv = int(hp.get("n_envs", 1))
     if algo == "ppo":
         return nenv * int(hp.get("n_steps", 2048))
@@ -396,93 +252,82 @@ def rollout_steps(algo: str, hp: dict[str, Any]) -> int | None:
     return nenv * int(freq)
 
 
-def check_out(out: str | Path, *, force: bool = False) -> Path:
-    """``out`` as a Path when a new training run may be written there.
-
-    Raises
-    ------
-    ValueError
-        ``out`` can never be trusted (:func:`agents.numpy_policy.trust_refusal`: ``/``, the home folder or a folder
-        above it), or ``out`` is the shipped agent's folder (``agents/models/…``), or already holds a run (its
-        ``model.zip``, ``config.yml``, ``run.json`` or ``checkpoints/``), and ``force`` is False: one
-        line naming the folder and saying that ``--force`` overwrites it.
-    """
-    from agents.numpy_policy import trust_refusal
-
-    out = Path(out)
-    reason = trust_refusal(out)
-    if reason is not None:  # the run would make the folder trusted (agents.numpy_policy.remember_run)
-        raise ValueError(
-            f"out: {str(out)[:80]!r} {reason}; a run's folder becomes trusted (its pickles load without --trust), "
-            "so give the run a folder of its own, e.g. runs/ppo"
-        )
-    shipped = Path(__file__).resolve().parent / "models"
-    if not force:
-        if out.resolve().is_relative_to(shipped):
-            raise ValueError(
-                f"out: {str(out)!r} is the shipped agent's folder; --force overwrites it "
-                "(or give another --out, e.g. runs/ppo)"
-            )
-        held = [name for name in ("model.zip", "config.yml", "run.json", "checkpoints") if (out / name).exists()]
-        if held:
-            raise ValueError(
-                f"out: {str(out)!r} already holds a training run ({', '.join(held)}); --force overwrites it "
-                "(--resume continues it)"
-            )
-    return out
-
-
-def _save_checkpoint(model, env, folder: Path, norm: bool, algo: str) -> Path:
-    """Save ``model`` (and its VecNormalize statistics, SAC's replay buffer) as the checkpoint of its
-    current step count in ``folder``, under the names :func:`checkpoints` reads, each file atomically
-    (:func:`flatbody_env.output.atomic_path`) and the model last: a checkpoint whose model is there is whole."""
-    steps = int(model.num_timesteps)
-    folder.mkdir(parents=True, exist_ok=True)
+def _checkpoint_writers(model, env, norm: bool, algo: str, state: dict | None) -> dict:
+    """The files of an SB3 checkpoint (:meth:`agents.runs.RunFolder.save_checkpoint`): VecNormalize statistics, the
+    replay buffer of SAC and TD3, a trainer's state (the curriculum's), the model."""
+    writers: dict[str, Any] = {}
     if norm:
-        with atomic_path(folder / f"rl_model_vecnormalize_{steps}_steps.pkl") as tmp:
-            env.save(str(tmp))
-    if algo == "sac" and hasattr(model, "save_replay_buffer"):
-        with atomic_path(folder / f"rl_model_replay_buffer_{steps}_steps.pkl") as tmp:
-            model.save_replay_buffer(str(tmp))
-    with atomic_path(folder / f"rl_model_{steps}_steps.zip") as tmp:
-        model.save(str(tmp))
-    return folder / f"rl_model_{steps}_steps.zip"
+        writers["vecnormalize"] = lambda tmp: env.save(str(tmp))
+    if algo in ("sac", "td3"):
+        writers["replay_buffer"] = lambda tmp: model.save_replay_buffer(str(tmp))
+    if state is not None:
+        writers["state"] = lambda tmp: Path(tmp).write_text(json.dumps(state), encoding="utf-8")
+    writers["model"] = lambda tmp: model.save(str(tmp))
+    return writers
 
 
-def _wall_time(run: dict) -> float:
-    """The ``wall_time_s`` of an earlier ``run.json`` (0 when it has none that is a finite number >= 0)."""
-    value = run.get("wall_time_s", 0.0)
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
-    return float(value) if ok else 0.0
+def _checkpoint_callback(every: int, folder: RunFolder, norm: bool, algo: str, state=None):
+    """Save a checkpoint (atomic, through the run folder) every ``every`` calls of the callback (``every × n_envs``
+    steps), the newest :data:`agents.runs.KEEP_CHECKPOINTS` kept; ``state()`` (optional) is saved beside it."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class AtomicCheckpoints(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.n_calls % every == 0:
+                env = self.model.get_vec_normalize_env()
+                writers = _checkpoint_writers(self.model, env, norm, algo, state() if state else None)
+                folder.save_checkpoint(int(self.model.num_timesteps), writers)
+            return True
+
+    return AtomicCheckpoints()
 
 
 def _resume_from(cls, candidates: list, env, norm):
-    """(model, env, steps) of the newest checkpoint of ``candidates`` (:func:`checkpoints`) that loads; a newer one that
-    does not (truncated by a crash, unreadable) is passed over with a one-line note on stderr. ``ValueError`` naming
-    ``resume`` when none loads."""
+    """(model, env, steps, state) of the newest checkpoint of ``candidates`` (:meth:`agents.runs.RunFolder.checkpoints`)
+    that loads; a newer one that does not (truncated by a crash, unreadable) is passed over with a one-line note on
+    stderr. ``ValueError`` naming ``resume`` when none loads."""
     from agents.numpy_policy import load_replay_buffer
+    from flatbody_env.physics import validation
 
-    for k, (model_path, vn_path, rb_path, steps) in enumerate(candidates):
+    for k, ckpt in enumerate(candidates):
         try:
-            model, wrapped = _load_saved(cls, model_path, vn_path, env, norm, "resume")
-            if rb_path is not None and hasattr(model, "load_replay_buffer"):
-                load_replay_buffer(model, rb_path)
+            model, wrapped = _load_saved(cls, ckpt.model, ckpt.vecnormalize, env, norm, "resume")
+            if ckpt.replay_buffer is not None and hasattr(model, "load_replay_buffer"):
+                load_replay_buffer(model, ckpt.replay_buffer)
+            state = validation.read_json("resume", ckpt.state) if ckpt.state is not None else None
         except ValueError as exc:
             if k + 1 == len(candidates):
                 why = str(exc).removeprefix("resume: ")
-                raise ValueError(f"resume: no checkpoint in {model_path.parent} loads (the oldest: {why})") from None
+                raise ValueError(f"resume: no checkpoint in {ckpt.model.parent} loads (the oldest: {why})") from None
             print(
-                f"flatbody: note: checkpoint {model_path.name} cannot be loaded "
-                f"({' '.join(str(exc).split())[:160]}); resuming from {candidates[k + 1][0].name}",
+                f"flatbody: note: checkpoint {ckpt.model.name} cannot be loaded "
+                f"({' '.join(str(exc).split())[:160]}); resuming from {candidates[k + 1].model.name}",
                 file=sys.stderr,
             )
             continue
-        return model, wrapped, steps
+        return model, wrapped, ckpt.steps, state
     raise ValueError("resume: no checkpoint")  # unreachable: candidates is not empty
 
 
+def check_resumed(
+    config: RunConfig, folder: RunFolder, *, algo: str | None, env_id: str | None, flag: str = ""
+) -> None:
+    """Refuse to resume the run in ``folder`` as another algorithm or on another task than its ``config.yml`` says
+    (``ValueError`` naming ``{flag}algo`` / ``{flag}env``: ``--env`` on the command line)."""
+    from flatbody_env.physics import validation
+
+    for name, given, recorded in (("algo", algo, config.algo), ("env", env_id, config.env_id)):
+        validation.requirement(
+            f"{flag}{name}",
+            given,
+            given is None or given == recorded,
+            f"be {recorded}, the run in {str(folder.path)[:80]} trains {config.algo} on {config.env_id} "
+            f"(leave {flag}{name} out: --resume reads it from config.yml)",
+        )
+
+
 def train(
-    algo: str,
+    algo: str | None,
     out: str | Path,
     *,
     seed: int = 0,
@@ -490,7 +335,7 @@ def train(
     n_envs: int | None = None,
     overrides: list[str] | None = None,
     hyperparams_file: str | Path | None = None,
-    env_id: str = ENV_ID,
+    env_id: str | None = None,
     resume: bool = False,
     checkpoint_freq: int = 50_000,
     keep_checkpoints: bool = False,
@@ -501,99 +346,179 @@ def train(
     force: bool = False,
     notes: bool = True,
     trained_agent: str | Path | None = None,
+    device: str = "cpu",
+    curriculum: dict[str, Any] | None = None,
+    callback=None,
 ) -> TrainResult:
-    """Train ``algo`` on ``env_id`` with the YAML hyperparameters and save everything in ``out``.
+    """Train ``algo`` on ``env_id`` (default :data:`ENV_ID`) with its file's hyperparameters and write the run folder
+    ``out`` (:func:`agents.config.resolve`, then :func:`train_config`).
+
+    With ``resume``, continue the run in ``out`` from its newest checkpoint instead: its ``config.yml`` says the
+    algorithm, task, seed and hyperparameters (``algo`` and ``env_id``, when given, must agree: ``ValueError`` naming
+    ``algo`` / ``env``); ``n_timesteps`` may raise the budget. ``trained_agent``: fine-tune from that run folder's
+    model (weights, optimiser state, VecNormalize statistics; a trusted folder). ``curriculum``: the settings of
+    :func:`agents.curriculum.curriculum_callback`. The other keywords: :func:`train_config`.
+    """
+    if resume:
+        folder = RunFolder.existing(out, where="resume")
+        config = folder.config()
+        check_resumed(config, folder, algo=algo, env_id=env_id)
+        if n_timesteps is not None:
+            hp = {**config.hyperparams, "n_timesteps": n_timesteps}
+            from agents.config import check_hyperparams
+
+            config = config.replace(hyperparams=check_hyperparams(config.algo, hp, config.env_id))
+    else:
+        folder = RunFolder.new(out, force=force)  # before anything heavy: a refusal is immediate, nothing written
+        config = resolve(
+            algo,
+            env_id or ENV_ID,
+            seed=seed,
+            n_timesteps=n_timesteps,
+            n_envs=n_envs,
+            overrides=overrides,
+            hyperparams_file=hyperparams_file,
+            device=device,
+            trained_agent=trained_agent,
+            curriculum=curriculum,
+        )
+    return train_config(
+        config,
+        folder,
+        resume=resume,
+        checkpoint_freq=checkpoint_freq,
+        keep_checkpoints=keep_checkpoints,
+        threads=threads,
+        progress=progress,
+        command=command,
+        extra_callbacks=extra_callbacks,
+        force=force,
+        notes=notes,
+        callback=callback,
+    )
+
+
+def train_config(
+    config: RunConfig,
+    folder: RunFolder,
+    *,
+    resume: bool = False,
+    checkpoint_freq: int = 50_000,
+    keep_checkpoints: bool = False,
+    threads: int = 1,
+    progress: bool = True,
+    command: list[str] | None = None,
+    extra_callbacks: list | None = None,
+    force: bool = False,
+    notes: bool = True,
+    callback=None,
+) -> TrainResult:
+    """Train the run ``config`` into ``folder`` (rsl-ppo: :func:`agents.rsl.train_rsl`).
 
     Parameters
     ----------
-    n_timesteps : int, optional
-        Environment steps; SB3 trains a whole number of :func:`rollout_steps`, so it rounds up
-        (one line on stderr says so, unless ``notes`` is False).
     checkpoint_freq : int
-        Environment steps between checkpoints (0: none). With checkpoints on, a run stopped by
-        Ctrl-C saves one at the step it reached (``--resume`` continues from it).
-    resume : bool
-        Continue from the newest checkpoint in ``out/checkpoints`` (same hyperparameters: the
-        saved ``config.yml`` is used) up to the total ``n_timesteps``.
+        Environment steps between checkpoints (0: none). With checkpoints on, a run stopped by Ctrl-C saves one at the
+        step it reached and its message names the command that continues it.
+    keep_checkpoints : bool
+        Keep ``checkpoints/`` after a completed run.
     extra_callbacks : list, optional
         SB3 callbacks added to the run (e.g. the intermediate evaluations of :mod:`agents.tune`).
-    trained_agent : str or Path, optional
-        Fine-tune: start from this run folder's ``model.zip`` (weights and optimiser state) and its
-        ``vecnormalize.pkl`` instead of a fresh policy (RL Zoo's ``--trained-agent``); the rollout
-        and update settings are this run's hyperparameters. Unpickles, so the folder must be trusted
-        (:func:`agents.numpy_policy.check_trusted`). Not with ``resume``.
-    force : bool
-        Train into ``out`` even if it holds a run or is the shipped agent (:func:`check_out`); the
-        old run's checkpoints are removed first.
+    callback : callable, optional
+        rsl-ppo's per-iteration callback (:func:`agents.rsl.train_rsl`).
     notes : bool
         Say on stderr when ``n_timesteps`` rounds up (False for the many runs of a search or sweep).
 
     Raises
     ------
     KeyboardInterrupt
-        Ctrl-C; its message says where the checkpoint was kept.
+        Ctrl-C; its message says where the checkpoint was kept and the command that continues the run.
     """
-    from flatbody_env.env.registration import task_spec
+    from flatbody_env.physics import validation
 
-    task_spec(env_id)  # ValueError naming env for an id that is not a registered flatbody task
-    out = Path(out) if resume else check_out(out, force=force)  # before the heavy imports: a refusal is immediate
-    from agents.numpy_policy import check_trusted, read_run_config, remember_run
+    validation.integer("threads", threads, low=1, high=validation.MAX_WORKERS)
+    validation.integer("checkpoint_freq", checkpoint_freq, low=0, high=validation.MAX_TIMESTEPS)
+    if config.algo == "rsl-ppo":
+        if extra_callbacks:
+            raise ValueError("extra_callbacks: SB3 callbacks do not run in rsl-ppo (give callback)")
+        from agents.rsl import train_rsl
 
-    ckpt_dir = out / "checkpoints"
+        return train_rsl(
+            config,
+            folder,
+            resume=resume,
+            checkpoint_freq=checkpoint_freq,
+            keep_checkpoints=keep_checkpoints,
+            threads=threads,
+            progress=progress,
+            command=command,
+            force=force,
+            callback=callback,
+        )
+    return _train_sb3(
+        config,
+        folder,
+        resume=resume,
+        checkpoint_freq=checkpoint_freq,
+        keep_checkpoints=keep_checkpoints,
+        threads=threads,
+        progress=progress,
+        command=command,
+        extra_callbacks=extra_callbacks,
+        force=force,
+        notes=notes,
+    )
+
+
+def _train_sb3(
+    config: RunConfig,
+    folder: RunFolder,
+    *,
+    resume: bool,
+    checkpoint_freq: int,
+    keep_checkpoints: bool,
+    threads: int,
+    progress: bool,
+    command: list[str] | None,
+    extra_callbacks: list | None,
+    force: bool,
+    notes: bool,
+) -> TrainResult:
+    from flatbody_env.physics import validation
+
+    validation.requirement(
+        "device",
+        config.device,
+        config.device == "cpu",
+        f"be cpu for {config.algo} (Stable-Baselines3 trains on the CPU here; rsl-ppo on cuda)",
+    )
+    from agents.numpy_policy import check_trusted
+
+    hp, algo = config.hyperparams, config.algo
+    candidates = []
     if resume:  # the checkpoints are pickles: only from one of your runs, or with --trust
-        check_trusted(ckpt_dir, "the checkpoints (pickle-based SB3 files)", where="resume")
-    elif trained_agent is not None:
-        if not (Path(trained_agent) / "model.zip").is_file():
-            raise ValueError(f"trained_agent: {str(trained_agent)[:80]!r} holds no model.zip")
-        check_trusted(trained_agent, "model.zip and vecnormalize.pkl (pickles)", where="trained_agent")
+        check_trusted(folder.checkpoint_dir, "the checkpoints (pickle-based SB3 files)", where="resume")
+        candidates = folder.checkpoints()
+        if not candidates:
+            raise ValueError(f"resume: no checkpoint in {folder.checkpoint_dir}")
+    earlier = folder.previous_wall_time() if resume else 0.0  # the run so far, read up front
+    if not resume and config.trained_agent is not None:
+        if not (Path(config.trained_agent) / "model.zip").is_file():
+            raise ValueError(f"trained_agent: {str(config.trained_agent)[:80]!r} holds no model.zip")
+        check_trusted(config.trained_agent, "model.zip and vecnormalize.pkl (pickles)", where="trained_agent")
 
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    if not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"threads: must be an integer >= 1, got {threads!r}")
     torch.set_num_threads(threads)
-    resumed_from = None
-    previous: dict[str, Any] = {}
-    if resume:
-        candidates = checkpoints(ckpt_dir)
-        if not candidates:
-            raise ValueError(f"resume: no checkpoint in {ckpt_dir}")
-        cfg = read_run_config(out)  # the one reading door (config.yml: bounded, no alias bombs)
-        if not cfg:
-            raise ValueError(f"resume: {str(out)[:80]!r} holds no config.yml (the run's hyperparameters)")
-        if cfg.get("algo") != algo:
-            raise ValueError(f"algo: the run in {out} was trained with {cfg.get('algo')!r}, not {algo!r}")
-        hp = cfg.get("hyperparams")
-        if not isinstance(hp, dict):
-            raise ValueError("config.yml.hyperparams: missing (the run's hyperparameters)")
-        from flatbody_env.physics import validation
-
-        seed = validation.integer("config.yml.seed", cfg.get("seed"), low=0, high=validation.MAX_SEED)
-        if n_timesteps is not None:
-            hp["n_timesteps"] = int(n_timesteps)
-        if (out / "run.json").exists():  # the run so far (its wall time adds up), read through the door up front
-            previous = validation.read_json("run.json", out / "run.json")
-            previous = previous if isinstance(previous, dict) else {}
-    else:
-        hp = apply_overrides(load_hyperparams(algo, env_id, hyperparams_file), overrides or [])
-        if n_timesteps is not None:
-            hp["n_timesteps"] = int(n_timesteps)
-        if n_envs is not None:
-            hp["n_envs"] = int(n_envs)
-    total = int(float(hp["n_timesteps"]))
-    nenv = int(hp.get("n_envs", 1))
-    if total < 1 or nenv < 1:
-        raise ValueError(f"n_timesteps, n_envs: must be >= 1, got {total}, {nenv}")
+    total, nenv, seed = config.n_timesteps, config.n_envs, config.seed
     norm = hp.get("normalize") or None
     if norm is True:
         norm = {"norm_obs": True, "norm_reward": True}
     algo_kwargs = algo_kwargs_of(hp)
     unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
-
-    if force and not resume and ckpt_dir.exists():
-        shutil.rmtree(ckpt_dir)  # an old run's checkpoints would be what a later --resume continues
-    out.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        folder.start(config, force=force)  # config.yml, the first file: the folder is trusted from here on
     env = make_vec_env(
         nenv,
         seed,
@@ -604,27 +529,23 @@ def train(
         float(hp.get("residual_gate", 0.0)),
         float(hp.get("precision_bonus", 0.0)),
         str(hp.get("residual_mode", "additive")),
-        env_id=env_id,
+        env_id=config.env_id,
     )
     cls = _algo_class(algo)
-    start = 0
+    start, resumed_from, state = 0, None, None
     if resume:
-        model, env, start = _resume_from(cls, candidates, env, norm)
+        model, env, start, state = _resume_from(cls, candidates, env, norm)
         resumed_from = start
+    elif config.trained_agent is not None:
+        model, env = _load_trained_agent(cls, Path(config.trained_agent), env, norm, hp, algo_kwargs, seed)
     else:
-        if trained_agent is not None:
-            model, env = _load_trained_agent(cls, Path(trained_agent), env, norm, hp, algo_kwargs, seed)
-            cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp, "trained_agent": str(trained_agent)}
-        else:
-            if norm:
-                env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
-            model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
-            cfg = {"env_id": env_id, "algo": algo, "seed": seed, "hyperparams": hp}
-        atomic_write(out / "config.yml", yaml.safe_dump(cfg, sort_keys=False))
-        remember_run(out)  # the run's first file is in place: its folder is this user's (docs/reliability.md)
-    planned = (
-        start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
-    )  # what SB3 will train
+        if norm:
+            env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
+        noise = action_noise(hp, env.action_space)
+        if noise is not None:
+            algo_kwargs["action_noise"] = noise
+        model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
+    planned = start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
     if planned > total and notes:
         what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
         print(
@@ -632,74 +553,90 @@ def train(
             f"{nenv} x {unit // nenv} = {unit} steps)",
             file=sys.stderr,
         )
-    model.set_logger(_csv_logger(out if not resume else out / f"resumed-{start}"))
+    model.set_logger(folder.progress_logger(f"resumed-{start}" if resume else ""))
 
-    bar = _progress_callback(planned, start, progress)
-    callbacks = [bar, *(extra_callbacks or [])]
-    if checkpoint_freq and checkpoint_freq > 0:
-        callbacks.append(_checkpoint_callback(max(checkpoint_freq // nenv, 1), ckpt_dir, bool(norm), algo))
+    callbacks = [_progress_callback(planned, start, progress), *(extra_callbacks or [])]
+    curriculum = None
+    if config.curriculum is not None:
+        from agents.curriculum import curriculum_callback
+
+        curriculum = curriculum_callback(
+            config.env_id, seed=seed, env_kwargs=config.env_kwargs, **_curriculum_settings(config.curriculum)
+        )
+        if state is not None:
+            curriculum.restore(state)
+        callbacks.append(curriculum)
+    if checkpoint_freq:
+        snapshot = curriculum.state if curriculum is not None else None
+        callbacks.append(_checkpoint_callback(max(checkpoint_freq // nenv, 1), folder, bool(norm), algo, snapshot))
     t0 = time.perf_counter()
-    remaining = max(total - start, 0)
     try:
         try:
             model.learn(
-                total_timesteps=remaining, callback=callbacks, reset_num_timesteps=not resume, progress_bar=False
+                total_timesteps=max(total - start, 0),
+                callback=callbacks,
+                reset_num_timesteps=not resume,
+                progress_bar=False,
             )
         finally:
             model.logger.close()  # progress.csv rewritten with every row (the one writing door)
     except KeyboardInterrupt:
-        bar.close()
+        callbacks[0].close()
         steps = int(model.num_timesteps)
-        if checkpoint_freq and checkpoint_freq > 0 and steps > start:
-            kept = _save_checkpoint(model, env, ckpt_dir, bool(norm), algo)
-            _rotate_checkpoints(ckpt_dir, KEEP_CHECKPOINTS)
-            raise KeyboardInterrupt(
-                f"training stopped at {steps} steps; checkpoint {kept}: "
-                f"flatbody train --algo {algo} --out {out} --resume continues"
-            ) from None
+        if checkpoint_freq and steps > start:
+            writers = _checkpoint_writers(
+                model, env, bool(norm), algo, curriculum.state() if curriculum is not None else None
+            )
+            raise stopped(config, folder, steps, folder.save_checkpoint(steps, writers)) from None
         why = "no step trained yet" if steps <= start else "--checkpoint-freq 0"
-        raise KeyboardInterrupt(f"training stopped at {steps} steps; no checkpoint saved ({why})") from None
+        raise stopped(config, folder, steps, None, why) from None
     wall = time.perf_counter() - t0
 
-    with atomic_path(out / "model.zip") as tmp:  # a killed run leaves the previous model, never half of one
-        model.save(str(tmp))
+    folder.save("model.zip", lambda tmp: model.save(str(tmp)))  # a killed run leaves the previous model
     if norm:
-        with atomic_path(out / "vecnormalize.pkl") as tmp:
-            env.save(str(tmp))
-    import gymnasium
-    import numpy
-    import stable_baselines3
-
-    run = {
-        "command": command if command is not None else [sys.executable, *sys.argv],
-        "command_line": shlex.join(command if command is not None else sys.argv),
-        "git_hash": git_hash(),
-        "env_id": env_id,
-        "algo": algo,
-        "seed": seed,
-        "n_timesteps": int(model.num_timesteps),
-        "n_envs": nenv,
-        "torch_threads": threads,
-        "wall_time_s": round(wall + _wall_time(previous), 1),
-        "resumed_from": resumed_from,
-        "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-        "versions": {
-            "python": platform.python_version(),
-            "numpy": numpy.__version__,
-            "gymnasium": gymnasium.__version__,
-            "stable_baselines3": stable_baselines3.__version__,
-            "torch": torch.__version__,
-        },
-        "cpu_count": os.cpu_count(),
-    }
-    atomic_write(out / "run.json", json.dumps(run, indent=2) + "\n")
-    from agents.numpy_policy import export_policy
-
-    try:
-        export_policy(out)  # policy.npz beside the model: evaluate/demo run it without torch
-    except ValueError as exc:  # a policy the numpy evaluator cannot run: evaluate/demo fall back to SB3
-        print(f"note: no numpy policy exported ({exc}); evaluate and demo will use SB3", file=sys.stderr)
-    if ckpt_dir.exists() and not keep_checkpoints:
-        shutil.rmtree(ckpt_dir)
+        folder.save("vecnormalize.pkl", lambda tmp: env.save(str(tmp)))
+    if curriculum is not None:  # the stages the run went through, beside its settings
+        folder.write_config(config.replace(curriculum={**config.curriculum, "history": curriculum.history}))
+    elif resume:  # the budget it was continued to
+        folder.write_config(config)
+    folder.write_run(
+        config,
+        timesteps=int(model.num_timesteps),
+        wall_time_s=wall + earlier,
+        command=command,
+        resumed_from=resumed_from,
+        threads=threads,
+    )
+    folder.export_policy()  # policy.npz beside the model: evaluate/demo run it without torch
+    folder.finish(keep_checkpoints=keep_checkpoints)
     env.close()
-    return TrainResult(out=out, timesteps=int(model.num_timesteps), wall_time_s=wall, resumed_from=resumed_from)
+    return TrainResult(out=folder.path, timesteps=int(model.num_timesteps), wall_time_s=wall, resumed_from=resumed_from)
+
+
+def _curriculum_settings(curriculum: dict[str, Any]) -> dict[str, Any]:
+    """The keywords of :func:`agents.curriculum.curriculum_callback` from a run's ``curriculum`` (its ``history`` left
+    out: what a run did, not what it is told)."""
+    c = curriculum
+    return {
+        "key": c["key"],
+        "stages": list(c["stages"]),
+        "advance_at": c.get("advance_at", 0.8),
+        "min_steps": c.get("min_stage_steps", 100_000),
+        "max_steps": c.get("max_stage_steps", 500_000),
+        "window": c.get("window", 2),
+        "train_env_kwargs": c.get("train_env_kwargs") or {},
+        "log_std_per_action": c.get("log_std_per_action"),
+    }
+
+
+__all__ = [
+    "ALGOS",
+    "ENV_ID",
+    "action_noise",
+    "algo_kwargs_of",
+    "check_resumed",
+    "make_vec_env",
+    "rollout_steps",
+    "train",
+    "train_config",
+]

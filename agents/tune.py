@@ -37,9 +37,12 @@ from typing import Any
 
 import yaml
 
-from agents.train import ALGOS, ENV_ID, HYPERPARAMS_DIR
+from agents.config import HYPERPARAMS_DIR
+from agents.config import SB3_ALGOS as ALGOS
 from flatbody_env.output import atomic_path
 
+ENV_ID = "FlatBody-v0"
+"""The task a search trains on (the entries of ``<algo>_search.yml``; the prior track's residual agent)."""
 TUNE_EVAL_SEED = 50_000
 """First episode seed of the tuning evaluations (held apart from training and from ``evaluate``)."""
 DEFAULT_STORAGE = "sqlite:///runs/tune/optuna.sqlite3"
@@ -308,7 +311,9 @@ def _evaluate(out: Path, model, episodes: int) -> dict[str, Any]:
         with atomic_path(out / "vecnormalize.pkl") as tmp:
             vn.save(str(tmp))
     agent = Agent(out)
-    return summarize(run_episodes(agent, episodes=episodes, seed=TUNE_EVAL_SEED, env_kwargs=agent.env_kwargs))
+    return summarize(
+        run_episodes(agent, episodes=episodes, seed=TUNE_EVAL_SEED, env_kwargs=agent.env_kwargs, env_id=agent.env_id)
+    )
 
 
 def _pruning_callback(trial, out: Path, every: int, episodes: int):
@@ -358,6 +363,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
         n_envs=cfg.n_envs,
         overrides=[*cfg.overrides, *as_overrides(params)],
         hyperparams_file=cfg.hyperparams_file,
+        env_id=ENV_ID,
         checkpoint_freq=0,
         threads=1,
         progress=False,

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import os
 import platform
+import shlex
 import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -62,4 +64,26 @@ def machine() -> dict[str, Any]:
     }
 
 
-__all__ = ["cpu_name", "git_hash", "machine"]
+def invocation(command: list[str] | None = None) -> dict[str, Any]:
+    """The command that made a result: ``command`` (the argument list, default ``[python, *sys.argv]``) and
+    ``command_line`` (the arguments after the interpreter, shell-quoted: what to type again)."""
+    argv = list(command) if command is not None else [sys.executable, *sys.argv]
+    shown = argv[1:] if command is None else argv
+    return {"command": argv, "command_line": shlex.join(str(a) for a in shown)}
+
+
+def versions(*packages: str) -> dict[str, str]:
+    """The installed version of each of ``packages`` (distribution names; ``"absent"`` when not installed), and
+    Python's; read from the package metadata, nothing imported."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    found = {"python": platform.python_version()}
+    for name in packages:
+        try:
+            found[name] = version(name)
+        except PackageNotFoundError:
+            found[name] = "absent"
+    return found
+
+
+__all__ = ["cpu_name", "git_hash", "invocation", "machine", "versions"]

@@ -2,7 +2,7 @@
 
 Both trainers run one after the other in the same process, each with its default configuration for
 ``FlatBody-v0`` (SB3: the shipped entry of ``agents/hyperparams/ppo.yml``, 32 envs, gSDE; rsl_rl:
-:data:`agents.rsl.DEFAULTS`, the torch vector env), one torch thread, the same training seed. Every
+``FlatBody-v0``'s entry of ``agents/hyperparams/rsl-ppo.yml``, the torch vector env), one torch thread, the same training seed. Every
 ``eval_every`` environment steps (rounded up to whole rollouts/iterations) the current policy, deterministic,
 is evaluated on ``episodes`` held-out episodes (seeds ``eval_seed`` …, apart from training and from
 ``flatbody evaluate``'s) — the time spent evaluating is left out of the wall time. A trainer reaches the goal
@@ -25,6 +25,9 @@ import numpy as np
 from flatbody_env.bench.harness import Report, write_report
 from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
+
+ENV_ID = "FlatBody-v0"
+"""The task both trainers race on (the residual agents of docs/agents.md)."""
 
 TRAINERS = ("sb3-ppo", "rsl-ppo")
 
@@ -124,9 +127,10 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 
     from agents.evaluate import run_episodes
     from agents.heuristic import ResidualAction
-    from agents.train import load_hyperparams, train
+    from agents.config import load_hyperparams
+    from agents.train import train
 
-    hp = load_hyperparams("ppo")
+    hp = load_hyperparams("ppo", ENV_ID)
     base = ResidualAction(
         hp.get("env_kwargs") or {},
         float(hp.get("residual_scale", 1.0)),
@@ -160,7 +164,7 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
                 o = vn.normalize_obs(obs) if vn is not None else obs
                 return base(obs, self.model.predict(o, deterministic=True)[0])
 
-            s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed))
+            s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed, env_id=ENV_ID))
             points.append((int(self.num_timesteps), round(wall, 2), s, d))
             self.done = goal(s, d, points)
             self.spent += time.perf_counter() - t
@@ -170,6 +174,7 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
         train(
             "ppo",
             Path(tmp) / "run",
+            env_id=ENV_ID,
             seed=seed,
             n_timesteps=max_timesteps,
             checkpoint_freq=0,
@@ -184,26 +189,38 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 
 def _rsl_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, eval_seed: int, goal) -> Curve:
     from agents.evaluate import run_episodes
-    from agents.rsl import DEFAULTS, TorchResidual, live_policy, train_rsl
+    from agents.config import load_hyperparams
+    from agents.rsl import TorchResidual, live_policy
+    from agents.train import train
 
-    res = TorchResidual(
-        DEFAULTS["env_kwargs"], float(DEFAULTS["residual_scale"]), str(DEFAULTS["residual_mode"]), "cpu"
-    )
+    hp = load_hyperparams("rsl-ppo", ENV_ID)
+    res = TorchResidual(hp["env_kwargs"], float(hp["residual_scale"]), str(hp["residual_mode"]), "cpu")
     points: list[tuple[int, float, float, float]] = []
     next_at = [eval_every]
 
-    last = -(-max_timesteps // (int(DEFAULTS["n_envs"]) * int(DEFAULTS["num_steps_per_env"])))
+    last = -(-max_timesteps // (int(hp["n_envs"]) * int(hp["num_steps_per_env"])))
 
     def callback(runner, row) -> bool:
         if row["timesteps"] < next_at[0] and row["iteration"] < last:  # the last iteration is always evaluated
             return False
         next_at[0] += eval_every * (1 + max(0, row["timesteps"] - next_at[0]) // eval_every)
-        s, d = _summary(run_episodes(live_policy(runner.alg.actor, res), episodes=episodes, seed=eval_seed))
+        s, d = _summary(
+            run_episodes(live_policy(runner.alg.actor, res), episodes=episodes, seed=eval_seed, env_id=ENV_ID)
+        )
         points.append((int(row["timesteps"]), round(float(row["time_s"]), 2), s, d))
         return goal(s, d, points)
 
     with tempfile.TemporaryDirectory() as tmp:
-        train_rsl(Path(tmp) / "run", seed=seed, n_timesteps=max_timesteps, progress=False, callback=callback)
+        train(
+            "rsl-ppo",
+            Path(tmp) / "run",
+            env_id=ENV_ID,
+            seed=seed,
+            n_timesteps=max_timesteps,
+            checkpoint_freq=0,
+            progress=False,
+            callback=callback,
+        )
     return _curve("rsl-ppo", points, goal)
 
 
@@ -250,7 +267,7 @@ def run(
     if not distance_goal > 0.0:
         raise ValueError(f"distance_goal: must be > 0, got {distance_goal!r}")
 
-    lqr_s, lqr_d = _summary(run_episodes("heuristic", episodes=episodes, seed=eval_seed))
+    lqr_s, lqr_d = _summary(run_episodes("heuristic", episodes=episodes, seed=eval_seed, env_id=ENV_ID))
 
     goal = _Reached(success_goal, distance_goal, lqr_d)
 
@@ -294,7 +311,7 @@ CAPTION = (
     "Each point: the policy at that moment (deterministic) on {episodes} held-out episodes (seeds {eval_seed}…); the wall time\n"
     "leaves the evaluations out. Goal: success ≥ {success:.0%} and mean final distance ≤ {distance:g} (dotted); vertical lines: when\n"
     "each trainer reached it and when it first beat the LQR (below the dashed line). sb3-ppo: the shipped\n"
-    "SB3 configuration (32 envs, gSDE); rsl-ppo: rsl_rl's PPO with agents.rsl.DEFAULTS on the torch vector env. Both: residual\n"
+    "SB3 configuration (32 envs, gSDE); rsl-ppo: rsl_rl's PPO with rsl-ppo.yml's FlatBody-v0 entry on the torch vector env. Both: residual\n"
     "on the LQR (linear-quadratic regulator; dashed: its final distance on the same seeds), one torch thread, same process."
 )
 

@@ -192,9 +192,10 @@ def run(
     docs : path, optional
         A Markdown page whose ``<!-- bench:train -->`` block gets this run's table.
     """
-    from agents.train import apply_overrides, load_hyperparams
+    from agents.config import apply_overrides, check_hyperparams, load_hyperparams
 
-    hp = apply_overrides(load_hyperparams("ppo"), overrides or [])
+    hp = apply_overrides(load_hyperparams("ppo", "FlatBody-v0"), overrides or [])
+    hp = check_hyperparams("ppo", hp, "FlatBody-v0")  # the one validator set: a bad override names its field
     settings = {"FlatBody-v0": hp, "Pendulum-v1": {k: v for k, v in hp.items() if k not in FLATBODY_ONLY}}
     runs: dict[str, list[TrainTiming]] = {env_id: [] for env_id in settings}
 

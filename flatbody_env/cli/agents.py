@@ -1,49 +1,18 @@
-"""Sub-commands of the agents layer: ``train``, ``evaluate``, ``demo`` (the README's main job),
-``export-policy`` (the numpy policy that ``evaluate`` and ``demo`` run without torch).
+"""Sub-commands of the agents layer: ``train`` (SB3's PPO, SAC, TD3 and rsl_rl's PPO on any task; ``--resume``,
+``--config``), ``curriculum`` and ``imitate plan|clone`` (the prior track), ``evaluate``, ``demo`` (the README's main
+job), ``export-policy`` (the numpy policy that ``evaluate`` and ``demo`` run without torch).
 
 Heavy imports (torch, SB3) happen inside the handlers so that ``flatbody --help`` stays fast.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
-from flatbody_env.cli.args import int_at_least, output_dir
+from flatbody_env.cli.args import int_at_least, number, number_list, output_dir, output_file, seed_range
 from flatbody_env.physics import validation
-
-
-def _train_rsl(args) -> int:
-    """``train --algo rsl-ppo``: rsl_rl's PPO on the torch vector env (agents/rsl.py)."""
-    from agents.rsl import ALGO, train_rsl
-
-    if args.study is not None or args.resume or args.hyperparams_file or args.trained_agent:
-        raise ValueError(
-            "--algo rsl-ppo: --study, --resume, --trained-agent and --hyperparams-file are SB3-only (give --hyperparams KEY=VALUE)"
-        )
-    command = (
-        ["flatbody", *sys.argv[1:]]
-        if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
-        else None
-    )
-    out = args.out or f"runs/{ALGO}-{args.env}-seed{args.seed}"
-    result = train_rsl(  # trusts the folder once its first file is written (agents.numpy_policy.remember_run)
-        out,
-        seed=args.seed,
-        n_timesteps=args.n_timesteps,
-        n_envs=args.n_envs,
-        device=args.device,
-        overrides=args.hyperparams or [],
-        env_id=args.env,
-        threads=args.threads,
-        progress=not args.no_progress,
-        command=command,
-        force=args.force,
-        checkpoint_freq=args.checkpoint_freq,
-        keep_checkpoints=args.keep_checkpoints,
-    )
-    print(f"trained {ALGO} for {result.timesteps} steps in {result.wall_time_s:.0f} s; saved in {result.out}")
-    return 0
 
 
 def _trusting(handler):
@@ -61,14 +30,75 @@ def _trusting(handler):
     return run
 
 
-@_trusting
-def _train(args) -> int:
-    if args.algo == "rsl-ppo":
-        return _train_rsl(args)
-    if args.device != "cpu":
-        raise ValueError("--device: only rsl-ppo trains on another device than the CPU")
-    from agents.train import train
+def _command() -> list[str] | None:
+    """The command line of this ``flatbody`` run as it was typed (for run.json), None outside the ``flatbody`` entry."""
+    if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py")):
+        return ["flatbody", *sys.argv[1:]]
+    return None
 
+
+def _refuse_with(flag: str, given, why: str) -> None:
+    validation.requirement(flag, given, not given, f"be left out {why}")
+
+
+def _run_config(args):
+    """(config, folder, resume) of ``flatbody train``: a run to continue (``--resume``), a configuration to train again
+    (``--config``) or a new run; every refusal before anything is written."""
+    from agents.config import SB3_ALGOS, RunConfig, apply_overrides, check_device, check_hyperparams, resolve
+    from agents.runs import RunFolder
+    from agents.train import check_resumed
+
+    check_device(args.device, "--device")  # cuda without a GPU: one line naming --device
+    if args.device != "cpu" and args.algo in SB3_ALGOS:
+        validation.requirement("--device", args.device, False, "be cpu for the SB3 algorithms (rsl-ppo trains on cuda)")
+    if args.resume:
+        for flag, given in (
+            ("--config", args.config),
+            ("--study", args.study),
+            ("--hyperparams-file", args.hyperparams_file),
+            ("--trained-agent", args.trained_agent),
+        ):
+            _refuse_with(flag, given, "with --resume (the run's config.yml holds it)")
+        if args.out is None and (args.algo is None or args.env is None):
+            raise ValueError("--out: required with --resume (the run's folder), or give --algo and --env")
+        folder = RunFolder.existing(args.out or f"runs/{args.algo}-{args.env}-seed0")
+        config = folder.config()
+        check_resumed(config, folder, algo=args.algo, env_id=args.env, flag="--")
+        _same_settings(args, config)
+        if args.device != config.device:
+            validation.requirement("--device", args.device, False, f"be {config.device}, the device the run trains on")
+        if args.n_timesteps is not None:  # a larger budget: continue beyond the planned end
+            hp = {**config.hyperparams, "n_timesteps": args.n_timesteps}
+            config = config.replace(hyperparams=check_hyperparams(config.algo, hp, config.env_id))
+        return config, folder, True
+    if args.config:
+        for flag, given in (("--study", args.study), ("--hyperparams-file", args.hyperparams_file)):
+            _refuse_with(flag, given, "with --config (the configuration holds the hyperparameters)")
+        config = RunConfig.read(args.config, where="--config")
+        if config.imitation is not None:
+            raise ValueError(
+                f"--config: {args.config[:80]!r} is a policy cloned from plans (prior.imitation): "
+                "flatbody imitate clone made it (run.json beside it holds the command)"
+            )
+        for flag, given, recorded in (("--algo", args.algo, config.algo), ("--env", args.env, config.env_id)):
+            validation.requirement(
+                flag, given, given in (None, recorded), f"be {recorded} as in {args.config[:80]} (or left out)"
+            )
+        folder = RunFolder.new(args.out or f"runs/{config.algo}-{config.env_id}-seed{config.seed}", force=args.force)
+        hp = apply_overrides(config.hyperparams, args.hyperparams or [])
+        if args.n_timesteps is not None:
+            hp["n_timesteps"] = args.n_timesteps
+        if args.n_envs is not None:
+            hp["n_envs"] = args.n_envs
+        config = config.replace(
+            seed=config.seed if args.seed is None else args.seed,
+            device=args.device if args.device != "cpu" else config.device,
+            hyperparams=check_hyperparams(config.algo, hp, config.env_id),
+            trained_agent=args.trained_agent or config.trained_agent,
+            source={**config.source, "config": args.config, "overrides": list(args.hyperparams or [])},
+        )
+        check_device(config.device, "--device")
+        return config, folder, False
     if args.study is not None:  # retrain a tuned trial: its hyperparameters become overrides
         from agents.tune import DEFAULT_STORAGE, trial_overrides
 
@@ -81,55 +111,183 @@ def _train(args) -> int:
         args.hyperparams_file = args.hyperparams_file or hp_file
         args.n_envs = args.n_envs or n_envs
     elif args.algo is None:
-        raise ValueError("--algo: required (ppo or sac), or give --study NAME --trial-id K")
-    command = (
-        ["flatbody", *sys.argv[1:]]
-        if sys.argv and sys.argv[0].endswith(("flatbody", "__main__.py", "main.py"))
-        else None
-    )
-    out = args.out or f"runs/{args.algo}-{args.env}-seed{args.seed}"
-    if args.trained_agent is not None and args.resume:
-        raise ValueError("--trained-agent: not with --resume (a resumed run continues its own model)")
-    # train() checks the trust of --resume's checkpoints and --trained-agent's model before it loads a pickle, and
-    # trusts --out once the run's first file is written there (never on a refusal before it)
-    result = train(
+        raise ValueError("--algo: required (ppo, sac, td3 or rsl-ppo), or give --config, --resume or --study")
+    from agents.config import DEFAULT_ENV_ID
+
+    env_id = args.env or DEFAULT_ENV_ID
+    seed = 0 if args.seed is None else args.seed
+    folder = RunFolder.new(args.out or f"runs/{args.algo}-{env_id}-seed{seed}", force=args.force)
+    config = resolve(
         args.algo,
-        out,
-        seed=args.seed,
+        env_id,
+        seed=seed,
         n_timesteps=args.n_timesteps,
         n_envs=args.n_envs,
         overrides=args.hyperparams or [],
         hyperparams_file=args.hyperparams_file,
-        env_id=args.env,
-        resume=args.resume,
+        device=args.device,
+        trained_agent=args.trained_agent,
+    )
+    return config, folder, False
+
+
+def _same_settings(args, config) -> None:
+    """With ``--resume``, a seed, ``--n-envs`` or ``--hyperparams`` may be given only as the run's config.yml has them
+    (the run continues as it began); anything else is refused naming the flag."""
+    from agents.config import apply_overrides, check_hyperparams
+
+    if args.seed is not None:
+        validation.requirement("--seed", args.seed, args.seed == config.seed, f"be {config.seed}, the run's seed")
+    hp = apply_overrides(config.hyperparams, args.hyperparams or [])
+    if args.n_envs is not None:
+        hp["n_envs"] = args.n_envs
+    hp = check_hyperparams(config.algo, {**hp, "n_timesteps": config.n_timesteps}, config.env_id)
+    changed = sorted(k for k in set(hp) | set(config.hyperparams) if hp.get(k) != config.hyperparams.get(k))
+    if changed:
+        flag = "--n-envs" if changed == ["n_envs"] else "--hyperparams"
+        validation.requirement(
+            flag,
+            ", ".join(changed),
+            False,
+            "agree with the run's config.yml with --resume (a resumed run continues as it began; give a new --out)",
+        )
+
+
+@_trusting
+def _train(args) -> int:
+    from agents.train import train_config
+
+    config, folder, resume = _run_config(args)
+    # train_config checks the trust of --resume's checkpoints and --trained-agent's model before it loads a pickle, and
+    # trusts the folder once the run's first file (config.yml) is written there (never on a refusal before it)
+    result = train_config(
+        config,
+        folder,
+        resume=resume,
         checkpoint_freq=args.checkpoint_freq,
         keep_checkpoints=args.keep_checkpoints,
         threads=args.threads,
         progress=not args.no_progress,
-        command=command,
+        command=_command(),
         force=args.force,
-        trained_agent=args.trained_agent,
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
     print(
-        f"trained {args.algo} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; saved in {result.out}"
+        f"trained {config.algo} on {config.env_id} for {result.timesteps} steps in {result.wall_time_s:.0f} s{note}; "
+        f"saved in {result.out}"
     )
-    _export_after_training(result.out)
     return 0
 
 
-def _export_after_training(out) -> None:
-    """Write ``policy.npz`` beside the new model, so that evaluate/demo/record load this run without
-    unpickling anything (docs/reliability.md, Trust model); a policy the numpy evaluator cannot run
-    is reported on stderr and left to SB3."""
-    from agents.numpy_policy import export_policy
+@_trusting
+def _curriculum(args) -> int:
+    """``flatbody curriculum``: ``flatbody train`` of an SB3 algorithm with a curriculum over one task keyword."""
+    from agents.config import check_device, resolve
+    from agents.runs import RunFolder
+    from agents.train import train_config
 
-    try:
-        export_policy(out)
-    except ValueError as exc:
-        sys.stderr.write(
-            f"flatbody train: no policy.npz exported ({' '.join(str(exc).split())[:200]}); evaluate uses Stable-Baselines3\n"
+    check_device(args.device, "--device")
+    if args.device != "cpu":
+        validation.requirement("--device", args.device, False, "be cpu (the curriculum trains SB3 algorithms)")
+    env_id = args.env
+    folder = RunFolder.new(args.out or f"runs/{args.algo}-{env_id}-curriculum-seed{args.seed}", force=args.force)
+    train_kw = {}
+    for item in args.train_env_kwargs:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--train-env-kwargs: expected KEY=VALUE, got {item[:60]!r}")
+        train_kw[key] = validation.parse_yaml(f"--train-env-kwargs.{key[:60]}", text)
+    from agents.evaluate import env_kwargs_for
+    from flatbody_env.env.core import configure
+
+    try:  # the training environments' keywords, checked now (not at the first stage's switch)
+        configure(**env_kwargs_for(env_id, {**train_kw, args.key: args.stages[-1]}))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--train-env-kwargs: {' '.join(str(exc).split())[:200]}") from None
+    curriculum = {
+        "key": args.key,
+        "stages": args.stages,
+        "advance_at": args.advance_at,
+        "min_stage_steps": args.min_stage_steps,
+        "max_stage_steps": args.max_stage_steps,
+        "window": args.window,
+        "train_env_kwargs": train_kw,
+        "log_std_per_action": args.log_std_per_action,
+    }
+    config = resolve(
+        args.algo,
+        env_id,
+        seed=args.seed,
+        n_timesteps=args.n_timesteps,
+        n_envs=args.n_envs,
+        overrides=args.hyperparams or [],
+        trained_agent=args.trained_agent,
+        curriculum=curriculum,
+    )
+    result = train_config(
+        config,
+        folder,
+        checkpoint_freq=args.checkpoint_freq,
+        keep_checkpoints=args.keep_checkpoints,
+        threads=args.threads,
+        progress=not args.no_progress,
+        command=_command(),
+        force=args.force,
+    )
+    stages = (folder.config().curriculum or {}).get("history") or []
+    print(
+        f"trained {config.algo} on {env_id} for {result.timesteps} steps in {result.wall_time_s:.0f} s through "
+        f"{len(stages)} of {len(args.stages)} stages; saved in {result.out}"
+    )
+    return 0
+
+
+@_trusting
+def _imitate(args) -> int:
+    """``flatbody imitate plan|clone`` (agents/imitation.py)."""
+    import numpy as np
+
+    from agents.imitation import Plans, PlanSettings, _residual_agent, clone, plan
+
+    if args.step == "plan":
+        settings = PlanSettings(
+            knots=args.knots,
+            samples=args.samples,
+            iterations=args.iterations,
+            elite=args.elite,
+            init_std=args.init_std,
+            reach=args.reach,
+            chunk=args.chunk,
+            seed=args.seed,
         )
+        lo, hi = args.seeds
+        plans = plan(args.model, range(lo, hi), settings, on_policy=args.on_policy, progress=not args.no_progress)
+        plans.save(args.out)
+        tol = _residual_agent(args.model).residual_action.task.success_tolerance
+        print(
+            f"planned {plans.seeds.size} episodes: {np.mean(plans.final_distance <= tol):.0%} end within {tol:g}; "
+            f"median final distance {np.median(plans.final_distance):.4f}; wrote {args.out}"
+        )
+        return 0
+    plans = Plans.load(args.plans[0])
+    for f in args.plans[1:]:
+        plans = plans + Plans.load(f)
+    res = clone(
+        plans,
+        args.model,
+        args.out,
+        epochs=args.epochs,
+        seed=args.seed,
+        progress=not args.no_progress,
+        force=args.force,
+        command=_command(),
+        plans_files=list(args.plans),
+    )
+    print(
+        f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the "
+        f"tolerance): squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
+    )
+    return 0
 
 
 @_trusting
@@ -167,9 +325,17 @@ def _evaluate_tasks(args) -> int:
         update_docs(args.docs, REFERENCE_DIR)
         print(f"updated the table in {args.docs} from {REFERENCE_DIR}")
         return 0
-    ids = V1_IDS if args.env == "all" else (task_spec(args.env or "FlatBody-v1").env_id,)
-    if args.model is not None and len(ids) > 1:
+    if args.model is not None and args.env == "all":
         raise ValueError("--env: give one task id with MODEL (all evaluates the shipped agents)")
+    trained_on = _trained_on(args.model) if args.model is not None else None
+    if trained_on is not None and args.env not in (None, trained_on):
+        task_spec(args.env)  # an unknown id: that is the error
+        validation.requirement(
+            "--env", args.env, False, f"be {trained_on}, the task {args.model[:80]} was trained on (its config.yml)"
+        )
+    from agents.config import DEFAULT_ENV_ID
+
+    ids = V1_IDS if args.env == "all" else (task_spec(args.env or trained_on or DEFAULT_ENV_ID).env_id,)
     reports = []
     for env_id in ids:
         report = evaluate_task(
@@ -197,6 +363,21 @@ def _evaluate_tasks(args) -> int:
     else:
         print("\n\n".join(format_table(r) for r in reports))
     return 0
+
+
+def _trained_on(model: str) -> str | None:
+    """The task a run folder (or its model.zip) was trained on, as its config.yml says (read without unpickling
+    anything); None when it does not say."""
+    from pathlib import Path
+
+    from agents.numpy_policy import read_run_config
+
+    p = Path(model)
+    folder = p if p.is_dir() else p.parent
+    env_id = read_run_config(folder).get("env_id")
+    if env_id is None and (folder / "model.zip").exists():
+        return "FlatBody-v0"  # the runs of before config.yml named the task trained the default task of the time
+    return env_id
 
 
 @_trusting
@@ -254,25 +435,26 @@ def _lqr_table(args) -> int:
     return 0
 
 
-def register(sub) -> None:
-    from agents.train import ALGOS, ENV_ID
+_TRUST_HELP = (
+    "allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; "
+    "docs/reliability.md)"
+)
 
-    p = sub.add_parser("train", help="train an agent (SB3 PPO or SAC, or rsl_rl's PPO: rsl-ppo) on FlatBody-v0")
+
+def _add_run_arguments(p, *, seed_default) -> None:
+    """The flags every training command shares (train, curriculum): seed, budget, overrides, folder, checkpoints."""
     p.add_argument(
-        "--algo",
-        choices=(*ALGOS, "rsl-ppo"),
-        help="algorithm (required unless --study); rsl-ppo: rsl_rl's PPO on the torch vector env",
-    )
-    p.add_argument("--env", default=ENV_ID, help=f"environment id (default {ENV_ID})")
-    p.add_argument(
-        "--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="random seed (default 0)"
+        "--seed",
+        type=int_at_least("seed", 0, validation.MAX_SEED),
+        default=seed_default,
+        help="training seed (default 0)",
     )
     p.add_argument(
         "--n-timesteps",
         type=int_at_least("n_timesteps", 1, validation.MAX_TIMESTEPS),
         default=None,
         metavar="N",
-        help="total environment steps (default: the YAML's)",
+        help="total environment steps (default: the YAML's; with --resume: a new, larger budget)",
     )
     p.add_argument(
         "--n-envs",
@@ -284,11 +466,11 @@ def register(sub) -> None:
         help="parallel bodies (default: the YAML's)",
     )
     p.add_argument(
-        "--hyperparams", nargs="*", metavar="KEY=VALUE", help="override YAML entries (values parsed as YAML)"
+        "--hyperparams",
+        nargs="*",
+        metavar="KEY=VALUE",
+        help="override YAML entries (values parsed as YAML; dotted keys reach into mappings; checked as the file's)",
     )
-    p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
-    p.add_argument("--out", metavar="DIR", help="output folder (default runs/ALGO-ENV-seedS)")
-    p.add_argument("--resume", action="store_true", help="continue from the newest checkpoint in DIR/checkpoints")
     p.add_argument(
         "--trained-agent",
         metavar="RUN",
@@ -305,7 +487,7 @@ def register(sub) -> None:
         type=int_at_least("checkpoint_freq", 0, validation.MAX_TIMESTEPS),
         default=50_000,
         metavar="N",
-        help="steps between checkpoints (0: none; default 50000)",
+        help="steps between checkpoints, the newest 3 kept (0: none; default 50000)",
     )
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
     p.add_argument(
@@ -314,10 +496,46 @@ def register(sub) -> None:
         default=1,
         help="torch threads (default 1)",
     )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--trust", action="store_true", help=_TRUST_HELP)
+
+
+def register(sub) -> None:
+    from agents.config import ALGOS, DEFAULT_ENV_ID, SB3_ALGOS  # a light module: no torch, no SB3
+
+    p = sub.add_parser(
+        "train",
+        help="train an agent: SB3's PPO, SAC or TD3, or rsl_rl's PPO (rsl-ppo), on any task (default FlatBody-v1)",
+    )
+    p.add_argument(
+        "--algo",
+        choices=ALGOS,
+        help="algorithm (required for a new run; --resume and --config read it); rsl-ppo: rsl_rl's PPO on the torch "
+        "vector env",
+    )
+    p.add_argument(
+        "--env",
+        default=None,
+        metavar="ID",
+        help=f"task id (docs/tasks.md; default {DEFAULT_ENV_ID}; --resume and --config read it from config.yml)",
+    )
+    _add_run_arguments(p, seed_default=None)
+    p.add_argument("--hyperparams-file", metavar="FILE", help="YAML file (default: agents/hyperparams/ALGO.yml)")
+    p.add_argument("--out", metavar="DIR", help="the run folder (default runs/ALGO-ENV-seedS)")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the run in DIR from its newest checkpoint (task, algorithm and hyperparameters from its config.yml)",
+    )
+    p.add_argument(
+        "--config",
+        metavar="FILE",
+        help="train a run's configuration again (a run folder's config.yml): the same algorithm, task, seed, "
+        "hyperparameters and budget",
+    )
     p.add_argument(
         "--device", choices=("cpu", "cuda"), default="cpu", help="torch device of env and policy (rsl-ppo; default cpu)"
     )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
         "--study",
         metavar="NAME",
@@ -335,12 +553,92 @@ def register(sub) -> None:
         metavar="URL",
         help="with --study: journal file or database URL (default sqlite:///runs/tune/optuna.sqlite3, with a heartbeat)",
     )
-    p.add_argument(
-        "--trust",
-        action="store_true",
-        help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
-    )
     p.set_defaults(handler=_train)
+
+    p = sub.add_parser(
+        "curriculum",
+        help="train through a curriculum over one task keyword (the prior track: stages of the keyword's value)",
+    )
+    p.add_argument("--algo", choices=SB3_ALGOS, default="ppo", help="SB3 algorithm (default ppo)")
+    p.add_argument("--env", required=True, metavar="ID", help="task id (docs/tasks.md)")
+    p.add_argument("--out", metavar="DIR", help="the run folder (default runs/ALGO-ENV-curriculum-seedS)")
+    _add_run_arguments(p, seed_default=0)
+    p.add_argument("--device", choices=("cpu",), default="cpu", help=argparse.SUPPRESS)
+    p.add_argument(
+        "--key", default="min_settling_rate", help="the task keyword the stages set (default min_settling_rate)"
+    )
+    p.add_argument(
+        "--stages",
+        required=True,
+        type=number_list("stages", low=-1e6, high=1e6),
+        metavar="V0,V1,...",
+        help="comma-separated values of the keyword, the last the task's own",
+    )
+    p.add_argument(
+        "--advance-at",
+        type=number("advance_at", low=0.0, high=1.0),
+        default=0.8,
+        help="training success rate that ends a stage (default 0.8)",
+    )
+    p.add_argument(
+        "--min-stage-steps", type=int_at_least("min_stage_steps", 0, validation.MAX_TIMESTEPS), default=100_000
+    )
+    p.add_argument(
+        "--max-stage-steps", type=int_at_least("max_stage_steps", 1, validation.MAX_TIMESTEPS), default=500_000
+    )
+    p.add_argument(
+        "--window",
+        type=int_at_least("window", 1, 10_000),
+        default=2,
+        help="rollouts whose finished episodes decide the success rate",
+    )
+    p.add_argument(
+        "--train-env-kwargs",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="task keywords of the training environments only (reward shaping, e.g. w_tumble=0); "
+        "the model is evaluated on the task's own",
+    )
+    p.add_argument(
+        "--log-std-per-action",
+        type=number_list("log_std_per_action", low=-20.0, high=2.0, max_items=16),
+        default=None,
+        metavar="L0,L1,...",
+        help="initial log std of each action component (overrides policy_kwargs.log_std_init per component)",
+    )
+    p.set_defaults(handler=_curriculum)
+
+    p = sub.add_parser("imitate", help="plan, then imitate: cross-entropy plans cloned into a residual agent's policy")
+    steps = p.add_subparsers(dest="step", metavar="STEP", required=True, parser_class=type(p))
+    q = steps.add_parser("plan", help="cross-entropy plans for seeded episodes of an additive residual agent's task")
+    q.add_argument("--model", required=True, help="run folder of an additive residual agent (its task and residual)")
+    q.add_argument("--seeds", required=True, type=seed_range("seeds"), help="LO:HI, training seeds (HI excluded)")
+    q.add_argument("--out", required=True, type=output_file("out", (".npz",)), help="plans file (.npz)")
+    for name, low, high, default in (
+        ("knots", 1, 400, 16),
+        ("samples", 2, 4096, 64),
+        ("iterations", 1, 10_000, 40),
+        ("elite", 1, 4096, 8),
+        ("chunk", 1, 4096, 32),
+    ):
+        q.add_argument(f"--{name}", type=int_at_least(name, low, high), default=default, help=f"(default {default})")
+    q.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of the draws")
+    q.add_argument("--init-std", type=number("init_std", low=0.0, high=10.0), default=0.5)
+    q.add_argument("--reach", type=number("reach", low=0.0, high=10.0), default=0.02)
+    q.add_argument("--on-policy", action="store_true", help="plan corrections of the run's own policy (a second round)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.add_argument("--trust", action="store_true", help=_TRUST_HELP)
+    q = steps.add_parser("clone", help="fit a PPO run's policy to the successful plans: a new run folder")
+    q.add_argument("--plans", required=True, nargs="+", help="plans files (joined)")
+    q.add_argument("--model", required=True, help="the PPO run folder to start from")
+    q.add_argument("--out", required=True, help="the new run folder")
+    q.add_argument("--epochs", type=int_at_least("epochs", 1, 10_000), default=20)
+    q.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of the fit")
+    q.add_argument("--force", action="store_true", help="write into DIR even if it holds a run (overwrites it)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
+    q.add_argument("--trust", action="store_true", help=_TRUST_HELP)
+    p.set_defaults(handler=_imitate)
 
     p = sub.add_parser(
         "evaluate", help="evaluate an agent and the baselines (zero, random, heuristic) over seeded episodes"
@@ -366,7 +664,12 @@ def register(sub) -> None:
     )
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--out", metavar="FILE", help="also write the JSON report here")
+    p.add_argument(
+        "--out",
+        type=output_file("out"),
+        metavar="FILE",
+        help="also write the JSON report here (checked before evaluating)",
+    )
     p.add_argument(
         "--backend",
         choices=("auto", "numpy", "sb3"),
@@ -381,7 +684,8 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--out-dir",
-        default="",
+        type=output_dir("out_dir"),
+        default=None,
         metavar="DIR",
         help="with --env: save each task's report as DIR/ID.json (the reference table)",
     )

@@ -109,6 +109,38 @@ def float_range(name: str, *, low: float = 0.0, high: float = validation.STRETCH
     return parse
 
 
+def number_list(name: str, *, low: float, high: float, max_items: int = 1000):
+    """argparse type: comma-separated finite numbers in [low, high], at least one and at most ``max_items``."""
+    spec = validation.Field(kind="numbers", low=low, high=high, max_items=max_items)
+
+    def parse(text: str) -> list[float]:
+        parts = [x.strip() for x in text.split(",")]
+        try:
+            return validation.field(name, [_float(name, x) if x else x for x in parts], spec)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    return parse
+
+
+def seed_range(name: str = "seeds", most: int = 100_000):
+    """argparse type: ``LO:HI``, the seeds LO … HI − 1 (0 ≤ LO < HI ≤ :data:`~flatbody_env.physics.validation.MAX_SEED`,
+    at most ``most`` of them), as ``(LO, HI)``."""
+
+    def parse(text: str) -> tuple[int, int]:
+        try:
+            lo, hi = (int(v) for v in text.split(":"))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name}: expected LO:HI (integers), got {text[:60]!r}") from None
+        if not 0 <= lo < hi <= validation.MAX_SEED or hi - lo > most:
+            raise argparse.ArgumentTypeError(
+                f"{name}: must be LO:HI with 0 <= LO < HI <= {validation.MAX_SEED}, at most {most} seeds, got {text[:60]!r}"
+            )
+        return lo, hi
+
+    return parse
+
+
 def times_list(text: str) -> list[float]:
     """argparse type of ``--times``: comma-separated finite numbers, at most
     :data:`~flatbody_env.physics.validation.MAX_SAMPLES` of them (range and order are checked by ``simulate``)."""

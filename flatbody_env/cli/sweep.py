@@ -196,7 +196,7 @@ def _family(args) -> int:
 
 
 def _seeds(args) -> int:
-    from agents.train import load_hyperparams
+    from agents.config import load_hyperparams
     from flatbody_env.sweep.tasks import parse_seeds
 
     load_hyperparams(args.algo, path=args.hyperparams_file)  # ValueError naming the file
@@ -493,7 +493,7 @@ def register(sub) -> None:
     _engine_arguments(p)
     p.set_defaults(handler=_family)
 
-    from agents.train import ALGOS
+    from agents.config import SB3_ALGOS as ALGOS
 
     p = kinds.add_parser("seeds", help="train and evaluate one configuration over many seeds (one task per seed)")
     p.add_argument("--algo", required=True, choices=ALGOS, help="algorithm")

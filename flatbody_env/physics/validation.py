@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -107,6 +108,10 @@ SWEEP_GRID_RANGE = (4, 20_000)
 """Grid points per axis of ``flatbody sweep stability-map`` (:data:`flatbody_env.sweep.tasks.MAX_GRID`; rows are stored in chunks)."""
 MAP_GRID_RANGE = (SWEEP_GRID_RANGE[0], 400)
 """Grid points per axis of the serial ``flatbody stability-map`` (one process; larger maps: ``flatbody sweep stability-map``)."""
+MAX_TRAINER_BYTES = 2 * 1024**3
+"""Most memory a training run's own buffers may be predicted to take (a rollout or replay buffer, the networks with
+their gradients, target copies and optimiser state), checked from its hyperparameters before any is allocated
+(:func:`memory`)."""
 
 
 def count(where: str, value: Any, *, low: int = 1, high: int = MAX_COUNT) -> int:
@@ -216,6 +221,213 @@ def boolean(where: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{where}: must be true or false, got {_short(value)}")
     return bool(value)
+
+
+FIELD_KINDS = (
+    "integer",
+    "number",
+    "boolean",
+    "choice",
+    "string",
+    "integers",
+    "numbers",
+    "layers",
+    "list",
+    "mapping",
+    "switch",
+    "frequency",
+)
+"""What a :class:`Field` accepts (:func:`field`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Field:
+    """How one field of a mapping is checked (:func:`field`, :func:`fields`): the one description of a
+    hyperparameter, read the same way from a YAML file, a ``--hyperparams KEY=VALUE`` flag or a run's ``config.yml``.
+
+    Attributes
+    ----------
+    kind : str
+        :data:`FIELD_KINDS`: ``integer`` (an int; an integral float or a numeric string such as YAML 1.1's ``1e5``
+        too), ``number`` (a finite number; a numeric string such as ``3e-4`` too), ``boolean`` (true or false only),
+        ``choice`` (one of ``choices``), ``string``, ``integers`` (a non-empty list of integers), ``numbers`` (a
+        non-empty list of finite numbers), ``layers`` (a non-empty list of integers, or a mapping of ``choices`` to
+        such lists), ``list`` (a list of at most ``max_items`` of anything: information, never used), ``mapping`` (checked by ``fields``
+        when given), ``switch`` (true, false or a mapping checked by ``fields``), ``frequency`` (an integer, or
+        ``[integer, unit]`` with the unit one of ``choices``).
+    low, high : float, optional
+        The allowed range of a number or integer (of each item of a list).
+    positive : bool
+        A number must be > 0.
+    choices : tuple
+        ``choice``: the allowed values; ``number``: strings allowed beside a number (e.g. ``"auto"``, and
+        ``"auto_0.1"``: the choice with a number in range after an underscore); ``layers``:
+        the allowed keys of a mapping; ``frequency``: the units.
+    nullable : bool
+        ``null`` (None) is allowed too.
+    max_items : int
+        Most items of a list.
+    fields : Mapping[str, Field], optional
+        The fields of a ``mapping`` or ``switch``.
+    flag : str
+        Not a field of the mapping but a command-line flag (``--seed``): refused naming the flag.
+    """
+
+    kind: str
+    low: float | None = None
+    high: float | None = None
+    positive: bool = False
+    choices: tuple = ()
+    nullable: bool = False
+    max_items: int = 64
+    fields: Mapping[str, Field] | None = None
+    flag: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in FIELD_KINDS:
+            raise ValueError(f"kind: must be one of {', '.join(FIELD_KINDS)}, got {self.kind!r}")
+
+
+def _numeric_text(value: Any) -> Any:
+    """A string that spells a number (YAML 1.1 reads ``3e-4`` and ``1e5`` as strings) as that number; else unchanged."""
+    if isinstance(value, str) and len(value) <= 40:
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def field(where: str, value: Any, spec: Field) -> Any:
+    """``value`` checked against ``spec`` (:class:`Field`) and returned in its plain type (int, float, bool, str,
+    list, dict); ``ValueError`` naming ``where`` and what is allowed."""
+    if value is None:
+        if spec.nullable or spec.flag:
+            return None
+        raise ValueError(f"{where}: must not be null ({_kind_text(spec)})")
+    kind = spec.kind
+    if kind == "integer":
+        v = _numeric_text(value)
+        if isinstance(v, (float, np.floating)) and math.isfinite(v) and float(v).is_integer() and abs(v) < 2**63:
+            v = int(v)
+        return integer(where, v, low=spec.low, high=spec.high)
+    if kind == "number":
+        if isinstance(value, str) and value in spec.choices:
+            return value
+        if isinstance(value, str) and value.partition("_")[0] in spec.choices and "_" in value:
+            head, _, tail = value.partition("_")  # "auto_0.1": the choice, starting from a number (SB3's ent_coef)
+            number(where, _numeric_text(tail), positive=spec.positive, low=spec.low, high=spec.high)
+            return value
+        v = _numeric_text(value)
+        if isinstance(v, str) and spec.choices:
+            raise ValueError(
+                f"{where}: must be one of {', '.join(map(str, spec.choices))} or a number, got {_short(v)}"
+            )
+        return number(where, v, positive=spec.positive, low=spec.low, high=spec.high)
+    if kind == "boolean":
+        return boolean(where, value)
+    if kind == "choice":
+        if isinstance(value, (list, dict)) or value not in spec.choices:
+            allowed = ", ".join("null" if c is None else str(c) for c in spec.choices)
+            raise ValueError(f"{where}: must be one of {allowed}, got {_short(value)}")
+        return value
+    if kind == "string":
+        return string(where, value)
+    if kind == "integers":
+        return _integers(where, value, spec)
+    if kind == "numbers":
+        if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)) or not value:
+            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+        if len(value) > spec.max_items:
+            raise ValueError(f"{where}: must hold at most {spec.max_items} numbers, got {len(value)}")
+        item = Field(kind="number", low=spec.low, high=spec.high)
+        return [field(f"{where}[{i}]", v, item) for i, v in enumerate(value)]
+    if kind == "list":
+        if not isinstance(value, (list, tuple)) or len(value) > spec.max_items:
+            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+        return list(value)
+    if kind == "layers":
+        if isinstance(value, Mapping):
+            keys(where, value, spec.choices)
+            return {str(k): _integers(f"{where}.{k}", v, spec) for k, v in value.items()}
+        return _integers(where, value, spec)
+    if kind == "frequency":
+        if isinstance(value, (list, tuple)):
+            if len(value) != 2 or value[1] not in spec.choices:
+                raise ValueError(
+                    f"{where}: must be an integer or [integer, unit] with the unit one of "
+                    f"{', '.join(spec.choices)}, got {_short(value)}"
+                )
+            return [field(f"{where}[0]", value[0], Field(kind="integer", low=spec.low, high=spec.high)), value[1]]
+        return field(where, value, Field(kind="integer", low=spec.low, high=spec.high))
+    if kind == "switch" and isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+    return fields(where, value, spec.fields) if spec.fields is not None else dict(value)
+
+
+def fields(where: str, values: Mapping[str, Any], specs: Mapping[str, Field]) -> dict[str, Any]:
+    """Every entry of ``values`` checked by its :class:`Field` in ``specs`` (:func:`field`), in order; a key without
+    a field is refused naming it and the allowed keys, a key that is a command-line flag (``Field.flag``) naming the
+    flag. Returns the checked values (``{}`` for an empty mapping)."""
+    mapping(where, values)
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f"{where}.{str(key)[:60]}"
+        spec = specs.get(key) if isinstance(key, str) else None
+        if spec is None:
+            allowed = sorted(k for k, s in specs.items() if not s.flag)
+            raise ValueError(f"{name}: unknown field (allowed: {', '.join(allowed)})")
+        if spec.flag:
+            raise ValueError(f"{name}: not a hyperparameter; give {spec.flag} on the command line")
+        out[key] = field(name, value, spec)
+    return out
+
+
+def requirement(where: str, value: Any, ok: bool, rule: str) -> None:
+    """A check that combines fields (``n_steps × n_envs`` divisible by ``batch_size``, ``batch_size`` ≤ ``buffer_size``):
+    when ``ok`` is false, ``ValueError`` naming ``where`` with ``rule``, what the value must do (e.g. ``"divide
+    n_steps x n_envs = 4096"``)."""
+    if not ok:
+        raise ValueError(f"{where}: must {rule}, got {_short(value)}")
+
+
+def memory(where: str, nbytes: int, what: str, *, limit: int = MAX_TRAINER_BYTES) -> int:
+    """Refuse a predicted allocation of ``nbytes`` above ``limit`` (:data:`MAX_TRAINER_BYTES`): ``ValueError`` naming
+    ``where``, ``what`` would be allocated and both sizes, before anything is allocated. Returns ``nbytes``."""
+    if nbytes > limit:
+        raise ValueError(
+            f"{where}: must keep {what} within {_size_text(limit)}; these settings predict {_size_text(int(nbytes))}"
+        )
+    return int(nbytes)
+
+
+def _integers(where: str, value: Any, spec: Field) -> list[int]:
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)) or not value:
+        raise ValueError(
+            f"{where}: must be a non-empty list of integers{_range_text(False, spec.low, spec.high)}, got {_short(value)}"
+        )
+    if len(value) > spec.max_items:
+        raise ValueError(f"{where}: must hold at most {spec.max_items} integers, got {len(value)}")
+    return [field(f"{where}[{i}]", v, Field(kind="integer", low=spec.low, high=spec.high)) for i, v in enumerate(value)]
+
+
+def _kind_text(spec: Field) -> str:
+    return {
+        "integer": f"an integer{_range_text(False, spec.low, spec.high)}",
+        "number": f"a finite number{_range_text(spec.positive, spec.low, spec.high)}",
+        "boolean": "true or false",
+        "choice": "one of " + ", ".join("null" if c is None else str(c) for c in spec.choices),
+        "string": "a string",
+        "integers": "a non-empty list of integers",
+        "numbers": f"a non-empty list of finite numbers{_range_text(False, spec.low, spec.high)}",
+        "layers": "a non-empty list of integers",
+        "list": f"a list of at most {spec.max_items} items",
+        "mapping": "a mapping",
+        "switch": "true, false or a mapping",
+        "frequency": "an integer",
+    }[spec.kind]
 
 
 def float_array(where: str, value: Any, *, shape: tuple[int | None, ...], finite: bool = True) -> np.ndarray:
@@ -585,6 +797,13 @@ def _size_text(n: int) -> str:
 __all__ = [
     "RESET_MAX_STEPS",
     "WITNESS_MAX_STEPS",
+    "FIELD_KINDS",
+    "Field",
+    "MAX_TRAINER_BYTES",
+    "field",
+    "fields",
+    "memory",
+    "requirement",
     "boolean",
     "interval",
     "ENV_DT_RANGE",

@@ -153,6 +153,7 @@ def seed_case(task: Task) -> dict[str, Any]:
     train(
         p["algo"],
         out,
+        env_id="FlatBody-v0",  # the task of the seeds sweep (its hyperparameters: the YAML's FlatBody-v0 entry)
         seed=seed,
         n_timesteps=p["n_timesteps"],
         n_envs=p["n_envs"],
@@ -166,7 +167,11 @@ def seed_case(task: Task) -> dict[str, Any]:
         command=["flatbody", "sweep", "seeds", f"--algo={p['algo']}", f"--seed={seed}"],
     )
     agent = Agent(out)
-    summary = summarize(run_episodes(agent, episodes=p["episodes"], seed=p["eval_seed"], env_kwargs=agent.env_kwargs))
+    summary = summarize(
+        run_episodes(
+            agent, episodes=p["episodes"], seed=p["eval_seed"], env_kwargs=agent.env_kwargs, env_id=agent.env_id
+        )
+    )
     return {"seed": seed, "model": p["model_name"], **summary}
 
 

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 
 import flatbody_env  # noqa: F401  (registers the tasks)
 from agents.evaluate import MODELS_DIR, Agent
-from agents.imitation import EFFORT_COST, REACH_COST, Plans, PlanSettings, clone, main, plan
+from agents.imitation import EFFORT_COST, REACH_COST, Plans, PlanSettings, clone, plan
+from flatbody_env.cli.main import main as flatbody
 
 SLOW = MODELS_DIR / "ppo-FlatBodySlow-v0"
 SMALL = PlanSettings(samples=8, iterations=4, elite=2, chunk=2, knots=4)
@@ -108,6 +110,15 @@ def test_clone_fits_the_plans_and_writes_a_run_that_loads(tmp_path):
     assert agent.env_id == "FlatBodySlow-v0" and agent.residual_action.mode == "additive"
     with pytest.raises(ValueError, match="out|holds"):
         clone(plans, SLOW, tmp_path / "bc", epochs=1, progress=False)  # an existing run is not overwritten
+    plans.save(tmp_path / "p.npz")  # the command: the one run folder, the plans and the start run as its prior
+    argv = ["imitate", "clone", "--plans", str(tmp_path / "p.npz"), "--model", str(SLOW), "--epochs", "2"]
+    assert flatbody([*argv, "--out", str(tmp_path / "bc-cli"), "--no-progress"]) == 0
+    assert {"config.yml", "run.json", "progress.csv", "model.zip", "vecnormalize.pkl", "policy.npz"} <= {
+        p.name for p in (tmp_path / "bc-cli").iterdir()
+    }
+    prior = yaml.safe_load((tmp_path / "bc-cli" / "config.yml").read_text())["prior"]
+    assert prior["trained_agent"] == str(SLOW) and prior["imitation"]["plans"] == [str(tmp_path / "p.npz")]
+    assert len((tmp_path / "bc-cli" / "progress.csv").read_text().splitlines()) == 3  # header, two epochs
     with pytest.raises(ValueError, match="plans"):
         clone(
             Plans(
@@ -125,8 +136,9 @@ def test_clone_fits_the_plans_and_writes_a_run_that_loads(tmp_path):
 
 def test_command_refuses_bad_input_with_one_line(tmp_path, capsys):
     assert (
-        main(
+        flatbody(
             [
+                "imitate",
                 "plan",
                 "--model",
                 str(MODELS_DIR / "ppo-FlatBodyHoldUnstable-v0"),
@@ -140,11 +152,13 @@ def test_command_refuses_bad_input_with_one_line(tmp_path, capsys):
     )
     assert "additive" in capsys.readouterr().err  # a gain-mode residual agent cannot execute an additive plan
     with pytest.raises(SystemExit):
-        main(["plan", "--model", str(SLOW), "--seeds", "5:2", "--out", str(tmp_path / "p.npz")])
-    assert (
-        main(["plan", "--model", str(SLOW), "--seeds", "0:2", "--samples", "1", "--out", str(tmp_path / "p.npz")]) == 2
-    )
+        flatbody(["imitate", "plan", "--model", str(SLOW), "--seeds", "5:2", "--out", str(tmp_path / "p.npz")])
+    argv = ["imitate", "plan", "--model", str(SLOW), "--seeds", "0:2", "--out", str(tmp_path / "p.npz")]
+    with pytest.raises(SystemExit):  # the shared argument types: one line naming samples
+        flatbody([*argv, "--samples", "1"])
     assert "samples" in capsys.readouterr().err
+    assert flatbody([*argv, "--elite", "100"]) == 2  # more elite plans than samples: the settings' own check
+    assert "elite" in capsys.readouterr().err
 
 
 def test_fine_tuning_starts_from_the_given_run(tmp_path):
@@ -168,7 +182,7 @@ def test_fine_tuning_starts_from_the_given_run(tmp_path):
         trained_agent=tmp_path / "a",
     )
     cfg = yaml.safe_load((tmp_path / "b" / "config.yml").read_text())
-    assert cfg["trained_agent"] == str(tmp_path / "a")
+    assert cfg["prior"]["trained_agent"] == str(tmp_path / "a")
     net = A(tmp_path / "b", backend="sb3").model.policy.mlp_extractor.policy_net
     assert [m.out_features for m in net if hasattr(m, "out_features")] == [8]  # the loaded run's, not the YAML's 64x64
     with pytest.raises(ValueError, match="trained_agent"):
@@ -197,17 +211,17 @@ def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_l
     plans = Plans(env_id="FlatBodySlow-v0", model=str(SLOW), seeds=np.array([0]), final_distance=np.zeros(1),
                   knots=np.zeros((1, 4, 4)))  # fmt: skip
     plans.save(tmp_path / "p.npz")
-    argv = ["clone", "--plans", str(tmp_path / "p.npz"), "--model", str(SLOW), "--epochs", "1", "--out"]
+    argv = ["imitate", "clone", "--plans", str(tmp_path / "p.npz"), "--model", str(SLOW), "--epochs", "1", "--out"]
 
     def full(*args):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     with monkeypatch.context() as m:
         m.setattr(output.os, "write", full)
-        assert main([*argv, str(tmp_path / "bc")]) == 1
+        assert flatbody([*argv, str(tmp_path / "bc"), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
-        f"python -m agents.imitation: cannot write {str(tmp_path / 'bc' / 'config.yml')!r}: No space left on device"
+        f"flatbody: I/O error: cannot write {str(tmp_path / 'bc' / 'config.yml')!r}: No space left on device"
     ]
     assert list((tmp_path / "bc").iterdir()) == [] and not npp.trusted(tmp_path / "bc")
 
@@ -215,7 +229,7 @@ def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_l
     victim.write_bytes(b"unchanged")
     (tmp_path / "bc2").mkdir()
     os.symlink(victim, tmp_path / "bc2" / "vecnormalize.pkl")
-    assert main([*argv, str(tmp_path / "bc2")]) == 1
+    assert flatbody([*argv, str(tmp_path / "bc2"), "--no-progress"]) == 1
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "vecnormalize.pkl" in line and "symbolic link" in line
     assert victim.read_bytes() == b"unchanged"

@@ -14,7 +14,11 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("rsl_rl")
 
 from agents.heuristic import ResidualAction  # noqa: E402
-from agents.rsl import DEFAULTS, HeldGaussianDistribution, RslVecEnv, TorchResidual, export_sb3, runner_config  # noqa: E402
+from agents.config import load_hyperparams  # noqa: E402
+from agents.rsl import HeldGaussianDistribution, RslVecEnv, TorchResidual, export_sb3, runner_config  # noqa: E402
+
+DEFAULTS = load_hyperparams("rsl-ppo", "FlatBody-v0")
+"""The residual agent's settings (rsl-ppo.yml's FlatBody-v0 entry)."""
 from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv  # noqa: E402
 
 
@@ -137,6 +141,8 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
                 "train",
                 "--algo",
                 "rsl-ppo",
+                "--env",
+                "FlatBody-v0",
                 "--num-envs",
                 "8",
                 "--n-timesteps",
@@ -158,13 +164,14 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
     }
     cfg = yaml.safe_load((out / "config.yml").read_text())
     assert (
-        cfg["algo"] == "ppo"
+        cfg["algo"] == "rsl-ppo"
+        and cfg["model_format"] == "ppo"
         and cfg["seed"] == 3
-        and cfg["trainer"]["name"] == "rsl-ppo"
         and cfg["hyperparams"]["residual"] == "heuristic"
+        and cfg["prior"] == {"residual": "heuristic"}
     )
     run = json.loads((out / "run.json").read_text())
-    assert run["algo"] == "rsl-ppo" and run["n_timesteps"] == 128 and run["versions"]["rsl_rl"] == "5.5.1"
+    assert run["algo"] == "rsl-ppo" and run["n_timesteps"] == 128 and run["versions"]["rsl-rl-lib"] == "5.5.1"
     assert len((out / "progress.csv").read_text().splitlines()) == 3
     agent = Agent(out)
     assert agent.backend == "numpy" and agent.residual == "heuristic"
@@ -205,11 +212,13 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
         == 2
     )
     assert main(["train", "--algo", "ppo", "--device", "cuda", "--out", str(tmp_path / "y")]) == 2
+    assert not (tmp_path / "y").exists()
 
 
 def test_callback_stops_the_run_and_the_live_policy_is_the_exported_agent(tmp_path):
     from agents.evaluate import Agent
-    from agents.rsl import live_policy, train_rsl
+    from agents.rsl import live_policy
+    from agents.train import train
 
     obs = _observations(n=6, steps=2)[-1].numpy()
     seen = []
@@ -220,8 +229,10 @@ def test_callback_stops_the_run_and_the_live_policy_is_the_exported_agent(tmp_pa
         seen.append(live(obs))
         return row["iteration"] == 2
 
-    result = train_rsl(
+    result = train(
+        "rsl-ppo",
         tmp_path / "run",
+        env_id="FlatBody-v0",
         seed=1,
         n_timesteps=10_000,
         n_envs=8,
@@ -242,10 +253,10 @@ def test_residual_policy_beats_the_lqr_on_held_out_seeds(tmp_path):
     """rsl_rl's PPO on the LQR residual with the defaults (10^6 steps): every held-out episode succeeds and the mean final
     distance on 20 held-out seeds is below the LQR's (measured: 0.0008 vs 0.0018; seeds 1, 2: 0.0008, 0.0009)."""
     from agents.evaluate import Agent, run_episodes
-    from agents.rsl import train_rsl
+    from agents.train import train
 
     out = tmp_path / "run"
-    train_rsl(out, seed=0, progress=False)
+    train("rsl-ppo", out, env_id="FlatBody-v0", seed=0, progress=False)
     seeds = dict(episodes=20, seed=50_000)
     records = run_episodes(Agent(out), **seeds)
     agent = np.mean([r["final_distance"] for r in records])
@@ -273,6 +284,8 @@ def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_
                 "train",
                 "--algo",
                 "rsl-ppo",
+                "--env",
+                "FlatBody-v0",
                 "--num-envs",
                 "8",
                 "--n-timesteps",
@@ -405,13 +418,13 @@ def test_periodic_checkpoints_are_atomic_and_rotated(tmp_path):
     (loadable without unpickling code: weights_only), and removes them after a completed run unless kept."""
     import torch
 
-    from agents.rsl import train_rsl
+    from agents.train import train
 
-    kw = dict(seed=0, n_timesteps=320, n_envs=8, overrides=["num_steps_per_env=8"], progress=False)
-    train_rsl(tmp_path / "kept", checkpoint_freq=64, keep_checkpoints=True, **kw)
+    kw = dict(env_id="FlatBody-v0", seed=0, n_timesteps=320, n_envs=8, overrides=["num_steps_per_env=8"])
+    train("rsl-ppo", tmp_path / "kept", checkpoint_freq=64, keep_checkpoints=True, progress=False, **kw)
     names = sorted(p.name for p in (tmp_path / "kept" / "checkpoints").iterdir())
     assert names == ["rsl_model_192_steps.pt", "rsl_model_256_steps.pt", "rsl_model_320_steps.pt"]
     state = torch.load(tmp_path / "kept" / "checkpoints" / "rsl_model_256_steps.pt", weights_only=True)
-    assert state["iterations"] == 4 and {"actor", "critic", "optimizer"} <= set(state)
-    train_rsl(tmp_path / "done", checkpoint_freq=64, **kw)
+    assert state["iterations"] == 4 and {"actor", "critic", "optimizer", "learning_rate", "return_rms"} <= set(state)
+    train("rsl-ppo", tmp_path / "done", checkpoint_freq=64, progress=False, **kw)
     assert not (tmp_path / "done" / "checkpoints").exists()

@@ -18,7 +18,7 @@ TASK_AGENTS = sorted(p for p in MODELS_DIR.glob("ppo-*") if p.name != "ppo-FlatB
 
 
 def test_every_task_has_ppo_hyperparameters():
-    from agents.train import load_hyperparams
+    from agents.config import load_hyperparams
 
     for env_id in [i for i in TASK_IDS if i.endswith("-v0")]:  # the v0 ids' residual agents (the prior track)
         hp = load_hyperparams("ppo", env_id)
@@ -26,16 +26,18 @@ def test_every_task_has_ppo_hyperparameters():
 
 
 def test_curriculum_switches_the_training_task_and_keeps_the_registered_one(tmp_path):
-    """agents/curriculum.py: the stages rebuild the training environments with the keyword, the last stage is
-    the task's own, config.yml records the schedule and keeps the task's hyperparameters (what evaluation reads)."""
+    """``flatbody curriculum`` (agents/curriculum.py): the stages rebuild the training environments with the keyword,
+    the last stage is the task's own, config.yml records the schedule as the run's prior and keeps the task's
+    hyperparameters (what evaluation reads)."""
     import yaml
 
-    from agents.curriculum import main
+    from flatbody_env.cli.main import main
 
     out = tmp_path / "run"
     assert (
         main(
             [
+                "curriculum",
                 "--env",
                 "FlatBodySlow-v0",
                 "--out",
@@ -56,13 +58,15 @@ def test_curriculum_switches_the_training_task_and_keeps_the_registered_one(tmp_
                 "n_steps=16",
                 "batch_size=32",
                 "n_epochs=1",
+                "--no-progress",
             ]
         )
         == 0
     )
     cfg = yaml.safe_load((out / "config.yml").read_text())
-    assert [h["value"] for h in cfg["curriculum"]["history"]] == [0.15, 0.0]
-    assert cfg["curriculum"]["train_env_kwargs"] == {"w_tumble": 0}
+    curriculum = cfg["prior"]["curriculum"]
+    assert [h["value"] for h in curriculum["history"]] == [0.15, 0.0]
+    assert curriculum["train_env_kwargs"] == {"w_tumble": 0} and curriculum["log_std_per_action"] == [-1, -1, -3, -3]
     assert cfg["hyperparams"]["env_kwargs"] == {}
     assert "curriculum/value" in (out / "progress.csv").read_text().splitlines()[0]
 

@@ -41,20 +41,19 @@ def _one_error_line(capsys) -> str:
 
 def test_train_refuses_a_folder_holding_a_run_and_the_shipped_agent(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    default = tmp_path / "runs" / "ppo-FlatBody-v0-seed0"  # where two runs without --out would meet
+    default = tmp_path / "runs" / "ppo-FlatBody-v1-seed0"  # where two runs without --out would meet
     default.mkdir(parents=True)
     (default / "model.zip").write_bytes(b"an earlier run")
     # a bad override after the folder: the refusal comes first (and the test never trains for long)
     assert main(["train", "--algo", "ppo", "--hyperparams", "not-an-override"]) == 2
     line = _one_error_line(capsys)
-    assert "runs/ppo-FlatBody-v0-seed0" in line and "--force overwrites" in line
+    assert "runs/ppo-FlatBody-v1-seed0" in line and "--force overwrites" in line
     assert (default / "model.zip").read_bytes() == b"an earlier run"
 
     before = {p.name: p.stat().st_mtime_ns for p in SHIPPED.iterdir()}
     # docs/agents.md's reproducibility command, with the bad override that keeps it from training if it is not refused
-    assert (
-        main(["train", "--algo", "ppo", "--seed", "0", "--out", str(SHIPPED), "--hyperparams", "not-an-override"]) == 2
-    )
+    argv = ["train", "--algo", "ppo", "--env", "FlatBody-v0", "--seed", "0", "--out", str(SHIPPED)]
+    assert main([*argv, "--hyperparams", "not-an-override"]) == 2
     line = _one_error_line(capsys)
     assert str(SHIPPED) in line and "shipped agent" in line and "--force overwrites" in line
     assert {p.name: p.stat().st_mtime_ns for p in SHIPPED.iterdir()} == before
@@ -118,14 +117,14 @@ def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
     assert (
         "Traceback" not in rest
         and last.startswith("flatbody train: interrupted (training stopped at ")
-        and "--resume continues" in last
+        and f"flatbody train --algo ppo --env FlatBody-v1 --out {out} --resume continues" in last
     ), rest
     (kept,) = (out / "checkpoints").glob("rl_model_*_steps.zip")
     steps = int(kept.name.split("_")[2])
     assert steps >= 200 and (out / "checkpoints" / f"rl_model_vecnormalize_{steps}_steps.pkl").exists()
     assert not (out / "model.zip").exists()  # no model of an unfinished run under the final name
-    r = subprocess.run(
-        [*argv, "--resume", "--n-timesteps", str(steps + 128), "--no-progress"],
+    r = subprocess.run(  # the command as printed, with a larger budget
+        [*argv[:3], "train", "--out", str(out), "--resume", "--n-timesteps", str(steps + 128), "--no-progress"],
         cwd=ROOT,
         env=env,
         capture_output=True,
@@ -140,14 +139,14 @@ def test_ctrl_c_keeps_a_checkpoint_that_resume_continues(tmp_path):
 def test_checkpoints_are_atomic_rotated_and_resume_falls_back_past_a_truncated_one(tmp_path, capsys):
     """The checkpoint callback writes each checkpoint through the writing door and keeps the newest three; a newest
     checkpoint truncated by a crash is passed over by --resume with a one-line note (the next good one continues)."""
-    from agents.train import KEEP_CHECKPOINTS, checkpoints
+    from agents.runs import KEEP_CHECKPOINTS, RunFolder
 
     out = tmp_path / "run"
     argv = ["train", *TINY[:-3], "--checkpoint-freq", "128", "--no-progress", "--out", str(out)]
     assert main([*argv, "--n-timesteps", "640", "--keep-checkpoints"]) == 0
-    kept = checkpoints(out / "checkpoints")
-    assert [c[3] for c in kept] == [640, 512, 384][:KEEP_CHECKPOINTS]
-    assert all(c[1] is not None for c in kept)  # each with its VecNormalize statistics
+    kept = RunFolder(path=out).checkpoints()
+    assert [c.steps for c in kept] == [640, 512, 384][:KEEP_CHECKPOINTS]
+    assert all(c.vecnormalize is not None for c in kept)  # each with its VecNormalize statistics
     assert sorted(p.name for p in (out / "checkpoints").iterdir()) == sorted(
         name for s in (384, 512, 640) for name in (f"rl_model_{s}_steps.zip", f"rl_model_vecnormalize_{s}_steps.pkl")
     )  # nothing else: no temporary, no older checkpoint

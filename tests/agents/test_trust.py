@@ -154,28 +154,26 @@ def _loading_paths(d, tmp_path):
             "trained_agent",
             "flatbody",
         ),
-        "imitation plan": (
-            ["plan", "--model", str(d), "--seeds", "0:1", "--out", str(tmp_path / "p.npz")],
+        "imitate plan": (
+            ["imitate", "plan", "--model", str(d), "--seeds", "0:1", "--out", str(tmp_path / "p.npz")],
             "model",
-            "imitation",
+            "flatbody",
         ),
-        "imitation clone": (
-            ["clone", "--plans", str(_plans(tmp_path)), "--model", str(d), "--out", out],
+        "imitate clone": (
+            ["imitate", "clone", "--plans", str(_plans(tmp_path)), "--model", str(d), "--out", out],
             "model",
-            "imitation",
+            "flatbody",
         ),
         "curriculum --trained-agent": (
-            ["--env", "FlatBody-v0", "--out", out, "--stages", "0.1", "--trained-agent", str(d)],
+            ["curriculum", "--env", "FlatBody-v0", "--out", out, "--stages", "0.1", "--trained-agent", str(d)],
             "trained_agent",
-            "curriculum",
+            "flatbody",
         ),
     }
 
 
 def _run(runner, argv):
-    from agents import curriculum, imitation
-
-    return {"flatbody": main, "imitation": imitation.main, "curriculum": curriculum.main}[runner](argv)
+    return {"flatbody": main}[runner](argv)
 
 
 @pytest.mark.parametrize(
@@ -188,8 +186,8 @@ def _run(runner, argv):
         "export-policy",
         "train --resume",
         "train --trained-agent",
-        "imitation plan",
-        "imitation clone",
+        "imitate plan",
+        "imitate clone",
         "curriculum --trained-agent",
     ],
 )
@@ -241,17 +239,18 @@ def test_a_refused_run_trusts_nothing(tmp_path, config_home, monkeypatch, capsys
 
 def test_a_run_is_trusted_once_its_first_file_is_written(tmp_path, config_home, monkeypatch):
     """The run's folder is recorded right after ``config.yml`` is in place (before the training itself)."""
+    from agents import runs as runs_mod
     from agents import train as train_mod
 
     seen = []
-    real = train_mod.atomic_write
+    real = runs_mod.atomic_write
 
     def spy(path, data, **kw):
         out = real(path, data, **kw)
         seen.append((path.name, npp.trusted(path.parent)))
         return out
 
-    monkeypatch.setattr(train_mod, "atomic_write", spy)
+    monkeypatch.setattr(runs_mod, "atomic_write", spy)
     tiny = ["n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=1", "policy_kwargs.net_arch=[8]"]
     train_mod.train("ppo", tmp_path / "run", n_timesteps=32, overrides=tiny, progress=False, checkpoint_freq=0)
     assert seen[0] == ("config.yml", False)  # not trusted before its first file ...

@@ -18,7 +18,7 @@ def test_train_benchmark_monitors_each_stack_once(env_id):
     per-env ``Monitor`` (SB3 warns when both wrap an env, and each step would be counted twice)."""
     import warnings
 
-    from agents.train import load_hyperparams
+    from agents.config import load_hyperparams
 
     hp = {**load_hyperparams("ppo", "FlatBody-v0"), "n_envs": 2, "n_steps": 32, "batch_size": 32}
     if env_id != "FlatBody-v0":

@@ -186,7 +186,8 @@ def test_a_full_disk_removes_the_temporary_and_names_the_file(tmp_path, monkeypa
 def test_a_writer_killed_mid_write_leaves_no_truncated_file_under_the_final_name(tmp_path):
     """A checkpoint whose save dies half-way (an exception inside the writer, as a kill would stop it) leaves neither a
     truncated file under a final name nor a temporary; the model is written last, so a checkpoint is whole or absent."""
-    from agents.train import _save_checkpoint, checkpoints
+    from agents.runs import RunFolder
+    from agents.train import _checkpoint_writers
 
     class Model:
         num_timesteps = 256
@@ -201,10 +202,11 @@ def test_a_writer_killed_mid_write_leaves_no_truncated_file_under_the_final_name
             with open(path, "wb") as fh:
                 fh.write(b"statistics")
 
-    folder = tmp_path / "checkpoints"
+    run = RunFolder(path=tmp_path)
+    folder = run.checkpoint_dir
     with pytest.raises(KeyboardInterrupt):
-        _save_checkpoint(Model(), Env(), folder, True, "ppo")
-    assert checkpoints(folder) == []  # no model under its final name: no checkpoint to resume from
+        run.save_checkpoint(256, _checkpoint_writers(Model(), Env(), True, "ppo", None))
+    assert run.checkpoints() == []  # no model under its final name: no checkpoint to resume from
     assert not any(p.name.startswith(".") for p in folder.iterdir())  # no temporary left
 
 

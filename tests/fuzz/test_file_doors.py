@@ -6,11 +6,9 @@ limit (``hostile.run_case``: a hang is an outcome, not a stuck test)."""
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 import shutil
-import signal
 import sys
 import zipfile
 from pathlib import Path
@@ -189,11 +187,20 @@ DOORS = {
         "csv",
         PLAIN,
     ),
-    "imitation clone --plans": (
+    "imitate clone --plans": (
         _plans_file,
         validation.MAX_JSON_BYTES,
-        lambda t, f: ["clone", "--plans", str(f), "--model", str(shipped_model_dir()), "--out", str(t / "bc")],
-        "imitation",
+        lambda t, f: [
+            "imitate",
+            "clone",
+            "--plans",
+            str(f),
+            "--model",
+            str(shipped_model_dir()),
+            "--out",
+            str(t / "bc"),
+        ],
+        "flatbody",
         "plans",
         NPZ,
     ),
@@ -201,35 +208,8 @@ DOORS = {
 CASES = [(door, kind) for door, spec in DOORS.items() for kind in spec[5]]
 
 
-def _run_module(main, argv: list[str], limit: float) -> dict:
-    """``main(argv)`` of a ``python -m`` module in-process under a time limit, classified as ``hostile.run_case`` does."""
-    err = io.StringIO()
-
-    def alarm(signum, frame):
-        raise TimeoutError
-
-    old = signal.signal(signal.SIGALRM, alarm)
-    signal.setitimer(signal.ITIMER_REAL, limit)
-    outcome, code = "exit", None
-    try:
-        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            code = main(argv)
-    except TimeoutError:
-        outcome = "hang"
-    except BaseException as exc:  # noqa: BLE001 - an exception escaping main is a traceback for the user
-        outcome = "traceback"
-        err.write(f"Traceback: {type(exc).__name__}: {exc}"[:500])
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
-    text = err.getvalue()
-    return {"outcome": outcome, "code": code, "err_lines": len(text.strip().splitlines()), "err": text[-300:]}
-
-
 @pytest.mark.parametrize("door, kind", CASES, ids=[f"{d}-{k}" for d, k in CASES])
 def test_every_door_refuses_hostile_files_in_one_line(tmp_path, monkeypatch, door, kind):
-    from agents import imitation
-
     monkeypatch.setenv("FLATBODY_CONFIG_HOME", str(tmp_path / "config"))
     place, cap, argv_of, runner, field, _ = DOORS[door]
     work = tmp_path / "work"
@@ -237,10 +217,8 @@ def test_every_door_refuses_hostile_files_in_one_line(tmp_path, monkeypatch, doo
     path = place(work)
     _plant(path, kind, cap)
     argv = argv_of(work, path)
-    if runner == "flatbody":
-        row = hostile.run_case(argv, limit=LIMIT_S)
-    else:
-        row = _run_module(imitation.main, argv, LIMIT_S)
+    assert runner == "flatbody"
+    row = hostile.run_case(argv, limit=LIMIT_S)
     assert row["outcome"] == "exit" and row["code"] == 2 and row["err_lines"] == 1, row
     assert f"{field}" in row["err"], row
 

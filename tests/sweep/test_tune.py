@@ -37,7 +37,7 @@ def _ok(r):
 
 
 def test_shipped_search_spaces_load_and_name_yaml_keys():
-    from agents.train import apply_overrides, load_hyperparams
+    from agents.config import apply_overrides, load_hyperparams
 
     for algo in ("ppo", "sac"):
         space = load_search_space(algo)

@@ -1,0 +1,59 @@
+"""The default hyperparameters learn (slow): each algorithm's FlatBody-v1 entry, from scratch, trained for a short budget,
+beats the zero policy's mean return on held-out seeds; and a shipped agent's config.yml trains its first steps again bit
+for bit (the progress.csv rows of the shipped run)."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from agents.evaluate import Agent, run_episodes
+from agents.train import train
+
+SMOKE = {
+    "ppo": (204_800, 5.0),
+    "sac": (50_000, 5.0),
+    "td3": (50_000, 5.0),
+    "rsl-ppo": (1_000_000, 20.0),
+}
+"""(budget in environment steps, margin in return) per algorithm. Measured on a loaded 2-core machine (docs/agents.md,
+"From scratch on FlatBody-v1": each run's held-out return against the zero policy's 47.4 on seeds 10000…10099); the
+margins are below the measured gaps, the budgets about 3 min of one core."""
+EPISODES, SEED = 50, 10_000
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", list(SMOKE))
+def test_the_default_hyperparameters_learn_on_flatbody_v1(tmp_path, algo):
+    budget, margin = SMOKE[algo]
+    out = tmp_path / "run"
+    train(algo, out, env_id="FlatBody-v1", n_timesteps=budget, checkpoint_freq=0, progress=False, notes=False)
+    agent = Agent(out)
+    assert agent.residual_action is None  # from scratch: the policy's action is the control
+    learned = np.mean([r["return"] for r in run_episodes(agent, episodes=EPISODES, seed=SEED, env_id="FlatBody-v1")])
+    zero = np.mean([r["return"] for r in run_episodes("zero", episodes=EPISODES, seed=SEED, env_id="FlatBody-v1")])
+    assert learned > zero + margin, (algo, learned, zero)
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        return [{k: v for k, v in row.items() if not k.startswith("time/")} for row in csv.DictReader(fh)]
+
+
+@pytest.mark.slow
+def test_the_shipped_agent_trains_its_first_steps_again_bit_for_bit(tmp_path):
+    """``flatbody train --config agents/models/ppo-FlatBody-v0/config.yml`` for two rollouts: the progress rows (returns,
+    success, the first update's losses, KL, entropy) are the shipped run's, digit for digit."""
+    from agents.numpy_policy import MODELS_DIR
+    from flatbody_env.cli.main import main
+
+    shipped = MODELS_DIR / "ppo-FlatBody-v0"
+    out = tmp_path / "again"
+    argv = ["train", "--config", str(shipped / "config.yml"), "--out", str(out), "--n-timesteps", "25600"]
+    assert main([*argv, "--no-progress", "--checkpoint-freq", "0"]) == 0
+    mine, theirs = _rows(out / "progress.csv"), _rows(shipped / "progress.csv")
+    assert len(mine) == 2
+    for a, b in zip(mine, theirs):
+        assert {k: v for k, v in a.items() if v != ""} == {k: b[k] for k, v in a.items() if v != ""}
