@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from flatbody_env.bench.harness import Report, alternate
-from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
 
 SINGLE = ("FlatBody-v1", "Pendulum-v1", "Acrobot-v1")
@@ -275,29 +274,22 @@ ENV_CAPTION = (
 
 def plot(csv_path: Path, png_path: Path) -> None:
     """Bar chart of env-steps/s from the saved CSV (log scale), with :data:`ENV_CAPTION` under it."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart
 
     rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["name"] for r in rows]
     rates = [float(r["env_steps_per_s"]) for r in rows]
-    colours = ["tab:blue" if "FlatBody" in n else "tab:gray" for n in names]
-    fig, ax = plt.subplots(figsize=(7.4, 3.9))
-    ax.barh(names, rates, color=colours)
-    ax.set_xscale("log")
-    ax.set_xlim(min(rates) / 3, max(rates) * 8)
-    ax.set_xlabel("env-steps per second (higher is better)")
-    for y, r in enumerate(rates):
-        ax.text(r, y, f" {r:,.0f}", va="center", fontsize=8)
-    ax.set_title("flatbody bench env (same run)")
-    bottom = add_caption(fig, ENV_CAPTION, fontsize=7)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    colours = [PALETTE["ours"] if "FlatBody" in n else PALETTE["yardstick"] for n in names]
+    with chart(png_path, size=(7.6, 4.4)) as c:
+        ax = c.ax
+        ax.barh(names, rates, color=colours)
+        ax.set_xscale("log")
+        ax.set_xlim(min(rates) / 3, max(rates) * 8)
+        ax.set_xlabel("env-steps per second (higher is better)")
+        for y, r in enumerate(rates):
+            ax.text(r, y, f" {r:,.0f}", va="center", fontsize=8)
+        ax.set_title("flatbody bench env (same run)")
+        c.caption(ENV_CAPTION, fontsize=7)
 
 
 def markdown(bench: EnvBenchmark) -> str:

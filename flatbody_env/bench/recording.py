@@ -311,39 +311,30 @@ RECORDING_CAPTION = (
 
 def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
     """Draw the chart of a saved ``recording.json`` (never from a fresh run) to ``png_path``."""
-
-    import matplotlib
-
-    from flatbody_env.chart_text import add_caption
-    from flatbody_env.output import save_figure
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flatbody_env.figures import PALETTE, chart
 
     result = validation.read_json("--plot-only", json_path)
     steps = [r["steps"] for r in result["sizes"]]
     med = [r["median_s"] for r in result["sizes"]]
     lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
     hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
-    fig, ax = plt.subplots(figsize=(6, 4.7))
-    ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
-    if result.get("live"):
-        lv = result["live"]
-        ax.plot(
-            [lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})"
-        )
-    ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("steps")
-    ax.set_ylabel("wall time to a finished .rrd [s]")
-    ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    bottom = add_caption(fig, RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    with chart(png_path, size=(6.4, 5.2)) as c:
+        ax = c.ax
+        ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
+        if result.get("live"):
+            lv = result["live"]
+            ax.plot(
+                [lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})"
+            )
+        ax.axhline(result["budget_s"], color=PALETTE["bad"], ls="--", lw=1, label="budget 1 s at 10 000 steps")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("steps")
+        ax.set_ylabel("wall time to a finished .rrd [s]")
+        ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
+        ax.grid(True, which="both", alpha=0.3)
+        c.legend(where="below", ncol=1)
+        c.caption(RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
     return Path(png_path)
 
 

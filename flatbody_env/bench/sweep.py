@@ -37,7 +37,6 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.bench.harness import Report
-from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
 from flatbody_env.provenance import machine
 from flatbody_env.sweep.tasks import Task, execute, plan
@@ -312,99 +311,95 @@ def report(rep: dict[str, Any]) -> Report:
 def plot(json_path: str | Path, png_path: str | Path) -> Path:
     """Two panels: speed-up over workers (measured, simulated, modelled) and time over grid size
     (serial vs clusters; the crossings are the break-even grid sizes)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flatbody_env.figures import chart
 
     rep = validation.read_json("--plot-only", json_path)
     costs = rep["task_costs_s"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    ws = [1, 2, 4, 8, 16, 32, 64, 128]
-    ax1.plot(
-        ws,
-        [rep["serial_s"] / model_time(costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"]) for w in ws],
-        "-",
-        color="0.5",
-        label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)",
-    )
     chunk, big = rep["chunk"], rep["extrapolated"][0]["grid_big"] if rep["extrapolated"] else 1000
     big_costs = [rep["cost_per_point_s"] * chunk * big] * math.ceil(big / chunk)
-    ax1.plot(
-        ws,
-        [
-            sum(big_costs) / model_time(big_costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"])
-            for w in ws
-        ],
-        "--",
-        color="C2",
-        label=f"model, grid {big} ({len(big_costs)} tasks)",
-    )
-    ax1.plot(ws, ws, ":", color="k", lw=0.8, label="ideal")
-    ax1.plot(
-        [x["workers"] for x in rep["local"]],
-        [x["speedup"] for x in rep["local"]],
-        "o",
-        color="C0",
-        label="measured, local processes",
-    )
-    ax1.plot(
-        [rep["simulated"]["workers"]], [rep["simulated"]["speedup"]], "s", color="C1", label="measured, simulated nodes"
-    )
-    ax1.set_xscale("log", base=2)
-    ax1.set_yscale("log", base=2)
-    ax1.set_xlabel("workers")
-    ax1.set_ylabel("speed-up over serial")
-    ax1.set_title("sweep stability-map: speed-up")
-    ax1.legend(fontsize=8)
-    ax1.grid(alpha=0.3)
-    grids = [int(g) for g in (10 ** (x / 20) for x in range(20, 81))]
-    c, o, t0 = rep["cost_per_point_s"], rep["overhead_per_task_s"], rep["connect_s"]
-    ax2.plot(grids, [c * g * g for g in grids], "-", color="k", label="serial")
-    for k, w in enumerate((2, 8, 32, 128)):
-        ax2.plot(
-            grids,
-            [t0 + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), w) for g in grids],
+    c_point, o, t0 = rep["cost_per_point_s"], rep["overhead_per_task_s"], rep["connect_s"]
+    with chart(png_path, size=(11, 5.2), ncols=2) as c:
+        ax1, ax2 = c.axes[0]
+        ws = [1, 2, 4, 8, 16, 32, 64, 128]
+        ax1.plot(
+            ws,
+            [rep["serial_s"] / model_time(costs, w, t0=t0, overhead=o) for w in ws],
             "-",
-            color=f"C{k}",
-            label=f"{w} workers (running cluster)",
+            color="0.5",
+            label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)",
         )
-    local2 = next((x for x in rep["local"] if x["workers"] == 2), None)
-    if local2 is not None:
-        ax2.plot(
-            grids,
-            [
-                local2["startup_s"] + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), 2)
-                for g in grids
-            ],
+        ax1.plot(
+            ws,
+            [sum(big_costs) / model_time(big_costs, w, t0=t0, overhead=o) for w in ws],
             "--",
-            color="C0",
-            label=f"2 local processes (start-up {local2['startup_s']:.1f} s)",
+            color="C2",
+            label=f"model, grid {big} ({len(big_costs)} tasks)",
         )
-    ax2.set_xscale("log")
-    ax2.set_yscale("log")
-    ax2.set_xlabel("grid points per axis")
-    ax2.set_ylabel("wall time (s, model from measured costs)")
-    ax2.set_title(f"overhead {o * 1e3:.1f} ms/task, connect {t0:.2f} s, {c * 1e3:.2f} ms/point")
-    ax2.legend(fontsize=8)
-    ax2.grid(alpha=0.3, which="both")
-    from flatbody_env.chart_text import add_caption
-
-    bottom = add_caption(
-        fig,
-        f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
-        f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
-        "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
-        "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
-        "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
-        "crosses the serial one, the cluster pays off (the break-even grid).",
-    )
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    save_figure(fig, png_path, dpi=110)
-    plt.close(fig)
-    return png_path
+        ax1.plot(ws, ws, ":", color="k", lw=0.8, label="ideal")
+        ax1.plot(
+            [x["workers"] for x in rep["local"]],
+            [x["speedup"] for x in rep["local"]],
+            "o",
+            color="C0",
+            label="measured, local processes",
+        )
+        ax1.plot(
+            [rep["simulated"]["workers"]],
+            [rep["simulated"]["speedup"]],
+            "s",
+            color="C1",
+            label="measured, simulated nodes",
+        )
+        ax1.set_xscale("log", base=2)
+        ax1.set_yscale("log", base=2)
+        ax1.set_xlabel("workers")
+        ax1.set_ylabel("speed-up over serial")
+        ax1.set_title("sweep stability-map: speed-up")
+        ax1.legend(loc="upper left")
+        ax1.grid(alpha=0.3)
+        grids = [int(g) for g in (10 ** (x / 20) for x in range(20, 81))]
+        ax2.plot(grids, [c_point * g * g for g in grids], "-", color="k", label="serial")
+        for k, w in enumerate((2, 8, 32, 128)):
+            ax2.plot(
+                grids,
+                [
+                    t0 + math.ceil(g / chunk) * o + makespan([c_point * chunk * g] * math.ceil(g / chunk), w)
+                    for g in grids
+                ],
+                "-",
+                color=f"C{k}",
+                label=f"{w} workers (running cluster)",
+            )
+        local2 = next((x for x in rep["local"] if x["workers"] == 2), None)
+        if local2 is not None:
+            ax2.plot(
+                grids,
+                [
+                    local2["startup_s"]
+                    + math.ceil(g / chunk) * o
+                    + makespan([c_point * chunk * g] * math.ceil(g / chunk), 2)
+                    for g in grids
+                ],
+                "--",
+                color="C0",
+                label=f"2 local processes (start-up {local2['startup_s']:.1f} s)",
+            )
+        ax2.set_xscale("log")
+        ax2.set_yscale("log")
+        ax2.set_xlabel("grid points per axis")
+        ax2.set_ylabel("wall time (s, model from measured costs)")
+        ax2.set_title(f"overhead {o * 1e3:.1f} ms/task, connect {t0:.2f} s, {c_point * 1e3:.2f} ms/point")
+        ax2.legend(loc="upper left")
+        ax2.grid(alpha=0.3, which="both")
+        c.caption(
+            f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
+            f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
+            "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
+            "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
+            "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
+            "crosses the serial one, the cluster pays off (the break-even grid)."
+        )
+    return Path(png_path)
 
 
 __all__ = ["NAME", "break_even_grid", "describe", "makespan", "measure", "model_time", "plot", "report"]

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from flatbody_env.bench.harness import Report, write_report
-from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
 
 TRAINERS = ("sb3-ppo", "rsl-ppo")
@@ -310,43 +309,38 @@ def load(json_path: str | Path) -> GoalBenchmark:
 
 def plot(json_path: Path, png_path: Path) -> None:
     """Final distance and success against wall time, redrawn from the saved ``time_to_goal.json``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart, fraction_axis
 
     bench = load(json_path)
-    fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
-    for c, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange")):
-        w = [p[1] for p in c.points]
-        ax_d.plot(w, [p[3] for p in c.points], "o-", ms=3, color=colour, label=c.trainer)
-        ax_s.plot(w, [p[2] for p in c.points], "o-", ms=3, color=colour, label=c.trainer)
-    ax_d.axhline(bench.lqr_final_distance, color="k", ls="--", lw=1, label="LQR")
-    ax_d.axhline(bench.distance_goal, color="gray", ls=":", lw=1, label="goal")
-    for c, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange")):
-        for w in (c.goal_s, c.lqr_s):
-            if w is not None:
-                ax_d.axvline(w, color=colour, ls=":", lw=0.8)
-    ax_s.axhline(bench.success_goal, color="gray", ls=":", lw=1)
-    ax_d.set_yscale("log")
-    ax_d.set_xlabel("wall time (s)")
-    ax_s.set_xlabel("wall time (s)")
-    ax_d.set_ylabel("mean final distance")
-    ax_s.set_ylabel("success rate")
-    ax_d.legend(fontsize=8)
-    fig.suptitle("flatbody bench train --to-goal (same run)", fontsize=10)
-    bottom = add_caption(
-        fig,
-        CAPTION.format(
-            episodes=bench.episodes, eval_seed=bench.eval_seed, success=bench.success_goal, distance=bench.distance_goal
-        ),
-        fontsize=7,
-    )
-    fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    with chart(png_path, size=(9.0, 4.9), ncols=2) as c:
+        ax_d, ax_s = c.axes[0]
+        for cv, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange"), strict=True):
+            w = [p[1] for p in cv.points]
+            ax_d.plot(w, [p[3] for p in cv.points], "o-", ms=3, color=colour, label=cv.trainer)
+            ax_s.plot(w, [p[2] for p in cv.points], "o-", ms=3, color=colour)
+        ax_d.axhline(bench.lqr_final_distance, color=PALETTE["reference"], ls="--", lw=1, label="LQR")
+        ax_d.axhline(bench.distance_goal, color=PALETTE["goal"], ls=":", lw=1, label="goal")
+        for cv, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange"), strict=True):
+            for w in (cv.goal_s, cv.lqr_s):
+                if w is not None:
+                    ax_d.axvline(w, color=colour, ls=":", lw=0.8)
+        ax_s.axhline(bench.success_goal, color=PALETTE["goal"], ls=":", lw=1)
+        ax_d.set_yscale("log")
+        ax_d.set_xlabel("wall time (s)")
+        ax_s.set_xlabel("wall time (s)")
+        ax_d.set_ylabel("mean final distance")
+        fraction_axis(ax_s, "success rate")
+        c.legend(where="below", ncol=4)
+        c.title("flatbody bench train --to-goal (same run)")
+        c.caption(
+            CAPTION.format(
+                episodes=bench.episodes,
+                eval_seed=bench.eval_seed,
+                success=bench.success_goal,
+                distance=bench.distance_goal,
+            ),
+            fontsize=7,
+        )
 
 
 def markdown(bench: GoalBenchmark) -> str:

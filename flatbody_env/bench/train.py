@@ -21,7 +21,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from flatbody_env.bench.harness import Report, alternate, best_of, write_report
-from flatbody_env.output import save_figure
 from flatbody_env.physics import validation
 
 FLATBODY_ONLY = ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")
@@ -250,30 +249,23 @@ CAPTION = (
 
 def plot(csv_path: Path, png_path: Path) -> None:
     """Stacked bars (environment vs the rest of PPO) from the saved CSV; legend and caption below the axes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart
 
     rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["env_id"] for r in rows]
     env = [float(r["env_s"]) for r in rows]
-    rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]
-    fig, ax = plt.subplots(figsize=(7.6, 3.9))
-    ax.barh(names, env, color="tab:blue", label="environment (+ LQR)")
-    ax.barh(names, rest, left=env, color="tab:gray", label="PPO (rollout policy, updates)")
-    for y, (e, r) in enumerate(zip(env, rest)):
-        ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
-    ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest)))
-    ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
-    ax.set_title("flatbody bench train (same run)")
-    bottom = add_caption(fig, CAPTION, fontsize=7)
-    fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, bottom))
-    fig.tight_layout(rect=(0, bottom + 0.06, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    rest = [float(r["wall_s"]) - e for r, e in zip(rows, env, strict=True)]
+    with chart(png_path, size=(7.6, 4.4)) as c:
+        ax = c.ax
+        ax.barh(names, env, color=PALETTE["ours"], label="environment (+ LQR)")
+        ax.barh(names, rest, left=env, color=PALETTE["yardstick"], label="PPO (rollout policy, updates)")
+        for y, (e, r) in enumerate(zip(env, rest, strict=True)):
+            ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
+        ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest, strict=True)))
+        ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
+        ax.set_title("flatbody bench train (same run)")
+        c.legend(where="below", ncol=2)
+        c.caption(CAPTION, fontsize=7)
 
 
 def markdown(bench: TrainBenchmark) -> str:

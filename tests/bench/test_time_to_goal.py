@@ -81,7 +81,7 @@ def test_the_committed_chart_explains_itself_and_nothing_overlaps(tmp_path, monk
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from flatbody_env.chart_text import all_text, caption_text, layout_problems
+    from flatbody_env.figures import all_text, caption_text, layout_problems
 
     saved = Path(__file__).resolve().parents[2] / "docs" / "img" / "time_to_goal.json"
     monkeypatch.setattr(plt, "close", lambda *a, **k: None)
