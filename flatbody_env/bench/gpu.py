@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report, best_of
+from flatbody_env.bench.harness import Report, Table, best_of
 from flatbody_env.physics import validation
 from flatbody_env.provenance import cpu_name
 
@@ -253,14 +253,39 @@ def run(
     return {"rows": rows, "settings": settings, "left_out": notes}
 
 
+def tables(result: dict) -> list[Table]:
+    """The rows of a run (the terminal's text), the backends left out under them."""
+    rows = [
+        [
+            "dynamics" if r["what"] == WHAT else "whole env",
+            r.get("env", "") or "—",
+            r["backend"],
+            r["method"],
+            str(r["n"]),
+            f"{r['steps_per_s']:.4g}",
+            r["device_name"],
+        ]
+        for r in result["rows"]
+    ]
+    return [
+        Table(
+            columns=["what", "env", "backend", "method", "N", "body-steps/s", "device"],
+            rows=rows,
+            notes=[f"left out: {note}" for note in result.get("left_out", ())],
+            block=None,
+        )
+    ]
+
+
 def report(result: dict, name: str) -> Report:
-    """``NAME.json`` (``result``), ``NAME.csv`` (the rows) and ``NAME.png`` (drawn from the JSON)."""
+    """``NAME.json`` (``result``), ``NAME.csv`` (the rows), ``NAME.png`` (drawn from the JSON) and the table."""
     return Report(
         name=name,
         record=result,
         header=list(ROW_KEYS),
-        rows=[[r[k] for k in ROW_KEYS] for r in result["rows"]],
+        rows=[[r.get(k, "") for k in ROW_KEYS] for r in result["rows"]],
         chart=plot,
+        tables=tables(result),
     )
 
 
@@ -356,4 +381,5 @@ __all__ = [
     "plot",
     "report",
     "run",
+    "tables",
 ]

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report
+from flatbody_env.bench.harness import Report, Stopwatch, Table
 from flatbody_env.physics import validation
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
@@ -80,19 +80,28 @@ class ServiceBenchmark:
         """Answers other than 200, over all rows."""
         return sum(r.errors for r in self.rows)
 
-    def table(self) -> str:
-        """The rows as a text table, under a line naming the service and the long job's status."""
-        lines = [
-            f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
-            f"status at the end: {self.long_job['status_at_end']}",
-            f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}",
-        ]
-        for r in self.rows:
-            lines.append(
-                f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
-                f"{r.requests_per_s:>9.1f}"
+    def tables(self) -> list[Table]:
+        """The rows (the terminal's text), under a line naming the service and the long job's status."""
+        return [
+            Table(
+                title=f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job "
+                f"{self.long_job['kind']} status at the end: {self.long_job['status_at_end']}",
+                columns=["endpoint", "clients", "requests", "errors", "p50 ms", "p99 ms", "req/s"],
+                rows=[
+                    [
+                        r.endpoint,
+                        str(r.clients),
+                        str(r.requests),
+                        str(r.errors),
+                        f"{r.p50_ms:.2f}",
+                        f"{r.p99_ms:.2f}",
+                        f"{r.requests_per_s:.1f}",
+                    ]
+                    for r in self.rows
+                ],
+                block=None,
             )
-        return "\n".join(lines)
+        ]
 
 
 async def _load(url: str, name: str, clients: int, requests: int, seconds: float) -> LoadRow:
@@ -102,25 +111,24 @@ async def _load(url: str, name: str, clients: int, requests: int, seconds: float
     latencies: list[float] = []
     errors = 0
     issued = 0
-    start = time.perf_counter()
-    deadline = start + seconds
+    run = Stopwatch.started()
 
     async def client() -> None:
         nonlocal issued, errors
         async with httpx.AsyncClient(base_url=url, timeout=120.0) as http:
-            while issued < requests and time.perf_counter() < deadline:
+            while issued < requests and run.seconds < seconds:
                 issued += 1
-                t0 = time.perf_counter()
-                try:
-                    r = await http.request(method, path, json=body)
-                    ok = r.status_code == 200
-                except httpx.HTTPError:
-                    ok = False
-                latencies.append(time.perf_counter() - t0)
+                with Stopwatch() as one:
+                    try:
+                        r = await http.request(method, path, json=body)
+                        ok = r.status_code == 200
+                    except httpx.HTTPError:
+                        ok = False
+                latencies.append(one.seconds)
                 errors += 0 if ok else 1
 
     await asyncio.gather(*(client() for _ in range(clients)))
-    elapsed = time.perf_counter() - start
+    elapsed = run.seconds
     lat = np.array(latencies) * 1e3
     return LoadRow(
         endpoint=name,
@@ -148,11 +156,11 @@ def measure(
     with tempfile.TemporaryDirectory(prefix="flatbody-bench-service-") as data_dir:
         proc, url = start_service(data_dir, workers=workers)
         try:
-            for name, (method, path, body) in ENDPOINTS.items():  # warm every worker process once
+            for method, path, body in ENDPOINTS.values():  # warm every worker process once
                 for _ in range(workers):
                     httpx.request(method, url + path, json=body, timeout=120.0)
             job_id = httpx.post(url + "/jobs", json=LONG_JOB, timeout=30.0).json()["id"]
-            time.sleep(0.5)
+            time.sleep(0.5)  # the worker picks the job up
             status_at_start = httpx.get(f"{url}/jobs/{job_id}", timeout=30.0).json()["status"]
             for name in ENDPOINTS:
                 for c in clients:
@@ -190,6 +198,7 @@ def report(result: ServiceBenchmark) -> Report:
         rows=[[asdict(r)[f] for f in fields] for r in result.rows],
         chart=plot,
         chart_from="json",
+        tables=result.tables(),
     )
 
 

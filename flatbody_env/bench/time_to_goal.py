@@ -16,13 +16,12 @@ same seeds as a line), and the ``<!-- bench:time-to-goal -->`` docs block when a
 from __future__ import annotations
 
 import tempfile
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report, write_report
+from flatbody_env.bench.harness import Report, Stopwatch, Table, write_report
 from flatbody_env.physics import validation
 
 TRAINERS = ("sb3-ppo", "rsl-ppo")
@@ -136,7 +135,7 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 
     class Evaluate(BaseCallback):
         def _on_training_start(self) -> None:
-            self.t0, self.spent, self.next_at, self.done = time.perf_counter(), 0.0, eval_every, False
+            self.clock, self.next_at, self.done = Stopwatch.started(), eval_every, False
 
         def _on_step(self) -> bool:
             return not self.done
@@ -151,18 +150,17 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
                 self._evaluate()
 
         def _evaluate(self) -> None:
-            t = time.perf_counter()
-            wall = t - self.t0 - self.spent
-            vn = self.model.get_vec_normalize_env()
+            wall = self.clock.seconds
+            with self.clock.paused():  # the evaluations are left out of the training's wall time
+                vn = self.model.get_vec_normalize_env()
 
-            def policy(obs):
-                o = vn.normalize_obs(obs) if vn is not None else obs
-                return base(obs, self.model.predict(o, deterministic=True)[0])
+                def policy(obs):
+                    o = vn.normalize_obs(obs) if vn is not None else obs
+                    return base(obs, self.model.predict(o, deterministic=True)[0])
 
-            s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed))
-            points.append((int(self.num_timesteps), round(wall, 2), s, d))
-            self.done = goal(s, d, points)
-            self.spent += time.perf_counter() - t
+                s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed))
+                points.append((int(self.num_timesteps), round(wall, 2), s, d))
+                self.done = goal(s, d, points)
 
     cb = Evaluate()
     with tempfile.TemporaryDirectory() as tmp:
@@ -284,7 +282,7 @@ def report(bench: GoalBenchmark) -> Report:
         ],
         chart=plot,
         chart_from="json",
-        markdown=markdown(bench),
+        tables=tables(bench),
         block="time-to-goal",
     )
 
@@ -343,8 +341,9 @@ def plot(json_path: Path, png_path: Path) -> None:
         )
 
 
-def markdown(bench: GoalBenchmark) -> str:
-    """The docs' table of this run (``flatbody bench train --to-goal --docs docs/agents.md`` writes it there)."""
+def tables(bench: GoalBenchmark) -> list[Table]:
+    """The race of this run (the terminal's text and the docs' ``time-to-goal`` block; ``flatbody bench train --to-goal
+    --docs docs/agents.md`` writes it there)."""
 
     def at(w: float | None, t: int | None) -> str:
         return f"{w:.1f} s ({t} steps)" if w is not None else "not reached"
@@ -358,24 +357,28 @@ def markdown(bench: GoalBenchmark) -> str:
             return "— (not reached by both)"
         return f"**{r:.2f}**" + (f" (goal ≤ {bound}: {'met' if r <= bound else 'missed'})" if bound is not None else "")
 
-    return (
-        "\n".join(
-            [
-                f"| trainer (seed {bench.seed}) | to the goal | to beat the LQR | last evaluation: success / final distance |",
-                "|---|---|---|---|",
-                *(
-                    f"| {c.trainer} | {at(c.goal_s, c.goal_timesteps)} | {at(c.lqr_s, c.lqr_timesteps)} | {last(c)} |"
-                    for c in (bench.sb3, bench.rsl)
-                ),
-                f"| rsl-ppo / sb3-ppo wall time | {ratio(bench.ratio, 0.5)} | {ratio(bench.ratio_lqr, None)} | |",
-                "",
-                f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the LQR: success ≥ "
-                f"{bench.success_goal:.0%} and mean final distance below the LQR's ({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); "
-                f"both on {bench.episodes} held-out episodes (seeds {bench.eval_seed}…).",
-            ]
+    rows = [
+        [c.trainer, at(c.goal_s, c.goal_timesteps), at(c.lqr_s, c.lqr_timesteps), last(c)]
+        for c in (bench.sb3, bench.rsl)
+    ]
+    rows.append(["rsl-ppo / sb3-ppo wall time", ratio(bench.ratio, 0.5), ratio(bench.ratio_lqr, None), ""])
+    return [
+        Table(
+            columns=[
+                f"trainer (seed {bench.seed})",
+                "to the goal",
+                "to beat the LQR",
+                "last evaluation: success / final distance",
+            ],
+            rows=rows,
+            notes=[
+                f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the "
+                f"LQR: success ≥ {bench.success_goal:.0%} and mean final distance below the LQR's "
+                f"({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); both on {bench.episodes} held-out "
+                f"episodes (seeds {bench.eval_seed}…)."
+            ],
         )
-        + "\n"
-    )
+    ]
 
 
-__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "markdown", "plot", "report", "run"]
+__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "plot", "report", "run", "tables"]
