@@ -1,7 +1,7 @@
 """``flatbody bench TARGET``: every benchmark's parser and handler, in one place.
 
 Each target's measurement lives in its module of :mod:`flatbody_env.bench` (``env``, ``gpu``, ``integrators``,
-``recording``, ``service``, ``sweep``, ``train`` and ``train --to-goal``); a handler here runs it,
+``recording``, ``service``, ``sweep``, ``train`` and ``train --to-goal``, ``compare``); a handler here runs it,
 prints its :class:`~flatbody_env.bench.harness.Report`'s tables (the same tables ``--docs`` writes into a page) and
 writes its files (:func:`~flatbody_env.bench.harness.write_report`). ``--plot-only`` redraws a chart (and, with
 ``--docs``, the page's tables) from the saved JSON. Heavy imports happen in the handlers.
@@ -180,6 +180,17 @@ def _train(args) -> int:
     return 0
 
 
+def _compare(args) -> int:
+    from flatbody_env.bench.compare import report, run
+    from flatbody_env.bench.harness import write_report
+
+    result = run(args.rev, figures=args.figures, rounds=args.rounds, progress=True)
+    rep = report(result)
+    _show(rep)
+    _wrote(write_report(rep, args.out_dir))
+    return 0
+
+
 # --------------------------------------------------------------------------------------------- parsers
 def _gpu_methods():
     from flatbody_env.integrators.specs import GPU_METHODS
@@ -191,6 +202,12 @@ def _gpu_backends():
     from flatbody_env.bench.gpu import BACKENDS
 
     return BACKENDS
+
+
+def _compare_figures():
+    from flatbody_env.bench.compare import FIGURES
+
+    return tuple(FIGURES)
 
 
 def _docs(p, block: str) -> None:
@@ -513,6 +530,30 @@ def register(sub) -> None:
         help="--to-goal: held-out episodes per evaluation (seeds 50000...)",
     )
     p.set_defaults(handler=_train)
+
+    p = bsub.add_parser(
+        "compare",
+        help="the core figures (env step, vector step, compiled simulate, recording, PPO iteration) of this tree "
+        "against a git revision checked out beside it, timed in alternation",
+    )
+    p.add_argument("rev", metavar="REV", help="a git revision of this checkout (a commit, branch or tag), e.g. main")
+    p.add_argument(
+        "--rounds",
+        type=int_at_least("rounds", 1, 100),
+        default=5,
+        help="timed rounds; each figure is the best of them (default 5)",
+    )
+    p.add_argument(
+        "--figures",
+        type=name_list("figures", _compare_figures),
+        default=None,
+        metavar="NAME,...",
+        help="only these figures (env-step, vector-step, simulate, recording, ppo; default all)",
+    )
+    p.add_argument(
+        "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write compare.json/.csv/.png"
+    )
+    p.set_defaults(handler=_compare)
 
 
 __all__ = ["INTEGRATORS_OUT", "register"]
