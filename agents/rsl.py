@@ -676,43 +676,33 @@ def plot_curve(
     title: str = "rsl-ppo from scratch (no LQR prior)",
 ) -> None:
     """Success and mean final distance against wall time, drawn from the saved curve ``csv_path`` (:func:`from_scratch_curve`)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
-    from flatbody_env.output import save_figure
+    from flatbody_env.figures import PALETTE, chart, fraction_axis
     from flatbody_env.physics import validation
 
     data = validation.read_csv("csv", csv_path)  # the one reading door
     w = [float(r["wall_s"]) for r in data]
-    fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
-    ax_d.plot(
-        w, [float(r["final_distance"]) for r in data], "o-", ms=3, color="tab:orange", label="rsl-ppo, from scratch"
-    )
-    ax_s.plot(w, [float(r["success"]) for r in data], "o-", ms=3, color="tab:orange")
-    ax_d.axhline(distance_goal, color="gray", ls=":", lw=1, label="goal")
-    ax_s.axhline(success_goal, color="gray", ls=":", lw=1)
-    for ax in (ax_d, ax_s):
-        ax.axvline(budget_s, color="gray", ls=":", lw=1)
-        ax.set_xlabel("wall time (s)")
-    ax_d.set_yscale("log")
-    ax_d.set_ylabel("mean final distance")
-    ax_s.set_ylabel("success rate")
-    ax_s.set_ylim(-0.02, 1.02)
-    ax_d.legend(fontsize=8)
-    fig.suptitle(title, fontsize=10)
-    bottom = add_caption(
-        fig,
-        SCRATCH_CAPTION.format(
-            episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s, note=note
-        ),
-        fontsize=7,
-    )
-    fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    with chart(png_path, size=(9.0, 4.4), ncols=2) as c:
+        ax_d, ax_s = c.axes[0]
+        ax_d.plot(
+            w, [float(r["final_distance"]) for r in data], "o-", ms=3, color="tab:orange", label="rsl-ppo, from scratch"
+        )
+        ax_s.plot(w, [float(r["success"]) for r in data], "o-", ms=3, color="tab:orange")
+        ax_d.axhline(distance_goal, color=PALETTE["goal"], ls=":", lw=1, label="goal (and the time budget)")
+        ax_s.axhline(success_goal, color=PALETTE["goal"], ls=":", lw=1)
+        for ax in (ax_d, ax_s):
+            ax.axvline(budget_s, color=PALETTE["goal"], ls=":", lw=1)
+            ax.set_xlabel("wall time (s)")
+        ax_d.set_yscale("log")
+        ax_d.set_ylabel("mean final distance")
+        fraction_axis(ax_s, "success rate")
+        c.legend(where="below", ncol=2)
+        c.title(title)
+        c.caption(
+            SCRATCH_CAPTION.format(
+                episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s, note=note
+            ),
+            fontsize=7,
+        )
 
 
 __all__ = [

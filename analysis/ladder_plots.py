@@ -12,9 +12,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from analysis.integrator_plots import _plt, _save
 from analysis.ladder import read_csv
-from flatbody_env.chart_text import add_caption
+from flatbody_env.figures import FONTS, PALETTE, chart
 
 RUNG_STYLE = {
     "stationary": ("#2ca02c", "*"),
@@ -70,11 +69,11 @@ def _horizon_panel(ax, rows) -> None:
     ax.margins(x=0.15, y=0.12)
     ax.grid(True, alpha=0.3)
     ax.set_xlabel("horizon t (labels: final-state error)")
-    ax.set_title(f"{rows[0]['scene'].split(' t=')[0]}: cost against horizon", fontsize=9)
+    ax.set_title(f"{rows[0]['scene'].split(' t=')[0]}: cost against horizon", fontsize=FONTS["base"])
 
 
 def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
-    plt = _plt()
+    """``ladder.csv`` + ``ladder_scenes.csv``: one panel per scene (module docstring), the horizon panel last."""
     rows = read_csv(csv_path)
     scenes = {r["scene"]: r for r in read_csv(scenes_csv)}
     horizon = [r for r in rows if " t=" in r["scene"]]
@@ -82,67 +81,70 @@ def plot_ladder(csv_path, scenes_csv, png_path) -> Path:
     names = list(dict.fromkeys(r["scene"] for r in rows))
     ncol = 4
     nrow = math.ceil((len(names) + (1 if horizon else 0)) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.6 * nrow + 0.9), squeeze=False)
-    seen = set()
-    for k, name in enumerate(names):
-        ax = axes[k // ncol, k % ncol]
-        sub = [r for r in rows if r["scene"] == name]
-        chosen = scenes[name]["chosen"] if name in scenes else sub[0]["chosen"]
-        series = [
-            (rung, method)
-            for rung in RUNG_STYLE
-            for method in dict.fromkeys(r["method"] for r in sub if r["rung"] == rung)
-        ]
-        for rung, method in series:
-            pts = [r for r in sub if r["rung"] == rung and r["method"] == method]
-            color, marker = RUNG_STYLE[rung]
-            dashed = method in _DASHED
-            key = _LABELS.get(method, _LABELS[rung])
-            ok = sorted([r for r in pts if r["status"] == "ok" and math.isfinite(r["error"])], key=lambda r: r["error"])
-            if ok:
-                ax.plot(
-                    [max(r["error"], 1e-16) for r in ok],
-                    [r["wall_time"] for r in ok],
-                    marker=marker,
-                    color=color,
-                    lw=3.0 if rung == chosen and not dashed else 1.2,
-                    ms=9 if rung == "stationary" else 5,
-                    label=key if key not in seen else None,
-                    ls=":" if dashed else "-",
-                    mfc="none" if dashed else color,
+    with chart(png_path, size=(4.4 * ncol, 3.6 * nrow + 1.6), nrows=nrow, ncols=ncol) as c:
+        axes = c.axes
+        seen = set()
+        for k, name in enumerate(names):
+            ax = axes[k // ncol, k % ncol]
+            sub = [r for r in rows if r["scene"] == name]
+            chosen = scenes[name]["chosen"] if name in scenes else sub[0]["chosen"]
+            series = [
+                (rung, method)
+                for rung in RUNG_STYLE
+                for method in dict.fromkeys(r["method"] for r in sub if r["rung"] == rung)
+            ]
+            for rung, method in series:
+                pts = [r for r in sub if r["rung"] == rung and r["method"] == method]
+                color, marker = RUNG_STYLE[rung]
+                dashed = method in _DASHED
+                key = _LABELS.get(method, _LABELS[rung])
+                ok = sorted(
+                    [r for r in pts if r["status"] == "ok" and math.isfinite(r["error"])], key=lambda r: r["error"]
                 )
-                seen.add(key)
-            bad = [r for r in pts if r["status"] not in ("ok", "skipped")]
-            if bad:
-                ax.plot([3.0] * len(bad), [r["wall_time"] for r in bad], ls="none", marker="x", color=color, ms=7)
-        floor = scenes.get(name, {}).get("floor", math.nan)
-        if isinstance(floor, float) and math.isfinite(floor) and floor > 0:
-            ax.axvspan(1e-16, floor, color="0.88", zorder=0)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlim(3e-17, 10.0)
-        ax.grid(True, alpha=0.3)
-        title = f"{name}: auto -> {chosen}" if " t=" in name else f"{name} (t = {sub[0]['t_end']:g}): auto -> {chosen}"
-        ax.set_title(title, fontsize=9)
-        if k % ncol == 0:
-            ax.set_ylabel("wall time [s]")
-        if k // ncol == nrow - 1:
-            ax.set_xlabel("final-state error")
-    if horizon:
-        k = len(names)
-        _horizon_panel(axes[k // ncol, k % ncol], horizon)
-        names.append("horizon")
-    for k in range(len(names), nrow * ncol):
-        axes[k // ncol, k % ncol].axis("off")
-    bottom = add_caption(fig, CAPTION, fontsize=8)
-    fig.legend(loc="lower center", ncol=6, fontsize=9, frameon=False, bbox_to_anchor=(0.5, bottom))
-    fig.suptitle(
-        "A ladder of models: error against cost per rung (thick: the rung model='auto' picks; grey: below the "
-        "reference's agreement floor; x at the right: failed)",
-        fontsize=10,
-    )
-    fig.tight_layout(rect=(0, bottom + 0.035, 1, 0.96))
-    return _save(plt, fig, png_path)
+                if ok:
+                    ax.plot(
+                        [max(r["error"], 1e-16) for r in ok],
+                        [r["wall_time"] for r in ok],
+                        marker=marker,
+                        color=color,
+                        lw=3.0 if rung == chosen and not dashed else 1.2,
+                        ms=9 if rung == "stationary" else 5,
+                        label=key if key not in seen else None,
+                        ls=":" if dashed else "-",
+                        mfc="none" if dashed else color,
+                    )
+                    seen.add(key)
+                bad = [r for r in pts if r["status"] not in ("ok", "skipped")]
+                if bad:
+                    ax.plot([3.0] * len(bad), [r["wall_time"] for r in bad], ls="none", marker="x", color=color, ms=7)
+            floor = scenes.get(name, {}).get("floor", math.nan)
+            if isinstance(floor, float) and math.isfinite(floor) and floor > 0:
+                ax.axvspan(1e-16, floor, color=PALETTE["band"], zorder=0)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlim(3e-17, 10.0)
+            ax.grid(True, alpha=0.3)
+            title = (
+                f"{name}: auto -> {chosen}" if " t=" in name else f"{name} (t = {sub[0]['t_end']:g}): auto -> {chosen}"
+            )
+            ax.set_title(title, fontsize=FONTS["base"])
+            if k % ncol == 0:
+                ax.set_ylabel("wall time [s]")
+            if k // ncol == nrow - 1:
+                ax.set_xlabel("final-state error")
+        if horizon:
+            k = len(names)
+            _horizon_panel(axes[k // ncol, k % ncol], horizon)
+            names.append("horizon")
+        for k in range(len(names), nrow * ncol):
+            axes[k // ncol, k % ncol].axis("off")
+        c.legend(where="below", ncol=6, fontsize=FONTS["base"])
+        c.title(
+            "A ladder of models: error against cost per rung (thick: the rung model='auto' picks; grey: below the "
+            "reference's agreement floor; x at the right: failed)"
+        )
+        c.caption(CAPTION, fontsize=8)
+    return Path(png_path)
 
 
 __all__ = ["RUNG_STYLE", "plot_ladder"]

@@ -1,6 +1,6 @@
 """The committed charts (docs/img/*.png), drawn again from their saved tables: each explains its jargon in
 the figure itself (caption or legend), and no text lies under a legend, outside the figure, or outside its
-axes (:func:`flatbody_env.chart_text.layout_problems`, measured with the renderer's window extents)."""
+axes (:func:`flatbody_env.figures.layout_problems`, measured with the renderer's window extents)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from flatbody_env.chart_text import add_caption, all_text, caption_text, layout_problems  # noqa: E402
+from flatbody_env.figures import add_caption, all_text, caption_text, layout_problems  # noqa: E402
 
 IMG = Path(__file__).resolve().parents[1] / "docs" / "img"
 
@@ -90,6 +91,18 @@ def _service(out):
     plot(IMG / "service_benchmark.json", out)
 
 
+def _gpu(out):
+    from flatbody_env.bench.gpu import plot
+
+    plot(IMG / "gpu.json", out)
+
+
+def _time_to_goal(out):
+    from flatbody_env.bench.time_to_goal import plot
+
+    plot(IMG / "time_to_goal.json", out)
+
+
 CHARTS = {
     # chart: (drawing function, phrases its caption or legend must hold: the jargon explained)
     "train_benchmark": (_train, ["LQR", "linear-quadratic regulator", "PPO", "Proximal Policy Optimization"]),
@@ -107,6 +120,8 @@ CHARTS = {
     "recording": (_recording, ["send_columns", "Recorder.append", "error bars"]),
     "scaling": (_scaling, ["makespan", "Simulated nodes", "break-even", "o the scheduler overhead"]),
     "service_benchmark": (_service, ["p50 / p99", "99th percentile", "concurrent clients", "error(s)"]),
+    "gpu": (_gpu, ["Colour: where it ran", "RK4 solid, DOP853 dashed", "dotted", "body-steps/s"]),
+    "time_to_goal": (_time_to_goal, ["linear-quadratic regulator", "Goal: success", "gSDE"]),
 }
 
 
@@ -131,8 +146,16 @@ def drawn(monkeypatch):
         plt.close(fig)
 
 
-# The three charts whose defects users reported run by default; the rest with ``pytest -m slow``.
-DEFAULT_CHARTS = {"train_benchmark", "bench_integrators", "ladder"}
+# The charts whose defects users reported run by default; the rest with ``pytest -m slow``.
+DEFAULT_CHARTS = {
+    "train_benchmark",
+    "bench_integrators",
+    "ladder",
+    "work_precision",
+    "gpu",
+    "time_to_goal",
+    "tasks_success",
+}
 
 
 @pytest.mark.parametrize(
@@ -152,8 +175,7 @@ def test_chart_explains_its_jargon_and_nothing_overlaps(name, drawn, tmp_path):
 def test_bench_integrators_labels_every_x_axis(drawn, tmp_path):
     fig = drawn(_bench, tmp_path / "b.png")
     assert all(ax.get_xlabel() for ax in fig.axes)
-    legend = fig.axes[0].get_legend()
-    assert legend is not None and any("100x" in t.get_text() for t in legend.get_texts())
+    assert any("100x" in t.get_text() for lg in fig.legends for t in lg.get_texts())
 
 
 def test_layout_problems_finds_the_defects():
@@ -173,8 +195,13 @@ def test_layout_problems_finds_the_defects():
         ax.text(0.3, 0.6, "two")
         ax.text(1.0, 1.0, "on a marker", ha="center", va="center")
         fig.text(0.9, 0.5, "outside the figure, far to the right")
+        ax2 = fig.add_axes((0.1, 0.1, 0.3, 0.3), label="second")
+        ax2.plot([0, 1], [0, 1], "-", label="a curve under its legend")
+        ax2.set_title("curve")
+        ax2.legend(loc="center")
         problems = "\n".join(layout_problems(fig))
         for phrase in (
+            "the legend of 'curve' covers data",
             "'under the legend' lies under a legend",
             "'cut by the frame' is cut by its axes' frame",
             "'one' and 'two' overlap",
@@ -310,3 +337,116 @@ def test_bench_service_plot_only_redraws_from_the_table(tmp_path):
     assert main(["bench", "service", "--out-dir", str(tmp_path), "--plot-only"]) == 0
     assert (tmp_path / "service_benchmark.png").stat().st_size > 10_000
     assert main(["bench", "service", "--out-dir", str(tmp_path / "none"), "--plot-only"]) == 2
+
+
+def test_every_chart_draws_through_the_one_figure_helper():
+    """No chart function sets a figure up (``plt.subplots``/``plt.figure``, ``matplotlib.use``, ``tight_layout``,
+    ``savefig``, a caption) on its own: every one draws inside :func:`flatbody_env.figures.chart`."""
+    import ast
+
+    root = Path(__file__).resolve().parents[1]
+    banned = {"subplots", "savefig", "tight_layout", "add_caption", "save_figure", "suptitle"}
+    offenders = []
+    for package in ("flatbody_env", "analysis", "agents"):
+        for path in sorted((root / package).rglob("*.py")):
+            if path.name in ("figures.py", "output.py"):
+                continue
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                name = node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else ""
+                if name in banned or (
+                    isinstance(node, ast.Attribute)
+                    and isinstance(node.value, ast.Name)
+                    and (node.value.id, node.attr) in {("matplotlib", "use"), ("plt", "figure")}
+                ):
+                    offenders.append(f"{path.relative_to(root)}:{node.lineno} {name}")
+    assert not offenders, offenders
+
+
+def test_the_tasks_chart_has_a_panel_per_task_and_its_legend_off_the_data(drawn, tmp_path):
+    """``tasks_success.png``: one panel per task (the tasks told apart by their panel, not by a marker), one legend of
+    the policies outside every axes, success on a 0-100 % axis."""
+    fig = drawn(_tasks, tmp_path / "t.png")
+    axes = [ax for ax in fig.axes if ax.get_visible() and ax.axison]
+    titles = [ax.get_title() for ax in axes]
+    assert len(axes) >= 3 and all(t.startswith("FlatBody") for t in titles), titles
+    assert len({t.split(":")[0] for t in titles}) == len(axes)  # each task on its own panel
+    assert all(ax.get_legend() is None for ax in axes) and len(fig.legends) == 1
+    assert all(max(ax.get_yticks()) <= 1.0 and ax.get_ylim()[1] <= 1.05 for ax in axes)
+    assert layout_problems(fig) == []
+
+
+def test_time_to_goal_success_axis_stops_at_100_percent(drawn, tmp_path):
+    fig = drawn(_time_to_goal, tmp_path / "t.png")
+    success = next(ax for ax in fig.axes if ax.get_ylabel() == "success rate")
+    assert max(success.get_yticks()) == 1.0 and success.get_ylim() == (-0.03, 1.03)
+    assert [t.get_text() for t in success.get_yticklabels()][-1] == "100%"
+
+
+def test_work_precision_lists_the_failed_runs_instead_of_piling_crosses(drawn, tmp_path):
+    from analysis.integrator_plots import failed_runs_text
+    from analysis.work_precision import read_csv
+
+    fig = drawn(_work_precision, tmp_path / "w.png")
+    assert not [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_marker() == "x"]
+    rows = [r for r in read_csv(IMG / "work_precision.csv") if r["scene"] == "close-approach"]
+    failed = {r["method"] for r in rows if r["status"] not in ("ok", "skipped")}
+    listed = failed_runs_text(rows)
+    assert failed and all(f"  {m}, " in listed for m in failed)
+    assert listed in all_text(fig) and "every run reached t_end" in all_text(fig)  # the regular scene: none failed
+
+
+def test_bench_integrators_marks_every_missing_method(drawn, tmp_path):
+    data = json.loads((IMG / "bench_integrators.json").read_text(encoding="utf-8"))
+    fig = drawn(_bench, tmp_path / "b.png")
+    close = fig.axes[1]
+    missing = sum(1 for c in data["close_approach"] for r in c["at_target"] if not r.get("wall_time"))
+    marks = [t.get_text() for t in close.texts if t.get_text().startswith("✗")]
+    assert missing and len(marks) == missing and all("fails" in m or "does not reach" in m for m in marks)
+    rows = len([t for t in close.get_yticklabels() if t.get_text()])
+    assert rows == sum(len(c["at_target"]) for c in data["close_approach"])  # every method has its row
+
+
+def test_gpu_chart_legend_names_every_backend_and_line_style(drawn, tmp_path):
+    data = json.loads((IMG / "gpu.json").read_text(encoding="utf-8"))
+    fig = drawn(_gpu, tmp_path / "g.png")
+    (legend,) = fig.legends
+    labels = [t.get_text() for t in legend.get_texts() if t.get_text()]
+    for backend in {r["backend"] for r in data["rows"]}:
+        assert any(lab.startswith(backend + " (") for lab in labels), labels
+    assert "dynamics alone, RK4" in labels and any(lab.startswith("whole env step") for lab in labels)
+    styles = {(ln.get_linestyle(), ln.get_color()) for ln in fig.axes[0].get_lines()}
+    assert {s for s, _ in styles} == {"-", "--", ":"}
+    lb, fb = legend.get_window_extent(), fig.bbox
+    assert fb.x0 <= lb.x0 and lb.x1 <= fb.x1 and fb.y0 <= lb.y0  # the whole legend inside the figure
+
+
+def test_a_family_over_decades_gets_a_log_axis(drawn, tmp_path):
+    from analysis.families import CSV_COLUMNS
+    from analysis.plots import plot_family
+
+    table = tmp_path / "family.csv"
+    lines = [",".join(CSV_COLUMNS)]
+    for k, j in enumerate(10.0 ** np.linspace(-6, 6, 25)):
+        row = dict.fromkeys(CSV_COLUMNS, "")
+        row.update(branch=0, param_name="J", param=j, s3=1.0, p_theta=0.5, classification="elliptic")
+        row.update({"lambda": 1.0 + 0.01 * k, "mu": 0.9, "max_real_part": 0.0})
+        lines.append(",".join(str(row[c]) for c in CSV_COLUMNS))
+    table.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    fig = drawn(lambda out: plot_family(table, out), tmp_path / "f.png")
+    assert all(ax.get_xscale() == "log" for ax in fig.axes) and "log scale" in fig.axes[1].get_xlabel()
+    assert layout_problems(fig) == []
+
+
+def test_chart_tasks_makes_its_output_folder(tmp_path, capsys):
+    """``flatbody chart --tasks --out NEWDIR`` makes the folder, as every command writing files does."""
+    from flatbody_env.cli.main import main
+
+    out = tmp_path / "new" / "dir"
+    assert main(["chart", "--tasks", "--out", str(out)]) == 0
+    assert (out / "tasks_success.png").stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and ("tasks_ladder.png" in printed)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SystemExit) as refused:  # a file where the folder should be: one line, exit 2
+        main(["chart", "--tasks", "--out", str(tmp_path / "file")])
+    assert refused.value.code == 2 and "out:" in capsys.readouterr().err

@@ -12,19 +12,17 @@ rtol = atol = 1e-13, restarted every step with the same actions). Each rate is t
 timed blocks (:mod:`.harness`). The batched FlatBody figure includes resets: a timed block is one whole
 episode of every body at the registered length plus the step that autoresets them (CartPole's
 random-action episodes end and autoreset within its blocks). :func:`report` gives the JSON, CSV, PNG
-chart and the ``<!-- bench:env -->`` docs block.
+chart and the tables (:func:`tables`: the terminal's text and the ``<!-- bench:env -->`` docs block).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report, alternate
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Stopwatch, Table, alternate
 from flatbody_env.physics import validation
 
 SINGLE = ("FlatBody-v1", "Pendulum-v1", "Acrobot-v1")
@@ -77,16 +75,16 @@ def _time_single(env_ids, steps: int, repeats: int, progress) -> dict[str, tuple
             action = np.zeros_like(action)
 
         def run() -> float:
-            spent = 0.0
-            for _ in range(steps):
-                start = time.perf_counter()
-                _, _, term, trunc, _ = env.step(action)
-                spent += time.perf_counter() - start
-                if term or trunc:
-                    start = time.perf_counter()
-                    env.reset()
-                    resets[env_id].append(time.perf_counter() - start)
-            return spent
+            in_resets = 0.0
+            with Stopwatch() as block_time:
+                for _ in range(steps):
+                    _, _, term, trunc, _ = env.step(action)
+                    if term or trunc:
+                        with Stopwatch() as one:
+                            env.reset()
+                        resets[env_id].append(one.seconds)
+                        in_resets += one.seconds
+            return block_time.seconds - in_resets
 
         return run
 
@@ -95,9 +93,9 @@ def _time_single(env_ids, steps: int, repeats: int, progress) -> dict[str, tuple
     for env_id, env in envs.items():
         if not resets[env_id]:
             for k in range(3):
-                start = time.perf_counter()
-                env.reset(seed=k)
-                resets[env_id].append(time.perf_counter() - start)
+                with Stopwatch() as one:
+                    env.reset(seed=k)
+                resets[env_id].append(one.seconds)
         env.close()
         out[env_id] = (best[env_id] / steps, float(np.median(resets[env_id])))
     return out
@@ -199,12 +197,16 @@ def run(
         bar.set_postfix_str(task)
         if task == "single envs":
             results["single"] = _time_single(
-                SINGLE, steps, repeats, lambda k: bar.set_postfix_str(f"{task} ({k}/{repeats})")
+                SINGLE, steps, repeats, lambda k, task=task: bar.set_postfix_str(f"{task} ({k}/{repeats})")
             )
         elif task == "batched FlatBody vs CartPole":
             rounds = max(2, repeats // 2 + 1)
             results["fb"], results["fbt"], results["cp"], results["threads"] = _time_batched(
-                batch, episode_steps, batch_steps * 10, rounds, lambda k: bar.set_postfix_str(f"{task} ({k}/{rounds})")
+                batch,
+                episode_steps,
+                batch_steps * 10,
+                rounds,
+                lambda k, task=task, rounds=rounds: bar.set_postfix_str(f"{task} ({k}/{rounds})"),
             )
         else:
             results["err"] = episode_error()
@@ -248,8 +250,17 @@ def run(
     )
 
 
+def load(json_path: str | Path) -> EnvBenchmark:
+    """An :class:`EnvBenchmark` from its saved ``env_benchmark.json``."""
+    data = validation.read_json("--plot-only", json_path)
+    fields = set(EnvBenchmark.__dataclass_fields__)
+    rows = {k: [StepRate(**r) for r in data[k]] for k in ("single", "batched")}
+    return EnvBenchmark(**{k: v for k, v in data.items() if k in fields and k not in rows}, **rows)
+
+
 def report(bench: EnvBenchmark) -> Report:
-    """``env_benchmark.json``, ``.csv``, ``.png`` (drawn from the CSV) and the ``<!-- bench:env -->`` block."""
+    """``env_benchmark.json``, ``.csv``, ``.png`` (drawn from the CSV) and the tables (:func:`tables`, the
+    ``<!-- bench:env -->`` block)."""
     return Report(
         name="env_benchmark",
         record=asdict(bench),
@@ -260,7 +271,7 @@ def report(bench: EnvBenchmark) -> Report:
         ],
         chart=plot,
         chart_from="csv",
-        markdown=markdown(bench),
+        tables=tables(bench),
         block="env",
     )
 
@@ -275,54 +286,81 @@ ENV_CAPTION = (
 
 def plot(csv_path: Path, png_path: Path) -> None:
     """Bar chart of env-steps/s from the saved CSV (log scale), with :data:`ENV_CAPTION` under it."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart
 
     rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["name"] for r in rows]
     rates = [float(r["env_steps_per_s"]) for r in rows]
-    colours = ["tab:blue" if "FlatBody" in n else "tab:gray" for n in names]
-    fig, ax = plt.subplots(figsize=(7.4, 3.9))
-    ax.barh(names, rates, color=colours)
-    ax.set_xscale("log")
-    ax.set_xlim(min(rates) / 3, max(rates) * 8)
-    ax.set_xlabel("env-steps per second (higher is better)")
-    for y, r in enumerate(rates):
-        ax.text(r, y, f" {r:,.0f}", va="center", fontsize=8)
-    ax.set_title("flatbody bench env (same run)")
-    bottom = add_caption(fig, ENV_CAPTION, fontsize=7)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    colours = [PALETTE["ours"] if "FlatBody" in n else PALETTE["yardstick"] for n in names]
+    with chart(png_path, size=(7.6, 4.4)) as c:
+        ax = c.ax
+        ax.barh(names, rates, color=colours)
+        ax.set_xscale("log")
+        ax.set_xlim(min(rates) / 3, max(rates) * 8)
+        ax.set_xlabel("env-steps per second (higher is better)")
+        for y, r in enumerate(rates):
+            ax.text(r, y, f" {r:,.0f}", va="center", fontsize=8)
+        ax.set_title("flatbody bench env (same run)")
+        c.caption(ENV_CAPTION, fontsize=7)
 
 
-def markdown(bench: EnvBenchmark) -> str:
-    """The docs' tables of this run (``flatbody bench env --docs docs/env.md`` writes them there)."""
-    rows = ["| what | µs per env step | env-steps/s | ms per reset |", "|---|---|---|---|"]
-    for r in bench.single:
-        rows.append(f"| {r.name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | {r.ms_per_reset:.3g} |")
-    for r in bench.batched:
-        note = ", resets included" if r.name.startswith("FlatBody") else ""
-        name = r.name[:-1] + note + ")" if note else r.name
-        rows.append(f"| {name} | {r.us_per_env_step:.3g} | {r.env_steps_per_s:,.0f} | — |")
-    ok = lambda x, bound, le=False: "met" if (x <= bound if le else x >= bound) else "missed"  # noqa: E731
-    rows += [
-        "",
-        "| ratio (same run) | measured | target |",
-        "|---|---|---|",
-        f"| `FlatBody-v1` step rate / `Pendulum-v1` | **{bench.ratio_vs_pendulum:.2f}** | ≥ 1.0 ({ok(bench.ratio_vs_pendulum, 1.0)}) |",
-        f"| `FlatBody-v1` step rate / `Acrobot-v1` | {bench.ratio_vs_acrobot:.2f} | — |",
-        f"| `FlatBody-v1` reset time / `Pendulum-v1` | **{bench.reset_ratio_vs_pendulum:.2f}** | ≤ 5 ({ok(bench.reset_ratio_vs_pendulum, 5.0, True)}) |",
-        f"| `FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included) | **{bench.ratio_batched_vs_cartpole:.2f}** "
-        f"| ≥ 0.5 ({ok(bench.ratio_batched_vs_cartpole, 0.5)}) |",
-        f"| the same with `num_threads=None` ({bench.threads} thread{'s' if bench.threads > 1 else ''}) | {bench.ratio_batched_threads_vs_cartpole:.2f} | — |",
-        f"| batched episode error vs tight reference | {bench.episode_error:.1e} | ≤ 1e-8 ({ok(bench.episode_error, 1e-8, True)}) |",
+def _met(x: float, bound: float, *, at_most: bool = False) -> str:
+    return "met" if (x <= bound if at_most else x >= bound) else "missed"
+
+
+def tables(bench: EnvBenchmark) -> list[Table]:
+    """The rates and the ratios of this run (the terminal's text and the docs' ``env`` block)."""
+    rates = [
+        [r.name, f"{r.us_per_env_step:.3g}", f"{r.env_steps_per_s:,.0f}", f"{r.ms_per_reset:.3g}"] for r in bench.single
     ]
-    return "\n".join(rows) + "\n"
+    for r in bench.batched:
+        name = r.name[:-1] + ", resets included)" if r.name.startswith("FlatBody") else r.name
+        rates.append([name, f"{r.us_per_env_step:.3g}", f"{r.env_steps_per_s:,.0f}", "—"])
+    first = bench.single[0].name if bench.single else "FlatBody-v1"
+    t = f"{bench.threads} thread{'s' if bench.threads > 1 else ''}"
+    ratios = [
+        [
+            f"`{first}` step rate / `Pendulum-v1`",
+            f"**{bench.ratio_vs_pendulum:.2f}**",
+            f"≥ 1.0 ({_met(bench.ratio_vs_pendulum, 1.0)})",
+        ],
+        [f"`{first}` step rate / `Acrobot-v1`", f"{bench.ratio_vs_acrobot:.2f}", "—"],
+        [
+            f"`{first}` reset time / `Pendulum-v1`",
+            f"**{bench.reset_ratio_vs_pendulum:.2f}**",
+            f"≤ 5 ({_met(bench.reset_ratio_vs_pendulum, 5.0, at_most=True)})",
+        ],
+        [
+            f"`FlatBodyVectorEnv` / `CartPoleVectorEnv` (N = {bench.batched[0].batch}, resets included)",
+            f"**{bench.ratio_batched_vs_cartpole:.2f}**",
+            f"≥ 0.5 ({_met(bench.ratio_batched_vs_cartpole, 0.5)})",
+        ],
+        [f"the same with `num_threads=None` ({t})", f"{bench.ratio_batched_threads_vs_cartpole:.2f}", "—"],
+        [
+            "batched episode error vs tight reference",
+            f"{bench.episode_error:.1e}",
+            f"≤ 1e-8 ({_met(bench.episode_error, 1e-8, at_most=True)})",
+        ],
+    ]
+    return [
+        Table(columns=["what", "µs per env step", "env-steps/s", "ms per reset"], rows=rates),
+        Table(
+            columns=["ratio (same run)", "measured", "target"],
+            rows=ratios,
+            notes=[f"integrator of the FlatBody envs: {bench.integrator}"],
+        ),
+    ]
 
 
-__all__ = ["ENV_CAPTION", "EnvBenchmark", "SINGLE", "StepRate", "episode_error", "markdown", "plot", "report", "run"]
+__all__ = [
+    "ENV_CAPTION",
+    "EnvBenchmark",
+    "SINGLE",
+    "StepRate",
+    "episode_error",
+    "load",
+    "plot",
+    "report",
+    "run",
+    "tables",
+]

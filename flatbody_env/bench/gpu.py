@@ -34,8 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report, best_of
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Table, best_of
 from flatbody_env.physics import validation
 from flatbody_env.provenance import cpu_name
 
@@ -254,63 +253,122 @@ def run(
     return {"rows": rows, "settings": settings, "left_out": notes}
 
 
+def tables(result: dict) -> list[Table]:
+    """The rows of a run (the terminal's text), the backends left out under them."""
+    rows = [
+        [
+            "dynamics" if r["what"] == WHAT else "whole env",
+            r.get("env", "") or "—",
+            r["backend"],
+            r["method"],
+            str(r["n"]),
+            f"{r['steps_per_s']:.4g}",
+            r["device_name"],
+        ]
+        for r in result["rows"]
+    ]
+    return [
+        Table(
+            columns=["what", "env", "backend", "method", "N", "body-steps/s", "device"],
+            rows=rows,
+            notes=[f"left out: {note}" for note in result.get("left_out", ())],
+            block=None,
+        )
+    ]
+
+
 def report(result: dict, name: str) -> Report:
-    """``NAME.json`` (``result``), ``NAME.csv`` (the rows) and ``NAME.png`` (drawn from the JSON)."""
+    """``NAME.json`` (``result``), ``NAME.csv`` (the rows), ``NAME.png`` (drawn from the JSON) and the table."""
     return Report(
         name=name,
         record=result,
         header=list(ROW_KEYS),
-        rows=[[r[k] for k in ROW_KEYS] for r in result["rows"]],
+        rows=[[r.get(k, "") for k in ROW_KEYS] for r in result["rows"]],
         chart=plot,
+        tables=tables(result),
     )
+
+
+BACKEND_COLOURS = {"cpu-serial": "#1f77b4", "cpu-parallel": "#2ca02c", "cuda": "#d62728"}
+"""The chart's colour of each backend."""
+ENV_MARKERS = ("s", "^", "v", "D", "P", "X", "h")
+"""The chart's marker of each env id of the whole-env rows, in order of appearance."""
+
+GPU_CAPTION = (
+    "Colour: where it ran (the backend and its device). Line style: what was timed: the dynamics alone (the "
+    "integrator's step of N bodies, no observation,\nreward or reset), RK4 solid, DOP853 dashed; the whole env step "
+    "(controls, dynamics, observation, reward, termination, autoresets) dotted, one marker\nper env id. "
+    "body-steps/s: N × steps / wall time, the best of the timed blocks; a CUDA block ends with a device "
+    "synchronisation."
+)
+"""The chart's caption: colours, line styles, what a body-step is."""
 
 
 def plot(json_path: str | Path, png_path: str | Path) -> None:
-    """Body-steps/s against N from the saved JSON, one line per kind of row, backend and method (log–log)."""
-    import matplotlib
+    """Body-steps/s against N from the saved JSON (log–log): colour = backend, line style = what was timed
+    (dynamics: RK4 solid, DOP853 dashed; whole env step: dotted, a marker per env id); legends below."""
+    from matplotlib.lines import Line2D
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flatbody_env.figures import chart
 
     result = validation.read_json("--plot-only", json_path)
-    fig, ax = plt.subplots(figsize=(10, 4.8))
-    keys = sorted({(r["what"], r.get("env", ""), r["backend"], r["method"]) for r in result["rows"]})
-    for what, env, backend, method in keys:
-        rows = sorted(
-            (
-                r
-                for r in result["rows"]
-                if (r["what"], r.get("env", ""), r["backend"], r["method"]) == (what, env, backend, method)
-            ),
-            key=lambda r: r["n"],
+    rows = result["rows"]
+    keys = list(dict.fromkeys((r["what"], r.get("env", ""), r["backend"], r["method"]) for r in rows))
+    env_ids = list(dict.fromkeys(k[1] for k in keys if k[0] != WHAT))
+    marker_of = {e: ENV_MARKERS[i % len(ENV_MARKERS)] for i, e in enumerate(env_ids)}
+    with chart(png_path, size=(9.6, 6.6)) as c:
+        ax = c.ax
+        for what, env, backend, method in keys:
+            sel = sorted(
+                (
+                    r
+                    for r in rows
+                    if (r["what"], r.get("env", ""), r["backend"], r["method"]) == (what, env, backend, method)
+                ),
+                key=lambda r: r["n"],
+            )
+            whole = what != WHAT
+            ax.plot(
+                [r["n"] for r in sel],
+                [r["steps_per_s"] for r in sel],
+                marker=marker_of[env] if whole else "o",
+                ms=5,
+                linestyle=":" if whole else ("-" if method == "RK4" else "--"),
+                color=BACKEND_COLOURS.get(backend, "#000000"),
+            )
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xlabel("bodies N")
+        ax.set_ylabel("body-steps / s (higher is better)")
+        ax.grid(True, which="major", alpha=0.3)
+        ax.set_title(
+            f"one env step of N bodies, dt = {DT:g}: RK4 h = dt/4, DOP853 tol {DOP853_TOL:g}; best of "
+            f"{result['settings']['repeats']} blocks of {result['settings']['steps']} steps"
         )
-        whole = what != WHAT
-        ax.plot(
-            [r["n"] for r in rows],
-            [r["steps_per_s"] for r in rows],
-            marker="s" if whole else "o",
-            linestyle=":" if whole else ("-" if method == "RK4" else "--"),
-            label=f"{env + ', ' if whole else ''}{backend}, {method} ({rows[0]['device_name']})",
-        )
-    ax.set_xscale("log", base=2)
-    ax.set_yscale("log")
-    ax.set_xlabel("bodies N")
-    ax.set_ylabel("body-steps / s")
-    ax.set_title(
-        f"one env step of N bodies: dynamics alone (lines) and the whole env step (dotted), dt = {DT:g}\n"
-        f"RK4 h = dt/4, DOP853 tol {DOP853_TOL:g}; best of {result['settings']['repeats']} blocks of "
-        f"{result['settings']['steps']} steps",
-        fontsize=9,
-    )
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    fig.tight_layout()
-    save_figure(fig, png_path, dpi=110)
-    plt.close(fig)
+        devices = {r["backend"]: r["device_name"] for r in rows}
+        where = [
+            Line2D([], [], color=BACKEND_COLOURS.get(b, "#000000"), lw=6, label=f"{b} ({devices[b]})") for b in devices
+        ]
+        methods = list(dict.fromkeys(k[3] for k in keys if k[0] == WHAT))
+        what = [
+            Line2D([], [], color="0.3", marker="o", ls="-" if m == "RK4" else "--", label=f"dynamics alone, {m}")
+            for m in methods
+        ]
+        what += [
+            Line2D([], [], color="0.3", marker=marker_of[e], ls=":", label=f"whole env step{', ' + e if e else ''}")
+            for e in env_ids
+        ]
+        rows_needed = max(len(where), len(what))
+        blank = [Line2D([], [], alpha=0.0, label="") for _ in range(2 * rows_needed)]
+        handles = where + blank[: rows_needed - len(where)] + what + blank[: rows_needed - len(what)]
+        c.legend(handles, [h.get_label() for h in handles], where="below", ncol=2)
+        c.title("flatbody bench gpu: body-steps per second against the number of bodies")
+        c.caption(GPU_CAPTION)
 
 
 __all__ = [
     "BACKENDS",
+    "BACKEND_COLOURS",
     "DEFAULT_METHODS",
     "DEFAULT_SIZES",
     "ENV_BACKENDS",
@@ -323,4 +381,5 @@ __all__ = [
     "plot",
     "report",
     "run",
+    "tables",
 ]

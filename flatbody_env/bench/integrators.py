@@ -20,10 +20,10 @@ tables of docs/integrators.md).
    the wall-clock budget's probe, :mod:`flatbody_env.integrators.budget`) against the bare kernel call of the same run
    and against the method's ``integrate``, timed in alternation (:func:`flatbody_env.bench.harness.alternate`).
 
-:func:`measure` → :class:`BenchReport`; :func:`describe` prints it, :func:`report` hands it to
+:func:`measure` → :class:`BenchReport`; :func:`report` (of a run, or of the saved JSON: :func:`load`) hands it to
 :func:`flatbody_env.bench.harness.write_report` (``bench_integrators.json``, ``.csv``, and ``.png`` drawn
-from the saved JSON by :func:`analysis.integrator_plots.plot_bench`); :func:`write_docs` rewrites the
-``<!-- bench:integrators-* -->`` tables of a docs page (:func:`docs_tables`) from the saved JSON.
+from the saved JSON by :func:`analysis.integrator_plots.plot_bench`) with its tables (:func:`tables`): the terminal
+shows them all, the ``<!-- bench:integrators-* -->`` blocks of a docs page get theirs.
 """
 
 from __future__ import annotations
@@ -39,9 +39,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from analysis.failure_study import gap_scene
-from analysis.work_precision import timed_run
-from flatbody_env.bench.harness import Report, best_of
-from flatbody_env.integrators import Tolerances, get_method
+from flatbody_env.bench.harness import Report, Stopwatch, Table, alternate, best_of
+from flatbody_env.integrators import IntegrationError, Tolerances, get_method
 from flatbody_env.physics import validation
 from flatbody_env.physics.hamiltonian import hamiltonian, hamiltonian_series
 from flatbody_env.physics.state import pack
@@ -106,13 +105,37 @@ class BenchReport:
         return asdict(self)
 
 
+ENOUGH_S = 0.2
+"""A setting's runs stop repeating once this much time went into them (a long run is timed once)."""
+
+
+def _run(method, scene, times, tol):
+    """(solution or None, wall time of the first run, status): the run that checks the method, timed once."""
+    meth, y0 = get_method(method), pack(scene.state)
+    with Stopwatch() as sw:
+        try:
+            sol = meth.integrate(scene.body, y0, times, tol=tol)
+        except IntegrationError as exc:
+            sol, status = None, exc.kind
+        else:
+            status = "ok"
+    return sol, sw.seconds, status
+
+
 def _curve(method, scene, t_end, ref, repeats, max_run_s):
     info = get_method(method).info
     settings = [("rtol", r) for r in RTOLS] if info.adaptive else [("step", h) for h in STEPS]
     out = []
+    y0, times = pack(scene.state), np.array([0.0, t_end])
     for kind, v in settings:
         tol = Tolerances(rtol=v, atol=1e-3 * v) if kind == "rtol" else Tolerances(step=v)
-        sol, wall, runs, status, reason = timed_run(method, scene, np.array([0.0, t_end]), tol, repeats=repeats)
+        sol, wall, status = _run(method, scene, times, tol)  # the first run is the warm-up of the timed ones
+        if sol is not None and repeats > 1 and wall < ENOUGH_S:
+            meth = get_method(method)
+            timed = best_of(
+                lambda m=meth, t=tol: m.integrate(scene.body, y0, times, tol=t), repeats, warm=False, enough_s=ENOUGH_S
+            )
+            wall = min(wall, timed)
         err = float(np.max(np.abs(sol.Y[:, -1] - ref))) if sol is not None else math.nan
         out.append(
             {
@@ -137,7 +160,7 @@ def wall_at(curve, target):
     ]
     pts.sort(key=lambda p: -p[0])
     best = None
-    for (e1, w1), (e2, w2) in zip(pts, pts[1:]):
+    for (e1, w1), (e2, w2) in zip(pts, pts[1:], strict=False):
         if e1 >= target >= e2:
             if e1 == e2:
                 w = min(w1, w2)
@@ -170,7 +193,7 @@ def _regular(repeats, max_run_s, t_end, bar):
         w = wall_at(curves[m], TARGET_REGULAR)
         at.append({"method": m, "wall_time": w, "speedup": (w_ref / w) if (w and w_ref) else None})
     same = []
-    for a, b in zip(curves["DOP853"], curves["DOP853-numba"]):
+    for a, b in zip(curves["DOP853"], curves["DOP853-numba"], strict=False):  # a sweep may stop early
         if a["status"] == "ok" and b["status"] == "ok":
             same.append(
                 {
@@ -238,7 +261,7 @@ def _long(bar, t_end):
     out = []
     for m, kw in LONG_RUNS:
         bar.set_postfix_str(f"long {m}")
-        sol, wall, runs, status, reason = timed_run(m, sc, times, Tolerances(**kw), repeats=1)
+        sol, wall, status = _run(m, sc, times, Tolerances(**kw))
         dH = float(np.max(np.abs(hamiltonian_series(sol.Y, sc.body) - H0))) if sol is not None else math.nan
         out.append(
             {
@@ -297,7 +320,8 @@ def _short_step(bar, n_batch=1024):
         O = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
         bbest = (
-            best_of(lambda st=st, h=h: st.batch(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), 5, warm=False) / n_batch
+            best_of(lambda a=(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), st=st: st.batch(*a), 5, warm=False)
+            / n_batch
         )
         out.append(
             {
@@ -402,40 +426,45 @@ def compile_times(names=None) -> list[dict]:
 
 def _auto(repeats: int, bar, t_cap: float) -> list[dict]:
     """``simulate(scene)`` (method="auto": the rung, then the fastest method meeting rtol = atol = 1e-10)
-    against ``simulate(scene, method="DOP853")`` on every built-in scene, t = min(t_end, t_cap)."""
-    from flatbody_env.integrators import IntegrationError
+    against ``simulate(scene, method="DOP853")`` on every built-in scene, t = min(t_end, t_cap), timed in
+    alternation (:func:`~flatbody_env.bench.harness.alternate`)."""
     from flatbody_env.scene import builtin_scenes
     from flatbody_env.simulation import simulate
 
     rows = []
     for name, sc in sorted(builtin_scenes().items()):
         t_end = min(sc.t_end, t_cap)
-        simulate(sc, t_end=t_end)  # compiled kernels loaded
-        runs = [simulate(sc, t_end=t_end) for _ in range(repeats)]
-        auto = min(runs, key=lambda r: r.wall_time)
+        auto = simulate(sc, t_end=t_end)  # compiled kernels loaded; what auto runs
         row = {
             "scene": name,
             "t_end": t_end,
             "method": auto.method,
             "model": auto.model,
-            "auto_s": auto.wall_time,
             "reason": auto.extra.get("method_reason", ""),
             "auto_step": auto.extra.get("auto_step"),
         }
         try:
-            ref = min(
-                (simulate(sc, t_end=t_end, method="DOP853") for _ in range(max(1, repeats - 1))),
-                key=lambda r: r.wall_time,
+            ref = simulate(sc, t_end=t_end, method="DOP853")
+        except IntegrationError as exc:
+            row["auto_s"] = best_of(lambda sc=sc, t=t_end: simulate(sc, t_end=t), repeats, warm=False)
+            row.update(scipy_method="DOP853", scipy_s=None, speedup=None, max_difference=None, scipy_failure=exc.kind)
+        else:
+            best = alternate(
+                {
+                    "auto": lambda sc=sc, t=t_end: simulate(sc, t_end=t) and None,
+                    "scipy": lambda sc=sc, t=t_end: simulate(sc, t_end=t, method="DOP853") and None,
+                },
+                repeats,
+                warm=False,
             )
+            row["auto_s"] = best["auto"]
             row.update(
                 scipy_method=ref.method,
                 scipy_model=ref.model,
-                scipy_s=ref.wall_time,
-                speedup=ref.wall_time / max(auto.wall_time, 1e-9),
+                scipy_s=best["scipy"],
+                speedup=best["scipy"] / max(best["auto"], 1e-9),
                 max_difference=float(np.max(np.abs(auto.y - ref.y))),
             )
-        except IntegrationError as exc:
-            row.update(scipy_method="DOP853", scipy_s=None, speedup=None, max_difference=None, scipy_failure=exc.kind)
         rows.append(row)
         bar.update(1)
     return rows
@@ -502,145 +531,171 @@ def measure(
     )
 
 
-def describe(rep: BenchReport) -> str:
-    """The printed summary."""
-    L = []
-    r = rep.regular
-    L.append(
-        f"regular scene, t = {r['t_end']:g}: wall time at final error {r['target_error']:g} "
-        f"(reference floor {r['reference_floor']:.1e})"
-    )
-    for a in r["at_target"]:
-        w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  (not bracketed)"
-        s = f"  {a['speedup']:7.1f}x vs scipy DOP853" if a.get("speedup") else ""
-        L.append(f"  {a['method']:<20} {w}{s}")
-    L.append("  same rtol, DOP853-numba vs scipy DOP853 (identical steps):")
-    for s in r["same_rtol"]:
-        L.append(
-            f"    {s['setting']:<11} scipy {s['scipy_s'] * 1e3:8.2f} ms  numba {s['numba_s'] * 1e3:7.3f} ms  ratio {s['ratio']:6.1f}x  "
-            f"nfev {s['scipy_nfev']}/{s['numba_nfev']}  error {s['numba_error']:.1e}"
-        )
-    for c in rep.close_approach:
-        L.append(
-            f"close approach, s3 - p_theta = {c['delta']:g}, t = {c['t_end']:g}: wall time at error {c['target_error']:g} "
-            f"(reference floor {c['reference_floor']:.1e})"
-        )
-        for a in c["at_target"]:
-            w = f"{a['wall_time'] * 1e3:9.3f} ms" if a["wall_time"] else "  does not reach it (fails or not bracketed)"
-            L.append(f"  {a['method']:<20} {a['chart']:<10} {w}")
-        ratio = c["regular_vs_cheapest_two_polar"]
-        L.append(
-            f"  cheapest two-polar / cheapest regular-chart ({c['cheapest_regular']}) = {ratio:.2f}x"
-            if ratio
-            else f"  no two-polar method reaches the target; {c['cheapest_regular']} does"
-        )
-    L.append("long horizon: energy error max|H - H0|")
-    for x in rep.long_horizon:
-        L.append(
-            f"  {x['method']:<20} {x['setting']:<22} t={x['t_end']:g}  {x['energy_error']:.2e}  ({x['wall_time']:.2f} s, {x['status']})"
-        )
-    L.append("one short step dt = 0.05 (us per call)")
-    for x in rep.short_step:
-        extra = (
-            f"   batch of {x['batch_size']}: {x['batch_us_per_body_step']:.3f} us/body-step"
-            if x["path"] == "env"
-            else ""
-        )
-        L.append(f"  {x['method']:<20} {x['path']:<10} {x['us_per_step']:10.2f}{extra}")
-    if rep.auto:
-        L.append("simulate's default (method auto) vs scipy DOP853, built-in scenes, rtol = atol = 1e-10 (same run)")
-        for x in rep.auto:
-            vs = (
-                f"{x['scipy_s'] * 1e3:9.2f} ms  {x['speedup']:6.1f}x  diff {x['max_difference']:.1e}"
-                if x.get("scipy_s")
-                else f"scipy DOP853 fails ({x.get('scipy_failure')})"
-            )
-            L.append(f"  {x['scene']:<20} {x['model']:<10} {x['method']:<18} {x['auto_s'] * 1e3:8.2f} ms | {vs}")
-    v = rep.simulate_vs_kernel
-    if v:
-        L.append(
-            f"simulate vs the bare kernel, {v['scene']} t = {v['t_end']:g}, {v['method']} ({v['nfev']} RHS evaluations; "
-            f"alternated, best of {v['rounds']})"
-        )
-        L.append(
-            f"  kernel {v['kernel_s'] * 1e3:.3f} ms   integrate {v['integrate_s'] * 1e3:.3f} ms "
-            f"({v['integrate_over_kernel']:.3f}x)   simulate {v['simulate_s'] * 1e3:.3f} ms ({v['simulate_over_kernel']:.3f}x)"
-        )
-    if rep.compile_times:
-        L.append("compile time (fresh processes): first call with empty numba cache / cached")
-        for x in rep.compile_times:
-            L.append(f"  {x['method']:<20} {x['first_call_s']:7.2f} s / {x['cached_s']:6.3f} s")
-    return "\n".join(L)
-
-
-def docs_tables(rep: dict) -> dict[str, str]:
-    """The Markdown tables of docs/integrators.md from a ``bench_integrators.json`` report, by block name
-    (``flatbody bench integrators --docs docs/integrators.md`` rewrites each ``<!-- bench:NAME -->`` block)."""
-    tables = {}
-    r = rep["regular"]
-    lines = [
-        f"| method | wall time at error {r['target_error']:g} (regular scene, t = {r['t_end']:g}) | vs scipy DOP853 |",
-        "|---|---|---|",
-    ]
-    for a in r["at_target"]:
-        w = f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "not bracketed"
-        lines.append(
-            f"| {a['method']} | {w} | {a['speedup']:.1f}× |" if a.get("speedup") else f"| {a['method']} | {w} | – |"
-        )
-    tables["integrators-regular"] = "\n".join(lines)
-    lines = [
-        "| s3 − p_θ | " + " | ".join(a["method"] for a in rep["close_approach"][0]["at_target"]) + " |",
-        "|---|" + "---|" * len(rep["close_approach"][0]["at_target"]),
-    ]
-    for c in rep["close_approach"]:
-        cells = [f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "fails / not reached" for a in c["at_target"]]
-        lines.append(f"| {c['delta']:g} | " + " | ".join(cells) + " |")
-    tables["integrators-close"] = "\n".join(lines)
-    lines = ["| method and setting | energy error | wall time |", "|---|---|---|"]
-    for x in rep["long_horizon"]:
-        lines.append(
-            f"| {x['method']}, {x['setting']} (t = {x['t_end']:g}) | {x['energy_error']:.1e} | {x['wall_time']:.2f} s |"
-        )
-    tables["integrators-long"] = "\n".join(lines)
-    lines = ["| method | path | µs per step | batched, µs per body-step |", "|---|---|---|---|"]
-    for x in rep["short_step"]:
-        b = f"{x['batch_us_per_body_step']:.2f}" if x["path"] == "env" else ""
-        lines.append(f"| {x['method']} | {x['path']} | {x['us_per_step']:.1f} | {b} |")
-    tables["integrators-short-step"] = "\n".join(lines)
+def tables(rep: dict) -> list[Table]:
+    """The tables of a ``bench_integrators.json`` report (the terminal's text); each docs table in its block of
+    docs/integrators.md (``<!-- bench:integrators-* -->``, rewritten by ``flatbody bench integrators --docs``)."""
+    out = []
     if rep.get("auto"):
-        lines = [
-            "| scene | model (rung) | method auto runs | auto | scipy DOP853 (former default) | speed-up | max difference |",
-            "|---|---|---|---|---|---|---|",
-        ]
+        rows = []
         for x in rep["auto"]:
             step = f", h = {x['auto_step']:g}" if x.get("auto_step") else ""
             if x.get("scipy_s"):
-                vs = f"{x['scipy_s'] * 1e3:.1f} ms ({x['scipy_method']}) | **{x['speedup']:.0f}×** | {x['max_difference']:.0e}"
+                vs = [
+                    f"{x['scipy_s'] * 1e3:.1f} ms ({x['scipy_method']})",
+                    f"**{x['speedup']:.0f}×**",
+                    f"{x['max_difference']:.0e}",
+                ]
             else:
-                vs = f"fails ({x.get('scipy_failure')}) | – | –"
-            lines.append(
-                f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}{step} | {x['auto_s'] * 1e3:.2f} ms | {vs} |"
+                vs = [f"fails ({x.get('scipy_failure')})", "–", "–"]
+            rows.append(
+                [
+                    f"{x['scene']} (t = {x['t_end']:g})",
+                    x["model"],
+                    x["method"] + step,
+                    f"{x['auto_s'] * 1e3:.2f} ms",
+                    *vs,
+                ]
             )
-        tables["integrators-auto"] = "\n".join(lines)
+        out.append(
+            Table(
+                columns=[
+                    "scene",
+                    "model (rung)",
+                    "method auto runs",
+                    "auto",
+                    "scipy DOP853 (former default)",
+                    "speed-up",
+                    "max difference",
+                ],
+                rows=rows,
+                block="integrators-auto",
+            )
+        )
+    r = rep["regular"]
+    out.append(
+        Table(
+            columns=[
+                "method",
+                f"wall time at error {r['target_error']:g} (regular scene, t = {r['t_end']:g})",
+                "vs scipy DOP853",
+            ],
+            rows=[
+                [
+                    a["method"],
+                    f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "not bracketed",
+                    f"{a['speedup']:.1f}×" if a.get("speedup") else "–",
+                ]
+                for a in r["at_target"]
+            ],
+            notes=[f"reference floor {r['reference_floor']:.1e}"],
+            block="integrators-regular",
+        )
+    )
+    out.append(
+        Table(
+            title="same rtol, DOP853-numba vs scipy DOP853 (identical steps)",
+            columns=["setting", "scipy", "numba", "ratio", "nfev scipy / numba", "error"],
+            rows=[
+                [
+                    x["setting"],
+                    f"{x['scipy_s'] * 1e3:.2f} ms",
+                    f"{x['numba_s'] * 1e3:.3f} ms",
+                    f"{x['ratio']:.1f}×",
+                    f"{x['scipy_nfev']} / {x['numba_nfev']}",
+                    f"{x['numba_error']:.1e}",
+                ]
+                for x in r["same_rtol"]
+            ],
+            block=None,
+        )
+    )
+    close = rep["close_approach"]
+    if close:
+        notes = []
+        for c in close:
+            ratio = c["regular_vs_cheapest_two_polar"]
+            notes.append(
+                f"s3 − p_θ = {c['delta']:g}: cheapest two-polar / cheapest regular-chart ({c['cheapest_regular']}) = "
+                f"{ratio:.2f}×"
+                if ratio
+                else f"s3 − p_θ = {c['delta']:g}: no two-polar method reaches the error; {c['cheapest_regular']} does"
+            )
+        out.append(
+            Table(
+                columns=["s3 − p_θ", *(a["method"] for a in close[0]["at_target"])],
+                rows=[
+                    [f"{c['delta']:g}"]
+                    + [
+                        f"{a['wall_time'] * 1e3:.3g} ms" if a["wall_time"] else "fails / not reached"
+                        for a in c["at_target"]
+                    ]
+                    for c in close
+                ],
+                notes=notes,
+                block="integrators-close",
+            )
+        )
+    out.append(
+        Table(
+            columns=["method and setting", "energy error", "wall time"],
+            rows=[
+                [
+                    f"{x['method']}, {x['setting']} (t = {x['t_end']:g})",
+                    f"{x['energy_error']:.1e}",
+                    f"{x['wall_time']:.2f} s",
+                ]
+                for x in rep["long_horizon"]
+            ],
+            block="integrators-long",
+        )
+    )
+    out.append(
+        Table(
+            columns=["method", "path", "µs per step", "batched, µs per body-step"],
+            rows=[
+                [
+                    x["method"],
+                    x["path"],
+                    f"{x['us_per_step']:.1f}",
+                    f"{x['batch_us_per_body_step']:.2f}" if x["path"] == "env" else "",
+                ]
+                for x in rep["short_step"]
+            ],
+            block="integrators-short-step",
+        )
+    )
     v = rep.get("simulate_vs_kernel")
     if v:
-        lines = [
-            f"| {v['scene']}, t = {v['t_end']:g}, {v['method']} ({v['nfev']} evaluations) | wall time | / kernel |",
-            "|---|---|---|",
-        ]
-        for what, key, ratio in (
-            ("bare kernel call", "kernel_s", 1.0),
-            ("`integrate`", "integrate_s", v["integrate_over_kernel"]),
-            ("`simulate(...)`", "simulate_s", v["simulate_over_kernel"]),
-        ):
-            lines.append(f"| {what} | {v[key] * 1e3:.3f} ms | {ratio:.3f}× |")
-        tables["integrators-simulate"] = "\n".join(lines)
+        out.append(
+            Table(
+                columns=[
+                    f"{v['scene']}, t = {v['t_end']:g}, {v['method']} ({v['nfev']} evaluations)",
+                    "wall time",
+                    "/ kernel",
+                ],
+                rows=[
+                    [what, f"{v[key] * 1e3:.3f} ms", f"{ratio:.3f}×"]
+                    for what, key, ratio in (
+                        ("bare kernel call", "kernel_s", 1.0),
+                        ("`integrate`", "integrate_s", v["integrate_over_kernel"]),
+                        ("`simulate(...)`", "simulate_s", v["simulate_over_kernel"]),
+                    )
+                ],
+                notes=[f"alternated, best of {v['rounds']}"],
+                block="integrators-simulate",
+            )
+        )
     if rep.get("compile_times"):
-        lines = ["| method | first call, empty cache | cached |", "|---|---|---|"]
-        for x in rep["compile_times"]:
-            lines.append(f"| {x['method']} | {x['first_call_s']:.2f} s | {x['cached_s']:.3f} s |")
-        tables["integrators-compile"] = "\n".join(lines)
-    return tables
+        out.append(
+            Table(
+                columns=["method", "first call, empty cache", "cached"],
+                rows=[
+                    [x["method"], f"{x['first_call_s']:.2f} s", f"{x['cached_s']:.3f} s"] for x in rep["compile_times"]
+                ],
+                block="integrators-compile",
+            )
+        )
+    return out
 
 
 CSV_HEADER = ("section", "case", "method", "setting_or_path", "figure", "value")
@@ -722,29 +777,27 @@ def csv_rows(rep: dict) -> list[tuple]:
     return rows
 
 
-def report(rep: BenchReport) -> Report:
-    """``rep`` for :func:`flatbody_env.bench.harness.write_report`: ``bench_integrators.json``, ``.csv`` and
-    ``.png`` (:func:`analysis.integrator_plots.plot_bench`, from the saved JSON). Its docs tables are
-    several blocks: :func:`write_docs`."""
+def load(json_path: str | os.PathLike) -> dict:
+    """A saved ``bench_integrators.json`` (the report as :func:`report` takes it)."""
+    return validation.read_json("--plot-only", json_path)
+
+
+def report(rep: BenchReport | dict) -> Report:
+    """``rep`` (a run, or a saved report) for :func:`flatbody_env.bench.harness.write_report`:
+    ``bench_integrators.json``, ``.csv``, ``.png`` (:func:`analysis.integrator_plots.plot_bench`, from the saved JSON)
+    and the tables (:func:`tables`, several docs blocks)."""
     from analysis.integrator_plots import plot_bench
 
-    record = rep.as_dict()
-    return Report(name=NAME, record=record, header=CSV_HEADER, rows=csv_rows(record), chart=plot_bench)
-
-
-def write_docs(json_path: str | os.PathLike, docs: str | os.PathLike) -> list[str]:
-    """Rewrite the ``<!-- bench:integrators-* -->`` tables (:func:`docs_tables`) of the page ``docs`` from
-    the saved ``json_path``; a table the page does not show is skipped. Returns the names of the tables rewritten."""
-    from flatbody_env.output import replace_marked_block
-
-    done = []
-    for name, table in docs_tables(validation.read_json("--plot-only", json_path)).items():
-        try:
-            replace_marked_block(docs, name, table)
-        except ValueError:
-            continue  # the page does not show this table
-        done.append(name)
-    return done
+    record = rep.as_dict() if isinstance(rep, BenchReport) else dict(rep)
+    return Report(
+        name=NAME,
+        record=record,
+        header=CSV_HEADER,
+        rows=csv_rows(record),
+        chart=plot_bench,
+        tables=tables(record),
+        block="integrators-regular",
+    )
 
 
 __all__ = [
@@ -753,11 +806,10 @@ __all__ = [
     "BenchReport",
     "compile_times",
     "csv_rows",
-    "describe",
-    "docs_tables",
+    "load",
     "measure",
     "report",
     "simulate_vs_kernel",
+    "tables",
     "wall_at",
-    "write_docs",
 ]

@@ -2,7 +2,7 @@
 
 Not a timed test: it prints figures and writes ``recording.json``, ``recording.csv`` (the
 ``record_trajectory`` sizes) and ``recording.png`` (drawn from the saved JSON by :func:`plot`);
-with a docs page, also its ``<!-- bench:recording -->`` table (:func:`markdown`).
+with a docs page, also its ``<!-- bench:recording -->`` table (:func:`tables`).
 
 * ``record_trajectory``: a whole simulated trajectory of N steps to a finished file, median, min and
   max of the repeats per size; the process's first recording (importing rerun) is timed apart.
@@ -12,18 +12,18 @@ with a docs page, also its ``<!-- bench:recording -->`` table (:func:`markdown`)
   ``simulate``'s default against scipy's DOP853.
 * ``render_frame`` (the env's ``rgb_array`` frame): median, mean and 90th percentile per frame.
 
-:func:`measure` → the result (the JSON record); :func:`describe` prints it, :func:`report` hands it to
-:func:`flatbody_env.bench.harness.write_report`.
+:func:`measure` → the result (the JSON record); :func:`report` hands it with its table (:func:`tables`: the
+terminal's text and the docs block) to :func:`flatbody_env.bench.harness.write_report`.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
-import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from flatbody_env.bench.harness import Report
+from flatbody_env.bench.harness import Report, Stopwatch, Table, alternate_samples, samples
 from flatbody_env.physics import validation
 
 NAME = "recording"
@@ -82,19 +82,21 @@ def measure(
     with tempfile.TemporaryDirectory() as tmp:
         # the process's first recording pays for importing rerun: timed apart, not in the medians
         warm = simulate(sc, t_end=sc.t_end, times=np.linspace(0.0, sc.t_end, 1000), with_rotation=True)
-        start = time.perf_counter()
-        record_trajectory(warm, sc.body, Path(tmp) / "warm-up.rrd")
-        first_call = {"steps": 1000, "seconds": time.perf_counter() - start}
+        with Stopwatch() as first:
+            record_trajectory(warm, sc.body, Path(tmp) / "warm-up.rrd")
+        first_call = {"steps": 1000, "seconds": first.seconds}
         for n in sorted({*sizes, steps}):
             traj = simulate(sc, t_end=sc.t_end, times=np.linspace(0.0, sc.t_end, n), with_rotation=True)
-            times = []
-            size_bytes = 0
-            for r in range(repeats):
-                path = Path(tmp) / f"bench-{n}-{r}.rrd"
-                start = time.perf_counter()
-                record_trajectory(traj, sc.body, path)
-                times.append(time.perf_counter() - start)
-                size_bytes = path.stat().st_size
+            files = (Path(tmp) / f"bench-{n}-{r}.rrd" for r in itertools.count())
+            made: list[Path] = []
+
+            def once(traj=traj, files=files, made=made) -> None:
+                made.append(next(files))
+                record_trajectory(traj, sc.body, made[-1])
+
+            times = samples(once, repeats, warm=False)
+            size_bytes = made[-1].stat().st_size
+            for path in made:
                 path.unlink()
             rows.append(
                 {
@@ -108,12 +110,10 @@ def measure(
             )
             if n == steps:
                 Y, R, E = traj.y, traj.rotation, traj.energy
-                start = time.perf_counter()
-                with Recorder(Path(tmp) / "bench-live.rrd", sc.body, block=block) as rec:
+                with Stopwatch() as live_s, Recorder(Path(tmp) / "bench-live.rrd", sc.body, block=block) as rec:
                     for k in range(n):
                         rec.append(traj.t[k], Y[:, k], R[k], energy=E[k])
-                live_s = time.perf_counter() - start
-                live = {"steps": n, "block": block, "seconds": live_s, "us_per_step": live_s / n * 1e6}
+                live = {"steps": n, "block": block, "seconds": live_s.seconds, "us_per_step": live_s.seconds / n * 1e6}
     episode = _episode(episode_repeats)
     frame = _frame(sc, frames)
     target = next(r for r in rows if r["steps"] == steps)
@@ -159,33 +159,44 @@ def _episode(repeats: int) -> dict:
         env = gym.make("FlatBody-v0", track_rotation=True, **kwargs)
         env = RerunRecorder(env, str(path)) if path is not None else env
         rng = np.random.default_rng(0)
-        start = time.perf_counter()
-        env.reset(seed=0)
-        done = False
-        while not done:
-            _, _, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
-            done = term or trunc
-        env.close()
-        return time.perf_counter() - start, info["integrator"]["method"]
+        with Stopwatch() as sw:
+            env.reset(seed=0)
+            done = False
+            while not done:
+                _, _, term, trunc, info = env.step(rng.uniform(-1.0, 1.0, env.action_space.shape).astype(np.float32))
+                done = term or trunc
+            env.close()
+        return sw.seconds, info["integrator"]["method"]
 
-    fast, slow, fast_steps, slow_steps = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
-        episode(Path(tmp) / "warm.rrd")  # compiled kernels loaded, rerun imported
-        for r in range(repeats):
-            s, method = episode(Path(tmp) / f"fast-{r}.rrd")
-            fast.append(s)
-            s, _ = episode(Path(tmp) / f"slow-{r}.rrd", integrator="DOP853")
-            slow.append(s)
-            fast_steps.append(episode(None)[0])  # the same episode carrying R, nothing recorded
-            slow_steps.append(episode(None, integrator="DOP853")[0])
+        method = episode(Path(tmp) / "warm.rrd")[1]  # compiled kernels loaded, rerun imported
+        files = itertools.count()
+        times = alternate_samples(
+            {
+                "fast": lambda: episode(Path(tmp) / f"fast-{next(files)}.rrd")[0],
+                "slow": lambda: episode(Path(tmp) / f"slow-{next(files)}.rrd", integrator="DOP853")[0],
+                "fast_steps": lambda: episode(None)[0],  # the same episode carrying R, nothing recorded
+                "slow_steps": lambda: episode(None, integrator="DOP853")[0],
+            },
+            repeats,
+            warm=False,
+        )
+    fast, slow, fast_steps, slow_steps = (times[k] for k in ("fast", "slow", "fast_steps", "slow_steps"))
     scene = load_scene("default")
-    times = np.linspace(0.0, scene.t_end, 1001)
-    auto = simulate(scene, t_end=scene.t_end, times=times, with_rotation=True)
-    auto_s = min(simulate(scene, t_end=scene.t_end, times=times, with_rotation=True).wall_time for _ in range(repeats))
-    scipy_s = min(
-        simulate(scene, t_end=scene.t_end, times=times, with_rotation=True, method="DOP853").wall_time
-        for _ in range(max(1, repeats // 2))
+    grid = np.linspace(0.0, scene.t_end, 1001)
+    auto = simulate(scene, t_end=scene.t_end, times=grid, with_rotation=True)
+    free = alternate_samples(
+        {
+            "auto": lambda: simulate(scene, t_end=scene.t_end, times=grid, with_rotation=True) and None,
+            "scipy": lambda: (
+                simulate(scene, t_end=scene.t_end, times=grid, with_rotation=True, method="DOP853") and None
+            ),
+        },
+        max(1, repeats // 2),
+        warm=False,
+        mirror=True,
     )
+    auto_s, scipy_s = min(free["auto"]), min(free["scipy"])
     return {
         "compiled_method": method,
         "compiled_s": float(np.median(fast)),
@@ -196,7 +207,7 @@ def _episode(repeats: int) -> dict:
         "stepping_former_s": float(np.median(slow_steps)),
         "stepping_speedup": float(np.median(slow_steps) / np.median(fast_steps)),
         "scene": scene.name,
-        "scene_samples": int(times.size),
+        "scene_samples": int(grid.size),
         "scene_auto_method": auto.method,
         "scene_auto_s": float(auto_s),
         "scene_scipy_s": float(scipy_s),
@@ -216,11 +227,13 @@ def _frame(scene, frames: int) -> dict:
     Y, R, t = traj.y, traj.rotation, traj.t
     for k in range(min(20, frames)):  # warm-up (font and legend caches)
         render_frame(Y[:, k], R[k], target, t[k])
-    times = np.empty(frames)
-    for k in range(frames):
-        start = time.perf_counter()
+    at = iter(range(frames))
+
+    def one_frame() -> None:
+        k = next(at)
         render_frame(Y[:, k], R[k], target, t[k])
-        times[k] = time.perf_counter() - start
+
+    times = np.array(samples(one_frame, frames, warm=False))
     median_ms = float(np.median(times)) * 1e3
     return {
         "frames": frames,
@@ -232,73 +245,59 @@ def _frame(scene, frames: int) -> dict:
     }
 
 
-def describe(result: dict) -> str:
-    """The printed summary of a :func:`measure` result."""
-    lines = [
-        f"whole trajectory, {r['steps']:>6} steps: median {r['median_s']:.3f} s (min {r['min_s']:.3f}, max {r['max_s']:.3f}) "
-        f"over {result['repeats']} runs, {r['file_bytes'] / 1e6:.1f} MB"
-        for r in result["sizes"]
-    ]
-    lv, ep, fr, fc = result["live"], result["episode"], result["frame"], result["first_call"]
-    if lv:
-        lines.append(
-            f"live Recorder.append, {lv['steps']} steps in blocks of {lv['block']}: {lv['seconds']:.3f} s ({lv['us_per_step']:.1f} µs/step)"
-        )
-    lines += [
-        f"recorded env episode (400 steps, random policy): {ep['compiled_method']} carrying R {ep['compiled_s']:.3f} s, "
-        f"the former path (scipy DOP853 stepping R) {ep['former_s']:.3f} s: {ep['speedup']:.1f}x faster (same run)",
-        f"  its stepping alone (nothing recorded): {ep['stepping_compiled_s']:.3f} s vs {ep['stepping_former_s']:.3f} s: "
-        f"{ep['stepping_speedup']:.1f}x; the rest of a recorded episode is the recorder",
-        f"free scene trajectory with R (scene {ep['scene']}, {ep['scene_samples']} samples): method auto ({ep['scene_auto_method']}) "
-        f"{ep['scene_auto_s'] * 1e3:.1f} ms, scipy DOP853 {ep['scene_scipy_s'] * 1e3:.1f} ms: {ep['scene_speedup']:.1f}x",
-        f"rgb_array frame ({fr['frames']} frames of scene {result['scene']}): median {fr['median_ms']:.3f} ms, mean {fr['mean_ms']:.3f} ms — "
-        + ("within" if fr["within_budget"] else "OVER")
-        + f" the {fr['budget_ms']:g} ms budget",
-        f"first call of the process ({fc['steps']} steps, includes importing rerun): {fc['seconds']:.3f} s",
-        f"logging a {result['steps']}-step trajectory: {result['median_s']:.3f} s (median of {result['repeats']}) — "
-        + ("within" if result["within_budget"] else "OVER")
-        + f" the {result['budget_s']:g} s budget",
-    ]
-    return "\n".join(lines)
-
-
-def markdown(result: dict) -> str:
-    """The Markdown table of docs/recording.md, from a ``recording.json`` result."""
+def tables(result: dict) -> list[Table]:
+    """The figures of a ``recording.json`` result: the terminal's text and the docs' ``recording`` block."""
     sizes = {r["steps"]: r for r in result["sizes"]}
     target = sizes[result["steps"]]
     others = [r for n, r in sorted(sizes.items()) if n != result["steps"]]
     ep, fr, lv, fc = result["episode"], result["frame"], result["live"], result["first_call"]
-    lines = [
-        "| what | result |",
-        "|---|---|",
-        f"| recorded env episode, 400 steps ({ep['compiled_method']} carrying R, compiled) | **{ep['compiled_s']:.3f} s** "
-        f"(median of {ep['repeats']}) |",
-        f"| the same episode on the former path (scipy DOP853 integrating R) | {ep['former_s']:.3f} s: "
-        f"**{ep['speedup']:.1f}× slower** (same run) |",
-        f"| its stepping alone (the env carrying R, nothing recorded): compiled vs the former path | {ep['stepping_compiled_s'] * 1e3:.0f} ms vs "
-        f"{ep['stepping_former_s'] * 1e3:.0f} ms: **{ep['stepping_speedup']:.0f}×** |",
-        f"| free scene with R, {ep['scene_samples']} samples: `simulate` method auto ({ep['scene_auto_method']}) vs scipy DOP853 | "
-        f"{ep['scene_auto_s'] * 1e3:.1f} ms vs {ep['scene_scipy_s'] * 1e3:.0f} ms ({ep['scene_speedup']:.0f}×) |",
-        f"| `record_trajectory`, {result['steps']} steps (budget ≤ 1 s) | **{target['median_s']:.2f} s** (min {target['min_s']:.2f} s; "
-        f"{target['file_bytes'] / 1e6:.1f} MB) |",
+    within = lambda ok: "within" if ok else "OVER"  # noqa: E731
+    rows = [
+        [
+            f"recorded env episode, 400 steps ({ep['compiled_method']} carrying R, compiled)",
+            f"**{ep['compiled_s']:.3f} s** (median of {ep['repeats']})",
+        ],
+        [
+            "the same episode on the former path (scipy DOP853 integrating R)",
+            f"{ep['former_s']:.3f} s: **{ep['speedup']:.1f}× slower** (same run)",
+        ],
+        [
+            "its stepping alone (the env carrying R, nothing recorded): compiled vs the former path",
+            f"{ep['stepping_compiled_s'] * 1e3:.0f} ms vs {ep['stepping_former_s'] * 1e3:.0f} ms: "
+            f"**{ep['stepping_speedup']:.0f}×**",
+        ],
+        [
+            f"free scene with R, {ep['scene_samples']} samples: `simulate` method auto ({ep['scene_auto_method']}) vs "
+            "scipy DOP853",
+            f"{ep['scene_auto_s'] * 1e3:.1f} ms vs {ep['scene_scipy_s'] * 1e3:.0f} ms ({ep['scene_speedup']:.0f}×)",
+        ],
+        [
+            f"`record_trajectory`, {result['steps']} steps (budget ≤ {result['budget_s']:g} s)",
+            f"**{target['median_s']:.2f} s** (min {target['min_s']:.2f} s; {target['file_bytes'] / 1e6:.1f} MB): "
+            f"{within(result['within_budget'])} the budget",
+        ],
     ]
     if others:
         counts = " / ".join(str(r["steps"]) for r in others)
-        medians = " / ".join(f"{r['median_s']:.3f}" for r in others)
-        lines.append(f"| `record_trajectory`, {counts} steps | {medians} s |")
+        rows.append([f"`record_trajectory`, {counts} steps", " / ".join(f"{r['median_s']:.3f}" for r in others) + " s"])
     if lv:
-        lines.append(
-            f"| live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']} | {lv['seconds']:.2f} s "
-            f"({lv['us_per_step']:.0f} µs per step) |"
+        rows.append(
+            [
+                f"live `Recorder.append`, {lv['steps']} steps in blocks of {lv['block']}",
+                f"{lv['seconds']:.2f} s ({lv['us_per_step']:.0f} µs per step)",
+            ]
         )
-    lines.append(
-        f"| the process's first recording ({fc['steps']} steps), including `import rerun` | {fc['seconds']:.2f} s |"
+    rows.append(
+        [f"the process's first recording ({fc['steps']} steps), including `import rerun`", f"{fc['seconds']:.2f} s"]
     )
-    lines.append(
-        f"| `rgb_array` frame, {fr['frames']} frames (budget ≤ 1 ms) | **{fr['median_ms']:.2f} ms** median "
-        f"({fr['mean_ms']:.2f} ms mean) |"
+    rows.append(
+        [
+            f"`rgb_array` frame, {fr['frames']} frames (budget ≤ {fr['budget_ms']:g} ms)",
+            f"**{fr['median_ms']:.2f} ms** median ({fr['mean_ms']:.2f} ms mean, 90th percentile {fr['p90_ms']:.2f} ms): "
+            f"{within(fr['within_budget'])} the budget",
+        ]
     )
-    return "\n".join(lines)
+    return [Table(columns=["what", "result"], rows=rows)]
 
 
 RECORDING_CAPTION = (
@@ -311,52 +310,44 @@ RECORDING_CAPTION = (
 
 def plot(json_path: str | os.PathLike, png_path: str | os.PathLike) -> Path:
     """Draw the chart of a saved ``recording.json`` (never from a fresh run) to ``png_path``."""
-
-    import matplotlib
-
-    from flatbody_env.chart_text import add_caption
-    from flatbody_env.output import save_figure
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flatbody_env.figures import PALETTE, chart
 
     result = validation.read_json("--plot-only", json_path)
     steps = [r["steps"] for r in result["sizes"]]
     med = [r["median_s"] for r in result["sizes"]]
     lo = [r["median_s"] - r["min_s"] for r in result["sizes"]]
     hi = [r["max_s"] - r["median_s"] for r in result["sizes"]]
-    fig, ax = plt.subplots(figsize=(6, 4.7))
-    ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
-    if result.get("live"):
-        lv = result["live"]
-        ax.plot(
-            [lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})"
-        )
-    ax.axhline(result["budget_s"], color="C3", ls="--", lw=1, label="budget 1 s at 10 000 steps")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("steps")
-    ax.set_ylabel("wall time to a finished .rrd [s]")
-    ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    bottom = add_caption(fig, RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    with chart(png_path, size=(6.4, 5.2)) as c:
+        ax = c.ax
+        ax.errorbar(steps, med, yerr=[lo, hi], marker="o", capsize=3, label="record_trajectory (whole, send_columns)")
+        if result.get("live"):
+            lv = result["live"]
+            ax.plot(
+                [lv["steps"]], [lv["seconds"]], "s", color="C1", label=f"live Recorder.append (blocks of {lv['block']})"
+            )
+        ax.axhline(result["budget_s"], color=PALETTE["bad"], ls="--", lw=1, label="budget 1 s at 10 000 steps")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("steps")
+        ax.set_ylabel("wall time to a finished .rrd [s]")
+        ax.set_title(f"flatbody recording, rerun-sdk {result['rerun_sdk']} ({result['cpus']} CPUs)")
+        ax.grid(True, which="both", alpha=0.3)
+        c.legend(where="below", ncol=1)
+        c.caption(RECORDING_CAPTION.format(repeats=result.get("repeats", "the")), fontsize=7)
     return Path(png_path)
 
 
 def report(result: dict) -> Report:
     """``result`` for :func:`flatbody_env.bench.harness.write_report`: ``recording.json``, ``recording.csv``
-    (the sizes), ``recording.png`` (:func:`plot`) and the ``<!-- bench:recording -->`` table (:func:`markdown`)."""
+    (the sizes), ``recording.png`` (:func:`plot`) and the table (:func:`tables`, the ``<!-- bench:recording -->``
+    block)."""
     return Report(
         name=NAME,
         record=result,
         header=CSV_HEADER,
         rows=[[r[c] for c in CSV_HEADER] for r in result["sizes"]],
         chart=plot,
-        markdown=markdown(result),
+        tables=tables(result),
     )
 
 
@@ -366,9 +357,8 @@ __all__ = [
     "FRAME_BUDGET_MS",
     "NAME",
     "RECORDING_CAPTION",
-    "describe",
-    "markdown",
     "measure",
     "plot",
     "report",
+    "tables",
 ]

@@ -23,8 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Stopwatch, Table
 from flatbody_env.physics import validation
 
 ENDPOINTS: dict[str, tuple[str, str, dict[str, Any] | None]] = {
@@ -81,19 +80,28 @@ class ServiceBenchmark:
         """Answers other than 200, over all rows."""
         return sum(r.errors for r in self.rows)
 
-    def table(self) -> str:
-        """The rows as a text table, under a line naming the service and the long job's status."""
-        lines = [
-            f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job {self.long_job['kind']} "
-            f"status at the end: {self.long_job['status_at_end']}",
-            f"{'endpoint':<16} {'clients':>7} {'requests':>8} {'errors':>6} {'p50 ms':>9} {'p99 ms':>9} {'req/s':>9}",
-        ]
-        for r in self.rows:
-            lines.append(
-                f"{r.endpoint:<16} {r.clients:>7} {r.requests:>8} {r.errors:>6} {r.p50_ms:>9.2f} {r.p99_ms:>9.2f} "
-                f"{r.requests_per_s:>9.1f}"
+    def tables(self) -> list[Table]:
+        """The rows (the terminal's text), under a line naming the service and the long job's status."""
+        return [
+            Table(
+                title=f"service with {self.workers} worker process(es) on {self.cpus} CPU(s); long job "
+                f"{self.long_job['kind']} status at the end: {self.long_job['status_at_end']}",
+                columns=["endpoint", "clients", "requests", "errors", "p50 ms", "p99 ms", "req/s"],
+                rows=[
+                    [
+                        r.endpoint,
+                        str(r.clients),
+                        str(r.requests),
+                        str(r.errors),
+                        f"{r.p50_ms:.2f}",
+                        f"{r.p99_ms:.2f}",
+                        f"{r.requests_per_s:.1f}",
+                    ]
+                    for r in self.rows
+                ],
+                block=None,
             )
-        return "\n".join(lines)
+        ]
 
 
 async def _load(url: str, name: str, clients: int, requests: int, seconds: float) -> LoadRow:
@@ -103,25 +111,24 @@ async def _load(url: str, name: str, clients: int, requests: int, seconds: float
     latencies: list[float] = []
     errors = 0
     issued = 0
-    start = time.perf_counter()
-    deadline = start + seconds
+    run = Stopwatch.started()
 
     async def client() -> None:
         nonlocal issued, errors
         async with httpx.AsyncClient(base_url=url, timeout=120.0) as http:
-            while issued < requests and time.perf_counter() < deadline:
+            while issued < requests and run.seconds < seconds:
                 issued += 1
-                t0 = time.perf_counter()
-                try:
-                    r = await http.request(method, path, json=body)
-                    ok = r.status_code == 200
-                except httpx.HTTPError:
-                    ok = False
-                latencies.append(time.perf_counter() - t0)
+                with Stopwatch() as one:
+                    try:
+                        r = await http.request(method, path, json=body)
+                        ok = r.status_code == 200
+                    except httpx.HTTPError:
+                        ok = False
+                latencies.append(one.seconds)
                 errors += 0 if ok else 1
 
     await asyncio.gather(*(client() for _ in range(clients)))
-    elapsed = time.perf_counter() - start
+    elapsed = run.seconds
     lat = np.array(latencies) * 1e3
     return LoadRow(
         endpoint=name,
@@ -149,11 +156,11 @@ def measure(
     with tempfile.TemporaryDirectory(prefix="flatbody-bench-service-") as data_dir:
         proc, url = start_service(data_dir, workers=workers)
         try:
-            for name, (method, path, body) in ENDPOINTS.items():  # warm every worker process once
+            for method, path, body in ENDPOINTS.values():  # warm every worker process once
                 for _ in range(workers):
                     httpx.request(method, url + path, json=body, timeout=120.0)
             job_id = httpx.post(url + "/jobs", json=LONG_JOB, timeout=30.0).json()["id"]
-            time.sleep(0.5)
+            time.sleep(0.5)  # the worker picks the job up
             status_at_start = httpx.get(f"{url}/jobs/{job_id}", timeout=30.0).json()["status"]
             for name in ENDPOINTS:
                 for c in clients:
@@ -191,6 +198,7 @@ def report(result: ServiceBenchmark) -> Report:
         rows=[[asdict(r)[f] for f in fields] for r in result.rows],
         chart=plot,
         chart_from="json",
+        tables=result.tables(),
     )
 
 
@@ -208,60 +216,48 @@ def load(json_path: str | Path) -> ServiceBenchmark:
 def plot(json_path: str | Path, png_path: str | Path) -> Path:
     """The chart of a saved ``service_benchmark.json``: latency (p50, p99) and requests/s over the number
     of concurrent clients, one colour per endpoint; a caption says what was measured."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import chart
 
     result = load(json_path)
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.6))
-    names = list(dict.fromkeys([*ENDPOINTS, *(r.endpoint for r in result.rows)]))
-    for k, name in enumerate(names):
-        sel = sorted((r for r in result.rows if r.endpoint == name), key=lambda r: r.clients)
-        if not sel:
-            continue
-        x = [r.clients for r in sel]
-        color = f"C{k}"
-        ax1.plot(x, [r.p50_ms for r in sel], "o-", color=color, label=f"{name}, p50")
-        ax1.plot(x, [r.p99_ms for r in sel], "s--", color=color, label=f"{name}, p99")
-        ax2.plot(x, [r.requests_per_s for r in sel], "o-", color=color, label=name)
-    clients = sorted({r.clients for r in result.rows})
-    for ax in (ax1, ax2):
-        ax.set_xscale("log", base=2)
-        ax.set_xticks(clients, [str(c) for c in clients])
-        ax.minorticks_off()
-        ax.set_xlabel("concurrent clients (one connection each)")
-        ax.grid(True, alpha=0.3)
-    ax1.set_yscale("log")
-    ax1.set_ylabel("latency per request (ms, log scale)")
-    ax1.set_title("latency: p50 (solid), p99 (dashed)", fontsize=10)
-    ax2.set_ylim(0, 1.3 * max([r.requests_per_s for r in result.rows], default=1.0))
-    ax2.set_ylabel("requests / s (answered)")
-    ax2.set_title("throughput", fontsize=10)
-    ax1.legend(fontsize=7, loc="upper left", ncol=1)
-    ax2.legend(fontsize=7, loc="upper right")
-    errors = result.errors
-    fig.suptitle(
-        f"flatbody serve: {result.workers} worker process(es) on {result.cpus} CPU(s), "
-        f"while a {result.long_job['kind']} job runs",
-        fontsize=10,
-    )
-    requests = max((r.requests for r in result.rows), default=0)
-    bottom = add_caption(
-        fig,
-        f"p50 / p99: the median and the 99th percentile of the time from sending a request to reading "
-        f"its answer, at most {requests} requests per point; requests/s: answered requests over the "
-        f"time taken.\nThe load generator runs on the same machine as the service; "
-        f"{errors} error(s) (any answer other than 200).",
-    )
-    fig.tight_layout(rect=(0, bottom, 1, 0.95))
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    save_figure(fig, png_path, dpi=100)
-    plt.close(fig)
-    return png_path
+    with chart(png_path, size=(11, 5.4), ncols=2) as c:
+        ax1, ax2 = c.axes[0]
+        names = list(dict.fromkeys([*ENDPOINTS, *(r.endpoint for r in result.rows)]))
+        for k, name in enumerate(names):
+            sel = sorted((r for r in result.rows if r.endpoint == name), key=lambda r: r.clients)
+            if not sel:
+                continue
+            x = [r.clients for r in sel]
+            color = f"C{k}"
+            ax1.plot(x, [r.p50_ms for r in sel], "o-", color=color, label=f"{name}, p50")
+            ax1.plot(x, [r.p99_ms for r in sel], "s--", color=color, label=f"{name}, p99")
+            ax2.plot(x, [r.requests_per_s for r in sel], "o-", color=color, label=name)
+        clients = sorted({r.clients for r in result.rows})
+        for ax in (ax1, ax2):
+            ax.set_xscale("log", base=2)
+            ax.set_xticks(clients, [str(c) for c in clients])
+            ax.minorticks_off()
+            ax.set_xlabel("concurrent clients (one connection each)")
+            ax.grid(True, alpha=0.3)
+        ax1.set_yscale("log")
+        ax1.set_ylabel("latency per request (ms, log scale)")
+        ax1.set_title("latency: p50 (solid, circles), p99 (dashed, squares)")
+        ax2.set_ylim(0, 1.15 * max([r.requests_per_s for r in result.rows], default=1.0))
+        ax2.set_ylabel("requests / s (answered)")
+        ax2.set_title("throughput")
+        handles, labels = ax1.get_legend_handles_labels()
+        c.legend(handles, labels, where="below", ncol=max(1, len(names)))
+        c.title(
+            f"flatbody serve: {result.workers} worker process(es) on {result.cpus} CPU(s), "
+            f"while a {result.long_job['kind']} job runs"
+        )
+        requests = max((r.requests for r in result.rows), default=0)
+        c.caption(
+            f"p50 / p99: the median and the 99th percentile of the time from sending a request to reading "
+            f"its answer, at most {requests} requests per point; requests/s: answered requests over the "
+            f"time taken.\nThe load generator runs on the same machine as the service; "
+            f"{result.errors} error(s) (any answer other than 200). Colours: the endpoints, as in the legend.",
+        )
+    return Path(png_path)
 
 
 __all__ = ["ENDPOINTS", "LONG_JOB", "NAME", "LoadRow", "ServiceBenchmark", "load", "measure", "plot", "report"]

@@ -36,8 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from flatbody_env.bench.harness import Report
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Stopwatch, Table
 from flatbody_env.physics import validation
 from flatbody_env.provenance import machine
 from flatbody_env.sweep.tasks import Task, execute, plan
@@ -109,20 +108,19 @@ def _timed_cluster_run(tasks: list[Task], workers: int) -> dict[str, float]:
 
     from flatbody_env.sweep.cluster import dask_client
 
-    t = time.perf_counter()
+    startup = Stopwatch.started()
     with dask_client(workers=workers) as client:
         client.wait_for_workers(workers)
         client.run(_warm)
-        startup = time.perf_counter() - t
-        t1 = time.perf_counter()
-        futures = client.map(execute, tasks, pure=False)
-        wait(futures)
-        outcomes = client.gather(futures)
-        run = time.perf_counter() - t1
+        startup_s = startup.seconds
+        with Stopwatch() as run:
+            futures = client.map(execute, tasks, pure=False)
+            wait(futures)
+            outcomes = client.gather(futures)
     bad = [o.key for o in outcomes if o.error is not None]
     if bad:
         raise RuntimeError(f"bench sweep: tasks failed on the cluster: {', '.join(bad[:3])}")
-    return {"startup_s": startup, "run_s": run}
+    return {"startup_s": startup_s, "run_s": run.seconds}
 
 
 def measure(
@@ -140,9 +138,9 @@ def measure(
     spec = _spec(grid, chunk)
     tasks = plan(spec, "unused")  # the map's tasks write no files
     _warm()
-    t = time.perf_counter()
-    outcomes = [execute(task) for task in tasks]
-    serial = time.perf_counter() - t
+    with Stopwatch() as serial_run:
+        outcomes = [execute(task) for task in tasks]
+    serial = serial_run.seconds
     if any(o.error for o in outcomes):
         raise RuntimeError("bench sweep: a serial task failed: " + next(o.error for o in outcomes if o.error))
     costs = [o.seconds for o in outcomes]
@@ -175,18 +173,18 @@ def measure(
                 silence_logs=logging.ERROR,
                 scheduler_kwargs=QUIET_SCHEDULER,
             )
-        t = time.perf_counter()
-        client = Client(cluster.scheduler_address)  # as a user connects to a running cluster
-        client.wait_for_workers(sim_workers)
-        connect = time.perf_counter() - t
+        with Stopwatch() as connecting:
+            client = Client(cluster.scheduler_address)  # as a user connects to a running cluster
+            client.wait_for_workers(sim_workers)
+        connect = connecting.seconds
         client.run(_warm)
         wait(client.map(_noop, range(sim_workers), pure=False))
-        t = time.perf_counter()
-        wait(client.map(_noop, range(noop_tasks), pure=False))
-        overhead = (time.perf_counter() - t) / noop_tasks
-        t = time.perf_counter()
-        wait(client.map(_sleep, costs, pure=False))
-        sim_wall = time.perf_counter() - t
+        with Stopwatch() as noops:
+            wait(client.map(_noop, range(noop_tasks), pure=False))
+        overhead = noops.seconds / noop_tasks
+        with Stopwatch() as simulated:
+            wait(client.map(_sleep, costs, pure=False))
+        sim_wall = simulated.seconds
         client.close()
     finally:
         if cluster is not None:
@@ -240,40 +238,65 @@ def measure(
     }
 
 
-def describe(rep: dict[str, Any]) -> str:
-    """The report as a few lines of text."""
+def tables(rep: dict[str, Any]) -> list[Table]:
+    """The report's figures for the terminal (no docs block: docs/scaling.md quotes them)."""
     load = rep["machine"]["load_avg_1min"]
-    lines = [
-        f"stability map {rep['grid']} x {rep['grid']} ({rep['tasks']} tasks of {rep['chunk']} lambda rows), "
-        f"{rep['machine']['cpu_count']} cores (load {'?' if load is None else f'{load:.1f}'})",
-        f"  serial (no Dask): {rep['serial_s']:.2f} s; task cost mean {rep['task_cost_mean_s'] * 1e3:.0f} ms, "
-        f"max {rep['task_cost_max_s'] * 1e3:.0f} ms; {rep['cost_per_point_s'] * 1e3:.2f} ms per grid point",
+    sim = rep["simulated"]
+    runs = [["serial (no Dask)", "—", f"{rep['serial_s']:.2f} s", "1.00×", "—"]]
+    runs += [
+        [
+            f"{x['workers']} local worker(s)",
+            f"{x['startup_s']:.2f} s",
+            f"{x['run_s']:.2f} s",
+            f"{x['speedup']:.2f}×",
+            f"{x['speedup_end_to_end']:.2f}×",
+        ]
+        for x in rep["local"]
     ]
-    for x in rep["local"]:
-        lines.append(
-            f"  {x['workers']} local worker(s): start-up {x['startup_s']:.2f} s, run {x['run_s']:.2f} s, "
-            f"speed-up {x['speedup']:.2f}x ({x['speedup_end_to_end']:.2f}x with start-up)"
-        )
-    lines.append(
-        f"  scheduler overhead: {rep['overhead_per_task_s'] * 1e3:.2f} ms per task "
-        f"({rep['overhead_over_task_cost']:.1%} of a mean task); connecting to a running cluster {rep['connect_s']:.2f} s"
+    runs.append(
+        [
+            f"{sim['workers']} simulated nodes (tasks sleep their measured cost)",
+            f"{rep['connect_s']:.2f} s (connect)",
+            f"{sim['wall_s']:.2f} s (model {sim['model_s']:.2f}, ideal {sim['ideal_s']:.2f})",
+            f"{sim['speedup']:.2f}×",
+            "—",
+        ]
     )
-    s = rep["simulated"]
-    lines.append(
-        f"  simulated {s['workers']} nodes (tasks sleep their measured cost): {s['wall_s']:.2f} s measured, "
-        f"{s['model_s']:.2f} s modelled, {s['ideal_s']:.2f} s ideal; speed-up {s['speedup']:.2f}x"
-    )
-    for x in rep["extrapolated"]:
-        lines.append(
-            f"  {x['workers']:>3} workers (model): grid {x['grid']}: {x['predicted_s']:.2f} s ({x['predicted_speedup']:.1f}x); "
-            f"grid {x['grid_big']}: {x['predicted_big_s']:.1f} s ({x['predicted_big_speedup']:.1f}x); "
-            f"pays off above grid {x['break_even_grid']:.0f}"
-        )
+    notes = [
+        f"task cost mean {rep['task_cost_mean_s'] * 1e3:.0f} ms, max {rep['task_cost_max_s'] * 1e3:.0f} ms; "
+        f"{rep['cost_per_point_s'] * 1e3:.2f} ms per grid point; scheduler overhead "
+        f"{rep['overhead_per_task_s'] * 1e3:.2f} ms per task ({rep['overhead_over_task_cost']:.1%} of a mean task)"
+    ]
     if rep["break_even_local_2"] is not None:
-        lines.append(
-            f"  embedded 2-process cluster (start-up included) pays off above grid {rep['break_even_local_2']:.0f}"
+        notes.append(
+            f"embedded 2-process cluster (start-up included) pays off above grid {rep['break_even_local_2']:.0f}"
         )
-    return "\n".join(lines)
+    model = [
+        [
+            str(x["workers"]),
+            f"{x['predicted_s']:.2f} s ({x['predicted_speedup']:.1f}×)",
+            f"{x['predicted_big_s']:.1f} s ({x['predicted_big_speedup']:.1f}×)",
+            f"{x['break_even_grid']:.0f}",
+        ]
+        for x in rep["extrapolated"]
+    ]
+    big = rep["extrapolated"][0]["grid_big"] if rep["extrapolated"] else 1000
+    return [
+        Table(
+            title=f"stability map {rep['grid']} x {rep['grid']} ({rep['tasks']} tasks of {rep['chunk']} lambda rows), "
+            f"{rep['machine']['cpu_count']} cores (load {'?' if load is None else f'{load:.1f}'})",
+            columns=["run", "start-up", "wall time", "speed-up", "with start-up"],
+            rows=runs,
+            notes=notes,
+            block=None,
+        ),
+        Table(
+            title="the model, extrapolated",
+            columns=["workers", f"grid {rep['grid']}", f"grid {big}", "pays off above grid"],
+            rows=model,
+            block=None,
+        ),
+    ]
 
 
 def report(rep: dict[str, Any]) -> Report:
@@ -306,105 +329,102 @@ def report(rep: dict[str, Any]) -> Report:
         rows=rows,
         chart=plot,
         chart_from="json",
+        tables=tables(rep),
     )
 
 
 def plot(json_path: str | Path, png_path: str | Path) -> Path:
     """Two panels: speed-up over workers (measured, simulated, modelled) and time over grid size
     (serial vs clusters; the crossings are the break-even grid sizes)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from flatbody_env.figures import chart
 
     rep = validation.read_json("--plot-only", json_path)
     costs = rep["task_costs_s"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    ws = [1, 2, 4, 8, 16, 32, 64, 128]
-    ax1.plot(
-        ws,
-        [rep["serial_s"] / model_time(costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"]) for w in ws],
-        "-",
-        color="0.5",
-        label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)",
-    )
     chunk, big = rep["chunk"], rep["extrapolated"][0]["grid_big"] if rep["extrapolated"] else 1000
     big_costs = [rep["cost_per_point_s"] * chunk * big] * math.ceil(big / chunk)
-    ax1.plot(
-        ws,
-        [
-            sum(big_costs) / model_time(big_costs, w, t0=rep["connect_s"], overhead=rep["overhead_per_task_s"])
-            for w in ws
-        ],
-        "--",
-        color="C2",
-        label=f"model, grid {big} ({len(big_costs)} tasks)",
-    )
-    ax1.plot(ws, ws, ":", color="k", lw=0.8, label="ideal")
-    ax1.plot(
-        [x["workers"] for x in rep["local"]],
-        [x["speedup"] for x in rep["local"]],
-        "o",
-        color="C0",
-        label="measured, local processes",
-    )
-    ax1.plot(
-        [rep["simulated"]["workers"]], [rep["simulated"]["speedup"]], "s", color="C1", label="measured, simulated nodes"
-    )
-    ax1.set_xscale("log", base=2)
-    ax1.set_yscale("log", base=2)
-    ax1.set_xlabel("workers")
-    ax1.set_ylabel("speed-up over serial")
-    ax1.set_title("sweep stability-map: speed-up")
-    ax1.legend(fontsize=8)
-    ax1.grid(alpha=0.3)
-    grids = [int(g) for g in (10 ** (x / 20) for x in range(20, 81))]
-    c, o, t0 = rep["cost_per_point_s"], rep["overhead_per_task_s"], rep["connect_s"]
-    ax2.plot(grids, [c * g * g for g in grids], "-", color="k", label="serial")
-    for k, w in enumerate((2, 8, 32, 128)):
-        ax2.plot(
-            grids,
-            [t0 + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), w) for g in grids],
+    c_point, o, t0 = rep["cost_per_point_s"], rep["overhead_per_task_s"], rep["connect_s"]
+    with chart(png_path, size=(11, 5.2), ncols=2) as c:
+        ax1, ax2 = c.axes[0]
+        ws = [1, 2, 4, 8, 16, 32, 64, 128]
+        ax1.plot(
+            ws,
+            [rep["serial_s"] / model_time(costs, w, t0=t0, overhead=o) for w in ws],
             "-",
-            color=f"C{k}",
-            label=f"{w} workers (running cluster)",
+            color="0.5",
+            label=f"model, grid {rep['grid']} ({rep['tasks']} tasks)",
         )
-    local2 = next((x for x in rep["local"] if x["workers"] == 2), None)
-    if local2 is not None:
-        ax2.plot(
-            grids,
-            [
-                local2["startup_s"] + math.ceil(g / chunk) * o + makespan([c * chunk * g] * math.ceil(g / chunk), 2)
-                for g in grids
-            ],
+        ax1.plot(
+            ws,
+            [sum(big_costs) / model_time(big_costs, w, t0=t0, overhead=o) for w in ws],
             "--",
-            color="C0",
-            label=f"2 local processes (start-up {local2['startup_s']:.1f} s)",
+            color="C2",
+            label=f"model, grid {big} ({len(big_costs)} tasks)",
         )
-    ax2.set_xscale("log")
-    ax2.set_yscale("log")
-    ax2.set_xlabel("grid points per axis")
-    ax2.set_ylabel("wall time (s, model from measured costs)")
-    ax2.set_title(f"overhead {o * 1e3:.1f} ms/task, connect {t0:.2f} s, {c * 1e3:.2f} ms/point")
-    ax2.legend(fontsize=8)
-    ax2.grid(alpha=0.3, which="both")
-    from flatbody_env.chart_text import add_caption
+        ax1.plot(ws, ws, ":", color="k", lw=0.8, label="ideal")
+        ax1.plot(
+            [x["workers"] for x in rep["local"]],
+            [x["speedup"] for x in rep["local"]],
+            "o",
+            color="C0",
+            label="measured, local processes",
+        )
+        ax1.plot(
+            [rep["simulated"]["workers"]],
+            [rep["simulated"]["speedup"]],
+            "s",
+            color="C1",
+            label="measured, simulated nodes",
+        )
+        ax1.set_xscale("log", base=2)
+        ax1.set_yscale("log", base=2)
+        ax1.set_xlabel("workers")
+        ax1.set_ylabel("speed-up over serial")
+        ax1.set_title("sweep stability-map: speed-up")
+        ax1.legend(loc="upper left")
+        ax1.grid(alpha=0.3)
+        grids = [int(g) for g in (10 ** (x / 20) for x in range(20, 81))]
+        ax2.plot(grids, [c_point * g * g for g in grids], "-", color="k", label="serial")
+        for k, w in enumerate((2, 8, 32, 128)):
+            ax2.plot(
+                grids,
+                [
+                    t0 + math.ceil(g / chunk) * o + makespan([c_point * chunk * g] * math.ceil(g / chunk), w)
+                    for g in grids
+                ],
+                "-",
+                color=f"C{k}",
+                label=f"{w} workers (running cluster)",
+            )
+        local2 = next((x for x in rep["local"] if x["workers"] == 2), None)
+        if local2 is not None:
+            ax2.plot(
+                grids,
+                [
+                    local2["startup_s"]
+                    + math.ceil(g / chunk) * o
+                    + makespan([c_point * chunk * g] * math.ceil(g / chunk), 2)
+                    for g in grids
+                ],
+                "--",
+                color="C0",
+                label=f"2 local processes (start-up {local2['startup_s']:.1f} s)",
+            )
+        ax2.set_xscale("log")
+        ax2.set_yscale("log")
+        ax2.set_xlabel("grid points per axis")
+        ax2.set_ylabel("wall time (s, model from measured costs)")
+        ax2.set_title(f"overhead {o * 1e3:.1f} ms/task, connect {t0:.2f} s, {c_point * 1e3:.2f} ms/point")
+        ax2.legend(loc="upper left")
+        ax2.grid(alpha=0.3, which="both")
+        c.caption(
+            f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
+            f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
+            "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
+            "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
+            "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
+            "crosses the serial one, the cluster pays off (the break-even grid)."
+        )
+    return Path(png_path)
 
-    bottom = add_caption(
-        fig,
-        f"Measured on {rep.get('machine', {}).get('cpu_count', '?')} core(s): the stability map, grid {rep['grid']}, "
-        f"{rep['tasks']} tasks of {chunk} λ rows. Model: T(W) = t₀ + n·o + makespan(task costs, W), "
-        "t₀ connecting to a running cluster, o the scheduler overhead per task,\n"
-        "makespan the tasks handed out in order to W workers. Simulated nodes: worker processes whose tasks "
-        "sleep for their measured cost (a sleeping worker uses no core). Right: where a cluster's line\n"
-        "crosses the serial one, the cluster pays off (the break-even grid).",
-    )
-    fig.tight_layout(rect=(0, bottom, 1, 1))
-    png_path = Path(png_path)
-    png_path.parent.mkdir(parents=True, exist_ok=True)
-    save_figure(fig, png_path, dpi=110)
-    plt.close(fig)
-    return png_path
 
-
-__all__ = ["NAME", "break_even_grid", "describe", "makespan", "measure", "model_time", "plot", "report"]
+__all__ = ["NAME", "break_even_grid", "makespan", "measure", "model_time", "plot", "report", "tables"]

@@ -16,14 +16,12 @@ same seeds as a line), and the ``<!-- bench:time-to-goal -->`` docs block when a
 from __future__ import annotations
 
 import tempfile
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from flatbody_env.bench.harness import Report, write_report
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Stopwatch, Table, write_report
 from flatbody_env.physics import validation
 
 ENV_ID = "FlatBody-v0"
@@ -141,7 +139,7 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
 
     class Evaluate(BaseCallback):
         def _on_training_start(self) -> None:
-            self.t0, self.spent, self.next_at, self.done = time.perf_counter(), 0.0, eval_every, False
+            self.clock, self.next_at, self.done = Stopwatch.started(), eval_every, False
 
         def _on_step(self) -> bool:
             return not self.done
@@ -156,18 +154,17 @@ def _sb3_curve(seed: int, max_timesteps: int, eval_every: int, episodes: int, ev
                 self._evaluate()
 
         def _evaluate(self) -> None:
-            t = time.perf_counter()
-            wall = t - self.t0 - self.spent
-            vn = self.model.get_vec_normalize_env()
+            wall = self.clock.seconds
+            with self.clock.paused():  # the evaluations are left out of the training's wall time
+                vn = self.model.get_vec_normalize_env()
 
-            def policy(obs):
-                o = vn.normalize_obs(obs) if vn is not None else obs
-                return base(obs, self.model.predict(o, deterministic=True)[0])
+                def policy(obs):
+                    o = vn.normalize_obs(obs) if vn is not None else obs
+                    return base(obs, self.model.predict(o, deterministic=True)[0])
 
-            s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed, env_id=ENV_ID))
-            points.append((int(self.num_timesteps), round(wall, 2), s, d))
-            self.done = goal(s, d, points)
-            self.spent += time.perf_counter() - t
+                s, d = _summary(run_episodes(policy, episodes=episodes, seed=eval_seed, env_id=ENV_ID))
+                points.append((int(self.num_timesteps), round(wall, 2), s, d))
+                self.done = goal(s, d, points)
 
     cb = Evaluate()
     with tempfile.TemporaryDirectory() as tmp:
@@ -302,7 +299,7 @@ def report(bench: GoalBenchmark) -> Report:
         ],
         chart=plot,
         chart_from="json",
-        markdown=markdown(bench),
+        tables=tables(bench),
         block="time-to-goal",
     )
 
@@ -327,47 +324,43 @@ def load(json_path: str | Path) -> GoalBenchmark:
 
 def plot(json_path: Path, png_path: Path) -> None:
     """Final distance and success against wall time, redrawn from the saved ``time_to_goal.json``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart, fraction_axis
 
     bench = load(json_path)
-    fig, (ax_d, ax_s) = plt.subplots(1, 2, figsize=(9.0, 3.9))
-    for c, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange")):
-        w = [p[1] for p in c.points]
-        ax_d.plot(w, [p[3] for p in c.points], "o-", ms=3, color=colour, label=c.trainer)
-        ax_s.plot(w, [p[2] for p in c.points], "o-", ms=3, color=colour, label=c.trainer)
-    ax_d.axhline(bench.lqr_final_distance, color="k", ls="--", lw=1, label="LQR")
-    ax_d.axhline(bench.distance_goal, color="gray", ls=":", lw=1, label="goal")
-    for c, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange")):
-        for w in (c.goal_s, c.lqr_s):
-            if w is not None:
-                ax_d.axvline(w, color=colour, ls=":", lw=0.8)
-    ax_s.axhline(bench.success_goal, color="gray", ls=":", lw=1)
-    ax_d.set_yscale("log")
-    ax_d.set_xlabel("wall time (s)")
-    ax_s.set_xlabel("wall time (s)")
-    ax_d.set_ylabel("mean final distance")
-    ax_s.set_ylabel("success rate")
-    ax_d.legend(fontsize=8)
-    fig.suptitle("flatbody bench train --to-goal (same run)", fontsize=10)
-    bottom = add_caption(
-        fig,
-        CAPTION.format(
-            episodes=bench.episodes, eval_seed=bench.eval_seed, success=bench.success_goal, distance=bench.distance_goal
-        ),
-        fontsize=7,
-    )
-    fig.tight_layout(rect=(0, bottom + 0.02, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    with chart(png_path, size=(9.0, 4.9), ncols=2) as c:
+        ax_d, ax_s = c.axes[0]
+        for cv, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange"), strict=True):
+            w = [p[1] for p in cv.points]
+            ax_d.plot(w, [p[3] for p in cv.points], "o-", ms=3, color=colour, label=cv.trainer)
+            ax_s.plot(w, [p[2] for p in cv.points], "o-", ms=3, color=colour)
+        ax_d.axhline(bench.lqr_final_distance, color=PALETTE["reference"], ls="--", lw=1, label="LQR")
+        ax_d.axhline(bench.distance_goal, color=PALETTE["goal"], ls=":", lw=1, label="goal")
+        for cv, colour in zip((bench.sb3, bench.rsl), ("tab:blue", "tab:orange"), strict=True):
+            for w in (cv.goal_s, cv.lqr_s):
+                if w is not None:
+                    ax_d.axvline(w, color=colour, ls=":", lw=0.8)
+        ax_s.axhline(bench.success_goal, color=PALETTE["goal"], ls=":", lw=1)
+        ax_d.set_yscale("log")
+        ax_d.set_xlabel("wall time (s)")
+        ax_s.set_xlabel("wall time (s)")
+        ax_d.set_ylabel("mean final distance")
+        fraction_axis(ax_s, "success rate")
+        c.legend(where="below", ncol=4)
+        c.title("flatbody bench train --to-goal (same run)")
+        c.caption(
+            CAPTION.format(
+                episodes=bench.episodes,
+                eval_seed=bench.eval_seed,
+                success=bench.success_goal,
+                distance=bench.distance_goal,
+            ),
+            fontsize=7,
+        )
 
 
-def markdown(bench: GoalBenchmark) -> str:
-    """The docs' table of this run (``flatbody bench train --to-goal --docs docs/agents.md`` writes it there)."""
+def tables(bench: GoalBenchmark) -> list[Table]:
+    """The race of this run (the terminal's text and the docs' ``time-to-goal`` block; ``flatbody bench train --to-goal
+    --docs docs/agents.md`` writes it there)."""
 
     def at(w: float | None, t: int | None) -> str:
         return f"{w:.1f} s ({t} steps)" if w is not None else "not reached"
@@ -381,24 +374,28 @@ def markdown(bench: GoalBenchmark) -> str:
             return "— (not reached by both)"
         return f"**{r:.2f}**" + (f" (goal ≤ {bound}: {'met' if r <= bound else 'missed'})" if bound is not None else "")
 
-    return (
-        "\n".join(
-            [
-                f"| trainer (seed {bench.seed}) | to the goal | to beat the LQR | last evaluation: success / final distance |",
-                "|---|---|---|---|",
-                *(
-                    f"| {c.trainer} | {at(c.goal_s, c.goal_timesteps)} | {at(c.lqr_s, c.lqr_timesteps)} | {last(c)} |"
-                    for c in (bench.sb3, bench.rsl)
-                ),
-                f"| rsl-ppo / sb3-ppo wall time | {ratio(bench.ratio, 0.5)} | {ratio(bench.ratio_lqr, None)} | |",
-                "",
-                f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the LQR: success ≥ "
-                f"{bench.success_goal:.0%} and mean final distance below the LQR's ({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); "
-                f"both on {bench.episodes} held-out episodes (seeds {bench.eval_seed}…).",
-            ]
+    rows = [
+        [c.trainer, at(c.goal_s, c.goal_timesteps), at(c.lqr_s, c.lqr_timesteps), last(c)]
+        for c in (bench.sb3, bench.rsl)
+    ]
+    rows.append(["rsl-ppo / sb3-ppo wall time", ratio(bench.ratio, 0.5), ratio(bench.ratio_lqr, None), ""])
+    return [
+        Table(
+            columns=[
+                f"trainer (seed {bench.seed})",
+                "to the goal",
+                "to beat the LQR",
+                "last evaluation: success / final distance",
+            ],
+            rows=rows,
+            notes=[
+                f"Goal: success ≥ {bench.success_goal:.0%} and mean final distance ≤ {bench.distance_goal:g}; beat the "
+                f"LQR: success ≥ {bench.success_goal:.0%} and mean final distance below the LQR's "
+                f"({bench.lqr_success:.0%} / {bench.lqr_final_distance:.4f}); both on {bench.episodes} held-out "
+                f"episodes (seeds {bench.eval_seed}…)."
+            ],
         )
-        + "\n"
-    )
+    ]
 
 
-__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "markdown", "plot", "report", "run"]
+__all__ = ["Curve", "GoalBenchmark", "TRAINERS", "load", "plot", "report", "run", "tables"]

@@ -16,12 +16,10 @@ docs block when asked).
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from flatbody_env.bench.harness import Report, alternate, best_of, write_report
-from flatbody_env.output import save_figure
+from flatbody_env.bench.harness import Report, Stopwatch, Table, alternate, best_of, write_report
 from flatbody_env.physics import validation
 
 FLATBODY_ONLY = ("residual", "residual_mode", "residual_scale", "residual_gate", "env_kwargs")
@@ -82,30 +80,25 @@ class TrainBenchmark:
 
 
 def _timed(venv):
+    """``venv`` under a wrapper whose :class:`~flatbody_env.bench.harness.Stopwatch` adds up the time inside it."""
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    class Timed(VecEnvWrapper):
-        spent = 0.0
+    clock = Stopwatch()
 
+    class Timed(VecEnvWrapper):
         def reset(self):
-            t = time.perf_counter()
-            out = self.venv.reset()
-            Timed.spent += time.perf_counter() - t
-            return out
+            with clock:
+                return self.venv.reset()
 
         def step_async(self, actions):
-            t = time.perf_counter()
-            self.venv.step_async(actions)
-            Timed.spent += time.perf_counter() - t
+            with clock:
+                self.venv.step_async(actions)
 
         def step_wait(self):
-            t = time.perf_counter()
-            out = self.venv.step_wait()
-            Timed.spent += time.perf_counter() - t
-            return out
+            with clock:
+                return self.venv.step_wait()
 
-    Timed.spent = 0.0
-    return Timed(venv), Timed
+    return Timed(venv), clock
 
 
 def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
@@ -146,11 +139,12 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
     if norm:
         venv = VecNormalize(venv, gamma=float(hp.get("gamma", 0.99)), **norm)
     model = PPO(hp.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=0, **algo_kwargs_of(hp))
-    t = time.perf_counter()
-    model.learn(total_timesteps=timesteps, progress_bar=False)
-    wall = time.perf_counter() - t
+    with Stopwatch() as learning:
+        model.learn(total_timesteps=timesteps, progress_bar=False)
     venv.close()
-    return TrainTiming(env_id=env_id, timesteps=int(model.num_timesteps), wall_s=wall, env_s=float(clock.spent))
+    return TrainTiming(
+        env_id=env_id, timesteps=int(model.num_timesteps), wall_s=learning.seconds, env_s=float(clock.seconds)
+    )
 
 
 def lqr_us_per_body_step(n_envs: int = 32, steps: int = 400, seed: int = 0) -> float:
@@ -234,7 +228,7 @@ def report(bench: TrainBenchmark) -> Report:
         ],
         chart=plot,
         chart_from="csv",
-        markdown=markdown(bench),
+        tables=tables(bench),
         block="train",
     )
 
@@ -251,56 +245,62 @@ CAPTION = (
 
 def plot(csv_path: Path, png_path: Path) -> None:
     """Stacked bars (environment vs the rest of PPO) from the saved CSV; legend and caption below the axes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.chart_text import add_caption
+    from flatbody_env.figures import PALETTE, chart
 
     rows = validation.read_csv("--plot-only", csv_path)  # the one reading door
     names = [r["env_id"] for r in rows]
     env = [float(r["env_s"]) for r in rows]
-    rest = [float(r["wall_s"]) - e for r, e in zip(rows, env)]
-    fig, ax = plt.subplots(figsize=(7.6, 3.9))
-    ax.barh(names, env, color="tab:blue", label="environment (+ LQR)")
-    ax.barh(names, rest, left=env, color="tab:gray", label="PPO (rollout policy, updates)")
-    for y, (e, r) in enumerate(zip(env, rest)):
-        ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
-    ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest)))
-    ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
-    ax.set_title("flatbody bench train (same run)")
-    bottom = add_caption(fig, CAPTION, fontsize=7)
-    fig.legend(loc="lower center", ncol=2, fontsize=8, frameon=False, bbox_to_anchor=(0.5, bottom))
-    fig.tight_layout(rect=(0, bottom + 0.06, 1, 1))
-    save_figure(fig, png_path, dpi=120)
-    plt.close(fig)
+    rest = [float(r["wall_s"]) - e for r, e in zip(rows, env, strict=True)]
+    with chart(png_path, size=(7.6, 4.4)) as c:
+        ax = c.ax
+        ax.barh(names, env, color=PALETTE["ours"], label="environment (+ LQR)")
+        ax.barh(names, rest, left=env, color=PALETTE["yardstick"], label="PPO (rollout policy, updates)")
+        for y, (e, r) in enumerate(zip(env, rest, strict=True)):
+            ax.text(e + r, y, f" {e + r:.1f} s ({e / (e + r):.0%} env)", va="center", fontsize=8)
+        ax.set_xlim(0, 1.3 * max(e + r for e, r in zip(env, rest, strict=True)))
+        ax.set_xlabel(f"wall time for {rows[0]['timesteps']} steps, same PPO settings (s)")
+        ax.set_title("flatbody bench train (same run)")
+        c.legend(where="below", ncol=2)
+        c.caption(CAPTION, fontsize=7)
 
 
-def markdown(bench: TrainBenchmark) -> str:
-    """The docs' table of this run (``flatbody bench train --docs docs/agents.md`` writes it there)."""
+def tables(bench: TrainBenchmark) -> list[Table]:
+    """The runs and the figures of this run (the terminal's text and the docs' ``train`` block; ``flatbody bench train
+    --docs docs/agents.md`` writes it there)."""
     fb, pd = bench.flatbody, bench.pendulum
 
     def ok(x: float, bound: float) -> str:
         return "met" if x <= bound else "missed"
 
-    return (
-        "\n".join(
-            [
-                f"| same PPO settings, {fb.timesteps} env steps | wall time (s) | in the environment (+ LQR) |",
-                "|---|---|---|",
-                f"| FlatBody-v0 (residual on the LQR) | {fb.wall_s:.1f} | {fb.env_s:.1f} s ({fb.env_share:.0%}) |",
-                f"| Pendulum-v1 | {pd.wall_s:.1f} | {pd.env_s:.1f} s ({pd.env_share:.0%}) |",
-                "",
-                "| figure (same run) | measured | target |",
-                "|---|---|---|",
-                f"| PPO wall time FlatBody-v0 / Pendulum-v1 | **{bench.ratio_wall:.2f}** | ≤ 1.0 ({ok(bench.ratio_wall, 1.0)}) |",
-                f"| share of FlatBody's wall time in env + LQR | **{bench.flatbody_env_share:.1%}** | ≤ 15 % ({ok(bench.flatbody_env_share, 0.15)}) |",
-                f"| LQR action per body-step (batch of {bench.n_envs}, gains stored) | {bench.lqr_us_per_body_step:.3f} µs | ≤ 1 µs ({ok(bench.lqr_us_per_body_step, 1.0)}) |",
-            ]
-        )
-        + "\n"
-    )
+    return [
+        Table(
+            columns=[f"same PPO settings, {fb.timesteps} env steps", "wall time (s)", "in the environment (+ LQR)"],
+            rows=[
+                ["FlatBody-v0 (residual on the LQR)", f"{fb.wall_s:.1f}", f"{fb.env_s:.1f} s ({fb.env_share:.0%})"],
+                ["Pendulum-v1", f"{pd.wall_s:.1f}", f"{pd.env_s:.1f} s ({pd.env_share:.0%})"],
+            ],
+        ),
+        Table(
+            columns=["figure (same run)", "measured", "target"],
+            rows=[
+                [
+                    "PPO wall time FlatBody-v0 / Pendulum-v1",
+                    f"**{bench.ratio_wall:.2f}**",
+                    f"≤ 1.0 ({ok(bench.ratio_wall, 1.0)})",
+                ],
+                [
+                    "share of FlatBody's wall time in env + LQR",
+                    f"**{bench.flatbody_env_share:.1%}**",
+                    f"≤ 15 % ({ok(bench.flatbody_env_share, 0.15)})",
+                ],
+                [
+                    f"LQR action per body-step (batch of {bench.n_envs}, gains stored)",
+                    f"{bench.lqr_us_per_body_step:.3f} µs",
+                    f"≤ 1 µs ({ok(bench.lqr_us_per_body_step, 1.0)})",
+                ],
+            ],
+        ),
+    ]
 
 
-__all__ = ["TrainBenchmark", "TrainTiming", "lqr_us_per_body_step", "markdown", "plot", "report", "run"]
+__all__ = ["TrainBenchmark", "TrainTiming", "lqr_us_per_body_step", "plot", "report", "run", "tables"]

@@ -441,6 +441,31 @@ _TRUST_HELP = (
 )
 
 
+def _targets_table(args) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from flatbody_env.env.targets import GRID_ASPECT, GRID_LAMBDA, TABLE_PATH, build_table
+
+    table = build_table(
+        grid_lambda=(*GRID_LAMBDA[:2], args.n_lambda),
+        grid_aspect=(*GRID_ASPECT[:2], args.n_aspect),
+        workers=args.workers,
+        progress=not args.no_progress,
+    )
+    out = Path(args.out) if args.out else TABLE_PATH
+    table.save(out)
+    edge = int(np.isfinite(table.edge_lo).sum())
+    print(
+        f"wrote {out}: {table.rate.shape[1]} x {table.rate.shape[0]} shapes (lambda x aspect), {edge} edge cells, "
+        f"largest interpolation margin {float(np.max(table.margin[np.isfinite(table.margin)])):.2e} 1/s"
+    )
+    return 0
+
+
+
+
 def _add_run_arguments(p, *, seed_default) -> None:
     """The flags every training command shares (train, curriculum): seed, budget, overrides, folder, checkpoints."""
     p.add_argument(
@@ -734,6 +759,20 @@ def register(sub) -> None:
     )
     p.set_defaults(handler=_demo)
     p = sub.add_parser(
+        "targets-table", help="regenerate the task's settling-rate table (default body, limits and controls)"
+    )
+    p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
+    p.add_argument(
+        "--n-lambda", type=int_at_least("n_lambda", 2, 2001), default=71, help="grid nodes in lambda* (shipped: 71)"
+    )
+    p.add_argument(
+        "--n-aspect", type=int_at_least("n_aspect", 2, 2001), default=81, help="grid nodes in lambda*/mu* (shipped: 81)"
+    )
+    p.add_argument("--workers", type=int_at_least("workers", 1, validation.MAX_WORKERS), default=2, help="processes")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(handler=_targets_table)
+
+    p = sub.add_parser(
         "lqr-table", help="regenerate the LQR controller's gain table (default body, limits, controls, weights)"
     )
     p.add_argument("--out", default="", help="where to write it (default: the package's own table file)")
@@ -759,116 +798,3 @@ def register(sub) -> None:
         help="allow unpickling a model from outside the shipped agent and your own runs (pickles can run code; docs/reliability.md)",
     )
     p.set_defaults(handler=_export_policy)
-
-
-def _bench_train(args) -> int:
-    if args.to_goal:
-        return _bench_time_to_goal(args)
-    from flatbody_env.bench.train import run
-
-    b = run(
-        timesteps=args.timesteps,
-        repeats=args.repeats,
-        seed=args.seed,
-        out_dir=args.out_dir,
-        overrides=args.hyperparams or [],
-        docs=args.docs or None,
-    )
-    for r in (b.flatbody, b.pendulum):
-        print(
-            f"{r.env_id:<12} {r.timesteps} steps  wall {r.wall_s:7.1f} s  in env {r.env_s:6.1f} s ({r.env_share:.0%})"
-        )
-    print(f"PPO wall time FlatBody-v0 / Pendulum-v1: {b.ratio_wall:.2f} (target <= 1.0)")
-    print(f"FlatBody share in env + LQR:             {b.flatbody_env_share:.1%} (target <= 15 %)")
-    print(f"LQR action per body-step (batch, gains stored): {b.lqr_us_per_body_step:.3f} us (target <= 1)")
-    print(f"wrote {args.out_dir}/train_benchmark.json, .csv, .png")
-    if args.docs:
-        print(f"updated the table in {args.docs}")
-    return 0
-
-
-def _bench_time_to_goal(args) -> int:
-    from flatbody_env.bench.time_to_goal import run
-
-    b = run(
-        seed=args.seed,
-        max_timesteps=args.max_timesteps,
-        eval_every=args.eval_every,
-        episodes=args.episodes,
-        out_dir=args.out_dir,
-        docs=args.docs or None,
-    )
-    for c in (b.sb3, b.rsl):
-        reached = f"{c.goal_s:.1f} s ({c.goal_timesteps} steps)" if c.goal_s is not None else "not reached"
-        t, w, s, d = c.points[-1]
-        beat = f"{c.lqr_s:.1f} s ({c.lqr_timesteps} steps)" if c.lqr_s is not None else "not reached"
-        print(
-            f"{c.trainer:<8} goal: {reached:<24} beats the LQR: {beat:<24} last: success {s:.0%}, final distance {d:.4f} after {t} steps, {w:.1f} s"
-        )
-    print(f"LQR on the same seeds: success {b.lqr_success:.0%}, final distance {b.lqr_final_distance:.4f}")
-    if b.ratio is not None:
-        print(f"rsl-ppo / sb3-ppo wall time to the goal: {b.ratio:.2f} (goal <= 0.5)")
-    if b.ratio_lqr is not None:
-        print(f"rsl-ppo / sb3-ppo wall time to beat the LQR: {b.ratio_lqr:.2f}")
-    print(f"wrote {args.out_dir}/time_to_goal.json, .csv, .png")
-    if args.docs:
-        print(f"updated the table in {args.docs}")
-    return 0
-
-
-def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser(
-        "train",
-        help="PPO wall time on FlatBody-v0 vs the same PPO on Pendulum-v1, share in env + LQR; "
-        "--to-goal: wall time to a good agent, SB3 vs rsl_rl",
-    )
-    p.add_argument(
-        "--timesteps",
-        type=int_at_least("timesteps", 1, validation.MAX_TIMESTEPS),
-        default=64_000,
-        help="environment steps per run",
-    )
-    p.add_argument(
-        "--repeats",
-        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
-        default=1,
-        help="runs per environment; the fastest is kept",
-    )
-    p.add_argument("--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=0, help="seed of both runs")
-    p.add_argument(
-        "--hyperparams", nargs="*", metavar="KEY=VALUE", help="overrides of the shipped PPO settings, for both runs"
-    )
-    p.add_argument(
-        "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write train_benchmark.json/.csv/.png"
-    )
-    p.add_argument(
-        "--docs",
-        default="",
-        metavar="FILE.md",
-        help="also regenerate the table between <!-- bench:train --> markers in FILE.md",
-    )
-    p.add_argument(
-        "--to-goal",
-        action="store_true",
-        help="instead: wall time to a good residual agent, SB3's PPO vs rsl_rl's PPO (rsl-ppo) in the same run "
-        "(time_to_goal.json/.csv/.png; with --docs the <!-- bench:time-to-goal --> table)",
-    )
-    p.add_argument(
-        "--max-timesteps",
-        type=int_at_least("max_timesteps", 1, validation.MAX_TIMESTEPS),
-        default=3_000_000,
-        help="--to-goal: stop a trainer here if it has not reached the goal",
-    )
-    p.add_argument(
-        "--eval-every",
-        type=int_at_least("eval_every", 1, validation.MAX_TIMESTEPS),
-        default=50_000,
-        help="--to-goal: environment steps between evaluations (rounded up to whole rollouts)",
-    )
-    p.add_argument(
-        "--episodes",
-        type=int_at_least("episodes", 1, 10_000),
-        default=20,
-        help="--to-goal: held-out episodes per evaluation (seeds 50000...)",
-    )
-    p.set_defaults(handler=_bench_train)

@@ -141,6 +141,35 @@ def seed_range(name: str = "seeds", most: int = 100_000):
     return parse
 
 
+def int_list(name: str, low: int = 1, high: int = validation.MAX_COUNT, *, max_items: int = 32):
+    """argparse type: 1 to ``max_items`` comma-separated integers, each in [``low``, ``high``]."""
+    one = int_at_least(name, low, high)
+
+    def parse(text: str) -> list[int]:
+        parts = [p.strip() for p in text.split(",") if p.strip()]
+        if not 1 <= len(parts) <= max_items:
+            raise argparse.ArgumentTypeError(
+                f"{name}: expected 1 to {max_items} comma-separated integers, got {text[:60]!r}"
+            )
+        return [one(p) for p in parts]
+
+    return parse
+
+
+def name_list(name: str, allowed):
+    """argparse type: comma-separated names, each one of ``allowed`` (a sequence, or a function giving it, read when
+    the argument is parsed so that heavy modules load only then)."""
+
+    def parse(text: str) -> list[str]:
+        names = [p.strip() for p in text.split(",") if p.strip()]
+        choices = tuple(allowed() if callable(allowed) else allowed)
+        if not names or any(n not in choices for n in names):
+            raise argparse.ArgumentTypeError(f"{name}: expected names from {', '.join(choices)}, got {text[:60]!r}")
+        return names
+
+    return parse
+
+
 def times_list(text: str) -> list[float]:
     """argparse type of ``--times``: comma-separated finite numbers, at most
     :data:`~flatbody_env.physics.validation.MAX_SAMPLES` of them (range and order are checked by ``simulate``)."""

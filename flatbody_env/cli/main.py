@@ -17,7 +17,6 @@ from flatbody_env.cli import (
     agents,
     analysis,
     bench,
-    gpu,
     integrators,
     record,
     serve,
@@ -25,10 +24,10 @@ from flatbody_env.cli import (
     sweep,
 )
 
-COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve, gpu)
+COMMAND_MODULES = (simulate, record, bench, analysis, integrators, agents, sweep, serve)
 """The declared command registry: modules that contribute sub-commands, in help order. Each has
-``register(subparsers)`` and may have ``register_bench(bench_subparsers)``; they keep heavy imports
-inside their handlers so that ``flatbody --help`` stays fast."""
+``register(subparsers)`` (:mod:`.bench` every ``flatbody bench`` target); they keep heavy imports inside their
+handlers so that ``flatbody --help`` stays fast."""
 
 
 class Parser(argparse.ArgumentParser):
@@ -67,16 +66,8 @@ def build_parser() -> Parser:
         description="A flat affinely-rigid body with thickness: simulate, analyse, record, train.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    modules = COMMAND_MODULES
-    for module in modules:
-        if hasattr(module, "register"):
-            module.register(sub)
-    bench = sub.add_parser("bench", help="benchmarks: print figures and write JSON/CSV and PNG (not timed tests)")
-    bench_sub = bench.add_subparsers(dest="target", metavar="TARGET", parser_class=Parser)
-    bench.set_defaults(handler=lambda args: (bench.print_help(), 2)[1])
-    for module in modules:
-        if hasattr(module, "register_bench"):
-            module.register_bench(bench_sub)
+    for module in COMMAND_MODULES:
+        module.register(sub)
     return parser
 
 

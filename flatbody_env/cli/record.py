@@ -1,5 +1,5 @@
 """Sub-commands for rerun recordings: ``record`` (scenes, ``--agent`` episodes), ``record-env``, ``record-info``,
-``record-shots``, ``bench recording``.
+``record-shots`` (``bench recording``: :mod:`flatbody_env.cli.bench`).
 
 Heavy imports (rerun through :mod:`flatbody_env.recording.writer`, gymnasium, matplotlib) happen in
 the handlers only.
@@ -18,7 +18,6 @@ from flatbody_env.cli.args import (
     check_output_path,
     int_at_least,
     load_scene_arg,
-    output_dir,
 )
 from flatbody_env.physics import validation
 from flatbody_env.physics.validation import MAX_SAMPLES, MIN_SAMPLES
@@ -314,37 +313,6 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _bench(args) -> int:
-    from flatbody_env.bench.harness import write_report
-    from flatbody_env.bench.recording import describe, measure, report
-
-    result = measure(
-        scene=args.scene,
-        steps=args.steps,
-        sizes=args.sizes,
-        repeats=args.repeats,
-        block=args.block,
-        frames=args.frames,
-        episode_repeats=args.episode_repeats,
-    )
-    print(describe(result))
-    paths = write_report(report(result), args.out_dir, docs=args.docs)
-    print("wrote " + ", ".join(map(str, paths[:3])))
-    if args.docs:
-        print(f"regenerated the table in {args.docs}")
-    return 0
-
-
-def _int_list(text: str) -> list[int]:
-    try:
-        values = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"sizes: expected comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 2:
-        raise argparse.ArgumentTypeError("sizes: every size must be an integer ≥ 2")
-    return values
-
-
 def register(sub) -> None:
     p = sub.add_parser("record", help="simulate a scene and write a rerun recording (.rrd) for offline playback")
     add_scene_arguments(p)
@@ -491,61 +459,3 @@ def register(sub) -> None:
     )
     p.add_argument("--env-id", default="FlatBody-v1", help="with --frames: the task (default FlatBody-v1)")
     p.set_defaults(handler=_record_shots)
-
-
-def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser(
-        "recording",
-        help="time to log an N-step trajectory to a finished .rrd (budget 1 s for 10 000) and to draw an rgb_array frame (budget 1 ms)",
-    )
-    p.add_argument(
-        "--steps",
-        type=int_at_least("steps", 2, validation.MAX_EPISODE_STEPS),
-        default=10000,
-        help="the size judged against the 1 s budget (default 10000)",
-    )
-    p.add_argument(
-        "--sizes",
-        type=_int_list,
-        default=[1000, 3000, 30000],
-        metavar="N1,N2,...",
-        help="further sizes for the scaling chart",
-    )
-    p.add_argument(
-        "--repeats",
-        type=int_at_least("repeats", 1, validation.MAX_REPEATS),
-        default=5,
-        help="runs per size (median reported; default 5)",
-    )
-    p.add_argument(
-        "--block",
-        type=int_at_least("block", 1, validation.MAX_SAMPLES),
-        default=256,
-        help="block size of the live-recorder measurement",
-    )
-    p.add_argument(
-        "--frames",
-        type=int_at_least("frames", 2, validation.MAX_SAMPLES),
-        default=2000,
-        help="rgb_array frames timed (budget 1 ms each; default 2000)",
-    )
-    p.add_argument("--scene", default="default", help="built-in scene that supplies the trajectory")
-    p.add_argument(
-        "--out-dir",
-        type=output_dir("out_dir"),
-        default="bench",
-        metavar="DIR",
-        help="where recording.json, .csv and .png go (default bench)",
-    )
-    p.add_argument(
-        "--episode-repeats",
-        type=int_at_least("episode_repeats", 1, validation.MAX_REPEATS),
-        default=3,
-        help="recorded env episodes per path (compiled vs the former scipy path; median; default 3)",
-    )
-    p.add_argument(
-        "--docs",
-        metavar="FILE.md",
-        help="also regenerate the table between <!-- bench:recording --> markers in FILE.md",
-    )
-    p.set_defaults(handler=_bench)

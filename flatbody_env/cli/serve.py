@@ -1,4 +1,4 @@
-"""``flatbody serve`` (the analysis service over HTTP) and ``flatbody bench service`` (its load figures).
+"""``flatbody serve``: the analysis service over HTTP (``bench service``, its load figures: :mod:`flatbody_env.cli.bench`).
 
 The app lives in :mod:`flatbody_env.service`; uvicorn, FastAPI and httpx are imported in the handlers.
 """
@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from flatbody_env.cli.args import int_at_least, positive_float, output_dir
+from flatbody_env.cli.args import int_at_least
 from flatbody_env.physics import validation
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
@@ -33,7 +33,6 @@ def default_workers() -> int:
 
 def _serve(args) -> int:
     import sqlite3
-    from pathlib import Path
 
     import uvicorn
 
@@ -136,30 +135,6 @@ def _serve_until_stopped(run) -> bool:
     return bool(seen)
 
 
-def _bench(args) -> int:
-    from flatbody_env.bench.harness import redraw, write_report
-    from flatbody_env.bench.service import NAME, measure, plot, report
-
-    out = Path(args.out_dir)
-    if args.plot_only:
-        print(f"wrote {redraw(out, NAME, plot)}")
-        return 0
-    result = measure(clients=tuple(args.clients), requests=args.requests, seconds=args.seconds, workers=args.workers)
-    print(result.table())
-    print("wrote " + ", ".join(map(str, write_report(report(result), out))))
-    return 0 if result.errors == 0 else 1
-
-
-def _clients(text: str) -> list[int]:
-    try:
-        values = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"clients: expected comma-separated integers, got {text!r}") from None
-    if not values or any(not 1 <= v <= 256 for v in values):
-        raise argparse.ArgumentTypeError(f"clients: each must be an integer in [1, 256], got {text!r}")
-    return values
-
-
 def _proxies(text: str) -> str:
     """``--trusted-proxies``: comma-separated IP addresses (argparse type; one line naming the flag otherwise)."""
     import ipaddress
@@ -202,39 +177,3 @@ def register(sub) -> None:
         help="uvicorn log level",
     )
     p.set_defaults(handler=_serve)
-
-
-def register_bench(bench_sub) -> None:
-    p = bench_sub.add_parser(
-        "service", help="latency and requests/s of the HTTP service at 1, 8, 32 clients while a long job runs"
-    )
-    p.add_argument(
-        "--clients", type=_clients, default=[1, 8, 32], metavar="N,N,...", help="concurrent clients (default 1,8,32)"
-    )
-    p.add_argument(
-        "--requests",
-        type=int_at_least("requests", 1, 1_000_000),
-        default=200,
-        help="requests per endpoint and client count, at most (default 200)",
-    )
-    p.add_argument(
-        "--seconds",
-        type=positive_float("seconds", validation.MAX_SECONDS),
-        default=20.0,
-        help="time per endpoint and client count, at most (default 20)",
-    )
-    p.add_argument(
-        "--workers",
-        type=int_at_least("workers", 1, validation.MAX_WORKERS),
-        default=default_workers(),
-        help="the service's worker processes",
-    )
-    p.add_argument(
-        "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write service_benchmark.json/.csv/.png"
-    )
-    p.add_argument(
-        "--plot-only",
-        action="store_true",
-        help="redraw service_benchmark.png from the saved service_benchmark.json in --out-dir",
-    )
-    p.set_defaults(handler=_bench)

@@ -1,4 +1,5 @@
-"""Sub-commands ``sweep``, ``tune`` and ``bench sweep``: the same studies on many cores or machines.
+"""Sub-commands ``sweep`` and ``tune``: the same studies on many cores or machines (``bench sweep``:
+:mod:`flatbody_env.cli.bench`).
 
 * ``flatbody sweep KIND ... --out DIR [--workers N | --scheduler tcp://HOST:8786] [--resume] [--json]``
   with KIND ``stability-map``, ``failure-study``, ``family`` or ``seeds`` (:mod:`flatbody_env.sweep`):
@@ -6,8 +7,6 @@
   Dask) or a running one (``--scheduler``); results by key in ``DIR/results.sqlite``; ``--resume``
   continues a killed sweep. ``sweep work-precision`` says why timing studies stay serial.
 * ``flatbody tune --algo ppo|sac --trials N ...`` — Optuna search (:mod:`agents.tune`).
-* ``flatbody bench sweep`` — speed-up over workers, scheduler overhead per task, extrapolation
-  (:mod:`flatbody_env.bench.sweep`).
 """
 
 from __future__ import annotations
@@ -18,7 +17,7 @@ import math
 import sys
 from pathlib import Path
 
-from flatbody_env.cli.args import float_range, int_at_least, positive_float, output_dir
+from flatbody_env.cli.args import float_range, int_at_least, positive_float
 from flatbody_env.physics import validation
 
 
@@ -363,27 +362,6 @@ def _tune(args) -> int:
     return 0
 
 
-def _bench_sweep(args) -> int:
-    from flatbody_env.bench.harness import redraw, write_report
-    from flatbody_env.bench.sweep import NAME, describe, measure, plot, report
-
-    out = Path(args.out)
-    if args.plot_only:
-        print(f"wrote {redraw(out, NAME, plot, where='out')}")
-        return 0
-    rep = measure(
-        grid=args.grid,
-        workers=tuple(args.workers),
-        sim_workers=args.sim_workers,
-        chunk=args.chunk,
-        noop_tasks=args.noop_tasks,
-        extrapolate=(8, 32, 128),
-    )
-    print(describe(rep))
-    print("wrote " + ", ".join(map(str, write_report(report(rep), out))))
-    return 0
-
-
 # ---------------------------------------------------------------------------------------------
 def _engine_arguments(p) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (results.sqlite, tables, models)")
@@ -638,55 +616,3 @@ def register(sub) -> None:
     p.add_argument("--out", default="runs/tune", metavar="DIR", help="folder of the trials' runs (default runs/tune)")
     p.add_argument("--json", action="store_true", help="print the study's trials as JSON")
     p.set_defaults(handler=_tune)
-
-
-def register_bench(bsub) -> None:
-    b = bsub.add_parser(
-        "sweep",
-        help="sweep scaling: speed-up over workers, scheduler overhead per task, extrapolation to 8/32/128 workers",
-    )
-    b.add_argument(
-        "--grid",
-        type=int_at_least("grid", 4, validation.SWEEP_GRID_RANGE[1]),
-        default=48,
-        metavar="N",
-        help="stability-map grid per axis (default 48)",
-    )
-    b.add_argument(
-        "--chunk",
-        type=int_at_least("chunk", 1, validation.SWEEP_GRID_RANGE[1]),
-        default=2,
-        metavar="ROWS",
-        help="lambda rows per task (default 2)",
-    )
-    b.add_argument(
-        "--workers",
-        type=int_at_least("workers", 1, validation.MAX_WORKERS),
-        nargs="+",
-        default=[1, 2],
-        metavar="N",
-        help="local worker counts (default 1 2)",
-    )
-    b.add_argument(
-        "--sim-workers",
-        type=int_at_least("sim_workers", 1, validation.MAX_WORKERS),
-        default=4,
-        metavar="N",
-        help="worker processes of the simulated multi-node run (tasks sleep for the measured cost; default 4)",
-    )
-    b.add_argument(
-        "--noop-tasks",
-        type=int_at_least("noop_tasks", 10, 1_000_000),
-        default=400,
-        metavar="N",
-        help="empty tasks timing the scheduler overhead (default 400)",
-    )
-    b.add_argument(
-        "--out",
-        type=output_dir("out"),
-        default="runs/sweep-bench",
-        metavar="DIR",
-        help="output folder (default runs/sweep-bench)",
-    )
-    b.add_argument("--plot-only", action="store_true", help="redraw the PNG from the saved JSON")
-    b.set_defaults(handler=_bench_sweep)

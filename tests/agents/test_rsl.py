@@ -400,7 +400,7 @@ def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tm
     import matplotlib.pyplot as plt
 
     from agents.rsl import plot_curve
-    from flatbody_env.chart_text import caption_text, layout_problems
+    from flatbody_env.figures import caption_text, layout_problems
 
     table = Path(__file__).resolve().parents[2] / "docs" / "img" / "from_scratch.csv"
     kept = []

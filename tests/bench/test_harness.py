@@ -9,7 +9,17 @@ import time
 
 import pytest
 
-from flatbody_env.bench.harness import Report, alternate, best_of, write_report
+from flatbody_env.bench.harness import (
+    Report,
+    Stopwatch,
+    Table,
+    alternate,
+    alternate_samples,
+    best_of,
+    samples,
+    write_docs,
+    write_report,
+)
 
 
 def test_best_of_keeps_the_least_time_after_an_untimed_warm_up():
@@ -60,7 +70,7 @@ def test_write_report_writes_the_record_the_table_the_chart_from_the_saved_file_
         header=["n", "rate"],
         rows=[[1, 2.5]],
         chart=chart,
-        markdown="| n | rate |\n|---|---|\n| 1 | 2.5 |\n",
+        tables=[Table(columns=["n", "rate"], rows=[["1", "2.5"]])],
     )
     paths = write_report(report, tmp_path / "out", docs=page)
     out = tmp_path / "out"
@@ -92,3 +102,98 @@ def test_redraw_draws_from_the_saved_record_or_names_the_folder(tmp_path):
     seen = []
     png = redraw(tmp_path, "demo", lambda saved, png: seen.append((json.loads(saved.read_text()), png)))
     assert png == tmp_path / "demo.png" and seen == [({"rows": [1]}, png)]
+
+
+def test_best_of_stops_repeating_once_enough_time_went_in():
+    calls = []
+    best_of(lambda: (calls.append(1), time.sleep(0.02)), 50, warm=False, enough_s=0.05)
+    assert 2 <= len(calls) <= 4  # not the 50 asked for
+
+
+def test_samples_and_mirrored_alternation_keep_every_time():
+    pauses = iter([0.0, 0.01, 0.02])
+    times = samples(lambda: time.sleep(next(pauses)), 3, warm=False)
+    assert len(times) == 3 and times[0] < times[2]
+    order = []
+    cases = {k: (lambda k=k: order.append(k)) for k in "abc"}
+    got = alternate_samples(cases, 3, warm=False, mirror=True)
+    assert order == list("abc") + list("cba") + list("abc")  # every other round reversed
+    assert {k: len(v) for k, v in got.items()} == {"a": 3, "b": 3, "c": 3}
+
+
+def test_stopwatch_adds_spans_and_leaves_paused_ones_out():
+    sw = Stopwatch()
+    for _ in range(2):
+        with sw:
+            time.sleep(0.02)
+    assert 0.035 < sw.seconds < 0.5
+    run = Stopwatch.started()
+    time.sleep(0.02)
+    with run.paused():
+        time.sleep(0.1)
+    assert 0.015 < run.seconds < 0.09
+
+
+def test_a_table_is_the_same_rows_on_the_terminal_and_in_the_docs():
+    t = Table(
+        title="rates",
+        columns=["what", "µs"],
+        rows=[["`FlatBody-v1`", "**15.7**"], ["Pendulum-v1", "16.5"]],
+        notes=["same run"],
+    )
+    text, md = t.text(), t.markdown()
+    assert text.splitlines()[0] == "rates" and "FlatBody-v1" in text and "**" not in text and "`" not in text
+    lines = text.splitlines()  # the title, the header, the rule, the rows, the notes
+    assert lines[3].endswith("15.7") and lines[4].endswith("16.5") and lines[5] == "same run"  # numbers right-aligned
+    assert md.startswith("rates\n\n| what | µs |\n|---|---|\n| `FlatBody-v1` | **15.7** |") and md.endswith("same run")
+    with pytest.raises(ValueError, match="rows"):
+        Table(columns=["a", "b"], rows=[["1"]])
+
+
+def test_write_docs_writes_each_block_the_page_shows_and_refuses_a_page_without_any(tmp_path):
+    report = Report(
+        name="demo",
+        record={},
+        header=["a"],
+        rows=[],
+        tables=[
+            Table(columns=["a"], rows=[["1"]], block="one"),
+            Table(columns=["b"], rows=[["2"]], block="two"),
+            Table(columns=["c"], rows=[["3"]], block=None),  # the terminal's only
+        ],
+    )
+    assert report.blocks == ["one", "two"] and "| c |" not in report.markdown("one") and "c" in report.text()
+    page = tmp_path / "p.md"
+    page.write_text("<!-- bench:two -->\nold\n<!-- /bench:two -->\n")
+    assert write_docs(report, page) == ["two"]
+    assert page.read_text() == "<!-- bench:two -->\n| b |\n|---|\n| 2 |\n<!-- /bench:two -->\n"
+    other = tmp_path / "other.md"
+    other.write_text("nothing here\n")
+    with pytest.raises(ValueError, match="^docs: .* shows none of the blocks"):
+        write_docs(report, other)
+
+
+def test_no_benchmark_keeps_a_clock_of_its_own():
+    """Every ``flatbody bench`` module times with the harness (best_of, samples, alternate, Stopwatch): none reads a
+    clock itself. The compare worker is the exception: it runs against another revision's tree, which may have no
+    harness (or another one)."""
+    import ast
+    from pathlib import Path
+
+    import flatbody_env.bench as bench
+
+    clocks = {"perf_counter", "perf_counter_ns", "monotonic", "monotonic_ns", "process_time", "time", "time_ns"}
+    found = []
+    for path in sorted(Path(bench.__file__).parent.glob("*.py")):
+        if path.name in ("harness.py", "compare_worker.py"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr in clocks
+                and isinstance(node.func.value, ast.Name)
+                and node.func.value.id == "time"
+            ):
+                found.append(f"{path.name}:{node.lineno} time.{node.func.attr}()")
+    assert not found, found

@@ -1,4 +1,5 @@
-"""The docs tables of ``flatbody bench integrators --docs``: made from the report, written between markers."""
+"""The tables of ``flatbody bench integrators``: made from the saved report, shown on the terminal and written into
+the docs page's blocks."""
 
 from __future__ import annotations
 
@@ -7,49 +8,60 @@ from pathlib import Path
 
 import pytest
 
-from flatbody_env.bench.integrators import docs_tables
-from flatbody_env.output import replace_marked_block
+from flatbody_env.bench.harness import write_docs
+from flatbody_env.bench.integrators import report, tables
 
 REPORT = Path(__file__).resolve().parents[2] / "docs" / "img" / "bench_integrators.json"
 
 
 def test_tables_come_from_the_saved_report_and_replace_only_their_block(tmp_path):
     rep = json.loads(REPORT.read_text())
-    tables = docs_tables(rep)
-    assert {"integrators-regular", "integrators-close", "integrators-long", "integrators-short-step"} <= set(tables)
+    by_block = {t.block: t.markdown() for t in tables(rep) if t.block}
+    assert {"integrators-regular", "integrators-close", "integrators-long", "integrators-short-step"} <= set(by_block)
     for a in rep["regular"]["at_target"]:
-        assert f"| {a['method']} |" in tables["integrators-regular"]
+        assert f"| {a['method']} |" in by_block["integrators-regular"]
     for x in rep["short_step"]:
-        assert f"{x['us_per_step']:.1f}" in tables["integrators-short-step"]
+        assert f"{x['us_per_step']:.1f}" in by_block["integrators-short-step"]
     if rep.get("auto"):
         for x in rep["auto"]:
-            assert f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}" in tables["integrators-auto"]
+            assert f"| {x['scene']} (t = {x['t_end']:g}) | {x['model']} | {x['method']}" in by_block["integrators-auto"]
+    text = report(rep).text()
+    assert "same rtol, DOP853-numba vs scipy DOP853" in text  # the terminal shows the table the docs leave out
     page = tmp_path / "p.md"
     page.write_text("a\n<!-- bench:integrators-long -->\nstale\n<!-- /bench:integrators-long -->\nb\n")
-    replace_marked_block(page, "integrators-long", tables["integrators-long"])
+    assert write_docs(report(rep), page) == ["integrators-long"]  # the blocks the page does not show: skipped
     text = page.read_text()
     assert (
         "stale" not in text
         and text.startswith("a\n<!-- bench:integrators-long -->\n| method and setting")
         and text.endswith("-->\nb\n")
     )
+    empty = tmp_path / "e.md"
+    empty.write_text("no blocks\n")
     with pytest.raises(ValueError, match="^docs:"):
-        replace_marked_block(page, "integrators-close", "x")
+        write_docs(report(rep), empty)
 
 
-def test_csv_rows_and_docs_come_from_the_saved_report(tmp_path):
-    """``bench_integrators.csv`` holds one figure a row; ``--docs`` rewrites the blocks the page shows and skips the rest."""
-    from flatbody_env.bench.integrators import CSV_HEADER, csv_rows, write_docs
+def test_csv_rows_come_from_the_saved_report():
+    """``bench_integrators.csv`` holds one figure a row."""
+    from flatbody_env.bench.integrators import CSV_HEADER, csv_rows
 
     rep = json.loads(REPORT.read_text())
     rows = csv_rows(rep)
     assert all(len(r) == len(CSV_HEADER) for r in rows)
     assert {r[0] for r in rows} >= {"regular", "close-approach", "long-horizon", "short-step"}
     assert sum(r[0] == "long-horizon" for r in rows) == len(rep["long_horizon"])
+
+
+def test_plot_only_with_docs_rewrites_the_tables_from_the_saved_json(tmp_path):
+    from flatbody_env.cli.main import main
+
+    (tmp_path / "bench_integrators.json").write_text(REPORT.read_text())
     page = tmp_path / "p.md"
-    page.write_text("<!-- bench:integrators-long -->\nstale\n<!-- /bench:integrators-long -->\n")
-    assert write_docs(REPORT, page) == ["integrators-long"]
-    assert "stale" not in page.read_text() and "| method and setting |" in page.read_text()
+    page.write_text("<!-- bench:integrators-close -->\nstale\n<!-- /bench:integrators-close -->\n")
+    assert main(["bench", "integrators", "--out", str(tmp_path), "--plot-only", "--docs", str(page)]) == 0
+    assert "stale" not in page.read_text() and "| s3 − p_θ |" in page.read_text()
+    assert (tmp_path / "bench_integrators.png").stat().st_size > 10_000
 
 
 def test_simulate_vs_kernel_row_comes_from_the_record():
@@ -69,7 +81,7 @@ def test_simulate_vs_kernel_row_comes_from_the_record():
     }
     v["integrate_over_kernel"] = v["integrate_s"] / v["kernel_s"]
     v["simulate_over_kernel"] = v["simulate_s"] / v["kernel_s"]
-    table = docs_tables(rep)["integrators-simulate"]
+    (table,) = [t for t in tables(rep) if t.block == "integrators-simulate"]
     assert f"{v['simulate_s'] * 1e3:.3f} ms | {v['simulate_over_kernel']:.3f}×" in table and "12554" in table
     rows = [r for r in csv_rows(rep) if r[0] == "simulate-vs-kernel"]
     assert {r[3] for r in rows} == {"kernel", "integrate", "simulate"}

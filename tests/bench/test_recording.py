@@ -7,16 +7,17 @@ import json
 from pathlib import Path
 
 from flatbody_env.bench.harness import write_report
-from flatbody_env.bench.recording import CSV_HEADER, describe, markdown, report
+from flatbody_env.bench.recording import CSV_HEADER, report
 
 RESULT = Path(__file__).resolve().parents[2] / "docs" / "img" / "recording.json"
 
 
 def test_report_writes_the_table_the_sizes_and_the_chart_from_the_saved_result(tmp_path):
     result = json.loads(RESULT.read_text(encoding="utf-8"))
-    table = markdown(result)
+    table = report(result).markdown()
     assert table.startswith("| what | result |") and f"{result['frame']['median_ms']:.2f} ms" in table
-    assert f"logging a {result['steps']}-step trajectory" in describe(result)
+    assert f"`record_trajectory`, {result['steps']} steps" in table
+    assert f"record_trajectory, {result['steps']} steps" in report(result).text()  # the same rows, plain
     page = tmp_path / "page.md"
     page.write_text("a\n<!-- bench:recording -->\nold\n<!-- /bench:recording -->\n")
     paths = write_report(report(result), tmp_path / "out", docs=page)

@@ -8,7 +8,7 @@ import json
 import pytest
 
 from flatbody_env.bench.harness import write_report
-from flatbody_env.bench.time_to_goal import GoalBenchmark, _curve, _Reached, load, markdown, plot, report, run
+from flatbody_env.bench.time_to_goal import GoalBenchmark, _curve, _Reached, load, plot, report, run
 
 
 def test_criteria_and_curves():
@@ -50,12 +50,12 @@ def test_files_and_table(tmp_path):
     assert len((tmp_path / "time_to_goal.csv").read_text().splitlines()) == 4
     assert (tmp_path / "time_to_goal.png").stat().st_size > 1000
     assert load(tmp_path / "time_to_goal.json") == b
-    table = markdown(b)
+    table = report(b).markdown()
     assert (
         "| rsl-ppo | 4.0 s (100000 steps) | 4.0 s (100000 steps) |" in table and "**0.40** (goal ≤ 0.5: met)" in table
     )
     slow = GoalBenchmark(sb3=sb3, rsl=_curve("rsl-ppo", [(100_000, 15.0, 1.0, 0.0025)], reached), **settings)
-    assert slow.ratio is None and "not reached" in markdown(slow)
+    assert slow.ratio is None and "not reached" in report(slow).markdown() and "not reached" in report(slow).text()
 
 
 @pytest.mark.parametrize(
@@ -81,7 +81,7 @@ def test_the_committed_chart_explains_itself_and_nothing_overlaps(tmp_path, monk
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from flatbody_env.chart_text import all_text, caption_text, layout_problems
+    from flatbody_env.figures import all_text, caption_text, layout_problems
 
     saved = Path(__file__).resolve().parents[2] / "docs" / "img" / "time_to_goal.json"
     monkeypatch.setattr(plt, "close", lambda *a, **k: None)

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from flatbody_env.bench.harness import write_report
-from flatbody_env.bench.train import FLATBODY_ONLY, TrainBenchmark, TrainTiming, _run, markdown, report
+from flatbody_env.bench.train import FLATBODY_ONLY, TrainBenchmark, TrainTiming, _run, report
 
 
 @pytest.mark.parametrize("env_id", ["FlatBody-v0", "Pendulum-v1"])
@@ -53,4 +53,5 @@ def test_files_and_table(tmp_path):
     assert [r["env_id"] for r in rows] == ["FlatBody-v0", "Pendulum-v1"] and rows[1]["env_share"] == f"{1.95 / 7.6:.4f}"
     assert (tmp_path / "train_benchmark.png").stat().st_size > 1000
     page = docs.read_text(encoding="utf-8")
-    assert "old" not in page and markdown(b) in page and "| **0.87** | ≤ 1.0 (met) |" in page
+    assert "old" not in page and report(b).markdown() in page and "| **0.87** | ≤ 1.0 (met) |" in page
+    assert "0.87" in report(b).text() and "**" not in report(b).text()

@@ -328,6 +328,11 @@ CASES = {
         _files("bw/scaling.json", "bw/scaling.csv", "bw/scaling.png"),
         True,
     ),
+    ("bench", "compare"): (
+        ["HEAD", "--figures", "simulate", "--rounds", "1", "--out-dir", "{tmp}/bc"],
+        _files("bc/compare.json", "bc/compare.csv", "bc/compare.png"),
+        True,
+    ),
     ("sweep", "stability-map"): (
         ["--grid", "4", "--workers", "0", "--no-progress", "--out", "{tmp}/sm", "--json"],
         _json_keys(),
