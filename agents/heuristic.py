@@ -131,7 +131,7 @@ class PassivityController:
         self._force = np.empty(4)
 
     @classmethod
-    def for_env(cls, env, gains: HeuristicGains | None = None) -> "PassivityController":
+    def for_env(cls, env, gains: HeuristicGains | None = None) -> PassivityController:
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, gains)
 
@@ -374,7 +374,7 @@ class HeuristicController:
         self._minus_K = self._K
 
     @classmethod
-    def for_env(cls, env, weights: LQRWeights | None = None) -> "HeuristicController":
+    def for_env(cls, env, weights: LQRWeights | None = None) -> HeuristicController:
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, weights)
 

@@ -112,17 +112,16 @@ class Plans:
     def save(self, path: str | Path) -> None:
         from flatbody_env.output import atomic_path
 
-        with atomic_path(path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(
-                    fh,
-                    env_id=np.str_(self.env_id),
-                    model=np.str_(self.model),
-                    seeds=self.seeds,
-                    final_distance=self.final_distance,
-                    knots=self.knots,
-                    on_policy=np.bool_(self.on_policy),
-                )
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(
+                fh,
+                env_id=np.str_(self.env_id),
+                model=np.str_(self.model),
+                seeds=self.seeds,
+                final_distance=self.final_distance,
+                knots=self.knots,
+                on_policy=np.bool_(self.on_policy),
+            )
 
     @classmethod
     def load(cls, path: str | Path) -> Plans:

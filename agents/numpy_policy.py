@@ -24,6 +24,7 @@ is one command. SB3 computes in float32, this evaluator in float64: the actions 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 from dataclasses import dataclass
@@ -136,10 +137,8 @@ def trusted_roots() -> list[Path]:
     from flatbody_env.physics import validation
 
     listed = [x for x in os.environ.get("FLATBODY_TRUSTED_DIRS", "").split(os.pathsep) if x.strip()]
-    try:  # the one reading door: a regular file of bounded size (a FIFO or device planted here is never read)
+    with contextlib.suppress(ValueError):  # the one reading door: a regular file of bounded size (never a FIFO)
         listed += validation.read_text("trusted-runs", _trust_file(), max_bytes=validation.MAX_TEXT_BYTES).splitlines()
-    except ValueError:
-        pass
     roots = [MODELS_DIR.resolve()]
     for line in listed:
         p = Path(line.strip()).expanduser()

@@ -25,6 +25,7 @@ as ``key=value`` overrides for ``flatbody train --study NAME --trial-id K``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
@@ -245,10 +246,8 @@ def _fail_stale(study) -> None:
     from optuna.storages._heartbeat import is_heartbeat_enabled
 
     if is_heartbeat_enabled(study._storage):
-        try:
+        with contextlib.suppress(Exception):  # a storage without a heartbeat
             optuna.storages.fail_stale_trials(study)
-        except Exception:  # noqa: BLE001 - a storage without a heartbeat
-            pass
 
 
 def prepare(cfg: TuneConfig) -> int:

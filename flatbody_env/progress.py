@@ -104,7 +104,7 @@ class LineProgress:
             self.update(1)
         self.close()  # as tqdm does at the end of the iterable
 
-    def __enter__(self) -> "LineProgress":
+    def __enter__(self) -> LineProgress:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -138,7 +138,7 @@ class LineProgress:
             text += f" {units}"
         text += f", {_clock(elapsed)} elapsed"
         done = self.n - self._initial
-        if self.total and 0 < done and self.n < self.total:
+        if self.total and done > 0 and self.n < self.total:
             text += f", ~{_clock(elapsed / done * (self.total - self.n))} left"
         return text + (f" [{self.postfix}]" if self.postfix else "")
 

@@ -53,7 +53,7 @@ class Scene:
     t_end: float = 20.0
     source: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
-    def with_state(self, **changes: float) -> "Scene":
+    def with_state(self, **changes: float) -> Scene:
         """A copy with some state entries replaced (validated)."""
         state = dict(self.state)
         state.update({k: float(v) for k, v in changes.items()})

@@ -251,7 +251,7 @@ class Trajectory:
         return out
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, where: str = "trajectory") -> "Trajectory":
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "trajectory") -> Trajectory:
         """A trajectory from its JSON form (:meth:`to_dict`, ``flatbody simulate --out FILE``), validated.
 
         ``t`` (n,) strictly increasing finite times, ``state`` the eleven series of n finite numbers

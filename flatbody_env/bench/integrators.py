@@ -317,10 +317,10 @@ def _short_step(bar, n_batch=1024):
         best = best_of(steps, 3, warm=False) / n
         X = np.repeat(y[:, None], n_batch, axis=1)
         U = np.zeros((4, n_batch))
-        O = np.empty_like(X)
+        OUT = np.empty_like(X)
         S = np.zeros(n_batch, np.int64)
         bbest = (
-            best_of(lambda a=(X, U, P, dt, h, 1e-8, 1e-10, math.inf, O, S), st=st: st.batch(*a), 5, warm=False)
+            best_of(lambda a=(X, U, P, dt, h, 1e-8, 1e-10, math.inf, OUT, S), st=st: st.batch(*a), 5, warm=False)
             / n_batch
         )
         out.append(

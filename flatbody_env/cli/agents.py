@@ -464,8 +464,6 @@ def _targets_table(args) -> int:
     return 0
 
 
-
-
 def _add_run_arguments(p, *, seed_default) -> None:
     """The flags every training command shares (train, curriculum): seed, budget, overrides, folder, checkpoints."""
     p.add_argument(

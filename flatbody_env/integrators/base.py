@@ -123,7 +123,7 @@ class Tolerances:
         )
 
 
-def check_step(info: "MethodInfo", tol: Tolerances) -> float:
+def check_step(info: MethodInfo, tol: Tolerances) -> float:
     """The fixed step ``h`` of a fixed-step method (0.0 for adaptive ones): the one home of the rule
     "fixed-step methods need ``step=``, adaptive methods refuse it" (``ValueError`` naming ``step``)."""
     if info.adaptive:

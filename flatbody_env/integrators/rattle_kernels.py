@@ -95,7 +95,7 @@ def rattle_step(z, h, P, f_rho, F, qt, Fn):
     p1 = np.empty(3)
     p2 = np.empty(3)
     ps = np.empty(3)
-    for it in range(NEWTON_MAX):
+    for _it in range(NEWTON_MAX):
         for i in range(3):
             p1[i] = qt[i] - c * L1 * z[6 + i] / J1
             p2[i] = qt[3 + i] - c * L2 * z[6 + i] / J2

@@ -99,7 +99,7 @@ class CompiledEnvStep:
         self.__dict__.update(state)
         self._load()
 
-    def with_body(self, body: Body) -> "CompiledEnvStep":
+    def with_body(self, body: Body) -> CompiledEnvStep:
         """The same stepper for another body (its kernel parameters; the compiled code is shared)."""
         if not body.compiled:
             raise ValueError("body: a compiled stepper needs a built-in potential")
@@ -136,7 +136,7 @@ class GenericEnvStep:
         self._last = ""
         self._lane_reasons: dict[int, str] = {}
 
-    def with_body(self, body: Body) -> "GenericEnvStep":
+    def with_body(self, body: Body) -> GenericEnvStep:
         """The same stepper for another body."""
         other = copy.copy(self)
         other.body = body

@@ -74,7 +74,7 @@ class Inertia:
         _check_positive("params", J1=self.J1, J2=self.J2, J3=self.J3)
 
     @classmethod
-    def isotropic(cls, J: float, J3: float) -> "Inertia":
+    def isotropic(cls, J: float, J3: float) -> Inertia:
         """J1 = J2 = J (section 3.2 of [1])."""
         return cls(J1=J, J2=J, J3=J3)
 
@@ -163,7 +163,7 @@ class Body:
 
     # --- data -------------------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, where: str = "") -> "Body":
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "") -> Body:
         """A body from its JSON form ``{"params", "potential", "thickness"[, "spin_convention"]}``.
 
         ``params`` is ``{"J", "J3"}`` (isotropic) or ``{"J1", "J2", "J3"}``; ``potential`` is

@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Union
 
 import numpy as np
 
@@ -315,4 +314,4 @@ class CustomPotential:
         return 0.5 * (hess + hess.T)
 
 
-InPlanePotential = Union[V1, V2, V3, CustomPotential]
+InPlanePotential = V1 | V2 | V3 | CustomPotential

@@ -257,7 +257,7 @@ def read_blueprint(path: str | Path) -> BlueprintInfo:
     stores = [(bp, list(reader.stream(store=bp))) for bp in reader.blueprints()]
     if stores:
         stores = [max(stores, key=lambda s: max((_chunk_time(c) for c in s[1]), default=-1))]
-    for bp, chunks in stores:
+    for _bp, chunks in stores:
         for chunk in chunks:
             rb = chunk.to_record_batch()
             for i, f in enumerate(rb.schema):

@@ -602,7 +602,7 @@ class Recorder:
         for sym in ("G", "C"):
             entries = _static(
                 ("entries", sym),
-                lambda: rr.SeriesLines(
+                lambda sym=sym: rr.SeriesLines(
                     names=[f"{sym}{ij}" for ij in ("11", "22", "33", "12", "13", "23")], colors=TENSOR_ENTRY_COLORS
                 ),
             )
@@ -1160,7 +1160,7 @@ class Recorder:
                 self.rec.disconnect()
         return self.path
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc) -> None:

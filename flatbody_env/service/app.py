@@ -293,7 +293,7 @@ class Service:
             return error(503, "unavailable", "the worker processes are restarting; try again")
         try:
             ok, data = await asyncio.wait_for(asyncio.wrap_future(future), timeout=self.limits.request_seconds)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             return error(
                 413,
                 "too-large",

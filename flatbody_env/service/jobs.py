@@ -32,7 +32,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -582,10 +582,8 @@ def remove_partial_files(folder: Path) -> None:
         return
     for entry in entries:
         if entry.name.startswith(".") and ".tmp" in entry.name and entry.is_file():
-            try:
+            with suppress(OSError):
                 entry.unlink()
-            except OSError:
-                pass
 
 
 def _stop_process(proc) -> None:

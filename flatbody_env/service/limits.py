@@ -88,7 +88,7 @@ class Limits:
         """The limits as JSON (``GET /limits``)."""
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
-    def with_environment(self, environ=None) -> "Limits":
+    def with_environment(self, environ=None) -> Limits:
         """These limits with any ``FLATBODY_LIMIT_<NAME>`` environment variable applied
         (e.g. ``FLATBODY_LIMIT_MAX_QUEUED_JOBS=8``); a bad value is a ``ValueError`` naming the variable."""
         environ = os.environ if environ is None else environ

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 from importlib import resources
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -171,7 +171,7 @@ def _inertia_tag(value: Any) -> str:
 
 
 InertiaSpec = Annotated[
-    Union[Annotated[IsotropicInertia, Tag("isotropic")], Annotated[Inertia, Tag("three-moments")]],
+    Annotated[IsotropicInertia, Tag("isotropic")] | Annotated[Inertia, Tag("three-moments")],
     Discriminator(_inertia_tag),
 ]
 
@@ -198,7 +198,7 @@ class PotentialV3(_Strict):
     kappa: Constant
 
 
-PotentialSpec = Annotated[Union[PotentialV1, PotentialV2, PotentialV3], Field(discriminator="name")]
+PotentialSpec = Annotated[PotentialV1 | PotentialV2 | PotentialV3, Field(discriminator="name")]
 
 
 class ThicknessSpec(_Strict):
@@ -225,9 +225,7 @@ class BodySpec(_Strict):
     potential: PotentialSpec = Field(
         description=f'{{"name": "V1"|"V2"|"V3", and its constants k | c, d | kappa, in {_PARAM_TEXT}}}'
     )
-    thickness: Union[ThicknessSpec, None] = Field(
-        default=None, description='thickness potential V_rho {"a", "b"}, or null'
-    )
+    thickness: ThicknessSpec | None = Field(default=None, description='thickness potential V_rho {"a", "b"}, or null')
     spin_convention: Literal["corrected", "paper"] = "corrected"
 
     def as_data(self) -> dict[str, Any]:
@@ -265,13 +263,11 @@ class SceneSpec(BodySpec):
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
 
-    name: Union[Name, None] = None
-    description: Union[Annotated[str, Field(max_length=L.max_string)], None] = None
-    thickness: Union[ThicknessSpec, None] = Field(
-        description='thickness potential V_rho {"a", "b"}, or null (required)'
-    )
+    name: Name | None = None
+    description: Annotated[str, Field(max_length=L.max_string)] | None = None
+    thickness: ThicknessSpec | None = Field(description='thickness potential V_rho {"a", "b"}, or null (required)')
     state: StateSpec
-    t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = None
+    t_end: Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)] | None = None
 
     @model_serializer(mode="wrap")
     def _without_nulls(self, handler):
@@ -282,7 +278,7 @@ class SceneSpec(BodySpec):
 class JobSceneSpec(SceneSpec):
     """A scene object of a job: ``t_end`` at most the job limit."""
 
-    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+    t_end: Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)] | None = None
 
 
 def _scene_tag(value: Any) -> str:
@@ -290,10 +286,10 @@ def _scene_tag(value: Any) -> str:
 
 
 RequestScene = Annotated[
-    Union[Annotated[SceneName, Tag("scene-name")], Annotated[SceneSpec, Tag("scene-object")]], Discriminator(_scene_tag)
+    Annotated[SceneName, Tag("scene-name")] | Annotated[SceneSpec, Tag("scene-object")], Discriminator(_scene_tag)
 ]
 JobScene = Annotated[
-    Union[Annotated[SceneName, Tag("scene-name")], Annotated[JobSceneSpec, Tag("scene-object")]],
+    Annotated[SceneName, Tag("scene-name")] | Annotated[JobSceneSpec, Tag("scene-object")],
     Discriminator(_scene_tag),
 ]
 
@@ -319,7 +315,7 @@ class SpinsRequest(_Strict):
     s3: Momentum = Field(description=f"spin component s3 (conserved with |s|), within {_MOMENTUM_TEXT}")
     p_theta: Momentum = Field(description=f"material momentum p_theta, within {_MOMENTUM_TEXT}")
     branch: Literal["N", "A", "all"] = Field("N", description="N: s1 = s2 = 0 (paper); A: in-plane axis (needs spin)")
-    spin: Union[Momentum, None] = Field(
+    spin: Momentum | None = Field(
         None, description=f"spin about the in-plane axis for branch A, within {_MOMENTUM_TEXT}"
     )
     lam_range: SearchRange = Field(BOX.lam, description=f"search range of lambda [LO, HI], {_SEARCH_TEXT}")
@@ -340,24 +336,24 @@ class SimulateRequest(_Strict):
     )
 
     scene: RequestScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
-    t_end: Union[Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+    t_end: Annotated[float, Field(gt=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)] | None = Field(
         None, description="final time (default: the scene's t_end)"
     )
-    times: Union[list[Annotated[float, Field(ge=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
+    times: list[Annotated[float, Field(ge=0, le=L.sync_t_end, allow_inf_nan=False, strict=True)]] | None = Field(
         None,
         min_length=1,
         max_length=L.max_times,
         description="output times in [0, t_end], increasing (default: an even grid)",
     )
-    samples: Union[Count(MIN_SAMPLES, L.sync_samples), None] = Field(
+    samples: Count(MIN_SAMPLES, L.sync_samples) | None = Field(
         None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})"
     )
     method: Name = Field("auto", description="integrator (GET /methods) or auto: the fastest that meets rtol/atol")
     rtol: Tolerance = Field(TOLERANCES.rtol, description=f"relative tolerance (adaptive methods), in {_TOL_TEXT}")
     atol: Tolerance = Field(TOLERANCES.atol, description=f"absolute tolerance (adaptive methods), in {_TOL_TEXT}")
-    step: Union[
-        Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)], None
-    ] = Field(None, description="step size (fixed-step methods)")
+    step: Annotated[float, Field(ge=STEP_MIN_REQUEST, le=L.sync_t_end, allow_inf_nan=False, strict=True)] | None = (
+        Field(None, description="step size (fixed-step methods)")
+    )
     model: Literal["auto", "two-polar", "regular"] = "auto"
     with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
 
@@ -371,19 +367,19 @@ class TrajectoryRequest(_Strict):
 
     t: list[Finite] = Field(min_length=1, max_length=L.trajectory_samples)
     state: dict[str, Annotated[list[Finite], Field(max_length=L.trajectory_samples)]] = Field(max_length=16)
-    energy: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
-    casimir: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
-    p_theta: Union[Annotated[list[Finite], Field(max_length=L.trajectory_samples)], None] = None
-    rotation: Union[
+    energy: Annotated[list[Finite], Field(max_length=L.trajectory_samples)] | None = None
+    casimir: Annotated[list[Finite], Field(max_length=L.trajectory_samples)] | None = None
+    p_theta: Annotated[list[Finite], Field(max_length=L.trajectory_samples)] | None = None
+    rotation: (
         Annotated[
             list[Annotated[list[Annotated[list[Finite], Field(max_length=3)]], Field(max_length=3)]],
             Field(max_length=L.trajectory_samples),
-        ],
-        None,
-    ] = None
-    initial_state: Union[Annotated[dict[str, Finite], Field(max_length=16)], None] = None
-    meta: Union[Annotated[dict[str, Any], Field(max_length=64)], None] = None
-    body: Union[BodySpec, None] = Field(None, description="the body (default: the built-in scene named in meta.scene)")
+        ]
+        | None
+    ) = None
+    initial_state: Annotated[dict[str, Finite], Field(max_length=16)] | None = None
+    meta: Annotated[dict[str, Any], Field(max_length=64)] | None = None
+    body: BodySpec | None = Field(None, description="the body (default: the built-in scene named in meta.scene)")
 
     def trajectory(self) -> dict[str, Any]:
         """The trajectory dict ``invariants_along`` reads."""
@@ -403,22 +399,22 @@ class SimulateJobParams(_Strict):
     )
 
     scene: JobScene = Field("default", description="a scene object (as a scene JSON file) or a built-in scene name")
-    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+    t_end: Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)] | None = Field(
         None, description="final time (default: the scene's t_end)"
     )
-    times: Union[list[Annotated[float, Field(ge=0, le=L.job_t_end, allow_inf_nan=False, strict=True)]], None] = Field(
+    times: list[Annotated[float, Field(ge=0, le=L.job_t_end, allow_inf_nan=False, strict=True)]] | None = Field(
         None,
         min_length=1,
         max_length=L.max_times,
         description="output times in [0, t_end], increasing (default: an even grid)",
     )
-    samples: Union[Count(MIN_SAMPLES, L.job_samples), None] = Field(
+    samples: Count(MIN_SAMPLES, L.job_samples) | None = Field(
         None, description=f"number of evenly spaced output times (default {DEFAULT_SAMPLES})"
     )
     method: Name = Field("auto", description="integrator (GET /methods) or auto")
     rtol: Tolerance = TOLERANCES.rtol
     atol: Tolerance = TOLERANCES.atol
-    step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+    step: Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)] | None = None
     model: Literal["auto", "two-polar", "regular"] = "auto"
     with_rotation: Flag = Field(False, description="also integrate R and output 'rotation'")
 
@@ -427,16 +423,16 @@ class RecordJobParams(_Strict):
     """A ``record`` job (``flatbody record``): simulate with R(t) and write a rerun recording ``recording.rrd``."""
 
     scene: JobScene = Field("default", description="a scene object or a built-in scene name")
-    t_end: Union[Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = Field(
+    t_end: Annotated[float, Field(gt=0, le=L.job_t_end, allow_inf_nan=False, strict=True)] | None = Field(
         None, description="final time (default: the scene's t_end)"
     )
     method: Name = "auto"
     rtol: Tolerance = TOLERANCES.rtol
     atol: Tolerance = TOLERANCES.atol
-    step: Union[Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)], None] = None
+    step: Annotated[float, Field(ge=STEP_MIN_JOB, le=L.job_t_end, allow_inf_nan=False, strict=True)] | None = None
     model: Literal["auto", "two-polar", "regular"] = "auto"
     samples: Count(MIN_SAMPLES, L.job_samples) = Field(RECORD_JOB_SAMPLES, description="recorded time steps")
-    title: Union[Annotated[str, Field(max_length=200)], None] = Field(None, description="recording title")
+    title: Annotated[str, Field(max_length=200)] | None = Field(None, description="recording title")
     tensor_every: Count(1, MAX_SAMPLES) = Field(1, description="log the tensors every N-th step")
 
 
@@ -453,12 +449,12 @@ class FamilyJobParams(_Strict):
         alias="to",
         description=f"end of the range (within {_MOMENTUM_TEXT}; greater than from)",
     )
-    s3: Union[Momentum, None] = Field(None, description=f"s3 held fixed (default {DEFAULT_S3:g})")
-    p_theta: Union[Momentum, None] = Field(None, description=f"p_theta held fixed (default {DEFAULT_P_THETA:g})")
+    s3: Momentum | None = Field(None, description=f"s3 held fixed (default {DEFAULT_S3:g})")
+    p_theta: Momentum | None = Field(None, description=f"p_theta held fixed (default {DEFAULT_P_THETA:g})")
     seeds: Count(FAMILY_SEEDS_RANGE[0], min(L.job_family_seeds, FAMILY_SEEDS_RANGE[1])) = Field(
         DEFAULT_SEEDS, description="parameter values at which all solutions are sought"
     )
-    step: Union[Annotated[float, Field(gt=0, le=2 * MOMENTUM_MAX, allow_inf_nan=False, strict=True)], None] = Field(
+    step: Annotated[float, Field(gt=0, le=2 * MOMENTUM_MAX, allow_inf_nan=False, strict=True)] | None = Field(
         None, description="largest continuation step (default range/60)"
     )
     lam_range: SearchRange = BOX.lam
@@ -521,9 +517,7 @@ class EvaluateJob(_Strict):
     params: EvaluateJobParams = Field(default_factory=EvaluateJobParams)
 
 
-JobRequest = Annotated[
-    Union[SimulateJob, RecordJob, FamilyJob, StabilityMapJob, EvaluateJob], Field(discriminator="kind")
-]
+JobRequest = Annotated[SimulateJob | RecordJob | FamilyJob | StabilityMapJob | EvaluateJob, Field(discriminator="kind")]
 """``POST /jobs``: ``{"kind", "params"}``."""
 
 JOB_KINDS = ("simulate", "family", "stability-map", "record", "evaluate")
@@ -572,8 +566,8 @@ class TrajectoryAnswer(BaseModel):
     energy: list[float]
     casimir: list[float]
     p_theta: list[float]
-    rotation: Union[list[list[list[float]]], None] = None
-    initial_state: Union[dict[str, float], None] = None
+    rotation: list[list[list[float]]] | None = None
+    initial_state: dict[str, float] | None = None
     meta: dict[str, Any]
 
 
@@ -621,28 +615,22 @@ class JobStatus(BaseModel):
         ge=0.0, le=1.0, description="fraction done, reported by the worker while the job runs; never decreases"
     )
     params: dict[str, Any]
-    result: Union[Any, None] = Field(None, description="the answer, when done (left out of GET /jobs)")
-    error: Union[str, None] = None
+    result: Any | None = Field(None, description="the answer, when done (left out of GET /jobs)")
+    error: str | None = None
     artifacts: list[str] = Field(description="file names for GET /jobs/{id}/artifact?name=...")
     created: float = Field(description="Unix time")
-    started: Union[float, None] = None
-    finished: Union[float, None] = None
-    stage: Union[str, None] = Field(None, description="what the job is doing now (e.g. 'row 12 of 30'), while it runs")
-    elapsed: Union[float, None] = Field(
-        None, description="seconds since the job started (to its end once it has ended)"
-    )
-    remaining: Union[float, None] = Field(
-        None, description="while it runs: estimated seconds left at its mean rate so far"
-    )
+    started: float | None = None
+    finished: float | None = None
+    stage: str | None = Field(None, description="what the job is doing now (e.g. 'row 12 of 30'), while it runs")
+    elapsed: float | None = Field(None, description="seconds since the job started (to its end once it has ended)")
+    remaining: float | None = Field(None, description="while it runs: estimated seconds left at its mean rate so far")
 
 
 class JobList(BaseModel):
     """A page of jobs, newest first; ``next`` is the ``before`` of the next page (null: no more)."""
 
     jobs: list[JobStatus]
-    next: Union[str, None] = Field(
-        None, description="pass as ?before= for the next page; null when this page is the last"
-    )
+    next: str | None = Field(None, description="pass as ?before= for the next page; null when this page is the last")
 
 
 class JobDeleted(BaseModel):
@@ -666,10 +654,10 @@ class ErrorAnswer(BaseModel):
         "method-not-allowed",
         "bad-host",
     ]
-    field: Union[str, None] = Field(None, description="the request field at fault (dotted)")
-    when: Union[float, None] = Field(None, description="integration failures: the time t at which it failed")
-    why: Union[str, None] = Field(None, description="integration failures: the reason (IntegrationError)")
-    method: Union[str, None] = None
+    field: str | None = Field(None, description="the request field at fault (dotted)")
+    when: float | None = Field(None, description="integration failures: the time t at which it failed")
+    why: str | None = Field(None, description="integration failures: the reason (IntegrationError)")
+    method: str | None = None
 
 
 # ----------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ import re
 import signal
 import threading
 from contextlib import contextmanager
-from typing import Iterator
+from collections.abc import Iterator
 
 _ADDRESS = re.compile(r"^(tcp|tls|inproc|ws|wss)://[^\s/]+(:\d+)?$")
 
@@ -65,7 +65,7 @@ def workers_leave_sigint() -> Iterator[None]:
 
 
 @contextmanager
-def dask_client(*, workers: int = 1, scheduler: str | None = None, timeout_s: float = 30.0) -> Iterator["object"]:
+def dask_client(*, workers: int = 1, scheduler: str | None = None, timeout_s: float = 30.0) -> Iterator[object]:
     """A ``distributed.Client`` for the sweep (closing what it started on exit).
 
     Parameters

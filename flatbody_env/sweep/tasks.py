@@ -34,7 +34,8 @@ import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from agents.evaluate import EVAL_SEED  # the first evaluation seed of a seeds sweep (re-exported)
 from flatbody_env.physics.validation import SWEEP_GRID_RANGE

@@ -80,7 +80,7 @@ def test_the_table_csv_and_chart_of_a_comparison(tmp_path):
     assert "1.50×" in text and "0.90×" in text and "not timed: the REV tree: TypeError" in text
     paths = write_report(rep, tmp_path)
     assert [p.name for p in paths] == ["compare.json", "compare.csv", "compare.png"]
-    rows = list(csv.DictReader(open(tmp_path / "compare.csv", newline="")))
+    rows = list(csv.DictReader((tmp_path / "compare.csv").read_text().splitlines()))
     assert [r["figure"] for r in rows] == ["env-step", "simulate", "ppo"] and float(
         rows[1]["ratio_new_over_old"]
     ) == 1.5

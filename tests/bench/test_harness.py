@@ -77,7 +77,7 @@ def test_write_report_writes_the_record_the_table_the_chart_from_the_saved_file_
     assert [p.name for p in paths] == ["demo.json", "demo.csv", "demo.png", "page.md"]
     record = json.loads((out / "demo.json").read_text())
     assert record["rows"] == [[1, 2.5]] and {"cpu", "python", "numpy", "git"} <= set(record["machine"])
-    assert list(csv.reader(open(out / "demo.csv"))) == [["n", "rate"], ["1", "2.5"]]
+    assert list(csv.reader((out / "demo.csv").read_text().splitlines())) == [["n", "rate"], ["1", "2.5"]]
     assert drawn == [[[1, 2.5]]]
     assert (
         page.read_text()

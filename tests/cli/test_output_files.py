@@ -21,10 +21,9 @@ def test_write_csv_writes_the_table_and_replaces_the_old_file(tmp_path):
 def test_a_writer_that_fails_leaves_the_previous_file_and_no_temporary(tmp_path):
     path = tmp_path / "t.csv"
     path.write_text("previous\n")
-    with pytest.raises(RuntimeError, match="half-way"):
-        with atomic_open(path) as fh:
-            fh.write("a,b\n")
-            raise RuntimeError("half-way")
+    with pytest.raises(RuntimeError, match="half-way"), atomic_open(path) as fh:
+        fh.write("a,b\n")
+        raise RuntimeError("half-way")
     assert path.read_text() == "previous\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv"]
 

@@ -241,7 +241,7 @@ def test_sb3_adapter_same_step_semantics():
     venv = FlatBodySB3VecEnv(3, seed=0, max_episode_steps=4)
     obs = venv.reset()
     assert obs.shape == (3, 16)
-    for k in range(4):
+    for _k in range(4):
         obs, rewards, dones, infos = venv.step(np.zeros((3, 4), dtype=np.float32))
     assert dones.all() and all(i["TimeLimit.truncated"] for i in infos)
     assert all("terminal_observation" in i for i in infos)

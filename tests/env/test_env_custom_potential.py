@@ -34,7 +34,7 @@ def test_single_env_with_a_custom_potential_reports_the_whole_energy():
     env = FlatBodyEnv(body=body, integrator="DOP853")
     twin = FlatBodyEnv(integrator="DOP853")  # the same body with the built-in V3
     _, info = env.reset(seed=3)
-    y = np.array(list(env.state.values()))
+    np.array(list(env.state.values()))
     assert abs(info["energy"] - hamiltonian(env.state, body)) < 1e-12
     _, twin_info = twin.reset(seed=3, options={"state": env.state})  # (the energy does not depend on the target)
     assert abs(info["energy"] - twin_info["energy"]) < 1e-12 * abs(twin_info["energy"])

@@ -22,7 +22,7 @@ def test_tracked_episode_equals_the_untracked_one_and_R_is_the_reference(kwargs)
     rng = np.random.default_rng(0)
     ref_tol = Tolerances(rtol=1e-13, atol=1e-13)
     worst = 0.0
-    for k in range(60):
+    for _k in range(60):
         a = rng.uniform(-1, 1, tracked.action_space.shape).astype(np.float32)
         y0, R0 = tracked.physics_state, tracked.rotation
         _, u = tracked.controls(a)

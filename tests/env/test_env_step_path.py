@@ -145,7 +145,7 @@ def test_same_step_autoreset_keeps_the_final_observation():
     venv.reset(seed=0)
     single = FlatBodyEnv()
     single.reset(seed=0)
-    for k in range(3):
+    for _k in range(3):
         obs, _, _, trunc, info = venv.step(np.zeros((2, 4)))
         o = single.step(np.zeros(4))[0]
     assert trunc.all() and info["_final_obs"].all()

@@ -284,7 +284,7 @@ def test_hold_unstable_without_control_leaves_and_ends_the_episode():
     times = []
     for seed in range(6):
         env.reset(seed=seed)
-        for k in range(400):
+        for _k in range(400):
             _, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))
             if term:
                 assert info["domain_code"] == 7 and not info["is_success"]
@@ -407,7 +407,7 @@ def test_any_body_draws_bodies_log_uniformly_in_the_documented_ranges():
     task = env.task
     C = np.array([body_constants(task.sample_body(np.random.default_rng(s))) for s in range(N_DRAWS)])
     lo, hi = task.ranges().T
-    assert (C >= lo).all() and (C <= hi).all()
+    assert (lo <= C).all() and (hi >= C).all()
     x = np.log(C / lo) / np.log(hi / lo)  # uniform on [0, 1] for a log-uniform draw
     for j in range(C.shape[1]):
         counts, _ = np.histogram(x[:, j], bins=10, range=(0, 1))

@@ -36,7 +36,8 @@ R_TOL = {
 }
 
 
-def _reference_R(body, y0, u, t_end, R0=np.eye(3)):
+def _reference_R(body, y0, u, t_end, R0=None):
+    R0 = np.eye(3) if R0 is None else R0
     sol = get_method("DOP853").integrate(
         body, y0, np.array([0.0, t_end]), tol=Tolerances(rtol=1e-13, atol=1e-13), u=u, R0=R0, with_rotation=True
     )

@@ -66,7 +66,10 @@ def test_every_method_declares_its_check_and_spec():
         with pytest.raises(ValueError, match="^step: "):
             meth.check(body, Tolerances(step=0.05) if info.adaptive else Tolerances())
         if info.compiled:  # a custom potential runs Python code: refused by check and by integrate alike
-            for call in (lambda: meth.check(custom, tol), lambda: meth.integrate(custom, y, [0.0, 0.1], tol=tol)):
+            for call in (
+                lambda meth=meth, tol=tol: meth.check(custom, tol),
+                lambda meth=meth, tol=tol: meth.integrate(custom, y, [0.0, 0.1], tol=tol),
+            ):
                 with pytest.raises(ValueError, match="^potential: "):
                     call()
 

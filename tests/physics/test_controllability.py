@@ -50,7 +50,7 @@ def test_settling_rate_is_the_cheap_control_limit(lam, aspect):
     r = settling_rate(body, y, LIMITS)
     moderate, _ = lqr_rate(A, B, np.diag([1.0] * 3 + [10.0] * 6), 0.1 * np.eye(4))  # the agents' LQR weights
     cheap, K = lqr_rate(A, B, np.eye(9), 1e-8 * np.eye(4))
-    assert 0 < r and cheap == pytest.approx(r, rel=2e-3)
+    assert r > 0 and cheap == pytest.approx(r, rel=2e-3)
     # the agents' LQR (other state weights, 1000× dearer control) settles at least about as fast
     assert moderate >= 0.99 * r
     # same for the time-reversed ellipse (the sign of (s3, p_theta))

@@ -56,7 +56,7 @@ def test_rates_match_finite_differences():
         omega = np.array([vel["omega1"], vel["omega2"], vel["omega3"]])
         rates = np.array([vel["lambda_dot"], vel["mu_dot"], vel["rho_dot"], vel["theta_dot"]])
 
-        def at(dt):
+        def at(dt, y=y, rates=rates, R=R, omega=omega):
             lam, mu, rho, th = y[7:11] + dt * rates
             from scipy.linalg import expm
 

@@ -86,7 +86,7 @@ def test_blueprint_names_each_expected_view_and_entity(kind, recorded, episode, 
     expected = view_specs(episode=is_episode)
     base = {base_title(v.name): v for v in bp.views}
     assert sorted((c, n) for c, n, _ in expected) == sorted((v.view_class, n) for n, v in base.items())
-    for cls, name, paths in expected:
+    for _cls, name, paths in expected:
         view = base[name]
         for p in paths:
             assert view.shows(p), (name, p)

@@ -57,7 +57,7 @@ def test_energy_change_equals_the_work_of_the_controls(controlled):
     W = [0.0]
     for k in range(1, t.size):
         sol = solve_ivp(
-            lambda s, y: rhs(s, y, U[k - 1], body),
+            lambda s, y, k=k: rhs(s, y, U[k - 1], body),
             (t[k - 1], t[k]),
             Y[:, k - 1],
             method="DOP853",

@@ -226,7 +226,7 @@ def test_bad_fields_are_422_naming_the_field(client, change, field):
 
 
 def test_nan_and_malformed_json_are_422(client):
-    raw = '{"body": %s, "s3": NaN, "p_theta": 0.5}' % json.dumps(DEFAULT_BODY)
+    raw = f'{{"body": {json.dumps(DEFAULT_BODY)}, "s3": NaN, "p_theta": 0.5}}'
     assert_error(client.post("/ellipses", content=raw, headers={"content-type": "application/json"}), 422, "s3")
     r = client.post("/ellipses", content="{not json", headers={"content-type": "application/json"})
     assert_error(r, 422, None, "JSON")
@@ -543,7 +543,7 @@ def test_the_page_colours_each_variable_as_the_recordings_do(client):
 
     page = client.get("/").text
     served = dict(re.findall(r"--color-(\w+): (#[0-9a-f]{6});", page))
-    assert served == {name: "#%02x%02x%02x" % rgb for name, rgb in COLORS.items()}
+    assert served == {name: "#{:02x}{:02x}{:02x}".format(*rgb) for name, rgb in COLORS.items()}
     assert served["lambda"] == "#d62728" and served["mu"] == "#2ca02c"  # λ red, μ green (ϱ blue)
     js = client.get("/page/page.js").text
     assert not re.search(r"#[0-9a-fA-F]{6}\b|rgba?\(", js), "page.js names a colour of its own"

@@ -121,7 +121,7 @@ def test_defaults_are_the_library_defaults(schemas):
     assert schemas["SpinsRequest"]["properties"]["grid"]["default"] == box.n
     assert schemas["SimulateRequest"]["properties"]["rtol"]["default"] == Tolerances().rtol
     assert schemas["RecordJobParams"]["properties"]["atol"]["default"] == Tolerances().atol
-    assert models.DEFAULT_BODY == default_body().to_dict()
+    assert default_body().to_dict() == models.DEFAULT_BODY
 
 
 def _refuses(check, value) -> bool:

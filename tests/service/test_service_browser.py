@@ -210,7 +210,7 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
         p.get_attribute("data-name"): browser.execute_script("return getComputedStyle(arguments[0]).stroke", p)
         for p in lines
     }
-    assert drawn == {name: "rgb(%d, %d, %d)" % COLORS[key] for name, key in palette.items()}, drawn
+    assert drawn == {name: "rgb({}, {}, {})".format(*COLORS[key]) for name, key in palette.items()}, drawn
     assert all(len(p.get_attribute("d")) > 100 for p in lines)
     assert card.find_element(By.CSS_SELECTOR, "svg.chart").size["width"] > 400
     assert card.find_element(By.CSS_SELECTOR, "svg.ellipse ellipse.now").get_attribute("rx")

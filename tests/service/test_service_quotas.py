@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from pathlib import Path
 
 import httpx
 import pytest
@@ -70,7 +71,7 @@ class HealthProbe:
                     self.failures.append("not 200")
                 time.sleep(0.02)
 
-    def __enter__(self) -> "HealthProbe":
+    def __enter__(self) -> HealthProbe:
         self._thread.start()
         return self
 
@@ -95,7 +96,7 @@ class HealthProbe:
 def _big_simulate_job() -> dict:
     """A simulate job with the most stored data the models allow: a scene with the longest description and the most
     explicit output times (it is queued behind a long job, so it never runs during the test)."""
-    scene = json.loads(open(__import__("flatbody_env").__path__[0] + "/scenes/default.json").read())
+    scene = json.loads((Path(__import__("flatbody_env").__path__[0]) / "scenes/default.json").read_text())
     scene["description"] = "x" * DEFAULT_LIMITS.max_string
     n = DEFAULT_LIMITS.max_times
     return {

@@ -36,9 +36,8 @@ def test_done_keys_skip_errors_unless_asked(tmp_path):
 
 
 def test_resume_rules(tmp_path):
-    with ResultStore(tmp_path / "a") as store:
-        with pytest.raises(ValueError, match="resume: no sweep"):
-            store.begin(SPEC, resume=True)
+    with ResultStore(tmp_path / "a") as store, pytest.raises(ValueError, match="resume: no sweep"):
+        store.begin(SPEC, resume=True)
     with ResultStore(tmp_path / "b") as store:
         store.begin(SPEC, resume=False)
         store.put("k", payload=[])
