@@ -164,12 +164,13 @@ def markdown(reports: list[dict[str, Any]]) -> str:
 def update_docs(path: str | Path, folder: str | Path = REFERENCE_DIR) -> None:
     """Regenerate the ``<!-- bench:tasks -->`` block of ``path`` from the reports saved in ``folder``."""
     from flatbody_env.env.registration import V1_IDS
+    from flatbody_env.physics import validation
     from flatbody_env.output import replace_marked_block
 
     reports = load_reports(folder)
     replace_marked_block(path, DOCS_BLOCK, markdown([r for r in reports if r["env_id"] in V1_IDS]))
     v0 = [r for r in reports if r["env_id"] not in V1_IDS]
-    if v0 and f"<!-- bench:{DOCS_BLOCK_V0} -->" in Path(path).read_text(encoding="utf-8"):
+    if v0 and f"<!-- bench:{DOCS_BLOCK_V0} -->" in validation.read_text("docs", path):
         replace_marked_block(path, DOCS_BLOCK_V0, markdown(v0))
 
 

@@ -378,16 +378,4 @@ class FlatBodyVectorEnv(VectorEnv):
             self._pool = None
 
 
-def make_vector_env(num_envs: int = 1, device=None, **kwargs: Any) -> VectorEnv:
-    """The vector entry point of every registered id (``gym.make_vec(ID, n, vectorization_mode="vector_entry_point",
-    device=...)``): :class:`FlatBodyVectorEnv` (numpy) without ``device``, else
-    :class:`~flatbody_env.env.torch_vector_env.FlatBodyTorchVectorEnv` on that device (``"cpu"`` or ``"cuda"``; torch
-    tensors, SAME_STEP autoreset unless ``autoreset_mode`` says otherwise)."""
-    if device is None:
-        return FlatBodyVectorEnv(num_envs, **kwargs)
-    from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv
-
-    return FlatBodyTorchVectorEnv(num_envs, device=device, **kwargs)
-
-
-__all__ = ["FlatBodyVectorEnv", "batch_arguments", "episode_info", "make_vector_env", "seed_list"]
+__all__ = ["FlatBodyVectorEnv", "batch_arguments", "episode_info", "seed_list"]

@@ -107,7 +107,7 @@ def test_hostile_hyperparameters_are_one_line_naming_the_field(tmp_path, capsys,
     argv = ["train", "--algo", algo, "--out", str(out), "--no-progress", *budget, "--hyperparams", override]
     assert main(argv) == 2
     line = _one_line(capsys)
-    assert line.startswith(f"flatbody: error: {field}: "), line
+    assert line.startswith(f"flatbody train: error: {field}: "), line
     assert not out.exists()  # nothing written, the folder not trusted
 
 
@@ -133,7 +133,7 @@ def test_a_yaml_file_gets_the_same_checks_as_the_flags(tmp_path, capsys, algo, o
         main(["train", "--algo", algo, "--hyperparams-file", str(file), "--out", str(out), "--no-progress", *budget])
         == 2
     )
-    assert _one_line(capsys).startswith(f"flatbody: error: {field}: ")
+    assert _one_line(capsys).startswith(f"flatbody train: error: {field}: ")
     assert not out.exists()
 
 
@@ -145,12 +145,12 @@ def test_a_run_config_gets_the_same_checks(tmp_path, capsys):
     cfg["hyperparams"]["n_steps"] = 0
     (tmp_path / "config.yml").write_text(yaml.safe_dump(cfg))
     assert main(["train", "--config", str(tmp_path / "config.yml"), "--out", str(tmp_path / "o")]) == 2
-    assert _one_line(capsys).startswith("flatbody: error: config.yml.hyperparams.n_steps: ")
+    assert _one_line(capsys).startswith("flatbody train: error: config.yml.hyperparams.n_steps: ")
     cfg["hyperparams"]["n_steps"] = 256
     cfg["algo"] = "a2c"
     (tmp_path / "config.yml").write_text(yaml.safe_dump(cfg))
     assert main(["train", "--config", str(tmp_path / "config.yml"), "--out", str(tmp_path / "o")]) == 2
-    assert _one_line(capsys).startswith("flatbody: error: config.yml.algo: ")
+    assert _one_line(capsys).startswith("flatbody train: error: config.yml.algo: ")
     assert not (tmp_path / "o").exists()
 
 
@@ -204,7 +204,7 @@ def test_device_cuda_without_a_gpu_is_one_line_naming_the_flag(tmp_path, capsys)
     for algo in ("rsl-ppo", "ppo"):
         assert main(["train", "--algo", algo, "--device", "cuda", "--out", str(tmp_path / "o"), "--no-progress"]) == 2
         line = _one_line(capsys)
-        assert line.startswith("flatbody: error: --device: ") and "internal error" not in line, line
+        assert line.startswith("flatbody train: error: --device: ") and "internal error" not in line, line
     assert not (tmp_path / "o").exists()
 
 

@@ -221,7 +221,7 @@ def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_l
         assert flatbody([*argv, str(tmp_path / "bc"), "--no-progress"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
-        f"flatbody: I/O error: cannot write {str(tmp_path / 'bc' / 'config.yml')!r}: No space left on device"
+        f"flatbody imitate: I/O error: cannot write {str(tmp_path / 'bc' / 'config.yml')!r}: No space left on device"
     ]
     assert list((tmp_path / "bc").iterdir()) == [] and not npp.trusted(tmp_path / "bc")
 

@@ -14,7 +14,7 @@ from agents import evaluate
 from agents.evaluate import CANNOT_BE_BUILT, shipped_agents, success_interval
 from agents.reference import REFERENCE_DIR, load_reports, markdown
 from flatbody_env.cli.main import main
-from flatbody_env.env.registration import TASK_IDS
+from flatbody_env.env.registration import TASK_IDS, V1_IDS
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -47,21 +47,12 @@ def test_evaluate_a_task_prints_its_figures(capsys):
 def test_reports_are_saved_the_docs_block_and_the_chart_come_from_them(tmp_path, capsys):
     out = tmp_path / "reports"
     page = tmp_path / "page.md"
-    page.write_text("# page\n\n<!-- bench:tasks -->\nstale\n<!-- /bench:tasks -->\n\nafter\n")
-    argv = [
-        "evaluate",
-        "--env",
-        "FlatBodyDilatation-v0",
-        "--episodes",
-        "3",
-        "--seed",
-        "10000",
-        "--out-dir",
-        str(out),
-        "--docs",
-        str(page),
-    ]
-    assert main(argv) == 0
+    page.write_text(
+        "# page\n\n<!-- bench:tasks -->\nstale\n<!-- /bench:tasks -->\n\n"
+        "<!-- bench:tasks-v0 -->\nstale\n<!-- /bench:tasks-v0 -->\n\nafter\n"
+    )
+    argv = ["evaluate", "--env", "FlatBodyDilatation-v0", "--episodes", "3", "--seed", "10000", "--out-dir", str(out)]
+    assert main([*argv, "--docs", str(page)]) == 0
     saved = json.loads((out / "FlatBodyDilatation-v0.json").read_text())
     assert saved["version"] == 1 and saved["targets"]["seed"] == [10000, 10001, 10002]
     # the LQR does not exist without torque; the witness replays every episode into the ball
@@ -69,21 +60,34 @@ def test_reports_are_saved_the_docs_block_and_the_chart_come_from_them(tmp_path,
     assert "LinAlgError" in saved["policies"]["heuristic"]["summary"]["reason"]
     assert saved["policies"]["witness"]["episodes"]["success"] == [True, True, True]
     text = page.read_text()
-    assert "stale" not in text and text.endswith("<!-- /bench:tasks -->\n\nafter\n")
-    assert "| FlatBodyDilatation-v0 | LQR | cannot be built (LinAlgError) |" in text
+    v1_block, v0_block = (
+        re.search(rf"<!-- bench:{b} -->\n(.*?)<!-- /bench:{b} -->", text, re.S).group(1) for b in ("tasks", "tasks-v0")
+    )
+    assert "stale" not in text and text.endswith("<!-- /bench:tasks-v0 -->\n\nafter\n")
+    # a v0 report goes in the deprecated suite's block, never in the v1 table
+    assert "| FlatBodyDilatation-v0 | v0 | LQR | cannot be built (LinAlgError) |" in v0_block
+    assert "FlatBodyDilatation-v0" not in v1_block
     assert main(["chart", "--tasks", "--from", str(out), "--out", str(tmp_path)]) == 2  # no reach or hold report there
     assert "--from" in capsys.readouterr().err
-    assert main(["evaluate", "--env", "FlatBodySlow-v0", "--episodes", "5", "--out-dir", str(out)]) == 0
+    assert (
+        main(["evaluate", "--env", "FlatBody-v1", "--episodes", "2", "--out-dir", str(out), "--docs", str(page)]) == 0
+    )
+    v1_block = re.search(r"<!-- bench:tasks -->\n(.*?)<!-- /bench:tasks -->", page.read_text(), re.S).group(1)
+    assert "| FlatBody-v1 | easy | planner (MPPI) |" in v1_block and "Normalised score" in v1_block
     assert main(["chart", "--tasks", "--from", str(out), "--out", str(tmp_path)]) == 0
     assert (tmp_path / "tasks_success.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
     page = (ROOT / "docs" / "tasks.md").read_text(encoding="utf-8")
-    block = re.search(r"<!-- bench:tasks -->\n(.*?)\n<!-- /bench:tasks -->", page, re.S).group(1)
     reports = load_reports(REFERENCE_DIR)
-    assert block == markdown(reports)
-    assert [r["env_id"] for r in reports] == list(TASK_IDS)
+    v1 = [r for r in reports if r["env_id"] in V1_IDS]
+    v0 = [r for r in reports if r["env_id"] not in V1_IDS]
+    for block, subset in (("tasks", v1), ("tasks-v0", v0)):
+        text = re.search(rf"<!-- bench:{block} -->\n(.*?)\n<!-- /bench:{block} -->", page, re.S).group(1)
+        assert text == markdown(subset), block
+    assert [r["env_id"] for r in v1] == list(V1_IDS)
+    assert {r["env_id"] for r in v0} <= set(TASK_IDS) - set(V1_IDS)
     for rep in reports:  # 100 held-out episodes from seed 10000, summaries consistent with the saved episodes
         assert rep["episodes"] == 100 and rep["seed"] == 10_000
         for name, entry in rep["policies"].items():
@@ -92,10 +96,27 @@ def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
                     rep["env_id"],
                     name,
                 )
-    # FlatBody-v0's figures are those of docs/agents.md (the task is unchanged)
-    v0 = reports[0]["policies"]
-    assert v0["heuristic"]["summary"]["final_distance"] == pytest.approx(0.0032, abs=5e-5)
-    assert v0["ppo"]["summary"]["final_distance"] == pytest.approx(0.0018, abs=5e-5)
+
+
+def test_the_v1_reward_ranks_policies_as_their_success_does():
+    """The reward agrees with the score: over the shipped v1 reports, whenever one causal policy succeeds at least
+    10 points more often than another on a task, its mean return is higher too (the witness, which replays the
+    answer open loop, is left out)."""
+    pairs = 0
+    for rep in load_reports(REFERENCE_DIR):
+        if rep["env_id"] not in V1_IDS:
+            continue
+        rows = [
+            (name, e["summary"]["success_rate"], e["summary"]["return"])
+            for name, e in rep["policies"].items()
+            if "episodes" in e and name != "witness"
+        ]
+        for a, sa, ra in rows:
+            for b, sb, rb in rows:
+                if sa - sb >= 0.10:
+                    pairs += 1
+                    assert ra > rb, (rep["env_id"], a, sa, ra, b, sb, rb)
+    assert pairs >= 20
 
 
 def test_a_task_agent_is_found_in_its_folder(tmp_path, monkeypatch):

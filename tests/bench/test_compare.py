@@ -17,7 +17,7 @@ from flatbody_env.cli.main import main
 def test_a_bad_revision_is_refused_in_one_line(rev, tmp_path, capsys):
     assert main(["bench", "compare", "--out-dir", str(tmp_path / "out"), "--", rev]) == 2  # "--": a REV like "-h"
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("flatbody: error: rev: "), err
+    assert len(err) == 1 and err[0].startswith("flatbody bench compare: error: rev: "), err
     assert not (tmp_path / "out" / "compare.json").exists()
 
 
