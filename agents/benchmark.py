@@ -246,76 +246,71 @@ def report(rows: list[dict[str, Any]], out: str | Path, reports: list[dict[str, 
 COLOURS = {"ppo": "#1f77b4", "sac": "#2ca02c", "td3": "#9467bd", "rsl-ppo": "#d62728"}
 
 
+CURVES_CAPTION = (
+    "Each line: one algorithm trained from scratch (no controller prior) with its task's hyperparameters, evaluated "
+    "deterministically on held-out episodes (never trained on) at fixed fractions of its budget; the line is the mean "
+    "over the training seeds, the band its 95 % t-interval. Top: against env steps; bottom: against training time on "
+    "2 shared CPU cores (the evaluations left out)."
+)
+IQM_CAPTION = (
+    "IQM: the interquartile mean of the normalised score over every (task, training seed) run — 0 is the best classic "
+    "controller of the task, 1 the best known reference (planner or witness, else 100 %); the bar is its 95 % "
+    "stratified bootstrap interval (resampling the seeds within each task)."
+)
+
+
 def plot_curves(data: dict[str, Any], png: str | Path) -> Path:
     """Success against env steps (top row) and against training time (bottom row), one column per task: mean over the
     seeds and its 95 % t-interval, one line per algorithm."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from flatbody_env.env.registration import V1_IDS
-    from flatbody_env.output import save_figure
+    from flatbody_env.figures import chart, fraction_axis
 
     envs = [e for e in V1_IDS if any(k.endswith(f"|{e}") for k in data["curves"])]
-    fig, axes = plt.subplots(2, len(envs), figsize=(3.2 * len(envs), 6.2), squeeze=False, sharey=True)
-    for j, env_id in enumerate(envs):
-        for key, c in sorted(data["curves"].items()):
-            algo, env = key.split("|")
-            if env != env_id:
-                continue
-            for i, x in enumerate(("env_steps", "train_seconds")):
-                xs = [p[x] for p in c["points"]]
-                m = [p["success"][0] for p in c["points"]]
-                lo = [p["success"][1] for p in c["points"]]
-                hi = [p["success"][2] for p in c["points"]]
-                ax = axes[i][j]
-                ax.plot(
-                    xs, m, color=COLOURS.get(algo), lw=1.6, marker="o", ms=3, label=f"{algo} ({len(c['seeds'])} seeds)"
-                )
-                ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=COLOURS.get(algo), alpha=0.15)
-        axes[0][j].set_title(env_id, fontsize=9)
-        axes[0][j].set_xlabel("env steps", fontsize=8)
-        axes[1][j].set_xlabel("training time (s, 2 shared cores)", fontsize=8)
-        for i in range(2):
-            axes[i][j].set_ylim(-0.02, 1.0)
-            axes[i][j].grid(alpha=0.3)
-            axes[i][j].tick_params(labelsize=7)
-    for i in range(2):
-        axes[i][0].set_ylabel("success on held-out episodes", fontsize=8)
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.suptitle("Learning curves from scratch: mean over training seeds, 95 % t-interval", fontsize=10)
-    fig.tight_layout(rect=(0, 0.05, 1, 0.96))
-    path = save_figure(fig, png, dpi=110)
-    plt.close(fig)
-    return path
+    with chart(png, size=(max(6.4, 3.2 * len(envs)), 7.0), nrows=2, ncols=len(envs), sharey=True) as c:
+        for j, env_id in enumerate(envs):
+            for key, curve in sorted(data["curves"].items()):
+                algo, env = key.split("|")
+                if env != env_id:
+                    continue
+                for i, x in enumerate(("env_steps", "train_seconds")):
+                    xs = [p[x] for p in curve["points"]]
+                    m = [p["success"][0] for p in curve["points"]]
+                    lo = [p["success"][1] for p in curve["points"]]
+                    hi = [p["success"][2] for p in curve["points"]]
+                    ax = c.axes[i, j]
+                    ax.plot(xs, m, color=COLOURS.get(algo), lw=1.6, marker="o", ms=3,
+                            label=f"{algo} ({len(curve['seeds'])} seeds)")  # fmt: skip
+                    ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=COLOURS.get(algo), alpha=0.15)
+            c.axes[0, j].set_title(env_id)
+            c.axes[0, j].set_xlabel("env steps")
+            c.axes[1, j].set_xlabel("training time (s)")
+            for i in range(2):
+                fraction_axis(c.axes[i, j], "success on held-out episodes" if j == 0 else None)
+                c.axes[i, j].grid(alpha=0.3)
+        c.title("Learning curves from scratch: mean over the training seeds, 95 % t-interval")
+        c.legend(where="below", ncol=4)
+        c.caption(CURVES_CAPTION)
+    return Path(png)
 
 
 def plot_iqm(data: dict[str, Any], png: str | Path) -> Path:
     """The suite's IQM of the normalised score per algorithm with its 95 % stratified bootstrap interval."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from flatbody_env.output import save_figure
+    from flatbody_env.figures import PALETTE, chart
 
     q = data["final"]["iqm"]
     algos = sorted(q, key=lambda a: q[a]["iqm"])
-    fig, ax = plt.subplots(figsize=(6.5, 0.6 + 0.45 * len(algos)))
-    for i, a in enumerate(algos):
-        ax.errorbar([q[a]["iqm"]], [i], xerr=[[q[a]["iqm"] - q[a]["lo"]], [q[a]["hi"] - q[a]["iqm"]]], fmt="o",
-                    color=COLOURS.get(a), capsize=4)  # fmt: skip
-    ax.set_yticks(range(len(algos)), [f"{a} ({q[a]['runs']} seeds × {q[a]['tasks']} tasks)" for a in algos], fontsize=8)
-    ax.axvline(0.0, color="#555", lw=0.8, ls=":")
-    ax.axvline(1.0, color="#555", lw=0.8, ls=":")
-    ax.set_xlabel("IQM of the normalised score (0: best classic controller, 1: best known)", fontsize=8)
-    ax.grid(axis="x", alpha=0.3)
-    fig.tight_layout()
-    path = save_figure(fig, png, dpi=110)
-    plt.close(fig)
-    return path
+    with chart(png, size=(7.0, 1.6 + 0.45 * len(algos))) as c:
+        ax = c.ax
+        for i, a in enumerate(algos):
+            ax.errorbar([q[a]["iqm"]], [i], xerr=[[q[a]["iqm"] - q[a]["lo"]], [q[a]["hi"] - q[a]["iqm"]]], fmt="o",
+                        color=COLOURS.get(a), capsize=4)  # fmt: skip
+        ax.set_yticks(range(len(algos)), [f"{a} ({q[a]['runs']} seeds × {q[a]['tasks']} tasks)" for a in algos])
+        ax.axvline(0.0, color=PALETTE["goal"], lw=0.8, ls=":")
+        ax.axvline(1.0, color=PALETTE["goal"], lw=0.8, ls=":")
+        ax.set_xlabel("IQM of the normalised score (0: best classic controller, 1: best known)")
+        ax.grid(axis="x", alpha=0.3)
+        c.caption(IQM_CAPTION)
+    return Path(png)
 
 
 def markdown(data: dict[str, Any], command: str) -> str:

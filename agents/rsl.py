@@ -553,7 +553,7 @@ def _rsl_state(runner, venv, hp: dict[str, Any], iterations: int, *, optimizer: 
 
 def _load_rsl_state(runner, venv, candidates: list) -> int:
     """Load the newest checkpoint of ``candidates`` that loads into ``runner`` (read through the one trust check and
-    reading door, unpickled by ``torch.load(weights_only=True)``: tensors and plain data only); a newer one that does
+    reading door, unpickled by torch's weights-only loader: tensors and plain data only); a newer one that does
     not is passed over with a note on stderr. Returns the iterations it had trained."""
     from agents.numpy_policy import load_torch_state
 

@@ -261,7 +261,9 @@ def _benchmark(args) -> int:
         from agents.benchmark import markdown
         from flatbody_env.output import replace_marked_block
 
-        replace_marked_block(args.docs, "benchmark", markdown(validation.read_json("benchmark report", paths["json"]), command))
+        replace_marked_block(
+            args.docs, "benchmark", markdown(validation.read_json("benchmark report", paths["json"]), command)
+        )
         print(f"updated the table in {args.docs}")
     if result.failed:
         sys.stderr.write(

@@ -133,20 +133,6 @@ def task_spec(env_id: str) -> TaskSpec:
     raise ValueError(f"env: must be one of {', '.join(TASK_IDS)}, got {env_id!r}")
 
 
-def make_vector_env(num_envs: int = 1, device=None, **kwargs: Any) -> Any:
-    """The vector entry point of every registered id (``gym.make_vec(ID, n, vectorization_mode="vector_entry_point",
-    device=...)``): :class:`~flatbody_env.env.vector_env.FlatBodyVectorEnv` (numpy) without ``device``, else
-    :class:`~flatbody_env.env.torch_vector_env.FlatBodyTorchVectorEnv` on that device (``"cpu"`` or ``"cuda"``; torch
-    tensors, SAME_STEP autoreset unless ``autoreset_mode`` says otherwise)."""
-    if device is None:
-        from flatbody_env.env.vector_env import FlatBodyVectorEnv
-
-        return FlatBodyVectorEnv(num_envs, **kwargs)
-    from flatbody_env.env.torch_vector_env import FlatBodyTorchVectorEnv  # torch only when a device is asked for
-
-    return FlatBodyTorchVectorEnv(num_envs, device=device, **kwargs)
-
-
 def register_envs() -> None:
     import gymnasium
 
@@ -156,7 +142,7 @@ def register_envs() -> None:
         gymnasium.register(
             id=spec.env_id,
             entry_point="flatbody_env.env.env:FlatBodyEnv",
-            vector_entry_point="flatbody_env.env.registration:make_vector_env",
+            vector_entry_point="flatbody_env.env.vector_entry:make_vector_env",
             max_episode_steps=spec.max_episode_steps,
             kwargs=dict(spec.kwargs),
         )

@@ -98,7 +98,7 @@ def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
                 )
 
 
-def test_the_v1_reward_ranks_policies_as_their_success_does():
+def test_return_ranks_like_success_on_every_v1_task():
     """The reward agrees with the score: over the shipped v1 reports, whenever one causal policy succeeds at least
     10 points more often than another on a task, its mean return is higher too (the witness, which replays the
     answer open loop, is left out)."""
@@ -145,4 +145,4 @@ def test_a_task_agent_is_found_in_its_folder(tmp_path, monkeypatch):
             }
         },
     }
-    assert "| FlatBodySlow-v0 | agent (sac) | 100% (20%–100%) |" in markdown([rep])
+    assert "| FlatBodySlow-v0 | v0 | agent (sac) | 100% (20%–100%) |" in markdown([rep])

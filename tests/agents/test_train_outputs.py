@@ -65,7 +65,7 @@ def test_rounding_up_is_said_and_force_overwrites(tmp_path, capsys):
     err = capsys.readouterr().err
     notes = [line for line in err.splitlines() if "rounds up" in line]
     assert notes == [
-        "flatbody train: note: n_timesteps 100 rounds up to 128 (PPO trains whole rollouts of n_envs x n_steps = 2 x 64 = 128 steps)"
+        "flatbody: note: n_timesteps 100 rounds up to 128 (PPO trains whole rollouts of n_envs x n_steps = 2 x 64 = 128 steps)"
     ]
     assert json.loads((out / "run.json").read_text())["n_timesteps"] == 128
 

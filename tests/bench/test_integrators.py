@@ -81,7 +81,7 @@ def test_simulate_vs_kernel_row_comes_from_the_record():
     }
     v["integrate_over_kernel"] = v["integrate_s"] / v["kernel_s"]
     v["simulate_over_kernel"] = v["simulate_s"] / v["kernel_s"]
-    (table,) = [t for t in tables(rep) if t.block == "integrators-simulate"]
+    (table,) = [t.markdown() for t in tables(rep) if t.block == "integrators-simulate"]
     assert f"{v['simulate_s'] * 1e3:.3f} ms | {v['simulate_over_kernel']:.3f}×" in table and "12554" in table
     rows = [r for r in csv_rows(rep) if r[0] == "simulate-vs-kernel"]
     assert {r[3] for r in rows} == {"kernel", "integrate", "simulate"}

@@ -405,6 +405,25 @@ CASES = {
         _files("ss/results.sqlite"),
         True,
     ),
+    ("benchmark",): (
+        [
+            "--algos",
+            "ppo",
+            "--envs",
+            "FlatBody-v1",
+            "--seeds",
+            "0-1",
+            "--budget",
+            "ppo=4096",
+            "--workers",
+            "0",
+            "--no-progress",
+            "--out",
+            "{tmp}/bm",
+        ],
+        _files("bm/results.sqlite", "bm/benchmark.json", "bm/benchmark.csv", "bm/benchmark_curves.png"),
+        True,
+    ),
     ("tune",): (
         [
             "--algo",

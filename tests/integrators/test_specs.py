@@ -30,7 +30,8 @@ def test_scipy_path_imports_no_numba():
 
 def test_every_map_is_derived_from_the_table():
     from flatbody_env import batch
-    from flatbody_env.cli import gpu
+    from flatbody_env.cli.args import name_list
+    from flatbody_env.cli.bench import _gpu_methods
     from flatbody_env.integrators import batch_solve, compiled_methods, rotation_kernels
 
     names = [s.name for s in SPECS]
@@ -39,7 +40,7 @@ def test_every_map_is_derived_from_the_table():
     assert batch.BATCH_METHODS == batch_solve.BATCH_METHODS == BATCH_METHODS == tuple(batch_solve.KIND)
     assert tuple(rotation_kernels.ENV_STEP_WITH_ROTATION) == ROTATION_METHODS
     assert compiled_methods.ENV_METHODS == ENV_METHODS
-    assert gpu._methods(",".join(GPU_METHODS)) == list(GPU_METHODS)
+    assert name_list("methods", _gpu_methods)(",".join(GPU_METHODS)) == list(GPU_METHODS)
 
 
 def test_every_method_declares_its_check_and_spec():

@@ -20,7 +20,9 @@ def fake_uvicorn(monkeypatch):
 
 def test_serve_binds_loopback_by_default(fake_uvicorn, capsys, tmp_path):
     assert cli(["serve", "--data-dir", str(tmp_path / "d")]) == 0
-    assert fake_uvicorn == [{"host": "127.0.0.1", "port": 8000, "log_level": "info"}]
+    assert fake_uvicorn == [
+        {"host": "127.0.0.1", "port": 8000, "log_level": "info", "proxy_headers": False, "forwarded_allow_ips": ""}
+    ]  # no proxy trusted unless --trusted-proxies names it
     assert "reachable from other machines" not in capsys.readouterr().err
 
 
@@ -36,7 +38,7 @@ def test_serve_elsewhere_is_said_in_the_log(fake_uvicorn, capsys, tmp_path):
     [
         (["serve", "--port", "70000"], "port: must be an integer in [0, 65535]"),
         (["serve", "--workers", "0"], "flatbody serve: error: --workers: must be an integer in [1, 256], got 0"),
-        (["bench", "service", "--clients", "0,8"], "clients: each must be an integer in [1, 256]"),
+        (["bench", "service", "--clients", "0,8"], "--clients: must be an integer in [1, 256]"),
     ],
 )
 def test_bad_options_exit_2_with_one_line(fake_uvicorn, capsys, argv, words):

@@ -39,9 +39,11 @@ def _ok(r):
 def test_shipped_search_spaces_load_and_name_yaml_keys():
     from agents.config import apply_overrides, load_hyperparams
 
+    from agents.tune import ENV_ID
+
     for algo in ("ppo", "sac"):
         space = load_search_space(algo)
-        hp = load_hyperparams(algo)
+        hp = load_hyperparams(algo, ENV_ID)  # the searched task's entry
         for name in space:  # every searched key exists in the algorithm's YAML (dotted: inside a mapping)
             node = hp
             for part in name.split("."):
