@@ -80,9 +80,17 @@ def stability(p: Mapping[str, Any]) -> dict[str, Any]:
     return stability_answer(body, p["s3"], p["p_theta"], box=_box(p), branch=p["branch"], spin=p["spin"])
 
 
-def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None = None, limits: Limits | None = None):
+def trajectory(
+    p: Mapping[str, Any],
+    *,
+    in_job: bool,
+    with_rotation: bool | None = None,
+    limits: Limits | None = None,
+    max_nfev: int | None = None,
+):
     """The :class:`~flatbody_env.simulation.Trajectory` of ``flatbody simulate`` for request ``p``,
-    after checking its cost against ``limits`` (request or job limits)."""
+    after checking its cost against ``limits`` (request or job limits). ``max_nfev``: the integration's budget of
+    right-hand-side evaluations (None: the library's default; :func:`check_integration` passes 1)."""
     from flatbody_env.answers import simulate_trajectory
 
     limits = limits or LIMITS
@@ -103,6 +111,7 @@ def trajectory(p: Mapping[str, Any], *, in_job: bool, with_rotation: bool | None
             model=p["model"],
             with_rotation=p.get("with_rotation", False) if with_rotation is None else with_rotation,
             max_wall_time=limits.job_seconds if in_job else limits.request_seconds,
+            max_nfev=max_nfev,
         )
     except (
         ValueError
@@ -169,8 +178,42 @@ def _check_family_range(params: Mapping[str, Any]) -> None:
             raise ValueError(f"vary: {str(exc).split(': ', 1)[-1]}") from None
 
 
+def check_integration(p: Mapping[str, Any], *, with_rotation: bool | None = None) -> None:
+    """Refuse a ``simulate`` or ``record`` job's params as its work would, before it is queued: the job's own
+    integration (:func:`trajectory`, with the job limits) run with a budget of one right-hand-side evaluation. Every
+    check of the integration runs first, as in the job (the scene, the cost, ``times`` or ``samples`` and the output
+    times within [0, t_end], the method's name and chart against ``model``, ``step`` for fixed-step methods only, the
+    method's refusals of the body); then the budget stops it at its first evaluation, so nothing is integrated.
+
+    Raises
+    ------
+    ValueError, LimitExceeded
+        As the job would, naming the field.
+    """
+    from contextlib import suppress
+
+    from flatbody_env.integrators import IntegrationError
+
+    # stopped by the budget (or failed at its first step, as the job then would): every check has passed
+    with suppress(IntegrationError):
+        trajectory(p, in_job=True, with_rotation=with_rotation, max_nfev=1)
+
+
+def _check_map_ranges(params: Mapping[str, Any]) -> None:
+    """A stability map's ranges hold a shape with lambda > mu (the only shapes the map draws,
+    :func:`analysis.families.shape_stability_grid`): otherwise the job finds no row and its chart fails."""
+    (lam_lo, lam_hi), (mu_lo, mu_hi) = params["lam_range"], params["mu_range"]
+    if not lam_hi > mu_lo:
+        raise ValueError(
+            f"lam_range: the map draws the shapes with lambda > mu only, so HI of lam_range must exceed LO of "
+            f"mu_range ({mu_lo:g}); got lam_range [{lam_lo:g}, {lam_hi:g}], mu_range [{mu_lo:g}, {mu_hi:g}]"
+        )
+
+
 def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
-    """Check a job's body or scene and its cost before it is queued (``{"kind", "params"}``); ``{}`` if fine.
+    """Check a job (``{"kind", "params"}``) before it is queued, by the checks its work runs: a family's range, a map's
+    ranges, the body, a scene job's integration settings and cost (:func:`check_integration`); ``{}`` if fine. So a
+    value the work would refuse is a 422 naming the field, never a queued job that fails in its worker.
 
     Raises
     ------
@@ -181,17 +224,13 @@ def check_job(p: Mapping[str, Any]) -> dict[str, Any]:
     try:
         if p.get("kind") == "family":
             _check_family_range(params)
+        if p.get("kind") == "stability-map":
+            _check_map_ranges(params)
         if "body" in params:
             build_body(params["body"])
         if "scene" in params:
-            scene = build_scene(params["scene"])
-            t_end = params.get("t_end") or scene.t_end
-            samples = _sample_count(params)
-            check_integration_cost(t_end=t_end, samples=samples, step=params.get("step"), in_job=True, limits=LIMITS)
-            from flatbody_env.integrators import get_method
-
-            if params["method"] != "auto":
-                get_method(params["method"])
+            # a record job integrates R(t) too (jobs._record); a simulate job as its params say
+            check_integration(params, with_rotation=True if p.get("kind") == "record" else None)
     except LimitExceeded as exc:
         raise LimitExceeded(f"params.{exc.field}", str(exc).split(": ", 1)[1]) from None
     except ValueError as exc:
@@ -346,6 +385,8 @@ __all__ = [
     "RequestInvalid",
     "build_body",
     "build_scene",
+    "check_integration",
+    "check_job",
     "ellipses",
     "error_data",
     "invariants",

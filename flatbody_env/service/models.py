@@ -11,7 +11,8 @@ a description is read from those modules and from the library's named defaults
 :data:`analysis.families.PARAMETERS` and the family and map defaults beside it,
 :data:`agents.evaluate.EVAL_SEED`), never written again here. What a schema cannot say (a
 trajectory's arrays as long as its ``t``, output times increasing, λ ≠ μ, J1 = J2 for the
-analysis, from < to) is checked by the same validators when the request is computed (422 too).
+analysis, from < to, a step only for a fixed-step method) is checked by the same validators when the request is
+computed, and a job's when it is posted, before it is queued (422 too: :func:`flatbody_env.service.answers.check_job`).
 The answers are the ``flatbody`` command's ``--json`` answers; the answer models document their
 shape in the OpenAPI document.
 """
