@@ -81,9 +81,11 @@ def run_tasks(
         from flatbody_env.sweep.cluster import dask_client
 
         with dask_client(workers=workers, scheduler=scheduler) as client:
-            futures = {
-                client.submit(execute, t, key=f"flatbody-sweep-{t.kind}-{t.key}-{id(store)}", pure=False): t
-                for t in tasks
+            futures = {  # run in the order of the list (Dask's priority: higher first), whatever the keys
+                client.submit(
+                    execute, t, key=f"flatbody-sweep-{t.kind}-{t.key}-{id(store)}", pure=False, priority=len(tasks) - i
+                ): t
+                for i, t in enumerate(tasks)
             }
             try:
                 for fut in as_completed(futures):

@@ -304,10 +304,10 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
                             },
                         )
                     )
-    elif kind == "benchmark":
-        for algo in spec["algos"]:
-            for env_id in spec["envs"]:
-                for seed in spec["seeds"]:
+    elif kind == "benchmark":  # seed by seed: a benchmark stopped early holds whole seeds of every algorithm and task
+        for seed in spec["seeds"]:
+            for algo in spec["algos"]:
+                for env_id in spec["envs"]:
                     key = f"{algo}.{env_id}.{seed:06d}"
                     tasks.append(
                         Task(
@@ -343,6 +343,8 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
                     },
                 )
             )
+    if kind == "benchmark":
+        return tasks  # in the order made above (seed by seed); the output is sorted by key all the same
     return sorted(tasks, key=lambda t: t.key)
 
 
