@@ -265,8 +265,10 @@ def build_gain_table(
     from concurrent.futures import ProcessPoolExecutor
     from dataclasses import asdict
 
+    from flatbody_env.physics import validation
     from flatbody_env.physics.body import default_body
 
+    workers = validation.workers("workers", workers)
     body = body or default_body()
     weights = weights or LQRWeights()
     lambdas, ws = np.linspace(*grid_lambda), np.linspace(*grid_w)

@@ -265,8 +265,10 @@ def prepare(cfg: TuneConfig) -> int:
 def shares(left: int, workers: int) -> list[int]:
     """Trials per worker: ``left`` split as evenly as possible, summing exactly to ``left`` (workers
     given no trial are left out), so a study of N trials never overshoots when workers finish together."""
-    if left < 0 or workers < 1:
-        raise ValueError(f"workers: need left >= 0 and workers >= 1, got {left}, {workers}")
+    from flatbody_env.physics import validation
+
+    workers = validation.workers("workers", workers)
+    left = validation.count("left", left, low=0)
     return [n for n in (left // workers + (i < left % workers) for i in range(workers)) if n > 0]
 
 

@@ -590,7 +590,7 @@ def check_range(
         start = validation.number(lo_name, start, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
         stop = validation.number(hi_name, stop, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
     if not start < stop:
-        raise ValueError(f"{hi_name}: must be greater than {lo_name.lstrip('-')} ({start:g}), got {stop:g}")
+        raise ValueError(f"{hi_name}: must be greater than {lo_name} ({start:g}), got {stop:g}")
     return start, stop
 
 

@@ -38,16 +38,7 @@ def positive_float(name: str, high: float | None = validation.MAX_COUNT):
     """argparse type: a finite number > 0 (at most ``high``, by default
     :data:`~flatbody_env.physics.validation.MAX_COUNT`); the error names ``name`` and the range."""
 
-    def parse(text: str) -> float:
-        value = _float(name, text)
-        if not math.isfinite(value) or value <= 0 or (high is not None and value > high):
-            hi = "inf)" if high is None else f"{high:g}]"
-            raise argparse.ArgumentTypeError(
-                f"{name}: must be a finite number > 0 (allowed range (0, {hi}), got {text[:60]}"
-            )
-        return value
-
-    return parse
+    return number(name, positive=True, high=high)
 
 
 def int_at_least(name: str, low: int = 1, high: int | None = validation.MAX_COUNT):
@@ -215,11 +206,16 @@ def output_dir(name: str):
         p = Path(text)
         if not text or "\0" in text:
             raise argparse.ArgumentTypeError(f"{name}: expected a folder path, got {text[:60]!r}")
-        if p.exists() and not p.is_dir():
-            raise argparse.ArgumentTypeError(f"{name}: {text[:60]!r} exists and is not a directory")
-        anchor = p.absolute()
-        while not anchor.exists():
-            anchor = anchor.parent
+        try:
+            if p.exists() and not p.is_dir():
+                raise argparse.ArgumentTypeError(f"{name}: {text[:60]!r} exists and is not a directory")
+            anchor = p.absolute()
+            while not anchor.exists():
+                anchor = anchor.parent
+        except OSError as exc:  # a name too long for the file system, a component that is a file, ...
+            raise argparse.ArgumentTypeError(
+                f"{name}: {text[:60]!r} is not a usable folder path ({exc.strerror})"
+            ) from None
         if not anchor.is_dir() or not os.access(anchor, os.W_OK | os.X_OK):
             raise argparse.ArgumentTypeError(f"{name}: {str(anchor)[:60]!r} is not a writable directory")
         return text

@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
 
     Every command is dispatched here, so this is where an error becomes one line on stderr and an
     exit code (module docstring), every line starting ``flatbody COMMAND:`` as argparse's own do (``flatbody
-    family: error: --to: must be greater than from (4), got 0.05``), and where Ctrl-C ends any command:
+    family: error: --to: must be greater than --from (4), got 0.05``), and where Ctrl-C ends any command:
     ``flatbody COMMAND: interrupted`` (with
     what was kept, when the command says so) and exit code 130, no traceback. Commands keep their
     partial results themselves (a sweep's stored rows, training's checkpoint).

@@ -161,7 +161,7 @@ def parse_body(text: str) -> tuple[str, dict]:
 
 
 def _family(args) -> int:
-    from analysis.families import DEFAULT_P_THETA, DEFAULT_S3, PARAMETERS
+    from analysis.families import DEFAULT_P_THETA, DEFAULT_S3, PARAMETERS, check_range
     from flatbody_env.cli.analysis import _box, resolve_body
 
     if args.bodies:
@@ -173,6 +173,12 @@ def _family(args) -> int:
         if v not in PARAMETERS:
             raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {v!r}")
     ranges = [list(r) for r in args.ranges]
+    for v in args.vary:  # each range as the family of each parameter takes it: refused here naming --ranges,
+        for lo_hi in ranges:  # never as a failed task naming the task's start/stop
+            try:
+                check_range(v, *lo_hi, names=("--ranges", "--ranges"))
+            except ValueError as exc:
+                raise ValueError(f"{exc} (the range {lo_hi[0]:g},{lo_hi[1]:g} with --vary {v})") from None
     lo, hi = validation.FAMILY_SEEDS_RANGE
     if not lo <= args.seeds <= hi:
         raise ValueError(f"--seeds: must be an integer in [{lo}, {hi}], got {args.seeds}")

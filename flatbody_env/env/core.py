@@ -560,7 +560,7 @@ class EnvCore:
                 raise ValueError("options.target: not with a task that draws its body per episode")
             if c.kernel_draws and "state" not in options:  # the target given, the start drawn by the transition
                 for i in idx.tolist():
-                    target = c.task.target_from(options["target"], self.body_of(i))
+                    target = _target_from(c.task, options["target"], self.body_of(i))
                     self._write_episode(
                         i, Episode(state=self.S[:11, i].copy(), target=target_row(target), ellipse=target)
                     )
@@ -605,7 +605,7 @@ class EnvCore:
         body = self.body_of(i)
         rng = self.rngs[i] or np.random.default_rng()
         if "target" in options:
-            target = c.task.target_from(options["target"], body)
+            target = _target_from(c.task, options["target"], body)
         else:
             target = c.task.sample_target(rng, body, limits=c.limits, control=c.control)
         if "state" in options:
@@ -800,9 +800,26 @@ def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any])
 
     module, name = TASK_CLASSES[task].split(":")
     cls = getattr(importlib.import_module(module), name)
+    import inspect
+
+    params = inspect.signature(cls).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        unknown = sorted(str(k) for k in task_kwargs if k not in params)
+        if unknown:
+            hint = (
+                " (the episode length is gym.make's max_episode_steps, a positive integer, or the vector envs' own)"
+                if unknown[0] == "max_episode_steps"
+                else ""
+            )
+            raise ValueError(
+                f"{unknown[0][:60]}: not a keyword of FlatBodyEnv or of task {task!r}{hint}; allowed task fields: "
+                + ", ".join(
+                    k for k, p in params.items() if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD
+                )
+            )
     try:
         return cls(**task_kwargs)
-    except TypeError as exc:  # an unknown keyword: name it
+    except TypeError as exc:  # a keyword the signature above did not catch: name it
         raise ValueError(f"task: {exc}") from None
 
 
@@ -820,9 +837,11 @@ def _checked_options(options: Any) -> dict[str, Any]:
     """``reset(options=...)`` validated before use: types, finite numbers within the documented
     ranges (:mod:`flatbody_env.physics.validation`); ``ValueError`` naming ``options.…``."""
     v = validation
-    if not options:
+    if options is None:
         return {}
     options = dict(v.mapping("options", options))
+    if not options:
+        return {}
     v.keys("options", options, ("target", "state"))
     target = options.get("target")
     if target is not None and not isinstance(target, StationaryEllipse):
@@ -832,6 +851,11 @@ def _checked_options(options: Any) -> dict[str, Any]:
             k: v.number(f"options.target.{k}", target[k], low=v.STRETCH_RANGE[0], high=v.STRETCH_RANGE[1])
             for k in ("lambda", "mu")
         }
+        v.requirement("options.target.mu", checked["mu"], checked["mu"] != checked["lambda"], "differ from lambda")
+        for k in ("rho", "s3", "p_theta"):  # a target record's own values: checked, then derived from the shape
+            if k in target:
+                bound = v.STRETCH_RANGE if k == "rho" else (-v.MOMENTUM_MAX, v.MOMENTUM_MAX)
+                v.number(f"options.target.{k}", target[k], low=bound[0], high=bound[1])
         if "branch" in target:
             checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
         if "sign" in target:
@@ -842,6 +866,21 @@ def _checked_options(options: Any) -> dict[str, Any]:
     if "state" in options:
         options["state"] = v.mapping("options.state", options["state"])
     return options
+
+
+def _target_from(task: ReachStationaryEllipse, spec: Any, body: Body) -> StationaryEllipse:
+    """The task's target of ``reset(options={"target": spec})``; a shape without a stationary ellipse (or one whose
+    ellipse cannot be computed) is a ``ValueError`` naming ``options.target``."""
+    try:
+        return task.target_from(spec, body)
+    except ValueError as exc:
+        text = str(exc)
+        if text.startswith("options."):
+            raise
+        if text.startswith("target"):
+            raise ValueError(f"options.{text}") from None
+        head, sep, rest = text.partition(": ")
+        raise ValueError(f"options.target: {rest if sep and head == 'lambda, mu' else text}") from None
 
 
 def target_of(core: EnvCore, i: int) -> StationaryEllipse:

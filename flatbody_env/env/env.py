@@ -311,9 +311,11 @@ class FlatBodyEnv(gym.Env):
             a = None if a.dtype.kind not in "fiu" or a.dtype == np.bool_ else a.astype(np.float64, copy=False)
         except (TypeError, ValueError, OverflowError):
             a = None
-        if a is None or a.shape not in ((n,), (1, n)):
-            raise ValueError(f"action: must be {n} finite real numbers in [-1, 1], got {validation._short(action)}")
-        return a.reshape(n)
+        if a is None or a.shape != (n,):  # the action space's shape (n,) only: (1, n), (n, 1) are batches or typos
+            raise ValueError(
+                f"action: must be {n} finite real numbers in [-1, 1] (shape ({n},)), got {validation._short(action)}"
+            )
+        return a
 
     # --- gymnasium API ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):

@@ -319,6 +319,9 @@ def build_table(
 ) -> SettlingRateTable:
     """Compute the table: exact r at every grid node, and at the centre of every cell whose
     corners all hold an ellipse or none does (module docstring)."""
+    from flatbody_env.physics import validation
+
+    workers = validation.workers("workers", workers)
     body = body or default_body()
     limits = np.asarray(limits, dtype=float)
     lambdas = np.linspace(*grid_lambda)

@@ -187,7 +187,7 @@ class FlatBodyTorchVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         self._open()
-        options = dict(options or {})
+        options = {} if options is None else dict(validation.mapping("options", options))
         if "stagger" in options and not isinstance(options["stagger"], (bool, np.bool_)):
             raise ValueError(f"options.stagger: must be true or false, got {options['stagger']!r:.60}")
         if "reset_mask" in options:

@@ -304,7 +304,7 @@ class FlatBodyVectorEnv(VectorEnv):
         """Reset every body, or those of ``options["reset_mask"]``; ``options["stagger"]``: start the reset bodies'
         clocks at random steps (module docstring). Other options are the single env's (``target``, ``state``)."""
         n = self.num_envs
-        options = dict(options or {})
+        options = {} if options is None else dict(validation.mapping("options", options))
         mask = options.pop("reset_mask", None)
         stagger = options.pop("stagger", False)
         if not isinstance(stagger, (bool, np.bool_)):

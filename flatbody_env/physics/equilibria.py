@@ -302,6 +302,12 @@ def stationary_from_shape(
         raise ValueError(f"lambda, mu: need λ, μ > 0 and λ ≠ μ, got {lam}, {mu}")
     J = body.inertia.J1
     rho = equilibrium_thickness(body, lam, mu)
+    h = stencil_step(lam, mu, rho)
+    if not h < min(lam, mu, rho):  # the stencil's points must stay in λ, μ, ϱ > 0 (a far too elongated shape)
+        raise ValueError(
+            f"lambda, mu: no stationary ellipse can be computed for the shape ({lam:g}, {mu:g}): the smallest of "
+            f"lambda, mu, rho = {rho:g} must exceed the difference step {h:g} (1e-5 x the largest)"
+        )
     out = np.empty(6)
     if not stationary_shape_kernel(
         J, body.inertia.J3, lam, mu, rho, potential_stencil(body, lam, mu, rho), branch == "rotation", float(sign), out

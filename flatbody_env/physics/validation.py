@@ -161,8 +161,14 @@ def number(
     if positive and x <= 0.0:
         raise ValueError(f"{where}: must be > 0{rng}, got {x!r}")
     if (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"{where}: must lie in{rng}, got {x!r}")
+        raise ValueError(f"{where}: must lie in {_range_bounds(positive, low, high)}, got {x!r}")
     return x
+
+
+def workers(where: str, value: Any, *, low: int = 1) -> int:
+    """A number of worker processes or threads: an ``int`` in [``low``, :data:`MAX_WORKERS`] (``low`` = 0 where 0
+    means "none, in this process"); ``ValueError`` naming ``where`` and the range."""
+    return integer(where, value, low=low, high=MAX_WORKERS)
 
 
 def mapping(where: str, value: Any) -> Mapping[str, Any]:
@@ -750,14 +756,20 @@ def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
         )
 
 
+def _range_bounds(positive: bool, low: float | None, high: float | None) -> str:
+    """The allowed range alone (``[1e-06, 1e+06]``, ``(0, 86400]``), the one spelling every message uses."""
+    if positive and low is None:
+        return "(0, inf)" if high is None else f"(0, {high:g}]"
+    lo = "-inf" if low is None else f"{low:g}"
+    hi = "inf" if high is None else f"{high:g}"
+    return f"[{lo}, {hi}]"
+
+
 def _range_text(positive: bool, low: float | None, high: float | None) -> str:
-    if positive and low is None and high is not None:
-        return f" (allowed range (0, {high:g}])"
-    if low is not None or high is not None:
-        lo = "-inf" if low is None else f"{low:g}"
-        hi = "inf" if high is None else f"{high:g}"
-        return f" (allowed range [{lo}, {hi}])"
-    return " (allowed range (0, inf))" if positive else ""
+    """`` (allowed range [lo, hi])`` after what a value must be (empty when nothing bounds it)."""
+    if positive or low is not None or high is not None:
+        return f" (allowed range {_range_bounds(positive, low, high)})"
+    return ""
 
 
 _REPR = None
@@ -775,10 +787,14 @@ def _short(value: Any) -> str:
         _REPR.maxlevel, _REPR.maxstring, _REPR.maxlong, _REPR.maxother = 3, 60, 60, 60
         _REPR.maxlist = _REPR.maxtuple = _REPR.maxdict = _REPR.maxset = _REPR.maxfrozenset = _REPR.maxdeque = 6
         _REPR.maxarray = 6
+    if isinstance(value, np.ndarray) and (value.ndim > 1 or value.size > 6):  # its shape says more than its repr
+        return f"an array of shape {value.shape} and dtype {value.dtype}"
     try:
         text = _REPR.repr(value)
     except (ValueError, RecursionError):  # integers beyond the digit limit, self-referencing containers
         return f"a {type(value).__name__} too large to print"
+    if "\n" in text:  # a multi-line repr (an object's; a string's repr has none) on the message's one line
+        text = " ".join(line.strip() for line in text.splitlines())
     return text if len(text) <= 60 else text[:57] + "..."
 
 
@@ -826,6 +842,7 @@ __all__ = [
     "STEP_MIN",
     "SWEEP_GRID_RANGE",
     "count",
+    "workers",
     "finite_result",
     "fixed_step",
     "sqlite_file",

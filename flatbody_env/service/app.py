@@ -331,9 +331,9 @@ def create_app(
         :data:`LOOPBACK_HOSTS`; ``*`` answers any).
     """
     from flatbody_env import __version__
+    from flatbody_env.physics import validation
 
-    if not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
+    workers = validation.workers("workers", workers)
     limits = (limits or DEFAULT_LIMITS).with_environment()
     if allowed_hosts is None:
         env_hosts = os.environ.get("FLATBODY_ALLOWED_HOSTS", "")

@@ -466,10 +466,10 @@ class JobRunner:
     """
 
     def __init__(self, store: JobStore, workers: int, *, poll: float = 0.2) -> None:
-        if workers < 1:
-            raise ValueError(f"workers: must be an integer >= 1, got {workers}")
+        from flatbody_env.physics import validation
+
         self.store = store
-        self.workers = workers
+        self.workers = validation.workers("workers", workers)
         self.poll = poll
         self._procs: dict[str, Any] = {}
         self._lock = threading.Lock()

@@ -156,8 +156,12 @@ def test_a_family_range_is_refused_in_the_callers_words():
 
     with pytest.raises(ValueError, match=r"^from: must lie in"):
         check_range("J", 1e-7, 1.0, names=("from", "to"))
-    with pytest.raises(ValueError, match=r"^--to: must be greater than from \(4\), got 0\.05"):
+    with pytest.raises(ValueError, match=r"^--to: must be greater than --from \(4\), got 0\.05"):
         check_range("s3", 4.0, 0.05, names=("--from", "--to"))
+    with pytest.raises(ValueError, match=r"^to: must be greater than from \(4\), got 0\.05"):
+        check_range("s3", 4.0, 0.05, names=("from", "to"))
+    with pytest.raises(ValueError, match=r"^--from: must lie in \[1e-06, 1e\+06\], got 1e-07$"):
+        check_range("J", 1e-7, 1.0, names=("--from", "--to"))
     # the body's own check names the constant varied, never params.J1
     with pytest.raises(ValueError, match=r"^J: must lie in"):
         body_with(body, "J", 1e-7)
