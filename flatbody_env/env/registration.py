@@ -83,7 +83,7 @@ TASKS = (
             "task": "reach-witnessed",
             "control": "torque",
             "min_uncontrolled_offset": 0.05,
-            "max_witness_attempts": 64,
+            "max_witness_attempts": 400,  # 400 witness runs of 400 steps at most: the reset bound
             **V1,
         },
         rung="hard",
