@@ -209,7 +209,7 @@ def plot_ladder(png_path: str | Path, folder: str | Path = REFERENCE_DIR) -> Pat
                 edgecolor="#4b2d73" if witness else "white",
             )
         ax.set_xticks(range(len(reports)), [f"{r['env_id']}\n({rungs[r['env_id']]})" for r in reports])
-        fraction_axis(ax, "success rate (95 % interval)", margin=0.0)
+        fraction_axis(ax, "success rate (95 % interval)")
         ax.axhline(
             0.9,
             color=PALETTE["goal"],
