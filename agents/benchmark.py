@@ -315,15 +315,24 @@ def plot_iqm(data: dict[str, Any], png: str | Path) -> Path:
 
 def markdown(data: dict[str, Any], command: str) -> str:
     """The docs block of the final table (the command that made it beside it)."""
+    from agents.reference import POLICY_LABELS
     from flatbody_env.env.registration import V1_IDS
 
     f = data["final"]
     algos = sorted({c["algo"] for c in f["cells"].values()}, key=lambda a: ALGOS.index(a) if a in ALGOS else 99)
-    lines = ["| task | " + " | ".join(algos) + " |", "|---|" + "---|" * len(algos)]
+    lines = [
+        "| task | score 0 (best classic) → 1 | " + " | ".join(algos) + " |",
+        "|---|---|" + "---|" * len(algos),
+    ]
     for env_id in [e for e in V1_IDS if any(c["env_id"] == e for c in f["cells"].values())]:
-        row = [env_id]
-        for a in algos:
-            c = f["cells"].get(f"{a}|{env_id}")
+        a = f["anchors"].get(env_id)
+        anchor = "—"
+        if a:
+            lo_from, hi_from = (POLICY_LABELS.get(a[k], a[k]) for k in ("lo_from", "hi_from"))
+            anchor = f"{a['lo']:.0%} ({lo_from}) → {a['hi']:.0%} ({hi_from.split(' (')[0]})"
+        row = [env_id, anchor]
+        for algo in algos:
+            c = f["cells"].get(f"{algo}|{env_id}")
             if c is None:
                 row.append("—")
                 continue
