@@ -7,6 +7,12 @@ import signal
 import subprocess
 
 
+def sigint_default() -> None:
+    """``preexec_fn`` of a child that a test interrupts: SIGINT back to its default, as a terminal's job has it (a
+    suite started from a background job inherits SIGINT ignored, and Python then installs no KeyboardInterrupt)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupt(proc: subprocess.Popen, timeout: float = 60) -> tuple[str, str]:
     """Send SIGINT to ``proc``'s process group (``start_new_session=True``), as Ctrl-C in a terminal
     reaches every process of the job, and return its remaining (stdout, stderr); a process that does

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from processes import interrupt
+from processes import interrupt, sigint_default
 
 psutil = pytest.importorskip("psutil")
 httpx = pytest.importorskip("httpx")
@@ -46,6 +46,7 @@ def test_ctrl_c_stops_the_service_and_its_workers_quietly(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=sigint_default,
     )
     url = f"http://127.0.0.1:{port}"
     try:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from processes import interrupt
+from processes import interrupt, sigint_default
 
 psutil = pytest.importorskip("psutil")
 
@@ -49,6 +49,7 @@ def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
+        preexec_fn=sigint_default,
     )
     try:
         deadline = time.monotonic() + 120
