@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from flatbody_env.sweep.store import ResultStore, StoredResult
-from flatbody_env.sweep.tasks import Outcome, Task, execute, plan
+from flatbody_env.sweep.tasks import Outcome, Task, execute, extends, plan
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -133,7 +133,8 @@ def run_sweep(
     scheduler : str, optional
         A running Dask scheduler's address (instead of the embedded cluster).
     resume : bool
-        Continue the sweep stored in ``out`` (same ``spec``): run only the keys without a result.
+        Continue the sweep stored in ``out`` (same ``spec``, or one that :func:`~.tasks.extends` it): run only the
+        keys without a result.
 
     Raises
     ------
@@ -144,7 +145,7 @@ def run_sweep(
         raise ValueError(f"workers: must be an integer >= 0, got {workers!r}")
     tasks = plan(spec, out)
     with ResultStore(out) as store:
-        store.begin(spec, resume=resume)
+        store.begin(spec, resume=resume, extends=extends)
         done = store.done_keys()
         todo = [t for t in tasks if t.key not in done]
         ran = run_tasks(

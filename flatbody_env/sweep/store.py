@@ -116,8 +116,19 @@ class ResultStore:
             )
         return spec
 
-    def begin(self, spec: dict[str, Any], *, resume: bool) -> None:
+    def begin(self, spec: dict[str, Any], *, resume: bool, extends=None) -> None:
         """Record ``spec`` for a new sweep, or check it against the stored one on resume.
+
+        Parameters
+        ----------
+        spec : dict
+            The sweep's specification.
+        resume : bool
+            Continue the stored sweep.
+        extends : callable, optional
+            ``extends(stored, spec)``: whether ``spec`` only adds keys to the stored sweep without changing any
+            stored key's meaning (a benchmark given one more algorithm). Such a ``spec`` replaces the stored one on
+            resume; the rows already stored stay.
 
         Raises
         ------
@@ -138,6 +149,10 @@ class ResultStore:
                 f"out: {self.folder} already holds a sweep; pass --resume to continue it or choose another folder"
             )
         if json.dumps(stored, sort_keys=True) != text:
+            if extends is not None and extends(stored, spec):
+                self._db.execute("UPDATE sweep SET spec = ? WHERE id = 1", (text,))
+                self._db.commit()
+                return
             diff = sorted(k for k in set(stored) | set(spec) if stored.get(k) != spec.get(k))
             raise ValueError(
                 f"resume: the sweep in {self.folder} was started with other parameters ({', '.join(diff)} differ)"

@@ -236,6 +236,27 @@ def default_chunk(grid: int) -> int:
     return max(1, min(grid, math.ceil(TASK_POINTS / grid)))
 
 
+def extends(stored: dict[str, Any], spec: dict[str, Any]) -> bool:
+    """Whether ``spec`` only adds algorithms to the benchmark ``stored``: same tasks, seeds and evaluation seed, the
+    stored algorithms a subset, each at its stored budget — so no stored row (keyed by algorithm, task and seed) changes
+    meaning, and a resumed benchmark trains only the new algorithm's runs.
+
+    Parameters
+    ----------
+    stored, spec : dict
+        The stored sweep specification and the requested one.
+    """
+    if stored.get("kind") != "benchmark" or spec.get("kind") != "benchmark":
+        return False
+    if any(stored.get(k) != spec.get(k) for k in ("envs", "seeds", "eval_seed")):
+        return False
+    old, new = stored.get("algos") or [], spec.get("algos") or []
+    if not set(old) <= set(new):
+        return False
+    budgets_old, budgets_new = stored.get("budgets") or {}, spec.get("budgets") or {}
+    return all(budgets_old.get(a) == budgets_new.get(a) for a in old)
+
+
 def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
     """The tasks of the sweep ``spec`` (their outputs go under ``out``), in key order."""
     kind = spec.get("kind")
@@ -385,6 +406,7 @@ __all__ = [
     "SERIAL_ONLY",
     "TASK_POINTS",
     "Task",
+    "extends",
     "default_chunk",
     "execute",
     "parse_seeds",

@@ -48,3 +48,41 @@ def test_resume_rules(tmp_path):
         with pytest.raises(ValueError, match=r"other parameters \(grid differ\)"):
             store.begin({**SPEC, "grid": 9}, resume=True)
         store.begin(SPEC, resume=True)
+
+
+BENCH = {
+    "kind": "benchmark",
+    "algos": ["ppo", "sac"],
+    "envs": ["FlatBody-v1"],
+    "seeds": [0, 1],
+    "budgets": {"ppo": 5000, "sac": 2000, "td3": 2000},
+    "eval_seed": 7,
+}
+
+
+def test_a_benchmark_resumed_with_one_more_algorithm_keeps_its_rows_and_takes_the_new_spec(tmp_path):
+    from flatbody_env.sweep.tasks import extends, plan
+
+    with ResultStore(tmp_path) as store:
+        store.begin(BENCH, resume=False, extends=extends)
+        store.put("ppo.FlatBody-v1.000000", payload={"curve": []})
+        more = {**BENCH, "algos": ["ppo", "sac", "td3"], "budgets": {**BENCH["budgets"], "td3": 3000}}
+        store.begin(more, resume=True, extends=extends)
+        assert store.spec() == more and store.done_keys() == {"ppo.FlatBody-v1.000000"}
+        todo = {t.key for t in plan(more, tmp_path)} - store.done_keys()
+        assert {k.split(".")[0] for k in todo} == {"ppo", "sac", "td3"} and len(todo) == 5
+        # what would change a stored row's meaning is refused: another budget for a stored algorithm, other seeds,
+        # another task, an algorithm dropped
+        for other in (
+            {**more, "budgets": {**more["budgets"], "ppo": 6000}},
+            {**more, "seeds": [0, 1, 2]},
+            {**more, "envs": ["FlatBodySlow-v1"]},
+            {**more, "algos": ["ppo", "td3"]},
+        ):
+            with pytest.raises(ValueError, match="started with other parameters"):
+                store.begin(other, resume=True, extends=extends)
+        assert store.spec() == more
+    with ResultStore(tmp_path / "map") as store:  # other kinds never extend
+        store.begin(SPEC, resume=False, extends=extends)
+        with pytest.raises(ValueError, match="grid differ"):
+            store.begin({**SPEC, "grid": 16}, resume=True, extends=extends)
