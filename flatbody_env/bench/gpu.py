@@ -6,8 +6,8 @@ dt = 0.05, RK4 with h = dt/4 and DOP853 at rtol = atol = 1e-11 (the env's defaul
 default shape on a regular orbit with perturbed momenta, on
 
 * ``cpu-serial`` — ``env_stepper(NAME).batch``: the env's compiled loop over bodies, one thread;
-* ``cpu-parallel`` — :func:`~flatbody_env.integrators.batch_solve.batch_env_step`: the same kernels,
-  ``numba.prange`` over chunks of bodies (all cores);
+* ``cpu-parallel`` — :func:`~flatbody_env.bench.kernels.batch_env_step_parallel`: the same kernels,
+  ``numba.prange`` over chunks of bodies (all cores; the bench's own kernel, :mod:`.kernels`);
 * ``cuda`` — :func:`~flatbody_env.integrators.cuda.env_step`: the same source compiled for the GPU, one thread
   per body, one launch per step, state kept on the device.
 
@@ -117,9 +117,10 @@ def measure(backend: str, method: str, n: int, *, steps: int, repeats: int) -> f
 
         block = _ping_pong(step, Y.copy(), np.empty_like(Y), steps)
     elif backend == "cpu-parallel":
+        from flatbody_env.bench.kernels import batch_env_step_parallel
 
         def step(A, B):
-            bs.batch_env_step(kind, coeffs, A, U, P, DT, h, DOP853_TOL, DOP853_TOL, np.inf, B, status, nfev)
+            batch_env_step_parallel(kind, coeffs, A, U, P, DT, h, DOP853_TOL, DOP853_TOL, np.inf, B, status, nfev)
 
         block = _ping_pong(step, Y.copy(), np.empty_like(Y), steps)
     elif backend == "cuda":

@@ -17,9 +17,10 @@ Method kinds (:data:`KIND`, derived from :data:`~.specs.SPECS`): 0 RK4, 1 a spli
   was detected.
 * :func:`solve_body`: one body's trajectory into ``Y`` (11, T); rows from the failing one on are NaN.
 * :func:`env_step_body`: one body's environment step; :func:`batch_env_step_serial` loops it (the
-  environment's batch, ``env_stepper(NAME).batch``).
-* :func:`batch_solve` / :func:`batch_env_step`: the CPU batch kernels, parallel over chunks of bodies
-  (``numba.prange``).
+  environment's batch, ``env_stepper(NAME).batch``). Its parallel twin, which only ``flatbody bench gpu``
+  runs, lives with that benchmark (:func:`flatbody_env.bench.kernels.batch_env_step_parallel`).
+* :func:`batch_solve` / :func:`batch_energy`: the CPU batch kernels of ``simulate_batch``, parallel over chunks of
+  bodies (``numba.prange``).
 
 Layouts: the CPU trajectory kernel writes ``OUT`` (N, T, 11) (one body's rows contiguous); the
 environment step takes ``Y``, ``OUT`` (11, N) and ``U`` (4, N) structure-of-arrays, as the env's
@@ -224,7 +225,9 @@ step limit, :data:`~.twopolar_kernels.DOP853_MAX_STEPS`, still applies)."""
 
 @njit
 def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
-    """:func:`batch_env_step` in one thread (the environment's compiled loop over bodies)."""
+    """One environment step of N bodies in one thread (the environment's compiled loop over bodies): Y, OUT (11, N),
+    U (4, N), STATUS, NFEV (N,) int64. ``max_nfev``: each body's budget of RHS evaluations in the step (DOP853; past it
+    the body's status is the ``budget`` failure, as the scalar env step's)."""
     y = np.empty(N)
     u = np.empty(4)
     out = np.empty(N)
@@ -268,54 +271,6 @@ def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, 
 
 
 @njit(parallel=True)
-def batch_env_step(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
-    """One environment step of N bodies: Y, OUT (11, N), U (4, N), STATUS, NFEV (N,) int64; parallel
-    over chunks of :data:`CHUNK` bodies. Equal, bit for bit, to :func:`batch_env_step_serial`.
-    ``max_nfev``: each body's budget of RHS evaluations in the step (DOP853; past it the body's status is
-    the ``budget`` failure, as the scalar env step's)."""
-    n = Y.shape[1]
-    for c in numba.prange((n + CHUNK - 1) // CHUNK):
-        y = np.empty(N)
-        u = np.empty(4)
-        out = np.empty(N)
-        K = np.empty((13, N))
-        ynew = np.empty(N)
-        ytmp = np.empty(N)
-        vel = np.empty(7)
-        force = np.empty(4)
-        f = np.empty(N)
-        counters = np.zeros(4, np.int64)
-        counters[3] = max_nfev  # each body's budget of RHS evaluations in this step
-        for b in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-            env_step_body(
-                b,
-                kind,
-                coeffs,
-                Y,
-                U,
-                P,
-                dt,
-                h,
-                rtol,
-                atol,
-                energy_tol,
-                OUT,
-                STATUS,
-                NFEV,
-                y,
-                u,
-                out,
-                K,
-                ynew,
-                ytmp,
-                vel,
-                force,
-                f,
-                counters,
-            )
-
-
-@njit(parallel=True)
 def batch_energy(Y0, P, H):
     """H (eq. (41)) of each row of Y0 (N, 11) into H (N,)."""
     n = Y0.shape[0]
@@ -336,7 +291,6 @@ __all__ = [
     "SPLIT_KIND",
     "STRANG",
     "batch_energy",
-    "batch_env_step",
     "batch_env_step_serial",
     "batch_solve",
     "env_step_body",

@@ -181,7 +181,7 @@ def _dop853_initial_step_device(y, f, t0, t_bound, u, P, rtol, atol, vel, force,
 
 def _env_step_kernel(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, max_nfev, OUT, STATUS, NFEV):
     """One thread per body: :func:`~.batch_solve.env_step_body` with local work arrays; ``max_nfev`` is each body's budget of
-    RHS evaluations in the step (DOP853 checks it before every step, as :func:`~.batch_solve.batch_env_step`)."""
+    RHS evaluations in the step (DOP853 checks it before every step, as :func:`~.batch_solve.batch_env_step_serial`)."""
     b = cuda.grid(1)
     if b < Y.shape[1]:
         y = cuda.local.array(11, float64)
@@ -318,7 +318,7 @@ def env_step(
     ``NFEV`` (N,) int64 are allocated on the device when not given. Returns (OUT, STATUS, NFEV) as
     given/allocated (device arrays unless host arrays were passed in, which are then filled). ``max_nfev``: each
     body's budget of RHS evaluations in this step (DOP853; a body past it gets the ``budget`` status and keeps its
-    state, as in :func:`~.batch_solve.batch_env_step`); the launch's work is bounded by it, since a kernel cannot
+    state, as in :func:`~.batch_solve.batch_env_step_serial`); the launch's work is bounded by it, since a kernel cannot
     read the clock. The env's whole step (:mod:`flatbody_env.env.transition`) has the env's budget,
     :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`."""
     kind, coeffs = _method(method)

@@ -54,7 +54,7 @@ from flatbody_env.physics import hamiltonian as _hamiltonian
 from flatbody_env.physics import potentials as _potentials
 
 _PACKAGE = Path(__file__).resolve().parents[1]
-_KERNEL_SOURCE_DIRS = ("physics", "integrators", "env")
+_KERNEL_SOURCE_DIRS = ("physics", "integrators", "env", "bench")
 """Folders (under the package) whose modules hold compiled functions: their ``__pycache__`` is numba's in-tree cache."""
 
 

@@ -38,7 +38,7 @@ with ``(kind, coeffs)`` from the method table (:data:`~.specs.SPECS`: ``spec.cod
 y, out (11,); u (4,); ``counters`` (3,) int64 accumulates [nfev, steps, rejected steps]. ``h`` is the
 largest sub-step of fixed-step methods and the initial step guess of DOP853 (0: automatic);
 rtol/atol are read by DOP853 only; energy_tol = inf switches the energy check off. N bodies:
-:func:`~.batch_solve.batch_env_step_serial` (and the parallel :func:`~.batch_solve.batch_env_step`).
+:func:`~.batch_solve.batch_env_step_serial`.
 
 References
 ----------

@@ -106,7 +106,7 @@ def main() -> dict:
         U[:, 1] = [0.1, -0.2, 0.05, 0.3]
         U[3, 2] = -0.5
         O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
-        bs.batch_env_step(kind, coeffs, Ys, U, P, 0.05, h / 4, 1e-11, 1e-11, 1e-3, O1, S1, N1)
+        bs.batch_env_step_serial(kind, coeffs, Ys, U, P, 0.05, h / 4, 1e-11, 1e-11, 1e-3, O1, S1, N1)
         d_Y, d_U, d_P = cuda.cuda.to_device(Ys), cuda.cuda.to_device(U), cuda.cuda.to_device(P)
         d_OUT, d_ST, d_NF = cuda.env_step(
             name, d_Y, d_U, d_P, 0.05, h=h / 4, rtol=1e-11, atol=1e-11, energy_tol=1e-3, threads_per_block=2
@@ -153,7 +153,7 @@ def _env_step_budget(body, Y0, P) -> dict:
     n = Y0.shape[0]
     Ys, U = np.ascontiguousarray(Y0.T), np.zeros((4, n))
     O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
-    bs.batch_env_step(bs.DOP853_KIND, bs.STRANG, Ys, U, P, 0.5, 0.0, 1e-11, 1e-11, np.inf, O1, S1, N1, 30)
+    bs.batch_env_step_serial(bs.DOP853_KIND, bs.STRANG, Ys, U, P, 0.5, 0.0, 1e-11, 1e-11, np.inf, O1, S1, N1, 30)
     d_OUT, d_ST, d_NF = cuda.env_step(
         "DOP853-numba",
         cuda.cuda.to_device(Ys),

@@ -69,8 +69,9 @@ def _same(a, b):
         np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("kernel", [bs.batch_env_step_serial, bs.batch_env_step], ids=["serial", "parallel"])
-def test_batch_env_step_stops_each_body_at_its_budget(kernel):
+def test_batch_env_step_stops_each_body_at_its_budget():
+    """The env's batch step (its parallel twin of the GPU benchmark: tests/bench/test_kernels.py)."""
+    kernel = bs.batch_env_step_serial
     P = kernel_params(default_body())
     Y, U = _lanes()
     tiny = _batch(kernel, Y, U, P, 0.0, TINY)

@@ -1,5 +1,5 @@
-"""The allocation-free drivers and the parallel CPU batch kernels equal the kernels behind simulate and the env,
-bit for bit; next_up equals np.nextafter bit for bit."""
+"""The allocation-free drivers and the parallel CPU batch kernels equal the kernels behind simulate, bit for bit;
+next_up equals np.nextafter bit for bit (the parallel env step, a benchmark's kernel: tests/bench/test_kernels.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from flatbody_env.integrators import batch_solve as bs
 from flatbody_env.integrators import twopolar_kernels as tk
-from flatbody_env.integrators.compiled_methods import env_stepper, kernel_params
+from flatbody_env.integrators.compiled_methods import kernel_params
 from flatbody_env.physics.state import pack
 from flatbody_env.scene import load_scene
 
@@ -116,26 +116,6 @@ def test_batch_solve_equals_the_solvers_behind_simulate(name):
             np.testing.assert_array_equal(OUT[b, :k], Y.T[:k])
     if kind != bs.DOP853_KIND:
         assert 0 < failed < n  # both paths ran
-
-
-@pytest.mark.parametrize("name", list(STEPS))
-def test_batch_env_step_equals_the_env_steppers(name):
-    body, Y0 = _batch()
-    P = kernel_params(body)
-    kind, coeffs = bs.KIND[name]
-    Ys = np.ascontiguousarray(Y0.T)
-    n = Ys.shape[1]
-    U = np.zeros((4, n))
-    U[:, 1::4] = np.array([0.1, -0.2, 0.05, 0.3])[:, None]
-    h = STEPS[name] / 2
-    O1, S1, N1 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
-    env_stepper(name).batch_counted(Ys, U, P, 0.05, h, 1e-11, 1e-11, 1e-3, O1, S1, N1)
-    O2, S2, N2 = np.empty_like(Ys), np.zeros(n, np.int64), np.zeros(n, np.int64)
-    bs.batch_env_step(kind, coeffs, Ys, U, P, 0.05, h, 1e-11, 1e-11, 1e-3, O2, S2, N2)
-    np.testing.assert_array_equal(O1, O2)
-    np.testing.assert_array_equal(S1, S2)
-    np.testing.assert_array_equal(N1, N2)
-    assert (N2 > 0).all()
 
 
 def test_batch_energy_equals_the_energy_kernel():

@@ -158,7 +158,7 @@ def test_real_gpu_agrees_with_the_cpu_kernels():
     d_Y = dev.to_device(Ys)
     for _ in range(20):
         out, st, nf = np.empty_like(cpu), np.zeros(n, np.int64), np.zeros(n, np.int64)
-        bs.batch_env_step(bs.RK4_KIND, bs.STRANG, cpu, U, P, 0.05, 0.0125, 1e-11, 1e-11, np.inf, out, st, nf)
+        bs.batch_env_step_serial(bs.RK4_KIND, bs.STRANG, cpu, U, P, 0.05, 0.0125, 1e-11, 1e-11, np.inf, out, st, nf)
         cpu = out
         d_Y, d_st, _ = cuda.env_step("RK4", d_Y, dev.to_device(U), dev.to_device(P), 0.05, h=0.0125)
         assert (d_st.copy_to_host() == st).all()
