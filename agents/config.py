@@ -267,8 +267,7 @@ def load_hyperparams(algo: str, env_id: str = DEFAULT_ENV_ID, path: str | Path |
             f"env: no {algo} hyperparameters for {env_id!r} in {file} (has: {', '.join(map(str, data)) or 'none'})"
         )
     entry = data[env_id]
-    if not isinstance(entry, dict):
-        raise ValueError(f"{where}: the entry {env_id!r} in {file} must be a mapping, got a {type(entry).__name__}")
+    validation.requirement(where, entry, isinstance(entry, dict), f"map {env_id!r} in {file} to a mapping")
     entry = copy.deepcopy(entry)
     return {**copy.deepcopy(RSL_DEFAULTS), **entry} if algo == "rsl-ppo" else entry
 

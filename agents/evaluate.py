@@ -111,8 +111,9 @@ class Agent:
     """
 
     def __init__(self, path: str | Path | None = None, *, backend: str = "auto") -> None:
-        if backend not in POLICY_BACKENDS:
-            raise ValueError(f"backend: must be one of {', '.join(POLICY_BACKENDS)}, got {backend!r}")
+        from flatbody_env.physics import validation
+
+        validation.string("backend", backend, choices=POLICY_BACKENDS)
         p = Path(path) if path is not None else shipped_model_dir()
         folder = p if p.is_dir() else p.parent
         model_file = p if p.is_file() else folder / "model.zip"
@@ -257,8 +258,9 @@ def run_episodes(
     from flatbody_env.env.registration import task_spec
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
-    if not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes: must be an integer >= 1, got {episodes!r}")
+    from flatbody_env.physics import validation
+
+    validation.integer("episodes", episodes, low=1)
     steps = task_spec(env_id).max_episode_steps
     kwargs = env_kwargs_for(env_id, env_kwargs)
     records: list[dict[str, Any]] = []
@@ -284,9 +286,7 @@ def run_episodes(
             elif policy == PLANNER:
                 pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute)
             else:
-                raise ValueError(
-                    f"baseline: must be one of {', '.join(BASELINES + (PLANNER, WITNESS))}, got {policy!r}"
-                )
+                raise validation.refusal("baseline", f"be one of {', '.join(BASELINES + (PLANNER, WITNESS))}", policy)
         else:
             pol = policy
         tol = env.task.success_tolerance
@@ -378,8 +378,9 @@ def _witness_policy(env, step_index: list[int]) -> Policy:
 def success_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
     """The 95 % Wilson score interval of a success rate k/n (E. B. Wilson, J. Am. Stat. Assoc. 22, 209 (1927)):
     (p̂ + z²/2n ∓ z √(p̂(1 − p̂)/n + z²/4n²)) / (1 + z²/n), z = Φ⁻¹(0.975)."""
-    if n < 1:
-        raise ValueError(f"episodes: must be >= 1, got {n!r}")
+    from flatbody_env.physics import validation
+
+    validation.requirement("episodes", n, n >= 1, "be >= 1")
     p = successes / n
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / denom

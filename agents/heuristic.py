@@ -78,7 +78,6 @@ References
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -532,18 +531,15 @@ class ResidualAction:
         self, env_kwargs=None, scale: float = 1.0, gate: float = 0.0, mode: str = "additive", base: str = "heuristic"
     ) -> None:
         from flatbody_env.env.env import FlatBodyEnv
+        from flatbody_env.physics import validation
 
-        if not (math.isfinite(scale) and scale >= 0):
-            raise ValueError(f"residual_scale: must be a finite number >= 0, got {scale!r}")
-        if not (math.isfinite(gate) and gate >= 0):
-            raise ValueError(f"residual_gate: must be a finite number >= 0, got {gate!r}")
-        if mode not in RESIDUAL_MODES:
-            raise ValueError(f"residual_mode: must be one of {', '.join(RESIDUAL_MODES)}, got {mode!r}")
+        validation.number("residual_scale", scale, low=0.0)
+        validation.number("residual_gate", gate, low=0.0)
+        validation.string("residual_mode", mode, choices=RESIDUAL_MODES)
         self.mode = mode
         proto = FlatBodyEnv(**(env_kwargs or {}))
         self.body, self.task = proto.body, proto.task
-        if base not in RESIDUAL_BASES:
-            raise ValueError(f"residual: must be one of {', '.join(RESIDUAL_BASES)}, got {base!r}")
+        validation.string("residual", base, choices=RESIDUAL_BASES)
         self.base = base
         cls = HeuristicController if base == "heuristic" else PassivityController
         self.controller = cls(proto.body, proto.control, proto.limits)

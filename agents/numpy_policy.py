@@ -255,11 +255,11 @@ def read_run_config(folder: Path) -> dict:
             f"config.yml: {str(cfg_file)[:80]!r} must hold a mapping (algo, env_id, hyperparams), got a {type(config).__name__}"
         )
     hp = config.get("hyperparams")
-    if hp is not None and not isinstance(hp, dict):
-        raise ValueError(f"config.yml.hyperparams: must be a mapping, got a {type(hp).__name__}")
-    if hp and hp.get("env_kwargs") is not None and not isinstance(hp["env_kwargs"], dict):
-        raise ValueError(
-            f"config.yml.hyperparams.env_kwargs: must be a mapping, got a {type(hp['env_kwargs']).__name__}"
+    validation.requirement("config.yml.hyperparams", hp, hp is None or isinstance(hp, dict), "be a mapping")
+    if hp and hp.get("env_kwargs") is not None:
+        env_kwargs = hp["env_kwargs"]
+        validation.requirement(
+            "config.yml.hyperparams.env_kwargs", env_kwargs, isinstance(env_kwargs, dict), "be a mapping"
         )
     for key in ("algo", "env_id"):
         if config.get(key) is not None:

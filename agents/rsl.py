@@ -70,11 +70,10 @@ class TorchResidual:
         from agents.heuristic import _KEY_COLUMNS, _REDUCED_OBS, RESIDUAL_MODES, HeuristicController
         from flatbody_env.env.env import FlatBodyEnv
         from flatbody_env.env.task import OBS_TARGET
+        from flatbody_env.physics import validation
 
-        if mode not in RESIDUAL_MODES:
-            raise ValueError(f"residual_mode: must be one of {', '.join(RESIDUAL_MODES)}, got {mode!r}")
-        if not (math.isfinite(scale) and scale >= 0):
-            raise ValueError(f"residual_scale: must be a finite number >= 0, got {scale!r}")
+        validation.string("residual_mode", mode, choices=RESIDUAL_MODES)
+        validation.number("residual_scale", scale, low=0.0)
         if gate:
             raise ValueError(
                 "residual_gate: not supported by rsl-ppo (use residual_mode=gain, which keeps the target an equilibrium)"
@@ -161,8 +160,12 @@ class RslVecEnv(_vec_env_base()):
         self._obs = obs.to(self.device)
         self._return = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
         self.reward_gamma = reward_gamma
-        if reward_gamma is not None and not (0.0 < reward_gamma <= 1.0):
-            raise ValueError(f"gamma: must be in (0, 1] for the reward normalisation, got {reward_gamma!r}")
+        if reward_gamma is not None:
+            from flatbody_env.physics import validation
+
+            validation.requirement(
+                "gamma", reward_gamma, 0.0 < reward_gamma <= 1.0, "lie in (0, 1] for the reward normalisation"
+            )
         self._disc = torch.zeros(self.num_envs, dtype=torch.float64, device=self.device)
         from stable_baselines3.common.running_mean_std import RunningMeanStd
 
@@ -241,8 +244,9 @@ class HeldGaussianDistribution(_held_gaussian_base()):
 
     def __init__(self, output_dim: int, hold_steps: int = 1, **kwargs) -> None:
         super().__init__(output_dim, **kwargs)
-        if not isinstance(hold_steps, int) or isinstance(hold_steps, bool) or hold_steps < 1:
-            raise ValueError(f"noise_hold_steps: must be an integer >= 1, got {hold_steps!r}")
+        from flatbody_env.physics import validation
+
+        validation.integer("noise_hold_steps", hold_steps, low=1)
         self.hold_steps = hold_steps
         self._eps = None
         self._age = 0
@@ -618,8 +622,11 @@ def from_scratch_curve(
     from agents.evaluate import run_episodes
     from flatbody_env.output import write_csv
 
-    if not (budget_s > 0 and eval_every_s > 0):
-        raise ValueError(f"budget_s, eval_every_s: must be > 0, got {budget_s!r}, {eval_every_s!r}")
+    from flatbody_env.physics import validation
+
+    validation.requirement(
+        "budget_s, eval_every_s", (budget_s, eval_every_s), budget_s > 0 and eval_every_s > 0, "be > 0"
+    )
     rows: list[tuple[int, float, float, float]] = []
     due = [float(eval_every_s)]
 

@@ -122,8 +122,11 @@ def make_vec_env(
     env_kwargs = env_kwargs_for(env_id, env_kwargs)
     venv = FlatBodySB3VecEnv(n_envs, seed=seed, **env_kwargs)
     if residual:
-        if residual not in ("heuristic", "passivity"):
-            raise ValueError(f"residual: must be 'heuristic', 'passivity' or empty, got {residual!r}")
+        from flatbody_env.physics import validation
+
+        validation.requirement(
+            "residual", residual, residual in ("heuristic", "passivity"), "be 'heuristic', 'passivity' or empty"
+        )
         from agents.heuristic import residual_vec_env
 
         venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode, residual)

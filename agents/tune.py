@@ -107,8 +107,9 @@ class TuneConfig:
     startup_trials: int = 3
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGOS:
-            raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {self.algo!r}")
+        from flatbody_env.physics import validation
+
+        validation.string("algo", self.algo, choices=ALGOS)
         for name, low in (
             ("trials", 1),
             ("n_timesteps", 1),
@@ -117,11 +118,10 @@ class TuneConfig:
             ("seed", 0),
             ("startup_trials", 0),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < low:
-                raise ValueError(f"{name}: must be an integer >= {low}, got {v!r}")
-        if not self.study or not isinstance(self.study, str):
-            raise ValueError(f"study: must be a non-empty name, got {self.study!r}")
+            validation.integer(name, getattr(self, name), low=low)
+        validation.requirement(
+            "study", self.study, isinstance(self.study, str) and self.study != "", "be a non-empty name"
+        )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -133,9 +133,9 @@ def load_search_space(algo: str, env_id: str = ENV_ID, path: str | Path | None =
     ValueError
         Naming the file or the entry and what is allowed.
     """
-    if algo not in ALGOS:
-        raise ValueError(f"algo: must be one of {', '.join(ALGOS)}, got {algo!r}")
     from flatbody_env.physics import validation
+
+    validation.string("algo", algo, choices=ALGOS)
 
     file = Path(path) if path else HYPERPARAMS_DIR / f"{algo}_search.yml"
     data = validation.read_yaml("search_file", file) or {}  # the one reading door: bounded, no alias bombs

@@ -579,8 +579,7 @@ def check_range(
     of the body, both within its allowed range (:data:`~flatbody_env.physics.validation.PARAM_RANGE`). ``names``:
     the fields' names in the caller's words (``("from", "to")`` for the service, ``("--from", "--to")`` for the
     command), which the messages start with."""
-    if param not in PARAMETERS:
-        raise ValueError(f"param: must be one of {', '.join(PARAMETERS)}, got {param!r}")
+    validation.string("param", param, choices=PARAMETERS)
     lo_name, hi_name = names
     if param in BODY_PARAMETERS:
         low, high = validation.PARAM_RANGE
@@ -589,8 +588,7 @@ def check_range(
     else:
         start = validation.number(lo_name, start, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
         stop = validation.number(hi_name, stop, low=-validation.MOMENTUM_MAX, high=validation.MOMENTUM_MAX)
-    if not start < stop:
-        raise ValueError(f"{hi_name}: must be greater than {lo_name} ({start:g}), got {stop:g}")
+    validation.requirement(hi_name, stop, start < stop, f"be greater than {lo_name} ({start:g})")
     return start, stop
 
 
@@ -644,14 +642,12 @@ def follow_family(
     """
     check_isotropic(body)
     for nm, v in (("s3", s3), ("p_theta", p_theta)):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ValueError(f"{nm}: must be a finite number, got {v!r}")
+        validation.number(nm, v)
     start, stop = check_range(param, start, stop)
     if param in BODY_PARAMETERS:
         body_with(body, param, start)  # raises if the body has no such constant
     seeds_lo, seeds_hi = FAMILY_SEEDS_RANGE
-    if not (isinstance(seeds, int) and seeds_lo <= seeds <= seeds_hi):
-        raise ValueError(f"seeds: must be an integer in [{seeds_lo}, {seeds_hi}], got {seeds!r}")
+    validation.integer("seeds", seeds, low=seeds_lo, high=seeds_hi)
     box = box or SearchBox()
     scale = family_scale(param, start, stop, s3=float(s3), p_theta=float(p_theta))
     prob = _Problem(body, param, float(s3), float(p_theta), rho, start, stop, scale)
@@ -659,8 +655,7 @@ def follow_family(
         prob.record = True
         _problem.append(prob)
     h_max = step if step is not None else (prob.q_hi - prob.q_lo) / 60.0
-    if not h_max > 0:
-        raise ValueError(f"step: must be > 0, got {step!r}")
+    validation.requirement("step", step, h_max > 0, "be > 0")
     traced: list[list[np.ndarray]] = []
     ends_of: list[tuple[tuple[str, str], tuple[str, str]]] = []
     seed_q = np.linspace(prob.q_lo, prob.q_hi, seeds)

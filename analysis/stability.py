@@ -43,6 +43,7 @@ import numpy as np
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import kinetic_kernel
+from flatbody_env.physics import validation
 from flatbody_env.physics.state import STATE_NAMES
 
 from analysis.stationary import (
@@ -383,10 +384,8 @@ def sample_stable_target(
         If no such ellipse is found in ``max_tries`` draws (the message names the ranges).
     """
     check_isotropic(body)
-    if require not in ("elliptic", "stable"):
-        raise ValueError(f"require: must be 'elliptic' or 'stable', got {require!r}")
-    if kind not in (None, "rigid", "circulating"):
-        raise ValueError(f"kind: must be None, 'rigid' or 'circulating', got {kind!r}")
+    validation.string("require", require, choices=("elliptic", "stable"))
+    validation.requirement("kind", kind, kind in (None, "rigid", "circulating"), "be None, 'rigid' or 'circulating'")
     for _ in range(max_tries):
         lam = float(rng.uniform(*lam_range))
         mu = float(rng.uniform(*mu_range))

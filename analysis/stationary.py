@@ -55,6 +55,7 @@ from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, velocities_from_momenta
 from flatbody_env.physics.potentials import KIND_CUSTOM, V1, V2, potential_kernel
 from flatbody_env.physics.state import STATE_NAMES
+from flatbody_env.physics import validation
 from flatbody_env.physics.validation import SEARCH_GRID_RANGE
 
 DEFAULT_TOL = 1e-10
@@ -92,10 +93,8 @@ class SearchBox:
             if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
                 raise ValueError(f"box.{name}: need 0 < low < high (finite), got ({lo!r}, {hi!r})")
         lo, hi = SEARCH_GRID_RANGE
-        if not (isinstance(self.n, int) and lo <= self.n <= hi):
-            raise ValueError(f"box.n: must be an integer in [{lo}, {hi}], got {self.n!r}")
-        if not (isinstance(self.n_rho, int) and 4 <= self.n_rho <= 401):
-            raise ValueError(f"box.n_rho: must be an integer in [4, 401], got {self.n_rho!r}")
+        validation.integer("box.n", self.n, low=lo, high=hi)
+        validation.integer("box.n_rho", self.n_rho, low=4, high=401)
 
 
 # --------------------------------------------------------------------------------------------
@@ -116,20 +115,11 @@ def check_isotropic(body: Body) -> float:
 
 
 def _finite(name: str, value: Any) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, (int, float, np.floating, np.integer))
-        or not math.isfinite(float(value))
-    ):
-        raise ValueError(f"{name}: must be a finite number, got {value!r}")
-    return float(value)
+    return validation.number(name, value)
 
 
 def _positive(name: str, value: Any) -> float:
-    x = _finite(name, value)
-    if x <= 0.0:
-        raise ValueError(f"{name}: must be > 0 (allowed range (0, inf)), got {value!r}")
-    return x
+    return validation.number(name, value, positive=True)
 
 
 def is_symmetric(body: Body) -> bool:
@@ -202,7 +192,7 @@ def equilibrium_equations(body: Body, branch: str, params: tuple[float, float], 
         I2 = J * lam * lam + J3 * rho * rho
         c = s * s / (I2 * I2)
         return -gl + J * lam * c, -gm, -gr + J3 * rho * c
-    raise ValueError(f"branch: must be one of {', '.join(BRANCHES)}, got {branch!r}")
+    raise validation.refusal("branch", f"be one of {', '.join(BRANCHES)}", branch)
 
 
 def make_state(branch: str, params: tuple[float, float], lam: float, mu: float, rho: float) -> dict[str, float]:
@@ -378,8 +368,7 @@ def solve_branch(
     SolveReport
     """
     check_isotropic(body)
-    if branch not in BRANCHES:
-        raise ValueError(f"branch: must be one of {', '.join(BRANCHES)}, got {branch!r}")
+    validation.string("branch", branch, choices=BRANCHES)
     box = box or SearchBox()
     tol = _positive("tol", tol)
     params = (_finite("s3" if branch == "N" else "spin", params[0]), _finite("p_theta", params[1]))
@@ -486,8 +475,7 @@ def stationary_ellipses(
     list of StationaryEllipse
         Sorted with λ > μ first, then by decreasing λ.
     """
-    if method not in ("auto", "closed-form", "numeric"):
-        raise ValueError(f"method: must be one of auto, closed-form, numeric; got {method!r}")
+    validation.string("method", method, choices=("auto", "closed-form", "numeric"))
     check_isotropic(body)
     if method == "closed-form" or (method == "auto" and isinstance(body.potential, V1)):
         return v1_closed_form(body, s3, p_theta, rho=rho)
@@ -512,12 +500,10 @@ def steady_rotations(
     """
     check_isotropic(body)
     spin = _finite("spin", spin)
-    if spin == 0.0:
-        raise ValueError("spin: must be non-zero for a steady rotation (allowed: any finite s != 0)")
+    validation.requirement("spin", spin, spin != 0.0, "be non-zero for a steady rotation (allowed: any finite s != 0)")
     out: list[StationaryEllipse] = []
     for axis in axes:
-        if axis not in (1, 2):
-            raise ValueError(f"axes: entries must be 1 or 2, got {axis!r}")
+        validation.requirement("axes", axis, axis in (1, 2), "hold only 1 or 2")
         out.extend(solve_branch(body, f"A{axis}", (spin, 0.0), box=box, tol=tol).solutions)
     return out
 

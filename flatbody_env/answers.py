@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from flatbody_env.output import atomic_write, check_output_path
+from flatbody_env.physics import validation
 
 
 def simulate_trajectory(
@@ -167,8 +168,7 @@ def family_run(
         write_family_csv,
     )
 
-    if vary not in PARAMETERS:
-        raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {vary!r}")
+    validation.string("--vary", vary, choices=PARAMETERS)
     start, stop = check_range(vary, start, stop, names=names)
     s3 = DEFAULT_S3 if s3 is None else float(s3)
     pt = DEFAULT_P_THETA if p_theta is None else float(p_theta)

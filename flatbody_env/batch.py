@@ -125,7 +125,7 @@ def _initial_states(y0: Any) -> np.ndarray:
             rng = f"[{-validation.MOMENTUM_MAX:g}, {validation.MOMENTUM_MAX:g}]"
         if bad.size:
             i = int(bad[0])
-            raise ValueError(f"y0[{i}].{STATE_NAMES[j]}: must lie in {rng}, got {col[i]!r}")
+            raise validation.refusal(f"y0[{i}].{STATE_NAMES[j]}", f"lie in {rng}", float(col[i]))
     same = np.flatnonzero(arr[:, 7] == arr[:, 8])
     if same.size:
         raise ValueError(
@@ -140,10 +140,11 @@ def _output_times(times: Any) -> np.ndarray:
     arr = validation.float_array("times", times, shape=(None,))
     if not 1 <= arr.size <= validation.MAX_SAMPLES:
         raise ValueError(f"times: must hold 1 to {validation.MAX_SAMPLES} times, got {arr.size}")
-    if np.any(arr < 0) or np.any(arr > validation.T_END_MAX):
-        raise ValueError(f"times: every time must lie in [0, {validation.T_END_MAX:g}]")
+    outside = arr[(arr < 0) | (arr > validation.T_END_MAX)]
+    if outside.size:
+        raise validation.refusal("times", f"each lie in [0, {validation.T_END_MAX:g}]", float(outside[0]))
     if np.any(np.diff(arr) <= 0):
-        raise ValueError("times: must be strictly increasing")
+        raise validation.refusal("times", "be strictly increasing")
     return arr
 
 

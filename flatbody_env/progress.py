@@ -38,8 +38,11 @@ def interval_s() -> float:
         value = float(text)
     except ValueError:
         value = math.nan
-    if not (math.isfinite(value) and value >= 0):
-        raise ValueError(f"FLATBODY_PROGRESS_S: must be a number of seconds >= 0, got {text[:40]!r}")
+    from flatbody_env.physics import validation
+
+    validation.requirement(
+        "FLATBODY_PROGRESS_S", text[:40], math.isfinite(value) and value >= 0, "be a number of seconds >= 0"
+    )
     return value
 
 

@@ -88,9 +88,11 @@ def scene_from_dict(data: Mapping[str, Any], *, default_name: str = "scene") -> 
         )
         state = validation.mapping("state", data["state"])
         validate_state(state)
-        t_end = validation.number("t_end", data["t_end"], positive=True) if "t_end" in data else 20.0
-        if t_end > validation.T_END_MAX:
-            raise ValueError(f"t_end: must lie in (0, {validation.T_END_MAX:g}], got {t_end!r}")
+        t_end = (
+            validation.number("t_end", data["t_end"], positive=True, high=validation.T_END_MAX)
+            if "t_end" in data
+            else 20.0
+        )
         name = validation.string("name", data.get("name", default_name))
         description = validation.string("description", data.get("description", ""))
     except SceneError:

@@ -273,7 +273,7 @@ class Trajectory:
         if not 1 <= n <= validation.MAX_SAMPLES:
             raise ValueError(f"{where}.t: must hold 1 to {validation.MAX_SAMPLES} times, got {n}")
         if np.any(np.diff(t) <= 0):
-            raise ValueError(f"{where}.t: must be strictly increasing")
+            raise validation.refusal(f"{where}.t", "be strictly increasing")
         st = validation.mapping(f"{where}.state", data["state"])
         validation.keys(f"{where}.state", st, STATE_NAMES, STATE_NAMES)
         state = {name: validation.float_array(f"{where}.state.{name}", st[name], shape=(n,)) for name in STATE_NAMES}
@@ -281,8 +281,10 @@ class Trajectory:
         for name in ("lambda", "mu", "rho"):  # the documented range (docs/reliability.md), as for a scene's state
             bad = np.flatnonzero((state[name] < lo) | (state[name] > hi))
             if bad.size:
-                raise ValueError(
-                    f"{where}.state.{name}: must lie in [{lo:g}, {hi:g}], got {float(state[name][bad[0]])!r} at t = {t[bad[0]]:g}"
+                raise validation.refusal(
+                    f"{where}.state.{name}",
+                    f"lie in [{lo:g}, {hi:g}] (at t = {t[bad[0]]:g})",
+                    float(state[name][bad[0]]),
                 )
         series = {}
         for key in ("energy", "casimir", "p_theta"):
@@ -352,9 +354,7 @@ def read_trajectory(path: str | Path) -> Trajectory:
 
 def _resolve_times(t_end: Any, times: Sequence[float] | np.ndarray | None) -> tuple[float, np.ndarray]:
     """Validated (t_end, output times): exactly the requested times (scipy's ``t_eval`` convention)."""
-    t_end = validation.number("t_end", t_end, positive=True)
-    if t_end > validation.T_END_MAX:
-        raise ValueError(f"t_end: must lie in (0, {validation.T_END_MAX:g}], got {t_end!r}")
+    t_end = validation.number("t_end", t_end, positive=True, high=validation.T_END_MAX)
     if times is None:
         return t_end, np.linspace(0.0, t_end, DEFAULT_SAMPLES)
     if isinstance(times, (int, float, np.integer, np.floating)) and not isinstance(times, bool):
@@ -362,10 +362,11 @@ def _resolve_times(t_end: Any, times: Sequence[float] | np.ndarray | None) -> tu
     arr = validation.float_array("times", times, shape=(None,))
     if arr.size == 0 or arr.size > validation.MAX_SAMPLES:
         raise ValueError(f"times: must hold 1 to {validation.MAX_SAMPLES} times in [0, t_end], got {arr.size}")
-    if np.any(arr < 0) or np.any(arr > t_end):
-        raise ValueError(f"times: every time must lie in [0, t_end] = [0, {t_end:g}]")
+    outside = arr[(arr < 0) | (arr > t_end)]
+    if outside.size:
+        raise validation.refusal("times", f"each lie in [0, t_end] = [0, {t_end:g}]", float(outside[0]))
     if np.any(np.diff(arr) <= 0):
-        raise ValueError("times: must be strictly increasing")
+        raise validation.refusal("times", "be strictly increasing")
     return t_end, arr
 
 
@@ -436,8 +437,7 @@ def simulate(
     t_end, times_arr = _resolve_times(t_end, times)
     model = validation.string("model", model, choices=MODELS)
     method = validation.string("method", method)
-    if not isinstance(with_rotation, bool):
-        raise ValueError(f"with_rotation: must be true or false, got {with_rotation!r}")
+    validation.boolean("with_rotation", with_rotation)
     if step is not None:  # bounded work: a fixed step below the floor is an error, never replaced
         step = validation.fixed_step("step", step)
     validation.number(

@@ -123,7 +123,7 @@ def _bad_y0(Y0, what):
         ({"y0": "p_rho big"}, r"y0\[0\]\.p_rho: must lie in \[-1e\+06, 1e\+06\]"),
         ({"y0": "lambda=mu"}, r"y0\[1\]\.lambda: must differ from mu"),
         ({"times": [1.0, 0.5]}, r"times: must be strictly increasing"),
-        ({"times": [-1.0]}, r"times: every time must lie in \[0, 1e\+06\]"),
+        ({"times": [-1.0]}, r"times: must each lie in \[0, 1e\+06\], got -1\.0"),
         ({"times": []}, r"times: must hold 1 to 100000 times"),
         ({"method": "DOP853"}, r"method: .*DOP853-numba"),
         ({"method": "RK4", "step": None}, r"step: RK4 is a fixed-step method"),

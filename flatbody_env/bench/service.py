@@ -150,8 +150,7 @@ def measure(
 
     from flatbody_env.service.launch import start_service, stop_service
 
-    if not (isinstance(seconds, (int, float)) and 0 < seconds <= 600):
-        raise ValueError(f"seconds: must be a number in (0, 600], got {seconds!r}")
+    validation.number("seconds", seconds, positive=True, high=600.0)
     rows: list[LoadRow] = []
     with tempfile.TemporaryDirectory(prefix="flatbody-bench-service-") as data_dir:
         proc, url = start_service(data_dir, workers=workers)

@@ -257,12 +257,9 @@ def run(
         ("seed", seed, 0),
         ("eval_seed", eval_seed, 0),
     ):
-        if not isinstance(v, int) or isinstance(v, bool) or v < low:
-            raise ValueError(f"{name}: must be an integer >= {low}, got {v!r}")
-    if not 0.0 <= success_goal <= 1.0:
-        raise ValueError(f"success_goal: must be in [0, 1], got {success_goal!r}")
-    if not distance_goal > 0.0:
-        raise ValueError(f"distance_goal: must be > 0, got {distance_goal!r}")
+        validation.integer(name, v, low=low)
+    validation.requirement("success_goal", success_goal, 0.0 <= success_goal <= 1.0, "lie in [0, 1]")
+    validation.requirement("distance_goal", distance_goal, distance_goal > 0.0, "be > 0")
 
     lqr_s, lqr_d = _summary(run_episodes("heuristic", episodes=episodes, seed=eval_seed, env_id=ENV_ID))
 

@@ -52,7 +52,7 @@ def int_at_least(name: str, low: int = 1, high: int | None = validation.MAX_COUN
             raise argparse.ArgumentTypeError(f"{name}: expected an integer, got {text[:60]!r}") from None
         if value < low or (high is not None and value > high):
             rng = f">= {low}" if high is None else f"in [{low}, {high}]"
-            raise argparse.ArgumentTypeError(f"{name}: must be an integer {rng}, got {text[:60]}")
+            raise validation.refusal(name, f"be an integer {rng}", value, error=argparse.ArgumentTypeError)
         return value
 
     return parse
@@ -124,8 +124,11 @@ def seed_range(name: str = "seeds", most: int = 100_000):
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name}: expected LO:HI (integers), got {text[:60]!r}") from None
         if not 0 <= lo < hi <= validation.MAX_SEED or hi - lo > most:
-            raise argparse.ArgumentTypeError(
-                f"{name}: must be LO:HI with 0 <= LO < HI <= {validation.MAX_SEED}, at most {most} seeds, got {text[:60]!r}"
+            raise validation.refusal(
+                name,
+                f"be LO:HI with 0 <= LO < HI <= {validation.MAX_SEED}, at most {most} seeds",
+                text[:60],
+                error=argparse.ArgumentTypeError,
             )
         return lo, hi
 
@@ -178,7 +181,7 @@ def times_list(text: str) -> list[float]:
                 f"times: expected comma-separated numbers, got {x.strip()[:40]!r}"
             ) from None
         if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"times: must be finite numbers, got {x.strip()[:40]}")
+            raise validation.refusal("times", "be finite numbers", x.strip()[:40], error=argparse.ArgumentTypeError)
         values.append(v)
     return values
 

@@ -299,7 +299,7 @@ def _float_list(text: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"times: expected comma-separated seconds, got {text!r}") from None
     if not values or any(not (v >= 0.0) for v in values):
-        raise argparse.ArgumentTypeError("times: every time must be a number ≥ 0")
+        raise validation.refusal("times", "each be a number ≥ 0", text, error=argparse.ArgumentTypeError)
     return values
 
 
@@ -309,7 +309,7 @@ def _size(text: str) -> tuple[int, int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"size: expected WIDTHxHEIGHT, got {text!r}") from None
     if not (320 <= w <= 4096 and 320 <= h <= 4096):
-        raise argparse.ArgumentTypeError(f"size: width and height must be in [320, 4096], got {text!r}")
+        raise validation.refusal("size", "have width and height in [320, 4096]", text, error=argparse.ArgumentTypeError)
     return w, h
 
 

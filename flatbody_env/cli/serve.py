@@ -22,7 +22,7 @@ def _port(text: str) -> int:
     except ValueError:
         raise argparse.ArgumentTypeError(f"port: expected an integer, got {text!r}") from None
     if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"port: must be an integer in [0, 65535], got {value}")
+        raise validation.refusal("port", "be an integer in [0, 65535]", value, error=argparse.ArgumentTypeError)
     return value
 
 
@@ -141,7 +141,9 @@ def _proxies(text: str) -> str:
 
     parts = [p.strip() for p in text.split(",") if p.strip()]
     if not parts or len(parts) > 64:
-        raise argparse.ArgumentTypeError(f"must be 1 to 64 comma-separated IP addresses, got {text[:60]!r}")
+        raise validation.refusal(
+            "trusted_proxies", "be 1 to 64 comma-separated IP addresses", text[:60], error=argparse.ArgumentTypeError
+        )
     for part in parts:
         try:
             ipaddress.ip_address(part)

@@ -81,13 +81,9 @@ def _stability_map(args) -> int:
     from flatbody_env.sweep.tasks import MAX_GRID, default_chunk
 
     body, _, _ = resolve_body(args, need_spins=False)
-    if not validation.SWEEP_GRID_RANGE[0] <= args.grid <= MAX_GRID:
-        raise ValueError(
-            f"--grid: must be an integer in [{validation.SWEEP_GRID_RANGE[0]}, {MAX_GRID}], got {args.grid}"
-        )
+    validation.integer("--grid", args.grid, low=validation.SWEEP_GRID_RANGE[0], high=MAX_GRID)
     chunk = args.chunk or default_chunk(args.grid)
-    if chunk > args.grid:
-        raise ValueError(f"--chunk: must be an integer in [1, {args.grid}] (the grid), got {chunk}")
+    validation.requirement("--chunk", chunk, chunk <= args.grid, f"be an integer in [1, {args.grid}] (the grid)")
     spec = {
         "kind": "stability-map",
         "body": body.to_dict(),
@@ -148,7 +144,7 @@ def parse_body(text: str) -> tuple[str, dict]:
         try:
             val[name] = float(number)
         except ValueError:
-            raise ValueError(f"bodies: {text!r}: {name} must be a number, got {number!r}") from None
+            raise validation.refusal(f"bodies: {text!r}", f"give {name} as a number", number) from None
     body = Body.from_dict(
         {
             "params": {"J": val["J"], "J3": val["J3"]},
@@ -170,8 +166,7 @@ def _family(args) -> int:
         body, _, _ = resolve_body(args, need_spins=False)
         bodies = [(body.describe(), body.to_dict())]
     for v in args.vary:
-        if v not in PARAMETERS:
-            raise ValueError(f"--vary: must be one of {', '.join(PARAMETERS)}, got {v!r}")
+        validation.string("--vary", v, choices=PARAMETERS)
     ranges = [list(r) for r in args.ranges]
     for v in args.vary:  # each range as the family of each parameter takes it: refused here naming --ranges,
         for lo_hi in ranges:  # never as a failed task naming the task's start/stop
@@ -180,8 +175,7 @@ def _family(args) -> int:
             except ValueError as exc:
                 raise ValueError(f"{exc} (the range {lo_hi[0]:g},{lo_hi[1]:g} with --vary {v})") from None
     lo, hi = validation.FAMILY_SEEDS_RANGE
-    if not lo <= args.seeds <= hi:
-        raise ValueError(f"--seeds: must be an integer in [{lo}, {hi}], got {args.seeds}")
+    validation.integer("--seeds", args.seeds, low=lo, high=hi)
     box = _box(args)
     spec = {
         "kind": "family",
@@ -195,8 +189,7 @@ def _family(args) -> int:
         "box": {"lam": list(box.lam), "mu": list(box.mu), "n": box.n},
     }
     for name in ("s3", "p_theta"):
-        if not math.isfinite(spec[name]):
-            raise ValueError(f"--{name.replace('_', '-')}: must be a finite number, got {spec[name]!r}")
+        validation.number(f"--{name.replace('_', '-')}", spec[name])
     return _run(args, spec)
 
 
@@ -286,8 +279,9 @@ def _number(text: str) -> int:
         value = float(text.replace("_", ""))
     except ValueError:
         raise ValueError(f"--budget: expected ALGO=STEPS (e.g. ppo=5e5), got {text!r:.40}") from None
-    if not math.isfinite(value) or value != int(value):
-        raise ValueError(f"--budget: steps must be a whole number, got {text!r:.40}")
+    validation.requirement(
+        "--budget", text[:40], math.isfinite(value) and value == int(value), "give steps as a whole number"
+    )
     return int(value)
 
 

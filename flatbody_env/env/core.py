@@ -319,8 +319,7 @@ class EnvCore:
         self.max_episode_steps = max_episode_steps
         self.autoreset = autoreset
         task, st = c.task, c.stepper
-        if backend not in ("cpu", "cuda"):
-            raise ValueError(f"device: must be 'cpu' or 'cuda', got {backend!r}")
+        validation.requirement("device", backend, backend in ("cpu", "cuda"), "be 'cpu' or 'cuda'")
         if task.varies_body and not _kernel_stepper(st) and n > 1:
             raise ValueError(
                 f"integrator: {st.method!r} cannot step a body drawn per episode "
@@ -474,11 +473,10 @@ class EnvCore:
         task = self.config.task
         if code == tr.ERR_ACTION:
             if self.num_envs == 1:
-                raise ValueError(f"{self.action_field}: must be finite numbers in [-1, 1] (the body was not stepped)")
-            raise ValueError(
-                f"{self.action_field}: must be finite numbers in [-1, 1] (body {body} was not stepped; the bodies with "
-                "finite "
-                "actions were)"
+                raise validation.refusal(self.action_field, "be finite numbers in [-1, 1] (the body was not stepped)")
+            raise validation.refusal(
+                self.action_field,
+                f"be finite numbers in [-1, 1] (body {body} was not stepped; the bodies with finite actions were)",
             )
         if code == tr.ERR_NO_TARGET:
             raise ValueError(task.no_target_message)
@@ -660,7 +658,7 @@ class EnvCore:
             tr.cpu("step_lanes")(A, self.S, self.K, self.OBS, self.FINAL, self.FLAGS, *self._dev)
         else:
             if not np.isfinite(A).all():  # before any body moves (the per-body loop checks each body itself)
-                raise ValueError(f"{self.action_field}: must be finite numbers in [-1, 1] (no body was stepped)")
+                raise validation.refusal(self.action_field, "be finite numbers in [-1, 1] (no body was stepped)")
             tr.cpu("controls_lanes")(A, self.S, self.K, self.xcfg, self._AC, self._U)
             Y = self.S[tr.Y0 : tr.Y0 + 11]
             st = c.stepper
@@ -754,7 +752,7 @@ class EnvCore:
         mask = c.mask.astype(np.uint8)
         for k in range(actions.shape[0]):
             if not compiled.controls_batch(np.ascontiguousarray(actions[k]), mask, c.limits, A, U):
-                raise ValueError("actions: must be finite numbers")
+                raise validation.refusal("actions", "be finite numbers")
             c.stepper.advance_batch(Y, U, c.dt, out, status, nfev)
             compiled.domain_codes(out, c.kcfg, codes)
             ok &= (status == 0) & (codes == 0)
@@ -794,8 +792,12 @@ def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any])
                 f"{sorted(task_kwargs)[0]}: give the task's fields to its constructor, not beside a task instance"
             )
         return task
-    if not isinstance(task, str) or task not in TASK_CLASSES:
-        raise ValueError(f"task: must be one of {', '.join(TASK_CLASSES)} or a task instance, got {task!r:.60}")
+    validation.requirement(
+        "task",
+        task,
+        isinstance(task, str) and task in TASK_CLASSES,
+        f"be one of {', '.join(TASK_CLASSES)} or a task instance",
+    )
     import importlib
 
     module, name = TASK_CLASSES[task].split(":")
@@ -860,8 +862,7 @@ def _checked_options(options: Any) -> dict[str, Any]:
             checked["branch"] = v.string("options.target.branch", target["branch"], choices=("rotation", "circulation"))
         if "sign" in target:
             checked["sign"] = v.number("options.target.sign", target["sign"], low=-1.0, high=1.0)
-            if checked["sign"] not in (-1.0, 1.0):
-                raise ValueError(f"options.target.sign: must be +1 or -1, got {checked['sign']!r}")
+            v.requirement("options.target.sign", checked["sign"], checked["sign"] in (-1.0, 1.0), "be +1 or -1")
         options["target"] = checked
     if "state" in options:
         options["state"] = v.mapping("options.state", options["state"])

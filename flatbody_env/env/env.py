@@ -294,9 +294,7 @@ class FlatBodyEnv(gym.Env):
         non-finite or wrong-sized action."""
         a = self._action(action)
         if not np.isfinite(a).all():
-            raise ValueError(
-                f"action: must be {a.size} finite real numbers in [-1, 1], got {validation._short(action)}"
-            )
+            raise validation.refusal("action", f"be {a.size} finite real numbers in [-1, 1]", action)
         clipped = np.clip(a, -1.0, 1.0) if self.config.mask.any() else np.zeros_like(a)
         u = np.zeros(4)
         u[self.config.mask] = clipped[: int(self.config.mask.sum())] * self.config.limits[self.config.mask]
@@ -312,9 +310,7 @@ class FlatBodyEnv(gym.Env):
         except (TypeError, ValueError, OverflowError):
             a = None
         if a is None or a.shape != (n,):  # the action space's shape (n,) only: (1, n), (n, 1) are batches or typos
-            raise ValueError(
-                f"action: must be {n} finite real numbers in [-1, 1] (shape ({n},)), got {validation._short(action)}"
-            )
+            raise validation.refusal("action", f"be {n} finite real numbers in [-1, 1] (shape ({n},))", action)
         return a
 
     # --- gymnasium API ---------------------------------------------------------------------------------

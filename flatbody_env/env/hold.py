@@ -82,20 +82,23 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
         super().__post_init__()
         for name in ("min_growth_rate", "max_growth_rate", "w_alive"):
             validation.number(name, getattr(self, name), low=0.0, high=validation.PARAM_RANGE[1])
-        if self.max_growth_rate < self.min_growth_rate:
-            raise ValueError(
-                f"max_growth_rate: must be >= min_growth_rate ({self.min_growth_rate}), got {self.max_growth_rate!r}"
-            )
+        validation.requirement(
+            "max_growth_rate",
+            self.max_growth_rate,
+            self.max_growth_rate >= self.min_growth_rate,
+            f"be >= min_growth_rate ({self.min_growth_rate})",
+        )
         lo, hi = validation.interval("start_radius", self.start_radius, low=0.0, high=1.0, strict=False)
         object.__setattr__(self, "start_radius", (lo, hi))
-        if hi >= 1.0:
-            raise ValueError(
-                f"start_radius: must be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance), got {(lo, hi)!r}"
-            )
-        if self.success_tolerance <= 0:
-            raise ValueError(
-                f"success_tolerance: must be > 0 for a task that ends outside it, got {self.success_tolerance!r}"
-            )
+        validation.requirement(
+            "start_radius", (lo, hi), hi < 1.0, "be (lo, hi) with 0 <= lo <= hi < 1 (fractions of the tolerance)"
+        )
+        validation.requirement(
+            "success_tolerance",
+            self.success_tolerance,
+            self.success_tolerance > 0,
+            "be > 0 for a task that ends outside it",
+        )
 
     @property
     def no_target_message(self) -> str:

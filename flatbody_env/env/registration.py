@@ -130,7 +130,9 @@ def task_spec(env_id: str) -> TaskSpec:
     for spec in TASKS:
         if spec.env_id == env_id:
             return spec
-    raise ValueError(f"env: must be one of {', '.join(TASK_IDS)}, got {env_id!r}")
+    from flatbody_env.physics import validation
+
+    raise validation.refusal("env", f"be one of {', '.join(TASK_IDS)}", env_id)
 
 
 def register_envs() -> None:

@@ -35,6 +35,8 @@ import math
 
 import numpy as np
 
+from flatbody_env.physics import validation
+
 SIZE = 256
 """Frame side in pixels."""
 
@@ -64,8 +66,7 @@ _NICE = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0)
 
 def nice_half_width(extent: float) -> float:
     """The smallest "nice" number (1, 1.5, 2, 3, 4, 5, 6, 8 × 10ᵏ) ≥ ``extent`` (> 0)."""
-    if not (extent > 0.0 and math.isfinite(extent)):
-        raise ValueError(f"extent: must be a finite number > 0, got {extent!r}")
+    validation.number("extent", extent, positive=True)
     k = math.floor(math.log10(extent))
     for m in _NICE:
         v = m * 10.0**k
@@ -431,8 +432,7 @@ def frame_strip(
     steps = [int(s) for s in steps]
     if not steps or steps[0] < 0 or any(b <= a for a, b in zip(steps, steps[1:])):
         raise ValueError(f"frames: expected increasing step counts ≥ 0, got {steps!r}")
-    if gap < 0:
-        raise ValueError(f"gap: must be ≥ 0, got {gap!r}")
+    validation.requirement("gap", gap, gap >= 0, "be ≥ 0")
     env = gym.make(f"flatbody_env:{env_id}", render_mode="rgb_array")  # (the prefix imports the package: the ids)
     try:
         obs, info = env.reset(seed=seed)

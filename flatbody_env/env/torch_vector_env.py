@@ -83,9 +83,8 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         try:
             dev = torch.device(device)
         except (RuntimeError, TypeError):
-            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r:.60}") from None
-        if dev.type not in ("cpu", "cuda"):
-            raise ValueError(f"device: must be 'cpu' or 'cuda', got {device!r:.60}")
+            dev = None  # not a device at all: refused below, without torch's error as context
+        validation.requirement("device", device, dev is not None and dev.type in ("cpu", "cuda"), "be 'cpu' or 'cuda'")
         self.device = dev
         """The device of every tensor this env returns."""
         self._closed = False
@@ -161,7 +160,7 @@ class FlatBodyTorchVectorEnv(VectorEnv):
             or bool((s < 0).any())
             or bool((s >= top).any())
         ):
-            raise ValueError(f"steps: must be {n} integers in [0, {top})")
+            raise validation.refusal("steps", f"be {n} integers in [0, {top})")
         if self._gpu is not None:
             self._gpu.t["K"][tr.K_CLOCK].copy_(s.to(self.device))
         else:
@@ -174,8 +173,8 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         try:
             a = torch.as_tensor(actions)
         except (TypeError, ValueError, RuntimeError, OverflowError):
-            raise ValueError(
-                f"actions: must be a tensor of shape {shape} with a real floating dtype, got {validation._short(actions)}"
+            raise validation.refusal(
+                "actions", f"be a tensor of shape {shape} with a real floating dtype", actions
             ) from None
         if tuple(a.shape) != shape:
             raise ValueError(f"actions: must have shape {shape}, got {tuple(a.shape)}")
@@ -188,12 +187,12 @@ class FlatBodyTorchVectorEnv(VectorEnv):
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         self._open()
         options = {} if options is None else dict(validation.mapping("options", options))
-        if "stagger" in options and not isinstance(options["stagger"], (bool, np.bool_)):
-            raise ValueError(f"options.stagger: must be true or false, got {options['stagger']!r:.60}")
+        if "stagger" in options:
+            validation.boolean("options.stagger", options["stagger"])
         if "reset_mask" in options:
             m = torch.as_tensor(options["reset_mask"])
             if tuple(m.shape) != (self.num_envs,) or m.dtype != torch.bool:
-                raise ValueError(f"options.reset_mask: must be a bool array of shape ({self.num_envs},)")
+                raise validation.refusal("options.reset_mask", f"be a bool array of shape ({self.num_envs},)")
             options["reset_mask"] = m
         self._started = True
         if self._gpu is not None:

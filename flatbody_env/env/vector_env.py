@@ -66,9 +66,13 @@ def batch_arguments(
     try:
         mode = AutoresetMode(autoreset_mode)
     except ValueError:
-        raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r:.60}") from None
-    if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-        raise ValueError(f"autoreset_mode: must be NextStep or SameStep, got {autoreset_mode!r:.60}")
+        mode = None  # not a mode at all: refused below, without the enum's error as context
+    validation.requirement(
+        "autoreset_mode",
+        autoreset_mode,
+        mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP),
+        "be NextStep or SameStep",
+    )
     return num_envs, max_episode_steps, mode
 
 
@@ -163,10 +167,8 @@ class FlatBodyVectorEnv(VectorEnv):
         **kwargs: Any,
     ) -> None:
         num_envs, max_episode_steps, mode = batch_arguments(num_envs, max_episode_steps, autoreset_mode)
-        if num_threads is not None and (
-            not isinstance(num_threads, int) or isinstance(num_threads, bool) or not 1 <= num_threads <= MAX_THREADS
-        ):
-            raise ValueError(f"num_threads: must be an integer in [1, {MAX_THREADS}] or None, got {num_threads!r:.60}")
+        if num_threads is not None:
+            num_threads = validation.integer("num_threads", num_threads, low=1, high=MAX_THREADS)
         if kwargs.get("render_mode") is not None or kwargs.get("track_rotation"):
             raise ValueError("render_mode: FlatBodyVectorEnv does not render; use FlatBody-v1 for frames")
         self.metadata = {**self.metadata, "autoreset_mode": mode}
@@ -271,7 +273,7 @@ class FlatBodyVectorEnv(VectorEnv):
             or (s < 0).any()
             or (s >= self.max_episode_steps).any()
         ):
-            raise ValueError(f"steps: must be {self.num_envs} integers in [0, {self.max_episode_steps})")
+            raise validation.refusal("steps", f"be {self.num_envs} integers in [0, {self.max_episode_steps})", steps)
         for core, sl in zip(self.cores, self._slices, strict=True):
             core.K[tr.K_CLOCK] = s[sl]
 
@@ -285,9 +287,7 @@ class FlatBodyVectorEnv(VectorEnv):
         except (TypeError, ValueError, OverflowError):
             a = None
         if a is None or not np.isfinite(a).all():
-            raise ValueError(
-                f"actions: must be {shape} finite real numbers in [-1, 1], got {validation._short(actions)}"
-            )
+            raise validation.refusal("actions", f"be {shape} finite real numbers in [-1, 1]", actions)
         return a
 
     def controls(self, actions) -> np.ndarray:
@@ -307,14 +307,17 @@ class FlatBodyVectorEnv(VectorEnv):
         options = {} if options is None else dict(validation.mapping("options", options))
         mask = options.pop("reset_mask", None)
         stagger = options.pop("stagger", False)
-        if not isinstance(stagger, (bool, np.bool_)):
-            raise ValueError(f"options.stagger: must be true or false, got {stagger!r:.60}")
+        validation.boolean("options.stagger", stagger)
         if mask is None:
             mask = np.ones(n, dtype=bool)
         else:
             mask = np.asarray(mask)
-            if mask.shape != (n,) or mask.dtype != np.bool_:
-                raise ValueError(f"options.reset_mask: must be a bool array of shape ({n},)")
+            validation.requirement(
+                "options.reset_mask",
+                mask,
+                mask.shape == (n,) and mask.dtype == np.bool_,
+                f"be a bool array of shape ({n},)",
+            )
         seeds = seed_list(seed, n)
         for core, sl in zip(self.cores, self._slices, strict=True):
             core.reset(

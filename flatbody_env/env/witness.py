@@ -153,21 +153,22 @@ class ReachWithWitness(ReachStationaryEllipse):
             )
         validation.integer("witness_steps", self.witness_steps, low=1, high=validation.WITNESS_MAX_STEPS)
         validation.integer("max_witness_attempts", self.max_witness_attempts, low=1, high=validation.RESET_MAX_STEPS)
-        if self.witness_steps * self.max_witness_attempts > validation.RESET_MAX_STEPS:
-            raise ValueError(
-                f"max_witness_attempts: witness_steps × max_witness_attempts must be <= {validation.RESET_MAX_STEPS:,} "
-                f"env steps (a reset's work; each step has its own budget), got {self.witness_steps} × "
-                f"{self.max_witness_attempts}"
-            )
+        validation.requirement(
+            "max_witness_attempts",
+            self.max_witness_attempts,
+            self.witness_steps * self.max_witness_attempts <= validation.RESET_MAX_STEPS,
+            f"keep witness_steps × max_witness_attempts <= {validation.RESET_MAX_STEPS:,} env steps (a reset's work; "
+            f"each step has its own budget; witness_steps = {self.witness_steps})",
+        )
         pair = self.witness_half_period
+        half_period_rule = "be integers (lo, hi) with 1 <= lo <= hi"
         if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
-            raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {pair!r:.60}")
+            raise validation.refusal("witness_half_period", half_period_rule, pair)
         lo, hi = (
             validation.integer(f"witness_half_period[{i}]", x, low=1, high=validation.MAX_EPISODE_STEPS)
             for i, x in enumerate(pair)
         )
-        if lo > hi:
-            raise ValueError(f"witness_half_period: must be integers (lo, hi) with 1 <= lo <= hi, got {(lo, hi)!r}")
+        validation.requirement("witness_half_period", (lo, hi), lo <= hi, half_period_rule)
         object.__setattr__(self, "witness_half_period", (lo, hi))
         validation.number(
             "min_uncontrolled_offset", self.min_uncontrolled_offset, low=0.0, high=validation.PARAM_RANGE[1]

@@ -104,18 +104,15 @@ class Tolerances:
         object.__setattr__(self, "rtol", v.number("rtol", self.rtol, low=v.TOL_RANGE[0], high=v.TOL_RANGE[1]))
         object.__setattr__(self, "atol", v.number("atol", self.atol, low=v.TOL_RANGE[0], high=v.TOL_RANGE[1]))
         if self.step is not None:
-            step = v.number("step", self.step, positive=True)
-            if step > v.T_END_MAX:
-                raise ValueError(f"step: must lie in (0, {v.T_END_MAX:g}], got {step!r}")
-            object.__setattr__(self, "step", step)
-        if not (
+            object.__setattr__(self, "step", v.number("step", self.step, positive=True, high=v.T_END_MAX))
+        v.requirement(
+            "energy_tol",
+            self.energy_tol,
             isinstance(self.energy_tol, (int, float, np.integer, np.floating))
             and not isinstance(self.energy_tol, bool)
-            and (self.energy_tol == np.inf or (math.isfinite(float(self.energy_tol)) and self.energy_tol > 0))
-        ):
-            raise ValueError(
-                f"energy_tol: must be a number > 0 or inf (allowed range (0, inf]), got {self.energy_tol!r}"
-            )
+            and (self.energy_tol == np.inf or (math.isfinite(float(self.energy_tol)) and self.energy_tol > 0)),
+            "be a number > 0 or inf (allowed range (0, inf])",
+        )
         object.__setattr__(self, "energy_tol", float(self.energy_tol))
         object.__setattr__(self, "max_nfev", v.integer("max_nfev", self.max_nfev, low=1, high=10**12))
         object.__setattr__(

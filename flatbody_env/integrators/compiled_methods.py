@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.kinematics import Decomposition
 from flatbody_env.physics.potentials import V2
@@ -155,7 +156,7 @@ def _watched(run: Callable[[], Any], times: np.ndarray, fail: np.ndarray) -> Any
 def _times(times) -> np.ndarray:
     times = np.array(times, dtype=np.float64).ravel()
     if times.size < 1 or not np.isfinite(times).all() or not (times[1:] > times[:-1]).all():
-        raise ValueError("times: must be finite and strictly increasing")
+        raise validation.refusal("times", "be finite and strictly increasing")
     return times
 
 

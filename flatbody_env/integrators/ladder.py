@@ -79,6 +79,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs
 from flatbody_env.physics.hamiltonian import hamiltonian, kinetic_kernel, velocities_from_momenta
@@ -290,7 +291,7 @@ def _energy(Y: np.ndarray, P: np.ndarray, times: np.ndarray, tol: Tolerances, na
 def _times(times) -> np.ndarray:
     times = np.array(times, dtype=np.float64).ravel()
     if times.size < 1 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
-        raise ValueError("times: must be finite and strictly increasing")
+        raise validation.refusal("times", "be finite and strictly increasing")
     return times
 
 

@@ -108,8 +108,7 @@ class Body:
             raise ValueError("potential: expected V1, V2, V3 or CustomPotential")
         if self.thickness is not None and not isinstance(self.thickness, ThicknessPotential):
             raise ValueError("thickness: expected ThicknessPotential(a=..., b=...) or None")
-        if self.spin_convention not in SPIN_CONVENTIONS:
-            raise ValueError(f"spin_convention: must be one of {SPIN_CONVENTIONS}, got {self.spin_convention!r}")
+        validation.string("spin_convention", self.spin_convention, choices=SPIN_CONVENTIONS)
         c1, c2 = self.potential.constants
         a, b = (self.thickness.a, self.thickness.b) if self.thickness is not None else (0.0, 0.0)
         conv = 1.0 if self.spin_convention == "corrected" else -1.0

@@ -34,6 +34,7 @@ import numpy as np
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equations import rhs_iso
 from flatbody_env.physics.hamiltonian import kinetic_iso
+from flatbody_env.physics import validation
 from flatbody_env.physics.state import STATE_NAMES, unpack
 
 BRANCHES = ("rotation", "circulation")
@@ -296,8 +297,7 @@ def stationary_from_shape(
     """
     if not body.inertia.is_isotropic:
         raise ValueError("params: stationary ellipses of branch N need J1 = J2 (isotropic in the plane)")
-    if branch not in BRANCHES:
-        raise ValueError(f"branch: must be one of {BRANCHES}, got {branch!r}")
+    validation.string("branch", branch, choices=BRANCHES)
     if not (lam > 0 and mu > 0) or lam == mu:
         raise ValueError(f"lambda, mu: need λ, μ > 0 and λ ≠ μ, got {lam}, {mu}")
     J = body.inertia.J1

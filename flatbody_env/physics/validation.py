@@ -6,6 +6,11 @@ as one line (exit 2) and an HTTP service returns it as a 422 naming the field. N
 for type before use: ``bool`` is not a number, integers too large for a float are refused, and
 NaN/inf are refused.
 
+A refusal's "X: must be …" / "X: must lie in …" text is composed here and nowhere else
+(a test of the suite holds it): a rule no validator below states goes through
+:func:`requirement` (a condition and the rule) or :func:`refusal` (the exception to raise, also without
+the value or as another class, e.g. argparse's ``ArgumentTypeError``).
+
 Documented ranges
 -----------------
 The model is integrated in double precision; magnitudes outside these ranges make it stiff
@@ -396,7 +401,37 @@ def requirement(where: str, value: Any, ok: bool, rule: str) -> None:
     when ``ok`` is false, ``ValueError`` naming ``where`` with ``rule``, what the value must do (e.g. ``"divide
     n_steps x n_envs = 4096"``)."""
     if not ok:
-        raise ValueError(f"{where}: must {rule}, got {_short(value)}")
+        raise refusal(where, rule, value)
+
+
+_UNSHOWN = object()
+
+
+def refusal(where: str, rule: str, value: Any = _UNSHOWN, *, error: type[Exception] = ValueError) -> Exception:
+    """The exception, to be raised by the caller, for a value that breaks ``rule``: the one spelling of a refusal,
+    ``"{where}: must {rule}, got {value}"`` (the value bounded by its short repr), for the checks no other validator
+    here states — a rule on many values at once, a message that cannot show the value (an array too large to print,
+    a check that already ran elsewhere), an exception other than ``ValueError``.
+
+    Parameters
+    ----------
+    where : str
+        The field's dotted name (``times``, ``options.reset_mask``, ``--grid``).
+    rule : str
+        What the value must do, after "must" (``"be strictly increasing"``, ``"lie in [0, 1]"``).
+    value : Any, optional
+        The refused value, shown after ", got"; left out, the message ends with the rule.
+    error : type of Exception
+        The exception's class: ``ValueError`` (the package's), or e.g. ``argparse.ArgumentTypeError`` for an argument
+        type of a command line.
+
+    Returns
+    -------
+    Exception
+        ``error(message)``; raise it (``from None`` inside an ``except`` block, to hide the library's error).
+    """
+    text = f"{where}: must {rule}" if value is _UNSHOWN else f"{where}: must {rule}, got {_short(value)}"
+    return error(text)
 
 
 def memory(where: str, nbytes: int, what: str, *, limit: int = MAX_TRAINER_BYTES) -> int:
@@ -820,6 +855,7 @@ __all__ = [
     "fields",
     "memory",
     "requirement",
+    "refusal",
     "boolean",
     "interval",
     "ENV_DT_RANGE",

@@ -175,8 +175,14 @@ def screenshots(
     if not times or any(not (t >= 0.0) for t in times):
         raise ValueError(f"times: expected one or more sim_time values ≥ 0, got {times!r}")
     width, height = (int(v) for v in size)
-    if not (320 <= width <= 4096 and 320 <= height <= 4096):
-        raise ValueError(f"size: width and height must be in [320, 4096], got {width}x{height}")
+    from flatbody_env.physics import validation
+
+    validation.requirement(
+        "size",
+        f"{width}x{height}",
+        320 <= width <= 4096 and 320 <= height <= 4096,
+        "have width and height in [320, 4096]",
+    )
     reason = viewer_unavailable()
     if reason:
         raise ValueError(f"viewer: cannot render here — {reason}")

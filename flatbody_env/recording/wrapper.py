@@ -239,10 +239,10 @@ class RerunRecorder(gym.Wrapper):
         path = str(path)
         if not path.endswith(".rrd"):
             raise ValueError(f"path: a rerun recording file must end in .rrd, got {path!r}")
-        if isinstance(block, bool) or not isinstance(block, int) or block < 1:
-            raise ValueError(f"block: must be an integer ≥ 1, got {block!r}")
-        if isinstance(tensor_every, bool) or not isinstance(tensor_every, int) or tensor_every < 1:
-            raise ValueError(f"tensor_every: must be an integer ≥ 1, got {tensor_every!r}")
+        from flatbody_env.physics import validation
+
+        validation.integer("block", block, low=1)
+        validation.integer("tensor_every", tensor_every, low=1)
         self._path = path
         self._trigger = episode_trigger or (lambda k: True)
         self._block = block

@@ -69,6 +69,7 @@ from typing import Any
 
 import numpy as np
 
+from flatbody_env.physics import validation
 from flatbody_env.physics.kinematics import cauchy_tensor, configuration, green_tensor, material_rotation
 from flatbody_env.physics.state import STATE_NAMES
 from flatbody_env.recording.geometry import (
@@ -201,7 +202,7 @@ class _Block:
 def _check_finite(name: str, a: np.ndarray) -> None:
     if not np.all(np.isfinite(a)):
         bad = int(np.argmax(~np.isfinite(a).reshape(a.shape[0], -1).all(axis=1))) if a.ndim else 0
-        raise ValueError(f"{name}: must be finite (first non-finite entry at step index {bad})")
+        raise validation.refusal(name, f"be finite (first non-finite entry at step index {bad})")
 
 
 def _as_block(t, states, rotations, *, energy, step, scale: float = 1.0) -> _Block:
@@ -211,21 +212,23 @@ def _as_block(t, states, rotations, *, energy, step, scale: float = 1.0) -> _Blo
         raise ValueError("t: must hold at least one time")
     _check_finite("t", t)
     if np.any(np.diff(t) < 0):
-        raise ValueError("t: must be non-decreasing")
+        raise validation.refusal("t", "be non-decreasing")
     states = np.asarray(states, dtype=np.float64)
     if states.shape != (len(STATE_NAMES), n):
         raise ValueError(f"states: expected shape ({len(STATE_NAMES)}, {n}) (state × step), got {states.shape}")
     _check_finite("states", states.T)
     for name in ("lambda", "mu", "rho"):
         if np.any(states[_IDX[name]] <= 0):
-            raise ValueError(f"states: {name} must be > 0 (allowed range (0, inf))")
+            raise validation.refusal("states", f"have {name} > 0 (allowed range (0, inf))")
     rotations = np.asarray(rotations, dtype=np.float64)
     if rotations.shape != (n, 3, 3):
         raise ValueError(f"rotations: expected shape ({n}, 3, 3), got {rotations.shape}")
     _check_finite("rotations", rotations)
     ortho = np.max(np.abs(rotations @ np.swapaxes(rotations, 1, 2) - np.eye(3)))
     if ortho > 1e-6 or np.any(np.linalg.det(rotations) <= 0):
-        raise ValueError(f"rotations: must be rotation matrices (RRᵀ = I to 1e-6, det > 0); |RRᵀ − I| = {ortho:.2g}")
+        raise validation.refusal(
+            "rotations", f"be rotation matrices (RRᵀ = I to 1e-6, det > 0); |RRᵀ − I| = {ortho:.2g}"
+        )
     if step is None:
         step_arr = np.arange(n, dtype=np.int64)
     else:
@@ -250,7 +253,7 @@ def _optional_column(name: str, values, n: int, width: int | None = None) -> np.
     if a.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
     if np.any(np.isinf(a)):
-        raise ValueError(f"{name}: must be finite or NaN (NaN marks a step without a value)")
+        raise validation.refusal(name, "be finite or NaN (NaN marks a step without a value)")
     return a
 
 
@@ -506,10 +509,8 @@ class Recorder:
         import rerun as rr
 
         for name, value in (("block", block), ("tensor_every", tensor_every), ("spokes", spokes)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"{name}: must be an integer ≥ 1, got {value!r}")
-        if not (isinstance(extent, (int, float, np.floating)) and np.isfinite(extent) and extent > 0):
-            raise ValueError(f"extent: must be a finite number > 0, got {extent!r}")
+            validation.integer(name, value, low=1)
+        validation.number("extent", extent, positive=True)
         self.path = Path(path)
         if self.path.suffix != ".rrd":
             raise ValueError(f"path: a rerun recording file must end in .rrd, got {str(path)!r}")
@@ -751,7 +752,7 @@ class Recorder:
             target = {k: v[keep] for k, v in b.target.arrays().items()}
             for name, values in target.items():
                 if not np.all(np.isfinite(values[~np.isnan(values)])):
-                    raise ValueError(f"target[{name!r}]: must be finite")
+                    raise validation.refusal(f"target[{name!r}]", "be finite")
             terms = {k: np.where(np.isfinite(v), v, np.nan)[keep] for k, v in b.terms.arrays().items()}
             controls = None
             if any(c is not None for c in b.controls):

@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, fields, replace
 
+from flatbody_env.physics import validation
+
 
 @dataclass(frozen=True, kw_only=True)
 class Limits:
@@ -102,8 +104,9 @@ class Limits:
                 value = int(text) if f.type in (int, "int") else float(text)
             except ValueError:
                 raise ValueError(f"{var}: expected a number, got {text[:40]!r}") from None
-            if not value > 0 or value != value or value == float("inf"):
-                raise ValueError(f"{var}: must be a finite number > 0, got {text[:40]!r}")
+            validation.requirement(
+                var, text[:40], value > 0 and value == value and value != float("inf"), "be a finite number > 0"
+            )
             changes[f.name] = value
         return replace(self, **changes) if changes else self
 

@@ -97,8 +97,9 @@ def dask_client(*, workers: int = 1, scheduler: str | None = None, timeout_s: fl
         finally:
             client.close()
         return
-    if not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers: must be an integer >= 1, got {workers!r}")
+    from flatbody_env.physics import validation
+
+    validation.integer("workers", workers, low=1)
     cluster = client = None
     try:
         with workers_leave_sigint():  # a Ctrl-C during the start is raised at the end of this block: the finally closes

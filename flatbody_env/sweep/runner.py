@@ -141,8 +141,9 @@ def run_sweep(
     ValueError
         ``out`` holds another sweep, or one without ``resume``; ``workers`` < 0.
     """
-    if not isinstance(workers, int) or workers < 0:
-        raise ValueError(f"workers: must be an integer >= 0, got {workers!r}")
+    from flatbody_env.physics import validation
+
+    validation.integer("workers", workers, low=0)
     tasks = plan(spec, out)
     with ResultStore(out) as store:
         store.begin(spec, resume=resume, extends=extends)

@@ -38,6 +38,7 @@ from typing import Any
 from collections.abc import Callable
 
 from agents.evaluate import EVAL_SEED  # the first evaluation seed of a seeds sweep (re-exported)
+from flatbody_env.physics import validation
 from flatbody_env.physics.validation import SWEEP_GRID_RANGE
 
 KINDS = ("stability-map", "failure-study", "family", "seeds", "benchmark")
@@ -262,8 +263,7 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
     kind = spec.get("kind")
     if kind in SERIAL_ONLY:
         raise ValueError(serial_only_message(kind))
-    if kind not in KINDS:
-        raise ValueError(f"kind: must be one of {', '.join(KINDS)}, got {kind!r}")
+    validation.requirement("kind", kind, kind in KINDS, f"be one of {', '.join(KINDS)}")
     out = Path(out).resolve()  # workers elsewhere write files (family tables, models) at this absolute path
     tasks: list[Task] = []
     if kind == "stability-map":

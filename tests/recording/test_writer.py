@@ -152,7 +152,7 @@ def test_bad_input_is_a_clear_value_error(traj, scene, tmp_path):
         record_arrays(t, Y[:, :-1], R, scene.body, ok, energy=traj.energy)
     bad = Y.copy()
     bad[9, 3] = -0.1
-    with pytest.raises(ValueError, match="rho must be > 0"):
+    with pytest.raises(ValueError, match="states: must have rho > 0"):
         record_arrays(t, bad, R, scene.body, ok, energy=traj.energy)
     bad = Y.copy()
     bad[7, 5] = np.nan
