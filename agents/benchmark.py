@@ -91,11 +91,31 @@ def _sb3_callback(curve: _Curve):
     return Evaluations()
 
 
+def variant_label(algo: str, overrides: list[str] | None) -> str:
+    """The name of an algorithm run with ``overrides`` in the tables and charts: ``"ppo learning_rate=0.0003"`` (the
+    algorithm itself without them)."""
+    return " ".join([algo, *(overrides or [])])
+
+
+def _order(label: str) -> tuple:
+    """Sort key of a table column: the algorithms in :data:`ALGOS` order, a grid's points by their value."""
+    base, _, rest = label.partition(" ")
+    _, _, value = rest.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.inf
+    return (ALGOS.index(base) if base in ALGOS else len(ALGOS), number, label)
+
+
 def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *, eval_seed: int, curve_episodes: int = CURVE_EPISODES,
-             final_episodes: int = FINAL_EPISODES, command: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+             final_episodes: int = FINAL_EPISODES, command: list[str] | None = None,
+             overrides: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
     """Train ``algo`` from scratch on ``env_id`` with ``seed`` for ``budget`` env steps into ``out`` and evaluate it
     along the way (module docstring); the row: ``{"algo", "env_id", "seed", "budget", "curve": [...], "final": {...},
-    "train_seconds", "run"}``."""
+    "train_seconds", "run"}``. ``overrides``: one point of a hyperparameter grid (``["learning_rate=0.0003"]``, as
+    ``flatbody train --hyperparams``); its row's ``algo`` is then the variant's label (:func:`variant_label`), and
+    ``"base_algo"`` and ``"overrides"`` say what it is."""
     from agents.train import train
 
     curve = _Curve(env_id, budget, eval_seed, curve_episodes)
@@ -113,7 +133,7 @@ def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *,
         kwargs["extra_callbacks"] = [_sb3_callback(curve)]
     result = train(
         algo, out, seed=seed, n_timesteps=int(budget), env_id=env_id, checkpoint_freq=0, threads=1, progress=False,
-        force=True, notes=False, command=command, **kwargs,
+        force=True, notes=False, command=command, overrides=list(overrides or []), **kwargs,
     )  # fmt: skip
     from agents.evaluate import Agent
 
@@ -121,8 +141,10 @@ def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *,
     train_s = time.perf_counter() - curve.t0 - curve.eval_seconds
     final = _evaluate(agent, env_id, final_episodes, eval_seed)
     curve.points.append({"env_steps": int(result.timesteps), "train_seconds": float(train_s), **final})
+    variant = {"base_algo": algo, "overrides": list(overrides)} if overrides else {}
     return {
-        "algo": algo,
+        "algo": variant_label(algo, overrides),
+        **variant,
         "env_id": env_id,
         "seed": int(seed),
         "budget": int(budget),
@@ -210,14 +232,14 @@ def final_table(rows: list[dict[str, Any]], reports: list[dict[str, Any]]) -> di
 
 
 def report(rows: list[dict[str, Any]], out: str | Path, reports: list[dict[str, Any]]) -> dict[str, Path]:
-    """Write ``benchmark.json`` (rows, curves, the final table), ``benchmark.csv`` (one row per case) and the charts
-    (``benchmark_curves.png``: success against env steps and against training time per task; ``benchmark_iqm.png``)
-    into ``out``; returns the paths."""
+    """Write ``benchmark.json`` (rows, curves, the final table, a hyperparameter grid's sensitivity), ``benchmark.csv``
+    (one row per case) and the charts (``benchmark_curves.png``: success against env steps and against training time
+    per task; ``benchmark_iqm.png``; with a grid ``benchmark_sensitivity.png``) into ``out``; returns the paths."""
     from flatbody_env.output import atomic_write, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    data = {"rows": rows, "curves": curves(rows), "final": final_table(rows, reports)}
+    data = {"rows": rows, "curves": curves(rows), "final": final_table(rows, reports), "sensitivity": sensitivity(rows)}
     paths = {"json": atomic_write(out / "benchmark.json", json.dumps(data, indent=1) + "\n")}
     header = ["algo", "env_id", "seed", "budget", "success", "return", "final_distance", "train_seconds"]
     paths["csv"] = write_csv(
@@ -240,10 +262,27 @@ def report(rows: list[dict[str, Any]], out: str | Path, reports: list[dict[str, 
     paths["curves"] = plot_curves(data, out / "benchmark_curves.png")
     if data["final"]["iqm"]:
         paths["iqm"] = plot_iqm(data, out / "benchmark_iqm.png")
+    if data["sensitivity"]:
+        paths["sensitivity"] = plot_sensitivity(data, out / "benchmark_sensitivity.png")
     return paths
 
 
 COLOURS = {"ppo": "#1f77b4", "sac": "#2ca02c", "td3": "#9467bd", "rsl-ppo": "#d62728"}
+
+
+def _colours(labels) -> dict[str, str]:
+    """A colour per column: an algorithm's own (:data:`COLOURS`); a hyperparameter grid's points in the figure
+    helper's colour cycle, in grid order."""
+    from flatbody_env.figures import CYCLE
+
+    out, k = {}, 0
+    for label in sorted(set(labels), key=_order):
+        if label in COLOURS:
+            out[label] = COLOURS[label]
+        else:
+            out[label] = CYCLE[k % len(CYCLE)]
+            k += 1
+    return out
 
 
 CURVES_CAPTION = (
@@ -266,9 +305,10 @@ def plot_curves(data: dict[str, Any], png: str | Path) -> Path:
     from flatbody_env.figures import chart, fraction_axis
 
     envs = [e for e in V1_IDS if any(k.endswith(f"|{e}") for k in data["curves"])]
+    colours = _colours(k.split("|")[0] for k in data["curves"])
     with chart(png, size=(max(6.4, 3.2 * len(envs)), 7.0), nrows=2, ncols=len(envs), sharey=True) as c:
         for j, env_id in enumerate(envs):
-            for key, curve in sorted(data["curves"].items()):
+            for key, curve in sorted(data["curves"].items(), key=lambda kv: _order(kv[0].split("|")[0])):
                 algo, env = key.split("|")
                 if env != env_id:
                     continue
@@ -278,9 +318,9 @@ def plot_curves(data: dict[str, Any], png: str | Path) -> Path:
                     lo = [p["success"][1] for p in curve["points"]]
                     hi = [p["success"][2] for p in curve["points"]]
                     ax = c.axes[i, j]
-                    ax.plot(xs, m, color=COLOURS.get(algo), lw=1.6, marker="o", ms=3,
+                    ax.plot(xs, m, color=colours[algo], lw=1.6, marker="o", ms=3,
                             label=f"{algo} ({len(curve['seeds'])} seeds)")  # fmt: skip
-                    ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=COLOURS.get(algo), alpha=0.15)
+                    ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=colours[algo], alpha=0.15)
             c.axes[0, j].set_title(env_id)
             c.axes[0, j].set_xlabel("env steps")
             c.axes[1, j].set_xlabel("training time (s)")
@@ -299,11 +339,12 @@ def plot_iqm(data: dict[str, Any], png: str | Path) -> Path:
 
     q = data["final"]["iqm"]
     algos = sorted(q, key=lambda a: q[a]["iqm"])
+    colours = _colours(algos)
     with chart(png, size=(7.0, 1.6 + 0.45 * len(algos))) as c:
         ax = c.ax
         for i, a in enumerate(algos):
             ax.errorbar([q[a]["iqm"]], [i], xerr=[[q[a]["iqm"] - q[a]["lo"]], [q[a]["hi"] - q[a]["iqm"]]], fmt="o",
-                        color=COLOURS.get(a), capsize=4)  # fmt: skip
+                        color=colours[a], capsize=4)  # fmt: skip
         ax.set_yticks(range(len(algos)), [f"{a} ({q[a]['runs']} seeds × {q[a]['tasks']} tasks)" for a in algos])
         ax.axvline(0.0, color=PALETTE["goal"], lw=0.8, ls=":")
         ax.axvline(1.0, color=PALETTE["goal"], lw=0.8, ls=":")
@@ -313,13 +354,68 @@ def plot_iqm(data: dict[str, Any], png: str | Path) -> Path:
     return Path(png)
 
 
+SENSITIVITY_CAPTION = (
+    "Each point: the algorithm trained from scratch with one value of the hyperparameter (every other entry as in its "
+    "YAML file), its final success on the held-out episodes, mean over the training seeds and its 95 % t-interval."
+)
+
+
+def sensitivity(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A hyperparameter grid's answer (rows from ``--hyperparam-grid``): per ``base_algo|env_id`` the grid's values
+    (sorted) and the final success at each (mean, lo, hi over the seeds); empty without a grid."""
+    groups: dict[str, dict[float, list[float]]] = {}
+    name = None
+    for r in rows:
+        if not r.get("overrides"):
+            continue
+        key, _, value = r["overrides"][0].partition("=")
+        name = key
+        cell = groups.setdefault(f"{r['base_algo']}|{r['env_id']}", {})
+        cell.setdefault(float(value), []).append(r["final"]["success_rate"])
+    out = {}
+    for key, by_value in groups.items():
+        values = sorted(by_value)
+        out[key] = {"values": values, "success": [mean_interval(by_value[v]) for v in values],
+                    "seeds": [len(by_value[v]) for v in values]}  # fmt: skip
+    return {"hyperparam": name, "cells": out} if out else {}
+
+
+def plot_sensitivity(data: dict[str, Any], png: str | Path) -> Path:
+    """Final success against the grid's hyperparameter (:func:`sensitivity`), one line per algorithm and task; a
+    logarithmic axis for a positive grid that spans a decade or more."""
+    from flatbody_env.figures import CYCLE, chart, fraction_axis
+
+    sens = data["sensitivity"]
+    with chart(png, size=(7.0, 4.4)) as c:
+        ax = c.ax
+        values = [v for cell in sens["cells"].values() for v in cell["values"]]
+        for k, (key, cell) in enumerate(sorted(sens["cells"].items())):
+            algo, env_id = key.split("|")
+            xs = cell["values"]
+            m, lo, hi = (np.array([p[i] for p in cell["success"]]) for i in range(3))
+            colour = COLOURS.get(algo) if len(sens["cells"]) == 1 else CYCLE[k % len(CYCLE)]
+            ax.plot(
+                xs, m, color=colour, lw=1.6, marker="o", ms=4, label=f"{algo} on {env_id} ({min(cell['seeds'])} seeds)"
+            )
+            ax.fill_between(xs, np.clip(lo, 0, 1), np.clip(hi, 0, 1), color=colour, alpha=0.15)
+        if min(values) > 0 and max(values) >= 10 * min(values):
+            ax.set_xscale("log")
+        ax.set_xlabel(sens["hyperparam"])
+        fraction_axis(ax, "final success on held-out episodes")
+        ax.grid(alpha=0.3)
+        c.title(f"Sensitivity to {sens['hyperparam']}: final success, mean and 95 % t-interval over the seeds")
+        c.legend(where="below", ncol=2)
+        c.caption(SENSITIVITY_CAPTION)
+    return Path(png)
+
+
 def markdown(data: dict[str, Any], command: str) -> str:
     """The docs block of the final table (the command that made it beside it)."""
     from agents.reference import POLICY_LABELS
     from flatbody_env.env.registration import V1_IDS
 
     f = data["final"]
-    algos = sorted({c["algo"] for c in f["cells"].values()}, key=lambda a: ALGOS.index(a) if a in ALGOS else 99)
+    algos = sorted({c["algo"] for c in f["cells"].values()}, key=_order)
     lines = [
         "| task | score 0 (best classic) → 1 | " + " | ".join(algos) + " |",
         "|---|---|" + "---|" * len(algos),
@@ -365,6 +461,9 @@ __all__ = [
     "final_table",
     "markdown",
     "mean_interval",
+    "plot_sensitivity",
     "report",
     "run_case",
+    "sensitivity",
+    "variant_label",
 ]

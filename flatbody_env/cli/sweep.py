@@ -16,6 +16,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 from flatbody_env.cli.args import float_range, int_at_least, positive_float
 from flatbody_env.physics import validation
@@ -244,9 +245,14 @@ def _benchmark(args) -> int:
         "budgets": budgets,
         "eval_seed": args.eval_seed,
     }
+    grid = ""
+    if args.hyperparam_grid is not None:
+        spec["grid"] = _hyperparam_grid(args.hyperparam_grid, algos, envs)
+        grid = f" --hyperparam-grid {args.hyperparam_grid}"
     command = (
         f"flatbody benchmark --algos {','.join(algos)} --envs {args.envs} --seeds {args.seeds} "
         + " ".join(f"--budget {a}={budgets[a]}" for a in algos)
+        + grid
         + f" --out {args.out}"
     )
     result = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
@@ -271,6 +277,37 @@ def _benchmark(args) -> int:
         )
         return 1
     return 0
+
+
+MAX_GRID_VALUES = 16
+"""Values of one ``--hyperparam-grid``: each one trains every algorithm, task and seed once more."""
+
+
+def _hyperparam_grid(text: str, algos: list[str], envs: list[str]) -> dict[str, Any]:
+    """``KEY=V1,V2,...`` as ``{"key", "values"}``, each value checked now — for every algorithm and task, as the run
+    would check it (:func:`agents.config.resolve`) — so a bad value stops the benchmark before anything trains."""
+    from agents.config import resolve
+
+    key, sep, rest = text.partition("=")
+    values = [v.strip() for v in rest.split(",") if v.strip()]
+    if not sep or not key.strip() or not values:
+        raise ValueError(
+            f"--hyperparam-grid: expected KEY=V1,V2,... (e.g. learning_rate=1e-4,3e-4,1e-3), got {text!r:.60}"
+        )
+    validation.requirement(
+        "--hyperparam-grid", text, 2 <= len(values) <= MAX_GRID_VALUES, f"hold 2 to {MAX_GRID_VALUES} values"
+    )
+    key = key.strip()
+    if len(set(values)) != len(values):
+        raise ValueError(f"--hyperparam-grid: a value is given twice, got {text!r:.60}")
+    for value in values:
+        for algo in algos:
+            for env_id in envs:
+                try:
+                    resolve(algo, env_id, overrides=[f"{key}={value}"])
+                except ValueError as e:
+                    raise ValueError(f"--hyperparam-grid: {algo} on {env_id}: {e}") from None
+    return {"key": key, "values": values}
 
 
 def _number(text: str) -> int:
@@ -521,6 +558,12 @@ def register(sub) -> None:
         "--algos", default="ppo,sac,td3,rsl-ppo", metavar="A,B", help="algorithms (default ppo,sac,td3,rsl-ppo)"
     )
     p.add_argument("--envs", default="all", metavar="ID,ID", help="v1 ids, or all (default)")
+    p.add_argument(
+        "--hyperparam-grid",
+        metavar="KEY=V1,V2",
+        help="train each algorithm once per value of one hyperparameter (e.g. learning_rate=1e-4,3e-4,1e-3): a "
+        "sensitivity study, charted as benchmark_sensitivity.png",
+    )
     p.add_argument("--seeds", default="0-4", metavar="RANGE", help="training seeds, e.g. 0-4 (default; at least 2)")
     p.add_argument(
         "--budget",

@@ -183,6 +183,8 @@ def benchmark_case(task: Task) -> dict[str, Any]:
     from agents.benchmark import run_case
 
     p = task.params
+    overrides = list(p.get("overrides") or [])
+    grid = [f"--hyperparam-grid={o}" for o in overrides]
     return run_case(
         p["algo"],
         p["env_id"],
@@ -190,7 +192,15 @@ def benchmark_case(task: Task) -> dict[str, Any]:
         p["budget"],
         p["run_dir"],
         eval_seed=p["eval_seed"],
-        command=["flatbody", "benchmark", f"--algos={p['algo']}", f"--envs={p['env_id']}", f"--seeds={p['seed']}"],
+        command=[
+            "flatbody",
+            "benchmark",
+            f"--algos={p['algo']}",
+            f"--envs={p['env_id']}",
+            f"--seeds={p['seed']}",
+            *grid,
+        ],
+        overrides=overrides,
     )
 
 
@@ -249,7 +259,7 @@ def extends(stored: dict[str, Any], spec: dict[str, Any]) -> bool:
     """
     if stored.get("kind") != "benchmark" or spec.get("kind") != "benchmark":
         return False
-    if any(stored.get(k) != spec.get(k) for k in ("envs", "seeds", "eval_seed")):
+    if any(stored.get(k) != spec.get(k) for k in ("envs", "seeds", "eval_seed", "grid")):
         return False
     old, new = stored.get("algos") or [], spec.get("algos") or []
     if not set(old) <= set(new):
@@ -326,24 +336,29 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
                         )
                     )
     elif kind == "benchmark":  # seed by seed: a benchmark stopped early holds whole seeds of every algorithm and task
+        grid = spec.get("grid")  # a hyperparameter grid: each algorithm once per value
+        variants = [[f"{grid['key']}={v}"] for v in grid["values"]] if grid else [[]]
         for seed in spec["seeds"]:
             for algo in spec["algos"]:
-                for env_id in spec["envs"]:
-                    key = f"{algo}.{env_id}.{seed:06d}"
-                    tasks.append(
-                        Task(
-                            kind=kind,
-                            key=key,
-                            params={
-                                "algo": algo,
-                                "env_id": env_id,
-                                "seed": seed,
-                                "budget": spec["budgets"][algo],
-                                "eval_seed": spec["eval_seed"],
-                                "run_dir": str(out / "runs" / key),
-                            },
+                for overrides in variants:
+                    for env_id in spec["envs"]:
+                        name = "@".join([algo, *overrides])
+                        key = f"{name}.{env_id}.{seed:06d}"
+                        tasks.append(
+                            Task(
+                                kind=kind,
+                                key=key,
+                                params={
+                                    "algo": algo,
+                                    "overrides": overrides,
+                                    "env_id": env_id,
+                                    "seed": seed,
+                                    "budget": spec["budgets"][algo],
+                                    "eval_seed": spec["eval_seed"],
+                                    "run_dir": str(out / "runs" / key),
+                                },
+                            )
                         )
-                    )
     else:  # seeds
         for seed in spec["seeds"]:
             name = f"models/seed-{seed}"

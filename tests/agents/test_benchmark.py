@@ -60,3 +60,50 @@ def test_curves_table_files_and_docs_block_come_from_the_rows(tmp_path):
     assert len(saved["rows"]) == 20 and len(paths["csv"].read_text().splitlines()) == 21
     block = markdown(saved, "flatbody benchmark --algos ppo,sac")
     assert "flatbody benchmark --algos ppo,sac" in block and "FlatBodySlow-v1" in block
+
+
+def test_a_hyperparameter_grid_plans_one_case_per_value_and_reports_its_sensitivity(tmp_path):
+    from agents.benchmark import sensitivity
+    from flatbody_env.sweep.tasks import extends, plan
+
+    spec = {"kind": "benchmark", "algos": ["ppo"], "envs": ["FlatBody-v1"], "seeds": [0, 1, 2],
+            "budgets": {"ppo": 5000}, "eval_seed": 7, "grid": {"key": "learning_rate", "values": ["1e-4", "1e-3", "3e-3"]}}  # fmt: skip
+    tasks = plan(spec, tmp_path)
+    assert len(tasks) == 9 and len({t.key for t in tasks}) == 9
+    assert sorted({tuple(t.params["overrides"]) for t in tasks}) == [
+        (f"learning_rate={v}",) for v in ("1e-3", "1e-4", "3e-3")
+    ]
+    assert not extends(spec, {**spec, "grid": {"key": "learning_rate", "values": ["1e-4"]}})  # another grid: refused
+    # rows as run_case writes them for a grid: the label names the value; success peaks at 1e-3
+    peak = {"1e-4": 0.2, "1e-3": 0.8, "3e-3": 0.4}
+    rows = []
+    for value, base in peak.items():
+        for r in _rows(f"ppo learning_rate={value}", ["FlatBody-v1"], range(3), lambda e, s, b=base: b + 0.01 * s):
+            rows.append({**r, "base_algo": "ppo", "overrides": [f"learning_rate={value}"]})
+    sens = sensitivity(rows)
+    cell = sens["cells"]["ppo|FlatBody-v1"]
+    assert sens["hyperparam"] == "learning_rate" and cell["values"] == [1e-4, 1e-3, 3e-3]
+    assert [m for m, _, _ in cell["success"]] == pytest.approx([0.21, 0.81, 0.41]) and cell["seeds"] == [3, 3, 3]
+    assert sensitivity(_rows("ppo", ["FlatBody-v1"], range(2), lambda e, s: 0.5)) == {}  # no grid, no chart
+    refs = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] == "FlatBody-v1"]
+    paths = report(rows, tmp_path, refs)
+    assert paths["sensitivity"].name == "benchmark_sensitivity.png" and paths["sensitivity"].stat().st_size > 10_000
+    block = markdown(json.loads(paths["json"].read_text()), "flatbody benchmark ...")
+    header = block.splitlines()[0]
+    assert header.index("learning_rate=1e-4") < header.index("learning_rate=1e-3") < header.index("learning_rate=3e-3")
+
+
+def test_a_bad_hyperparameter_grid_stops_the_benchmark_before_it_trains(tmp_path, capsys):
+    from flatbody_env.cli.main import main
+
+    base = ["benchmark", "--algos", "ppo", "--envs", "FlatBody-v1", "--seeds", "0-1", "--out", str(tmp_path / "b")]
+    for grid, words in (
+        ("learning_rate=1e-4", "must hold 2 to 16 values"),
+        ("learning_rate=1e-4,-1", "hyperparams.learning_rate"),
+        ("lr=1e-4,1e-3", "hyperparams.lr: unknown field"),
+        ("learning_rate", "expected KEY=V1,V2"),
+    ):
+        assert main([*base, "--hyperparam-grid", grid]) == 2
+        err = capsys.readouterr().err
+        assert "--hyperparam-grid" in err and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b").exists()
