@@ -16,6 +16,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 import flatbody_env
 
 SITECUSTOMIZE = textwrap.dedent(
@@ -52,6 +54,7 @@ def _make_readonly(root: Path) -> None:
     root.chmod(root.stat().st_mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
 
 
+@pytest.mark.slow  # long: copies the package and compiles its kernels afresh
 def test_compiled_method_runs_from_a_readonly_copy(tmp_path):
     src = Path(flatbody_env.__file__).resolve().parent
     site = tmp_path / "site"

@@ -73,6 +73,7 @@ def test_settling_rate_grows_toward_the_edge_of_existence_and_needs_tau3_and_for
         assert settling_rate(body, y, LIMITS, np.array(mask, dtype=bool)) == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow  # long: integrates hundreds of episodes
 def test_task_samples_only_targets_reachable_in_the_episode():
     body = default_body()
     task = ReachStationaryEllipse()

@@ -71,6 +71,7 @@ def offline_browser():
         driver.quit()
 
 
+@pytest.mark.slow  # long: the page test below keeps the browser in the default run
 def test_api_docs_render_without_internet_access(offline_browser, live_service):
     """/docs (Swagger UI) and /redoc draw the service's API from its own scripts: the browser reaches
     nothing but the service."""
@@ -270,6 +271,7 @@ def test_page_finds_ellipses_runs_jobs_draws_their_results_and_keeps_them_over_a
     assert browser.find_elements(By.CSS_SELECTOR, "#runs article[data-kind=record]")
 
 
+@pytest.mark.slow  # long: refusals are checked over HTTP in the default run
 def test_bad_input_is_refused_next_to_the_field_inside_the_window(window, live_service, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select, WebDriverWait
@@ -354,6 +356,7 @@ def _progress_seen(browser, kind: str, timeout: float) -> tuple[list[float], lis
     return values, texts, status
 
 
+@pytest.mark.slow  # long: progress and cancel are checked over HTTP in the default run
 def test_progress_moves_while_a_job_runs_and_a_running_job_can_be_cancelled(window, live_service, tmp_path):
     from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.common.by import By
@@ -424,6 +427,7 @@ def _overflow(driver) -> int:
     return driver.execute_script("return document.documentElement.scrollWidth - window.innerWidth")
 
 
+@pytest.mark.slow  # long: a page-behaviour check of tens of seconds
 def test_errors_go_when_their_fields_are_fixed_without_moving_the_form(window, live_service, tmp_path):
     """A message under a field is a bubble (the row does not reflow), the summary beside the button goes once every
     field it names is changed, and every number in a message is written one way (1×10⁶, never 1e+06 beside it)."""
@@ -493,6 +497,7 @@ def test_the_page_on_a_phone_keeps_everything_on_screen_and_readable(live_servic
         browser.quit()
 
 
+@pytest.mark.slow  # long: a page-behaviour check of tens of seconds
 def test_a_long_run_is_drawn_as_its_envelope_zooms_and_shows_its_energy_drift(window, live_service, tmp_path):
     """20 001 samples over t = 0 … 3000: a series faster than the pixels is a band of its range around its mean (no
     aliasing pattern), the energy drift H − H₀ has a plot on its own scale with its size in the title, the last time
@@ -546,6 +551,7 @@ def test_a_long_run_is_drawn_as_its_envelope_zooms_and_shows_its_energy_drift(wi
     WebDriverWait(browser, 10).until(lambda d: not card.find_elements(By.CSS_SELECTOR, "button.whole-run"))
 
 
+@pytest.mark.slow  # long: a page-behaviour check of tens of seconds
 def test_a_family_over_decades_a_recording_preview_and_the_ellipse_table_actions(window, live_service, tmp_path):
     """A family over J from 10⁻⁶ to 10⁶ (both ends allowed) is done, followed in ln J, and says where its branch
     ends; a recording job shows its preview; an ellipse of the table starts a simulation from itself and can be

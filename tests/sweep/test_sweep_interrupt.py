@@ -37,6 +37,7 @@ def _rows(db_path: Path) -> dict[str, str]:
         return {}
 
 
+@pytest.mark.slow  # long: a real sweep interrupted and resumed; resume after a kill is in the default run (test_sweep_cli)
 def test_ctrl_c_ends_a_sweep_in_one_line_and_resume_continues(tmp_path):
     out = tmp_path / "map"
     db_path = out / "results.sqlite"

@@ -167,6 +167,7 @@ def test_journal_study_shared_by_two_workers_and_retrained(cli, tmp_path):
     assert r.returncode == 2 and "trial_id" in r.stderr
 
 
+@pytest.mark.slow  # long: starts a PostgreSQL server and two search workers
 def test_postgresql_study_shared_by_two_workers(cli, postgres_url, tmp_path):
     rep = json.loads(
         _ok(
