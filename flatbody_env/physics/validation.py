@@ -154,17 +154,18 @@ def number(
     ValueError
         Naming ``where`` and the allowed range.
     """
-    rng = _range_text(positive, low, high)
+    # the range's text is composed only for a refusal: this check runs on every value of every call
     if isinstance(value, bool) or not isinstance(value, _NUMBER_TYPES):
-        raise ValueError(f"{where}: must be a finite number{rng}, got {_short(value)}")
+        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {_short(value)}")
     try:
         x = float(value)
     except OverflowError:
+        rng = _range_text(positive, low, high)
         raise ValueError(f"{where}: must be a finite number{rng}, got an integer too large for a float") from None
     if not math.isfinite(x):
-        raise ValueError(f"{where}: must be a finite number{rng}, got {_short(value)}")
+        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {_short(value)}")
     if positive and x <= 0.0:
-        raise ValueError(f"{where}: must be > 0{rng}, got {x!r}")
+        raise ValueError(f"{where}: must be > 0{_range_text(positive, low, high)}, got {x!r}")
     if (low is not None and x < low) or (high is not None and x > high):
         raise ValueError(f"{where}: must lie in {_range_bounds(positive, low, high)}, got {x!r}")
     return x
@@ -207,12 +208,11 @@ def keys(where: str, obj: Mapping[str, Any], allowed: Iterable[str], required: I
 
 def integer(where: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
     """``value`` as an ``int`` (not a bool, not a float) within [low, high]."""
-    rng = _range_text(False, low, high)
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{where}: must be an integer{rng}, got {_short(value)}")
+        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {_short(value)}")
     x = int(value)
     if (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"{where}: must be an integer{rng}, got {_short(x)}")
+        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {_short(x)}")
     return x
 
 
