@@ -52,7 +52,7 @@ def plot_family(csv_path: str | Path, png_path: str | Path, *, title: str | None
     points = [r for r in rows if not r["event"]]
     events = [r for r in rows if r["event"]]
     if not points:
-        raise ValueError(f"family: {csv_path} holds no points (no stationary ellipse in the range)")
+        raise ValueError(f"family: {Path(csv_path).name} holds no points (no stationary ellipse in the range)")
     pname = points[0]["param_name"]
     with chart(png_path, size=(7.5, 8.4), nrows=2, sharex=True, gridspec_kw={"height_ratios": [3, 1.3]}) as c:
         ax, ax2 = c.axes[0, 0], c.axes[1, 0]
@@ -117,7 +117,7 @@ def plot_shape_map(csv_path: str | Path, png_path: str | Path, *, title: str | N
         raise ValueError(f"map: no file {str(path)!r}")
     rows = validation.read_csv("map", path)  # the one reading door
     if not rows or "classification" not in rows[0]:
-        raise ValueError(f"map: {path} holds no shape rows")
+        raise ValueError(f"map: {path.name} holds no shape rows")
     with chart(png_path, size=(10, 6.2), ncols=2, sharey=True) as c:
         for ax, kind in zip(c.axes[0], ("rigid", "circulating"), strict=True):
             sel = [r for r in rows if r["kind"] == kind]

@@ -174,6 +174,14 @@ def family_run(
     pt = DEFAULT_P_THETA if p_theta is None else float(p_theta)
     seeds = DEFAULT_SEEDS if seeds is None else seeds
     fam = follow_family(body, vary, start, stop, s3=s3, p_theta=pt, seeds=seeds, box=box, step=step, progress=progress)
+    if plot is not None and not any(fam.branches):  # said in the request's terms, before any file is written
+        raise ValueError(
+            f"family: no stationary ellipse over {vary} from {start:g} to {stop:g}"
+            + "".join(f", {k} = {v:g}" for k, v in (("s3", s3), ("p_theta", pt)) if k != vary)
+            + ": "
+            f"the search box held none at any of the {len(fam.seeds) or seeds} seeds, so there is no family to chart "
+            "(move the range or widen the search box)"
+        )
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
     stage = on_stage or (lambda _: None)
@@ -205,6 +213,11 @@ def stability_map_answer(
 
     (lo_l, hi_l), (lo_m, hi_m) = lam_range, mu_range
     rows = shape_stability_grid(body, np.linspace(lo_l, hi_l, grid), np.linspace(lo_m, hi_m, grid), progress=progress)
+    if plot is not None and not rows:  # said in the request's terms, before any file is written
+        raise ValueError(
+            f"stability-map: no stationary ellipse with lambda in [{lo_l:g}, {hi_l:g}] and mu in [{lo_m:g}, {hi_m:g}] "
+            f"on the {grid} x {grid} grid, so there is no map to chart (move or widen the ranges)"
+        )
     if out is None and plot is not None:
         out = str(check_output_path("--out", Path(plot).with_suffix(".csv"), (".csv",)))
     stage = on_stage or (lambda _: None)

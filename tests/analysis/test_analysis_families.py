@@ -165,3 +165,15 @@ def test_a_family_range_is_refused_in_the_callers_words():
     # the body's own check names the constant varied, never params.J1
     with pytest.raises(ValueError, match=r"^J: must lie in"):
         body_with(body, "J", 1e-7)
+
+
+def test_a_family_with_no_ellipse_in_its_box_is_refused_in_the_requests_terms_before_any_file(tmp_path):
+    from flatbody_env.answers import family_run
+
+    box = SearchBox(lam=(5.0, 6.0), mu=(5.0, 6.0))
+    csv, png = tmp_path / "f.csv", tmp_path / "f.png"
+    with pytest.raises(ValueError) as e:
+        family_run(default_body(), "s3", 0.05, 0.1, p_theta=0.5, box=box, out=str(csv), plot=str(png))
+    text = str(e.value)
+    assert text.startswith("family: no stationary ellipse over s3 from 0.05 to 0.1, p_theta = 0.5:") and "seeds" in text
+    assert str(tmp_path) not in text and not csv.exists() and not png.exists()  # no server folder named, no file left
