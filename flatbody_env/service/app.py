@@ -556,9 +556,8 @@ def create_app(
         names = job["artifacts"]
         chosen = names[0] if name is None and names else name
         if chosen not in names:
-            return error(
-                404, "not-found", f"name: must be one of {', '.join(names) or '(none)'}, got {name!r}", field="name"
-            )
+            refused = validation.refusal("name", f"be one of {', '.join(names) or '(none)'}", name)
+            return error(404, "not-found", str(refused), field="name")
         path = service.store.job_dir(job_id) / chosen
         if not path.is_file():
             return error(404, "not-found", f"name: {chosen} is gone from the data dir", field="name")
