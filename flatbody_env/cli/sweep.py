@@ -255,6 +255,8 @@ def _benchmark(args) -> int:
         + grid
         + f" --out {args.out}"
     )
+    if args.retrain:
+        _forget_runs(spec, args)
     result = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                        progress=not args.no_progress)  # fmt: skip
     rows = [r for r in rows_of(result) if isinstance(r, dict) and "curve" in r]
@@ -277,6 +279,24 @@ def _benchmark(args) -> int:
         )
         return 1
     return 0
+
+
+def _forget_runs(spec: dict[str, Any], args) -> None:
+    """``--retrain A,B``: the stored runs of these algorithms are removed once the stored benchmark is known to be this
+    one (or one it extends), so the resumed benchmark trains them again — after their hyperparameters changed."""
+    from flatbody_env.sweep.store import ResultStore
+    from flatbody_env.sweep.tasks import extends, plan
+
+    names = [a.strip() for a in args.retrain.split(",") if a.strip()]
+    for a in names:
+        validation.string("--retrain", a, choices=spec["algos"])
+    if not args.resume:
+        raise ValueError("--retrain: trains stored runs again, so it needs --resume (and the benchmark's folder)")
+    with ResultStore(args.out) as store:
+        store.begin(spec, resume=True, extends=extends)  # refuses another benchmark before anything is removed
+        keys = [t.key for t in plan(spec, args.out) if t.params["algo"] in names]
+        removed = store.forget(keys)
+    print(f"--retrain: {removed} stored runs of {', '.join(names)} removed; they train again")
 
 
 MAX_GRID_VALUES = 16
@@ -558,6 +578,11 @@ def register(sub) -> None:
         "--algos", default="ppo,sac,td3,rsl-ppo", metavar="A,B", help="algorithms (default ppo,sac,td3,rsl-ppo)"
     )
     p.add_argument("--envs", default="all", metavar="ID,ID", help="v1 ids, or all (default)")
+    p.add_argument(
+        "--retrain",
+        metavar="A,B",
+        help="with --resume: train these algorithms' stored runs again (after their hyperparameters changed)",
+    )
     p.add_argument(
         "--hyperparam-grid",
         metavar="KEY=V1,V2",

@@ -192,6 +192,14 @@ class ResultStore:
         q = "SELECT key FROM rows" + ("" if include_errors else " WHERE status = 'ok'")
         return {k for (k,) in self._db.execute(q)}
 
+    def forget(self, keys) -> int:
+        """Remove the rows of ``keys`` (a resumed sweep runs those tasks again); returns how many were stored."""
+        keys = list(keys)
+        before = self._db.total_changes
+        self._db.executemany("DELETE FROM rows WHERE key = ?", [(k,) for k in keys])
+        self._db.commit()
+        return self._db.total_changes - before
+
     def results(self) -> list[StoredResult]:
         """All stored outcomes, sorted by key."""
         cur = self._db.execute("SELECT key, status, payload, error, seconds, worker FROM rows ORDER BY key")

@@ -107,3 +107,36 @@ def test_a_bad_hyperparameter_grid_stops_the_benchmark_before_it_trains(tmp_path
         err = capsys.readouterr().err
         assert "--hyperparam-grid" in err and words in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "b").exists()
+
+
+def test_retrain_removes_only_the_named_algorithms_runs_and_only_from_this_benchmark(tmp_path, capsys):
+    import argparse
+
+    from flatbody_env.cli.main import main
+    from flatbody_env.cli.sweep import _forget_runs
+    from flatbody_env.sweep.store import ResultStore
+    from flatbody_env.sweep.tasks import plan
+
+    spec = {"kind": "benchmark", "algos": ["ppo", "sac"], "envs": ["FlatBody-v1"], "seeds": [0, 1],
+            "budgets": {"ppo": 5000, "sac": 2000, "td3": 30000, "rsl-ppo": 2000000}, "eval_seed": 10000}  # fmt: skip
+    out = tmp_path / "b"
+    with ResultStore(out) as store:
+        store.begin(spec, resume=False)
+        for task in plan(spec, out):
+            store.put(task.key, payload={"curve": []})
+    ns = argparse.Namespace(retrain="ppo", resume=True, out=str(out))
+    _forget_runs(spec, ns)
+    with ResultStore(out) as store:
+        assert store.done_keys() == {"sac.FlatBody-v1.000000", "sac.FlatBody-v1.000001"}
+    assert "2 stored runs of ppo removed" in capsys.readouterr().out
+    base = ["benchmark", "--algos", "ppo,sac", "--envs", "FlatBody-v1", "--out", str(out), "--no-progress"]
+    for extra, words in (
+        (["--seeds", "0-1", "--retrain", "sac"], "needs --resume"),
+        (["--seeds", "0-1", "--retrain", "td3", "--resume"], "--retrain: must be one of ppo, sac"),
+        (["--seeds", "0-2", "--retrain", "sac", "--resume"], "started with other parameters"),  # another benchmark
+    ):
+        assert main([*base, *extra]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    with ResultStore(out) as store:  # nothing removed by a refused command
+        assert len(store.done_keys()) == 2
