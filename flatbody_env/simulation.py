@@ -35,7 +35,6 @@ References
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -492,14 +491,18 @@ def simulate(
                 invariant=f"method {method!r} has no twin in the {chosen} chart and runs in its own",
                 measured=choice.measured,
             )
-    # rtol, atol, step, energy_tol and the budget are validated by Tolerances (one home)
-    tol = Tolerances(rtol=rtol, atol=atol, step=step, max_nfev=max_nfev, max_wall_time=max_wall_time)
-    check_step(meth.info, tol)
+    # rtol, atol, step, energy_tol and the budget are validated by Tolerances (one home), built once: the default
+    # energy tolerance needs rtol and atol, checked first by the same rule
     H0 = hamiltonian(y0, body)
     if energy_tol is None:
         # fixed step: the tolerance only catches blow-ups (see docs/integrators.md)
-        energy_tol = default_energy_tol(H0, rtol, atol, adaptive=meth.info.adaptive)
-    tol = dataclasses.replace(tol, energy_tol=energy_tol)
+        lo, hi = validation.TOL_RANGE
+        checked = (validation.number(k, v, low=lo, high=hi) for k, v in (("rtol", rtol), ("atol", atol)))
+        energy_tol = default_energy_tol(H0, *checked, adaptive=meth.info.adaptive)
+    tol = Tolerances(
+        rtol=rtol, atol=atol, step=step, energy_tol=energy_tol, max_nfev=max_nfev, max_wall_time=max_wall_time
+    )
+    check_step(meth.info, tol)
     # methods integrate from grid[0] = 0; a grid without 0 gets it prepended and its row dropped
     prepended = times_arr[0] != 0.0
     grid = np.concatenate([[0.0], times_arr]) if prepended else times_arr

@@ -154,7 +154,16 @@ def number(
     ValueError
         Naming ``where`` and the allowed range.
     """
-    # the range's text is composed only for a refusal: this check runs on every value of every call
+    # a plain float inside its range returns at once (this check runs on every value of every call); the range's
+    # text is composed only for a refusal
+    if (
+        type(value) is float
+        and -math.inf < value < math.inf
+        and (not positive or value > 0.0)
+        and (low is None or value >= low)
+        and (high is None or value <= high)
+    ):
+        return value
     if isinstance(value, bool) or not isinstance(value, _NUMBER_TYPES):
         raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {_short(value)}")
     try:
