@@ -378,6 +378,9 @@ class EnvCore:
         self._fast = None
         if self._mode == "lanes" and c.kernel_draws and c.custom_potential is None:
             self._fast = (tr.cpu("step_lanes"), (self.S, self.K, self.OBS, self.FINAL, self.FLAGS, *self._dev))
+        self._stepper = c.stepper.own()
+        """This core's stepper: the configuration's with work arrays of its own (the cores of a vector env step in
+        threads at once, and the fused batch step writes its work arrays in place)."""
         if self._mode != "lanes" and backend == "cpu":
             self._AC = np.zeros((n, c.n_act))
             self._U = np.zeros((4, n))
@@ -661,7 +664,7 @@ class EnvCore:
                 raise validation.refusal(self.action_field, "be finite numbers in [-1, 1] (no body was stepped)")
             tr.cpu("controls_lanes")(A, self.S, self.K, self.xcfg, self._AC, self._U)
             Y = self.S[tr.Y0 : tr.Y0 + 11]
-            st = c.stepper
+            st = self._stepper
             if c.task.varies_body:  # one body (the single env) drawn per episode: the stepper follows its body
                 P = self.S[tr.P0 : tr.P0 + 9, 0]
                 if self._seam is None or not np.array_equal(self._seam[0], P):
@@ -753,7 +756,7 @@ class EnvCore:
         for k in range(actions.shape[0]):
             if not compiled.controls_batch(np.ascontiguousarray(actions[k]), mask, c.limits, A, U):
                 raise validation.refusal("actions", "be finite numbers")
-            c.stepper.advance_batch(Y, U, c.dt, out, status, nfev)
+            self._stepper.advance_batch(Y, U, c.dt, out, status, nfev)
             compiled.domain_codes(out, c.kcfg, codes)
             ok &= (status == 0) & (codes == 0)
             np.copyto(Y, out, where=ok)

@@ -25,6 +25,7 @@ Both have the same interface, so the environment has one step path::
     step.advance_batch(Y, U, dt, OUT, STATUS, NFEV)             # structure-of-arrays, in place
     step.describe(status)                                       # "kind: reason" of a failure
     step.with_body(body)                                        # the same stepper for another body
+    step.own()                                                  # the same, with work arrays of its own
 
 * ``y``, ``out`` (11,) paper states (:mod:`flatbody_env.physics.state`); ``u`` (4,) the controls
   (τ1, τ2, τ3, f_ϱ); ``counters`` (3,) int64 accumulates [nfev, steps, rejected steps];
@@ -32,6 +33,8 @@ Both have the same interface, so the environment has one step path::
 * ``Y``, ``OUT`` (11, N), ``U`` (4, N), ``STATUS`` and ``NFEV`` (N,) int64.
 * ``status``: :data:`flatbody_env.integrators.failure.KINDS` index (0 = success). On failure
   ``out`` holds no physics; the caller keeps the old state.
+* ``own()``: each env core steps through its own copy (a vector env's cores step in threads at once, and the fused
+  batch step writes its work arrays in place); the compiled code is shared.
 
 :attr:`method` names the method that really runs and :attr:`compiled` whether it runs compiled
 (the environment then uses its compiled bookkeeping too).
@@ -109,6 +112,16 @@ class CompiledEnvStep:
             other._fused = None
         return other
 
+    def own(self) -> CompiledEnvStep:
+        """The same stepper with work arrays of its own (the compiled code shared): one per thread that steps a batch,
+        since the fused step writes its work arrays in place."""
+        other = copy.copy(self)
+        if self._fused is not None:
+            from flatbody_env.integrators.batch_kernels import DOP853Batch
+
+            other._fused = DOP853Batch(1)
+        return other
+
     def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
         return self._step(y, u, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, out, counters)
 
@@ -140,6 +153,12 @@ class GenericEnvStep:
         """The same stepper for another body."""
         other = copy.copy(self)
         other.body = body
+        other._lane_reasons = {}
+        return other
+
+    def own(self) -> GenericEnvStep:
+        """The same stepper with its failure record of its own (one per env core)."""
+        other = copy.copy(self)
         other._lane_reasons = {}
         return other
 

@@ -174,6 +174,9 @@ def test_integrator_failure_is_flagged_not_returned():
             STATUS[:] = 2
             NFEV[:] = 0
 
+        def own(self):
+            return self
+
     env = _with_stepper(FlatBodyEnv(integrator="DOP853"), Failing())  # the generic (seam) path
     obs0, _ = env.reset(seed=0)
     obs, r, term, trunc, info = env.step(np.zeros(4, dtype=np.float32))

@@ -272,6 +272,29 @@ def test_controls_clip_and_scale_each_body_alike(control):
             env.controls(A[7])
 
 
+def test_threads_on_the_fused_batch_step_keep_their_own_work_and_every_number():
+    """Cores large enough for the fused structure-of-arrays step (which writes its work arrays in place) step in
+    threads at once: each has its own work arrays, and the batch steps exactly as in one thread."""
+    from flatbody_env.env.core import FUSED_MIN_BODIES
+
+    n = 2 * FUSED_MIN_BODIES + 6
+    one = FlatBodyVectorEnv(num_envs=n, num_threads=1)
+    two = FlatBodyVectorEnv(num_envs=n, num_threads=2)
+    assert [c._mode for c in two.cores] == ["fused", "fused"]
+    works = [c._stepper._fused for c in (*one.cores, *two.cores)]
+    assert all(w is not None for w in works) and len({id(w) for w in works}) == 3  # none shared
+    a, b = one.reset(seed=9), two.reset(seed=9)
+    np.testing.assert_array_equal(a[0], b[0])
+    rng = np.random.default_rng(2)
+    for _ in range(25):
+        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
+        ra, rb = one.step(A), two.step(A)
+        for x, y in zip(ra[:4], rb[:4]):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
+    two.close()
+
+
 def test_threads_do_not_change_a_single_number():
     """Bodies split across threads (num_threads) step, score and autoreset exactly as in one thread."""
     n = 11
