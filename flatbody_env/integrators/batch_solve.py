@@ -224,10 +224,12 @@ step limit, :data:`~.twopolar_kernels.DOP853_MAX_STEPS`, still applies)."""
 
 
 @njit
-def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
-    """One environment step of N bodies in one thread (the environment's compiled loop over bodies): Y, OUT (11, N),
-    U (4, N), STATUS, NFEV (N,) int64. ``max_nfev``: each body's budget of RHS evaluations in the step (DOP853; past it
-    the body's status is the ``budget`` failure, as the scalar env step's)."""
+def batch_env_step_range(
+    b0, b1, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET
+):
+    """One environment step of the bodies ``b0`` … ``b1 - 1`` of a batch, one after another, with work arrays of its
+    own: Y, OUT (11, N), U (4, N), STATUS, NFEV (N,) int64. ``max_nfev``: each body's budget of RHS evaluations in the
+    step (DOP853; past it the body's status is the ``budget`` failure, as the scalar env step's)."""
     y = np.empty(N)
     u = np.empty(4)
     out = np.empty(N)
@@ -238,36 +240,21 @@ def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, 
     force = np.empty(4)
     f = np.empty(N)
     counters = np.zeros(4, np.int64)
-    counters[3] = (
-        max_nfev  # each body's budget of RHS evaluations in this step (the DOP853 kernel checks it before every step)
-    )
-    for b in range(Y.shape[1]):
+    counters[3] = max_nfev  # each body's budget of RHS evaluations (the DOP853 kernel checks it before every step)
+    for b in range(b0, b1):
         env_step_body(
-            b,
-            kind,
-            coeffs,
-            Y,
-            U,
-            P,
-            dt,
-            h,
-            rtol,
-            atol,
-            energy_tol,
-            OUT,
-            STATUS,
-            NFEV,
-            y,
-            u,
-            out,
-            K,
-            ynew,
-            ytmp,
-            vel,
-            force,
-            f,
-            counters,
-        )
+            b, kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, y, u, out, K, ynew, ytmp, vel,
+            force, f, counters,
+        )  # fmt: skip
+
+
+@njit
+def batch_env_step_serial(kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev=NO_BUDGET):
+    """One environment step of N bodies in one thread (the environment's compiled loop over bodies): Y, OUT (11, N),
+    U (4, N), STATUS, NFEV (N,) int64; :func:`batch_env_step_range` over every body."""
+    batch_env_step_range(
+        0, Y.shape[1], kind, coeffs, Y, U, P, dt, h, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev
+    )
 
 
 @njit(parallel=True)
@@ -291,6 +278,7 @@ __all__ = [
     "SPLIT_KIND",
     "STRANG",
     "batch_energy",
+    "batch_env_step_range",
     "batch_env_step_serial",
     "batch_solve",
     "env_step_body",
