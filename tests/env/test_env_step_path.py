@@ -272,6 +272,22 @@ def test_controls_clip_and_scale_each_body_alike(control):
             env.controls(A[7])
 
 
+def _steps_alike(one, other, *, seed: int, steps: int) -> None:
+    """``one`` and ``other`` (vector envs of the same bodies) reset with ``seed`` and stepped with the same random
+    actions give the same observations, rewards, flags, energies and evaluation counts, number for number."""
+    n = one.num_envs
+    np.testing.assert_array_equal(one.reset(seed=seed)[0], other.reset(seed=seed)[0])
+    rng = np.random.default_rng(seed + 1)
+    for _ in range(steps):
+        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
+        ra, rb = one.step(A), other.step(A)
+        for x, y in zip(ra[:4], rb[:4]):
+            np.testing.assert_array_equal(x, y)
+        np.testing.assert_array_equal(ra[4]["energy"], rb[4]["energy"])
+        np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
+    np.testing.assert_array_equal(one.states, other.states)
+
+
 def test_threads_on_the_fused_batch_step_keep_their_own_work_and_every_number():
     """Cores large enough for the fused structure-of-arrays step (which writes its work arrays in place) step in
     threads at once: each has its own work arrays, and the batch steps exactly as in one thread."""
@@ -283,15 +299,7 @@ def test_threads_on_the_fused_batch_step_keep_their_own_work_and_every_number():
     assert [c._mode for c in two.cores] == ["fused", "fused"]
     works = [c._stepper._fused for c in (*one.cores, *two.cores)]
     assert all(w is not None for w in works) and len({id(w) for w in works}) == 3  # none shared
-    a, b = one.reset(seed=9), two.reset(seed=9)
-    np.testing.assert_array_equal(a[0], b[0])
-    rng = np.random.default_rng(2)
-    for _ in range(25):
-        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
-        ra, rb = one.step(A), two.step(A)
-        for x, y in zip(ra[:4], rb[:4]):
-            np.testing.assert_array_equal(x, y)
-        np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
+    _steps_alike(one, two, seed=9, steps=25)
     two.close()
 
 
@@ -301,17 +309,7 @@ def test_threads_do_not_change_a_single_number():
     one = FlatBodyVectorEnv(num_envs=n, max_episode_steps=6, num_threads=1)
     three = FlatBodyVectorEnv(num_envs=n, max_episode_steps=6, num_threads=3)
     assert three.num_threads == 3 and [s.stop - s.start for s in three._slices] == [4, 3, 4]
-    a, b = one.reset(seed=4), three.reset(seed=4)
-    np.testing.assert_array_equal(a[0], b[0])
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        A = rng.uniform(-1, 1, (n, 4)).astype(np.float32)
-        ra, rb = one.step(A), three.step(A)
-        for x, y in zip(ra[:4], rb[:4]):
-            np.testing.assert_array_equal(x, y)
-        np.testing.assert_array_equal(ra[4]["energy"], rb[4]["energy"])
-        np.testing.assert_array_equal(ra[4]["integrator"]["nfev"], rb[4]["integrator"]["nfev"])
-    np.testing.assert_array_equal(one.states, three.states)
+    _steps_alike(one, three, seed=4, steps=20)
     three.close()
     assert FlatBodyVectorEnv(num_envs=4, integrator="RK45", num_threads=2).num_threads == 1  # not compiled: one thread
     assert FlatBodyVectorEnv(num_envs=4).num_threads == 1  # the default
