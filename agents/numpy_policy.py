@@ -10,7 +10,7 @@ What is exported (the deterministic action SB3's ``predict(obs, deterministic=Tr
 * the observation normalisation of VecNormalize: clip((o − mean)/√(var + ε), −clip, clip)
   (when the run normalised observations);
 * the actor's MLP (``mlp_extractor.policy_net`` of an actor-critic policy, ``actor.latent_pi``
-  of SAC), as (W, b) per linear layer and the activation between them (tanh or ReLU);
+  of SAC), as (W, b) per linear layer and the activation between them (tanh, ReLU or ELU);
 * the action head (``action_net`` of PPO/A2C: the mean action, also with gSDE; ``actor.mu`` of
   SAC), then SB3's post-processing: tanh squashing and unscaling to the action bounds for a
   squashed policy (SAC), clipping to the bounds otherwise.
@@ -38,7 +38,13 @@ FORMAT_VERSION = 1
 POLICY_FILE = "policy.npz"
 MAX_POLICY_BYTES = 64 * 1024 * 1024
 """Largest ``policy.npz``, and most bytes its arrays may declare (an MLP of 2 000 × 2 000 float64 layers)."""
-ACTIVATIONS = ("tanh", "relu")
+ACTIVATIONS = ("tanh", "relu", "elu")
+"""The activations between linear layers that an exported policy may have (ELU with α = 1, rsl_rl's default)."""
+_ACTIVATION_FUNCTIONS = {
+    "tanh": np.tanh,
+    "relu": lambda v: np.maximum(v, 0.0),
+    "elu": lambda v: np.where(v > 0.0, v, np.expm1(np.minimum(v, 0.0))),
+}
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 """Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...); also :data:`agents.evaluate.MODELS_DIR`."""
 
@@ -383,7 +389,7 @@ class NumpyPolicy:
     def forward(self, normalized_obs: np.ndarray) -> np.ndarray:
         """The action head's output (before squashing/clipping) for normalised observations (N, d)."""
         x = np.atleast_2d(np.asarray(normalized_obs, dtype=np.float64))
-        act = np.tanh if self.activation == "tanh" else (lambda v: np.maximum(v, 0.0))
+        act = _ACTIVATION_FUNCTIONS[self.activation]
         last = len(self.weights) - 1
         for k, (W, b) in enumerate(zip(self.weights, self.biases)):
             x = x @ W.T + b
@@ -404,7 +410,7 @@ def export_policy(path: str | Path | None = None) -> Path:
     """Write ``policy.npz`` beside the SB3 model at ``path`` (default: the shipped agent); returns its path.
 
     Imports torch and SB3 (this is the one step that needs them). ValueError for a model whose
-    policy is not an MLP of linear layers with tanh/ReLU (the only kind this evaluator runs).
+    policy is not an MLP of linear layers with tanh, ReLU or ELU (the only kinds this evaluator runs).
     """
     folder = model_folder(path)
     algo = model_format_of(read_run_config(folder))
@@ -425,7 +431,7 @@ def export_policy(path: str | Path | None = None) -> Path:
         trunk, head = torch.nn.Sequential(*layers[:-1]), torch.nn.Sequential()
     else:
         trunk, head = policy.mlp_extractor.policy_net, policy.action_net
-    names = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu"}
+    names = {torch.nn.Tanh: "tanh", torch.nn.ReLU: "relu", torch.nn.ELU: "elu"}
     layers, activations = [], set()
 
     def flat(module):  # nested Sequentials (SB3 builds some MLPs that way) in order
@@ -438,11 +444,11 @@ def export_policy(path: str | Path | None = None) -> Path:
             layers.append(
                 (module.weight.detach().double().numpy().copy(), module.bias.detach().double().numpy().copy())
             )
-        elif type(module) in names:
+        elif type(module) in names and getattr(module, "alpha", 1.0) == 1.0:
             activations.add(names[type(module)])
         else:
             raise ValueError(
-                f"model: cannot export a policy layer of type {type(module).__name__} (linear, tanh, relu only)"
+                f"model: cannot export a policy layer of type {type(module).__name__} (linear, tanh, relu, elu with alpha 1 only)"
             )
     if len(activations) > 1:
         raise ValueError(f"model: mixed activations {sorted(activations)} are not supported")
@@ -530,6 +536,8 @@ def load_policy(path: str | Path | None = None) -> NumpyPolicy:
 
 def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     """The policy of a loaded ``policy.npz``, its arrays checked (float, finite, chained shapes)."""
+    from flatbody_env.physics import validation
+
     n = int(meta["layers"])
     if not 1 <= n <= 64:
         raise ValueError(f"layers = {n}")
@@ -554,7 +562,7 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     return NumpyPolicy(
         weights=tuple(arrays[f"W{k}"] for k in range(n)),
         biases=tuple(arrays[f"b{k}"] for k in range(n)),
-        activation=meta["activation"] if meta["activation"] in ACTIVATIONS else "tanh",
+        activation=validation.string("activation", meta["activation"], choices=ACTIVATIONS),
         obs_mean=arrays["obs_mean"] if has_norm else None,
         obs_scale=arrays["obs_scale"] if has_norm else None,
         clip_obs=float(meta["clip_obs"]),

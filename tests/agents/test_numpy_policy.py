@@ -101,6 +101,20 @@ def test_format_version_is_checked(tmp_path):
         load_policy(model)
 
 
+def test_an_unknown_activation_is_damage_never_a_fallback(tmp_path):
+    from agents.numpy_policy import DamagedPolicyError
+
+    model = tmp_path / "model"
+    shutil.copytree(shipped_model_dir(), model)
+    data = dict(np.load(model / POLICY_FILE))
+    meta = json.loads(str(data["meta"]))
+    meta["activation"] = "gelu"
+    data["meta"] = np.array(json.dumps(meta))
+    np.savez(model / POLICY_FILE, **data)
+    with pytest.raises(DamagedPolicyError, match="activation: must be one of tanh, relu, elu, got 'gelu'"):
+        load_policy(model)
+
+
 def test_bad_backend_names_the_field():
     with pytest.raises(ValueError, match="backend"):
         Agent(backend="onnx")

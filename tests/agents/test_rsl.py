@@ -428,3 +428,29 @@ def test_periodic_checkpoints_are_atomic_and_rotated(tmp_path):
     assert state["iterations"] == 4 and {"actor", "critic", "optimizer", "learning_rate", "return_rms"} <= set(state)
     train("rsl-ppo", tmp_path / "done", checkpoint_freq=64, progress=False, **kw)
     assert not (tmp_path / "done" / "checkpoints").exists()
+
+
+def test_an_elu_actor_exports_to_numpy_and_acts_as_the_sb3_model(tmp_path):
+    """rsl_rl's default activation (ELU) on a v1 task from scratch: the run's ``policy.npz`` is written and the numpy
+    policy's actions are the SB3 model's (so ``evaluate``, ``demo`` and ``record`` need no torch for it)."""
+    from agents.evaluate import Agent
+    from agents.numpy_policy import POLICY_FILE, load_policy
+    from agents.train import train
+
+    train(
+        "rsl-ppo",
+        tmp_path / "run",
+        env_id="FlatBody-v1",
+        seed=2,
+        n_timesteps=128,
+        n_envs=8,
+        overrides=["num_steps_per_env=8", "activation=elu", "hidden_dims=[16,8]"],
+        progress=False,
+    )
+    assert (tmp_path / "run" / POLICY_FILE).is_file()
+    policy = load_policy(tmp_path / "run")
+    assert policy.activation == "elu" and len(policy.weights) == 3
+    obs = np.concatenate([o.numpy() for o in _observations(n=6, steps=4)])
+    obs = np.concatenate([obs, 3.0 * obs])  # also where the hidden layers are far into ELU's negative side
+    numpy_agent, sb3_agent = Agent(tmp_path / "run", backend="numpy"), Agent(tmp_path / "run", backend="sb3")
+    np.testing.assert_allclose(numpy_agent(obs), sb3_agent(obs), rtol=0, atol=1e-5)
