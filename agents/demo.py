@@ -1,7 +1,7 @@
 """``flatbody demo``: the README's main job.
 
 The shipped agent steers the body from a seeded off-equilibrium state onto a stable stationary
-ellipse (``FlatBody-v0``, default task) for one 400-step episode; the command prints the target,
+ellipse (``FlatBody-v1``, its task) for one 400-step episode; the command prints the target,
 the distance over time and whether the episode ended on the target, and writes a rerun recording
 through :class:`flatbody_env.recording.wrapper.RerunRecorder` (the one way an env episode is recorded).
 """
@@ -52,10 +52,10 @@ def rollout(
 def _rollout(agent, *, seed, env_kwargs, record_to, title, env_id) -> dict[str, Any]:
     import gymnasium as gym
 
-    import flatbody_env  # noqa: F401  (registers FlatBody-v0)
+    import flatbody_env  # noqa: F401  (registers the ids)
     from flatbody_env.env.core import end_reason
 
-    with warnings.catch_warnings():  # a v0 id (the shipped agent's) is deprecated: the summary says so, once
+    with warnings.catch_warnings():  # a v0 id (the prior track's agents) is deprecated: the summary says so, once
         warnings.simplefilter("ignore", DeprecationWarning)
         env = gym.make(env_id, track_rotation=True, **(env_kwargs or {}))
     wrapper = None

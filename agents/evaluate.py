@@ -422,7 +422,7 @@ def evaluate_all(
     progress: bool = False,
     backend: str = "auto",
 ) -> dict[str, Any]:
-    """The evaluation report of an agent on its task (``FlatBody-v0`` for the shipped one):
+    """The evaluation report of an agent on its task (``FlatBody-v1`` for the shipped one):
     ``{"agent": {...}, "baselines": {"zero", "random", "heuristic", "passivity"}, ...}``;
     ``policy_backend`` says how the agent's policy ran (``numpy`` or ``sb3``, :class:`Agent`)."""
     agent = Agent(model, backend=backend)

@@ -49,9 +49,16 @@ MODELS_DIR = Path(__file__).resolve().parent / "models"
 """Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...); also :data:`agents.evaluate.MODELS_DIR`."""
 
 
+SHIPPED_AGENT = "rsl-ppo-FlatBody-v1"
+"""The agent ``demo``, ``evaluate`` and ``record --agent`` run by default: rsl_rl's PPO trained from scratch on
+``FlatBody-v1`` with the registered reward and the entry of ``agents/hyperparams/rsl-ppo.yml`` (its ``config.yml``
+trains it again). The other folders of :data:`MODELS_DIR` are the prior track's agents of the v0 ids."""
+
+
 def shipped_model_dir() -> Path:
-    """The folder of the agent shipped in the package (``agents/models/ppo-FlatBody-v0``); also :func:`agents.evaluate.shipped_model_dir`."""
-    return MODELS_DIR / "ppo-FlatBody-v0"
+    """The folder of the agent shipped in the package (``agents/models/`` :data:`SHIPPED_AGENT`); also
+    :func:`agents.evaluate.shipped_model_dir`."""
+    return MODELS_DIR / SHIPPED_AGENT
 
 
 class StalePolicyError(ValueError):
@@ -441,9 +448,9 @@ def export_policy(path: str | Path | None = None) -> Path:
 
     for module in flat(trunk) + flat(head):
         if isinstance(module, torch.nn.Linear):
-            layers.append(
-                (module.weight.detach().double().numpy().copy(), module.bias.detach().double().numpy().copy())
-            )
+            # stored in the layer's own precision (float32: half the file, and exact — the forward pass
+            # computes in float64 whatever the stored dtype)
+            layers.append((module.weight.detach().cpu().numpy().copy(), module.bias.detach().cpu().numpy().copy()))
         elif type(module) in names and getattr(module, "alpha", 1.0) == 1.0:
             activations.add(names[type(module)])
         else:
@@ -560,8 +567,8 @@ def _policy_from(arrays: dict, meta: dict) -> NumpyPolicy:
     ):
         raise ValueError("normalisation statistics do not match the first layer")
     return NumpyPolicy(
-        weights=tuple(arrays[f"W{k}"] for k in range(n)),
-        biases=tuple(arrays[f"b{k}"] for k in range(n)),
+        weights=tuple(arrays[f"W{k}"].astype(np.float64) for k in range(n)),
+        biases=tuple(arrays[f"b{k}"].astype(np.float64) for k in range(n)),
         activation=validation.string("activation", meta["activation"], choices=ACTIVATIONS),
         obs_mean=arrays["obs_mean"] if has_norm else None,
         obs_scale=arrays["obs_scale"] if has_norm else None,

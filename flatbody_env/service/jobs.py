@@ -352,11 +352,13 @@ def _stability_map(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple
 
 
 def _evaluate(p: Mapping[str, Any], out: Path, progress: Progress) -> tuple[Any, list[str]]:
-    from agents.evaluate import baselines_for, evaluate_all
+    from agents.evaluate import baselines_for, evaluate_all, shipped_model_dir
+    from agents.numpy_policy import read_run_config
 
     report = Reporter(progress)
     report.step(0.02, 0.95, "evaluating the shipped agent")
-    bars = 1 + (len(baselines_for("FlatBody-v0")) if p["baselines"] else 0)
+    env_id = read_run_config(shipped_model_dir())["env_id"]  # its task: the baselines (and bars) of that task
+    bars = 1 + (len(baselines_for(env_id)) if p["baselines"] else 0)
     with reporting_bars(report, bars=bars):
         report_json = evaluate_all(
             None, episodes=p["episodes"], seed=p["seed"], baselines=p["baselines"], progress=True

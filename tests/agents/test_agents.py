@@ -324,11 +324,12 @@ def test_shipped_model_is_small_and_loads():
 
     folder = shipped_model_dir()
     size = sum(f.stat().st_size for f in folder.iterdir())
-    assert size < 1_000_000
+    assert size < 2_000_000  # model.zip (actor and critic, float32) and policy.npz (the actor): about 1.3 MB
     run = json.loads((folder / "run.json").read_text())
     assert run["command_line"].startswith("flatbody train")
     agent = Agent()
-    env = gym.make("FlatBody-v0")
+    assert agent.env_id == "FlatBody-v1" and agent.residual is None  # from scratch on the v1 task
+    env = gym.make(agent.env_id)
     obs = np.stack([env.reset(seed=s)[0] for s in range(3)])
     actions = agent(obs)
     assert actions.shape == (3, 4) and np.all(np.abs(actions) <= 1.0)
@@ -361,13 +362,15 @@ def test_shipped_evaluation_reproduces():
 
 @pytest.mark.slow
 def test_shipped_agent_acceptance():
-    """Acceptance: ≥ 90 % success over 100 seeded episodes and a lower mean final distance than the heuristic."""
+    """Acceptance on held-out seeds the shipped evaluation never used: ≥ 95 % success over 100 episodes (the v1 goal of
+    a learned agent from scratch) and a mean final distance inside the tolerance."""
     from agents.evaluate import evaluate_all
 
-    report = evaluate_all(episodes=100, seed=10_000)
-    agent, heur = report["agent"], report["baselines"]["heuristic"]
-    assert agent["success_rate"] >= 0.9
-    assert agent["final_distance"] < heur["final_distance"]
+    report = evaluate_all(episodes=100, seed=20_000, baselines=False)
+    agent = report["agent"]
+    assert report["env_id"] == "FlatBody-v1"
+    assert agent["success_rate"] >= 0.95
+    assert agent["final_distance"] < 0.05
 
 
 def test_record_agent_episode(tmp_path, capsys):

@@ -12,10 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents.evaluate import Agent, shipped_model_dir
+from agents.evaluate import MODELS_DIR, Agent, shipped_model_dir
 from agents.numpy_policy import POLICY_FILE, StalePolicyError, export_policy, load_policy
 
 ROOT = Path(__file__).resolve().parents[2]
+V0_AGENT = MODELS_DIR / "ppo-FlatBody-v0"
+"""A shipped SB3 agent with VecNormalize statistics (whose staleness the round trip checks)."""
 
 
 @pytest.fixture(scope="module")
@@ -41,23 +43,26 @@ def test_shipped_export_is_current_and_equals_sb3(observations):
     sb3_agent = Agent(backend="sb3")
     assert numpy_agent.backend == "numpy" and sb3_agent.backend == "sb3"
     seen, uniform = observations
-    both = np.concatenate([seen, uniform])
-    raw = np.abs(numpy_agent.policy_actions(both) - sb3_agent.policy_actions(both)).max()
-    # the executed action (the LQR's, gain-scheduled by the policy) on observations of real episodes
+    # SB3 runs the MLP (16-256-256-128-4) in float32, the export in float64: a few 1e-6 on the agent's own states;
+    # uniform over the whole box the normalised inputs reach hundreds of standard deviations and float32's rounding of
+    # the large hidden values leaves up to ≈5e-5 (measured) in the output
+    for obs, atol in ((seen, 1e-5), (uniform, 1e-4)):
+        np.testing.assert_allclose(numpy_agent.policy_actions(obs), sb3_agent.policy_actions(obs), rtol=0, atol=atol)
+    # the executed action on observations of real episodes
     final = np.abs(numpy_agent(seen) - sb3_agent(seen)).max()
-    assert raw <= 1e-6 and final <= 1e-6, (raw, final)
+    assert final <= 1e-5, final
 
 
 def test_export_roundtrip_and_staleness(tmp_path):
     pytest.importorskip("stable_baselines3")
     model = tmp_path / "model"
-    shutil.copytree(shipped_model_dir(), model, ignore=shutil.ignore_patterns(POLICY_FILE))
+    shutil.copytree(V0_AGENT, model, ignore=shutil.ignore_patterns(POLICY_FILE))
     with pytest.raises(StalePolicyError, match="no policy.npz"):
         load_policy(model)
     path = export_policy(model)
     assert path == model / POLICY_FILE
     fresh = load_policy(model)
-    shipped = load_policy(None)
+    shipped = load_policy(V0_AGENT)
     for a, b in zip(fresh.weights, shipped.weights):
         assert np.array_equal(a, b)
     assert fresh.meta["sources"] == shipped.meta["sources"]
@@ -68,7 +73,7 @@ def test_export_roundtrip_and_staleness(tmp_path):
     with pytest.raises(ValueError, match="flatbody export-policy"):
         Agent(model, backend="numpy")
     # model.zip changed: same
-    (model / "vecnormalize.pkl").write_bytes((shipped_model_dir() / "vecnormalize.pkl").read_bytes())
+    (model / "vecnormalize.pkl").write_bytes((V0_AGENT / "vecnormalize.pkl").read_bytes())
     assert load_policy(model).meta["sources"] == shipped.meta["sources"]
     (model / "model.zip").write_bytes((model / "model.zip").read_bytes() + b"\0")
     with pytest.raises(StalePolicyError, match="model.zip changed"):

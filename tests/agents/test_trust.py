@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 
 from agents import numpy_policy as npp
-from agents.evaluate import Agent, shipped_model_dir
+from agents.evaluate import MODELS_DIR, Agent
 from flatbody_env.cli.main import main
+
+V0_AGENT = MODELS_DIR / "ppo-FlatBody-v0"
+"""A shipped SB3 agent with VecNormalize statistics (the pickles these tests plant and refuse)."""
 
 
 @pytest.fixture
@@ -25,7 +28,7 @@ def _copy(tmp_path, name, files=("model.zip", "config.yml", "vecnormalize.pkl", 
     d = tmp_path / name
     d.mkdir()
     for f in files:
-        shutil.copy(shipped_model_dir() / f, d / f)
+        shutil.copy(V0_AGENT / f, d / f)
     return d
 
 
@@ -37,7 +40,7 @@ def test_shipped_agent_loads_without_pickle(config_home):
 
 def test_damaged_policy_is_an_error_not_a_fallback(tmp_path, config_home):
     d = _copy(tmp_path, "run")
-    (d / "policy.npz").write_bytes((shipped_model_dir() / "policy.npz").read_bytes()[:200])
+    (d / "policy.npz").write_bytes((V0_AGENT / "policy.npz").read_bytes()[:200])
     with pytest.raises(npp.DamagedPolicyError, match="damaged"):
         Agent(d)
     np.savez(d / "policy.npz", meta=np.array([{"x": 1}], dtype=object))  # pickled content is never loaded
@@ -117,7 +120,7 @@ def _planted(tmp_path, name="planted"):
     marker = tmp_path / f"{name}-RAN"
     d = tmp_path / name
     (d / "checkpoints").mkdir(parents=True)
-    shutil.copy(shipped_model_dir() / "config.yml", d / "config.yml")
+    shutil.copy(V0_AGENT / "config.yml", d / "config.yml")
     _payload_zip(d / "model.zip", marker)
     (d / "vecnormalize.pkl").write_bytes(pickle.dumps(_Payload(marker)))
     _payload_zip(d / "checkpoints" / "rl_model_128_steps.zip", marker)
@@ -211,7 +214,7 @@ def test_the_payload_is_live_so_the_refusal_is_what_stops_it(tmp_path, config_ho
     assert marker.exists()
     capsys.readouterr()
     d2, marker2 = _planted(tmp_path, "planted-vn")
-    shutil.copy(shipped_model_dir() / "model.zip", d2 / "model.zip")
+    shutil.copy(V0_AGENT / "model.zip", d2 / "model.zip")
     assert main(["evaluate", str(d2), "--trust", "--backend", "sb3", "--episodes", "1", "--no-baselines"]) == 2
     assert marker2.exists()
 

@@ -150,12 +150,12 @@ def _trajectories(folder: Path) -> dict[str, Path]:
 
 
 def _model_folders(folder: Path) -> dict[str, Path]:
-    """Bad model folders beside copies of the shipped agent's files."""
+    """Bad model folders beside copies of a shipped SB3 agent's files."""
     import shutil
 
-    from agents.evaluate import shipped_model_dir
+    from agents.evaluate import MODELS_DIR
 
-    src = shipped_model_dir()
+    src = MODELS_DIR / "ppo-FlatBody-v0"  # a shipped SB3 agent with VecNormalize statistics
     made = {}
 
     def copy(name, files=("model.zip", "config.yml", "vecnormalize.pkl", "policy.npz")):

@@ -19,9 +19,12 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import hostile  # noqa: E402
 
-from agents.evaluate import shipped_model_dir  # noqa: E402
+from agents.evaluate import MODELS_DIR  # noqa: E402
 from agents.numpy_policy import MAX_MODEL_BYTES, MAX_POLICY_BYTES  # noqa: E402
 from flatbody_env.physics import validation  # noqa: E402
+
+V0_AGENT = MODELS_DIR / "ppo-FlatBody-v0"
+"""A shipped SB3 agent with VecNormalize statistics (its pickles are the doors fuzzed here)."""
 
 LIMIT_S = 60.0
 ALIAS_BOMB = "".join(  # 9 levels of 9 aliases each: 9**9 (387 million) strings once expanded, in a few hundred bytes
@@ -62,14 +65,14 @@ def _model_copy(tmp: Path) -> Path:
     d = tmp / "model"
     d.mkdir()
     for f in ("model.zip", "config.yml", "vecnormalize.pkl", "policy.npz"):
-        shutil.copy(shipped_model_dir() / f, d / f)
+        shutil.copy(V0_AGENT / f, d / f)
     return d
 
 
 def _resume_folder(tmp: Path) -> Path:
     d = tmp / "run"
     (d / "checkpoints").mkdir(parents=True)
-    shutil.copy(shipped_model_dir() / "config.yml", d / "config.yml")
+    shutil.copy(V0_AGENT / "config.yml", d / "config.yml")
     (d / "checkpoints" / "rl_model_128_steps.zip").write_bytes(b"a checkpoint")
     return d
 
@@ -196,7 +199,7 @@ DOORS = {
             "--plans",
             str(f),
             "--model",
-            str(shipped_model_dir()),
+            str(V0_AGENT),
             "--out",
             str(t / "bc"),
         ],

@@ -387,7 +387,7 @@ def test_evaluate_job_reports_the_shipped_agent(client):
     job = wait_job(client.get, r.json()["id"], timeout=300)
     assert job["status"] == "done", job["error"]
     agent = Agent(None)
-    expected = summarize(run_episodes(agent, episodes=2, seed=7, env_kwargs=agent.env_kwargs))
+    expected = summarize(run_episodes(agent, episodes=2, seed=7, env_kwargs=agent.env_kwargs, env_id=agent.env_id))
     got = job["result"]["agent"]
     assert got.keys() == expected.keys()
     for key, value in expected.items():  # the interval is a (low, high) pair
