@@ -26,6 +26,7 @@ is reported as such (:data:`CANNOT_BE_BUILT`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -244,10 +245,12 @@ def run_episodes(
     progress: bool = False,
     label: str = "",
     compute: dict | None = None,
+    planner: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Roll out ``episodes`` seeded episodes of ``env_id`` (batched ``batch`` at a time); one record per episode.
 
-    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`WITNESS`); ``env_kwargs``
+    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`PLANNER`, :data:`WITNESS`; ``planner``:
+    overrides of the planner's settings, :func:`agents.planner.parse_overrides`); ``env_kwargs``
     update the id's registered keywords.
 
     Raises
@@ -284,7 +287,7 @@ def run_episodes(
             elif policy == WITNESS:
                 pol = None  # after the reset, which draws the witnesses
             elif policy == PLANNER:
-                pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute)
+                pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute, planner)
             else:
                 raise validation.refusal("baseline", f"be one of {', '.join(BASELINES + (PLANNER, WITNESS))}", policy)
         else:
@@ -344,12 +347,15 @@ def run_episodes(
     return records
 
 
-def _planner_policy(env, env_id: str, kwargs: dict[str, Any], n: int, seed: int, compute: dict | None) -> Policy:
-    """The planner (:mod:`agents.planner`) of ``env_id`` for the ``n`` episodes of ``env``, which it reads each body's
-    kernel parameters from (the true model, also where the observation hides them); its compute into ``compute``."""
+def _planner_policy(
+    env, env_id: str, kwargs: dict[str, Any], n: int, seed: int, compute: dict | None, overrides: dict | None = None
+) -> Policy:
+    """The planner (:mod:`agents.planner`) of ``env_id`` (its settings with ``overrides``) for the ``n`` episodes of
+    ``env``, which it reads each body's kernel parameters from (the true model, also where the observation hides them);
+    its compute into ``compute``."""
     from agents.planner import Planner, label, settings_for
 
-    planner = Planner(kwargs, n, settings_for(env_id), seed=seed)
+    planner = Planner(kwargs, n, settings_for(env_id, overrides), seed=seed)
 
     def act(obs):
         a = planner.act(obs, env.body_params)
@@ -358,6 +364,7 @@ def _planner_policy(env, env_id: str, kwargs: dict[str, Any], n: int, seed: int,
             compute["episode_steps"] = compute.get("episode_steps", 0) + n
             compute["body_steps_per_step"] = planner.settings.body_steps
             compute["label"] = label(planner.settings)
+            compute["settings"] = dataclasses.asdict(planner.settings)
             planner.seconds = 0.0
         return a
 
@@ -470,6 +477,7 @@ def _summary_or_status(name: str, **kwargs) -> tuple[dict[str, Any], list[dict[s
             "label": compute["label"],
             "body_steps_per_step": compute["body_steps_per_step"],
             "seconds_per_step": compute["seconds"] / max(compute["episode_steps"], 1),
+            "settings": compute["settings"],
         }
     return summary, records
 
@@ -484,10 +492,14 @@ def evaluate_task(
     with_agents: bool = True,
     progress: bool = False,
     backend: str = "auto",
+    only: tuple[str, ...] | None = None,
+    planner: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The reference report of one registered task: every baseline (:func:`baselines_for`) and agent — the one
-    in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes`` seeded episodes,
-    with each episode's target features (:func:`target_features`) and per-episode results.
+    """The reference report of one registered task: every baseline (:func:`baselines_for`; ``only``: those named)
+    and agent — the one in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes``
+    seeded episodes, with each episode's target features (:func:`target_features`) and per-episode results.
+    ``planner``: overrides of the planner's settings (:func:`agents.planner.parse_overrides`; the report's planner
+    summary holds the settings that ran).
 
     ``{"env_id", "episodes", "seed", "targets": {"seed", "settling_rate", "growth_rate"}, "policies": {name:
     {"kind", "summary", "episodes": {"success", "final_distance", "return", "length"}}}}``; for ``FlatBody-v0``
@@ -510,8 +522,18 @@ def evaluate_task(
     policies = report["policies"]
     columns = ("success", "final_distance", "return", "length")
     if baselines:
-        for name in baselines_for(env_id):
-            summary, records = _summary_or_status(name, episodes=episodes, seed=seed, env_id=env_id, progress=progress)
+        names = baselines_for(env_id)
+        if only is not None:
+            from flatbody_env.physics import validation
+
+            for name in only:
+                validation.string("baselines", name, choices=names)
+            names = tuple(n for n in names if n in only)
+        for name in names:
+            extra = {"planner": planner} if name == PLANNER else {}
+            summary, records = _summary_or_status(
+                name, episodes=episodes, seed=seed, env_id=env_id, progress=progress, **extra
+            )
             entry: dict[str, Any] = {"kind": "baseline", "summary": summary}
             if records is not None:
                 entry["episodes"] = {c: [r[c] for r in records] for c in columns}

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -77,6 +78,8 @@ class PlannerSettings:
         for name, hi in (("samples", 4096), ("horizon", 400), ("knots", 400), ("iterations", 16)):
             validation.integer(name, getattr(self, name), low=2 if name in ("samples", "knots") else 1, high=hi)
         validation.number("noise", self.noise, low=0.0, high=2.0)
+        validation.number("noise_floor", self.noise_floor, low=0.0, high=1.0)
+        validation.number("noise_distance", self.noise_distance, low=1e-6, high=1e6)
         validation.number("temperature", self.temperature, low=1e-6, high=1e6)
         validation.number("terminal", self.terminal, low=0.0, high=1e6)
         validation.string("objective", self.objective, choices=("distance", "reward"))
@@ -208,8 +211,9 @@ PRIORS = {"FlatBodyHoldUnstable-v1": "passivity", "FlatBodyTorque-v1": "passivit
 law (torque only: no LQR exists; the unstable ellipse: passivity holds more starts than the LQR, docs/tasks.md)."""
 
 
-def settings_for(env_id: str) -> PlannerSettings:
-    """The planner of a registered id (:data:`PRIORS`; the v0 ids: the LQR's, passivity where it cannot be built)."""
+def settings_for(env_id: str, overrides: dict[str, Any] | None = None) -> PlannerSettings:
+    """The planner of a registered id (:data:`PRIORS`; the v0 ids: the LQR's, passivity where it cannot be built),
+    with ``overrides`` (:func:`parse_overrides`: field → value) of its settings."""
     prior = PRIORS.get(env_id)
     if prior is None:
         from flatbody_env.env.registration import task_spec
@@ -219,7 +223,36 @@ def settings_for(env_id: str) -> PlannerSettings:
         prior = "lqr" if control == "torque+dilatation" and not hold else "passivity"
     # around the LQR, a terminal weight: without it the 3 s horizon trades the slow modes for quick gains and the
     # plans did worse than the LQR alone (84 % against 100 % on FlatBody-v1; with it 100 %, docs/tasks.md)
-    return PlannerSettings(prior=prior, terminal=60.0 if prior == "lqr" else 0.0)
+    base = {"prior": prior, "terminal": 60.0 if prior == "lqr" else 0.0}
+    return PlannerSettings(**{**base, **(overrides or {})})
+
+
+def parse_overrides(items: list[str] | None, where: str = "planner") -> dict[str, Any]:
+    """``["samples=256", "horizon=160", ...]`` → ``{"samples": 256, "horizon": 160, ...}``: each KEY a field of
+    :class:`PlannerSettings`, each VALUE read as that field's type (int, float or str); the ranges are checked when the
+    settings are built. ``ValueError`` naming ``where`` and the item otherwise."""
+    from dataclasses import fields
+
+    from flatbody_env.physics import validation
+
+    kinds = {f.name: f.type for f in fields(PlannerSettings)}
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, eq, text = str(item).partition("=")
+        if not eq or key not in kinds:
+            raise validation.refusal(where, f"be KEY=VALUE with KEY one of {', '.join(kinds)}", item)
+        kind = {"int": int, "float": float}.get(str(kinds[key]), str)
+        try:
+            out[key] = kind(text)
+        except ValueError:
+            raise validation.refusal(
+                f"{where}.{key}", f"be a{'n integer' if kind is int else ' number'}", text
+            ) from None
+    try:  # the ranges, before anything runs
+        PlannerSettings(**out)
+    except ValueError as exc:
+        raise ValueError(f"{where}.{exc}") from None
+    return out
 
 
 def label(settings: PlannerSettings) -> str:
@@ -227,4 +260,4 @@ def label(settings: PlannerSettings) -> str:
     return f"planner (MPPI on {'the ' + settings.prior if settings.prior != 'none' else 'open-loop plans'}, true model)"
 
 
-__all__ = ["PRIORS", "Planner", "PlannerSettings", "label", "settings_for"]
+__all__ = ["PRIORS", "Planner", "PlannerSettings", "label", "parse_overrides", "settings_for"]

@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from flatbody_env.cli.args import int_at_least, number, number_list, output_dir, output_file, seed_range
+from flatbody_env.cli.args import int_at_least, name_list, number, number_list, output_dir, output_file, seed_range
 from flatbody_env.physics import validation
 
 
@@ -290,12 +290,21 @@ def _imitate(args) -> int:
     return 0
 
 
+def _baseline_names() -> tuple[str, ...]:
+    """Every baseline's name (read when ``--baselines`` is parsed: agents load only then)."""
+    from agents.evaluate import BASELINES, PLANNER, WITNESS
+
+    return (*BASELINES, PLANNER, WITNESS)
+
+
 @_trusting
 def _evaluate(args) -> int:
     from agents.evaluate import evaluate_all, format_table
 
     if args.env is not None or args.out_dir or args.docs:
         return _evaluate_tasks(args)
+    for flag, value in (("--baselines", args.baselines), ("--planner", args.planner)):
+        validation.requirement(flag, value, value is None, "go with --env (the reference report of a task)")
     report = evaluate_all(
         args.model,
         episodes=args.episodes,
@@ -336,6 +345,15 @@ def _evaluate_tasks(args) -> int:
     from agents.config import DEFAULT_ENV_ID
 
     ids = V1_IDS if args.env == "all" else (task_spec(args.env or trained_on or DEFAULT_ENV_ID).env_id,)
+    from agents.planner import parse_overrides
+
+    planner = parse_overrides(args.planner, "--planner") if args.planner else None  # checked before anything runs
+    if args.baselines is not None:
+        from agents.evaluate import baselines_for
+
+        for env_id in ids:
+            for name in args.baselines:
+                validation.string("--baselines", name, choices=baselines_for(env_id))
     reports = []
     for env_id in ids:
         report = evaluate_task(
@@ -346,6 +364,8 @@ def _evaluate_tasks(args) -> int:
             baselines=not args.no_baselines,
             progress=not args.json,
             backend=args.backend,
+            only=None if args.baselines is None else tuple(args.baselines),
+            planner=planner,
         )
         reports.append(report)
         if args.out_dir:
@@ -686,6 +706,21 @@ def register(sub) -> None:
         help=f"episode i is reset with seed S + i (default {EVAL_SEED})",
     )
     p.add_argument("--no-baselines", action="store_true", help="evaluate the agent only")
+    p.add_argument(
+        "--baselines",
+        type=name_list("baselines", _baseline_names),
+        default=None,
+        metavar="A,B",
+        help="with --env: evaluate only these baselines (zero, random, heuristic, passivity, planner, witness)",
+    )
+    p.add_argument(
+        "--planner",
+        nargs="+",
+        default=None,
+        metavar="KEY=VALUE",
+        help="with --env: the planner's settings (samples, horizon, knots, noise, iterations, prior, ...; "
+        "docs/tasks.md), e.g. samples=256 horizon=160 knots=24",
+    )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(
         "--out",

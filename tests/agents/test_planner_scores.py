@@ -54,9 +54,73 @@ def test_the_planner_holds_more_unstable_starts_than_the_passivity_law_it_pertur
 def test_planner_settings_are_checked():
     from agents.planner import PlannerSettings
 
-    for kw, field in (({"samples": 1}, "samples"), ({"noise": -1.0}, "noise"), ({"prior": "pid"}, "prior")):
+    for kw, field in (
+        ({"samples": 1}, "samples"),
+        ({"noise": -1.0}, "noise"),
+        ({"prior": "pid"}, "prior"),
+        ({"noise_floor": float("nan")}, "noise_floor"),
+        ({"noise_distance": 0.0}, "noise_distance"),
+    ):
         with pytest.raises(ValueError, match=f"^{field}"):
             PlannerSettings(**kw)
+
+
+def test_planner_overrides_are_typed_and_checked_before_anything_runs():
+    from agents.planner import parse_overrides, settings_for
+
+    got = parse_overrides(["samples=256", "horizon=160", "noise=0.6", "prior=none"])
+    assert got == {"samples": 256, "horizon": 160, "noise": 0.6, "prior": "none"}
+    s = settings_for("FlatBodyTorque-v1", got)
+    assert (s.samples, s.horizon, s.noise, s.prior, s.knots) == (256, 160, 0.6, "none", 4)
+    assert settings_for("FlatBody-v1", {"samples": 8}).prior == "lqr"  # the task's own law stays unless overridden
+    for bad, match in (
+        (["x=1"], "^--planner: must be KEY=VALUE with KEY one of samples, horizon"),
+        (["samples"], "^--planner: must be KEY=VALUE"),
+        (["samples=many"], "^--planner.samples: must be an integer, got 'many'"),
+        (["horizon=1.5"], "^--planner.horizon: must be an integer"),
+        (["samples=1"], r"^--planner.samples: must be an integer \(allowed range \[2, 4096\]\)"),
+        (["noise=inf"], "^--planner.noise: must"),
+        (["prior=pid"], "^--planner.prior: must be one of none, lqr, passivity"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            parse_overrides(bad, "--planner")
+
+
+def test_a_task_report_runs_only_the_named_baselines_and_the_planner_as_overridden():
+    from agents.evaluate import evaluate_task
+
+    report = evaluate_task(
+        "FlatBodyTorque-v1",
+        episodes=2,
+        seed=10000,
+        with_agents=False,
+        only=("planner",),
+        planner={"samples": 6, "horizon": 5, "knots": 3},
+    )
+    assert list(report["policies"]) == ["planner"]
+    compute = report["policies"]["planner"]["summary"]["compute"]
+    assert compute["body_steps_per_step"] == 6 * 5
+    assert compute["settings"]["samples"] == 6 and compute["settings"]["prior"] == "passivity"
+    with pytest.raises(ValueError, match="^baselines: must be one of zero, random, heuristic, passivity, planner, got"):
+        evaluate_task("FlatBody-v1", episodes=1, only=("witness",), with_agents=False)
+
+
+def test_evaluate_refuses_planner_flags_in_one_line(capsys):
+    from flatbody_env.cli.main import main
+
+    for argv, text in (
+        (["evaluate", "--planner", "samples=8"], "--planner: must go with --env"),
+        (["evaluate", "--env", "FlatBody-v1", "--planner", "samples=1"], "--planner.samples: must be an integer"),
+        (["evaluate", "--env", "FlatBody-v1", "--baselines", "witness"], "--baselines: must be one of"),
+        (["evaluate", "--env", "FlatBody-v1", "--baselines", "lqr"], "--baselines: expected names from"),
+    ):
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's own refusals (a --baselines name no task has)
+            code = exc.code
+        assert code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and text in err[0], err
 
 
 # --------------------------------------------------------------------------------------------- scores
