@@ -460,6 +460,7 @@ def train_rsl(
             unit="step",
             desc=f"rsl-ppo {config.env_id}",
         )
+    table = folder.progress_table("progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
     t0 = time.perf_counter()
     it = done_it
     try:
@@ -482,6 +483,7 @@ def train_rsl(
                     "learning_rate": float(runner.alg.learning_rate),
                 }
             )
+            table.add(rows[-1])  # written as it grows (a while apart): a long run shows its progress
             if bar is not None:
                 bar.update(nenv * steps)
             done = (it + 1) * nenv * steps
@@ -496,7 +498,7 @@ def train_rsl(
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
-        folder.write_progress(rows, "progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
+        table.close()
         reached = len(rows) + done_it
         if checkpoint_freq and rows:
             kept = _save_rsl_checkpoint(folder, runner, venv, hp, reached, reached * nenv * steps)
@@ -507,7 +509,7 @@ def train_rsl(
     if bar is not None:
         bar.close()
     trained = (done_it + len(rows)) * nenv * steps
-    folder.write_progress(rows, "progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
+    table.close()
     folder.save(
         "rsl_model.pt",
         lambda tmp: torch.save(_rsl_state(runner, venv, hp, done_it + len(rows), optimizer=False), str(tmp)),

@@ -73,6 +73,44 @@ class Checkpoint:
     """A trainer's own state beside the model (the curriculum's stage), JSON."""
 
 
+class ProgressTable:
+    """A training log kept in memory and written to ``path`` as it grows, through the one writing door
+    (:func:`flatbody_env.output.write_csv`: atomic, no planted link followed).
+
+    The file is rewritten after a row once the last rewrite is a while ago (at least 2 s, and ten times as long as the
+    rewrite took, so the cost stays a small share of the run however long it is), and when the table is closed (then
+    always, so a run too short for a row has an empty table): a killed run leaves the table of its last rewrite, never
+    a half-written file. Columns are added as they appear (sorted among themselves with ``sort``, as SB3's logger
+    gives them; else the first row's order is the header's); earlier rows leave them empty (as SB3's format does)."""
+
+    def __init__(self, path: Path, *, sort: bool = True) -> None:
+        self.path, self.keys, self.rows, self.sort = Path(path), [], [], sort
+        self.written, self.cost, self.dirty = -math.inf, 0.0, False
+
+    def add(self, row: dict[str, Any]) -> None:
+        """Append one row (values None are left empty)."""
+        new = [k for k in row if k not in self.keys]
+        self.keys.extend(sorted(new) if self.sort or self.keys else new)
+        self.rows.append({k: v for k, v in row.items() if v is not None})
+        self.dirty = True
+        if time.monotonic() - self.written >= max(2.0, 10.0 * self.cost):
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the table now if it changed since the last write."""
+        if not self.dirty:
+            return
+        t0 = time.monotonic()
+        write_csv(self.path, self.keys, ([row.get(k, "") for k in self.keys] for row in self.rows))
+        self.written, self.dirty = time.monotonic(), False
+        self.cost = self.written - t0
+
+    def close(self) -> None:
+        """The last write (also of an empty table)."""
+        self.dirty = self.dirty or not self.path.exists()
+        self.flush()
+
+
 @dataclass(frozen=True, kw_only=True)
 class RunFolder:
     """The folder of one training run (module docstring); ``path`` as given."""
@@ -182,32 +220,22 @@ class RunFolder:
 
         class AtomicCSV(KVWriter):
             def __init__(self, path: Path) -> None:
-                self.path, self.keys, self.rows = path, [], []
-                self.written, self.cost, self.dirty = -math.inf, 0.0, False
+                self.table = ProgressTable(path)
 
             def write(self, key_values, key_excluded, step: int = 0) -> None:
-                values = filter_excluded_keys(key_values, key_excluded, "csv")
-                self.keys.extend(sorted(k for k in values if k not in self.keys))
-                self.rows.append({k: v for k, v in values.items() if v is not None})
-                self.dirty = True
-                if time.monotonic() - self.written >= max(2.0, 10.0 * self.cost):
-                    self.flush()
-
-            def flush(self) -> None:
-                if not self.dirty:
-                    return
-                t0 = time.monotonic()
-                write_csv(self.path, self.keys, ([row.get(k, "") for k in self.keys] for row in self.rows))
-                self.written, self.dirty = time.monotonic(), False
-                self.cost = self.written - t0
+                self.table.add(filter_excluded_keys(key_values, key_excluded, "csv"))
 
             def close(self) -> None:
-                self.dirty = self.dirty or not self.path.exists()  # a run too short for a row still has its file
-                self.flush()
+                self.table.close()
 
         folder = self.path / subfolder if subfolder else self.path
         folder.mkdir(parents=True, exist_ok=True)
         return Logger(folder=str(folder), output_formats=[AtomicCSV(folder / "progress.csv")])
+
+    def progress_table(self, name: str = "progress.csv") -> ProgressTable:
+        """The run's training log ``name`` as a :class:`ProgressTable` (rsl-ppo's rows; SB3's go through
+        :meth:`progress_logger`, which writes through the same table)."""
+        return ProgressTable(self.path / name, sort=False)
 
     def write_run(
         self,
@@ -358,4 +386,13 @@ def stopped(
     )
 
 
-__all__ = ["Checkpoint", "KEEP_CHECKPOINTS", "RUN_FILES", "RunFolder", "TrainResult", "resume_command", "stopped"]
+__all__ = [
+    "Checkpoint",
+    "KEEP_CHECKPOINTS",
+    "RUN_FILES",
+    "ProgressTable",
+    "RunFolder",
+    "TrainResult",
+    "resume_command",
+    "stopped",
+]

@@ -227,6 +227,9 @@ def test_callback_stops_the_run_and_the_live_policy_is_the_exported_agent(tmp_pa
         seen.append(row["iteration"])
         live = live_policy(runner.alg.actor, TorchResidual({}, 1.0, "gain", "cpu"))
         seen.append(live(obs))
+        if row["iteration"] == 1:  # the log is on disk while the run goes on (its first row at once)
+            lines = (tmp_path / "run" / "progress.csv").read_text().splitlines()
+            assert len(lines) == 2 and lines[0].startswith("iteration,timesteps,")
         return row["iteration"] == 2
 
     result = train(
