@@ -328,8 +328,15 @@ class FlatBodyVectorEnv(VectorEnv):
             )
         return self._gather("OBS"), self._info(step=False)
 
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``S`` and ``K`` of all bodies, read only: one core's own arrays (no copy: :func:`episode_info` copies every
+        row it hands out), else the cores' concatenated."""
+        if len(self.cores) == 1:
+            return self.cores[0].S, self.cores[0].K
+        return self._gather("S"), self._gather("K")
+
     def _info(self, *, step: bool) -> dict[str, Any]:
-        S, K = self._gather("S"), self._gather("K")
+        S, K = self._arrays()
         return episode_info(
             S,
             K,
@@ -353,7 +360,7 @@ class FlatBodyVectorEnv(VectorEnv):
             self.cores[0].step(parts[0])
             for f in futures:
                 f.result()
-        S, K = self._gather("S"), self._gather("K")
+        S, K = self._arrays()
         info = episode_info(
             S,
             K,
