@@ -37,7 +37,7 @@ def test_mean_interval_is_the_student_t_interval():
     assert mean_interval([0.3]) == (0.3, 0.3, 0.3)
 
 
-def test_curves_table_files_and_docs_block_come_from_the_rows(tmp_path):
+def test_curves_table_files_and_docs_block_come_from_the_rows(tmp_path, monkeypatch):
     refs = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] in ("FlatBody-v1", "FlatBodySlow-v1")]
     envs = [r["env_id"] for r in refs]
     rows = _rows("ppo", envs, range(5), lambda e, s: 0.9 + 0.02 * s) + _rows("sac", envs, range(5), lambda e, s: 0.1)
@@ -58,6 +58,14 @@ def test_curves_table_files_and_docs_block_come_from_the_rows(tmp_path):
                                                 "benchmark_iqm.png"}  # fmt: skip
     saved = json.loads(paths["json"].read_text())
     assert len(saved["rows"]) == 20 and len(paths["csv"].read_text().splitlines()) == 21
+    # run folders below the working directory are saved relative to it (the same on every machine), others as given
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    monkeypatch.chdir(repo)
+    inside, outside = repo / "runs" / "x", tmp_path / "elsewhere" / "y"
+    report([{**rows[0], "run": str(inside)}, {**rows[1], "run": str(outside)}] + rows[2:], tmp_path / "b", refs)
+    runs = [r["run"] for r in json.loads((tmp_path / "b" / "benchmark.json").read_text())["rows"][:2]]
+    assert runs == ["runs/x", str(outside)]
     block = markdown(saved, "flatbody benchmark --algos ppo,sac")
     assert "flatbody benchmark --algos ppo,sac" in block and "FlatBodySlow-v1" in block
 
