@@ -34,6 +34,8 @@ ALGOS = ("ppo", "sac", "td3", "rsl-ppo")
 BUDGETS = {"ppo": 500_000, "sac": 30_000, "td3": 30_000, "rsl-ppo": 2_000_000}
 """Env steps per run at the stated budgets for 2 CPU cores (docs/tasks.md, "Trained agents": on-policy algorithms take
 many cheap steps, the off-policy ones few expensive ones — about the same minutes each)."""
+DATA_DIR = Path(__file__).resolve().parent / "data" / "benchmark"
+"""The saved tables of the v1 suite's benchmark (``benchmark.json``, ``.csv``; docs/tasks.md, "Learned baselines")."""
 
 
 def _sb3_policy(model):
