@@ -38,13 +38,13 @@ FORMAT_VERSION = 1
 POLICY_FILE = "policy.npz"
 MAX_POLICY_BYTES = 64 * 1024 * 1024
 """Largest ``policy.npz``, and most bytes its arrays may declare (an MLP of 2 000 × 2 000 float64 layers)."""
-ACTIVATIONS = ("tanh", "relu", "elu")
-"""The activations between linear layers that an exported policy may have (ELU with α = 1, rsl_rl's default)."""
 _ACTIVATION_FUNCTIONS = {
     "tanh": np.tanh,
     "relu": lambda v: np.maximum(v, 0.0),
     "elu": lambda v: np.where(v > 0.0, v, np.expm1(np.minimum(v, 0.0))),
 }
+ACTIVATIONS = tuple(_ACTIVATION_FUNCTIONS)
+"""The activations between linear layers that an exported policy may have (ELU with α = 1, rsl_rl's default)."""
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 """Where shipped agents live: ``MODELS_DIR/<algo>-<env id>/`` (model.zip, config.yml, ...); also :data:`agents.evaluate.MODELS_DIR`."""
 
