@@ -231,8 +231,7 @@ class Chart:
                     frameon=False,
                     title=lg["title"],
                 )
-                fig.canvas.draw()
-                bottom += (legend.get_window_extent().height + 4.0) / height
+                bottom += (legend.get_window_extent(fig.canvas.get_renderer()).height + 4.0) / height
             else:
                 legend = fig.legend(
                     lg["handles"],
@@ -244,8 +243,7 @@ class Chart:
                     frameon=False,
                     title=lg["title"],
                 )
-                fig.canvas.draw()
-                right = 1.0 - (legend.get_window_extent().width + 6.0) / width
+                right = 1.0 - (legend.get_window_extent(fig.canvas.get_renderer()).width + 6.0) / width
         fig.tight_layout(rect=(0.0, bottom, right, top), pad=0.6)
 
     def save(self, png_path: str | os.PathLike) -> Path:

@@ -303,8 +303,9 @@ class EnvCore:
     backend : str
         ``"cpu"`` or ``"cuda"``.
     alloc : callable, optional
-        ``alloc(shape, dtype)`` makes the arrays (default numpy zeros; numba device arrays on CUDA; the torch face
-        passes views of torch tensors).
+        ``alloc(shape, dtype)`` makes the arrays (default: numpy zeros, ``S`` and ``K`` in the lanes' layout of
+        :func:`~flatbody_env.env.transition.lanes`; numba device arrays on CUDA; the torch face passes views of torch
+        tensors).
     """
 
     def __init__(
@@ -335,6 +336,7 @@ class EnvCore:
         self.coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
         self.xcfg = self._xcfg(kind)
         self._fused = None
+        custom_alloc = alloc
         if backend == "cpu":
             self._put = np.ascontiguousarray
             alloc = alloc or (lambda shape, dtype: np.zeros(shape, dtype))
@@ -350,8 +352,11 @@ class EnvCore:
                     return dev.to_device(np.zeros(shape, dtype))
 
             self.threads_per_block = threads_per_block or _cuda.THREADS_PER_BLOCK
-        self.S = alloc((tr.S_ROWS, n), np.float64)
-        self.K = alloc((tr.K_ROWS, n), np.int64)
+        if backend == "cpu" and custom_alloc is None:
+            self.S, self.K = tr.lanes(tr.S_ROWS, n), tr.lanes(tr.K_ROWS, n, np.int64)
+        else:
+            self.S = alloc((tr.S_ROWS, n), np.float64)
+            self.K = alloc((tr.K_ROWS, n), np.int64)
         self.OBS = alloc((n, c.observation_size), np.float32)
         self.FINAL = alloc((n, c.observation_size), np.float32)
         self.FLAGS = alloc((2,), np.int64)
@@ -383,8 +388,8 @@ class EnvCore:
         threads at once, and the fused batch step writes its work arrays in place)."""
         if self._mode != "lanes" and backend == "cpu":
             self._AC = np.zeros((n, c.n_act))
-            self._U = np.zeros((4, n))
-            self._OUT = np.zeros((11, n))
+            self._U = tr.lanes(4, n)
+            self._OUT = tr.lanes(11, n)
             self._STATUS = np.zeros(n, np.int64)
             self._NFEV = np.zeros(n, np.int64)
             self._lanes = tr.lane_work(n)

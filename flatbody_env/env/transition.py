@@ -113,6 +113,20 @@ CODE_LEFT_TOLERANCE = 7
 """``K_CODE`` of a step that ends the episode because the body left the target's tolerance (the hold task);
 0–6 are :data:`flatbody_env.env.task.DOMAIN_CODES`."""
 
+
+def lanes(rows: int, n: int, dtype=np.float64) -> np.ndarray:
+    """Zeros (``rows``, ``n``) in the lanes' layout (one row per quantity, one column per body) for the CPU loops: a
+    view of a wider array whose rows lie an odd number of 64-byte cache lines apart. Rows a power-of-two multiple of
+    4 KiB apart (``n`` = 512, 1024, 2048, ...) all fall into the same sets of a set-associative cache, and the per-body
+    loops, which touch some twenty rows per body, then miss it at every body (measured: 0.84 µs against 0.66 µs per
+    body-step at N = 1024 against 1030). Always a strided view (never C-contiguous), so the compiled loops have one
+    layout whatever ``n``."""
+    width = n + 1 + (-(n + 1)) % 8  # a whole number of cache lines, more than n
+    if (width // 8) % 2 == 0:
+        width += 8
+    return np.zeros((rows, width), dtype)[:, :n]
+
+
 X_DT, X_H, X_RTOL, X_ATOL, X_ETOL, X_KIND = 0, 1, 2, 3, 4, 5
 X_LIMITS, X_MASK, X_NACT = 6, 10, 14
 """(τ1, τ2, τ3, f_ϱ) limits, which of them the action drives (0/1), and the action's size."""
@@ -823,10 +837,10 @@ def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW
 
 
 def lane_work(n: int) -> tuple:
-    """The work arrays of :func:`finish_lanes` for ``n`` bodies."""
+    """The work arrays of :func:`finish_lanes` for ``n`` bodies (:func:`lanes`)."""
     return (
-        np.zeros((11, n)), np.zeros((6, n)), np.zeros((4, n)), np.zeros(n, np.int64), np.zeros(n), np.zeros((4, n)),
-        np.zeros((n, 4)), np.zeros(11),
+        lanes(11, n), lanes(6, n), lanes(4, n), np.zeros(n, np.int64), np.zeros(n), lanes(4, n), np.zeros((n, 4)),
+        np.zeros(11),
     )  # fmt: skip
 
 
@@ -971,6 +985,7 @@ __all__ = [
     "cuda_kernels",
     "draw_body",
     "finish_body",
+    "lanes",
     "philox4x32",
     "proximity",
     "reset_body",

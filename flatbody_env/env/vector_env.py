@@ -44,6 +44,9 @@ LANES_PER_THREAD = 256
 """Fewest bodies per thread of the automatic split (below that a thread costs more than it saves)."""
 MAX_THREADS = 64
 """Largest ``num_threads`` accepted."""
+INFO_ROWS = (slice(3, 4), slice(tr.R_REWARD, tr.S_ROWS))
+"""The rows of ``S`` that :func:`episode_info` and a step's returns read: p_θ, and the reward to the episode's end
+figures."""
 
 
 def available_cores() -> int:
@@ -96,36 +99,44 @@ def episode_info(
 ) -> dict[str, Any]:
     """The ``info`` of a step (or, ``step=False``, of a reset) of a batch from its arrays ``S``, ``K``
     (:mod:`flatbody_env.env.transition`; numpy arrays, or torch tensors with ``xp`` = torch): the one schema of every
-    face (:class:`~flatbody_env.env.env.FlatBodyEnv`, "Info")."""
-    clock = xp.where(K[tr.K_EP_DONE] != 0, K[tr.K_EP_LENGTH], K[tr.K_CLOCK]) if step else K[tr.K_CLOCK]
+    face (:class:`~flatbody_env.env.env.FlatBodyEnv`, "Info"). The rows it hands out are views of two copies made
+    here (the rows from the reward on, and ``K``), never of the env's own arrays."""
+    copy = (lambda a: a.copy()) if xp is np else (lambda a: a.clone())
+    rows, ints = copy(S[tr.R_REWARD : tr.S_ROWS]), copy(K)
+
+    def row(r):
+        return rows[r - tr.R_REWARD]
+
+    done = ints[tr.K_EP_DONE] != 0
+    clock = xp.where(done, ints[tr.K_EP_LENGTH], ints[tr.K_CLOCK]) if step else ints[tr.K_CLOCK]
     clock = clock.astype(np.float64) if xp is np else clock.double()
-    terminated = K[tr.K_TERMINATED] != 0
-    d = S[tr.R_DISTANCE] + 0.0  # a copy
+    d = row(tr.R_DISTANCE)
     info: dict[str, Any] = {
         "t": clock * dt,
         "distance": d,
-        "is_success": (d <= tol) & ~terminated,
-        "energy": S[tr.R_ENERGY] + 0.0,
-        "casimir": S[tr.R_CASIMIR] + 0.0,
-        "p_theta": S[3] + 0.0,
-        "integrator": {"method": method, "nfev": K[tr.K_NFEV] + 0},
-        "status": K[tr.K_STATUS] + 0,
-        "domain_code": K[tr.K_CODE] + 0,
+        "is_success": (d <= tol) & (ints[tr.K_TERMINATED] == 0),
+        "energy": row(tr.R_ENERGY),
+        "casimir": row(tr.R_CASIMIR),
+        "p_theta": copy(S[3]),
+        "integrator": {"method": method, "nfev": ints[tr.K_NFEV]},
+        "status": ints[tr.K_STATUS],
+        "domain_code": ints[tr.K_CODE],
     }
     if not step:
         return info
-    info["reward_terms"] = {name: S[tr.R_TERMS + i] + 0.0 for i, name in enumerate(names)}
-    done = K[tr.K_EP_DONE] != 0
-    ret, length, ok, dist = (
-        S[tr.R_EP_RETURN] + 0.0,
-        K[tr.K_EP_LENGTH] + 0,
-        K[tr.K_EP_SUCCESS] != 0,
-        S[tr.R_EP_DISTANCE] + 0.0,
-    )
+    info["reward_terms"] = {name: row(tr.R_TERMS + i) for i, name in enumerate(names)}
+    ret, length, ok, dist = row(tr.R_EP_RETURN), ints[tr.K_EP_LENGTH], ints[tr.K_EP_SUCCESS] != 0, row(tr.R_EP_DISTANCE)
     info["episode"] = {"r": ret, "l": length, "is_success": ok, "distance": dist}
     info["_episode"] = done
-    count = done.sum()
-    w = done / max(int(count), 1) if xp is np else done.double() / count.clamp(min=1)
+    if xp is np:
+        count = int(np.count_nonzero(done))
+        if count == 0:  # no episode ended: the log's means are 0 (read nothing)
+            info["log"] = {"episodes": np.asarray(0), **{key: np.asarray(0.0) for key in LOG_MEANS}}
+            return info
+        w = done / count
+    else:
+        count = done.sum()
+        w = done.double() / count.clamp(min=1)
     info["log"] = {  # 0-d arrays (tensors on the torch face): no device synchronisation to read them
         "episodes": xp.asarray(count),
         "episode_return": xp.asarray((ret * w).sum()),
@@ -134,6 +145,10 @@ def episode_info(
         "final_distance": xp.asarray((dist * w).sum()),
     }
     return info
+
+
+LOG_MEANS = ("episode_return", "episode_length", "success_rate", "final_distance")
+"""The means of ``info["log"]`` (rsl_rl's ``extras["log"]``) over the episodes that ended in a step."""
 
 
 class FlatBodyVectorEnv(VectorEnv):
@@ -199,6 +214,7 @@ class FlatBodyVectorEnv(VectorEnv):
         """The names of ``info["reward_terms"]`` (the task's)."""
         self._method = c.stepper.method
         self._pool: ThreadPoolExecutor | None = None
+        self._info_buffers: tuple[np.ndarray, np.ndarray] | None = None
         self._pool_pid = 0
 
     # --- composition (read only) ---------------------------------------------------------------------
@@ -329,11 +345,20 @@ class FlatBodyVectorEnv(VectorEnv):
         return self._gather("OBS"), self._info(step=False)
 
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """``S`` and ``K`` of all bodies, read only: one core's own arrays (no copy: :func:`episode_info` copies every
-        row it hands out), else the cores' concatenated."""
+        """``S`` and ``K`` of all bodies for :func:`episode_info` and the step's returns, read only: one core's own
+        arrays (no copy: :func:`episode_info` copies every row it hands out), else the rows they read (:data:`INFO_ROWS`
+        of ``S``, all of ``K``) of every core gathered into buffers this env keeps (the other rows of ``S`` are not
+        filled)."""
         if len(self.cores) == 1:
             return self.cores[0].S, self.cores[0].K
-        return self._gather("S"), self._gather("K")
+        if self._info_buffers is None:
+            self._info_buffers = (np.zeros((tr.S_ROWS, self.num_envs)), np.zeros((tr.K_ROWS, self.num_envs), np.int64))
+        S, K = self._info_buffers
+        for core, sl in zip(self.cores, self._slices, strict=True):
+            for rows in INFO_ROWS:
+                S[rows, sl] = core.S[rows]
+            K[:, sl] = core.K
+        return S, K
 
     def _info(self, *, step: bool) -> dict[str, Any]:
         S, K = self._arrays()

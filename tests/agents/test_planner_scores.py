@@ -35,11 +35,11 @@ def test_the_planner_acts_and_counts_its_compute():
     from agents.evaluate import run_episodes, summarize
 
     compute: dict = {}
-    records = run_episodes("planner", episodes=2, seed=10000, env_id="FlatBodyHoldUnstable-v1", compute=compute)
-    assert len(records) == 2 and compute["body_steps_per_step"] == 48 * 60
-    assert compute["episode_steps"] >= 2 and compute["seconds"] > 0
+    records = run_episodes("planner", episodes=1, seed=10000, env_id="FlatBodyHoldUnstable-v1", compute=compute)
+    assert len(records) == 1 and compute["body_steps_per_step"] == 48 * 60
+    assert compute["episode_steps"] >= 1 and compute["seconds"] > 0
     assert "passivity" in compute["label"] and "true model" in compute["label"]
-    assert summarize(records)["success_rate"] in (0.0, 0.5, 1.0)
+    assert summarize(records)["success_rate"] in (0.0, 1.0)
 
 
 @pytest.mark.slow

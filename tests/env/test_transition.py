@@ -170,11 +170,35 @@ def test_episode_statistics_and_log_follow_the_episodes():
         returns += r
         if k < 4:
             assert not info["_episode"].any() and int(info["log"]["episodes"]) == 0
+            quiet = info["log"]
     assert info["_episode"].all() and trunc.all()
+    # the same log whether or not an episode ended (keys, 0-d arrays, dtypes)
+    assert {k: (v.shape, v.dtype) for k, v in quiet.items()} == {k: (v.shape, v.dtype) for k, v in info["log"].items()}
+    # every array handed out is the step's own: none shares memory with the env's state
+    core = env.cores[0]
+    leaves = [info[k] for k in ("t", "distance", "energy", "casimir", "p_theta", "status", "domain_code")]
+    leaves += [*info["reward_terms"].values(), *info["episode"].values(), info["integrator"]["nfev"]]
+    assert not any(np.shares_memory(a, core.S) or np.shares_memory(a, core.K) for a in leaves)
     np.testing.assert_allclose(info["episode"]["r"], returns, rtol=0, atol=1e-12)
     assert (info["episode"]["l"] == 5).all()
     np.testing.assert_allclose(info["log"]["episode_return"], returns.mean(), atol=1e-12)
     np.testing.assert_array_equal(info["episode"]["distance"], info["distance"])
+
+
+def test_the_lanes_rows_lie_an_odd_number_of_cache_lines_apart():
+    """Rows a power-of-two multiple of 4 KiB apart share their cache sets: the lanes' layout never puts them so, and
+    has one (strided) layout whatever N, so that the compiled loops are compiled once."""
+    from flatbody_env.env import transition as tr
+    from flatbody_env.env.core import EnvCore, configure
+
+    for n in (1, 7, 8, 63, 512, 1000, 1024, 4096):
+        for dtype in (np.float64, np.int64):
+            a = tr.lanes(tr.S_ROWS, n, dtype)
+            assert a.shape == (tr.S_ROWS, n) and a.dtype == dtype and not a.any()
+            assert not a.flags.c_contiguous and a.strides[1] == 8
+            assert a.strides[0] % 64 == 0 and (a.strides[0] // 64) % 2 == 1, (n, a.strides)
+    core = EnvCore(configure(**_v1_kwargs("FlatBody-v1")), 1024)
+    assert all((x.strides[0] // 64) % 2 == 1 for x in (core.S, core.K))
 
 
 def test_the_tolerance_reward_is_bounded_and_names_its_terms():
