@@ -15,7 +15,6 @@ pytest.importorskip("rsl_rl")
 
 from agents.heuristic import ResidualAction  # noqa: E402
 from agents.config import load_hyperparams  # noqa: E402
-from agents.rsl import HeldGaussianDistribution, RslVecEnv, TorchResidual, export_sb3, runner_config  # noqa: E402
 
 DEFAULTS = load_hyperparams("rsl-ppo", "FlatBody-v0")
 """The residual agent's settings (rsl-ppo.yml's FlatBody-v0 entry)."""
@@ -34,6 +33,8 @@ def _observations(n=12, steps=5):
 
 @pytest.mark.parametrize("mode", ["gain", "additive"])
 def test_torch_residual_equals_the_numpy_residual(mode):
+    from agents.rsl import TorchResidual
+
     res = TorchResidual({}, 0.7, mode, "cpu")
     ref = ResidualAction({}, 0.7, 0.0, mode)
     rng = np.random.default_rng(0)
@@ -47,6 +48,8 @@ def test_torch_residual_equals_the_numpy_residual(mode):
 
 
 def test_adapter_contract_and_exact_export(tmp_path):
+    from agents.rsl import RslVecEnv, TorchResidual, export_sb3, runner_config
+
     from rsl_rl.runners import OnPolicyRunner
     from stable_baselines3 import PPO
 
@@ -83,6 +86,8 @@ def test_adapter_contract_and_exact_export(tmp_path):
 
 
 def test_held_noise_is_held_for_k_rollout_steps_and_fresh_in_the_update():
+    from agents.rsl import HeldGaussianDistribution
+
     torch.manual_seed(0)
     dist = HeldGaussianDistribution(4, hold_steps=3, init_std=1.5)
     mean = torch.zeros(5, 4)
@@ -111,6 +116,8 @@ def test_held_noise_is_held_for_k_rollout_steps_and_fresh_in_the_update():
 
 
 def test_reward_normalisation_scales_the_training_rewards_only():
+    from agents.rsl import RslVecEnv, TorchResidual
+
     n = 16
     raw = RslVecEnv(FlatBodyTorchVectorEnv(n, max_episode_steps=6), TorchResidual({}, 1.0, "gain", "cpu"), seed=1)
     norm = RslVecEnv(
@@ -217,7 +224,7 @@ def test_short_run_writes_the_run_folder_and_evaluates(tmp_path, monkeypatch):
 
 def test_callback_stops_the_run_and_the_live_policy_is_the_exported_agent(tmp_path):
     from agents.evaluate import Agent
-    from agents.rsl import live_policy
+    from agents.rsl import TorchResidual, live_policy
     from agents.train import train
 
     obs = _observations(n=6, steps=2)[-1].numpy()
@@ -271,6 +278,8 @@ def test_residual_policy_beats_the_lqr_on_held_out_seeds(tmp_path):
 def test_from_scratch_option_trains_without_the_lqr_and_evaluates_unchanged(tmp_path):
     """``--hyperparams residual=null``: the policy's clipped action is the executed control (no LQR anywhere), and the
     exported agent, the live policy and the adapter agree on it."""
+    from agents.rsl import RslVecEnv, TorchResidual, runner_config
+
     import contextlib
     import io
 
