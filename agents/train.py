@@ -503,7 +503,10 @@ def _train_sb3(
         check_trusted(folder.checkpoint_dir, "the checkpoints (pickle-based SB3 files)", where="resume")
         candidates = folder.checkpoints()
         if not candidates:
-            raise ValueError(f"resume: no checkpoint in {folder.checkpoint_dir}")
+            raise ValueError(
+                f"resume: no checkpoint in {folder.checkpoint_dir} (a run that completed keeps its checkpoints only "
+                "when trained with --keep-checkpoints; train a longer run with a larger --n-timesteps)"
+            )
     earlier = folder.previous_wall_time() if resume else 0.0  # the run so far, read up front
     if not resume and config.trained_agent is not None:
         if not (Path(config.trained_agent) / "model.zip").is_file():

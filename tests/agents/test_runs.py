@@ -84,6 +84,16 @@ def test_checkpoints_rotate_and_the_folder_is_trusted_from_its_first_file(tmp_pa
     assert (config_home / "trusted-runs.txt").read_text().splitlines() == [str(out.resolve())]
 
 
+@pytest.mark.parametrize("algo", ["ppo", "rsl-ppo"])
+def test_resuming_a_completed_run_without_checkpoints_says_how_to_keep_them(tmp_path, config_home, capsys, algo):
+    out = tmp_path / "run"
+    assert _train(algo, "FlatBody-v1", out) == 0
+    capsys.readouterr()
+    assert main(["train", "--out", str(out), "--resume", "--n-timesteps", "4096", "--no-progress"]) == 2
+    line = _one_line(capsys)
+    assert line.startswith("flatbody train: error: resume: no checkpoint in ") and "--keep-checkpoints" in line, line
+
+
 def test_a_new_run_refuses_a_folder_holding_one_and_force_replaces_it(tmp_path, config_home, capsys):
     out = tmp_path / "run"
     assert _train("ppo", "FlatBody-v1", out) == 0
