@@ -336,7 +336,7 @@ class EnvCore:
         self.coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
         self.xcfg = self._xcfg(kind)
         self._fused = None
-        custom_alloc = alloc
+        lanes_layout = backend == "cpu" and alloc is None  # S and K as transition.lanes lays them out
         if backend == "cpu":
             self._put = np.ascontiguousarray
             alloc = alloc or (lambda shape, dtype: np.zeros(shape, dtype))
@@ -352,7 +352,7 @@ class EnvCore:
                     return dev.to_device(np.zeros(shape, dtype))
 
             self.threads_per_block = threads_per_block or _cuda.THREADS_PER_BLOCK
-        if backend == "cpu" and custom_alloc is None:
+        if lanes_layout:
             self.S, self.K = tr.lanes(tr.S_ROWS, n), tr.lanes(tr.K_ROWS, n, np.int64)
         else:
             self.S = alloc((tr.S_ROWS, n), np.float64)
