@@ -45,8 +45,8 @@ LANES_PER_THREAD = 256
 MAX_THREADS = 64
 """Largest ``num_threads`` accepted."""
 INFO_ROWS = (slice(3, 4), slice(tr.R_REWARD, tr.S_ROWS))
-"""The rows of ``S`` that :func:`episode_info` and a step's returns read: p_θ, and the reward to the episode's end
-figures."""
+"""The rows of ``S`` that :func:`episode_info` copies (and a step's returns read): p_θ, and the reward to the episode's
+end figures."""
 
 
 def available_cores() -> int:
@@ -94,18 +94,22 @@ def seed_list(seed, n: int) -> list[int] | None:
     return [s + i for i in range(n)]
 
 
+LOG_MEANS = ("episode_return", "episode_length", "success_rate", "final_distance")
+"""The means of ``info["log"]`` (rsl_rl's ``extras["log"]``) over the episodes that ended in a step."""
+
+
 def episode_info(
     S: np.ndarray, K: np.ndarray, *, dt: float, tol: float, method: str, names, step: bool, xp=np
 ) -> dict[str, Any]:
     """The ``info`` of a step (or, ``step=False``, of a reset) of a batch from its arrays ``S``, ``K``
     (:mod:`flatbody_env.env.transition`; numpy arrays, or torch tensors with ``xp`` = torch): the one schema of every
-    face (:class:`~flatbody_env.env.env.FlatBodyEnv`, "Info"). The rows it hands out are views of two copies made
-    here (the rows from the reward on, and ``K``), never of the env's own arrays."""
+    face (:class:`~flatbody_env.env.env.FlatBodyEnv`, "Info"). The rows it hands out are views of copies made here
+    (:data:`INFO_ROWS` of ``S``, and ``K``), never of the env's own arrays."""
     copy = (lambda a: a.copy()) if xp is np else (lambda a: a.clone())
-    rows, ints = copy(S[tr.R_REWARD : tr.S_ROWS]), copy(K)
+    (p_theta, rows), ints = (copy(S[r]) for r in INFO_ROWS), copy(K)
 
     def row(r):
-        return rows[r - tr.R_REWARD]
+        return rows[r - INFO_ROWS[1].start]
 
     done = ints[tr.K_EP_DONE] != 0
     clock = xp.where(done, ints[tr.K_EP_LENGTH], ints[tr.K_CLOCK]) if step else ints[tr.K_CLOCK]
@@ -117,7 +121,7 @@ def episode_info(
         "is_success": (d <= tol) & (ints[tr.K_TERMINATED] == 0),
         "energy": row(tr.R_ENERGY),
         "casimir": row(tr.R_CASIMIR),
-        "p_theta": copy(S[3]),
+        "p_theta": p_theta[0],
         "integrator": {"method": method, "nfev": ints[tr.K_NFEV]},
         "status": ints[tr.K_STATUS],
         "domain_code": ints[tr.K_CODE],
@@ -137,18 +141,9 @@ def episode_info(
     else:
         count = done.sum()
         w = done.double() / count.clamp(min=1)
-    info["log"] = {  # 0-d arrays (tensors on the torch face): no device synchronisation to read them
-        "episodes": xp.asarray(count),
-        "episode_return": xp.asarray((ret * w).sum()),
-        "episode_length": xp.asarray((length * w).sum()),
-        "success_rate": xp.asarray((ok * w).sum()),
-        "final_distance": xp.asarray((dist * w).sum()),
-    }
+    means = {key: xp.asarray((v * w).sum()) for key, v in zip(LOG_MEANS, (ret, length, ok, dist), strict=True)}
+    info["log"] = {"episodes": xp.asarray(count), **means}  # 0-d arrays (tensors on the torch face): no sync to read
     return info
-
-
-LOG_MEANS = ("episode_return", "episode_length", "success_rate", "final_distance")
-"""The means of ``info["log"]`` (rsl_rl's ``extras["log"]``) over the episodes that ended in a step."""
 
 
 class FlatBodyVectorEnv(VectorEnv):
