@@ -422,6 +422,95 @@ def plot_sensitivity(data: dict[str, Any], png: str | Path) -> Path:
     return Path(png)
 
 
+LONGER_BUDGETS = DATA_DIR / "rsl-ppo-longer-budgets.json"
+"""rsl-ppo's v1 entry trained past the table's budget (docs/tasks.md, "Longer budgets on the hard tasks"): each run's
+commands and final held-out success (``rows``), the checkpoints evaluated on the way (``checkpoints``)."""
+MARK = 2_500_000
+"""Env steps between the marks where the longer-budget chart averages over the training seeds."""
+LONGER_CAPTION = (
+    "Each thin line: one training seed of rsl-ppo's v1 entry (unchanged but for its budget), its deterministic policy "
+    "on the table's 100 held-out episodes (seeds 10000-10099, never trained on) at checkpoints along the run. Black: "
+    "the mean over the seeds with its 95 % t-interval, where every seed has a point. Dashed: the best classic "
+    "controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive planner."
+)
+
+
+def longer_budget_points(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per task of the longer-budget table (:data:`LONGER_BUDGETS`): each training seed's held-out success along its
+    run (``seeds``: seed -> sorted (env steps, success) from the evaluated checkpoints and the rows of the entry as it
+    is, without hyperparameter overrides) and, at each mark of :data:`MARK` env steps where every seed has a point
+    within a tenth of a mark, the mean over the seeds with its 95 % t-interval (``means``: (mark, mean, lo, hi))."""
+    out: dict[str, dict[str, Any]] = {}
+    for r in [*data.get("rows", []), *data.get("checkpoints", [])]:
+        if r.get("hyperparams"):  # a variant of the entry (its own row in the table), not the entry's run
+            continue
+        seeds = out.setdefault(r["env_id"], {"seeds": {}, "means": []})["seeds"]
+        seeds.setdefault(int(r["seed"]), {})[int(r["n_timesteps"])] = float(r["success_rate"])
+    for task in out.values():
+        task["seeds"] = {s: sorted(pts.items()) for s, pts in sorted(task["seeds"].items())}
+        if len(task["seeds"]) < 2:
+            continue
+        last = max(n for pts in task["seeds"].values() for n, _ in pts)
+        for k in range(1, round(last / MARK) + 1):
+            near = [[v for n, v in pts if abs(n - k * MARK) <= MARK / 10] for pts in task["seeds"].values()]
+            if all(near):
+                task["means"].append((k * MARK, *mean_interval([v[0] for v in near])))
+    return out
+
+
+def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, reports=None) -> Path:
+    """The longer-budget chart: held-out success against env steps per task (:func:`longer_budget_points`), the
+    best classic controller and the planner of the task's saved reference report as lines. ``data``: the table
+    (default :data:`LONGER_BUDGETS`); ``reports``: the reference reports (default the shipped ones)."""
+    from agents.reference import load_reports
+    from agents.scores import CLASSIC, anchors
+    from flatbody_env.env.registration import V1_IDS
+    from flatbody_env.figures import CYCLE, PALETTE, chart, fraction_axis
+    from flatbody_env.physics import validation
+    from matplotlib.ticker import FuncFormatter
+
+    if data is None:
+        data = validation.read_json("longer budgets", LONGER_BUDGETS)
+    by_env = {r["env_id"]: r for r in (reports if reports is not None else load_reports())}
+    points = longer_budget_points(data)
+    envs = [e for e in V1_IDS if e in points]
+    names = {"heuristic": "LQR"}
+    with chart(png, size=(max(6.4, 3.6 * len(envs)), 4.6), ncols=len(envs), sharey=True) as c:
+        for j, env_id in enumerate(envs):
+            ax, task = c.axes[0, j], points[env_id]
+            for k, (seed, pts) in enumerate(task["seeds"].items()):
+                xs, ys = zip(*pts)
+                ax.plot(xs, ys, color=CYCLE[k % len(CYCLE)], lw=1.0, marker="o", ms=3, alpha=0.8,
+                        label=f"seed {seed}" if j == 0 else None)  # fmt: skip
+            if task["means"]:
+                x, m, lo, hi = (np.array(v) for v in zip(*task["means"]))
+                ax.errorbar(x, m, yerr=[m - np.clip(lo, 0, 1), np.clip(hi, 0, 1) - m], color=PALETTE["reference"],
+                            lw=1.8, capsize=4, marker="s", ms=4,
+                            label=f"mean over {len(task['seeds'])} seeds" if j == 0 else None)  # fmt: skip
+            title = env_id
+            report = by_env.get(env_id)
+            if report is not None:
+                a = anchors(report)
+                if a.lo_from in CLASSIC:
+                    ax.axhline(a.lo, color=PALETTE["goal"], lw=1.0, ls="--",
+                               label="best classic controller" if j == 0 else None)  # fmt: skip
+                    title += f"\n{names.get(a.lo_from, a.lo_from)} {a.lo:.0%}"
+                planner = report.get("policies", {}).get("planner", {}).get("summary", {}).get("success_rate")
+                if planner is not None:
+                    ax.axhline(planner, color=PALETTE["goal"], lw=1.0, ls=":", label="planner" if j == 0 else None)
+                    title += f"{' ·' if a.lo_from in CLASSIC else chr(10)} planner {planner:.0%}"
+            ax.set_title(title)
+            ax.set_xlabel("env steps (millions)")
+            ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e6:g}"))
+            ax.set_xlim(0, None)
+            fraction_axis(ax, "success on held-out episodes" if j == 0 else None)
+            ax.grid(alpha=0.3)
+        c.title("rsl-ppo past the table's budget: held-out success along each training run")
+        c.legend(where="below", ncol=min(6, 3 * len(envs)))
+        c.caption(LONGER_CAPTION)
+    return Path(png)
+
+
 def markdown(data: dict[str, Any], command: str) -> str:
     """The docs block of the final table (the command that made it beside it)."""
     from agents.reference import POLICY_LABELS

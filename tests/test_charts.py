@@ -103,6 +103,12 @@ def _time_to_goal(out):
     plot(IMG / "time_to_goal.json", out)
 
 
+def _longer(out):
+    from agents.benchmark import plot_longer_budgets
+
+    plot_longer_budgets(out)
+
+
 CHARTS = {
     # chart: (drawing function, phrases its caption or legend must hold: the jargon explained)
     "train_benchmark": (_train, ["LQR", "linear-quadratic regulator", "PPO", "Proximal Policy Optimization"]),
@@ -122,6 +128,7 @@ CHARTS = {
     "service_benchmark": (_service, ["p50 / p99", "99th percentile", "concurrent clients", "error(s)"]),
     "gpu": (_gpu, ["Colour: where it ran", "RK4 solid, DOP853 dashed", "dotted", "body-steps/s"]),
     "time_to_goal": (_time_to_goal, ["linear-quadratic regulator", "Goal: success", "gSDE"]),
+    "rsl_ppo_longer_budgets": (_longer, ["held-out episodes", "t-interval", "LQR: the linear-quadratic", "planner"]),
 }
 
 
@@ -155,6 +162,7 @@ DEFAULT_CHARTS = {
     "gpu",
     "time_to_goal",
     "tasks_success",
+    "rsl_ppo_longer_budgets",
 }
 
 
@@ -450,3 +458,57 @@ def test_chart_tasks_makes_its_output_folder(tmp_path, capsys):
     with pytest.raises(SystemExit) as refused:  # a file where the folder should be: one line, exit 2
         main(["chart", "--tasks", "--out", str(tmp_path / "file")])
     assert refused.value.code == 2 and "out:" in capsys.readouterr().err
+
+
+def _longer_table(runs: dict[int, dict[int, float]]) -> dict:
+    """A longer-budget table (agents/data/benchmark/rsl-ppo-longer-budgets.json's layout) of one task: seed ->
+    {env steps: success}, the largest step count of each seed a row, the others checkpoints."""
+    rows, checkpoints = [], []
+    for seed, points in runs.items():
+        for n, s in points.items():
+            entry = {
+                "env_id": "FlatBodySlowHard-v1",
+                "algo": "rsl-ppo",
+                "seed": seed,
+                "n_timesteps": n,
+                "success_rate": s,
+            }
+            (rows if n == max(points) else checkpoints).append(entry)
+    return {"episodes": 100, "seed": 10000, "rows": rows, "checkpoints": checkpoints}
+
+
+def test_the_longer_budget_mean_is_drawn_only_where_every_seed_has_a_point(drawn, tmp_path):
+    """The mean over the seeds (with its t-interval) at a mark where every seed was evaluated within a tenth of a mark,
+    none where a seed lacks one; each seed its own line; the task's LQR and planner as lines from its report."""
+    from agents.benchmark import MARK, longer_budget_points, mean_interval, plot_longer_budgets
+
+    runs = {
+        0: {6_021_120: 0.65, 15_015_936: 0.80, 25_018_368: 0.86},  # no point near 5e6 (6.0e6 is off by 1e6)
+        1: {5_013_504: 0.59, 15_040_512: 0.70, 25_018_368: 0.81},
+        2: {5_087_232: 0.64, 14_991_360: 0.75, 24_969_216: 0.84},
+    }
+    table = _longer_table(runs)
+    task = longer_budget_points(table)["FlatBodySlowHard-v1"]
+    assert [m[0] for m in task["means"]] == [6 * MARK, 10 * MARK]
+    assert task["means"][1][1:] == pytest.approx(mean_interval([0.86, 0.81, 0.84]))
+    assert task["seeds"][0] == sorted(runs[0].items())
+    report = {"env_id": "FlatBodySlowHard-v1", "policies": {
+        "zero": {"summary": {"success_rate": 0.0}}, "heuristic": {"summary": {"success_rate": 0.64}},
+        "planner": {"summary": {"success_rate": 0.56}}}}  # fmt: skip
+    fig = drawn(lambda out: plot_longer_budgets(out, table, [report]), tmp_path / "l.png")
+    ax = fig.axes[0]
+    assert len([line for line in ax.get_lines() if line.get_marker() == "o"]) == 3  # one line per seed
+    levels = {round(line.get_ydata()[0], 2) for line in ax.get_lines() if line.get_linestyle() in ("--", ":")}
+    assert levels == {0.64, 0.56}
+    assert ax.get_title() == "FlatBodySlowHard-v1\nLQR 64% · planner 56%"
+    assert layout_problems(fig) == []
+
+
+def test_chart_longer_budgets_draws_the_shipped_table(tmp_path, capsys):
+    """``flatbody chart --longer-budgets --out NEWDIR`` draws the shipped table into a new folder."""
+    from flatbody_env.cli.main import main
+
+    out = tmp_path / "new"
+    assert main(["chart", "--longer-budgets", "--out", str(out)]) == 0
+    assert (out / "rsl_ppo_longer_budgets.png").stat().st_size > 10_000
+    assert "rsl_ppo_longer_budgets.png" in capsys.readouterr().out

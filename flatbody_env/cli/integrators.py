@@ -10,6 +10,9 @@
   (:mod:`agents.reference_chart`): success against the target's settling rate and growth rate, drawn
   from the saved task reports (``flatbody evaluate --env all --out-dir DIR``) → ``DIR/tasks_ladder.png`` (the v1
   suite's ladder; left out, with a line saying so, when the folder holds no v1 report) and ``DIR/tasks_success.png``.
+* ``flatbody chart --longer-budgets [--out DIR]`` — rsl-ppo past the benchmark's budget
+  (:func:`agents.benchmark.plot_longer_budgets`): each training run's held-out success along its budget, drawn from
+  ``agents/data/benchmark/rsl-ppo-longer-budgets.json`` → ``DIR/rsl_ppo_longer_budgets.png``.
 * ``flatbody failure-study [--quick] [--studies gap rho horizon] [--out DIR]`` —
   :mod:`analysis.failure_study` → ``DIR/failure_study.csv``, ``failure_study.png``.
 
@@ -84,6 +87,11 @@ def _ladder(args) -> int:
 
 
 def _chart(args) -> int:
+    if args.longer_budgets:  # rsl-ppo past the table's budget (agents.benchmark), from its saved table
+        from agents.benchmark import plot_longer_budgets
+
+        print(f"wrote {plot_longer_budgets(Path(args.out) / 'rsl_ppo_longer_budgets.png')}")
+        return 0
     if args.tasks:  # the tasks' reference chart (agents.reference_chart), from the saved reports
         from agents.reference import REFERENCE_DIR
         from agents.reference_chart import plot_ladder, plot_task_success
@@ -221,6 +229,12 @@ def register(sub) -> None:
         action="store_true",
         help="the tasks' reference chart: success against the target's settling rate and growth rate (tasks_success.png), "
         "drawn from the saved task reports",
+    )
+    p.add_argument(
+        "--longer-budgets",
+        action="store_true",
+        help="rsl-ppo past the benchmark's budget: held-out success along each training run "
+        "(rsl_ppo_longer_budgets.png), drawn from agents/data/benchmark/rsl-ppo-longer-budgets.json",
     )
     p.add_argument(
         "--from",
