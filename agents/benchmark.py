@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from pathlib import Path
 from typing import Any
 
@@ -36,61 +35,6 @@ BUDGETS = {"ppo": 500_000, "sac": 30_000, "td3": 30_000, "rsl-ppo": 2_000_000}
 many cheap steps, the off-policy ones few expensive ones — about the same minutes each)."""
 DATA_DIR = Path(__file__).resolve().parent / "data" / "benchmark"
 """The saved tables of the v1 suite's benchmark (``benchmark.json``, ``.csv``; docs/tasks.md, "Learned baselines")."""
-
-
-def _sb3_policy(model):
-    """The deterministic action of an SB3 model as a batch policy (its VecNormalize statistics applied, frozen)."""
-    vn = model.get_vec_normalize_env()
-
-    def policy(obs: np.ndarray) -> np.ndarray:
-        o = vn.normalize_obs(np.asarray(obs, dtype=np.float32)) if vn is not None else obs
-        return model.predict(o, deterministic=True)[0]
-
-    return policy
-
-
-def _evaluate(policy, env_id: str, episodes: int, seed: int) -> dict[str, float]:
-    from agents.evaluate import run_episodes, summarize
-
-    s = summarize(run_episodes(policy, episodes=episodes, seed=seed, env_id=env_id))
-    return {k: s[k] for k in ("success_rate", "return", "final_distance", "final_distance_median")}
-
-
-class _Curve:
-    """The evaluations of one case along its training: points (env steps, training seconds, figures)."""
-
-    def __init__(self, env_id: str, budget: int, eval_seed: int, episodes: int) -> None:
-        self.env_id, self.eval_seed, self.episodes = env_id, eval_seed, episodes
-        self.at = [max(1, int(round(f * budget))) for f in EVAL_POINTS[:-1]]
-        self.points: list[dict[str, Any]] = []
-        self.t0 = time.perf_counter()
-        self.eval_seconds = 0.0
-
-    def due(self, steps: int) -> bool:
-        return bool(self.at) and steps >= self.at[0]
-
-    def add(self, steps: int, policy, episodes: int | None = None) -> None:
-        while self.at and steps >= self.at[0]:
-            self.at.pop(0)
-        train_s = time.perf_counter() - self.t0 - self.eval_seconds
-        t = time.perf_counter()
-        figures = _evaluate(policy, self.env_id, episodes or self.episodes, self.eval_seed)
-        self.eval_seconds += time.perf_counter() - t
-        self.points.append({"env_steps": int(steps), "train_seconds": float(train_s), **figures})
-
-
-def _sb3_callback(curve: _Curve):
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class Evaluations(BaseCallback):
-        """The benchmark's evaluations along an SB3 run (:class:`_Curve`)."""
-
-        def _on_step(self) -> bool:
-            if curve.due(self.num_timesteps):
-                curve.add(self.num_timesteps, _sb3_policy(self.model))
-            return True
-
-    return Evaluations()
 
 
 def variant_label(algo: str, overrides: list[str] | None) -> str:
@@ -118,30 +62,17 @@ def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *,
     "train_seconds", "run"}``. ``overrides``: one point of a hyperparameter grid (``["learning_rate=0.0003"]``, as
     ``flatbody train --hyperparams``); its row's ``algo`` is then the variant's label (:func:`variant_label`), and
     ``"base_algo"`` and ``"overrides"`` say what it is."""
+    from agents.evaluate import Agent, HeldOutEvaluations
     from agents.train import train
 
-    curve = _Curve(env_id, budget, eval_seed, curve_episodes)
-    kwargs: dict[str, Any] = {}
-    if algo == "rsl-ppo":
-        from agents.rsl import live_policy
-
-        def on_iteration(runner, row) -> None:
-            steps = int(row.get("env_steps", row.get("timesteps", 0)))
-            if curve.due(steps):
-                curve.add(steps, live_policy(runner.alg.actor, None, "cpu"))
-
-        kwargs["callback"] = on_iteration
-    else:
-        kwargs["extra_callbacks"] = [_sb3_callback(curve)]
+    at = [max(1, int(round(f * budget))) for f in EVAL_POINTS[:-1]]
+    curve = HeldOutEvaluations(env_id, at, seed=eval_seed, episodes=curve_episodes)
     result = train(
         algo, out, seed=seed, n_timesteps=int(budget), env_id=env_id, checkpoint_freq=0, threads=1, progress=False,
-        force=True, notes=False, command=command, overrides=list(overrides or []), **kwargs,
+        force=True, notes=False, command=command, overrides=list(overrides or []), evaluations=curve,
     )  # fmt: skip
-    from agents.evaluate import Agent
-
-    agent = Agent(out)
-    train_s = time.perf_counter() - curve.t0 - curve.eval_seconds
-    final = _evaluate(agent, env_id, final_episodes, eval_seed)
+    train_s = curve.train_seconds()
+    final = curve.figures(Agent(out), final_episodes)
     curve.points.append({"env_steps": int(result.timesteps), "train_seconds": float(train_s), **final})
     variant = {"base_algo": algo, "overrides": list(overrides)} if overrides else {}
     return {

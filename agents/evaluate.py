@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -162,17 +164,7 @@ class Agent:
         self.residual_gate = validation.number(
             "config.yml.hyperparams.residual_gate", hp.get("residual_gate", 0.0), low=0.0, high=1e6
         )
-        self._base = None
-        if self.residual in ("heuristic", "passivity"):
-            from agents.heuristic import ResidualAction
-
-            self._base = ResidualAction(
-                self.env_kwargs,
-                self.residual_scale,
-                self.residual_gate,
-                str(hp.get("residual_mode", "additive")),
-                self.residual,
-            )
+        self._base = residual_action(self.env_kwargs, hp)
 
     def _load_sb3(self, model_file: Path, folder: Path, algo: str) -> None:
         from agents.numpy_policy import check_trusted, load_sb3, load_vecnormalize
@@ -208,6 +200,149 @@ class Agent:
         if self._base is not None:  # residual on the hand-designed controller
             actions = self._base(obs, actions)
         return actions
+
+
+def residual_action(env_kwargs: dict[str, Any], hp: dict[str, Any]):
+    """The executed action's form of a run with hyperparameters ``hp`` on a task of ``env_kwargs``: a
+    :class:`agents.heuristic.ResidualAction` (the LQR or the passivity law plus the policy's residual) where ``hp`` has
+    a ``residual`` prior, else None (the policy's action is the control)."""
+    kind = hp.get("residual") or None
+    if kind not in ("heuristic", "passivity"):
+        return None
+    from agents.heuristic import ResidualAction
+
+    return ResidualAction(
+        env_kwargs,
+        float(hp.get("residual_scale", 1.0)),
+        float(hp.get("residual_gate", 0.0)),
+        str(hp.get("residual_mode", "additive")),
+        kind,
+    )
+
+
+def sb3_policy(model, residual=None) -> Policy:
+    """The deterministic action of an SB3 ``model`` as it trains, as a batch policy: its VecNormalize statistics
+    applied as they are now, through ``residual`` (:func:`residual_action`) when the run has a prior."""
+    vn = model.get_vec_normalize_env()
+
+    def policy(obs: np.ndarray) -> np.ndarray:
+        o = vn.normalize_obs(np.asarray(obs, dtype=np.float32)) if vn is not None else obs
+        actions = model.predict(o, deterministic=True)[0]
+        return residual(obs, actions) if residual is not None else actions
+
+    return policy
+
+
+EVAL_COLUMNS = ("env_steps", "train_seconds", "episodes", "success_rate", "success_lo", "success_hi", "return",
+                "final_distance", "final_distance_median")  # fmt: skip
+"""The columns of a run's ``evaluations.csv`` (:class:`HeldOutEvaluations`)."""
+
+
+class HeldOutEvaluations:
+    """Evaluations of a policy along its training on held-out episodes (seeds ``seed`` … ``seed + episodes − 1``, the
+    table's, never trained on): the deterministic policy as it is when the run passes each step count of ``at``.
+
+    ``flatbody train --eval-freq N`` (:meth:`every`) and the benchmark's learning curves (fractions of the budget) are
+    both this. The trainers call :meth:`start` with the step count they start from (earlier marks are dropped: a
+    resumed run does not evaluate again what it passed), :meth:`due` and :meth:`add` as they go (the time spent
+    evaluating is left out of the run's wall time and of ``train_seconds``) and :meth:`close` at the end.
+
+    Parameters
+    ----------
+    env_id : str
+        The task (its registered keywords updated by ``env_kwargs``).
+    at : sequence of int
+        Env step counts, ascending.
+    seed, episodes : int
+        Episode i is reset with seed ``seed + i``; ``episodes`` per evaluation.
+    """
+
+    def __init__(self, env_id: str, at, *, seed: int = EVAL_SEED, episodes: int = 100,
+                 env_kwargs: dict[str, Any] | None = None) -> None:  # fmt: skip
+        from flatbody_env.physics import validation
+
+        self.env_id = validation.string("env", env_id)
+        self.seed = validation.integer("eval_seed", seed, low=0, high=validation.MAX_SEED)
+        self.episodes = validation.integer("eval_episodes", episodes, low=1, high=validation.MAX_EPISODES)
+        self.env_kwargs = dict(env_kwargs or {})
+        self.at = sorted(int(a) for a in at)
+        self.points: list[dict[str, Any]] = []
+        self.t0 = time.perf_counter()
+        self.eval_seconds = 0.0
+        self.table = None
+        self.say = False
+
+    @classmethod
+    def every(cls, freq: int, total: int, env_id: str, **kwargs: Any) -> HeldOutEvaluations:
+        """Evaluations every ``freq`` env steps up to ``total`` (``flatbody train --eval-freq``): at most
+        ``MAX_REPEATS`` (1000) of them, so ``freq`` ≥ total / 1000."""
+        from flatbody_env.physics import validation
+
+        low = max(1, -(-int(total) // validation.MAX_REPEATS))
+        validation.integer("eval_freq", freq, low=low, high=validation.MAX_TIMESTEPS)
+        return cls(env_id, range(freq, int(total) + 1, freq), **kwargs)
+
+    def start(self, steps: int, table=None, *, say: bool = False) -> None:
+        """The run starts at ``steps`` (marks up to it dropped); ``table``: a :class:`agents.runs.ProgressTable` that
+        gets a row per evaluation (:data:`EVAL_COLUMNS`); ``say``: a line per evaluation on stderr."""
+        self.at = [a for a in self.at if a > steps]
+        self.table, self.say = table, say
+
+    def due(self, steps: int) -> bool:
+        """Whether the run, at ``steps``, has passed the next mark."""
+        return bool(self.at) and steps >= self.at[0]
+
+    def train_seconds(self) -> float:
+        """Seconds since the evaluations were made, less the time spent evaluating."""
+        return time.perf_counter() - self.t0 - self.eval_seconds
+
+    def figures(self, policy: Policy, episodes: int | None = None) -> dict[str, Any]:
+        """``policy`` on the held-out episodes: success (with its 95 % interval), return, final distance."""
+        s = summarize(run_episodes(policy, episodes=episodes or self.episodes, seed=self.seed, env_id=self.env_id,
+                                   env_kwargs=self.env_kwargs or None))  # fmt: skip
+        keep = ("episodes", "success_rate", "success_ci95", "return", "final_distance", "final_distance_median")
+        return {k: s[k] for k in keep}
+
+    def add(self, steps: int, policy: Policy, episodes: int | None = None) -> dict[str, Any]:
+        """Evaluate ``policy`` now, at ``steps`` env steps (the marks passed dropped); the point, also in ``points``."""
+        while self.at and steps >= self.at[0]:
+            self.at.pop(0)
+        train_s = self.train_seconds()
+        t = time.perf_counter()
+        figures = self.figures(policy, episodes)
+        self.eval_seconds += time.perf_counter() - t
+        point = {"env_steps": int(steps), "train_seconds": float(train_s), **figures}
+        self.points.append(point)
+        lo, hi = figures["success_ci95"]
+        if self.table is not None:
+            self.table.add({k: point.get(k, {"success_lo": lo, "success_hi": hi}.get(k)) for k in EVAL_COLUMNS})
+        if self.say:
+            print(
+                f"flatbody: evaluation at {steps:,} steps: success {figures['success_rate']:.0%} ({lo:.0%}-{hi:.0%}) "
+                f"on {figures['episodes']} held-out episodes (seeds {self.seed}+), final distance "
+                f"{figures['final_distance']:.3g}",
+                file=sys.stderr,
+            )
+        return point
+
+    def sb3_callback(self, residual=None):
+        """An SB3 callback that evaluates the model (:func:`sb3_policy`) whenever :meth:`due`."""
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        evaluations = self
+
+        class Evaluations(BaseCallback):
+            def _on_step(self) -> bool:
+                if evaluations.due(self.num_timesteps):
+                    evaluations.add(self.num_timesteps, sb3_policy(self.model, residual))
+                return True
+
+        return Evaluations()
+
+    def close(self) -> None:
+        """The last write of the table."""
+        if self.table is not None:
+            self.table.close()
 
 
 def zero_policy(action_dim: int) -> Policy:

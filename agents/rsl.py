@@ -395,6 +395,8 @@ def train_rsl(
     command: list[str] | None = None,
     force: bool = False,
     callback=None,
+    evaluations=None,
+    notes: bool = True,
 ) -> TrainResult:
     """Train rsl_rl's PPO with the configuration ``config`` (``algo: rsl-ppo``) into the run folder ``folder`` (module
     docstring); :func:`agents.train.train` and ``flatbody train --algo rsl-ppo`` come here.
@@ -406,7 +408,9 @@ def train_rsl(
     from the newest checkpoint that loads (the environments restart from the seed, so a resumed run is not bit-identical
     to an uninterrupted one). ``callback`` (optional) is called after each iteration as ``callback(runner, row)``
     (``row``: the progress row); a true return value stops the training there, and the time spent in it is left out of
-    the wall time (a benchmark's evaluations).
+    the wall time. ``evaluations`` (optional, :class:`agents.evaluate.HeldOutEvaluations`): the deterministic policy
+    (:func:`live_policy`, through the run's prior) on held-out episodes whenever due, a row each in the run folder's
+    ``evaluations.csv``, their time left out of the wall time too (``notes``: a line on stderr each).
     """
     from agents.config import check_device
     from agents.numpy_policy import check_trusted
@@ -464,6 +468,8 @@ def train_rsl(
             desc=f"rsl-ppo {config.env_id}",
         )
     table = folder.progress_table("progress.csv" if not resume else f"progress-resumed-{resumed_from}.csv")
+    if evaluations is not None:
+        evaluations.start(done_it * nenv * steps, folder.evaluations_table(resumed_from), say=notes)
     t0 = time.perf_counter()
     it = done_it
     try:
@@ -492,6 +498,10 @@ def train_rsl(
             done = (it + 1) * nenv * steps
             if checkpoint_freq and done // checkpoint_freq > it * nenv * steps // checkpoint_freq:
                 _save_rsl_checkpoint(folder, runner, venv, hp, it + 1, done)
+            if evaluations is not None and evaluations.due(done):
+                tc = time.perf_counter()
+                evaluations.add(done, live_policy(runner.alg.actor, residual, device))
+                t0 += time.perf_counter() - tc
             if callback is not None:
                 tc = time.perf_counter()
                 stop = callback(runner, rows[-1])
@@ -502,6 +512,8 @@ def train_rsl(
         if bar is not None:
             bar.close()
         table.close()
+        if evaluations is not None:
+            evaluations.close()
         reached = len(rows) + done_it
         if checkpoint_freq and rows:
             kept = _save_rsl_checkpoint(folder, runner, venv, hp, reached, reached * nenv * steps)
@@ -513,6 +525,8 @@ def train_rsl(
         bar.close()
     trained = (done_it + len(rows)) * nenv * steps
     table.close()
+    if evaluations is not None:
+        evaluations.close()
     folder.save(
         "rsl_model.pt",
         lambda tmp: torch.save(_rsl_state(runner, venv, hp, done_it + len(rows), optimizer=False), str(tmp)),

@@ -7,6 +7,7 @@ write their run through a :class:`RunFolder`::
                             and version, env keywords, hyperparameters after overrides, seed, budget, device, prior)
     OUT/run.json            what ran it: command, git hash, machine, versions, wall time, steps trained
     OUT/progress.csv        the training log (SB3's logger, or one row per rsl-ppo iteration)
+    OUT/evaluations.csv     with --eval-freq: the policy on held-out episodes along the run (agents.evaluate)
     OUT/model.zip           the SB3 model (rsl-ppo: its actor exported as an SB3 PPO model)
     OUT/vecnormalize.pkl    VecNormalize statistics (SB3 runs that normalise)
     OUT/policy.npz          the deterministic policy for numpy (agents.numpy_policy: evaluate and demo without torch)
@@ -235,6 +236,12 @@ class RunFolder:
     def progress_table(self, name: str = "progress.csv") -> ProgressTable:
         """The run's training log ``name`` as a :class:`ProgressTable` (rsl-ppo's rows; SB3's go through
         :meth:`progress_logger`, which writes through the same table)."""
+        return ProgressTable(self.path / name, sort=False)
+
+    def evaluations_table(self, resumed_from: int | None = None) -> ProgressTable:
+        """The run's held-out evaluations (:class:`agents.evaluate.HeldOutEvaluations`) as a table: ``evaluations.csv``,
+        or ``evaluations-resumed-N.csv`` for the part of a run resumed from N steps (as its progress log)."""
+        name = "evaluations.csv" if resumed_from is None else f"evaluations-resumed-{resumed_from}.csv"
         return ProgressTable(self.path / name, sort=False)
 
     def write_run(

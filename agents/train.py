@@ -352,6 +352,7 @@ def train(
     device: str = "cpu",
     curriculum: dict[str, Any] | None = None,
     callback=None,
+    evaluations=None,
 ) -> TrainResult:
     """Train ``algo`` on ``env_id`` (default :data:`ENV_ID`) with its file's hyperparameters and write the run folder
     ``out`` (:func:`agents.config.resolve`, then :func:`train_config`).
@@ -398,6 +399,7 @@ def train(
         force=force,
         notes=notes,
         callback=callback,
+        evaluations=evaluations,
     )
 
 
@@ -415,6 +417,7 @@ def train_config(
     force: bool = False,
     notes: bool = True,
     callback=None,
+    evaluations=None,
 ) -> TrainResult:
     """Train the run ``config`` into ``folder`` (rsl-ppo: :func:`agents.rsl.train_rsl`).
 
@@ -430,7 +433,12 @@ def train_config(
     callback : callable, optional
         rsl-ppo's per-iteration callback (:func:`agents.rsl.train_rsl`).
     notes : bool
-        Say on stderr when ``n_timesteps`` rounds up (False for the many runs of a search or sweep).
+        Say on stderr when ``n_timesteps`` rounds up, and each evaluation's result (False for the many runs of a search
+        or sweep).
+    evaluations : agents.evaluate.HeldOutEvaluations, optional
+        Evaluations of the policy on held-out episodes along the run (``flatbody train --eval-freq``, the benchmark's
+        curves), each a row of ``evaluations.csv`` in the run folder (``evaluations-resumed-N.csv`` after a resume);
+        their time is left out of the run's wall time.
 
     Raises
     ------
@@ -457,6 +465,8 @@ def train_config(
             command=command,
             force=force,
             callback=callback,
+            evaluations=evaluations,
+            notes=notes,
         )
     return _train_sb3(
         config,
@@ -470,6 +480,7 @@ def train_config(
         extra_callbacks=extra_callbacks,
         force=force,
         notes=notes,
+        evaluations=evaluations,
     )
 
 
@@ -486,6 +497,7 @@ def _train_sb3(
     extra_callbacks: list | None,
     force: bool,
     notes: bool,
+    evaluations=None,
 ) -> TrainResult:
     from flatbody_env.physics import validation
 
@@ -575,6 +587,14 @@ def _train_sb3(
     if checkpoint_freq:
         snapshot = curriculum.state if curriculum is not None else None
         callbacks.append(_checkpoint_callback(max(checkpoint_freq // nenv, 1), folder, bool(norm), algo, snapshot))
+    if evaluations is not None:
+        from agents.evaluate import env_kwargs_for, residual_action
+
+        evaluations.start(start, folder.evaluations_table(start if resume else None), say=notes)
+        callbacks.append(
+            evaluations.sb3_callback(residual_action(env_kwargs_for(config.env_id, config.env_kwargs), hp))
+        )
+    evaluated = evaluations.eval_seconds if evaluations is not None else 0.0
     t0 = time.perf_counter()
     try:
         try:
@@ -586,6 +606,8 @@ def _train_sb3(
             )
         finally:
             model.logger.close()  # progress.csv rewritten with every row (the one writing door)
+            if evaluations is not None:
+                evaluations.close()
     except KeyboardInterrupt:
         callbacks[0].close()
         steps = int(model.num_timesteps)
@@ -596,7 +618,7 @@ def _train_sb3(
             raise stopped(config, folder, steps, folder.save_checkpoint(steps, writers)) from None
         why = "no step trained yet" if steps <= start else "--checkpoint-freq 0"
         raise stopped(config, folder, steps, None, why) from None
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - t0 - ((evaluations.eval_seconds - evaluated) if evaluations is not None else 0.0)
 
     folder.save("model.zip", lambda tmp: model.save(str(tmp)))  # a killed run leaves the previous model
     if norm:

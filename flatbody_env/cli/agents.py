@@ -153,6 +153,19 @@ def _same_settings(args, config) -> None:
         )
 
 
+def _evaluations(args, config):
+    """``--eval-freq``'s evaluations of a run (:class:`agents.evaluate.HeldOutEvaluations`), or None."""
+    if args.eval_seed is not None and not args.eval_freq:
+        raise ValueError("eval_seed: give --eval-freq N too (the evaluations along the run)")
+    if not args.eval_freq:
+        return None
+    from agents.evaluate import EVAL_SEED, HeldOutEvaluations
+
+    seed = EVAL_SEED if args.eval_seed is None else args.eval_seed
+    return HeldOutEvaluations.every(args.eval_freq, config.n_timesteps, config.env_id, seed=seed,
+                                    episodes=args.eval_episodes, env_kwargs=config.env_kwargs)  # fmt: skip
+
+
 @_trusting
 def _train(args) -> int:
     from agents.train import train_config
@@ -170,6 +183,7 @@ def _train(args) -> int:
         progress=not args.no_progress,
         command=_command(),
         force=args.force,
+        evaluations=_evaluations(args, config),
     )
     note = f" (resumed from {result.resumed_from} steps)" if result.resumed_from is not None else ""
     print(
@@ -233,6 +247,7 @@ def _curriculum(args) -> int:
         progress=not args.no_progress,
         command=_command(),
         force=args.force,
+        evaluations=_evaluations(args, config),
     )
     stages = (folder.config().curriculum or {}).get("history") or []
     print(
@@ -533,6 +548,28 @@ def _add_run_arguments(p, *, seed_default) -> None:
         help="steps between checkpoints, the newest 3 kept (0: none; default 50000)",
     )
     p.add_argument("--keep-checkpoints", action="store_true", help="keep DIR/checkpoints after a completed run")
+    p.add_argument(
+        "--eval-freq",
+        type=int_at_least("eval_freq", 0, validation.MAX_TIMESTEPS),
+        default=0,
+        metavar="N",
+        help="every N env steps, the deterministic policy on held-out episodes: a row of DIR/evaluations.csv and a "
+        "line on stderr, the time left out of the run's wall time (0: never; default 0)",
+    )
+    p.add_argument(
+        "--eval-episodes",
+        type=int_at_least("eval_episodes", 1, validation.MAX_EPISODES),
+        default=100,
+        metavar="K",
+        help="held-out episodes per evaluation (default 100)",
+    )
+    p.add_argument(
+        "--eval-seed",
+        type=int_at_least("eval_seed", 0, validation.MAX_SEED),
+        default=None,
+        metavar="S",
+        help="held-out episode i is reset with seed S + i (default 10000, the table's)",
+    )
     p.add_argument(
         "--threads",
         type=int_at_least("threads", 1, validation.MAX_WORKERS),

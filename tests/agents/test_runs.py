@@ -218,3 +218,51 @@ def test_a_clone_config_is_not_retrained_by_config(tmp_path, config_home, capsys
     folder.write_config(config.replace(imitation={"plans": ["p.npz"]}))
     assert main(["train", "--config", str(folder.path / "config.yml"), "--out", str(tmp_path / "o")]) == 2
     assert "imitate clone" in _one_line(capsys)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "rsl-ppo"])
+def test_eval_freq_evaluates_the_policy_on_held_out_episodes_along_the_run(tmp_path, config_home, capsys, algo):
+    """``--eval-freq N``: a row of ``evaluations.csv`` each time the run passes a multiple of N (and a line on stderr),
+    the success inside its interval; a resumed run evaluates only the marks it had not passed, into its own table. For
+    rsl-ppo the last row is the final policy's: ``flatbody evaluate`` of the saved run gives the same figures."""
+    import csv
+
+    from agents.evaluate import EVAL_COLUMNS
+
+    out = tmp_path / "run"
+    flags = ["--eval-freq", "32", "--eval-episodes", "3", "--eval-seed", "20000", "--checkpoint-freq", "32"]
+    assert _train(algo, "FlatBody-v1", out, *flags, "--keep-checkpoints", "--n-timesteps", "128") == 0
+    rows = list(csv.DictReader((out / "evaluations.csv").open()))
+    assert [int(r["env_steps"]) for r in rows] == [32, 64, 96, 128]
+    assert list(rows[0]) == list(EVAL_COLUMNS)
+    for r in rows:
+        lo, rate, hi = (float(r[k]) for k in ("success_lo", "success_rate", "success_hi"))
+        assert 0.0 <= lo <= rate + 1e-12 and rate <= hi <= 1.0  # the Wilson interval (its lower end at 0 wins: ~1e-17)
+        assert int(r["episodes"]) == 3 and float(r["final_distance"]) > 0
+    err = capsys.readouterr().err
+    assert err.count("flatbody: evaluation at ") == 4 and "on 3 held-out episodes (seeds 20000+)" in err
+    if algo == "rsl-ppo":
+        assert main(["evaluate", str(out), "--env", "FlatBody-v1", "--episodes", "3", "--seed", "20000",
+                     "--no-baselines", "--json"]) == 0  # fmt: skip
+        final = json.loads(capsys.readouterr().out)["agent"]
+        assert final["success_rate"] == float(rows[-1]["success_rate"])
+        assert final["final_distance"] == pytest.approx(float(rows[-1]["final_distance"]), rel=1e-3)
+    resumed = ["train", "--out", str(out), "--resume", "--n-timesteps", "192", "--no-progress", *flags[:6]]
+    assert main(resumed) == 0
+    rows = list(csv.DictReader((out / "evaluations-resumed-128.csv").open()))
+    assert [int(r["env_steps"]) for r in rows] == [160, 192]
+
+
+def test_eval_flags_are_checked_before_anything_runs(tmp_path, config_home, capsys):
+    out = tmp_path / "run"
+    assert _train("ppo", "FlatBody-v1", out, "--eval-seed", "5") == 2
+    line = _one_line(capsys)
+    assert "eval_seed" in line and "--eval-freq" in line, line
+    assert not (out / "config.yml").exists()
+    assert _train("ppo", "FlatBody-v1", out, "--eval-freq", "1", "--n-timesteps", "1000000000") == 2
+    line = _one_line(capsys)  # a million evaluations: refused before any is listed
+    assert line.startswith("flatbody train: error: eval_freq: must be an integer (allowed range [1e+06, "), line
+    for flag, value in (("--eval-freq", "-1"), ("--eval-episodes", "0")):
+        with pytest.raises(SystemExit) as refused:
+            _train("ppo", "FlatBody-v1", tmp_path / "other", flag, value)
+        assert refused.value.code == 2 and _one_line(capsys).startswith(f"flatbody train: error: {flag}: must be")
