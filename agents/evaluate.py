@@ -527,7 +527,8 @@ def success_interval(successes: int, n: int, z: float = 1.959963984540054) -> tu
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
+    # at 0 and n successes the ends are exactly 0 and 1 (the formula's rounding left 1e-17 above the rate)
+    return (0.0 if successes == 0 else max(0.0, centre - half)), (1.0 if successes == n else min(1.0, centre + half))
 
 
 def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:

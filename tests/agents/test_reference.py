@@ -29,6 +29,9 @@ def test_wilson_interval_matches_known_values():
     ]:
         a, b = success_interval(k, n)
         assert a == pytest.approx(lo, abs=5e-5) and b == pytest.approx(hi, abs=5e-5)
+    for n in (1, 3, 40, 100, 1000):  # the interval holds the rate: exactly 0 and 1 at the ends, never 1e-17 off
+        assert success_interval(0, n)[0] == 0.0 and success_interval(n, n)[1] == 1.0
+        assert all(a <= k / n <= b for k in range(n + 1) for a, b in [success_interval(k, n)])
     with pytest.raises(ValueError, match="episodes"):
         success_interval(0, 0)
 
