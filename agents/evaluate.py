@@ -293,7 +293,7 @@ class HeldOutEvaluations:
         return bool(self.at) and steps >= self.at[0]
 
     def train_seconds(self) -> float:
-        """Seconds since the evaluations were made, less the time spent evaluating."""
+        """Seconds since this object was made (just before its run), less the time spent evaluating."""
         return time.perf_counter() - self.t0 - self.eval_seconds
 
     def figures(self, policy: Policy, episodes: int | None = None) -> dict[str, Any]:
