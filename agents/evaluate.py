@@ -255,10 +255,13 @@ class HeldOutEvaluations:
         Env step counts, ascending.
     seed, episodes : int
         Episode i is reset with seed ``seed + i``; ``episodes`` per evaluation.
+    then : callable, optional
+        Called with each point; a return of False stops the run there (a pruner: ``flatbody tune``), which the trainer
+        then ends as a completed run.
     """
 
     def __init__(self, env_id: str, at, *, seed: int = EVAL_SEED, episodes: int = 100,
-                 env_kwargs: dict[str, Any] | None = None) -> None:  # fmt: skip
+                 env_kwargs: dict[str, Any] | None = None, then=None) -> None:  # fmt: skip
         from flatbody_env.physics import validation
 
         self.env_id = validation.string("env", env_id)
@@ -271,6 +274,9 @@ class HeldOutEvaluations:
         self.eval_seconds = 0.0
         self.table = None
         self.say = False
+        self.then = then
+        self.stop = False
+        """Whether ``then`` asked to stop the run."""
 
     @classmethod
     def every(cls, freq: int, total: int, env_id: str, **kwargs: Any) -> HeldOutEvaluations:
@@ -323,6 +329,8 @@ class HeldOutEvaluations:
                 f"{figures['final_distance']:.3g}",
                 file=sys.stderr,
             )
+        if self.then is not None and self.then(point) is False:
+            self.stop = True
         return point
 
     def sb3_callback(self, residual=None):
@@ -335,7 +343,7 @@ class HeldOutEvaluations:
             def _on_step(self) -> bool:
                 if evaluations.due(self.num_timesteps):
                     evaluations.add(self.num_timesteps, sb3_policy(self.model, residual))
-                return True
+                return not evaluations.stop
 
         return Evaluations()
 

@@ -502,6 +502,8 @@ def train_rsl(
                 tc = time.perf_counter()
                 evaluations.add(done, live_policy(runner.alg.actor, residual, device))
                 t0 += time.perf_counter() - tc
+                if evaluations.stop:
+                    break
             if callback is not None:
                 tc = time.perf_counter()
                 stop = callback(runner, rows[-1])

@@ -9,7 +9,8 @@ into mappings, e.g. ``policy_kwargs.log_std_init``) and how to sample it::
     gamma: {type: categorical, choices: [0.98, 0.99, 0.995]}
 
 A trial trains ``algo`` with the YAML hyperparameters plus the sampled ones for a short budget
-(:func:`agents.train.train`), evaluates the agent ``evaluations`` times along the way on
+(:func:`agents.train.train`), evaluates the agent ``evaluations`` times along the way
+(:class:`agents.evaluate.HeldOutEvaluations`, as ``flatbody train --eval-freq`` and the benchmark do) on
 ``eval_episodes`` episodes seeded from :data:`TUNE_EVAL_SEED` (held apart from the training
 episodes, seeded from the training seed, and from ``flatbody evaluate``'s episodes, seeded from
 10000), reports each mean final distance to the pruner and stops early when the median pruner says
@@ -40,7 +41,6 @@ import yaml
 
 from agents.config import HYPERPARAMS_DIR
 from agents.config import SB3_ALGOS as ALGOS
-from flatbody_env.output import atomic_path
 
 ENV_ID = "FlatBody-v0"
 """The task a search trains on (the entries of ``<algo>_search.yml``; the prior track's residual agent)."""
@@ -302,60 +302,25 @@ def _study(cfg: TuneConfig, worker: int = 0):
     return study
 
 
-def _evaluate(out: Path, model, episodes: int) -> dict[str, Any]:
-    from agents.evaluate import Agent, run_episodes, summarize
-
-    with atomic_path(out / "model.zip") as tmp:
-        model.save(str(tmp))
-    vn = model.get_vec_normalize_env()
-    if vn is not None:
-        with atomic_path(out / "vecnormalize.pkl") as tmp:
-            vn.save(str(tmp))
-    agent = Agent(out)
-    return summarize(
-        run_episodes(agent, episodes=episodes, seed=TUNE_EVAL_SEED, env_kwargs=agent.env_kwargs, env_id=agent.env_id)
-    )
-
-
-def _pruning_callback(trial, out: Path, every: int, episodes: int):
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    class TrialEvaluation(BaseCallback):
-        """Evaluate every ``every`` steps, report to the trial, stop training when it is pruned."""
-
-        def __init__(self) -> None:
-            super().__init__()
-            self.next_at = every
-            self.step = 0
-            self.pruned = False
-            self.last: dict[str, Any] | None = None
-
-        def _on_step(self) -> bool:
-            if self.num_timesteps < self.next_at:
-                return True
-            self.next_at += every
-            self.last = _evaluate(out, self.model, episodes)
-            trial.report(self.last["final_distance"], self.step)
-            self.step += 1
-            if trial.should_prune():
-                self.pruned = True
-                return False
-            return True
-
-    return TrialEvaluation()
-
-
 def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float:
     """Train one trial's configuration, evaluating along the way; the final mean distance."""
     import optuna
 
+    from agents.evaluate import Agent, HeldOutEvaluations
     from agents.train import train
 
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
     every = max(1, cfg.n_timesteps // cfg.evaluations)
-    callback = _pruning_callback(trial, out, every, cfg.eval_episodes)
+
+    def report(point) -> bool:
+        """Each evaluation's final distance to the trial; False (stop training) when the pruner prunes it."""
+        trial.report(point["final_distance"], len(evaluations.points) - 1)
+        return not trial.should_prune()
+
+    evaluations = HeldOutEvaluations(ENV_ID, range(every, cfg.n_timesteps + 1, every), seed=TUNE_EVAL_SEED,
+                                     episodes=cfg.eval_episodes, then=report)  # fmt: skip
     train(
         cfg.algo,
         out,
@@ -368,14 +333,14 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
         checkpoint_freq=0,
         threads=1,
         progress=False,
-        extra_callbacks=[callback],
+        evaluations=evaluations,
         force=True,
         notes=False,
         command=["flatbody", "tune", f"--algo={cfg.algo}", f"--study={cfg.study}", f"--trial={trial.number}"],
     )
-    if callback.pruned:
-        raise optuna.TrialPruned(f"pruned at evaluation {callback.step - 1}")
-    final = _evaluate(out, callback.model, cfg.eval_episodes)
+    if evaluations.stop:
+        raise optuna.TrialPruned(f"pruned at evaluation {len(evaluations.points) - 1}")
+    final = evaluations.figures(Agent(out))
     trial.set_user_attr("success_rate", final["success_rate"])
     trial.set_user_attr("run", str(out))
     return float(final["final_distance"])
