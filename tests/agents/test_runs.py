@@ -266,3 +266,19 @@ def test_eval_flags_are_checked_before_anything_runs(tmp_path, config_home, caps
         with pytest.raises(SystemExit) as refused:
             _train("ppo", "FlatBody-v1", tmp_path / "other", flag, value)
         assert refused.value.code == 2 and _one_line(capsys).startswith(f"flatbody train: error: {flag}: must be")
+
+
+@pytest.mark.parametrize("algo", ["sac", "rsl-ppo"])
+def test_an_evaluation_that_says_stop_ends_the_run_there(tmp_path, config_home, algo):
+    """``HeldOutEvaluations(then=...)`` returning False (a pruner) stops the training at that evaluation; the run is
+    saved as a completed one of the steps it reached."""
+    from agents.evaluate import HeldOutEvaluations
+    from agents.train import train
+
+    seen = []
+    evaluations = HeldOutEvaluations("FlatBody-v1", [32, 64, 96], episodes=2, then=lambda p: bool(seen.append(p)))
+    overrides = [o for o in TINY[algo] if not o.startswith("n_envs")]
+    result = train(algo, tmp_path / "run", env_id="FlatBody-v1", n_timesteps=128, n_envs=4 if algo == "rsl-ppo" else 2,
+                   overrides=overrides, checkpoint_freq=0, progress=False, notes=False, evaluations=evaluations)  # fmt: skip
+    assert [p["env_steps"] for p in seen] == [32] and evaluations.stop
+    assert result.timesteps < 128 and json.loads((tmp_path / "run" / "run.json").read_text())["n_timesteps"] < 128
