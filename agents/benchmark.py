@@ -393,7 +393,7 @@ def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, rep
     """The longer-budget chart: held-out success against env steps per task (:func:`longer_budget_points`), the
     best classic controller and the planner of the task's saved reference report as lines. ``data``: the table
     (default :data:`LONGER_BUDGETS`); ``reports``: the reference reports (default the shipped ones)."""
-    from agents.reference import load_reports
+    from agents.reference import POLICY_LABELS, load_reports
     from agents.scores import CLASSIC, anchors
     from flatbody_env.env.registration import V1_IDS
     from flatbody_env.figures import CYCLE, PALETTE, chart, fraction_axis
@@ -405,7 +405,6 @@ def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, rep
     by_env = {r["env_id"]: r for r in (reports if reports is not None else load_reports())}
     points = longer_budget_points(data)
     envs = [e for e in V1_IDS if e in points]
-    names = {"heuristic": "LQR"}
     with chart(png, size=(max(6.4, 3.6 * len(envs)), 4.6), ncols=len(envs), sharey=True) as c:
         for j, env_id in enumerate(envs):
             ax, task = c.axes[0, j], points[env_id]
@@ -418,19 +417,19 @@ def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, rep
                 ax.errorbar(x, m, yerr=[m - np.clip(lo, 0, 1), np.clip(hi, 0, 1) - m], color=PALETTE["reference"],
                             lw=1.8, capsize=4, marker="s", ms=4,
                             label=f"mean over {len(task['seeds'])} seeds" if j == 0 else None)  # fmt: skip
-            title = env_id
+            lines = []
             report = by_env.get(env_id)
             if report is not None:
                 a = anchors(report)
                 if a.lo_from in CLASSIC:
                     ax.axhline(a.lo, color=PALETTE["goal"], lw=1.0, ls="--",
                                label="best classic controller" if j == 0 else None)  # fmt: skip
-                    title += f"\n{names.get(a.lo_from, a.lo_from)} {a.lo:.0%}"
+                    lines.append(f"{POLICY_LABELS.get(a.lo_from, a.lo_from)} {a.lo:.0%}")
                 planner = report.get("policies", {}).get("planner", {}).get("summary", {}).get("success_rate")
                 if planner is not None:
                     ax.axhline(planner, color=PALETTE["goal"], lw=1.0, ls=":", label="planner" if j == 0 else None)
-                    title += f"{' ·' if a.lo_from in CLASSIC else chr(10)} planner {planner:.0%}"
-            ax.set_title(title)
+                    lines.append(f"planner {planner:.0%}")
+            ax.set_title("\n".join([env_id, " · ".join(lines)] if lines else [env_id]))
             ax.set_xlabel("env steps (millions)")
             ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e6:g}"))
             ax.set_xlim(0, None)

@@ -155,15 +155,17 @@ def _same_settings(args, config) -> None:
 
 def _evaluations(args, config):
     """``--eval-freq``'s evaluations of a run (:class:`agents.evaluate.HeldOutEvaluations`), or None."""
-    if args.eval_seed is not None and not args.eval_freq:
-        raise ValueError("eval_seed: give --eval-freq N too (the evaluations along the run)")
+    for name in ("eval_seed", "eval_episodes"):
+        if getattr(args, name) is not None and not args.eval_freq:
+            raise ValueError(f"{name}: give --eval-freq N too (the evaluations along the run)")
     if not args.eval_freq:
         return None
     from agents.evaluate import EVAL_SEED, HeldOutEvaluations
 
     seed = EVAL_SEED if args.eval_seed is None else args.eval_seed
-    return HeldOutEvaluations.every(args.eval_freq, config.n_timesteps, config.env_id, seed=seed,
-                                    episodes=args.eval_episodes, env_kwargs=config.env_kwargs)  # fmt: skip
+    episodes = 100 if args.eval_episodes is None else args.eval_episodes
+    return HeldOutEvaluations.every(args.eval_freq, config.n_timesteps, config.env_id, seed=seed, episodes=episodes,
+                                    env_kwargs=config.env_kwargs)  # fmt: skip
 
 
 @_trusting
@@ -559,16 +561,16 @@ def _add_run_arguments(p, *, seed_default) -> None:
     p.add_argument(
         "--eval-episodes",
         type=int_at_least("eval_episodes", 1, validation.MAX_EPISODES),
-        default=100,
+        default=None,
         metavar="K",
-        help="held-out episodes per evaluation (default 100)",
+        help="with --eval-freq: held-out episodes per evaluation (default 100)",
     )
     p.add_argument(
         "--eval-seed",
         type=int_at_least("eval_seed", 0, validation.MAX_SEED),
         default=None,
         metavar="S",
-        help="held-out episode i is reset with seed S + i (default 10000, the table's)",
+        help="with --eval-freq: held-out episode i is reset with seed S + i (default 10000, the table's)",
     )
     p.add_argument(
         "--threads",

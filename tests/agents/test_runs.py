@@ -255,9 +255,10 @@ def test_eval_freq_evaluates_the_policy_on_held_out_episodes_along_the_run(tmp_p
 
 def test_eval_flags_are_checked_before_anything_runs(tmp_path, config_home, capsys):
     out = tmp_path / "run"
-    assert _train("ppo", "FlatBody-v1", out, "--eval-seed", "5") == 2
-    line = _one_line(capsys)
-    assert "eval_seed" in line and "--eval-freq" in line, line
+    for flag in ("--eval-seed", "--eval-episodes"):  # nothing to apply them to: refused, not ignored
+        assert _train("ppo", "FlatBody-v1", out, flag, "5") == 2
+        line = _one_line(capsys)
+        assert flag.lstrip("-").replace("-", "_") in line and "--eval-freq" in line, line
     assert not (out / "config.yml").exists()
     assert _train("ppo", "FlatBody-v1", out, "--eval-freq", "1", "--n-timesteps", "1000000000") == 2
     line = _one_line(capsys)  # a million evaluations: refused before any is listed
