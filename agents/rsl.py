@@ -634,13 +634,14 @@ def from_scratch_curve(
     """Train rsl-ppo with :data:`FROM_SCRATCH` (then ``overrides``) for ``budget_s`` seconds of training wall time and write the curve.
 
     After the first iteration that ends ``eval_every_s`` or more after the previous evaluation, and at the end, the
-    deterministic policy (:func:`live_policy`, no residual) runs ``episodes`` held-out episodes (seeds ``eval_seed`` …);
-    the evaluation time is left out of the wall time (``train_rsl``'s ``callback``). The training stops at the first
+    deterministic policy (:func:`live_policy`, no residual) runs ``episodes`` held-out episodes (seeds ``eval_seed`` …,
+    through :class:`agents.evaluate.HeldOutEvaluations`); the evaluation time is left out of the wall time
+    (``train_rsl``'s ``callback``). The training stops at the first
     evaluation at or past ``budget_s``, so the run folder ``out`` holds the last evaluated policy. ``csv_path``: one row
     per evaluation (:data:`CURVE_HEADER`), rewritten after each. ``device``: the torch device of env and policy
     (``"cuda"``: the torch env and the policy on the GPU, the evaluations' policy too). Returns the rows.
     """
-    from agents.evaluate import run_episodes
+    from agents.evaluate import HeldOutEvaluations
     from flatbody_env.output import write_csv
 
     from flatbody_env.physics import validation
@@ -650,20 +651,20 @@ def from_scratch_curve(
     )
     rows: list[tuple[int, float, float, float]] = []
     due = [float(eval_every_s)]
+    # the evaluations along every training run, here on a wall-time schedule (no step marks: added when due below)
+    evaluations = HeldOutEvaluations("FlatBody-v0", [], seed=eval_seed, episodes=episodes)
 
     def callback(runner, row) -> bool:
         if row["time_s"] < min(due[0], budget_s):
             return False
         due[0] = row["time_s"] + eval_every_s
-        recs = run_episodes(
-            live_policy(runner.alg.actor, None, device), episodes=episodes, seed=eval_seed, env_id="FlatBody-v0"
-        )
+        point = evaluations.add(int(row["timesteps"]), live_policy(runner.alg.actor, None, device))
         rows.append(
             (
-                int(row["timesteps"]),
+                point["env_steps"],
                 round(float(row["time_s"]), 2),
-                float(np.mean([r["success"] for r in recs])),
-                float(np.mean([r["final_distance"] for r in recs])),
+                float(point["success_rate"]),
+                float(point["final_distance"]),
             )
         )
         write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
