@@ -160,12 +160,13 @@ def _evaluations(args, config):
             raise ValueError(f"{name}: give --eval-freq N too (the evaluations along the run)")
     if not args.eval_freq:
         return None
-    from agents.evaluate import EVAL_SEED, HeldOutEvaluations
+    from agents.evaluate import HeldOutEvaluations
 
-    seed = EVAL_SEED if args.eval_seed is None else args.eval_seed
-    episodes = 100 if args.eval_episodes is None else args.eval_episodes
-    return HeldOutEvaluations.every(args.eval_freq, config.n_timesteps, config.env_id, seed=seed, episodes=episodes,
-                                    env_kwargs=config.env_kwargs)  # fmt: skip
+    # the seed and episodes given; the others are HeldOutEvaluations's defaults (the table's)
+    given = {k: v for k, v in (("seed", args.eval_seed), ("episodes", args.eval_episodes)) if v is not None}
+    return HeldOutEvaluations.every(
+        args.eval_freq, config.n_timesteps, config.env_id, env_kwargs=config.env_kwargs, **given
+    )
 
 
 @_trusting
