@@ -113,12 +113,13 @@ class TuneConfig:
         for name, low in (
             ("trials", 1),
             ("n_timesteps", 1),
-            ("evaluations", 1),
             ("eval_episodes", 1),
             ("seed", 0),
             ("startup_trials", 0),
         ):
             validation.integer(name, getattr(self, name), low=low)
+        # one evaluation per pruner step, at most the evaluations a run may hold (HeldOutEvaluations.every)
+        validation.integer("evaluations", self.evaluations, low=1, high=min(validation.MAX_REPEATS, self.n_timesteps))
         validation.requirement(
             "study", self.study, isinstance(self.study, str) and self.study != "", "be a non-empty name"
         )
@@ -312,15 +313,15 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
-    every = max(1, cfg.n_timesteps // cfg.evaluations)
+    every = -(-cfg.n_timesteps // cfg.evaluations)  # evaluations marks at most, the last at the budget or before
 
     def report(point) -> bool:
         """Each evaluation's final distance to the trial; False (stop training) when the pruner prunes it."""
         trial.report(point["final_distance"], len(evaluations.points) - 1)
         return not trial.should_prune()
 
-    evaluations = HeldOutEvaluations(ENV_ID, range(every, cfg.n_timesteps + 1, every), seed=TUNE_EVAL_SEED,
-                                     episodes=cfg.eval_episodes, then=report)  # fmt: skip
+    evaluations = HeldOutEvaluations.every(every, cfg.n_timesteps, ENV_ID, seed=TUNE_EVAL_SEED,
+                                           episodes=cfg.eval_episodes, then=report)  # fmt: skip
     train(
         cfg.algo,
         out,

@@ -76,6 +76,13 @@ def test_bad_search_space_names_the_entry(tmp_path, entry, match):
         load_search_space("ppo", path=f)
 
 
+@pytest.mark.parametrize(("steps", "evaluations"), [(512, 0), (512, 513), (10**9, 1001)])
+def test_evaluations_per_trial_are_bounded(tmp_path, steps, evaluations):
+    # one evaluation per pruner step: at least one, at most one per step and 1,000 in all (never a hang)
+    with pytest.raises(ValueError, match="^evaluations"):
+        TuneConfig(algo="ppo", study="s", storage=str(tmp_path / "j.log"), n_timesteps=steps, evaluations=evaluations)
+
+
 def test_pruned_trial_stops_training_early(tmp_path):
     cfg = TuneConfig(
         algo="ppo",
