@@ -16,6 +16,7 @@ suite's interquartile mean with its stratified bootstrap interval per algorithm)
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
@@ -362,23 +363,29 @@ LONGER_CAPTION = (
     "Each thin line: one training seed of rsl-ppo's v1 entry (unchanged but for its budget), its deterministic policy "
     "on the table's 100 held-out episodes (seeds 10000-10099, never trained on) at checkpoints along the run. Black: "
     "the mean over the seeds with its 95 % t-interval, where every seed has a point. Dashed: the best classic "
-    "controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive planner."
+    "controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive planner; "
+    "dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where they "
+    "change the environment), outside the mean."
 )
 
 
 def longer_budget_points(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """Per task of the longer-budget table (:data:`LONGER_BUDGETS`): each training seed's held-out success along its
     run (``seeds``: seed -> sorted (env steps, success) from the evaluated checkpoints and the rows of the entry as it
-    is, without hyperparameter overrides) and, at each mark of :data:`MARK` env steps where every seed has a point
-    within a tenth of a mark, the mean over the seeds with its 95 % t-interval (``means``: (mark, mean, lo, hi))."""
+    is, without hyperparameter overrides), each variant's run apart (``variants``: (overrides, seed) -> sorted points,
+    the overrides joined by spaces as ``flatbody train --hyperparams`` took them) and, at each mark of :data:`MARK`
+    env steps where every seed of the entry has a point within a tenth of a mark, the mean over those seeds with its
+    95 % t-interval (``means``: (mark, mean, lo, hi))."""
     out: dict[str, dict[str, Any]] = {}
     for r in [*data.get("rows", []), *data.get("checkpoints", [])]:
-        if r.get("hyperparams"):  # a variant of the entry (its own row in the table), not the entry's run
-            continue
-        seeds = out.setdefault(r["env_id"], {"seeds": {}, "means": []})["seeds"]
-        seeds.setdefault(int(r["seed"]), {})[int(r["n_timesteps"])] = float(r["success_rate"])
+        task = out.setdefault(r["env_id"], {"seeds": {}, "variants": {}, "means": []})
+        # a variant of the entry (its own rows in the table) is drawn apart, never in the entry's mean
+        runs, key = ((task["variants"], (" ".join(r["hyperparams"]), int(r["seed"]))) if r.get("hyperparams")
+                     else (task["seeds"], int(r["seed"])))  # fmt: skip
+        runs.setdefault(key, {})[int(r["n_timesteps"])] = float(r["success_rate"])
     for task in out.values():
         task["seeds"] = {s: sorted(pts.items()) for s, pts in sorted(task["seeds"].items())}
+        task["variants"] = {k: sorted(pts.items()) for k, pts in sorted(task["variants"].items())}
         if len(task["seeds"]) < 2:
             continue
         last = max(n for pts in task["seeds"].values() for n, _ in pts)
@@ -405,6 +412,7 @@ def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, rep
     by_env = {r["env_id"]: r for r in (reports if reports is not None else load_reports())}
     points = longer_budget_points(data)
     envs = [e for e in V1_IDS if e in points]
+    variant_colour = itertools.count(max(len(points[e]["seeds"]) for e in envs))
     with chart(png, size=(max(6.4, 3.6 * len(envs)), 4.6), ncols=len(envs), sharey=True) as c:
         for j, env_id in enumerate(envs):
             ax, task = c.axes[0, j], points[env_id]
@@ -412,11 +420,15 @@ def plot_longer_budgets(png: str | Path, data: dict[str, Any] | None = None, rep
                 xs, ys = zip(*pts)
                 ax.plot(xs, ys, color=CYCLE[k % len(CYCLE)], lw=1.0, marker="o", ms=3, alpha=0.8,
                         label=f"seed {seed}" if j == 0 else None)  # fmt: skip
+            for (overrides, seed), pts in task["variants"].items():  # colours after every task's seeds'
+                xs, ys = zip(*pts)
+                ax.plot(xs, ys, color=CYCLE[next(variant_colour) % len(CYCLE)], lw=1.0, ls="-.", marker="^",
+                        ms=4, mfc="none", label=f"seed {seed}, {overrides}")  # fmt: skip
             if task["means"]:
                 x, m, lo, hi = (np.array(v) for v in zip(*task["means"]))
                 ax.errorbar(x, m, yerr=[m - np.clip(lo, 0, 1), np.clip(hi, 0, 1) - m], color=PALETTE["reference"],
                             lw=1.8, capsize=4, marker="s", ms=4,
-                            label=f"mean over {len(task['seeds'])} seeds" if j == 0 else None)  # fmt: skip
+                            label=f"mean over {len(task['seeds'])} seeds")  # fmt: skip
             lines = []
             report = by_env.get(env_id)
             if report is not None:

@@ -488,16 +488,22 @@ def test_the_longer_budget_mean_is_drawn_only_where_every_seed_has_a_point(drawn
         2: {5_087_232: 0.64, 14_991_360: 0.75, 24_969_216: 0.84},
     }
     table = _longer_table(runs)
+    variant = {"env_id": "FlatBodySlowHard-v1", "algo": "rsl-ppo", "seed": 0, "hyperparams": ["gamma=0.995"]}
+    table["rows"].append({**variant, "n_timesteps": 25_018_368, "success_rate": 0.20})  # a variant: apart
+    table["checkpoints"].append({**variant, "n_timesteps": 5_013_504, "success_rate": 0.10})
     task = longer_budget_points(table)["FlatBodySlowHard-v1"]
     assert [m[0] for m in task["means"]] == [6 * MARK, 10 * MARK]
     assert task["means"][1][1:] == pytest.approx(mean_interval([0.86, 0.81, 0.84]))
     assert task["seeds"][0] == sorted(runs[0].items())
+    assert task["variants"] == {("gamma=0.995", 0): [(5_013_504, 0.10), (25_018_368, 0.20)]}
     report = {"env_id": "FlatBodySlowHard-v1", "policies": {
         "zero": {"summary": {"success_rate": 0.0}}, "heuristic": {"summary": {"success_rate": 0.64}},
         "planner": {"summary": {"success_rate": 0.56}}}}  # fmt: skip
     fig = drawn(lambda out: plot_longer_budgets(out, table, [report]), tmp_path / "l.png")
     ax = fig.axes[0]
     assert len([line for line in ax.get_lines() if line.get_marker() == "o"]) == 3  # one line per seed
+    (drawn_variant,) = [line for line in ax.get_lines() if line.get_linestyle() == "-."]
+    assert list(drawn_variant.get_ydata()) == [0.10, 0.20] and drawn_variant.get_label() == "seed 0, gamma=0.995"
     levels = {round(line.get_ydata()[0], 2) for line in ax.get_lines() if line.get_linestyle() in ("--", ":")}
     assert levels == {0.64, 0.56}
     assert ax.get_title() == "FlatBodySlowHard-v1\nLQR 64% · planner 56%"
