@@ -362,9 +362,9 @@ MARK = 2_500_000
 LONGER_CAPTION = (
     "Each thin line: one training seed of rsl-ppo's v1 entry (unchanged but for its budget), its deterministic policy "
     "on the table's 100 held-out episodes (seeds 10000-10099, never trained on) at checkpoints along the run. Black: "
-    "the mean over the seeds with its 95 % t-interval, where every seed has a point. Dashed: the best classic "
-    "controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive planner; "
-    "dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where they "
+    "the mean over the seeds with its 95 % t-interval, where every seed (three or more) has a point. Dashed: the best "
+    "classic controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive "
+    "planner; dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where they "
     "change the environment), outside the mean."
 )
 
@@ -374,8 +374,8 @@ def longer_budget_points(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
     run (``seeds``: seed -> sorted (env steps, success) from the evaluated checkpoints and the rows of the entry as it
     is, without hyperparameter overrides), each variant's run apart (``variants``: (overrides, seed) -> sorted points,
     the overrides joined by spaces as ``flatbody train --hyperparams`` took them) and, at each mark of :data:`MARK`
-    env steps where every seed of the entry has a point within a tenth of a mark, the mean over those seeds with its
-    95 % t-interval (``means``: (mark, mean, lo, hi))."""
+    env steps where every seed of the entry (three or more) has a point within a tenth of a mark, the mean over those
+    seeds with its 95 % t-interval (``means``: (mark, mean, lo, hi))."""
     out: dict[str, dict[str, Any]] = {}
     for r in [*data.get("rows", []), *data.get("checkpoints", [])]:
         task = out.setdefault(r["env_id"], {"seeds": {}, "variants": {}, "means": []})
@@ -386,7 +386,7 @@ def longer_budget_points(data: dict[str, Any]) -> dict[str, dict[str, Any]]:
     for task in out.values():
         task["seeds"] = {s: sorted(pts.items()) for s, pts in sorted(task["seeds"].items())}
         task["variants"] = {k: sorted(pts.items()) for k, pts in sorted(task["variants"].items())}
-        if len(task["seeds"]) < 2:
+        if len(task["seeds"]) < 3:  # two seeds: a t-interval of 12.7 standard errors says nothing
             continue
         last = max(n for pts in task["seeds"].values() for n, _ in pts)
         for k in range(1, round(last / MARK) + 1):
