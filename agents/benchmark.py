@@ -364,8 +364,8 @@ LONGER_CAPTION = (
     "on the table's 100 held-out episodes (seeds 10000-10099, never trained on) at checkpoints along the run. Black: "
     "the mean over the seeds with its 95 % t-interval, where every seed (three or more) has a point. Dashed: the best "
     "classic controller on the same episodes (LQR: the linear-quadratic regulator); dotted: the model-predictive "
-    "planner; dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where they "
-    "change the environment), outside the mean."
+    "planner; dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where "
+    "they change the environment), outside the mean."
 )
 
 

@@ -313,7 +313,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
-    every = -(-cfg.n_timesteps // cfg.evaluations)  # evaluations marks at most, the last at the budget or before
+    every = -(-cfg.n_timesteps // cfg.evaluations)  # at most cfg.evaluations marks, the last at the budget or before
 
     def report(point) -> bool:
         """Each evaluation's final distance to the trial; False (stop training) when the pruner prunes it."""

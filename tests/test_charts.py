@@ -496,6 +496,8 @@ def test_the_longer_budget_mean_is_drawn_only_where_every_seed_has_a_point(drawn
     assert task["means"][1][1:] == pytest.approx(mean_interval([0.86, 0.81, 0.84]))
     assert task["seeds"][0] == sorted(runs[0].items())
     assert task["variants"] == {("gamma=0.995", 0): [(5_013_504, 0.10), (25_018_368, 0.20)]}
+    two = longer_budget_points(_longer_table({0: runs[0], 1: runs[1]}))["FlatBodySlowHard-v1"]
+    assert two["means"] == [] and len(two["seeds"]) == 2  # two seeds: each drawn, no mean (its interval says nothing)
     report = {"env_id": "FlatBodySlowHard-v1", "policies": {
         "zero": {"summary": {"success_rate": 0.0}}, "heuristic": {"summary": {"success_rate": 0.64}},
         "planner": {"summary": {"success_rate": 0.56}}}}  # fmt: skip
