@@ -165,14 +165,14 @@ def number(
     ):
         return value
     if isinstance(value, bool) or not isinstance(value, _NUMBER_TYPES):
-        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {_short(value)}")
+        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {shown(value)}")
     try:
         x = float(value)
     except OverflowError:
         rng = _range_text(positive, low, high)
         raise ValueError(f"{where}: must be a finite number{rng}, got an integer too large for a float") from None
     if not math.isfinite(x):
-        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {_short(value)}")
+        raise ValueError(f"{where}: must be a finite number{_range_text(positive, low, high)}, got {shown(value)}")
     if positive and x <= 0.0:
         raise ValueError(f"{where}: must be > 0{_range_text(positive, low, high)}, got {x!r}")
     if (low is not None and x < low) or (high is not None and x > high):
@@ -196,7 +196,7 @@ def mapping(where: str, value: Any) -> Mapping[str, Any]:
 def string(where: str, value: Any, *, choices: Iterable[str] | None = None) -> str:
     """``value`` if it is a string (one of ``choices`` when given)."""
     if not isinstance(value, str):
-        raise ValueError(f"{where}: must be a string, got {_short(value)}")
+        raise ValueError(f"{where}: must be a string, got {shown(value)}")
     if choices is not None:
         allowed = tuple(choices)
         if value not in allowed:
@@ -218,10 +218,10 @@ def keys(where: str, obj: Mapping[str, Any], allowed: Iterable[str], required: I
 def integer(where: str, value: Any, *, low: int | None = None, high: int | None = None) -> int:
     """``value`` as an ``int`` (not a bool, not a float) within [low, high]."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {_short(value)}")
+        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {shown(value)}")
     x = int(value)
     if (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {_short(x)}")
+        raise ValueError(f"{where}: must be an integer{_range_text(False, low, high)}, got {shown(x)}")
     return x
 
 
@@ -229,7 +229,7 @@ def interval(where: str, value: Any, *, low: float, high: float, strict: bool = 
     """``value`` as a range (lo, hi) of two finite numbers within [low, high], lo < hi (lo <= hi unless ``strict``)."""
     order = "<" if strict else "<="
     if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
-        raise ValueError(f"{where}: must be (lo, hi) with {low:g} <= lo {order} hi <= {high:g}, got {_short(value)}")
+        raise ValueError(f"{where}: must be (lo, hi) with {low:g} <= lo {order} hi <= {high:g}, got {shown(value)}")
     lo, hi = (number(f"{where}[{i}]", x, low=low, high=high) for i, x in enumerate(value))
     if not (lo < hi if strict else lo <= hi):
         raise ValueError(f"{where}: must be (lo, hi) with lo {order} hi, got {(lo, hi)!r}")
@@ -239,7 +239,7 @@ def interval(where: str, value: Any, *, low: float, high: float, strict: bool = 
 def boolean(where: str, value: Any) -> bool:
     """``value`` if it is ``True`` or ``False`` (a numpy bool too), else a ``ValueError`` naming ``where``."""
     if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{where}: must be true or false, got {_short(value)}")
+        raise ValueError(f"{where}: must be true or false, got {shown(value)}")
     return bool(value)
 
 
@@ -340,16 +340,14 @@ def field(where: str, value: Any, spec: Field) -> Any:
             return value
         v = _numeric_text(value)
         if isinstance(v, str) and spec.choices:
-            raise ValueError(
-                f"{where}: must be one of {', '.join(map(str, spec.choices))} or a number, got {_short(v)}"
-            )
+            raise ValueError(f"{where}: must be one of {', '.join(map(str, spec.choices))} or a number, got {shown(v)}")
         return number(where, v, positive=spec.positive, low=spec.low, high=spec.high)
     if kind == "boolean":
         return boolean(where, value)
     if kind == "choice":
         if isinstance(value, (list, dict)) or value not in spec.choices:
             allowed = ", ".join("null" if c is None else str(c) for c in spec.choices)
-            raise ValueError(f"{where}: must be one of {allowed}, got {_short(value)}")
+            raise ValueError(f"{where}: must be one of {allowed}, got {shown(value)}")
         return value
     if kind == "string":
         return string(where, value)
@@ -357,14 +355,14 @@ def field(where: str, value: Any, spec: Field) -> Any:
         return _integers(where, value, spec)
     if kind == "numbers":
         if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)) or not value:
-            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {shown(value)}")
         if len(value) > spec.max_items:
             raise ValueError(f"{where}: must hold at most {spec.max_items} numbers, got {len(value)}")
         item = Field(kind="number", low=spec.low, high=spec.high)
         return [field(f"{where}[{i}]", v, item) for i, v in enumerate(value)]
     if kind == "list":
         if not isinstance(value, (list, tuple)) or len(value) > spec.max_items:
-            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+            raise ValueError(f"{where}: must be {_kind_text(spec)}, got {shown(value)}")
         return list(value)
     if kind == "layers":
         if isinstance(value, Mapping):
@@ -376,14 +374,14 @@ def field(where: str, value: Any, spec: Field) -> Any:
             if len(value) != 2 or value[1] not in spec.choices:
                 raise ValueError(
                     f"{where}: must be an integer or [integer, unit] with the unit one of "
-                    f"{', '.join(spec.choices)}, got {_short(value)}"
+                    f"{', '.join(spec.choices)}, got {shown(value)}"
                 )
             return [field(f"{where}[0]", value[0], Field(kind="integer", low=spec.low, high=spec.high)), value[1]]
         return field(where, value, Field(kind="integer", low=spec.low, high=spec.high))
     if kind == "switch" and isinstance(value, (bool, np.bool_)):
         return bool(value)
     if not isinstance(value, Mapping):
-        raise ValueError(f"{where}: must be {_kind_text(spec)}, got {_short(value)}")
+        raise ValueError(f"{where}: must be {_kind_text(spec)}, got {shown(value)}")
     return fields(where, value, spec.fields) if spec.fields is not None else dict(value)
 
 
@@ -439,7 +437,7 @@ def refusal(where: str, rule: str, value: Any = _UNSHOWN, *, error: type[Excepti
     Exception
         ``error(message)``; raise it (``from None`` inside an ``except`` block, to hide the library's error).
     """
-    text = f"{where}: must {rule}" if value is _UNSHOWN else f"{where}: must {rule}, got {_short(value)}"
+    text = f"{where}: must {rule}" if value is _UNSHOWN else f"{where}: must {rule}, got {shown(value)}"
     return error(text)
 
 
@@ -456,7 +454,7 @@ def memory(where: str, nbytes: int, what: str, *, limit: int = MAX_TRAINER_BYTES
 def _integers(where: str, value: Any, spec: Field) -> list[int]:
     if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, (list, tuple)) or not value:
         raise ValueError(
-            f"{where}: must be a non-empty list of integers{_range_text(False, spec.low, spec.high)}, got {_short(value)}"
+            f"{where}: must be a non-empty list of integers{_range_text(False, spec.low, spec.high)}, got {shown(value)}"
         )
     if len(value) > spec.max_items:
         raise ValueError(f"{where}: must hold at most {spec.max_items} integers, got {len(value)}")
@@ -488,7 +486,7 @@ def float_array(where: str, value: Any, *, shape: tuple[int | None, ...], finite
     """
     dims = "x".join("n" if d is None else str(d) for d in shape)
     if isinstance(value, (str, bytes, Mapping)) or value is None or isinstance(value, (bool, int, float)):
-        raise ValueError(f"{where}: expected an array of shape ({dims}), got {_short(value)}")
+        raise ValueError(f"{where}: expected an array of shape ({dims}), got {shown(value)}")
     try:
         arr = np.asarray(value)
     except (ValueError, TypeError, OverflowError, RecursionError):
@@ -530,7 +528,7 @@ def parse_json(where: str, text: str | bytes) -> Any:
     except RecursionError:
         raise ValueError(f"{where}: not valid JSON (nested too deeply)") from None
     except (ValueError, UnicodeDecodeError) as exc:  # e.g. integers beyond Python's digit limit
-        raise ValueError(f"{where}: not valid JSON ({_short(str(exc))})") from None
+        raise ValueError(f"{where}: not valid JSON ({shown(str(exc))})") from None
 
 
 def _path_of(where: str, path: Any):
@@ -538,7 +536,7 @@ def _path_of(where: str, path: Any):
     from pathlib import Path
 
     if not isinstance(path, (str, os.PathLike)) or not str(path) or "\0" in str(path):
-        raise ValueError(f"{where}: expected a file path, got {_short(path)}")
+        raise ValueError(f"{where}: expected a file path, got {shown(path)}")
     return Path(path)
 
 
@@ -546,11 +544,11 @@ def _check_regular(where: str, p, info, max_bytes: int) -> None:
     import stat
 
     if stat.S_ISDIR(info.st_mode):
-        raise ValueError(f"{where}: {_short(str(p))} is a directory, not a file")
+        raise ValueError(f"{where}: {shown(str(p))} is a directory, not a file")
     if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"{where}: {_short(str(p))} is not a regular file (a FIFO, socket or device is never read)")
+        raise ValueError(f"{where}: {shown(str(p))} is not a regular file (a FIFO, socket or device is never read)")
     if info.st_size > max_bytes:
-        raise ValueError(f"{where}: {_short(str(p))} is larger than {_size_text(max_bytes)}")
+        raise ValueError(f"{where}: {shown(str(p))} is larger than {_size_text(max_bytes)}")
 
 
 def read_bytes(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> bytes:
@@ -575,9 +573,9 @@ def read_bytes(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> byt
         _check_regular(where, p, p.stat(), max_bytes)
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        raise ValueError(f"{where}: no file {_short(str(p))}") from None
+        raise ValueError(f"{where}: no file {shown(str(p))}") from None
     except OSError as exc:
-        raise ValueError(f"{where}: cannot read {_short(str(p))} ({exc.strerror or exc})") from None
+        raise ValueError(f"{where}: cannot read {shown(str(p))} ({exc.strerror or exc})") from None
     try:
         _check_regular(where, p, os.fstat(fd), max_bytes)
         chunks, left = [], max_bytes + 1
@@ -588,12 +586,12 @@ def read_bytes(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> byt
             chunks.append(chunk)
             left -= len(chunk)
     except OSError as exc:
-        raise ValueError(f"{where}: cannot read {_short(str(p))} ({exc.strerror or exc})") from None
+        raise ValueError(f"{where}: cannot read {shown(str(p))} ({exc.strerror or exc})") from None
     finally:
         os.close(fd)
     data = b"".join(chunks)
     if len(data) > max_bytes:
-        raise ValueError(f"{where}: {_short(str(p))} is larger than {_size_text(max_bytes)}")
+        raise ValueError(f"{where}: {shown(str(p))} is larger than {_size_text(max_bytes)}")
     return data
 
 
@@ -603,7 +601,7 @@ def read_text(where: str, path: Any, *, max_bytes: int = MAX_TEXT_BYTES) -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{where}: {_short(str(path))} is not UTF-8 text (byte {exc.start})") from None
+        raise ValueError(f"{where}: {shown(str(path))} is not UTF-8 text (byte {exc.start})") from None
 
 
 def read_csv(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> list[dict[str, str]]:
@@ -615,7 +613,7 @@ def read_csv(where: str, path: Any, *, max_bytes: int = MAX_JSON_BYTES) -> list[
     try:
         return list(csv.DictReader(io.StringIO(text, newline="")))
     except csv.Error as exc:
-        raise ValueError(f"{where}: {_short(str(path))} is not a CSV table ({_short_text(str(exc))})") from None
+        raise ValueError(f"{where}: {shown(str(path))} is not a CSV table ({_short_text(str(exc))})") from None
 
 
 def read_json(where: str, path: Any) -> Any:
@@ -708,7 +706,7 @@ def read_npz(
     import zipfile
 
     data = read_bytes(where, path, max_bytes=max_bytes)
-    name = _short(str(path))
+    name = shown(str(path))
     declared = 0
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
@@ -791,7 +789,7 @@ def sqlite_file(where: str, path: Any, tables: Iterable[str]) -> None:
             db.close()
     except sqlite3.Error as exc:
         raise ValueError(
-            f"{where}: {str(p)!r} is a damaged SQLite database ({_short(str(exc))}; move it away)"
+            f"{where}: {str(p)!r} is a damaged SQLite database ({shown(str(exc))}; move it away)"
         ) from None
     missing = sorted(set(tables) - have)
     if missing:
@@ -819,10 +817,11 @@ def _range_text(positive: bool, low: float | None, high: float | None) -> str:
 _REPR = None
 
 
-def _short(value: Any) -> str:
-    """``value``'s repr in at most 60 characters, its size bounded *before* it is built: containers are shown to a
-    few levels and items (:mod:`reprlib`), long strings and numbers cut first — never the whole repr of a
-    huge or self-similar value (a YAML alias bomb, a list of a million items) cut afterwards."""
+def shown(value: Any) -> str:
+    """``value`` as an error message shows it after "got": its repr in at most 60 characters, its size bounded
+    *before* it is built — containers to a few levels and items (:mod:`reprlib`), long strings cut first, an integer
+    of 19 digits or more by its magnitude (``1e+99``) — never the whole repr of a huge or self-similar value (a YAML
+    alias bomb, a list of a million items) cut afterwards. The one formatter of refused values (the service's too)."""
     global _REPR
     if _REPR is None:
         import reprlib
@@ -833,6 +832,11 @@ def _short(value: Any) -> str:
         _REPR.maxarray = 6
     if isinstance(value, np.ndarray) and (value.ndim > 1 or value.size > 6):  # its shape says more than its repr
         return f"an array of shape {value.shape} and dtype {value.dtype}"
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**18:  # 1e+99, not digits cut
+        try:
+            return f"{value:.6g}"
+        except OverflowError:  # beyond a float: its size (bit_length is cheap, str() of it may not be)
+            return f"an integer of about {value.bit_length() * math.log10(2):.0f} digits"
     try:
         text = _REPR.repr(value)
     except (ValueError, RecursionError):  # integers beyond the digit limit, self-referencing containers
@@ -855,6 +859,7 @@ def _size_text(n: int) -> str:
 
 
 __all__ = [
+    "shown",
     "RESET_MAX_STEPS",
     "WITNESS_MAX_STEPS",
     "FIELD_KINDS",

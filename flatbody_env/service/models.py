@@ -59,6 +59,7 @@ from flatbody_env.physics.validation import (
     STRETCH_RANGE,
     SWEEP_GRID_RANGE,
     TOL_RANGE,
+    shown,
 )
 from flatbody_env.service.limits import DEFAULT_LIMITS
 from flatbody_env.simulation import DEFAULT_SAMPLES
@@ -669,7 +670,7 @@ WORK_FIELDS = {"t_end": "t_end", "samples": "output times", "times": "output tim
 
 
 def _bound_text(kind: str, ctx: dict[str, Any], value: Any) -> str | None:
-    got = repr(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+    got = shown(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
     if kind in ("greater_than_equal", "greater_than", "less_than_equal", "less_than") and ctx:
         op = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}[kind]
         bound = next(iter(ctx.values()))
@@ -728,5 +729,4 @@ def describe_errors(errors: list[dict[str, Any]], *, where: str = "request") -> 
 def _got(value: Any) -> str:
     if isinstance(value, list):
         return f"{len(value)} values"
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return shown(value)

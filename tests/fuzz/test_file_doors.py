@@ -265,12 +265,22 @@ def test_yaml_aliases_within_the_budget_still_load():
         validation.parse_yaml("x", "a: &a [1, 2, 3]\nb: [*a, *a, *a]\n", max_nodes=10)
 
 
+@pytest.mark.parametrize(
+    ("value", "shown"), [(10**99, "1e+99"), (-(10**30) - 7, "-1e+30"), (10**400, "an integer of about 400 digits")]
+)
+def test_a_huge_integer_is_shown_by_its_size(value, shown):
+    """A huge integer (a YAML value, ``--budget ppo=1e99``) is shown as 1e+99, never as 60 of its digits cut off."""
+    with pytest.raises(ValueError) as refused:
+        validation.integer("n", value, low=0, high=10)
+    assert str(refused.value).endswith(f"got {shown}")
+
+
 def test_short_never_builds_the_whole_repr():
-    """validation._short cuts before formatting: an alias bomb's shared lists (9**9 items once expanded) print at once."""
+    """validation.shown cuts before formatting: an alias bomb's shared lists (9**9 items once expanded) print at once."""
     inner: list = ["lol"] * 9
     for _ in range(8):
         inner = [inner] * 9
-    text = validation._short(inner)
+    text = validation.shown(inner)
     assert len(text) <= 60 and text.startswith("[[[")
     with pytest.raises(ValueError, match=r"^config\.yml\.algo: must be a string, got \[\[\["):
         validation.string("config.yml.algo", inner)
