@@ -836,7 +836,8 @@ def shown(value: Any) -> str:
         try:
             return f"{value:.6g}"
         except OverflowError:  # beyond a float: its size (bit_length is cheap, str() of it may not be)
-            return f"an integer of about {value.bit_length() * math.log10(2):.0f} digits"
+            sign = "a negative" if value < 0 else "an"
+            return f"{sign} integer of about {value.bit_length() * math.log10(2):.0f} digits"
     try:
         text = _REPR.repr(value)
     except (ValueError, RecursionError):  # integers beyond the digit limit, self-referencing containers

@@ -266,7 +266,13 @@ def test_yaml_aliases_within_the_budget_still_load():
 
 
 @pytest.mark.parametrize(
-    ("value", "shown"), [(10**99, "1e+99"), (-(10**30) - 7, "-1e+30"), (10**400, "an integer of about 400 digits")]
+    ("value", "shown"),
+    [
+        (10**99, "1e+99"),
+        (-(10**30) - 7, "-1e+30"),
+        (10**400, "an integer of about 400 digits"),
+        (-(10**400), "a negative integer of about 400 digits"),
+    ],
 )
 def test_a_huge_integer_is_shown_by_its_size(value, shown):
     """A huge integer (a YAML value, ``--budget ppo=1e99``) is shown as 1e+99, never as 60 of its digits cut off."""
