@@ -18,7 +18,9 @@ Policies: the agent (an SB3 model, observations normalised by its frozen VecNorm
 statistics, deterministic actions; for a residual agent combined with the LQR action, :class:`agents.heuristic.ResidualAction`), and the
 baselines ``zero`` (a = 0), ``random`` (uniform actions from a seeded generator), ``heuristic``
 (LQR about the target, :class:`agents.heuristic.HeuristicController`) and ``passivity``
-(:class:`agents.heuristic.PassivityController`), and on the tasks whose starts come with a witness
+(:class:`agents.heuristic.PassivityController`), on the v1 tasks driven by torque alone ``pumping`` (the LQR with the
+thickness pumped by the out-of-plane spin, :class:`agents.heuristic.PumpingController`), and on the tasks whose starts
+come with a witness
 (:class:`flatbody_env.env.witness.ReachWithWitness`) ``witness``: the witness replayed open loop. A
 baseline that cannot be built for a task (the LQR where the controls are not linearly controllable)
 is reported as such (:data:`CANNOT_BE_BUILT`).
@@ -52,6 +54,9 @@ PLANNER = "planner"
 """The model-predictive reference of the v1 ids (:mod:`agents.planner`): MPPI over the env's own transition."""
 WITNESS = "witness"
 """The baseline of the tasks with witnessed starts: each episode's witness replayed open loop."""
+PUMPING = "pumping"
+"""The classic baseline of the v1 tasks driven by torque alone: the LQR with the thickness pumped by the out-of-plane
+spin (:class:`agents.heuristic.PumpingController`; elsewhere it is the LQR)."""
 GROWTH_FLOOR = 1e-4
 """Growth rates (s⁻¹) below this count as 0 in :func:`target_features` (the finite-difference linearisation of a
 spectrally stable target has eigenvalues within ~1e-6 of the imaginary axis)."""
@@ -85,11 +90,14 @@ def shipped_agents(env_id: str) -> dict[str, Path]:
 
 
 def baselines_for(env_id: str) -> tuple[str, ...]:
-    """The baselines evaluated on a task: :data:`BASELINES`, and :data:`WITNESS` where its starts come with a witness."""
+    """The baselines evaluated on a task: :data:`BASELINES`; on the v1 ids :data:`PUMPING` where torque alone drives
+    the body, then :data:`PLANNER`; and :data:`WITNESS` where its starts come with a witness."""
     from flatbody_env.env.registration import task_spec
 
     spec = task_spec(env_id)
-    extra = (PLANNER,) if spec.version >= 1 else ()
+    extra = ()
+    if spec.version >= 1:
+        extra = ((PUMPING,) if spec.kwargs.get("control") == "torque" else ()) + (PLANNER,)
     return BASELINES + extra + ((WITNESS,) if spec.kwargs.get("task") == "reach-witnessed" else ())
 
 
@@ -363,9 +371,10 @@ def random_policy(action_dim: int, seed: int) -> Policy:
 
 
 def heuristic_policy(env, kind: str = "heuristic") -> Policy:
-    from agents.heuristic import HeuristicController, PassivityController
+    """The classic law ``kind`` (``heuristic``: the LQR, ``passivity``, :data:`PUMPING`) of ``env``'s body as a batch policy."""
+    from agents.heuristic import HeuristicController, PassivityController, PumpingController
 
-    cls = HeuristicController if kind == "heuristic" else PassivityController
+    cls = {"heuristic": HeuristicController, "passivity": PassivityController, PUMPING: PumpingController}[kind]
     ctl = cls(env.body, env.control, env.limits)
     return lambda obs: ctl.predict(obs)[0]
 
@@ -392,7 +401,8 @@ def run_episodes(
 ) -> list[dict[str, Any]]:
     """Roll out ``episodes`` seeded episodes of ``env_id`` (batched ``batch`` at a time); one record per episode.
 
-    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`PLANNER`, :data:`WITNESS`; ``planner``:
+    ``policy`` is a batch policy or a baseline name (:data:`BASELINES`, :data:`PUMPING`, :data:`PLANNER`,
+    :data:`WITNESS`; ``planner``:
     overrides of the planner's settings, :func:`agents.planner.parse_overrides`); ``env_kwargs``
     update the id's registered keywords.
 
@@ -425,14 +435,16 @@ def run_episodes(
                 pol = zero_policy(adim)
             elif policy == "random":
                 pol = random_policy(adim, seed + start)
-            elif policy in ("heuristic", "passivity"):
+            elif policy in ("heuristic", "passivity", PUMPING):
                 pol = heuristic_policy(env, policy)
             elif policy == WITNESS:
                 pol = None  # after the reset, which draws the witnesses
             elif policy == PLANNER:
                 pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute, planner)
             else:
-                raise validation.refusal("baseline", f"be one of {', '.join(BASELINES + (PLANNER, WITNESS))}", policy)
+                raise validation.refusal(
+                    "baseline", f"be one of {', '.join(BASELINES + (PUMPING, PLANNER, WITNESS))}", policy
+                )
         else:
             pol = policy
         tol = env.task.success_tolerance

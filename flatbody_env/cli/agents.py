@@ -310,9 +310,9 @@ def _imitate(args) -> int:
 
 def _baseline_names() -> tuple[str, ...]:
     """Every baseline's name (read when ``--baselines`` is parsed: agents load only then)."""
-    from agents.evaluate import BASELINES, PLANNER, WITNESS
+    from agents.evaluate import BASELINES, PLANNER, PUMPING, WITNESS
 
-    return (*BASELINES, PLANNER, WITNESS)
+    return (*BASELINES, PUMPING, PLANNER, WITNESS)
 
 
 @_trusting
@@ -751,7 +751,8 @@ def register(sub) -> None:
         type=name_list("baselines", _baseline_names),
         default=None,
         metavar="A,B",
-        help="with --env: evaluate only these baselines (zero, random, heuristic, passivity, planner, witness)",
+        help="with --env: evaluate only these baselines (zero, random, heuristic = the LQR, passivity; pumping where torque "
+        "alone drives the body; planner; witness where the starts are witnessed)",
     )
     p.add_argument(
         "--planner",

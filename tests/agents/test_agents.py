@@ -387,3 +387,80 @@ def test_record_agent_episode(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         raise SystemExit(main(["record", "--agent", "--scene", "default", "--out", str(out)]))
     assert info.value.code == 2
+
+
+def _torque_batch(n: int, seed: int):
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    from agents.evaluate import env_kwargs_for
+
+    venv = FlatBodyVectorEnv(num_envs=n, **env_kwargs_for("FlatBodyTorque-v1"))
+    obs, _ = venv.reset(seed=seed)
+    return venv, obs
+
+
+def test_thickness_pumping_acts_only_where_the_thickness_is_off_and_unforced():
+    from agents.heuristic import PumpingController, PumpingGains
+
+    venv, obs = _torque_batch(3, 10_000)
+    g = PumpingGains()
+    pump = PumpingController(venv.body, venv.control, venv.limits, gains=g)
+    lqr = HeuristicController(venv.body, venv.control, venv.limits)
+    rho_star = obs[:, 14].copy()
+    obs = obs.astype(np.float64)
+    # row 0: at rest out of plane, the thickness moving inward far from its target: spin up along s1, at full torque
+    obs[0, [0, 1, 6, 9]] = (0.0, 0.0, -0.2, rho_star[0] + 0.1)
+    # row 1: spinning out of plane while the thickness moves outward: spin down along (s1, s2)
+    obs[1, [0, 1, 6, 9]] = (0.3, 0.4, 0.2, rho_star[1])
+    # row 2: the thickness mode below the gate: the LQR unchanged
+    obs[2, [6, 9]] = (0.5 * g.gate, rho_star[2])
+    a, a_lqr = pump.act(obs), lqr.act(obs)
+    assert a.shape == a_lqr.shape == (3, 3)
+    np.testing.assert_array_equal(a[:, 2], a_lqr[:, 2])  # τ3 is always the LQR's
+    np.testing.assert_allclose(a[0, :2], [1.0, 0.0])
+    push = np.clip(g.k_spin * (0.0 - 0.5), -1, 1)
+    np.testing.assert_allclose(a[1, :2], [push * 0.6, push * 0.8], rtol=1e-6)
+    np.testing.assert_array_equal(a[2], a_lqr[2])
+    # one observation at a time is the batch's row
+    for k in range(3):
+        np.testing.assert_array_equal(pump.action(obs[k]), a[k])
+    # where the thickness force is driven, the law is the LQR itself
+    both = PumpingController(venv.body, "torque+dilatation", venv.limits)
+    assert not both.pumps
+    obs4 = np.concatenate([obs, obs[:1]])
+    np.testing.assert_array_equal(
+        both.act(obs4), HeuristicController(venv.body, "torque+dilatation", venv.limits).act(obs4)
+    )
+
+
+def test_thickness_pumping_drains_the_thickness_mode_the_lqr_leaves_alone():
+    """Torque alone moves the thickness only through the centrifugal force of the out-of-plane spin; the LQR (linear)
+    leaves the thickness mode's amplitude where it started, the pumping law takes most of it out."""
+    from agents.heuristic import PumpingController
+
+    n = 8
+    amplitudes = {}
+    for name, cls in (("lqr", HeuristicController), ("pumping", PumpingController)):
+        venv, obs = _torque_batch(n, 10_000)
+        law = cls(venv.body, venv.control, venv.limits)
+        start = np.hypot(obs[:, 9] - obs[:, 14], obs[:, 6])
+        for _ in range(300):
+            obs, *_ = venv.step(law.act(obs))
+        amplitudes[name] = (start, np.hypot(obs[:, 9] - obs[:, 14], obs[:, 6]))
+    start, lqr_end = amplitudes["lqr"]
+    assert np.all(start >= 0.05 - 1e-9)  # every start is off in the thickness (the task's min_uncontrolled_offset)
+    assert np.median(lqr_end / start) > 0.5
+    pump_end = amplitudes["pumping"][1]
+    assert np.median(pump_end / start) < 0.3
+    assert np.mean(pump_end) < 0.5 * np.mean(lqr_end)
+
+
+def test_the_pumping_baseline_belongs_to_the_torque_only_v1_task():
+    from agents.evaluate import PUMPING, baselines_for
+    from flatbody_env.env.registration import TASK_IDS, task_spec
+
+    for env_id in TASK_IDS:
+        spec = task_spec(env_id)
+        expected = spec.version >= 1 and spec.kwargs.get("control") == "torque"
+        assert (PUMPING in baselines_for(env_id)) == expected, env_id
+    assert PUMPING in baselines_for("FlatBodyTorque-v1")
