@@ -53,8 +53,9 @@ COLOURS = {
     "random": "#bcbd22",
     "planner": "#ff7f0e",
     "witness": "#9467bd",
+    "pumping": "#8c6d31",
 }
-MARKERS = {"heuristic": "o", "passivity": "s", "zero": "v", "planner": "D", "witness": "P"}
+MARKERS = {"heuristic": "o", "passivity": "s", "zero": "v", "planner": "D", "witness": "P", "pumping": "X"}
 """Each policy's marker (with its colour: policies told apart in print and by colour-blind readers)."""
 AGENT_COLOURS = ("#d62728", "#8c564b", "#e377c2", "#17becf", "#000000")
 AGENT_MARKERS = ("^", "<", ">", "h", "*")
@@ -156,9 +157,10 @@ def plot_task_success(png_path: str | Path, folder: str | Path = REFERENCE_DIR, 
 
 LADDER_CAPTION = (
     "Each v1 task, easy to hard (its rung under the name): the success rate of each policy over the same held-out\n"
-    "episodes, with its 95 % Wilson interval. zero, random, passivity, LQR: classic references; planner: MPPI over the\n"
-    "env's own transition from the observed state; witness: the solvability certificate of FlatBodyTorque-v1's starts\n"
-    "(the open-loop actions that reach the target by construction), not a policy; agent (ALGO): trained agents."
+    "episodes, with its 95 % Wilson interval. zero, random, passivity, LQR and, under torque alone, the LQR with\n"
+    "thickness pumping: classic references; planner: MPPI over the env's own transition from the observed state;\n"
+    "witness: the solvability certificate of FlatBodyTorque-v1's starts (the open-loop actions that reach the target\n"
+    "by construction), not a policy; agent (ALGO): trained agents."
 )
 
 
@@ -177,6 +179,8 @@ def plot_ladder(png_path: str | Path, folder: str | Path = REFERENCE_DIR) -> Pat
     names: list[str] = []
     for rep in reports:
         names += [n for n, e in rep["policies"].items() if "episodes" in e and n not in names]
+    baselines = ("zero", "random", "heuristic", "passivity", "pumping", "planner", "witness")
+    names.sort(key=lambda n: baselines.index(n) if n in baselines else len(baselines))  # the classic laws first
     style = _policy_style([n for n in names if n != "witness"])
     style["witness"] = (COLOURS["witness"], "")
     width = 0.8 / len(names)
