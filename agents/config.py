@@ -75,7 +75,7 @@ _SB3 = {
         },
     ),
     # the prior track (agents.heuristic.ResidualAction) and training-only reward terms
-    "residual": Field(kind=_C, choices=(None, "heuristic", "passivity"), nullable=True),
+    "residual": Field(kind=_C, choices=(None, "heuristic", "passivity", "pumping"), nullable=True),
     "residual_mode": Field(kind=_C, choices=("gain", "additive")),
     "residual_scale": Field(kind=_N, low=0.0, high=100.0),
     "residual_gate": Field(kind=_N, low=0.0, high=10.0),

@@ -212,10 +212,12 @@ class Agent:
 
 def residual_action(env_kwargs: dict[str, Any], hp: dict[str, Any]):
     """The executed action's form of a run with hyperparameters ``hp`` on a task of ``env_kwargs``: a
-    :class:`agents.heuristic.ResidualAction` (the LQR or the passivity law plus the policy's residual) where ``hp`` has
+    :class:`agents.heuristic.ResidualAction` (a classic law of ``RESIDUAL_BASES`` plus the policy's residual) where ``hp`` has
     a ``residual`` prior, else None (the policy's action is the control)."""
+    from agents.heuristic import RESIDUAL_BASES
+
     kind = hp.get("residual") or None
-    if kind not in ("heuristic", "passivity"):
+    if kind not in RESIDUAL_BASES:
         return None
     from agents.heuristic import ResidualAction
 

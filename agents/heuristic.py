@@ -604,8 +604,9 @@ _KEY_COLUMNS = np.array([OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.star
 
 
 RESIDUAL_MODES = ("additive", "gain")
-RESIDUAL_BASES = ("heuristic", "passivity")
-"""The controllers a residual agent can act on: the LQR (``heuristic``) or the passivity law."""
+RESIDUAL_BASES = ("heuristic", "passivity", "pumping")
+"""The controllers a residual agent can act on: the LQR (``heuristic``), the passivity law or the LQR with thickness
+pumping (``pumping``, :class:`PumpingController`)."""
 
 
 class ResidualAction:
@@ -641,7 +642,7 @@ class ResidualAction:
         self.body, self.task = proto.body, proto.task
         validation.string("residual", base, choices=RESIDUAL_BASES)
         self.base = base
-        cls = HeuristicController if base == "heuristic" else PassivityController
+        cls = {"heuristic": HeuristicController, "passivity": PassivityController, "pumping": PumpingController}[base]
         self.controller = cls(proto.body, proto.control, proto.limits)
         self.scale, self.gate = float(scale), float(gate)
 

@@ -104,7 +104,7 @@ def make_vec_env(
     (any registered flatbody id, docs/tasks.md: its registered keywords updated by ``env_kwargs``).
 
     ``residual="heuristic"`` (the LQR; on ``FlatBodyAnyBody-v0`` re-solved for each episode's body from the
-    observed constants) or ``"passivity"`` (the passivity law): the policy's actions are residuals added to the hand-designed
+    observed constants), ``"passivity"`` (the passivity law) or ``"pumping"`` (the LQR with thickness pumping): the policy's actions are residuals added to the hand-designed
     controller's, scaled by ``residual_scale`` and faded out within ``residual_gate`` of the target,
     or (``residual_mode="gain"``) rescale its components (:class:`agents.heuristic.ResidualAction`). ``success_bonus`` > 0: training
     reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so
@@ -122,12 +122,10 @@ def make_vec_env(
     env_kwargs = env_kwargs_for(env_id, env_kwargs)
     venv = FlatBodySB3VecEnv(n_envs, seed=seed, **env_kwargs)
     if residual:
+        from agents.heuristic import RESIDUAL_BASES, residual_vec_env
         from flatbody_env.physics import validation
 
-        validation.requirement(
-            "residual", residual, residual in ("heuristic", "passivity"), "be 'heuristic', 'passivity' or empty"
-        )
-        from agents.heuristic import residual_vec_env
+        validation.string("residual", residual, choices=RESIDUAL_BASES)
 
         venv = residual_vec_env(venv, env_kwargs, residual_scale, residual_gate, residual_mode, residual)
     venv = VecMonitor(venv)

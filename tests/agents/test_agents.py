@@ -464,3 +464,22 @@ def test_the_pumping_baseline_belongs_to_the_torque_only_v1_task():
         expected = spec.version >= 1 and spec.kwargs.get("control") == "torque"
         assert (PUMPING in baselines_for(env_id)) == expected, env_id
     assert PUMPING in baselines_for("FlatBodyTorque-v1")
+
+
+def test_a_residual_on_the_pumping_law_is_the_law_when_the_policy_is_silent():
+    from agents.evaluate import env_kwargs_for, residual_action
+    from agents.heuristic import PumpingController
+
+    venv, obs = _torque_batch(4, 10_000)
+    law = PumpingController(venv.body, venv.control, venv.limits)
+    res = residual_action(
+        env_kwargs_for("FlatBodyTorque-v1"), {"residual": "pumping", "residual_scale": 0.5, "residual_mode": "additive"}
+    )
+    assert res.base == "pumping"
+    np.testing.assert_array_equal(res(obs, np.zeros((4, 3))), law.act(obs))
+    moved = res(obs, np.ones((4, 3)))
+    np.testing.assert_allclose(moved, np.clip(law.act(obs) + 0.5, -1, 1), rtol=1e-6)
+    from agents.heuristic import ResidualAction
+
+    with pytest.raises(ValueError, match="^residual: must be one of heuristic, passivity, pumping"):
+        ResidualAction(env_kwargs_for("FlatBodyTorque-v1"), base="pid")
