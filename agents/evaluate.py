@@ -18,9 +18,9 @@ Policies: the agent (an SB3 model, observations normalised by its frozen VecNorm
 statistics, deterministic actions; for a residual agent combined with the LQR action, :class:`agents.heuristic.ResidualAction`), and the
 baselines ``zero`` (a = 0), ``random`` (uniform actions from a seeded generator), ``heuristic``
 (LQR about the target, :class:`agents.heuristic.HeuristicController`) and ``passivity``
-(:class:`agents.heuristic.PassivityController`), on the v1 tasks driven by torque alone ``pumping`` (the LQR with the
-thickness pumped by the out-of-plane spin, :class:`agents.heuristic.PumpingController`), and on the tasks whose starts
-come with a witness
+(:class:`agents.heuristic.PassivityController`), on the v1 reach tasks ``pumping`` (the LQR with the out-of-plane
+spin's centrifugal force pumped against the thickness or the shape, :class:`agents.heuristic.PumpingController`), and on
+the tasks whose starts come with a witness
 (:class:`flatbody_env.env.witness.ReachWithWitness`) ``witness``: the witness replayed open loop. A
 baseline that cannot be built for a task (the LQR where the controls are not linearly controllable)
 is reported as such (:data:`CANNOT_BE_BUILT`).
@@ -55,8 +55,9 @@ PLANNER = "planner"
 WITNESS = "witness"
 """The baseline of the tasks with witnessed starts: each episode's witness replayed open loop."""
 PUMPING = "pumping"
-"""The classic baseline of the v1 tasks driven by torque alone: the LQR with the thickness pumped by the out-of-plane
-spin (:class:`agents.heuristic.PumpingController`; elsewhere it is the LQR)."""
+"""The classic baseline of the v1 reach tasks that uses the second-order channel: the LQR with the out-of-plane spin's
+centrifugal force pumped against the thickness (torque alone) or the in-plane shape
+(:class:`agents.heuristic.PumpingController`)."""
 GROWTH_FLOOR = 1e-4
 """Growth rates (s⁻¹) below this count as 0 in :func:`target_features` (the finite-difference linearisation of a
 spectrally stable target has eigenvalues within ~1e-6 of the imaginary axis)."""
@@ -90,14 +91,14 @@ def shipped_agents(env_id: str) -> dict[str, Path]:
 
 
 def baselines_for(env_id: str) -> tuple[str, ...]:
-    """The baselines evaluated on a task: :data:`BASELINES`; on the v1 ids :data:`PUMPING` where torque alone drives
-    the body, then :data:`PLANNER`; and :data:`WITNESS` where its starts come with a witness."""
+    """The baselines evaluated on a task: :data:`BASELINES`; on the v1 ids :data:`PUMPING` where a target is reached
+    (not held), then :data:`PLANNER`; and :data:`WITNESS` where its starts come with a witness."""
     from flatbody_env.env.registration import task_spec
 
     spec = task_spec(env_id)
     extra = ()
     if spec.version >= 1:
-        extra = ((PUMPING,) if spec.kwargs.get("control") == "torque" else ()) + (PLANNER,)
+        extra = ((PUMPING,) if spec.kwargs.get("task") != "hold-unstable" else ()) + (PLANNER,)
     return BASELINES + extra + ((WITNESS,) if spec.kwargs.get("task") == "reach-witnessed" else ())
 
 

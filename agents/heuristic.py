@@ -1,6 +1,6 @@
 """Hand-designed controllers for the flatbody tasks: LQR about the target ellipse (the ``heuristic``
-baseline), a passivity-based damping law (:class:`PassivityController`) and, where torque alone must move the
-thickness, the LQR with the thickness pumped by the out-of-plane spin (:class:`PumpingController`).
+baseline), a passivity-based damping law (:class:`PassivityController`) and the LQR with the out-of-plane spin's
+centrifugal force pumped against the mode the LQR cannot settle (:class:`PumpingController`).
 
 Dynamics both rely on (eqs. (44)–(49) of [1], spin bracket per errata E3/E4 of [2]; the controls
 enter as in :mod:`flatbody_env.physics.equations`): with H = 𝒯 + V (eqs. (32), (37)–(40)),
@@ -69,21 +69,32 @@ Each term is saturated at the action limits (a saturated damping term still has 
 makes L̇ ≤ 0). The velocities come from the inverse Legendre map
 (:func:`flatbody_env.physics.hamiltonian.kinetic_kernel`).
 
-Thickness pumping (:class:`PumpingController`)
-----------------------------------------------
-With torque alone (no thickness force) neither law above moves the thickness: at linear order τ1, τ2 reach only
-(s1, s2), and the thickness mode (ϱ, p_ϱ) keeps its amplitude (the LQR's closed loop leaves it on the imaginary
-axis). It is reached at second order: the kinetic energy (32) holds s1²/(2I1) + s2²/(2I2) with
-I1 = Jμ² + J3ϱ², I2 = Jλ² + J3ϱ², so the out-of-plane spin pushes the thickness outward with the centrifugal force
+Centrifugal pumping (:class:`PumpingController`)
+------------------------------------------------
+The out-of-plane spin (s1, s2) reaches the rest of the body only at second order, through the centrifugal forces of the
+kinetic energy (32), s1²/(2I1) + s2²/(2I2) with I1 = Jμ² + J3ϱ², I2 = Jλ² + J3ϱ² (ω1 = s1/I1, ω2 = s2/I2):
 
-.. math:: F_\\varrho = -\\partial \\mathcal{T}/\\partial\\varrho = J_3\\varrho\\,(s_1^2/I_1^2 + s_2^2/I_2^2) \\ge 0,
+.. math:: -\\partial_\\varrho \\mathcal{T} \\ni J_3\\varrho(\\omega_1^2 + \\omega_2^2), \\quad
+          -\\partial_\\lambda \\mathcal{T} \\ni J\\lambda\\,\\omega_2^2, \\quad
+          -\\partial_\\mu \\mathcal{T} \\ni J\\mu\\,\\omega_1^2 \\qquad (\\text{eqs. (47)–(49)}),
 
-whose power on the thickness mode is F_ϱ ϱ̇, with ϱ̇ = p_ϱ/J3 (the thickness block of (32) is p_ϱ²/(2J3)). A force
-that can only push outward still drains the mode if it acts only while the thickness moves inward: the law asks for
-an out-of-plane spin |(s1, s2)| = min(s_max, k ‖(ϱ − ϱ*, p_ϱ)‖) while p_ϱ < 0 and for none while p_ϱ ≥ 0 — a swing
-pumped in reverse — steering |(s1, s2)| there with τ1, τ2 along (s1, s2) (a P law, saturated), and hands (τ1, τ2)
-back to the LQR once ‖(ϱ − ϱ*, p_ϱ)‖ is below a gate; τ3 is the LQR's throughout. It is a ten-line classic law,
-written for ``FlatBodyTorque-v1``, the task it bounds from below (docs/tasks.md).
+each ≥ 0: a spin can only push a coordinate outward. Its power on that coordinate's motion is the force times the
+velocity — ϱ̇ = p_ϱ/J3, λ̇ = p_λ/J, μ̇ = p_μ/J (the momentum blocks of (32)) — so a force applied only while the
+coordinate moves inward drains its mode: a swing pumped in reverse. Linear feedback never uses this channel (it is zero
+at linear order), and it is what the LQR lacks where it is weak:
+
+* **thickness** (the thickness force not driven: torque alone): the LQR cannot move the thickness at all (its closed
+  loop leaves the thickness mode's amplitude where it starts). The law asks for an out-of-plane spin
+  |(s1, s2)| = min(s_max, k ‖(ϱ − ϱ*, p_ϱ)‖) while p_ϱ < 0 and for none while p_ϱ ≥ 0, steering |(s1, s2)| there with
+  τ1, τ2 along (s1, s2) (a saturated P law), until ‖(ϱ − ϱ*, p_ϱ)‖ is below a gate;
+* **in-plane shape** (the thickness force driven): toward targets the LQR settles slowly (settling rate under linear
+  feedback below 0.1/s, :func:`flatbody_env.physics.controllability.settling_rate`: a mode that decays over more than
+  10 s), it asks for |s2| = min(s_max, k |λ − λ*|) while p_λ < 0 and |s1| = min(s_max, k |μ − μ*|) while p_μ < 0
+  (s2 pushes λ out, s1 pushes μ), 0 for the other while one is asked. Toward fast targets the LQR alone is faster than
+  any tumbling.
+
+τ3 and the thickness force stay the LQR's, and so do τ1, τ2 whenever the law asks for no spin. Ten lines on the LQR,
+its constants chosen on training seeds (:class:`PumpingGains`); docs/tasks.md measures it on every reach task.
 
 References
 ----------
@@ -504,25 +515,36 @@ class HeuristicController:
 
 @dataclass(frozen=True, kw_only=True)
 class PumpingGains:
-    """Gains of :class:`PumpingController` (the module docstring's "Thickness pumping"); chosen on training seeds
-    0–59 of ``FlatBodyTorque-v1`` (a grid of a few values each), never on the evaluation seeds."""
+    """Gains of :class:`PumpingController` (the module docstring's "Centrifugal pumping"), chosen on training seeds
+    (a grid of a few values each; the thickness channel's on seeds 0–59 of ``FlatBodyTorque-v1``, the shape channel's
+    on seeds 0–99 of ``FlatBodySlowHard-v1``), never on the evaluation seeds."""
 
     spin: float = 0.6
-    """The largest out-of-plane spin |(s1, s2)| the law asks for."""
+    """Thickness channel: the largest out-of-plane spin |(s1, s2)| the law asks for."""
     per_offset: float = 10.0
-    """Spin asked per unit of the thickness mode's amplitude ‖(ϱ − ϱ*, p_ϱ)‖ (below :attr:`spin`)."""
+    """Thickness channel: spin asked per unit of the thickness mode's amplitude ‖(ϱ − ϱ*, p_ϱ)‖ (below :attr:`spin`)."""
     gate: float = 0.03
-    """Amplitude ‖(ϱ − ϱ*, p_ϱ)‖ below which the law leaves the LQR alone (the task's tolerance is 0.05)."""
+    """Thickness channel: amplitude ‖(ϱ − ϱ*, p_ϱ)‖ below which the law leaves the LQR alone (the tolerance is 0.05)."""
+    shape_spin: float = 0.7
+    """Shape channel: the largest |s2| (for λ) or |s1| (for μ) the law asks for."""
+    shape_per_offset: float = 50.0
+    """Shape channel: spin asked per unit of |λ − λ*| (or |μ − μ*|), below :attr:`shape_spin`."""
+    shape_gate: float = 0.002
+    """Shape channel: |λ − λ*| (or |μ − μ*|) below which that coordinate asks for no spin."""
+    shape_below_rate: float = 0.1
+    """Shape channel: it acts only toward targets whose settling rate under linear feedback
+    (:func:`flatbody_env.physics.controllability.settling_rate`, of the controller's body) is below this (s⁻¹); the
+    LQR settles the others within the episode, faster than a tumbling body would."""
     k_spin: float = 8.0
-    """Proportional gain of |(s1, s2)| toward the asked spin (normalised torque per unit of spin)."""
+    """Proportional gain of the spin toward the asked one (normalised torque per unit of spin), both channels."""
 
 
 class PumpingController:
-    """The LQR with the thickness pumped by the out-of-plane spin where the thickness force is not driven
-    (module docstring, "Thickness pumping"), with SB3's ``predict`` signature.
+    """The LQR with the out-of-plane spin's centrifugal force pumped against the mode the linear law cannot settle
+    (module docstring, "Centrifugal pumping"), with SB3's ``predict`` signature: the thickness where the thickness
+    force is not driven, else the in-plane shape.
 
-    Where the action drives the thickness force, or not both of τ1 and τ2, it is the LQR
-    (:class:`HeuristicController`) unchanged.
+    Where the action does not drive both τ1 and τ2 it is the LQR (:class:`HeuristicController`) unchanged.
 
     Parameters
     ----------
@@ -542,8 +564,11 @@ class PumpingController:
         self.lqr = HeuristicController(body, control, limits, weights)
         self.mask = self.lqr.mask
         self.gains = gains or PumpingGains()
-        self.pumps = bool(self.mask[0] and self.mask[1] and not self.mask[3])
-        """Whether the law acts (τ1, τ2 driven, the thickness force not)."""
+        self.channel = "none" if not (self.mask[0] and self.mask[1]) else ("shape" if self.mask[3] else "thickness")
+        """What the spin pumps: ``"thickness"`` (τ1, τ2 driven, the thickness force not), ``"shape"`` (τ1, τ2 and the
+        thickness force driven) or ``"none"`` (the LQR alone)."""
+        self._rates: dict[tuple[float, ...], float] = {}
+        self._row_keys, self._row_rates = np.zeros((0, len(_KEY_COLUMNS))), np.zeros(0)
 
     @classmethod
     def for_env(cls, env, gains: PumpingGains | None = None) -> PumpingController:
@@ -552,26 +577,61 @@ class PumpingController:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, k) float32 for observations (N, 16) (or (N, 21)), one vectorised call: the LQR's,
-        with (τ1, τ2) replaced by the pumping law on the rows whose thickness mode is above :attr:`PumpingGains.gate`."""
+        with (τ1, τ2) replaced by the pumping law on the rows where :attr:`channel` asks for a spin."""
         obs = np.asarray(obs, dtype=np.float64)
         obs = obs.reshape(-1, obs.shape[-1])
         a = self.lqr.act(obs)
-        if not self.pumps:
+        if self.channel == "none":
             return a
         g = self.gains
-        s1, s2, p_rho = obs[:, 0], obs[:, 1], obs[:, 6]
-        amplitude = np.hypot(obs[:, 9] - obs[:, OBS_TARGET.start + 2], p_rho)
-        on = amplitude > g.gate
-        spin = np.hypot(s1, s2)
-        # along the present out-of-plane spin (its length is what the centrifugal force sees); along s1 from rest
-        moving = spin > 1e-9
-        d1 = np.where(moving, s1 / np.where(moving, spin, 1.0), 1.0)
-        d2 = np.where(moving, s2 / np.where(moving, spin, 1.0), 0.0)
-        wanted = np.where(p_rho < 0.0, np.minimum(g.spin, g.per_offset * amplitude), 0.0)
-        push = np.clip(g.k_spin * (wanted - spin), -1.0, 1.0)
-        a[on, 0] = (push * d1)[on]
-        a[on, 1] = (push * d2)[on]
+        s1, s2 = obs[:, 0], obs[:, 1]
+        t = OBS_TARGET.start
+        if self.channel == "thickness":
+            # |(s1, s2)| toward min(spin, k‖(Δϱ, p_ϱ)‖) while ϱ̇ = p_ϱ/J3 < 0, toward 0 otherwise, along (s1, s2)
+            amplitude = np.hypot(obs[:, 9] - obs[:, t + 2], obs[:, 6])
+            on = amplitude > g.gate
+            spin = np.hypot(s1, s2)
+            moving = spin > 1e-9  # from rest: along s1
+            d1 = np.where(moving, s1 / np.where(moving, spin, 1.0), 1.0)
+            d2 = np.where(moving, s2 / np.where(moving, spin, 1.0), 0.0)
+            wanted = np.where(obs[:, 6] < 0.0, np.minimum(g.spin, g.per_offset * amplitude), 0.0)
+            push = np.clip(g.k_spin * (wanted - spin), -1.0, 1.0)
+            u1, u2 = push * d1, push * d2
+        else:
+            # toward slow targets only: |s2| (pushes λ out) toward min(shape_spin, k|Δλ|) while λ̇ = p_λ/J < 0;
+            # |s1| likewise for μ; else 0
+            dl, dm = obs[:, 7] - obs[:, t], obs[:, 8] - obs[:, t + 1]
+            asks_l = (obs[:, 4] < 0.0) & (np.abs(dl) > g.shape_gate)
+            asks_m = (obs[:, 5] < 0.0) & (np.abs(dm) > g.shape_gate)
+            w2 = np.where(asks_l, np.minimum(g.shape_spin, g.shape_per_offset * np.abs(dl)), 0.0)
+            w1 = np.where(asks_m, np.minimum(g.shape_spin, g.shape_per_offset * np.abs(dm)), 0.0)
+            on = ((w1 > 0.0) | (w2 > 0.0)) & (self.settling_rates(obs) < g.shape_below_rate)
+            u1 = np.clip(g.k_spin * (np.where(s1 < 0.0, -w1, w1) - s1), -1.0, 1.0)  # keeps the spin's sign
+            u2 = np.clip(g.k_spin * (np.where(s2 < 0.0, -w2, w2) - s2), -1.0, 1.0)
+        a[on, 0] = u1[on]
+        a[on, 1] = u2[on]
         return a
+
+    def settling_rates(self, obs: np.ndarray) -> np.ndarray:
+        """The settling rate under linear feedback (s⁻¹) of each row's target (N,), for the controller's body (cached
+        per target and p_θ: a Riccati solve per new target)."""
+        from flatbody_env.physics.controllability import settling_rate
+
+        keys = obs[:, _KEY_COLUMNS]
+        if self._row_keys.shape != keys.shape:
+            self._row_keys, self._row_rates = np.full(keys.shape, np.nan), np.empty(len(keys))
+        for k in np.flatnonzero((keys != self._row_keys).any(axis=1)):  # the rows whose target changed (a reset)
+            key = tuple(keys[k])
+            r = self._rates.get(key)
+            if r is None:
+                if len(self._rates) > 65_536:
+                    self._rates.clear()
+                r = self._rates[key] = settling_rate(
+                    self.lqr.body, _target_state(key[:4], key[4]), self.lqr.limits, self.mask
+                )
+            self._row_rates[k] = r
+        self._row_keys = keys.copy()
+        return self._row_rates.copy()
 
     def action(self, obs: np.ndarray) -> np.ndarray:
         """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""

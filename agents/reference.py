@@ -84,7 +84,7 @@ POLICY_LABELS = {
     "random": "random",
     "passivity": "passivity",
     "heuristic": "LQR",
-    "pumping": "LQR + thickness pumping",
+    "pumping": "LQR + pumping",
     "planner": "planner (MPPI)",
     "witness": "witness (certificate, open loop)",
 }

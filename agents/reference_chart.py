@@ -64,7 +64,8 @@ AGENT_MARKERS = ("^", "<", ">", "h", "*")
 TASKS_CAPTION = (
     "One panel per task (its id and what it asks in the title). Policies: zero: no control; LQR: the "
     "linear-quadratic regulator baseline on the linearisation at the target; passivity: a passivity-based damping "
-    "law; planner: MPPI over the env's own transition; agent (ALGO): a trained agent.\n"
+    "law; LQR + pumping: the LQR with the out-of-plane spin's centrifugal force pumped against the slow shape (or, "
+    "under torque alone, the thickness); planner: MPPI over the env's own transition; agent (ALGO): a trained agent.\n"
     "r: how fast optimal linear feedback can settle the target's slowest mode; γ: the growth rate of the target's "
     "unstable mode (its eigenvalue).\n"
     "Points: the success rate of each of the bins of equal count along the target feature, at the bin's median "
@@ -157,8 +158,8 @@ def plot_task_success(png_path: str | Path, folder: str | Path = REFERENCE_DIR, 
 
 LADDER_CAPTION = (
     "Each v1 task, easy to hard (its rung under the name): the success rate of each policy over the same held-out\n"
-    "episodes, with its 95 % Wilson interval. zero, random, passivity, LQR and, under torque alone, the LQR with\n"
-    "thickness pumping: classic references; planner: MPPI over the env's own transition from the observed state;\n"
+    "episodes, with its 95 % Wilson interval. zero, random, passivity, LQR and the LQR with centrifugal pumping\n"
+    "(reach tasks): classic references; planner: MPPI over the env's own transition from the observed state;\n"
     "witness: the solvability certificate of FlatBodyTorque-v1's starts (the open-loop actions that reach the target\n"
     "by construction), not a policy; agent (ALGO): trained agents."
 )

@@ -3,8 +3,8 @@
 A task's normalised score puts a success rate between two anchors measured on the same held-out episodes (the
 saved reference reports, :mod:`agents.reference`):
 
-* 0 — the best classic controller (the best of ``zero``, ``random``, ``passivity``, the LQR and, where torque alone
-  drives the body, the LQR with thickness pumping); where a classic
+* 0 — the best classic controller (the best of ``zero``, ``random``, ``passivity``, the LQR and, on the reach tasks,
+  the LQR with centrifugal pumping); where a classic
   controller already solves the task as well as the best known (the easy rung), 0 is the zero policy instead;
 * 1 — the best known: the best of the planner and, where the task certifies its starts, the witness ceiling (every
   ``FlatBodyTorque-v1`` start comes with actions that reach the target: 100 %), when that beats the classic anchor;
@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 
 CLASSIC = ("zero", "random", "passivity", "heuristic", "pumping")
-"""The classic controllers of the lower anchor (``heuristic`` is the LQR; ``pumping`` the LQR with the thickness pumped
-by the out-of-plane spin, on the task driven by torque alone)."""
+"""The classic controllers of the lower anchor (``heuristic`` is the LQR; ``pumping`` the LQR with centrifugal pumping,
+:class:`agents.heuristic.PumpingController`, on the reach tasks)."""
 KNOWN = ("planner", "witness")
 """The non-learned references of the upper anchor."""
 

@@ -104,7 +104,7 @@ def make_vec_env(
     (any registered flatbody id, docs/tasks.md: its registered keywords updated by ``env_kwargs``).
 
     ``residual="heuristic"`` (the LQR; on ``FlatBodyAnyBody-v0`` re-solved for each episode's body from the
-    observed constants), ``"passivity"`` (the passivity law) or ``"pumping"`` (the LQR with thickness pumping): the policy's actions are residuals added to the hand-designed
+    observed constants), ``"passivity"`` (the passivity law) or ``"pumping"`` (the LQR with centrifugal pumping): the policy's actions are residuals added to the hand-designed
     controller's, scaled by ``residual_scale`` and faded out within ``residual_gate`` of the target,
     or (``residual_mode="gain"``) rescale its components (:class:`agents.heuristic.ResidualAction`). ``success_bonus`` > 0: training
     reward + bonus on every step with ``info["is_success"]`` (the task's distance ≤ tolerance), so

@@ -62,7 +62,7 @@ TASKS = (
     TaskSpec(
         env_id="FlatBodySlow-v1",
         kwargs={"task": "reach", "min_settling_rate": 0.05, **V1},
-        rung="medium",
+        rung="easy",  # a classic law reaches 91 % (the LQR with centrifugal pumping, docs/tasks.md)
         summary="reach a stable ellipse whose slowest mode settles at r >= 0.05/s under linear feedback",
     ),
     TaskSpec(

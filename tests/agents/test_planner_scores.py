@@ -105,7 +105,9 @@ def test_a_task_report_runs_only_the_named_baselines_and_the_planner_as_overridd
     compute = report["policies"]["planner"]["summary"]["compute"]
     assert compute["body_steps_per_step"] == 6 * 5
     assert compute["settings"]["samples"] == 6 and compute["settings"]["prior"] == "pumping"  # the task's own law
-    with pytest.raises(ValueError, match="^baselines: must be one of zero, random, heuristic, passivity, planner, got"):
+    with pytest.raises(
+        ValueError, match="^baselines: must be one of zero, random, heuristic, passivity, pumping, planner, got"
+    ):
         evaluate_task("FlatBody-v1", episodes=1, only=("witness",), with_agents=False)
 
 

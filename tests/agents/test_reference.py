@@ -109,11 +109,15 @@ def test_return_ranks_like_success_on_every_v1_task():
     """The reward agrees with the score: over the shipped v1 reports — the baselines and the planner —, every learned
     run of the saved benchmark table and the shipped agent, all on the same 100 episodes of a task (seeds 10000…),
     whenever one causal policy succeeds at least 10 points more often than another, its mean return is higher too
-    (the witness, which replays the answer open loop, is left out)."""
+    (the witness, which replays the answer open loop, is left out) — but for a pair where the more successful policy
+    reaches the tolerance later on average: the reward pays the time inside the tolerance, so one that arrives later
+    more often can earn less (docs/tasks.md: the LQR with pumping against the planner on FlatBodyAnyBody-v1). Those
+    exceptions stay under 1 % of the pairs."""
     from agents.benchmark import DATA_DIR as BENCHMARK_DIR
     from agents.evaluate import shipped_model_dir
 
     policies: dict[str, list] = {}
+    reach_time: dict[tuple[str, str], float] = {}
     for rep in load_reports(REFERENCE_DIR):
         if rep["env_id"] in V1_IDS:
             assert (rep["seed"], rep["episodes"]) == (10_000, 100)
@@ -122,20 +126,45 @@ def test_return_ranks_like_success_on_every_v1_task():
                 for name, e in rep["policies"].items()
                 if "episodes" in e and name != "witness"
             ]
+            for name, e in rep["policies"].items():
+                if e.get("summary", {}).get("time_to_reach") is not None:
+                    reach_time[rep["env_id"], name] = e["summary"]["time_to_reach"]
     for row in json.loads((BENCHMARK_DIR / "benchmark.json").read_text())["rows"]:
         name = f"{row['algo']} seed {row['seed']}"
         policies[row["env_id"]].append((name, row["final"]["success_rate"], row["final"]["return"]))
     shipped = json.loads((shipped_model_dir() / "evaluation.json").read_text())
     assert (shipped["seed"], shipped["episodes"]) == (10_000, 100)
     policies[shipped["env_id"]].append(("shipped agent", shipped["agent"]["success_rate"], shipped["agent"]["return"]))
-    pairs = 0
+    pairs, exceptions = 0, []
     for env_id, rows in policies.items():
         for a, sa, ra in rows:
             for b, sb, rb in rows:
                 if sa - sb >= 0.10:
                     pairs += 1
-                    assert ra > rb, (env_id, a, sa, ra, b, sb, rb)
+                    if not ra > rb:
+                        exceptions.append((env_id, a, b))
+    for env_id, a, b in exceptions:  # the more successful arrives later (a learned row has no reach time: it fails)
+        assert reach_time[env_id, a] > reach_time[env_id, b], (env_id, a, b)
+    assert len(exceptions) <= 0.01 * pairs
     assert pairs >= 500
+
+
+def test_no_medium_or_hard_v1_task_is_solved_by_a_classic_controller():
+    """The ladder's rule, on the saved reports: on a medium or hard task every classic controller (agents.scores.CLASSIC:
+    zero, random, passivity, the LQR and the LQR with pumping) succeeds in under 90 % of the reference episodes."""
+    from agents.scores import CLASSIC
+    from flatbody_env.env.registration import TASKS
+
+    rungs = {spec.env_id: spec.rung for spec in TASKS}
+    checked = 0
+    for rep in load_reports(REFERENCE_DIR):
+        if rep["env_id"] in V1_IDS and rungs[rep["env_id"]] in ("medium", "hard"):
+            for name in CLASSIC:
+                entry = rep["policies"].get(name, {})
+                if "summary" in entry:
+                    checked += 1
+                    assert entry["summary"]["success_rate"] < 0.9, (rep["env_id"], name)
+    assert checked >= 4 * 4
 
 
 def test_a_task_agent_is_found_in_its_folder(tmp_path, monkeypatch):
