@@ -363,8 +363,8 @@ LONGER_CAPTION = (
     "Each thin line: one training seed of rsl-ppo's v1 entry (unchanged but for its budget), its deterministic policy "
     "on the table's 100 held-out episodes (seeds 10000-10099, never trained on) at checkpoints along the run. Black: "
     "the mean over the seeds with its 95 % t-interval, where every seed (three or more) has a point. Dashed: the best "
-    "classic controller on the same episodes (LQR + pumping: the linear-quadratic regulator with the out-of-plane "
-    "spin's centrifugal force pumped against the mode it cannot settle); dotted: the model-predictive "
+    "classic controller on the same episodes (LQR: the linear-quadratic regulator; LQR + pumping: the LQR with the "
+    "out-of-plane spin's centrifugal force pumped against the mode it cannot settle); dotted: the model-predictive "
     "planner; dash-dotted, open triangles: a run of the entry with the overrides its label names (another task where "
     "they change the environment), outside the mean."
 )
