@@ -106,6 +106,7 @@ References
 from __future__ import annotations
 
 import json
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -115,6 +116,26 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
 from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
 from flatbody_env.env.task import DEFAULT_LIMITS, OBS_TARGET, OBSERVATION_SIZE, control_mask, state_from_observation  # noqa: F401  (re-exported)
+
+
+class FeedbackLaw(ABC):
+    """What the controllers below share: SB3's ``predict`` over :meth:`act` (a batch) and :meth:`action` (one
+    observation, by default the batch of one)."""
+
+    @abstractmethod
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised actions (N, k) float32 for observations (N, 16) (or (N, 21) with the body's constants)."""
+
+    def action(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""
+        return self.act(np.asarray(obs)[None, :])[0]
+
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
+        obs = np.asarray(observation)
+        if obs.ndim == 1:
+            return self.action(obs), None
+        return self.act(obs), None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -133,7 +154,7 @@ class HeuristicGains:
     """Thickness damping d_ϱ."""
 
 
-class PassivityController:
+class PassivityController(FeedbackLaw):
     """The passivity-based controller of the module docstring, with SB3's ``predict`` signature.
 
     Parameters
@@ -220,13 +241,6 @@ class PassivityController:
             axis=1,
         )
         return np.clip(U[:, self.mask] / self.limits[self.mask], -1.0, 1.0).astype(np.float32)
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
-        obs = np.asarray(observation)
-        if obs.ndim == 1:
-            return self.action(obs), None
-        return self.act(obs), None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -355,7 +369,7 @@ def shipped_gain_table() -> dict | None:
     return _GAIN_TABLES[key]
 
 
-class HeuristicController:
+class HeuristicController(FeedbackLaw):
     """LQR about the target ellipse (module docstring), with SB3's ``predict`` signature.
 
     The actions of a batch are one vectorised call (:meth:`act`): the gains are kept per row
@@ -501,17 +515,6 @@ class HeuristicController:
         np.clip(a, -1.0, 1.0, out=a)
         return a.astype(np.float32)
 
-    def action(self, obs: np.ndarray) -> np.ndarray:
-        """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""
-        return self.act(np.asarray(obs)[None, :])[0]
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
-        obs = np.asarray(observation)
-        if obs.ndim == 1:
-            return self.action(obs), None
-        return self.act(obs), None
-
 
 @dataclass(frozen=True, kw_only=True)
 class PumpingGains:
@@ -539,7 +542,7 @@ class PumpingGains:
     """Proportional gain of the spin toward the asked one (normalised torque per unit of spin), both channels."""
 
 
-class PumpingController:
+class PumpingController(FeedbackLaw):
     """The LQR with the out-of-plane spin's centrifugal force pumped against the mode the linear law cannot settle
     (module docstring, "Centrifugal pumping"), with SB3's ``predict`` signature: the thickness where the thickness
     force is not driven, else the in-plane shape.
@@ -632,17 +635,6 @@ class PumpingController:
             self._row_rates[k] = r
         self._row_keys = keys.copy()
         return self._row_rates.copy()
-
-    def action(self, obs: np.ndarray) -> np.ndarray:
-        """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""
-        return self.act(np.asarray(obs)[None, :])[0]
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style: a batch (N, 16) or one observation (16,) → (actions, None)."""
-        obs = np.asarray(observation)
-        if obs.ndim == 1:
-            return self.action(obs), None
-        return self.act(obs), None
 
 
 def _target_state(target, p_theta) -> np.ndarray:
