@@ -213,8 +213,8 @@ class Agent:
 
 def residual_action(env_kwargs: dict[str, Any], hp: dict[str, Any]):
     """The executed action's form of a run with hyperparameters ``hp`` on a task of ``env_kwargs``: a
-    :class:`agents.heuristic.ResidualAction` (a classic law of ``RESIDUAL_BASES`` plus the policy's residual) where ``hp`` has
-    a ``residual`` prior, else None (the policy's action is the control)."""
+    :class:`agents.heuristic.ResidualAction` (a classic law of ``RESIDUAL_BASES`` plus the policy's residual) where
+    ``hp`` has a ``residual`` prior, else None (the policy's action is the control)."""
     from agents.heuristic import RESIDUAL_BASES
 
     kind = hp.get("residual") or None
@@ -374,7 +374,8 @@ def random_policy(action_dim: int, seed: int) -> Policy:
 
 
 def heuristic_policy(env, kind: str = "heuristic") -> Policy:
-    """The classic law ``kind`` (``heuristic``: the LQR, ``passivity``, :data:`PUMPING`) of ``env``'s body as a batch policy."""
+    """The classic law ``kind`` (``heuristic``: the LQR, ``passivity``, :data:`PUMPING`) of ``env``'s body as a batch
+    policy."""
     from agents.heuristic import HeuristicController, PassivityController, PumpingController
 
     cls = {"heuristic": HeuristicController, "passivity": PassivityController, PUMPING: PumpingController}[kind]

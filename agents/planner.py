@@ -69,8 +69,8 @@ class PlannerSettings:
     the horizon: without it a short horizon is myopic about the slow modes)."""
     prior: str = "none"
     """A feedback law the candidates perturb: ``"none"`` (open-loop action sequences), ``"lqr"``, ``"passivity"`` or
-    ``"pumping"`` (the LQR with centrifugal pumping; closed-loop rollouts: the action at each step is clip(law(observation) + the candidate's
-    perturbation); :mod:`agents.heuristic`). The row's label names it."""
+    ``"pumping"`` (the LQR with centrifugal pumping) — closed-loop rollouts: the action at each step is
+    clip(law(observation) + the candidate's perturbation); :mod:`agents.heuristic`. The row's label names it."""
     objective: str = "distance"
     """What a candidate scores: ``"distance"`` — minus log(d + :data:`LOG_FLOOR`) of the task distance d summed over
     the horizon (the env's own distance, so no formula is restated; a body whose episode ends scores
@@ -210,28 +210,38 @@ class Planner:
         return total.reshape(B, K)
 
 
-PRIORS = {"FlatBodyHoldUnstable-v1": "passivity", "FlatBodyTorque-v1": "pumping"}
-"""The feedback law each v1 id's planner perturbs: the LQR by default; the passivity law on the unstable ellipse (it
-holds more starts than the LQR, docs/tasks.md); under torque alone the LQR with centrifugal pumping (the LQR cannot move
-the thickness: 3 % against 53 %). Not on the slow-target tasks, where the pumping law is better too: its gains there come
-over 10 s and more, which the 3 s horizon undoes (50 % against the law's 90 % on 20 episodes of FlatBodySlowHard-v1)."""
+SLOW_TARGETS = {"prior": "pumping", "terminal": 200.0, "horizon": 120, "knots": 8}
+"""The planner of the slow-target reach tasks: around the LQR with centrifugal pumping, whose gains come over 10 s and
+more, a 6 s horizon with its last state weighted 200 steps (5,760 body-steps per control step, twice the suite's
+default): 96 % on ``FlatBodySlowHard-v1`` against the law's 84 %. Over the default 3 s horizon the plans undid what the
+law gains (50 % on the first 20 episodes, the law 90 %; docs/tasks.md)."""
+PLANNERS: dict[str, dict[str, Any]] = {
+    "FlatBodySlow-v1": SLOW_TARGETS,
+    "FlatBodySlowHard-v1": SLOW_TARGETS,
+    "FlatBodyAnyBody-v1": SLOW_TARGETS,
+    "FlatBodyHoldUnstable-v1": {"prior": "passivity"},
+    "FlatBodyTorque-v1": {"prior": "pumping", "terminal": 60.0},
+}
+"""Each v1 id's planner, as overrides of :class:`PlannerSettings` (the others: the LQR with a terminal weight of 60
+steps): the passivity law on the unstable ellipse (it holds more starts than the LQR, docs/tasks.md); under torque
+alone the LQR with centrifugal pumping (the LQR cannot move the thickness: 3 % against 53 %), with the LQR's terminal
+weight; on the slow-target tasks :data:`SLOW_TARGETS`."""
 
 
 def settings_for(env_id: str, overrides: dict[str, Any] | None = None) -> PlannerSettings:
-    """The planner of a registered id (:data:`PRIORS`; the v0 ids: the LQR's, passivity where it cannot be built),
+    """The planner of a registered id (:data:`PLANNERS`; the v0 ids: the LQR's, passivity where it cannot be built),
     with ``overrides`` (:func:`parse_overrides`: field → value) of its settings."""
-    prior = PRIORS.get(env_id)
-    if prior is None:
+    task = PLANNERS.get(env_id)
+    if task is None:
         from flatbody_env.env.registration import task_spec
 
         control = task_spec(env_id).kwargs.get("control", "torque+dilatation")
         hold = task_spec(env_id).kwargs.get("task") == "hold-unstable"
         prior = "lqr" if control == "torque+dilatation" and not hold else "passivity"
-    # around the LQR (pumped or not), a terminal weight: without it the 3 s horizon trades the slow modes for quick gains
-    # and the plans did worse than the law alone (84 % against 100 % on FlatBody-v1; on FlatBodyTorque-v1 40 % against
-    # 70 % on 20 episodes; with it 100 % and 90 %, docs/tasks.md)
-    base = {"prior": prior, "terminal": 60.0 if prior in ("lqr", "pumping") else 0.0}
-    return PlannerSettings(**{**base, **(overrides or {})})
+        # around the LQR, a terminal weight: without it the 3 s horizon trades the slow modes for quick gains and the
+        # plans did worse than the LQR alone (84 % against 100 % on FlatBody-v1; with it 100 %, docs/tasks.md)
+        task = {"prior": prior, "terminal": 60.0 if prior == "lqr" else 0.0}
+    return PlannerSettings(**{**task, **(overrides or {})})
 
 
 def parse_overrides(items: list[str] | None, where: str = "planner") -> dict[str, Any]:
@@ -267,4 +277,13 @@ def label(settings: PlannerSettings) -> str:
     return f"planner (MPPI on {'the ' + settings.prior if settings.prior != 'none' else 'open-loop plans'}, true model)"
 
 
-__all__ = ["PRIORS", "PRIOR_LAWS", "Planner", "PlannerSettings", "label", "parse_overrides", "settings_for"]
+__all__ = [
+    "PLANNERS",
+    "PRIOR_LAWS",
+    "SLOW_TARGETS",
+    "Planner",
+    "PlannerSettings",
+    "label",
+    "parse_overrides",
+    "settings_for",
+]

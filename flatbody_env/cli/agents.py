@@ -751,8 +751,8 @@ def register(sub) -> None:
         type=name_list("baselines", _baseline_names),
         default=None,
         metavar="A,B",
-        help="with --env: evaluate only these baselines (zero, random, heuristic = the LQR, passivity; pumping where torque "
-        "alone drives the body; planner; witness where the starts are witnessed)",
+        help="with --env: evaluate only these baselines (zero, random, heuristic = the LQR, passivity; pumping on the "
+        "reach tasks; planner; witness where the starts are witnessed)",
     )
     p.add_argument(
         "--planner",
