@@ -75,7 +75,7 @@ def test_planner_overrides_are_typed_and_checked_before_anything_runs():
     got = parse_overrides(["samples=256", "horizon=160", "noise=0.6", "prior=none"])
     assert got == {"samples": 256, "horizon": 160, "noise": 0.6, "prior": "none"}
     s = settings_for("FlatBodyTorque-v1", got)
-    assert (s.samples, s.horizon, s.noise, s.prior, s.knots) == (256, 160, 0.6, "none", 4)
+    assert (s.samples, s.horizon, s.noise, s.prior, s.knots) == (256, 160, 0.6, "none", 8)  # knots: the task's own
     assert settings_for("FlatBody-v1", {"samples": 8}).prior == "lqr"  # the task's own law stays unless overridden
     slow = settings_for("FlatBodySlowHard-v1", {"samples": 8})  # the slow-target planner: the pumping law, 6 s ahead
     assert (slow.samples, slow.prior, slow.horizon, slow.knots, slow.terminal) == (8, "pumping", 120, 8, 200.0)
