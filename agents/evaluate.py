@@ -58,6 +58,8 @@ PUMPING = "pumping"
 """The classic baseline of the v1 reach tasks that uses the second-order channel: the LQR with the out-of-plane spin's
 centrifugal force pumped against the thickness (torque alone) or the in-plane shape
 (:class:`agents.heuristic.PumpingController`)."""
+ALL_BASELINES = (*BASELINES, PUMPING, PLANNER, WITNESS)
+"""Every baseline's name, in the order the reports and charts list them (:func:`baselines_for`: those of a task)."""
 GROWTH_FLOOR = 1e-4
 """Growth rates (s⁻¹) below this count as 0 in :func:`target_features` (the finite-difference linearisation of a
 spectrally stable target has eigenvalues within ~1e-6 of the imaginary axis)."""
@@ -376,10 +378,9 @@ def random_policy(action_dim: int, seed: int) -> Policy:
 def heuristic_policy(env, kind: str = "heuristic") -> Policy:
     """The classic law ``kind`` (``heuristic``: the LQR, ``passivity``, :data:`PUMPING`) of ``env``'s body as a batch
     policy."""
-    from agents.heuristic import HeuristicController, PassivityController, PumpingController
+    from agents.heuristic import LAWS
 
-    cls = {"heuristic": HeuristicController, "passivity": PassivityController, PUMPING: PumpingController}[kind]
-    ctl = cls(env.body, env.control, env.limits)
+    ctl = LAWS[kind](env.body, env.control, env.limits)
     return lambda obs: ctl.predict(obs)[0]
 
 
@@ -446,9 +447,7 @@ def run_episodes(
             elif policy == PLANNER:
                 pol = _planner_policy(env, env_id, kwargs, n, seed + start, compute, planner)
             else:
-                raise validation.refusal(
-                    "baseline", f"be one of {', '.join(BASELINES + (PUMPING, PLANNER, WITNESS))}", policy
-                )
+                raise validation.refusal("baseline", f"be one of {', '.join(ALL_BASELINES)}", policy)
         else:
             pol = policy
         tol = env.task.success_tolerance

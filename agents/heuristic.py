@@ -656,7 +656,14 @@ _KEY_COLUMNS = np.array([OBS_TARGET.start, OBS_TARGET.start + 1, OBS_TARGET.star
 
 
 RESIDUAL_MODES = ("additive", "gain")
-RESIDUAL_BASES = ("heuristic", "passivity", "pumping")
+LAWS: dict[str, type[FeedbackLaw]] = {
+    "heuristic": HeuristicController,
+    "passivity": PassivityController,
+    "pumping": PumpingController,
+}
+"""The classic feedback laws by their baseline names (``heuristic`` is the LQR): what the evaluation's baselines, a
+residual agent's base and the planner's prior (``lqr`` for ``heuristic``) build."""
+RESIDUAL_BASES = tuple(LAWS)
 """The controllers a residual agent can act on: the LQR (``heuristic``), the passivity law or the LQR with thickness
 pumping (``pumping``, :class:`PumpingController`)."""
 
@@ -694,8 +701,7 @@ class ResidualAction:
         self.body, self.task = proto.body, proto.task
         validation.string("residual", base, choices=RESIDUAL_BASES)
         self.base = base
-        cls = {"heuristic": HeuristicController, "passivity": PassivityController, "pumping": PumpingController}[base]
-        self.controller = cls(proto.body, proto.control, proto.limits)
+        self.controller = LAWS[base](proto.body, proto.control, proto.limits)
         self.scale, self.gate = float(scale), float(gate)
 
     def __call__(self, obs: np.ndarray, actions: np.ndarray) -> np.ndarray:

@@ -118,10 +118,10 @@ class Planner:
         self.rng = np.random.default_rng(seed)
         self.law = None
         if s.prior != "none":
-            from agents.heuristic import HeuristicController, PassivityController, PumpingController
+            from agents.heuristic import LAWS
 
-            cls = {"lqr": HeuristicController, "passivity": PassivityController, "pumping": PumpingController}[s.prior]
-            self.law = cls(self.config.body, self.config.control, self.config.limits)
+            law = LAWS["heuristic" if s.prior == "lqr" else s.prior]
+            self.law = law(self.config.body, self.config.control, self.config.limits)
         self.plan = np.zeros((self.episodes, s.horizon, self.n_act))
         t = np.linspace(0.0, 1.0, s.horizon)
         knots = np.linspace(0.0, 1.0, s.knots)

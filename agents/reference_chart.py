@@ -167,7 +167,7 @@ LADDER_CAPTION = (
 
 def plot_ladder(png_path: str | Path, folder: str | Path = REFERENCE_DIR) -> Path:
     """The ladder (module docstring) from the v1 reports saved in ``folder`` into ``png_path``."""
-    from agents.evaluate import success_interval
+    from agents.evaluate import ALL_BASELINES, success_interval
     from flatbody_env.env.registration import TASKS, V1_IDS
     from flatbody_env.figures import PALETTE, chart, fraction_axis
 
@@ -180,8 +180,7 @@ def plot_ladder(png_path: str | Path, folder: str | Path = REFERENCE_DIR) -> Pat
     names: list[str] = []
     for rep in reports:
         names += [n for n, e in rep["policies"].items() if "episodes" in e and n not in names]
-    baselines = ("zero", "random", "heuristic", "passivity", "pumping", "planner", "witness")
-    names.sort(key=lambda n: baselines.index(n) if n in baselines else len(baselines))  # the classic laws first
+    names.sort(key=lambda n: ALL_BASELINES.index(n) if n in ALL_BASELINES else len(ALL_BASELINES))  # baselines first
     style = _policy_style([n for n in names if n != "witness"])
     style["witness"] = (COLOURS["witness"], "")
     width = 0.8 / len(names)

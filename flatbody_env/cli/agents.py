@@ -310,9 +310,9 @@ def _imitate(args) -> int:
 
 def _baseline_names() -> tuple[str, ...]:
     """Every baseline's name (read when ``--baselines`` is parsed: agents load only then)."""
-    from agents.evaluate import BASELINES, PLANNER, PUMPING, WITNESS
+    from agents.evaluate import ALL_BASELINES
 
-    return (*BASELINES, PUMPING, PLANNER, WITNESS)
+    return ALL_BASELINES
 
 
 @_trusting

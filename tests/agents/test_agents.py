@@ -389,12 +389,12 @@ def test_record_agent_episode(tmp_path, capsys):
     assert info.value.code == 2
 
 
-def _torque_batch(n: int, seed: int):
+def _batch(env_id: str, n: int, seed: int):
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
     from agents.evaluate import env_kwargs_for
 
-    venv = FlatBodyVectorEnv(num_envs=n, **env_kwargs_for("FlatBodyTorque-v1"))
+    venv = FlatBodyVectorEnv(num_envs=n, **env_kwargs_for(env_id))
     obs, _ = venv.reset(seed=seed)
     return venv, obs
 
@@ -402,7 +402,7 @@ def _torque_batch(n: int, seed: int):
 def test_thickness_pumping_acts_only_where_the_thickness_is_off_and_unforced():
     from agents.heuristic import PumpingController, PumpingGains
 
-    venv, obs = _torque_batch(3, 10_000)
+    venv, obs = _batch("FlatBodyTorque-v1", 3, 10_000)
     g = PumpingGains()
     pump = PumpingController(venv.body, venv.control, venv.limits, gains=g)
     lqr = HeuristicController(venv.body, venv.control, venv.limits)
@@ -427,16 +427,6 @@ def test_thickness_pumping_acts_only_where_the_thickness_is_off_and_unforced():
     assert pump.channel == "thickness"
     assert PumpingController(venv.body, "torque+dilatation", venv.limits).channel == "shape"
     assert PumpingController(venv.body, "dilatation", venv.limits).channel == "none"
-
-
-def _batch(env_id: str, n: int, seed: int):
-    from flatbody_env.env.vector_env import FlatBodyVectorEnv
-
-    from agents.evaluate import env_kwargs_for
-
-    venv = FlatBodyVectorEnv(num_envs=n, **env_kwargs_for(env_id))
-    obs, _ = venv.reset(seed=seed)
-    return venv, obs
 
 
 def test_shape_pumping_acts_only_toward_slow_targets_and_while_the_shape_moves_inward():
@@ -473,7 +463,7 @@ def test_thickness_pumping_drains_the_thickness_mode_the_lqr_leaves_alone():
     n = 8
     amplitudes = {}
     for name, cls in (("lqr", HeuristicController), ("pumping", PumpingController)):
-        venv, obs = _torque_batch(n, 10_000)
+        venv, obs = _batch("FlatBodyTorque-v1", n, 10_000)
         law = cls(venv.body, venv.control, venv.limits)
         start = np.hypot(obs[:, 9] - obs[:, 14], obs[:, 6])
         for _ in range(300):
@@ -502,7 +492,7 @@ def test_a_residual_on_the_pumping_law_is_the_law_when_the_policy_is_silent():
     from agents.evaluate import env_kwargs_for, residual_action
     from agents.heuristic import PumpingController
 
-    venv, obs = _torque_batch(4, 10_000)
+    venv, obs = _batch("FlatBodyTorque-v1", 4, 10_000)
     law = PumpingController(venv.body, venv.control, venv.limits)
     res = residual_action(
         env_kwargs_for("FlatBodyTorque-v1"), {"residual": "pumping", "residual_scale": 0.5, "residual_mode": "additive"}
