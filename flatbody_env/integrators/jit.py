@@ -12,6 +12,10 @@ here. The same :func:`retarget` clones the stepping code for the 20-entry state 
 sub-systems (:mod:`.ladder_kernels`), compiles the env's kernels (:mod:`flatbody_env.env.compiled`)
 and, on its CUDA :class:`Target`, the device functions (:mod:`.cuda`).
 
+Inlining (:func:`inlined`): the scalar right-hand side (:func:`~flatbody_env.physics.equations.rhs_kernel`,
+:func:`~flatbody_env.physics.equations.rhs_core`, :func:`~flatbody_env.physics.hamiltonian.kinetic_kernel`) is compiled
+into its callers, so that the arrays it is handed cost no reference counting per call.
+
 The on-disk cache (:func:`njit`): numba keys a function by its file, line and bytecode and checks
 its own file's time stamp; :func:`code_digest` adds the constants, the numeric globals and,
 recursively, the code of every compiled callee, so a caller recompiles when a callee in another
@@ -140,6 +144,8 @@ def code_digest(func, _active=None) -> str:
         return func.__qualname__
     active.add(id(func))
     h = hashlib.sha256(func.__code__.co_code + repr(_consts(func.__code__)).encode())
+    if func.__code__ in INLINED:  # compiled into its callers: their machine code changes with it
+        h.update(b"inline=always")
     for name in sorted(_names(func.__code__)):
         value = func.__globals__.get(name)
         if isinstance(value, numba.core.dispatcher.Dispatcher):
@@ -158,12 +164,29 @@ class _DigestCache(FunctionCache):
         return super()._index_key(sig, codegen) + (code_digest(self._py_func),)
 
 
+INLINED: set = set()
+"""Code objects of the kernels compiled into their callers (numba's ``inline="always"``, :func:`inlined`)."""
+
+
+def inlined(func):
+    """Mark the plain-Python kernel ``func`` to be compiled into its callers (numba's ``inline="always"``: inlined in
+    numba's own IR, before LLVM; returns ``func`` unchanged). A compiled call that LLVM does not inline pays an atomic
+    increment and decrement of the reference count of every array it is handed; for the scalar right-hand side (six
+    arrays, 13 calls per DOP853 step) that cost four times its arithmetic. For small kernels called in hot loops with
+    array arguments (each mark adds compile time to every caller); the results are bit for bit those of the call (no
+    fast-math). Mark before the first caller compiles."""
+    INLINED.add(getattr(func, "py_func", func).__code__)
+    return func
+
+
 def njit(func=None, **options):
     """``numba.njit`` with :data:`JIT_OPTIONS` (and ``options``) whose on-disk cache entry is keyed by
-    :func:`code_digest` too; as ``@njit`` or ``njit(parallel=True)(func)``."""
+    :func:`code_digest` too; as ``@njit`` or ``njit(parallel=True)(func)``. A kernel marked by :func:`inlined` is
+    compiled with ``inline="always"``."""
 
     def compile_(f):
-        dispatcher = numba.njit(**{**JIT_OPTIONS, **options})(f)
+        inline = {"inline": "always"} if f.__code__ in INLINED else {}
+        dispatcher = numba.njit(**{**JIT_OPTIONS, **inline, **options})(f)
         if CACHE:
             dispatcher._cache = _DigestCache(dispatcher.py_func)
         return dispatcher
@@ -260,6 +283,8 @@ def _retarget(func, target, constants, key):
     return result
 
 
+for _kernel in (_hamiltonian.kinetic_kernel, _equations.rhs_core, _equations.rhs_kernel):
+    inlined(_kernel)  # the scalar right-hand side: called 13 times per DOP853 step with six arrays
 kinetic_iso = retarget(_hamiltonian.kinetic_iso)
 kinetic_kernel = retarget(_hamiltonian.kinetic_kernel)
 potential_kernel = retarget(_potentials.potential_kernel)
@@ -287,6 +312,7 @@ __all__ = [
     "Target",
     "cache_location",
     "code_digest",
+    "inlined",
     "njit",
     "rebound",
     "retarget",

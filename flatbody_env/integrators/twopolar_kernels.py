@@ -222,19 +222,27 @@ def next_up(t):
 def _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force):
     for i in range(N):
         K[0, i] = f[i]
-    for s in range(1, 12):
+    # stage s = 1 … 11, then the solution (s = 12, the b_j): each sum over j as one loop over the components per j (the
+    # same additions in the same order as one sum per component, which would chain each component's additions)
+    for s in range(1, 13):
         for i in range(N):
-            acc = 0.0
-            for q in range(_STAGE_L[s]):  # the nonzero a_sj, in increasing j
-                acc += K[_STAGE_J[s, q], i] * _STAGE_C[s, q]
-            ytmp[i] = y[i] + h * acc
-        rhs_kernel(ytmp, u, P, K[s], vel, force)
+            ytmp[i] = 0.0
+        for q in range(_STAGE_L[s]):  # the nonzero a_sj (b_j), in increasing j
+            j = _STAGE_J[s, q]
+            c = _STAGE_C[s, q]
+            for i in range(N):
+                ytmp[i] += K[j, i] * c
+        if s < 12:
+            for i in range(N):
+                ytmp[i] = y[i] + h * ytmp[i]
+            rhs_kernel(ytmp, u, P, ynew, vel, force)  # into ynew (free until the end): a view K[s] costs a refcount
+            for i in range(N):
+                K[s, i] = ynew[i]
     for i in range(N):
-        acc = 0.0
-        for q in range(_STAGE_L[12]):  # the nonzero b_j
-            acc += K[_STAGE_J[12, q], i] * _STAGE_C[12, q]
-        ynew[i] = y[i] + h * acc
-    rhs_kernel(ynew, u, P, K[12], vel, force)
+        ynew[i] = y[i] + h * ytmp[i]
+    rhs_kernel(ynew, u, P, ytmp, vel, force)
+    for i in range(N):
+        K[12, i] = ytmp[i]
 
 
 @njit
