@@ -222,8 +222,10 @@ def next_up(t):
 def _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force):
     for i in range(N):
         K[0, i] = f[i]
-    # stage s = 1 … 11, then the solution (s = 12, the b_j): each sum over j as one loop over the components per j (the
-    # same additions in the same order as one sum per component, which would chain each component's additions)
+    # stage s = 1 … 11, then the solution (s = 12, the b_j), each at y + h Σ_j c_sj K_j: the sum over j as one loop over
+    # the components per j (the same additions in the same order as one sum per component, which would chain each
+    # component's additions); one call of the right-hand side (compiled into this loop), into ynew, copied into K[s]
+    # (a view K[s] would cost a reference count per call)
     for s in range(1, 13):
         for i in range(N):
             ytmp[i] = 0.0
@@ -232,17 +234,13 @@ def _dop853_stages(y, f, h, u, P, K, ynew, ytmp, vel, force):
             c = _STAGE_C[s, q]
             for i in range(N):
                 ytmp[i] += K[j, i] * c
-        if s < 12:
-            for i in range(N):
-                ytmp[i] = y[i] + h * ytmp[i]
-            rhs_kernel(ytmp, u, P, ynew, vel, force)  # into ynew (free until the end): a view K[s] costs a refcount
-            for i in range(N):
-                K[s, i] = ynew[i]
+        for i in range(N):
+            ytmp[i] = y[i] + h * ytmp[i]
+        rhs_kernel(ytmp, u, P, ynew, vel, force)
+        for i in range(N):
+            K[s, i] = ynew[i]
     for i in range(N):
-        ynew[i] = y[i] + h * ytmp[i]
-    rhs_kernel(ynew, u, P, ytmp, vel, force)
-    for i in range(N):
-        K[12, i] = ytmp[i]
+        ynew[i] = ytmp[i]
 
 
 @njit

@@ -139,6 +139,31 @@ def kinetic_kernel(y, P, vel, force):
         force[2] = f2
         force[3] = f3
         return T
+    T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
+        s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, y[10], J1, J2, J3
+    )
+    vel[0] = w1
+    vel[1] = w2
+    vel[2] = w3
+    vel[3] = thd
+    vel[4] = ld
+    vel[5] = md
+    vel[6] = rd
+    force[0] = f0
+    force[1] = f1
+    force[2] = f2
+    force[3] = f3
+    return T
+
+
+def kinetic_general(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, th, J1, J2, J3):
+    """:func:`kinetic_kernel` for any J1, J2 (the closed form of docs/physics.md §4) on scalars, returning a tuple
+    (a call without arrays: no reference counting).
+
+    Returns
+    -------
+    (𝒯, ω1, ω2, ω3, θ̇, λ̇, μ̇, ϱ̇, −∂𝒯/∂θ, −∂𝒯/∂λ, −∂𝒯/∂μ, −∂𝒯/∂ϱ)
+    """
     u = lam + mu
     v = lam - mu
     iu = 1.0 / u
@@ -146,7 +171,6 @@ def kinetic_kernel(y, P, vel, force):
     sp = s3 + pt
     sm = s3 - pt
     j3r2 = J3 * rho * rho
-    th = y[10]
     c = math.cos(th)
     s = math.sin(th)
     s2t = 2.0 * s * c
@@ -171,13 +195,9 @@ def kinetic_kernel(y, P, vel, force):
     al2 = Ki12 * pl + Ki22 * Pb
     be1 = Ki11 * Pa - Ki12 * pm
     be2 = Ki12 * Pa - Ki22 * pm
-    vel[0] = w1
-    vel[1] = w2
-    vel[2] = 0.5 * (al2 * (iu - iv) + be1 * (iu + iv))
-    vel[3] = 0.5 * (al2 * (iu + iv) + be1 * (iu - iv))
-    vel[4] = al1
-    vel[5] = -be2
-    vel[6] = pr / J3
+    w3 = 0.5 * (al2 * (iu - iv) + be1 * (iu + iv))
+    thd = 0.5 * (al2 * (iu + iv) + be1 * (iu - iv))
+    rd = pr / J3
     # derivatives of P_a, P_b with respect to λ and μ
     du = sp * iu * iu
     dv = sm * iv * iv
@@ -197,11 +217,8 @@ def kinetic_kernel(y, P, vel, force):
     dT_dth = -0.5 * (w1 * w1 * dK22 * mu * mu - 2.0 * w1 * w2 * dK12 * lam * mu + w2 * w2 * dK11 * lam * lam) + 0.5 * (
         dKi11 * (pl * pl + Pa * Pa) + 2.0 * dKi12 * (pl * Pb - Pa * pm) + dKi22 * (Pb * Pb + pm * pm)
     )
-    force[0] = -dT_dth
-    force[1] = -dT_dl
-    force[2] = -dT_dm
-    force[3] = -dT_dr
-    return 0.5 * (s1 * w1 + s2 * w2) + 0.5 * (pl * al1 + Pb * al2) + 0.5 * (Pa * be1 - pm * be2) + 0.5 * pr * pr / J3
+    T = 0.5 * (s1 * w1 + s2 * w2) + 0.5 * (pl * al1 + Pb * al2) + 0.5 * (Pa * be1 - pm * be2) + 0.5 * pr * pr / J3
+    return T, w1, w2, w3, thd, al1, -be2, rd, -dT_dth, -dT_dl, -dT_dm, -dT_dr
 
 
 def mass_matrix(lam: float, mu: float, rho: float, theta: float, inertia: Inertia) -> np.ndarray:

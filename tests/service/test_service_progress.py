@@ -52,9 +52,12 @@ def test_every_progress_stream_of_a_job_rises_through_three_values_before_done(n
 def test_the_compiled_default_reports_the_time_its_kernel_has_reached(tmp_path, monkeypatch):
     """A long simulation on ``auto`` (DOP853-numba, one call into compiled code) no longer sits at 2 % until done:
     the time the kernel has written is read while it runs (every report kept here, none thinned out)."""
+    import flatbody_env.integrators.compiled_methods as compiled_methods
     import flatbody_env.service.jobs as jobs
 
     monkeypatch.setattr(jobs, "REPORT_EVERY_S", 0.0)
+    watching = compiled_methods.watching_kernels  # read every 2 ms, not 50: the run takes ≈ 0.1 s on a fast machine
+    monkeypatch.setattr(compiled_methods, "watching_kernels", lambda watch: watching(watch, every=0.002))
     params = {"scene": "long-horizon", "t_end": 10000.0, "samples": 20001, "rtol": 1e-13, "atol": 1e-13}
     seen = _run("simulate", params, tmp_path / "job-long")
     during = [(v, s) for v, s in seen if s and s.startswith("integrating: t = ")]
