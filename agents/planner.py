@@ -272,9 +272,15 @@ def parse_overrides(items: list[str] | None, where: str = "planner") -> dict[str
     return out
 
 
+PRIOR_NAMES = {"lqr": "the LQR", "pumping": "the LQR with pumping", "passivity": "the passivity law"}
+"""How :func:`label` names each prior (the baselines' row names, docs/tasks.md)."""
+
+
 def label(settings: PlannerSettings) -> str:
-    """The report's name of the planner row."""
-    return f"planner (MPPI on {'the ' + settings.prior if settings.prior != 'none' else 'open-loop plans'}, true model)"
+    """The report's name of the planner row: the law its plans perturb, and the model it rolls out."""
+    if settings.prior == "none":
+        return "planner (MPPI over open-loop plans, true model)"
+    return f"planner (MPPI around {PRIOR_NAMES.get(settings.prior, settings.prior)}, true model)"
 
 
 __all__ = [

@@ -100,6 +100,8 @@ def _label(name: str, entry: dict[str, Any]) -> str:
 def markdown(reports: list[dict[str, Any]]) -> str:
     """The reference table: one row per task and policy (module docstring); for the v1 suite also each policy's
     normalised score (:mod:`agents.scores`), the anchors of each task, the planner's compute and the suite's IQM."""
+    from agents.planner import PlannerSettings
+    from agents.planner import label as planner_label
     from agents.scores import suite_table
     from flatbody_env.env.registration import TASK_IDS, TASKS
 
@@ -133,8 +135,9 @@ def markdown(reports: list[dict[str, Any]]) -> str:
             )
             if "compute" in s:
                 c = s["compute"]
+                name = planner_label(PlannerSettings(**c["settings"])) if "settings" in c else c["label"]
                 compute.append(
-                    f"{env_id}: {c['label']}, {c['body_steps_per_step']:,} body-steps and "
+                    f"{env_id}: {name}, {c['body_steps_per_step']:,} body-steps and "
                     f"{1e3 * c['seconds_per_step']:.1f} ms per control step"
                 )
     first = reports[0] if reports else {"episodes": 0, "seed": 0}

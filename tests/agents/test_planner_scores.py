@@ -42,8 +42,19 @@ def test_the_planner_acts_and_counts_its_compute():
     assert len(records) == 1 and compute["body_steps_per_step"] == 8 * 10
     assert compute["settings"]["samples"] == 8 and compute["settings"]["horizon"] == 10
     assert compute["episode_steps"] >= 1 and compute["seconds"] > 0
-    assert "passivity" in compute["label"] and "true model" in compute["label"]
+    assert compute["label"] == "planner (MPPI around the passivity law, true model)"
     assert summarize(records)["success_rate"] in (0.0, 1.0)
+
+
+def test_the_planner_row_names_the_law_its_plans_perturb():
+    """Every prior by the name its baseline row has (the reference table names the planner from its settings)."""
+    from agents.planner import PRIOR_LAWS, PlannerSettings, label
+
+    names = {prior: label(PlannerSettings(prior=prior)) for prior in PRIOR_LAWS}
+    assert names["pumping"] == "planner (MPPI around the LQR with pumping, true model)"
+    assert names["lqr"] == "planner (MPPI around the LQR, true model)"
+    assert names["none"] == "planner (MPPI over open-loop plans, true model)"
+    assert len(set(names.values())) == len(PRIOR_LAWS)
 
 
 @pytest.mark.slow
