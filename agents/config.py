@@ -292,19 +292,40 @@ def apply_overrides(hp: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
     return hp
 
 
-def _dims(env_id: str, env_kwargs: dict[str, Any], where: str) -> tuple[int, int]:
-    """(observation size, action size) of the task with ``env_kwargs``, from its configuration (no env is built);
-    a keyword the env refuses is a ``ValueError`` named ``<where>.env_kwargs.<keyword>``."""
+def parse_env_kwargs(items: list[str] | None, where: str = "--env-kwargs") -> dict[str, Any]:
+    """``["observe_body=true", "dt=0.1"]`` → ``{"observe_body": True, "dt": 0.1}`` (each VALUE read as YAML, plain data
+    only); ``ValueError`` naming ``where`` for an item that is not KEY=VALUE. The keywords themselves are checked by
+    :func:`checked_env_kwargs`."""
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, eq, text = str(item).partition("=")
+        key = key.strip()
+        if not eq or not key.isidentifier():
+            raise validation.refusal(where, "be KEY=VALUE with KEY a keyword of the env (docs/env.md)", item)
+        out[key] = validation.parse_yaml(f"{where}.{key[:60]}", text)
+    return out
+
+
+def checked_env_kwargs(env_id: str, env_kwargs: dict[str, Any], where: str):
+    """The configuration (:class:`~flatbody_env.env.core.EnvConfig`) of the task ``env_id`` with its registered keywords
+    updated by ``env_kwargs`` (no env is built); a keyword the env refuses is a ``ValueError`` named
+    ``<where>.<keyword>``, an unknown one a ``ValueError`` naming ``where``."""
     from flatbody_env.env.core import configure
     from flatbody_env.env.registration import task_spec
 
     kwargs = {**task_spec(env_id).kwargs, **env_kwargs}
     try:
-        cfg = configure(**kwargs)
+        return configure(**kwargs)
     except ValueError as exc:
-        raise ValueError(f"{where}.env_kwargs.{exc}") from None
+        raise ValueError(f"{where}.{exc}") from None
     except TypeError as exc:  # an unknown keyword
-        raise ValueError(f"{where}.env_kwargs: {' '.join(str(exc).split())[:160]}") from None
+        raise ValueError(f"{where}: {' '.join(str(exc).split())[:160]}") from None
+
+
+def _dims(env_id: str, env_kwargs: dict[str, Any], where: str) -> tuple[int, int]:
+    """(observation size, action size) of the task with ``env_kwargs`` (:func:`checked_env_kwargs`, named
+    ``<where>.env_kwargs``)."""
+    cfg = checked_env_kwargs(env_id, env_kwargs, f"{where}.env_kwargs")
     return int(cfg.observation_space.shape[0]), int(cfg.action_space.shape[0])
 
 
@@ -651,9 +672,11 @@ __all__ = [
     "apply_overrides",
     "check_algo",
     "check_device",
+    "checked_env_kwargs",
     "check_hyperparams",
     "hyperparams_path",
     "load_hyperparams",
+    "parse_env_kwargs",
     "predicted_bytes",
     "resolve",
 ]

@@ -653,12 +653,15 @@ def evaluate_task(
     backend: str = "auto",
     only: tuple[str, ...] | None = None,
     planner: dict[str, Any] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The reference report of one registered task: every baseline (:func:`baselines_for`; ``only``: those named)
     and agent — the one in ``model``, else the task's shipped agents (:func:`shipped_agents`) — over ``episodes``
     seeded episodes, with each episode's target features (:func:`target_features`) and per-episode results.
     ``planner``: overrides of the planner's settings (:func:`agents.planner.parse_overrides`; the report's planner
-    summary holds the settings that ran).
+    summary holds the settings that ran). ``env_kwargs``: the task's registered keywords changed (a variant: every
+    policy, the targets and the planner's model run on it; an agent on its own keywords updated by these); the report
+    holds them in ``env_kwargs`` (all of them) and ``variant`` (the changed ones).
 
     ``{"env_id", "episodes", "seed", "targets": {"seed", "settling_rate", "growth_rate"}, "policies": {name:
     {"kind", "summary", "episodes": {"success", "final_distance", "return", "length"}}}}``; for ``FlatBody-v0``
@@ -673,11 +676,13 @@ def evaluate_task(
         "seed": seed,
         "max_episode_steps": spec.max_episode_steps,
         "dt": float(spec.kwargs.get("dt", 0.05)),
-        "env_kwargs": dict(spec.kwargs),
+        "env_kwargs": env_kwargs_for(env_id, env_kwargs),
         "summary": spec.summary,
-        "targets": target_features(env_id, episodes=episodes, seed=seed),
+        "targets": target_features(env_id, episodes=episodes, seed=seed, env_kwargs=env_kwargs),
         "policies": {},
     }
+    if env_kwargs:
+        report["variant"] = dict(env_kwargs)
     policies = report["policies"]
     columns = ("success", "final_distance", "return", "length")
     if baselines:
@@ -691,7 +696,7 @@ def evaluate_task(
         for name in names:
             extra = {"planner": planner} if name == PLANNER else {}
             summary, records = _summary_or_status(
-                name, episodes=episodes, seed=seed, env_id=env_id, progress=progress, **extra
+                name, episodes=episodes, seed=seed, env_id=env_id, env_kwargs=env_kwargs, progress=progress, **extra
             )
             entry: dict[str, Any] = {"kind": "baseline", "summary": summary}
             if records is not None:
@@ -704,7 +709,7 @@ def evaluate_task(
             agent,
             episodes=episodes,
             seed=seed,
-            env_kwargs=agent.env_kwargs,
+            env_kwargs={**agent.env_kwargs, **(env_kwargs or {})},
             env_id=env_id,
             progress=progress,
             label=name,

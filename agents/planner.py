@@ -171,8 +171,7 @@ class Planner:
 
         out = np.empty(Y.shape[1])
         for b in range(Y.shape[1]):
-            P = bodies_P[:, b]
-            body = body_from_constants((P[0], P[2], P[4], P[6], P[7]))
+            body = body_from_constants(bodies_P[list(tr.P_CONSTANTS), b])
             out[b] = self.config.task.distance(Y[:, b], body, T[:, b])
         return out
 

@@ -321,7 +321,11 @@ def _evaluate(args) -> int:
 
     if args.env is not None or args.out_dir or args.docs:
         return _evaluate_tasks(args)
-    for flag, value in (("--baselines", args.baselines), ("--planner", args.planner)):
+    for flag, value in (
+        ("--baselines", args.baselines),
+        ("--planner", args.planner),
+        ("--env-kwargs", args.env_kwargs),
+    ):
         validation.requirement(flag, value, value is None, "go with --env (the reference report of a task)")
     report = evaluate_all(
         args.model,
@@ -366,6 +370,20 @@ def _evaluate_tasks(args) -> int:
     from agents.planner import parse_overrides
 
     planner = parse_overrides(args.planner, "--planner") if args.planner else None  # checked before anything runs
+    env_kwargs = None
+    if args.env_kwargs:
+        from agents.config import checked_env_kwargs, parse_env_kwargs
+
+        for flag, given in (("--out-dir", args.out_dir), ("--docs", args.docs)):
+            validation.requirement(
+                "--env-kwargs",
+                " ".join(args.env_kwargs),
+                not given,
+                f"not go with {flag} (a variant's report is not the reference table's: write it with --out FILE)",
+            )
+        env_kwargs = parse_env_kwargs(args.env_kwargs)
+        for env_id in ids:
+            checked_env_kwargs(env_id, env_kwargs, "--env-kwargs")
     if args.baselines is not None:
         from agents.evaluate import baselines_for
 
@@ -384,6 +402,7 @@ def _evaluate_tasks(args) -> int:
             backend=args.backend,
             only=None if args.baselines is None else tuple(args.baselines),
             planner=planner,
+            env_kwargs=env_kwargs,
         )
         reports.append(report)
         if args.out_dir:
@@ -761,6 +780,15 @@ def register(sub) -> None:
         metavar="KEY=VALUE",
         help="with --env: the planner's settings (samples, horizon, knots, noise, iterations, prior, ...; "
         "docs/tasks.md), e.g. samples=256 horizon=160 knots=24",
+    )
+    p.add_argument(
+        "--env-kwargs",
+        nargs="+",
+        default=None,
+        metavar="KEY=VALUE",
+        help="with --env: a variant of the task, its registered keywords changed (docs/env.md; VALUE read as YAML), "
+        "e.g. observe_body=true; every policy, the targets and the planner's model run on it; the report records "
+        "them (not with --out-dir or --docs: the reference table holds the registered tasks)",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(

@@ -640,7 +640,7 @@ class EnvCore:
         from flatbody_env.env.any_body import body_from_constants
 
         P = self.host("S")[tr.P0 : tr.P0 + 9, i]
-        return body_from_constants((P[0], P[2], P[4], P[6], P[7]))
+        return body_from_constants(P[list(tr.P_CONSTANTS)])
 
     def step(self, A) -> None:
         """One env step of every body with actions ``A`` (N, n) (float32 or float64, on the core's backend)."""
@@ -736,6 +736,8 @@ class EnvCore:
         self.S[tr.TG0 : tr.TG0 + 6] = TG
         if P is not None:
             self.S[tr.P0 : tr.P0 + 9] = P
+            if self.config.task.observation_extra_names:  # the observed constants, as a reset writes them
+                self.OBS[:, 16:21] = P[list(tr.P_CONSTANTS)].T
         self.S[tr.R_RETURN] = 0.0
         self.K[[tr.K_CLOCK, tr.K_TERMINATED, tr.K_TRUNCATED, tr.K_PENDING, tr.K_HOST, tr.K_EP_DONE]] = 0
         self._seam = None

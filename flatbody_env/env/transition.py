@@ -104,6 +104,10 @@ R_REWARD, R_TERMS, R_DISTANCE, R_ENERGY, R_CASIMIR, R_RETURN, R_EP_RETURN, R_EP_
 episode's return so far, and the return and final distance of the episode that ended in the last step."""
 MAX_TERMS = 7
 S_ROWS = 49
+P_CONSTANTS = (0, 2, 4, 6, 7)
+"""The kernel parameters (rows ``P0 + i`` of ``S``) that are a drawn body's constants (J, J3, κ, a, b), in the order of
+:data:`flatbody_env.env.any_body.BODY_OBSERVATION_NAMES`: the observation's entries 16–20 where the task observes the
+body (:func:`reset_body` writes them)."""
 K_CLOCK, K_SEED, K_EPISODE, K_STATUS, K_NFEV, K_CODE, K_TERMINATED, K_TRUNCATED = 0, 1, 2, 3, 4, 5, 6, 7
 K_PENDING, K_HOST, K_EP_DONE, K_EP_LENGTH, K_EP_SUCCESS = 8, 9, 10, 11, 12
 """Rows of ``K``: ``K_PENDING`` an autoreset due at the next step (NEXT_STEP); ``K_HOST`` a reset whose draw the

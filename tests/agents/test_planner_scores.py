@@ -31,6 +31,27 @@ def test_the_planners_model_is_the_env_itself():
         assert planner.core.S[tr.R_DISTANCE, 0] == pytest.approx(info["distance"][0], abs=1e-6)
 
 
+def test_a_planners_batch_observes_the_bodies_it_is_given_as_a_reset_would():
+    """Where the task observes the body (``observe_body``), the planner's batch put at an episode's body observes
+    that body's constants at once, as a reset writes them: the law it perturbs reads them from there."""
+    from agents.planner import Planner, PlannerSettings
+    from flatbody_env.env import transition as tr
+    from flatbody_env.env.task import state_from_observation
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kw = env_kwargs_for("FlatBodyAnyBody-v1", {"observe_body": True})
+    env = FlatBodyVectorEnv(2, **kw)
+    obs, _ = env.reset(seed=10000)
+    planner = Planner(kw, 2, PlannerSettings(samples=2, horizon=2))
+    y, t = state_from_observation(obs[:, :16].astype(np.float64))
+    tg = np.zeros((6, 2))
+    tg[:4], tg[4] = t, y[3]
+    planner.core.set_bodies(*(np.repeat(a, 2, axis=1) for a in (y, tg, env.body_params)))  # 2 samples per episode
+    seen = planner.core.OBS[:, 16:21]
+    assert np.array_equal(seen, np.repeat(obs[:, 16:21], 2, axis=0))  # float32 both, from the same doubles
+    assert np.array_equal(seen[::2], env.body_params[list(tr.P_CONSTANTS)].T.astype(np.float32))
+
+
 def test_the_planner_acts_and_counts_its_compute():
     from agents.evaluate import run_episodes, summarize
 
@@ -141,6 +162,42 @@ def test_evaluate_refuses_planner_flags_in_one_line(capsys):
         assert code == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and text in err[0], err
+
+
+def test_a_variant_of_a_task_runs_every_policy_on_it_and_says_so(tmp_path):
+    """``--env-kwargs``: the baselines, the targets and the planner's model run on the changed task; the report records
+    what changed."""
+    from agents.evaluate import evaluate_task
+
+    small = {"samples": 4, "horizon": 3, "knots": 2}
+    kw = dict(episodes=2, seed=10000, with_agents=False, only=("zero", "planner"), planner=small)
+    plain = evaluate_task("FlatBody-v1", **kw)
+    longer = evaluate_task("FlatBody-v1", env_kwargs={"dt": 0.1}, **kw)  # 400 steps of 0.1: twice the time
+    assert "variant" not in plain and longer["variant"] == {"dt": 0.1} and longer["env_kwargs"]["dt"] == 0.1
+    assert longer["env_kwargs"]["task"] == plain["env_kwargs"]["task"]  # the registered keywords, one changed
+    for name in ("zero", "planner"):
+        a, b = (r["policies"][name]["episodes"]["final_distance"] for r in (plain, longer))
+        assert a != b, name  # the same starts, stepped otherwise
+    observed = evaluate_task("FlatBodyAnyBody-v1", env_kwargs={"observe_body": True}, **kw)
+    assert observed["policies"]["planner"]["summary"]["episodes"] == 2
+
+
+def test_evaluate_refuses_a_bad_variant_in_one_line(capsys, tmp_path):
+    from flatbody_env.cli.main import main
+
+    run = ["evaluate", "--env", "FlatBody-v1", "--episodes", "1", "--baselines", "zero", "--env-kwargs"]
+    for argv, text in (
+        (["evaluate", "--env-kwargs", "dt=0.1"], "--env-kwargs: must go with --env"),
+        ([*run, "bogus=1"], "--env-kwargs.bogus: not a keyword of FlatBodyEnv"),
+        ([*run, "dt=-1"], "--env-kwargs.dt: must lie in"),
+        ([*run, "dt"], "--env-kwargs: must be KEY=VALUE"),
+        ([*run, "dt=[1"], "--env-kwargs.dt:"),
+        ([*run, "dt=0.1", "--out-dir", str(tmp_path / "ref")], "--env-kwargs: must not go with --out-dir"),
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and text in err[0], err
+    assert not (tmp_path / "ref").exists()
 
 
 # --------------------------------------------------------------------------------------------- scores
