@@ -13,10 +13,11 @@ sub-systems (:mod:`.ladder_kernels`), compiles the env's kernels (:mod:`flatbody
 and, on its CUDA :class:`Target`, the device functions (:mod:`.cuda`).
 
 Inlining (:func:`inlined`): the scalar right-hand side (:func:`~flatbody_env.physics.equations.rhs_kernel`,
-:func:`~flatbody_env.physics.equations.rhs_core` and the J1 ≠ J2 kinetic term they call,
-:func:`~flatbody_env.physics.hamiltonian.kinetic_general`) is compiled into its callers, so that the arrays it is handed
-cost no reference counting per call (a call left in it keeps the counts); ≈ 9 s more compiling on the first run, a
-DOP853 step of the single env ≈ 2.2× faster.
+:func:`~flatbody_env.physics.equations.rhs_core`, the J1 ≠ J2 kinetic term they call,
+:func:`~flatbody_env.physics.hamiltonian.kinetic_general`, and the store of its outputs,
+:func:`~flatbody_env.physics.hamiltonian.store_kinetic`) is compiled into its callers, so that the arrays it is handed
+cost no reference counting per call (a call left in it keeps the counts): 150 → 12.5 ns a call, a DOP853 step of the
+single env 2.7 → 0.95 µs, ≈ 5 s more compiling on the first run.
 
 The on-disk cache (:func:`njit`): numba keys a function by its file, line and bytecode and checks
 its own file's time stamp; :func:`code_digest` adds the constants, the numeric globals and,
@@ -174,7 +175,7 @@ def inlined(func):
     """Mark the plain-Python kernel ``func`` to be compiled into its callers (numba's ``inline="always"``: inlined in
     numba's own IR, before LLVM; returns ``func`` unchanged). A compiled call that LLVM does not inline pays an atomic
     increment and decrement of the reference count of every array it is handed; for the scalar right-hand side (six
-    arrays, 13 calls per DOP853 step) that cost four times its arithmetic. For small kernels called in hot loops with
+    arrays, 13 calls per DOP853 step) that cost ten times its arithmetic. For small kernels called in hot loops with
     array arguments (each mark adds compile time to every caller); the results are bit for bit those of the call (no
     fast-math). Mark before the first caller compiles."""
     INLINED.add(getattr(func, "py_func", func).__code__)
@@ -285,7 +286,7 @@ def _retarget(func, target, constants, key):
     return result
 
 
-for _kernel in (_hamiltonian.kinetic_general, _equations.rhs_core, _equations.rhs_kernel):
+for _kernel in (_hamiltonian.kinetic_general, _hamiltonian.store_kinetic, _equations.rhs_core, _equations.rhs_kernel):
     inlined(_kernel)  # the scalar right-hand side: called 13 times per DOP853 step with six arrays (module docstring)
 kinetic_iso = retarget(_hamiltonian.kinetic_iso)
 kinetic_kernel = retarget(_hamiltonian.kinetic_kernel)

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from flatbody_env.physics.body import Body
-from flatbody_env.physics.hamiltonian import kinetic_general, kinetic_iso
+from flatbody_env.physics.hamiltonian import kinetic_general, kinetic_iso, store_kinetic
 from flatbody_env.physics.potentials import potential_kernel
 
 CONTROL_NAMES: tuple[str, ...] = ("tau1", "tau2", "tau3", "f_rho")
@@ -81,59 +81,39 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
             gm,
             gr,
         )
-        out[0] = d0
-        out[1] = d1
-        out[2] = d2
-        out[3] = d3
-        out[4] = d4
-        out[5] = d5
-        out[6] = d6
-        out[7] = d7
-        out[8] = d8
-        out[9] = d9
-        out[10] = d10
-        vel[0] = w1
-        vel[1] = w2
-        vel[2] = w3
-        vel[3] = thd
-        vel[4] = ld
-        vel[5] = md
-        vel[6] = rd
-        force[0] = 0.0
-        force[1] = f1
-        force[2] = f2
-        force[3] = f3
-        return
-    T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
-        y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], P[0], P[1], P[2]
-    )
-    vel[0] = w1
-    vel[1] = w2
-    vel[2] = w3
-    vel[3] = thd
-    vel[4] = ld
-    vel[5] = md
-    vel[6] = rd
-    force[0] = f0
-    force[1] = f1
-    force[2] = f2
-    force[3] = f3
-    conv = P[8]
-    s1 = y[0]
-    s2 = y[1]
-    s3 = y[2]
-    # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of docs/physics.md)
-    out[0] = conv * (w2 * s3 - w3 * s2) + u[0]
-    out[1] = conv * (w3 * s1 - w1 * s3) + u[1]
-    out[2] = conv * (w1 * s2 - w2 * s1) + u[2]
-    out[3] = f0  # ṗ_θ (eq. (46))
-    out[4] = f1 - gl  # eq. (47)
-    out[5] = f2 - gm  # eq. (48)
-    out[6] = f3 - gr + u[3]  # eq. (49) + dilatation force
-    out[7] = ld  # λ̇ = p_λ / J
-    out[8] = md  # μ̇ = p_μ / J
-    out[9] = rd  # ϱ̇ = p_ϱ / J3
-    out[10] = thd  # θ̇
+        f0 = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
+    else:
+        T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
+            y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], P[0], P[1], P[2]
+        )
+        conv = P[8]
+        s1 = y[0]
+        s2 = y[1]
+        s3 = y[2]
+        # ṡ = ±ω × s (eqs. (44)–(46) of [1]; sign per erratum E3/E4 of docs/physics.md)
+        d0 = conv * (w2 * s3 - w3 * s2) + u[0]
+        d1 = conv * (w3 * s1 - w1 * s3) + u[1]
+        d2 = conv * (w1 * s2 - w2 * s1) + u[2]
+        d3 = f0  # ṗ_θ (eq. (46))
+        d4 = f1 - gl  # eq. (47)
+        d5 = f2 - gm  # eq. (48)
+        d6 = f3 - gr + u[3]  # eq. (49) + dilatation force
+        d7 = ld  # λ̇ = p_λ / J
+        d8 = md  # μ̇ = p_μ / J
+        d9 = rd  # ϱ̇ = p_ϱ / J3
+        d10 = thd  # θ̇
+    out[0] = d0
+    out[1] = d1
+    out[2] = d2
+    out[3] = d3
+    out[4] = d4
+    out[5] = d5
+    out[6] = d6
+    out[7] = d7
+    out[8] = d8
+    out[9] = d9
+    out[10] = d10
+    store_kinetic(vel, force, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3)
 
 
 def rhs_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, u0, u1, u2, u3, J, J3, conv, gl, gm, gr):

@@ -127,21 +127,18 @@ def kinetic_kernel(y, P, vel, force):
     rho = y[9]
     if J1 == J2:
         T, w1, w2, w3, thd, ld, md, rd, f1, f2, f3 = kinetic_iso(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, J1, J3)
-        vel[0] = w1
-        vel[1] = w2
-        vel[2] = w3
-        vel[3] = thd
-        vel[4] = ld
-        vel[5] = md
-        vel[6] = rd
-        force[0] = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
-        force[1] = f1
-        force[2] = f2
-        force[3] = f3
-        return T
-    T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
-        s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, y[10], J1, J2, J3
-    )
+        f0 = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
+    else:
+        T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
+            s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, y[10], J1, J2, J3
+        )
+    store_kinetic(vel, force, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3)
+    return T
+
+
+def store_kinetic(vel, force, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3):
+    """Write the velocities (ω1, ω2, ω3, θ̇, λ̇, μ̇, ϱ̇) into ``vel`` (7,) and the kinetic forces (−∂𝒯/∂θ, −∂𝒯/∂λ,
+    −∂𝒯/∂μ, −∂𝒯/∂ϱ) into ``force`` (4,) (:func:`kinetic_kernel`'s outputs)."""
     vel[0] = w1
     vel[1] = w2
     vel[2] = w3
@@ -153,7 +150,6 @@ def kinetic_kernel(y, P, vel, force):
     force[1] = f1
     force[2] = f2
     force[3] = f3
-    return T
 
 
 def kinetic_general(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, th, J1, J2, J3):

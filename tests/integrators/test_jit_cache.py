@@ -58,11 +58,11 @@ def test_an_inlined_callee_gives_its_caller_a_cache_entry_of_its_own(tmp_path):
 
 def test_the_scalar_right_hand_side_is_compiled_into_its_callers():
     """The kernels a DOP853 step calls 13 times with six arrays are marked inlined (numba's ``inline="always"``), and
-    so is the J1 ≠ J2 kinetic term they call (a call left in them keeps the arrays' reference counts)."""
+    so are the J1 ≠ J2 kinetic term and the store they call (a call left in them keeps the arrays' reference counts)."""
     from flatbody_env.integrators import jit
     from flatbody_env.physics import hamiltonian
 
     for kernel in (jit.rhs_core, jit.rhs_kernel):
         assert kernel.targetoptions.get("inline") == "always", kernel
-    assert hamiltonian.kinetic_general.__code__ in jit.INLINED
+    assert {hamiltonian.kinetic_general.__code__, hamiltonian.store_kinetic.__code__} <= jit.INLINED
     assert jit.rhs_iso.targetoptions.get("inline") is None  # scalars in, a tuple out: LLVM inlines it by itself
