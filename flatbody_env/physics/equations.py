@@ -56,7 +56,8 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
     out : array (11,), output
         dy/dt.
     vel, force : arrays (7,), (4,)
-        Work space; on return the velocities and kinetic forces of :func:`~flatbody_env.physics.hamiltonian.kinetic_kernel`.
+        Work space; on return the velocities and kinetic forces of
+        :func:`~flatbody_env.physics.hamiltonian.kinetic_kernel`.
     """
     if P[0] == P[1]:
         (d0, d1, d2, d3, d4, d5, d6, d7, d8, d9, d10, w1, w2, w3, thd, ld, md, rd, f1, f2, f3) = rhs_iso(
@@ -83,7 +84,7 @@ def rhs_core(y, u, P, gl, gm, gr, out, vel, force):
         )
         f0 = 0.0  # θ is cyclic: ṗ_θ = 0 (eq. (46) of [1])
     else:
-        T, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
+        _, w1, w2, w3, thd, ld, md, rd, f0, f1, f2, f3 = kinetic_general(
             y[0], y[1], y[2], y[3], y[4], y[5], y[6], y[7], y[8], y[9], y[10], P[0], P[1], P[2]
         )
         conv = P[8]

@@ -164,7 +164,7 @@ def test_evaluate_refuses_planner_flags_in_one_line(capsys):
         assert len(err) == 1 and text in err[0], err
 
 
-def test_a_variant_of_a_task_runs_every_policy_on_it_and_says_so(tmp_path):
+def test_a_variant_of_a_task_runs_every_policy_on_it_and_says_so():
     """``--env-kwargs``: the baselines, the targets and the planner's model run on the changed task; the report records
     what changed."""
     from agents.evaluate import evaluate_task
