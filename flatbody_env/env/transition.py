@@ -616,25 +616,16 @@ def pending_reset(
     )  # fmt: skip
 
 
-def step_body(
-    b, A, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate,
-    fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout,
-    terms, sc,
-):  # fmt: skip
-    """Body ``b``'s environment step: a pending reset (NEXT_STEP), or its action clipped and scaled
-    (:func:`controls_body`), the integrator (:func:`~flatbody_env.integrators.twopolar_kernels.env_step_into`, at
-    most :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV` evaluations, ``counters[3]``), then
-    :func:`finish_body` and, when the episode ended, :func:`end_episode`. Work arrays: ``y``, ``out``, ``ynew``,
-    ``ytmp``, ``f``, ``yout`` (11,), ``tg`` (6,), ``p``, ``wp`` (9,), ``sl`` (16,), ``pot`` (7, 4), ``table_code`` (1,)
-    int64, ``cand`` (10,), ``uu`` (12,), ``a``, ``u`` (4,), ``K13`` (13, 11), ``vel`` (7,), ``force`` (4,),
-    ``counters`` (4,) int64, ``terms`` (7,), ``sc`` (4,). Returns 0 or an error code (:data:`ERR_ACTION`: the body
-    is left untouched)."""
-    if K[K_PENDING, b] != 0:
-        return pending_reset(
-            b, S, K, OBS, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate,
-            fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters,
-            yout, terms, sc,
-        )  # fmt: skip
+STEP_ENDED = -1
+""":func:`advance_body`'s return when the body's episode ended in the step (its autoreset, :func:`end_episode`, is due)."""
+
+
+def advance_body(b, A, S, K, OBS, coeffs, kcfg, xcfg, y, tg, p, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout,
+                 terms, sc):  # fmt: skip
+    """Body ``b``'s step without a reset: its action clipped and scaled (:func:`controls_body`), the integrator
+    (:func:`~flatbody_env.integrators.twopolar_kernels.env_step_into`, at most
+    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV` evaluations, ``counters[3]``), then :func:`finish_body`.
+    Returns 0, :data:`STEP_ENDED` when the episode ended, or :data:`ERR_ACTION` (the body is left untouched)."""
     if not controls_body(A, b, xcfg, a, u):
         return ERR_ACTION
     load_body(b, S, y, tg, p)
@@ -648,6 +639,32 @@ def step_body(
     )  # fmt: skip
     if finish_body(b, status, counters[0], y, out, a, p, tg, S, K, OBS, kcfg, xcfg, yout, terms, sc, vel, force) == 0:
         return 0
+    return STEP_ENDED
+
+
+def step_body(
+    b, A, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate,
+    fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout,
+    terms, sc,
+):  # fmt: skip
+    """Body ``b``'s environment step: a pending reset (NEXT_STEP, :func:`pending_reset`), or :func:`advance_body` and,
+    when the episode ended, :func:`end_episode`. Work arrays: ``y``, ``out``, ``ynew``, ``ytmp``, ``f``, ``yout``
+    (11,), ``tg`` (6,), ``p``, ``wp`` (9,), ``sl`` (16,), ``pot`` (7, 4), ``table_code`` (1,) int64, ``cand`` (10,),
+    ``uu`` (12,), ``a``, ``u`` (4,), ``K13`` (13, 11), ``vel`` (7,), ``force`` (4,), ``counters`` (4,) int64,
+    ``terms`` (7,), ``sc`` (4,). Returns 0 or an error code (:data:`ERR_ACTION`: the body is left untouched). The CUDA
+    kernel calls it per body; the CPU loop (:func:`step_lanes`) composes the same three calls itself."""
+    if K[K_PENDING, b] != 0:
+        return pending_reset(
+            b, S, K, OBS, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined, fine_rate,
+            fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters,
+            yout, terms, sc,
+        )  # fmt: skip
+    err = advance_body(
+        b, A, S, K, OBS, coeffs, kcfg, xcfg, y, tg, p, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout, terms,
+        sc,
+    )  # fmt: skip
+    if err != STEP_ENDED:
+        return err
     return end_episode(
         b, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
         fine_rate, fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f,
@@ -736,8 +753,9 @@ _GRID, _RATE, _MARGIN, _INVALID, _EDGE_LO, _EDGE_HI, _REFINED, _FINE_RATE, _FINE
 
 
 def step_lanes(A, S, K, OBS, FINAL, FLAGS, CFG, WF, WI):
-    """:func:`step_body` for every body, one after another (the CPU side of the CUDA step kernel); ``CFG`` from
-    :func:`pack_config`, ``WF``/``WI`` the work (:func:`work_views`)."""
+    """:func:`step_body` for every body, one after another (the CPU side of the CUDA step kernel: its three calls made
+    here, the same arithmetic, bit for bit); ``CFG`` from :func:`pack_config`, ``WF``/``WI`` the work
+    (:func:`work_views`)."""
     y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout, terms, sc = (
         work_views(WF, WI)
     )
@@ -746,11 +764,25 @@ def step_lanes(A, S, K, OBS, FINAL, FLAGS, CFG, WF, WI):
     scfg = CFG[SC0:CO0]
     coeffs = CFG[CO0:]
     for b in range(S.shape[1]):
-        err = step_body(
-            b, A, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, _GRID, _RATE, _MARGIN, _INVALID, _EDGE_LO, _EDGE_HI,
-            _REFINED, _FINE_RATE, _FINE_MARGIN, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp,
-            vel, force, f, counters, yout, terms, sc,
-        )  # fmt: skip
+        # step_body's three calls, written out: a compiled call with its 40 arrays costs ≈ 0.9 µs of reference counts
+        # per body (CPython hands a call of more than 30 arguments over as a tuple, which numba does not inline)
+        if K[K_PENDING, b] != 0:
+            err = pending_reset(
+                b, S, K, OBS, coeffs, kcfg, scfg, xcfg, _GRID, _RATE, _MARGIN, _INVALID, _EDGE_LO, _EDGE_HI, _REFINED,
+                _FINE_RATE, _FINE_MARGIN, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel,
+                force, f, counters, yout, terms, sc,
+            )  # fmt: skip
+        else:
+            err = advance_body(
+                b, A, S, K, OBS, coeffs, kcfg, xcfg, y, tg, p, a, u, out, K13, ynew, ytmp, vel, force, f, counters,
+                yout, terms, sc,
+            )  # fmt: skip
+            if err == STEP_ENDED:
+                err = end_episode(
+                    b, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, _GRID, _RATE, _MARGIN, _INVALID, _EDGE_LO, _EDGE_HI,
+                    _REFINED, _FINE_RATE, _FINE_MARGIN, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew,
+                    ytmp, vel, force, f, counters, yout, terms, sc,
+                )  # fmt: skip
         if err != 0:
             FLAGS[0] = err
             FLAGS[1] = b
