@@ -440,7 +440,8 @@ def test_any_body_targets_are_fast_for_their_own_body_and_the_observation_carrie
 def test_any_body_reachability_rule_over_ten_thousand_draws():
     env = _env("FlatBodyAnyBody-v0")
     rngs = [np.random.default_rng(s) for s in range(N_DRAWS)]
-    eps = env.draw_episodes(rngs)
+    eps = env.task.draw_batch(rngs, env.body, limits=env.limits, control=env.control)  # each body drawn per episode
+    assert len({tuple(body_constants(ep.body)) for ep in eps}) == N_DRAWS
     for ep in eps:
         assert settling_rate(ep.body, _target_state(ep.target), env.limits) >= 0.15 - 1e-9
 
