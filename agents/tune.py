@@ -310,8 +310,17 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     from agents.evaluate import Agent, HeldOutEvaluations
     from agents.train import train
 
+    from agents.config import resolve
+
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
+    overrides = [*cfg.overrides, *as_overrides(params)]
+    try:  # a point the hyperparameter checks refuse (e.g. batch_size above n_steps x n_envs): pruned before training
+        resolve(cfg.algo, ENV_ID, seed=cfg.seed, n_timesteps=cfg.n_timesteps, n_envs=cfg.n_envs, overrides=overrides,
+                hyperparams_file=cfg.hyperparams_file)  # fmt: skip
+    except ValueError as exc:
+        trial.set_user_attr("infeasible", str(exc))
+        raise optuna.TrialPruned(f"infeasible: {exc}") from None
     out = Path(cfg.out) / cfg.study / f"trial-{trial.number}"
     every = -(-cfg.n_timesteps // cfg.evaluations)  # at most cfg.evaluations marks, the last at the budget or before
 
@@ -328,7 +337,7 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
         seed=cfg.seed,
         n_timesteps=cfg.n_timesteps,
         n_envs=cfg.n_envs,
-        overrides=[*cfg.overrides, *as_overrides(params)],
+        overrides=overrides,
         hyperparams_file=cfg.hyperparams_file,
         env_id=ENV_ID,
         checkpoint_freq=0,
@@ -377,7 +386,8 @@ def tune_worker(cfg: TuneConfig, worker: int = 0, n_trials: int | None = None) -
     trial_log = logging.getLogger("optuna.study._optimize")  # the module that logs failed trials
     if not any(isinstance(f, _QuietInterrupt) for f in trial_log.filters):
         trial_log.addFilter(_QuietInterrupt())
-    space = load_search_space(cfg.algo, path=cfg.search_file)
+    fixed = {item.split("=", 1)[0].strip() for item in cfg.overrides}
+    space = {k: v for k, v in load_search_space(cfg.algo, path=cfg.search_file).items() if k not in fixed}
     study = _study(cfg, worker)
     finished = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED, optuna.trial.TrialState.FAIL)
     left = cfg.trials - len(study.get_trials(deepcopy=False, states=finished))

@@ -271,10 +271,7 @@ def configure(
         if custom is not None:
             raise ValueError("body: a custom potential cannot be drawn by the v1 resets (use a built-in potential)")
         if task.compiled_targets and not _sampler(config).applies:
-            raise ValueError(
-                "min_settling_rate: the v1 resets decide reachability by the shipped settling-rate table, which holds "
-                "the default body, limits and target ranges only; with these settings pass min_settling_rate=0"
-            )
+            raise _outside_the_table(config)
     return config
 
 
@@ -783,6 +780,26 @@ def _kernel_stepper(st) -> bool:
         bool(getattr(st, "compiled", False))
         and not getattr(st, "carries_rotation", False)
         and st.method in _batch_kinds()
+    )
+
+
+def _outside_the_table(c: EnvConfig) -> ValueError:
+    """The refusal of a v1 configuration whose targets the shipped settling-rate table does not cover, naming the
+    keywords that took it outside (the table's own ranges where they are the target ranges)."""
+    from flatbody_env.env.targets import shipped_table
+
+    table, task = shipped_table(), c.task
+    names = (
+        table.mismatch(c.body, c.limits, c.control, task.target_lambda, task.target_aspect) if table is not None else ()
+    ) or ("min_settling_rate",)
+    ranges = ""
+    if table is not None and "target_lambda" in names:
+        ranges += f"; its λ* in [{table.lambdas[0]:g}, {table.lambdas[-1]:g}], got {tuple(task.target_lambda)}"
+    if table is not None and "target_aspect" in names:
+        ranges += f"; its aspect in [{table.aspects[0]:g}, {table.aspects[-1]:g}], got {tuple(task.target_aspect)}"
+    return ValueError(
+        f"{', '.join(names)}: the v1 resets decide reachability by the shipped settling-rate table, which holds the "
+        f"default body, limits and target ranges only{ranges}; with these settings pass min_settling_rate=0"
     )
 
 

@@ -115,22 +115,32 @@ class SettlingRateTable:
     # --- use ------------------------------------------------------------------------------------
     def applies(self, body: Body, limits, control: str, target_lambda, target_aspect) -> bool:
         """Whether the table answers for this body, these limits, controls and target ranges."""
+        return not self.mismatch(body, limits, control, target_lambda, target_aspect)
+
+    def mismatch(self, body: Body, limits, control: str, target_lambda, target_aspect) -> tuple[str, ...]:
+        """The settings the table was not computed for, by the env's keyword that sets each (``control``,
+        ``torque_limit``/``force_limit``, ``body``, ``target_lambda``, ``target_aspect``; ``settling_table`` when the
+        table is of another version); empty when it :meth:`applies`."""
         m = self.meta
-        if (
-            getattr(body.potential, "kind", None) == KIND_CUSTOM
-        ):  # Python callables: no JSON form, never the table's body
-            return False
-        return (
-            control == "torque+dilatation"
-            and m.get("version") == TABLE_VERSION
-            and m.get("cheap_control_r") == CHEAP_CONTROL_R
-            and list(np.asarray(limits, dtype=float)) == m.get("limits")
-            and json.loads(json.dumps(body.to_dict())) == m.get("body")
-            and self.lambdas[0] <= target_lambda[0]
-            and target_lambda[1] <= self.lambdas[-1]
-            and self.aspects[0] <= target_aspect[0]
-            and target_aspect[1] <= self.aspects[-1]
-        )
+        lim = np.asarray(limits, dtype=float)
+        table_lim = np.asarray(m.get("limits") or [np.nan] * 4, dtype=float)
+        out = []
+        if m.get("version") != TABLE_VERSION or m.get("cheap_control_r") != CHEAP_CONTROL_R:
+            out.append("settling_table")
+        if control != "torque+dilatation":
+            out.append("control")
+        if lim.shape != table_lim.shape or not np.array_equal(lim[:3], table_lim[:3]):
+            out.append("torque_limit")
+        if lim.shape != table_lim.shape or lim[3] != table_lim[3]:
+            out.append("force_limit")
+        custom = getattr(body.potential, "kind", None) == KIND_CUSTOM  # Python callables: no JSON form
+        if custom or json.loads(json.dumps(body.to_dict())) != m.get("body"):
+            out.append("body")
+        if not (self.lambdas[0] <= target_lambda[0] and target_lambda[1] <= self.lambdas[-1]):
+            out.append("target_lambda")
+        if not (self.aspects[0] <= target_aspect[0] and target_aspect[1] <= self.aspects[-1]):
+            out.append("target_aspect")
+        return tuple(out)
 
     def decide(self, lam: float, aspect: float, threshold: float) -> int:
         """:data:`ACCEPT`, :data:`REJECT`, :data:`ACCEPT_IF_STABLE` (an edge cell: accept if a stable

@@ -112,9 +112,9 @@ def test_bench_train_to_goal_writes_its_files(tmp_path):
                 "train",
                 "--to-goal",
                 "--max-timesteps",
-                "64",
+                "8192",  # half of rsl-ppo's collection (256 envs x 64 steps), the larger: the least both accept
                 "--eval-every",
-                "64",
+                "8192",
                 "--episodes",
                 "1",
                 "--out-dir",

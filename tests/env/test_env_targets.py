@@ -4,6 +4,7 @@ analysis service's full reduced-Jacobian classification."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -63,6 +64,37 @@ def test_table_applies_only_where_it_was_computed():
     from flatbody_env.physics.body import Body
 
     assert not table.applies(Body.from_dict(other), LIMITS, "torque+dilatation", task.target_lambda, task.target_aspect)
+    mismatch = table.mismatch  # by the keyword that sets each
+    assert mismatch(body, LIMITS, "torque+dilatation", task.target_lambda, task.target_aspect) == ()
+    assert mismatch(body, LIMITS * [1, 1, 1, 2], "torque", (1.2, 2.0), (1.0, 9.0)) == (
+        "control", "force_limit", "target_lambda", "target_aspect",
+    )  # fmt: skip
+    assert mismatch(Body.from_dict(other), LIMITS * 2, "torque+dilatation", task.target_lambda, task.target_aspect) == (
+        "torque_limit", "force_limit", "body",
+    )  # fmt: skip
+
+
+def test_a_v1_task_outside_the_table_is_refused_naming_what_took_it_there():
+    """The v1 resets decide reachability by the shipped table: a setting it does not cover is refused at once, by the
+    keyword the user changed (and its range where it is a target range), with the way out (no filter)."""
+    for kwargs, names in (
+        ({"target_lambda": (1.0, 1.0)}, "target_lambda: "),
+        ({"torque_limit": 0.3}, "torque_limit: "),
+        ({"target_lambda": (1.0, 1.5), "force_limit": 2.0}, "force_limit, target_lambda: "),
+    ):
+        with pytest.raises(ValueError, match="min_settling_rate=0") as err:
+            gym.make("FlatBodySlow-v1", **kwargs)
+        assert str(err.value).startswith(names), str(err.value)
+    assert "its λ* in [1.3, 2], got (1.0, 1.0)" in str(_refusal(target_lambda=(1.0, 1.0)))
+    gym.make("FlatBodySlow-v1", target_lambda=(1.0, 1.0), min_settling_rate=0).close()  # the way out
+
+
+def _refusal(**kwargs) -> ValueError:
+    try:
+        gym.make("FlatBodySlow-v1", **kwargs)
+    except ValueError as exc:
+        return exc
+    raise AssertionError(f"accepted {kwargs}")
 
 
 def test_table_draws_the_same_targets_as_the_exact_test():

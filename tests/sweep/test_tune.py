@@ -107,6 +107,31 @@ def test_pruned_trial_stops_training_early(tmp_path):
     assert run["n_timesteps"] < 512  # stopped after the first evaluation, at 128 steps (two 64-step rollouts of 2 envs)
 
 
+def test_an_infeasible_point_is_pruned_with_its_reason_and_a_fixed_key_is_not_searched(tmp_path):
+    """A drawn batch_size above n_steps x n_envs is pruned before training (no traceback, no run folder), the reason
+    kept with the trial; a key the user fixes with --hyperparams is left out of the search space."""
+    from agents.tune import tune_worker
+
+    space = {
+        "batch_size": {"type": "categorical", "choices": [4096]},
+        "n_steps": {"type": "categorical", "choices": [8]},
+    }
+    search = tmp_path / "space.yml"
+    search.write_text(yaml.safe_dump({"FlatBody-v0": space}))
+    cfg = TuneConfig(algo="ppo", study="infeasible", storage=str(tmp_path / "j.log"), trials=1, n_timesteps=128,
+                     evaluations=1, eval_episodes=1, n_envs=2, search_file=str(search), out=str(tmp_path))  # fmt: skip
+    study = optuna.create_study(direction="minimize")
+    study.optimize(lambda t: objective(t, cfg, load_search_space("ppo", path=str(search))), n_trials=1)
+    (trial,) = study.trials
+    assert trial.state == optuna.trial.TrialState.PRUNED
+    assert "batch_size" in trial.user_attrs["infeasible"] and "n_steps" in trial.user_attrs["infeasible"]
+    assert not (tmp_path / "infeasible" / "trial-0").exists()
+    fixed = TuneConfig(**{**vars(cfg), "study": "fixed", "overrides": ("n_steps=64", "batch_size=64")})
+    assert tune_worker(fixed) == 1
+    (trial,) = optuna.load_study(study_name="fixed", storage=open_storage(cfg.storage)).trials
+    assert trial.params == {} and trial.state == optuna.trial.TrialState.COMPLETE  # nothing left to search: trained
+
+
 def _check_study(storage: str, name: str, trials: int) -> list:
     study = optuna.load_study(study_name=name, storage=open_storage(storage))
     done = study.get_trials(deepcopy=False)
