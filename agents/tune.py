@@ -307,10 +307,9 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
     """Train one trial's configuration, evaluating along the way; the final mean distance."""
     import optuna
 
+    from agents.config import resolve
     from agents.evaluate import Agent, HeldOutEvaluations
     from agents.train import train
-
-    from agents.config import resolve
 
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
