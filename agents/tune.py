@@ -309,14 +309,15 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
 
     from agents.config import resolve
     from agents.evaluate import Agent, HeldOutEvaluations
-    from agents.train import train
+    from agents.runs import RunFolder
+    from agents.train import train_config
 
     params = sample(trial, space)
     trial.set_user_attr("worker", f"{socket.gethostname()}:{os.getpid()}")
     overrides = [*cfg.overrides, *as_overrides(params)]
     try:  # a point the hyperparameter checks refuse (e.g. batch_size above n_steps x n_envs): pruned before training
-        resolve(cfg.algo, ENV_ID, seed=cfg.seed, n_timesteps=cfg.n_timesteps, n_envs=cfg.n_envs, overrides=overrides,
-                hyperparams_file=cfg.hyperparams_file)  # fmt: skip
+        config = resolve(cfg.algo, ENV_ID, seed=cfg.seed, n_timesteps=cfg.n_timesteps, n_envs=cfg.n_envs,
+                         overrides=overrides, hyperparams_file=cfg.hyperparams_file)  # fmt: skip
     except ValueError as exc:
         trial.set_user_attr("infeasible", str(exc))
         raise optuna.TrialPruned(f"infeasible: {exc}") from None
@@ -330,15 +331,9 @@ def objective(trial, cfg: TuneConfig, space: dict[str, dict[str, Any]]) -> float
 
     evaluations = HeldOutEvaluations.every(every, cfg.n_timesteps, ENV_ID, seed=TUNE_EVAL_SEED,
                                            episodes=cfg.eval_episodes, then=report)  # fmt: skip
-    train(
-        cfg.algo,
-        out,
-        seed=cfg.seed,
-        n_timesteps=cfg.n_timesteps,
-        n_envs=cfg.n_envs,
-        overrides=overrides,
-        hyperparams_file=cfg.hyperparams_file,
-        env_id=ENV_ID,
+    train_config(  # the configuration resolved above (flatbody train's path after its own resolve)
+        config,
+        RunFolder.new(out, force=True),
         checkpoint_freq=0,
         threads=1,
         progress=False,

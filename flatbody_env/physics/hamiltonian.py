@@ -159,6 +159,8 @@ def kinetic_general(s1, s2, s3, pt, pl, pm, pr, lam, mu, rho, th, J1, J2, J3):
     Returns
     -------
     (𝒯, ω1, ω2, ω3, θ̇, λ̇, μ̇, ϱ̇, −∂𝒯/∂θ, −∂𝒯/∂λ, −∂𝒯/∂μ, −∂𝒯/∂ϱ)
+        𝒯 of eq. (32) of [1] (with erratum E1 of docs/physics.md for J1 ≠ J2), its momentum gradient (the velocities)
+        and minus its configuration gradient (the kinetic forces of eqs. (46)–(49)).
     """
     u = lam + mu
     v = lam - mu
