@@ -90,6 +90,34 @@ def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *,
 
 
 # --------------------------------------------------------------------------------------------- the report
+ROW_KEYS = ("algo", "env_id", "seed", "budget", "curve", "final", "train_seconds")
+"""The fields of a stored case (:func:`run_case`) the report reads."""
+
+
+def join_rows(rows: list[dict[str, Any]], saved: Any, where: str = "--with") -> list[dict[str, Any]]:
+    """This run's rows and the rows of a saved table (``benchmark.json`` of an earlier benchmark or of another
+    machine's) as one report's: a saved case is kept unless this run has its (algorithm, task, seed), so a benchmark
+    that trains one algorithm again replaces that algorithm's rows and keeps the others'; sorted as the store orders
+    its cases (algorithm, task, seed).
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` when ``saved`` is not a saved table (no ``rows``, or a row without the fields of
+        :data:`ROW_KEYS`).
+    """
+    listed = saved.get("rows") if isinstance(saved, dict) else None
+    if not isinstance(listed, list):
+        raise ValueError(f"{where}: expected a saved benchmark table (benchmark.json, with its rows)")
+    for i, row in enumerate(listed):
+        missing = [k for k in ROW_KEYS if not isinstance(row, dict) or k not in row]
+        if missing:
+            raise ValueError(f"{where}: row {i} is not a benchmark case (it lacks {', '.join(missing)})")
+    mine = {(r["algo"], r["env_id"], r["seed"]) for r in rows}
+    joined = list(rows) + [r for r in listed if (r["algo"], r["env_id"], r["seed"]) not in mine]
+    return sorted(joined, key=lambda r: (r["algo"], r["env_id"], r["seed"]))  # the store's order of its keys
+
+
 def _t95(n: int) -> float:
     """The two-sided 95 % Student t quantile with n − 1 degrees of freedom (n ≥ 2)."""
     from scipy.stats import t

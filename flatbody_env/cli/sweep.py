@@ -216,7 +216,7 @@ def _seeds(args) -> int:
 
 def _benchmark(args) -> int:
     """``flatbody benchmark``: the benchmark table (:mod:`agents.benchmark`) on the sweep engine, then its report."""
-    from agents.benchmark import ALGOS, BUDGETS, report
+    from agents.benchmark import ALGOS, BUDGETS, join_rows, report
     from agents.reference import REFERENCE_DIR, load_reports
     from flatbody_env.env.registration import V1_IDS, task_spec
     from flatbody_env.sweep.report import rows_of
@@ -255,12 +255,19 @@ def _benchmark(args) -> int:
         + grid
         + f" --out {args.out}"
     )
+    if args.with_table is not None:  # read and checked before anything trains
+        saved = validation.read_json("--with", args.with_table)
+        join_rows([], saved)
+        command += f" --with {args.with_table}"
     if args.retrain:
         _forget_runs(spec, args)
     result = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                        progress=not args.no_progress)  # fmt: skip
     rows = [r for r in rows_of(result) if isinstance(r, dict) and "curve" in r]
-    references = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] in envs]
+    if args.with_table is not None:
+        rows = join_rows(rows, saved)
+    shown = {r["env_id"] for r in rows}
+    references = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] in shown]
     paths = report(rows, args.out, references) if rows else {}
     for path in paths.values():
         print(f"wrote {path}")
@@ -582,6 +589,13 @@ def register(sub) -> None:
         "--retrain",
         metavar="A,B",
         help="with --resume: train these algorithms' stored runs again (after their hyperparameters changed)",
+    )
+    p.add_argument(
+        "--with",
+        dest="with_table",
+        metavar="TABLE.json",
+        help="a saved benchmark table (an earlier benchmark's or another machine's benchmark.json) whose cases join "
+        "this run's in the report; this run's replace those of the same algorithm, task and seed",
     )
     p.add_argument(
         "--hyperparam-grid",

@@ -148,3 +148,28 @@ def test_retrain_removes_only_the_named_algorithms_runs_and_only_from_this_bench
         assert words in err and len(err.strip().splitlines()) == 1, err
     with ResultStore(out) as store:  # nothing removed by a refused command
         assert len(store.done_keys()) == 2
+
+
+def test_a_saved_table_joins_this_runs_rows_which_replace_its_cases(tmp_path, capsys):
+    from agents.benchmark import join_rows
+    from flatbody_env.cli.main import main
+
+    envs = ["FlatBody-v1"]
+    saved = {"rows": _rows("ppo", envs, range(3), lambda e, s: 0.5) + _rows("td3", envs, range(3), lambda e, s: 0.0)}
+    again = _rows("td3", envs, range(3), lambda e, s: 0.7)
+    joined = join_rows(again, saved)
+    assert len(joined) == 6
+    assert {r["algo"]: r["final"]["success_rate"] for r in joined} == {"ppo": 0.5, "td3": 0.7}
+    extra = _rows("td3", envs, [3], lambda e, s: 0.1)  # a seed the saved table lacks joins it
+    assert len(join_rows(extra, saved)) == 7
+    for bad, words in (([1, 2], "expected a saved benchmark table"), ({"rows": [{"algo": "ppo"}]}, "row 0 is not a")):
+        with pytest.raises(ValueError, match=words):
+            join_rows([], bad)
+    table = tmp_path / "table.json"
+    table.write_text(json.dumps({"rows": [{"algo": "ppo", "env_id": "FlatBody-v1"}]}))
+    base = ["benchmark", "--algos", "td3", "--envs", "FlatBody-v1", "--seeds", "0-1", "--out", str(tmp_path / "b")]
+    for path in (table, tmp_path / "missing.json"):
+        assert main([*base, "--with", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("flatbody") and "--with" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "b").exists()  # refused before anything trains
