@@ -10,7 +10,7 @@ suites: here the two trees share this venv, and the figures are the project's ow
 ``rounds`` blocks; the ratio this tree / REV is the result (> 1: slower now).
 
 The figures (:data:`FIGURES`), on the newest single-env id both trees register (``FlatBody-v1``, else
-``FlatBody-v0``):
+``FlatBody-v0``), or on the id given (``--env``, e.g. ``FlatBodyAnyBody-v1``'s batch of bodies drawn per episode):
 
 * ``env-step`` — ``gym.make(ID)``'s ``step`` (with its wrappers), 1000 zero-action steps a block, resets included;
 * ``vector-step`` — ``FlatBodyVectorEnv`` with ID's task, N = 1024, 20 random-action steps a block (autoresets
@@ -153,9 +153,12 @@ class _Worker:
             self._log.close()
 
 
-def run(rev: str, *, figures=None, rounds: int = 5, progress: bool = False) -> dict[str, Any]:
+def run(
+    rev: str, *, figures=None, rounds: int = 5, progress: bool = False, env_id: str | None = None
+) -> dict[str, Any]:
     """Time :data:`FIGURES` (or ``figures`` among them) of this working tree against ``rev`` (module docstring);
-    returns the JSON record."""
+    returns the JSON record. ``env_id``: the task of the env figures (default: the newest single-env id both trees
+    register); ``ValueError`` naming ``env`` when this tree or ``rev`` does not register it."""
     from flatbody_env.progress import progress_bar
     from flatbody_env.provenance import machine
 
@@ -164,6 +167,10 @@ def run(rev: str, *, figures=None, rounds: int = 5, progress: bool = False) -> d
     if unknown or not names:
         raise ValueError(f"figures: expected names from {', '.join(FIGURES)}, got {', '.join(unknown) or 'none'}")
     rounds = validation.integer("rounds", rounds, low=1, high=100)
+    if env_id is not None:
+        from flatbody_env.env.registration import task_spec
+
+        env_id = task_spec(env_id).env_id
     root = this_tree()
     commit = resolve(rev, root)
     head = _git(root, "rev-parse", "HEAD").stdout.strip()
@@ -179,12 +186,15 @@ def run(rev: str, *, figures=None, rounds: int = 5, progress: bool = False) -> d
             raise RuntimeError(f"bench compare: git worktree add failed: {added.stderr.strip()[:300]}")
         old, new = _Worker("REV", checkout, scratch), _Worker("working", root, scratch)
         workers += [old, new]
-        hello = {w.label: w.ask({"do": "hello"}, SETUP_S) for w in workers}
+        hello = {w.label: w.ask({"do": "hello", "env": env_id}, SETUP_S) for w in workers}
         if Path(hello["working"]["package"]).resolve() != (root / "flatbody_env").resolve():
             raise RuntimeError(f"bench compare: the working tree's worker imported {hello['working']['package']}")
         if Path(hello["REV"]["package"]).resolve() != (checkout / "flatbody_env").resolve():
             raise RuntimeError(f"bench compare: the REV worker imported {hello['REV']['package']}, not the checkout")
+        asked = env_id
         env_id = next((e for e in hello["working"]["envs"] if e in hello["REV"]["envs"]), None)
+        if asked is not None and env_id is None:
+            raise validation.refusal("env", f"be an id {rev} registers too", asked)
         if env_id is None:
             raise RuntimeError("bench compare: the two trees register no FlatBody id in common")
         failed: dict[str, str] = {}

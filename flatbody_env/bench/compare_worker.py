@@ -133,7 +133,8 @@ def _answer(request: dict) -> dict:
 
         import flatbody_env
 
-        registered = [e for e in CANDIDATE_IDS if e in gym.registry]
+        asked = request.get("env")
+        registered = [e for e in ((asked,) if asked else CANDIDATE_IDS) if e in gym.registry]
         return {"package": os.path.dirname(os.path.abspath(flatbody_env.__file__)), "envs": registered}
     if do == "setup":
         block = FIGURES[request["figure"]](request["env"])

@@ -184,7 +184,7 @@ def _compare(args) -> int:
     from flatbody_env.bench.compare import report, run
     from flatbody_env.bench.harness import write_report
 
-    result = run(args.rev, figures=args.figures, rounds=args.rounds, progress=True)
+    result = run(args.rev, figures=args.figures, rounds=args.rounds, progress=True, env_id=args.env)
     rep = report(result)
     _show(rep)
     _wrote(write_report(rep, args.out_dir))
@@ -549,6 +549,12 @@ def register(sub) -> None:
         default=None,
         metavar="NAME,...",
         help="only these figures (env-step, vector-step, simulate, recording, ppo; default all)",
+    )
+    p.add_argument(
+        "--env",
+        metavar="ID",
+        default=None,
+        help="the task of the env figures (default: the newest FlatBody id both trees register, FlatBody-v1)",
     )
     p.add_argument(
         "--out-dir", type=output_dir("out_dir"), default="bench", help="where to write compare.json/.csv/.png"

@@ -16,7 +16,8 @@ step). It is the only place a step happens:
 
 On the CPU a step is one compiled call per batch (:func:`~flatbody_env.env.transition.step_lanes`), or, where
 a batched integrator computes the same numbers faster (the fused structure-of-arrays DOP853 of
-:mod:`flatbody_env.integrators.batch_kernels`) or the method has no per-body kernel (scipy's methods, a custom
+:mod:`flatbody_env.integrators.batch_kernels`, for one body or, where the task draws a body per episode, with each
+body's own parameters) or the method has no per-body kernel (scipy's methods, a custom
 potential, R carried for rendering), three: :func:`~flatbody_env.env.transition.controls_lanes`, the seam's
 stepper, :func:`~flatbody_env.env.transition.finish_lanes` — the same per-body functions, bit for bit.
 
@@ -434,8 +435,8 @@ class EnvCore:
             return "cuda"
         if c.custom_potential is not None or self.R is not None or not _kernel_stepper(st):
             return "seam"
-        if self.num_envs >= FUSED_MIN_BODIES and getattr(st, "_fused", None) is not None and not c.task.varies_body:
-            return "fused"
+        if self.num_envs >= FUSED_MIN_BODIES and getattr(st, "steps_bodies", False):
+            return "fused"  # a task that draws a body per episode too: each lane's parameters go with it
         return "lanes"
 
     def device_unsupported(self) -> str | None:
@@ -667,7 +668,10 @@ class EnvCore:
             tr.cpu("controls_lanes")(A, self.S, self.K, self.xcfg, self._AC, self._U)
             Y = self.S[tr.Y0 : tr.Y0 + 11]
             st = self._stepper
-            if c.task.varies_body:  # one body (the single env) drawn per episode: the stepper follows its body
+            bodies = None
+            if c.task.varies_body and self._mode == "fused":  # the fused step takes each body's own parameters
+                bodies = self.S[tr.P0 : tr.P0 + 9]
+            elif c.task.varies_body:  # one body (the single env) drawn per episode: the stepper follows its body
                 P = self.S[tr.P0 : tr.P0 + 9, 0]
                 if self._seam is None or not np.array_equal(self._seam[0], P):
                     self._seam = (P.copy(), st.with_body(self.body_of(0)))
@@ -679,6 +683,8 @@ class EnvCore:
                 self._STATUS[0] = st.advance(Y[:, 0].copy(), self._U[:, 0].copy(), c.dt, out, counters, self.R, Rnew)
                 self._OUT[:, 0] = out
                 self._NFEV[0] = counters[0]
+            elif bodies is not None:
+                st.advance_batch(Y, self._U, c.dt, self._OUT, self._STATUS, self._NFEV, bodies)
             else:
                 st.advance_batch(Y, self._U, c.dt, self._OUT, self._STATUS, self._NFEV)
             tr.cpu("finish_lanes")(

@@ -88,7 +88,8 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
     and the observation by :func:`~flatbody_env.env.task.observe_kernel` per body.
 
     ``Y_old``, ``Y_new``, ``Y_out``: (11, N); ``status``: (N,); ``A``: (N, n) (``n_act`` columns used);
-    ``T``: (N, 4); ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output; work:
+    ``T``: (N, 4); ``P``: (9, N) each body's kernel parameters (one body or one drawn per episode in each lane);
+    ``OBS``: (N, 16); ``TERMS``: (6, N); ``SC``: (4, N); ``ENDED``: (N,) output; work:
     ``ACT2`` (N,), ``Tt`` (4, N), ``vel`` (7,), ``force`` (4,), ``yk`` (11,).
     """
     n = Y_old.shape[1]
@@ -111,11 +112,16 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
         for k in range(n):
             Y_out[i, k] = Y_old[i, k] if ENDED[k] else Y_new[i, k]
     SC[0] = score_kernel(Y_out, Tt, ACT2, ENDED, cfg, P, TERMS)
-    J = P[0]
-    J3 = P[2]
-    if P[0] == P[1]:
+    kind = P[3, 0]
+    alike = True  # J1 = J2 and one potential kind in every lane: one loop numba vectorises
+    for k in range(n):
+        if P[0, k] != P[1, k] or P[3, k] != kind:
+            alike = False
+    if alike:
         for k in range(n):
-            v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], Y_out[7, k], Y_out[8, k], Y_out[9, k])
+            v, gl, gm, gr = potential_kernel(
+                kind, P[4, k], P[5, k], P[6, k], P[7, k], Y_out[7, k], Y_out[8, k], Y_out[9, k]
+            )
             kin = kinetic_iso(
                 Y_out[0, k],
                 Y_out[1, k],
@@ -127,16 +133,22 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
                 Y_out[7, k],
                 Y_out[8, k],
                 Y_out[9, k],
-                J,
-                J3,
+                P[0, k],
+                P[2, k],
             )
             SC[1, k] = kin[0] + v
-    else:
+    else:  # each lane as post_step computes it
         for k in range(n):
             for i in range(11):
                 yk[i] = Y_out[i, k]
-            v, gl, gm, gr = potential_kernel(P[3], P[4], P[5], P[6], P[7], yk[7], yk[8], yk[9])
-            SC[1, k] = kinetic_kernel(yk, P, vel, force) + v
+            v, gl, gm, gr = potential_kernel(P[3, k], P[4, k], P[5, k], P[6, k], P[7, k], yk[7], yk[8], yk[9])
+            if P[0, k] == P[1, k]:
+                kin = kinetic_iso(
+                    yk[0], yk[1], yk[2], yk[3], yk[4], yk[5], yk[6], yk[7], yk[8], yk[9], P[0, k], P[2, k]
+                )
+                SC[1, k] = kin[0] + v
+            else:
+                SC[1, k] = kinetic_kernel(yk, P[:, k], vel, force) + v
     for k in range(n):
         SC[2, k] = Y_out[0, k] * Y_out[0, k] + Y_out[1, k] * Y_out[1, k] + Y_out[2, k] * Y_out[2, k]
         observe_kernel(Y_out[:, k], T[k], OBS[k])

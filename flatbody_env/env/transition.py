@@ -808,7 +808,8 @@ def controls_lanes(A, S, K, xcfg, AC, U):
 def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW):
     """The rest of :func:`step_body` for every body after a batched integrator step (``OUT`` (11, N), ``STATUS``,
     ``NFEV``): the bookkeeping of all bodies at once by :func:`~flatbody_env.env.kernels.post_step_lanes` (the
-    structure-of-arrays twin of :func:`~flatbody_env.env.kernels.post_step`, bit for bit, for one body's parameters),
+    structure-of-arrays twin of :func:`~flatbody_env.env.kernels.post_step`, bit for bit, each body with its own
+    parameters),
     then per body a pending reset or :func:`close_step` and :func:`end_episode`. With :func:`controls_lanes` and a
     batched integrator it computes what :func:`step_lanes` computes, bit for bit. ``LW``: the lanes' work arrays
     (:func:`lane_work`)."""
@@ -824,8 +825,6 @@ def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW
     for b in range(n):
         for i in range(4):
             TG4[b, i] = S[TG0 + i, b]
-    for i in range(9):
-        p[i] = S[P0 + i, 0]
     post_step_lanes(
         S[Y0 : Y0 + 11],
         OUT,
@@ -834,7 +833,7 @@ def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW
         int(xcfg[X_NACT]),
         TG4,
         kcfg,
-        p,
+        S[P0 : P0 + 9],
         YOUT,
         OBS,
         TERMS,

@@ -27,11 +27,13 @@ same options, :data:`JIT_OPTIONS`): the vector env equals N single envs step for
 
 Lanes are stepped in blocks of :data:`BLOCK` so that the stage array stays in the caches.
 
-Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``STATUS``, ``NFEV`` (N,) int64 (outputs; ``NFEV`` counts
-the scalar kernel's evaluations, 13 per accepted single step); ``ERR`` (N,) the error norms; work:
-``KS`` (12, 11, B), ``YT``, ``ACC``, ``HH``, ``A5``, ``A3`` (11, B), ``E3S``, ``HB`` (B,) for blocks of B
-lanes (all flat), ``LANES`` (N,) int64, ``W`` (9, B) and the scalar kernel's work arrays — allocated
-once by the caller (:class:`DOP853Batch`).
+Arrays: ``Y``, ``OUT`` (11, N); ``U`` (4, N); ``P`` (9, 1) one body's kernel parameters or (9, N) each
+lane's (J1 = J2 and one potential kind in every lane: a batch of bodies drawn per episode steps fused as
+well); ``STATUS``, ``NFEV`` (N,) int64 (outputs; ``NFEV`` counts the scalar kernel's evaluations, 13 per
+accepted single step); ``ERR`` (N,) the error norms; work: ``KS`` (12, 11, B), ``YT``, ``ACC``, ``HH``,
+``A5``, ``A3`` (11, B), ``PB`` (9, B), ``E3S``, ``HB`` (B,) for blocks of B lanes (all flat), ``LANES``
+(N,) int64, ``W`` (9, B), ``pl`` (9,) and the scalar kernel's work arrays — allocated once by the caller
+(:class:`DOP853Batch`).
 """
 
 from __future__ import annotations
@@ -60,25 +62,28 @@ a small block wastes little work on padding lanes."""
 
 def rhs_lanes(X, U, P, F):
     """F[i·BLOCK + k] = component i of dy/dt of lane k of the block X (component i of lane k at
-    X[i·BLOCK + k]) with controls U[j·BLOCK + k], for J1 = J2 (the caller checks).
+    X[i·BLOCK + k]) with controls U[j·BLOCK + k] and body parameters P[r·BLOCK + k] (the layout of
+    :meth:`~flatbody_env.physics.body.Body.kernel_params` per lane), for J1 = J2 and one potential kind
+    in every lane (the caller checks; the kind is read from lane 0).
 
     The physics is :func:`flatbody_env.physics.equations.rhs_iso` and
-    :func:`flatbody_env.physics.potentials.potential_kernel` on scalars. The parameters are read once
-    into scalars and each array is addressed at constant offsets from its own start (``F`` is a
-    view of the stage array, not an array and a run-time offset: with an offset of unknown sign
-    numba's negative-index wrap-around makes the store addresses non-affine and LLVM gives up
-    vectorising), so the lane loop has no memory dependence and numba (LLVM) compiles it to SIMD
-    instructions (4 lanes per AVX2 instruction; about twice the speed of the scalar loop).
+    :func:`flatbody_env.physics.potentials.potential_kernel` on scalars. Each array is addressed at
+    constant offsets from its own start (``F`` is a view of the stage array, not an array and a run-time
+    offset: with an offset of unknown sign numba's negative-index wrap-around makes the store addresses
+    non-affine and LLVM gives up vectorising), so the lane loop has no memory dependence and numba
+    (LLVM) compiles it to SIMD instructions (4 lanes per AVX2 instruction; about twice the speed of the
+    scalar loop). The potential's kind, a branch, is the same in every lane, so the branch stays outside
+    the vector instructions.
     """
-    J = P[0]
-    J3 = P[2]
-    kind = P[3]
-    c1 = P[4]
-    c2 = P[5]
-    a = P[6]
-    b = P[7]
-    conv = P[8]
+    kind = P[3 * BLOCK]
     for k in range(BLOCK):
+        J = P[k]
+        J3 = P[2 * BLOCK + k]
+        c1 = P[4 * BLOCK + k]
+        c2 = P[5 * BLOCK + k]
+        a = P[6 * BLOCK + k]
+        b = P[7 * BLOCK + k]
+        conv = P[8 * BLOCK + k]
         lam = X[7 * BLOCK + k]
         mu = X[8 * BLOCK + k]
         rho = X[9 * BLOCK + k]
@@ -164,7 +169,8 @@ def combine_lanes(KS, Y, HH, row, OUT, ACC):
 def dop853_lanes(Y, U, P, H, rtol, atol, OUT, KS, YT, E5S, E3S, ACC, HH, A5, A3):
     """One DOP853 step of size ``H[k]`` for each lane k of a block; OUT receives y + h Σ b_j k_j,
     E5S the error norm (scipy's ``_estimate_error_norm``) of each lane. Flat block arrays: component
-    i of lane k at [i·BLOCK + k], stage j's component i at KS[(j·11 + i)·BLOCK + k] (KS: 12 stages).
+    i of lane k at [i·BLOCK + k] (the body parameters ``P`` too, :func:`rhs_lanes`), stage j's component
+    i at KS[(j·11 + i)·BLOCK + k] (KS: 12 stages).
     The lane index is the innermost loop; each lane's sums keep the scalar kernel's order
     (:func:`combine_lanes`). The scalar kernel's 13th evaluation, f at the new state, is its next
     step's first stage and enters no error estimate: a fused step, whose next step starts with new
@@ -240,6 +246,7 @@ def dop853_batch_env_step(
     YB,
     UB,
     OB,
+    PB,
     KS,
     YT,
     EB,
@@ -253,6 +260,7 @@ def dop853_batch_env_step(
     W,
     yl,
     ul,
+    pl,
     K1,
     ynew,
     ytmp,
@@ -270,15 +278,18 @@ def dop853_batch_env_step(
     exceed; a lane the scalar kernel takes keeps that budget (the ``budget`` status past it)."""
     n = Y.shape[1]
     check_energy = energy_tol < np.inf or (counters.size > 3 and counters[3] < FUSED_MAX_NFEV)
+    shared = P.shape[1] == 1
     if check_energy:
         for k in range(n):
+            for r in range(9):
+                pl[r] = P[r, 0 if shared else k]
             scalar_lane(
                 k,
                 DOP853_KIND,
                 NO_COEFFS,
                 Y,
                 U,
-                P,
+                pl,
                 dt,
                 dt,
                 rtol,
@@ -301,8 +312,17 @@ def dop853_batch_env_step(
         return
     for j in range(BLOCK):
         HB[j] = dt
+        if shared:
+            for r in range(9):
+                PB[r * BLOCK + j] = P[r, 0]
     for start in range(0, n, BLOCK):
         m = min(BLOCK, n - start)
+        if not shared:
+            for r in range(9):
+                for j in range(m):
+                    PB[r * BLOCK + j] = P[r, start + j]
+                for j in range(m, BLOCK):
+                    PB[r * BLOCK + j] = P[r, start]
         for i in range(11):  # component by component: contiguous copies
             for j in range(m):
                 YB[i * BLOCK + j] = Y[i, start + j]
@@ -313,7 +333,7 @@ def dop853_batch_env_step(
                 UB[i * BLOCK + j] = U[i, start + j]
             for j in range(m, BLOCK):
                 UB[i * BLOCK + j] = U[i, start]
-        dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
+        dop853_lanes(YB, UB, PB, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
         for i in range(11):
             for j in range(m):
                 OUT[i, start + j] = OB[i * BLOCK + j]
@@ -331,7 +351,7 @@ def dop853_batch_env_step(
                     OB[8 * BLOCK + j],
                     OB[9 * BLOCK + j],
                     gap_sign,
-                    not crossable(P[0], P[1], YB[2 * BLOCK + j], YB[3 * BLOCK + j], UB[2 * BLOCK + j]),
+                    not crossable(PB[j], PB[BLOCK + j], YB[2 * BLOCK + j], YB[3 * BLOCK + j], UB[2 * BLOCK + j]),
                 )
                 NFEV[start + j] = 13
     nl = 0
@@ -356,6 +376,7 @@ def dop853_batch_env_step(
             YB,
             UB,
             OB,
+            PB,
             KS,
             YT,
             EB,
@@ -368,6 +389,7 @@ def dop853_batch_env_step(
             W,
             yl,
             ul,
+            pl,
             K1,
             ynew,
             ytmp,
@@ -405,6 +427,7 @@ def dop853_redo_lanes(
     YB,
     UB,
     OB,
+    PB,
     KS,
     YT,
     EB,
@@ -417,6 +440,7 @@ def dop853_redo_lanes(
     W,
     yl,
     ul,
+    pl,
     K1,
     ynew,
     ytmp,
@@ -444,6 +468,7 @@ def dop853_redo_lanes(
     ``W`` (9, BLOCK) work: t, |h|, rejected, active, attempts, gap sign, check gap, new step, t_new;
     ``yl`` (11,) receives a lane's state for the status check.
     """
+    shared = P.shape[1] == 1
     for start in range(0, nl, BLOCK):
         m = min(BLOCK, nl - start)
         for j in range(BLOCK):
@@ -452,6 +477,8 @@ def dop853_redo_lanes(
                 YB[i * BLOCK + j] = Y[i, k]
             for i in range(4):
                 UB[i * BLOCK + j] = U[i, k]
+            for r in range(9):
+                PB[r * BLOCK + j] = P[r, 0 if shared else k]
             # the first attempt (h = dt) was the fused step's, rejected with the error ERR[k]: go on from there
             factor = _SAFETY * ERR[k] ** _ERROR_EXPONENT
             if not factor > _MIN_FACTOR:
@@ -462,7 +489,7 @@ def dop853_redo_lanes(
             W[3, j] = 1.0 if j < m else 0.0
             W[4, j] = 1.0
             W[5, j] = 1.0 if Y[7, k] > Y[8, k] else -1.0
-            W[6, j] = 0.0 if may_cross(Y[:, k], U[:, k], P) else 1.0
+            W[6, j] = 0.0 if crossable(PB[j], PB[BLOCK + j], Y[2, k], Y[3, k], U[2, k]) else 1.0
             W[7, j] = 0.0
             STATUS[k] = OK
         for _ in range(MAX_ROUNDS):
@@ -491,7 +518,7 @@ def dop853_redo_lanes(
                 active += 1
             if active == 0:
                 break
-            dop853_lanes(YB, UB, P, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
+            dop853_lanes(YB, UB, PB, HB, rtol, atol, OB, KS, YT, EB, E3S, ACC, HH, A5, A3)
             for j in range(BLOCK):
                 if W[3, j] != 1.0:
                     continue
@@ -526,13 +553,15 @@ def dop853_redo_lanes(
         for j in range(m):
             k = LANES[start + j]
             if W[3, j] != 0.0:  # collapsed or unfinished: the scalar kernel from the start
+                for r in range(9):
+                    pl[r] = P[r, 0 if shared else k]
                 scalar_lane(
                     k,
                     DOP853_KIND,
                     NO_COEFFS,
                     Y,
                     U,
-                    P,
+                    pl,
                     dt,
                     dt,
                     rtol,
@@ -565,7 +594,6 @@ NO_COEFFS = _tk.STRANG
 """(the fixed-step coefficients :func:`scalar_lane` takes; unused by DOP853)"""
 state_status = _tk._state_status
 state_code = _tk.state_code
-may_cross = _tk.may_cross
 crossable = _tk.crossable
 next_up = _tk.next_up
 OK = _tk.OK
@@ -597,6 +625,7 @@ class DOP853Batch:
             np.empty(Sz),
             np.empty(4 * B),
             np.empty(Sz),
+            np.empty(9 * B),
             np.empty(12 * Sz),
             np.empty(Sz),
             np.empty(B),
@@ -610,6 +639,7 @@ class DOP853Batch:
             np.empty((9, B)),
             np.empty(N),
             np.empty(4),
+            np.empty(9),
             np.empty((13, N)),
             np.empty(N),
             np.empty(N),
@@ -628,9 +658,18 @@ class DOP853Batch:
         self._alloc()
 
     def __call__(self, Y, U, P, dt, rtol, atol, energy_tol, OUT, STATUS, NFEV, max_nfev: int = NO_BUDGET) -> None:
-        """``max_nfev``: each lane's budget of RHS evaluations in this step (``budget`` status past it)."""
-        if P[0] != P[1]:
-            raise ValueError("P: the fused batch step needs J1 = J2")
+        """``P``: the body's kernel parameters (9,), or each lane's (9, N) (a batch of bodies, e.g. one drawn per
+        episode); ``max_nfev``: each lane's budget of RHS evaluations in this step (``budget`` status past it)."""
+        P = np.asarray(P)
+        if P.ndim == 1:
+            P = P.reshape(-1, 1)
+        if P.ndim != 2 or P.shape[0] != 9 or P.shape[1] not in (1, Y.shape[1]):
+            raise ValueError(f"P: expected shape (9,) or (9, {Y.shape[1]}), got {P.shape}")
+        if P.shape[1] == 1:
+            if P[0, 0] != P[1, 0]:
+                raise ValueError("P: the fused batch step needs J1 = J2")
+        elif not (np.array_equal(P[0], P[1]) and (P[3] == P[3, 0]).all()):
+            raise ValueError("P: the fused batch step needs J1 = J2 and one potential kind in every lane")
         if Y.shape[1] != self.n:
             self.n = Y.shape[1]
             self._alloc()

@@ -23,6 +23,7 @@ Both have the same interface, so the environment has one step path::
 
     status = step.advance(y, u, dt, out, counters, R, R_out)   # 0 = success
     step.advance_batch(Y, U, dt, OUT, STATUS, NFEV)             # structure-of-arrays, in place
+    step.advance_batch(Y, U, dt, OUT, STATUS, NFEV, P)          # each body its own (9, N): where steps_bodies
     step.describe(status)                                       # "kind: reason" of a failure
     step.with_body(body)                                        # the same stepper for another body
     step.own()                                                  # the same, with work arrays of its own
@@ -125,7 +126,17 @@ class CompiledEnvStep:
     def advance(self, y, u, dt, out, counters, R=None, R_out=None) -> int:
         return self._step(y, u, self.P, dt, self.h, self.rtol, self.atol, self.energy_tol, out, counters)
 
-    def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV) -> None:
+    @property
+    def steps_bodies(self) -> bool:
+        """Whether :meth:`advance_batch` takes each body's parameters (``P``): the fused DOP853 step."""
+        return self._fused is not None
+
+    def advance_batch(self, Y, U, dt, OUT, STATUS, NFEV, P=None) -> None:
+        if P is not None:  # a batch of bodies, each its own (J1 = J2 in every lane; checked by the fused step)
+            if self._fused is None or self.h != dt:
+                raise ValueError("P: a batch of bodies steps through the fused DOP853 step only")
+            self._fused(Y, U, P, dt, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV, self.max_nfev)
+            return
         if self._fused is not None and self.h == dt:
             self._fused(Y, U, self.P, dt, self.rtol, self.atol, self.energy_tol, OUT, STATUS, NFEV, self.max_nfev)
             return

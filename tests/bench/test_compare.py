@@ -21,6 +21,13 @@ def test_a_bad_revision_is_refused_in_one_line(rev, tmp_path, capsys):
     assert not (tmp_path / "out" / "compare.json").exists()
 
 
+def test_an_unknown_task_is_refused_in_one_line_before_anything_is_checked_out(tmp_path, capsys):
+    assert main(["bench", "compare", "HEAD", "--env", "NoSuchTask-v9", "--out-dir", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "env: must be one of" in err[0] and "NoSuchTask-v9" in err[0], err
+    assert not (tmp_path / "out" / "compare.json").exists()
+
+
 def test_a_revision_resolves_to_its_commit():
     root = this_tree()
     head = resolve("HEAD", root)
@@ -120,8 +127,10 @@ def test_compare_against_head_end_to_end(tmp_path, capsys):
 
     root = this_tree()
     before = subprocess.run(["git", "-C", str(root), "worktree", "list"], capture_output=True, text=True).stdout
-    assert main(["bench", "compare", "HEAD", "--figures", "simulate", "--rounds", "2", "--out-dir", str(tmp_path)]) == 0
+    argv = ["bench", "compare", "HEAD", "--figures", "simulate", "--rounds", "2", "--env", "FlatBodyAnyBody-v1"]
+    assert main([*argv, "--out-dir", str(tmp_path)]) == 0
     data = json.loads((tmp_path / "compare.json").read_text())
+    assert data["env_id"] == "FlatBodyAnyBody-v1"  # the task asked for, registered by both trees
     (row,) = data["figures"]
     assert row["figure"] == "simulate" and len(row["old_blocks"]) == len(row["new_blocks"]) == 2 and row["ratio"] > 0
     assert data["rev_commit"] == resolve("HEAD", root) and set(FIGURES) >= {r["figure"] for r in data["figures"]}

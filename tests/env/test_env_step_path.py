@@ -165,10 +165,11 @@ def test_bad_vector_actions_and_mode():
 
 
 @pytest.mark.parametrize("kernels", ["compiled", "python"])
-@pytest.mark.parametrize("J2", [1.0, 1.3])
-def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
+@pytest.mark.parametrize("bodies", ["one isotropic", "one anisotropic", "each its own"])
+def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, bodies):
     """post_step_lanes (loops over bodies, vectorised) is post_step body by body, bit for bit, with
-    failed steps, non-finite states and states outside the domain among the lanes."""
+    failed steps, non-finite states and states outside the domain among the lanes — for one body in every lane and
+    for a body of its own in each (inertia, potential and thickness constants; J1 ≠ J2 in some lanes)."""
     from flatbody_env.env import kernels as python_kernels
 
     k = compiled if kernels == "compiled" else python_kernels
@@ -176,9 +177,13 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
     venv = FlatBodyVectorEnv(num_envs=n)
     venv.reset(seed=1)
     p = venv.config
-    P = np.array(p.body.kernel_params())
-    P[1] = J2
     rng = np.random.default_rng(2)
+    P = np.repeat(np.array(p.body.kernel_params())[:, None], n, axis=1)
+    if bodies == "one anisotropic":
+        P[1] = 1.3
+    elif bodies == "each its own":
+        P[[0, 2, 4, 6, 7]] *= rng.uniform(0.5, 2.0, (5, n))
+        P[1] = np.where(np.arange(n) % 3 == 0, 1.3 * P[0], P[0])
     Y_old = venv.states.T.copy()
     Y_new = Y_old + rng.normal(scale=0.02, size=Y_old.shape)
     Y_new[7, :4] = -1.0  # λ out of the domain
@@ -230,7 +235,7 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, J2):
             4,
             T[i].copy(),
             p.kcfg,
-            P,
+            P[:, i].copy(),
             y,
             obs,
             terms,
@@ -301,6 +306,29 @@ def test_threads_on_the_fused_batch_step_keep_their_own_work_and_every_number():
     assert all(w is not None for w in works) and len({id(w) for w in works}) == 3  # none shared
     _steps_alike(one, two, seed=9, steps=25)
     two.close()
+
+
+def test_a_body_drawn_per_episode_steps_fused_with_every_number_of_the_per_body_loop(monkeypatch):
+    """``FlatBodyAnyBody-v1`` (each body's constants drawn per episode): a batch large enough steps through the fused
+    DOP853 with each lane's own parameters, and gives what the per-body loop gives, number for number, across
+    episode ends and autoresets (new bodies drawn)."""
+    import gymnasium as gym
+
+    from flatbody_env.env import core
+    from flatbody_env.env import transition as tr
+    from flatbody_env.env.core import FUSED_MIN_BODIES
+
+    kwargs = dict(gym.spec("FlatBodyAnyBody-v1").kwargs)
+    n = FUSED_MIN_BODIES + 5
+    fused = FlatBodyVectorEnv(num_envs=n, max_episode_steps=12, **kwargs)
+    monkeypatch.setattr(core, "FUSED_MIN_BODIES", 10**9)
+    loop = FlatBodyVectorEnv(num_envs=n, max_episode_steps=12, **kwargs)
+    assert [c._mode for c in fused.cores] == ["fused"] and [c._mode for c in loop.cores] == ["lanes"]
+    _steps_alike(fused, loop, seed=21, steps=30)
+    J = fused.cores[0].S[tr.P0].copy()
+    assert np.unique(J).size == n  # a body of its own in every lane
+    fused.reset(seed=21)
+    assert not np.array_equal(J, fused.cores[0].S[tr.P0])  # the autoresets (every 12 steps) drew other bodies
 
 
 def test_threads_do_not_change_a_single_number():

@@ -140,7 +140,6 @@ def test_kernels_score_random_states_as_documented(env_id, kernels):
 
     A_clip = np.empty_like(A)  # the step path: the actions clipped (and scaled) first, then the bookkeeping
     assert kernels.controls_batch(A, env.mask.astype(np.uint8), env.limits, A_clip, np.empty((4, n)))
-    P = np.array(P)
     Y_out, OBS, TERMS, SC, ENDED = (
         np.empty((11, n)),
         np.empty((n, 16), np.float32),
@@ -156,7 +155,7 @@ def test_kernels_score_random_states_as_documented(env_id, kernels):
         m,
         T,
         cfg,
-        P,
+        np.repeat(np.array(P)[:, None], n, axis=1),  # each body's parameters (here one body's)
         Y_out,
         OBS,
         TERMS,
@@ -238,7 +237,7 @@ def test_every_weight_is_a_keyword_and_each_one_counts():
         4,
         T,
         env.kernel_config,
-        env.kernel_params,
+        np.repeat(env.kernel_params[:, None], n, axis=1),
         np.empty((11, n)),
         np.empty((n, 16), np.float32),
         TERMS,

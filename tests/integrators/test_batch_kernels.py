@@ -73,6 +73,53 @@ def test_many_rejected_lanes_follow_the_scalar_step_control_bitwise():
     assert np.unique(NF).size > 3  # lanes needed different numbers of attempts
 
 
+def test_a_batch_of_bodies_steps_fused_each_lane_with_its_own_body_bitwise():
+    """Each lane's own body (J1 = J2, J3, V3's κ, the thickness constants: a body drawn per episode), given as P
+    (9, N): every lane's state, status and count are the scalar kernel's for that body — redone lanes, lanes handed
+    to the scalar kernel (a collapse, the energy check) and more than one block included; the same parameters in
+    every column step as the one body given once."""
+    from flatbody_env.physics.body import Body, Inertia
+    from flatbody_env.physics.potentials import V3, ThicknessPotential
+
+    rng = np.random.default_rng(11)
+    n = 2 * batch_kernels.BLOCK + 7
+    Y, U = _lanes(n, 12)
+    Y[4:7, 3:40] *= 20.0  # fast shape motion: rejected single steps, redone fused
+    Y[0, 5] = np.nan  # collapses: the scalar kernel
+    bodies = [
+        Body(inertia=Inertia.isotropic(J, J3), potential=V3(kappa=kappa), thickness=ThicknessPotential(a=a, b=b))
+        for J, J3, kappa, a, b in 0.5 * 4.0 ** rng.random((n, 5))
+    ]
+    P = np.ascontiguousarray(np.stack([kernel_params(b) for b in bodies], axis=1))
+    st = env_stepper("DOP853-numba")
+    for energy_tol in (np.inf, 1e-3):
+        OUT, S, NF = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)
+        DOP853Batch(n)(Y, U, P, 0.05, 1e-11, 1e-11, energy_tol, OUT, S, NF)
+        for k in range(n):
+            out, counters = np.empty(11), np.zeros(3, np.int64)
+            status = st.step_counted(Y[:, k].copy(), U[:, k].copy(), P[:, k].copy(), 0.05, 0.05, 1e-11, 1e-11,
+                                     energy_tol, out, counters)  # fmt: skip
+            assert S[k] == status and NF[k] == counters[0], k
+            np.testing.assert_array_equal(OUT[:, k], out)
+        if energy_tol == np.inf:
+            assert (NF > 13).sum() > 20 and S[5] != 0
+    one = kernel_params(default_body())
+    a = [np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)]
+    b = [np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64)]
+    DOP853Batch(n)(Y, U, one, 0.05, 1e-11, 1e-11, np.inf, *a)
+    DOP853Batch(n)(Y, U, np.repeat(one[:, None], n, axis=1), 0.05, 1e-11, 1e-11, np.inf, *b)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    OUT, S, NF = b
+    for bad, words in (
+        (np.where(np.arange(9)[:, None] == 1, 2.0, P), "J1 = J2"),  # an anisotropic lane
+        (np.where(np.arange(9)[:, None] == 3, np.arange(n) % 2, P), "one potential kind"),
+        (P[:, :5], r"expected shape \(9,\) or \(9, "),
+    ):
+        with pytest.raises(ValueError, match=words):
+            DOP853Batch(n)(Y, U, bad, 0.05, 1e-11, 1e-11, np.inf, OUT, S, NF)
+
+
 def test_fused_kernels_are_plain_python_over_arrays():
     """The source of the batch kernels stays plain Python (compiled by jit_copy, reusable for other targets)."""
     for name in ("rhs_lanes", "combine_lanes", "dop853_lanes", "dop853_batch_env_step", "dop853_redo_lanes"):
