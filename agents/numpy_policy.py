@@ -38,10 +38,20 @@ FORMAT_VERSION = 1
 POLICY_FILE = "policy.npz"
 MAX_POLICY_BYTES = 64 * 1024 * 1024
 """Largest ``policy.npz``, and most bytes its arrays may declare (an MLP of 2 000 × 2 000 float64 layers)."""
+
+
+def _expm1(v: np.ndarray) -> np.ndarray:
+    """e^v − 1 as the C library computes it (:mod:`flatbody_env.integrators.libm`: NumPy's differs in the last bit on
+    AVX-512 machines); imported on first use, so that reading this module's constants loads no compiler."""
+    from flatbody_env.integrators.libm import expm1
+
+    return expm1(v)
+
+
 _ACTIVATION_FUNCTIONS = {
     "tanh": np.tanh,
     "relu": lambda v: np.maximum(v, 0.0),
-    "elu": lambda v: np.where(v > 0.0, v, np.expm1(np.minimum(v, 0.0))),
+    "elu": lambda v: np.where(v > 0.0, v, _expm1(np.minimum(v, 0.0))),
 }
 ACTIVATIONS = tuple(_ACTIVATION_FUNCTIONS)
 """The activations between linear layers that an exported policy may have (ELU with α = 1, rsl_rl's default)."""

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from flatbody_env.integrators import libm
 from flatbody_env.env import transition as tr
 from flatbody_env.env.core import EnvCore, configure
 from flatbody_env.env.task import state_from_observation
@@ -152,7 +153,7 @@ class Planner:
             np.clip(cand, -1.0, 1.0, out=cand)
             returns = self._rollout(Y, T, bodies_P, cand)
             spread = returns.max(axis=1, keepdims=True) - returns.min(axis=1, keepdims=True)
-            w = np.exp((returns - returns.max(axis=1, keepdims=True)) / (s.temperature * np.maximum(spread, 1e-9)))
+            w = libm.exp((returns - returns.max(axis=1, keepdims=True)) / (s.temperature * np.maximum(spread, 1e-9)))
             w /= w.sum(axis=1, keepdims=True)
             self.plan = np.einsum("bj,bjhn->bhn", w, cand)
         action = self.plan[:, 0].copy()
@@ -202,10 +203,10 @@ class Planner:
             if reward:
                 total += np.where(alive, core.S[tr.R_REWARD], 0.0)
             else:
-                total -= np.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
+                total -= libm.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
             alive &= core.K[tr.K_TERMINATED] == 0
         if not reward and s.terminal > 0:  # where the horizon ends counts as ``terminal`` more steps there
-            total -= s.terminal * np.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
+            total -= s.terminal * libm.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
         return total.reshape(B, K)
 
 

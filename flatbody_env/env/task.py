@@ -538,13 +538,17 @@ def state_from_observation(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The state y and the target (λ*, μ*, ϱ*, s3*) from observation(s): the inverse of
     :func:`observe_kernel` (θ = atan2(sin θ, cos θ), in (−π, π]).
 
-    ``obs`` (16,) gives y (11,) and target (4,); ``obs`` (N, 16) gives y (11, N) and target (4, N).
+    ``obs`` (16,) gives y (11,) and target (4,); ``obs`` (N, 16) gives y (11, N) and target (4, N). θ is the C
+    library's atan2 (:mod:`flatbody_env.integrators.libm`: NumPy's differs in the last bit on AVX-512 machines, and the
+    adaptive step of a motion started from y weighs θ too).
     """
+    from flatbody_env.integrators.libm import arctan2
+
     obs = np.asarray(obs, dtype=np.float64)
     o = obs.T
     y = np.empty((11,) + o.shape[1:])
     y[0:10] = o[OBS_STATE]
-    y[10] = np.arctan2(o[OBS_SIN_THETA], o[OBS_COS_THETA])
+    y[10] = arctan2(o[OBS_SIN_THETA], o[OBS_COS_THETA])
     return y, o[OBS_TARGET].copy()
 
 
@@ -584,8 +588,8 @@ def score_kernel(y, tgt, act2, ended, cfg, P, terms):
         1 when the step ends the episode by failure or by leaving the domain.
     cfg : (≥ 6,)
         Weights w_shape, w_spin, w_tumble, w_rest, w_action, failure_penalty (module docstring).
-    P : (≥ 3,)
-        J = P[0], J3 = P[2] (:meth:`flatbody_env.physics.body.Body.kernel_params`).
+    P : (≥ 3,) or (≥ 3, N)
+        J = P[0], J3 = P[2] (:meth:`flatbody_env.physics.body.Body.kernel_params`), one body's or each body's.
     terms : (6,) or (6, N), output
         shape, spin, tumble, rest, action, failure (:data:`REWARD_TERMS`).
     """

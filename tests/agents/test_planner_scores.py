@@ -239,3 +239,18 @@ def test_iqm_is_the_mean_of_the_middle_half_with_a_stratified_bootstrap_interval
     assert iqm(wide, reps=500)["hi"] - iqm(wide, reps=500)["lo"] > 0
     with pytest.raises(ValueError, match="^scores"):
         iqm(np.array([[np.nan]]))
+
+
+def test_the_planner_and_the_policies_compute_with_the_c_librarys_functions():
+    """The planner's weights and objective and the exported policy's ELU call flatbody_env.integrators.libm, not
+    NumPy's ufuncs (which differ in the last bit on AVX-512 machines)."""
+    import inspect
+    import math
+
+    from agents import numpy_policy, planner
+
+    src = inspect.getsource(planner)
+    assert "libm.exp(" in src and "libm.log(" in src and "np.exp(" not in src and "np.log(" not in src
+    elu = numpy_policy._ACTIVATION_FUNCTIONS["elu"]
+    v = np.linspace(-3.0, 3.0, 101)
+    assert elu(v).tobytes() == np.array([x if x > 0 else math.expm1(x) for x in v]).tobytes()
