@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from flatbody_env.integrators import libm
 from flatbody_env.env import transition as tr
 from flatbody_env.env.core import EnvCore, configure
 from flatbody_env.env.task import state_from_observation
+from flatbody_env.integrators import libm
 
 
 LOG_FLOOR = 1e-3
