@@ -668,25 +668,26 @@ class EnvCore:
             tr.cpu("controls_lanes")(A, self.S, self.K, self.xcfg, self._AC, self._U)
             Y = self.S[tr.Y0 : tr.Y0 + 11]
             st = self._stepper
-            bodies = None
-            if c.task.varies_body and self._mode == "fused":  # the fused step takes each body's own parameters
-                bodies = self.S[tr.P0 : tr.P0 + 9]
-            elif c.task.varies_body:  # one body (the single env) drawn per episode: the stepper follows its body
-                P = self.S[tr.P0 : tr.P0 + 9, 0]
-                if self._seam is None or not np.array_equal(self._seam[0], P):
-                    self._seam = (P.copy(), st.with_body(self.body_of(0)))
-                st = self._seam[1]
-            if self.R is not None:
-                counters = np.zeros(3, np.int64)
-                out = np.empty(11)
-                Rnew = np.empty((3, 3))
-                self._STATUS[0] = st.advance(Y[:, 0].copy(), self._U[:, 0].copy(), c.dt, out, counters, self.R, Rnew)
-                self._OUT[:, 0] = out
-                self._NFEV[0] = counters[0]
-            elif bodies is not None:
+            if self._mode == "fused":  # a body drawn per episode: the fused step takes each body's own parameters
+                bodies = self.S[tr.P0 : tr.P0 + 9] if c.task.varies_body else None
                 st.advance_batch(Y, self._U, c.dt, self._OUT, self._STATUS, self._NFEV, bodies)
             else:
-                st.advance_batch(Y, self._U, c.dt, self._OUT, self._STATUS, self._NFEV)
+                if c.task.varies_body:  # one body (the single env) drawn per episode: the stepper follows its body
+                    P = self.S[tr.P0 : tr.P0 + 9, 0]
+                    if self._seam is None or not np.array_equal(self._seam[0], P):
+                        self._seam = (P.copy(), st.with_body(self.body_of(0)))
+                    st = self._seam[1]
+                if self.R is not None:
+                    counters = np.zeros(3, np.int64)
+                    out = np.empty(11)
+                    Rnew = np.empty((3, 3))
+                    self._STATUS[0] = st.advance(
+                        Y[:, 0].copy(), self._U[:, 0].copy(), c.dt, out, counters, self.R, Rnew
+                    )
+                    self._OUT[:, 0] = out
+                    self._NFEV[0] = counters[0]
+                else:
+                    st.advance_batch(Y, self._U, c.dt, self._OUT, self._STATUS, self._NFEV)
             tr.cpu("finish_lanes")(
                 self._AC,
                 self._OUT,
