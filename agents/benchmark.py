@@ -193,25 +193,15 @@ def final_table(rows: list[dict[str, Any]], reports: list[dict[str, Any]]) -> di
     return table
 
 
-def _shown(path: str) -> str:
-    """A run folder as the saved tables name it: relative to the working directory when it lies below it (the
-    repository's ``runs/...``, the same on every machine), else as it is."""
-    p = Path(path)
-    try:
-        return str(p.resolve().relative_to(Path.cwd().resolve()))
-    except ValueError:
-        return str(p)
-
-
 def report(rows: list[dict[str, Any]], out: str | Path, reports: list[dict[str, Any]]) -> dict[str, Path]:
     """Write ``benchmark.json`` (rows, curves, the final table, a hyperparameter grid's sensitivity), ``benchmark.csv``
     (one row per case) and the charts (``benchmark_curves.png``: success against env steps and against training time
     per task; ``benchmark_iqm.png``; with a grid ``benchmark_sensitivity.png``) into ``out``; returns the paths."""
-    from flatbody_env.output import atomic_write, write_csv
+    from flatbody_env.output import atomic_write, shown_path, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = [{**r, "run": _shown(r["run"])} if "run" in r else r for r in rows]
+    rows = [{**r, "run": shown_path(r["run"])} if "run" in r else r for r in rows]
     data = {"rows": rows, "curves": curves(rows), "final": final_table(rows, reports), "sensitivity": sensitivity(rows)}
     paths = {"json": atomic_write(out / "benchmark.json", json.dumps(data, indent=1) + "\n")}
     header = ["algo", "env_id", "seed", "budget", "success", "return", "final_distance", "train_seconds"]

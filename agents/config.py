@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from flatbody_env.output import shown_path
 from flatbody_env.physics import validation
 from flatbody_env.physics.validation import Field
 
@@ -644,16 +645,12 @@ def resolve(
         device=validation.field("device", device, Field(kind=_C, choices=DEVICES)),
         trained_agent=str(trained_agent) if trained_agent is not None else None,
         curriculum=curriculum,
-        source={"file": _shown(file), "entry": env_id, "overrides": list(overrides or [])},
+        source={
+            "file": shown_path(file, Path(__file__).resolve().parent.parent),
+            "entry": env_id,
+            "overrides": list(overrides or []),
+        },
     )
-
-
-def _shown(path: Path) -> str:
-    """``path`` relative to the package's parent (``agents/hyperparams/ppo.yml``) when it lies there."""
-    try:
-        return str(Path(path).resolve().relative_to(Path(__file__).resolve().parent.parent))
-    except ValueError:
-        return str(path)
 
 
 __all__ = [

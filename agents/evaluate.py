@@ -703,6 +703,8 @@ def evaluate_task(
                 entry["episodes"] = {c: [r[c] for r in records] for c in columns}
             policies[name] = entry
     found = {"agent": Path(model)} if model is not None else (shipped_agents(env_id) if with_agents else {})
+    from flatbody_env.output import shown_path
+
     for name, folder in found.items():
         agent = Agent(folder, backend=backend)
         records = run_episodes(
@@ -716,7 +718,7 @@ def evaluate_task(
         )
         policies[name] = {
             "kind": "agent",
-            "model": str(folder),
+            "model": shown_path(folder, MODELS_DIR.parent.parent),  # agents/models/... wherever the checkout lies
             "policy_backend": agent.backend,
             "summary": summarize(records),
             "episodes": {c: [r[c] for r in records] for c in columns},

@@ -1,4 +1,4 @@
-"""Plan, then imitate: cross-entropy plans of open-loop residuals, cloned into a residual agent's policy.
+"""Imitation: cross-entropy plans of open-loop residuals cloned into a residual agent's policy; the planner distilled.
 
 Used for ``FlatBodySlow-v0`` (docs/agents.md), where the LQR fails on the slowest targets and PPO alone
 found only part of the strategy that reaches them (tumbling the body, s1, s2 ≠ 0, moves the slow
@@ -29,6 +29,12 @@ residual is clip(policy(obs) + u(t), −1, 1), u = 0 being the run alone), clone
 fine-tunes again (expert iteration).
 
 Plans are saved as ``.npz`` without pickles (:class:`Plans`).
+
+**Distilling the planner** (:func:`distill`, ``flatbody imitate distill``): the v1 tasks' model-predictive reference
+(:mod:`agents.planner`) is the expert of a DAgger loop — it labels the states the policy reaches with what it would do
+there, and the policy's mean action is fitted to every label so far (:func:`fit_policy_mean`, the fit ``clone`` makes
+too). The result is a PPO run folder that acts from the observation alone at the cost of one forward pass, where the
+planner rolls out thousands of body-steps per control step with the true model.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -316,12 +323,9 @@ def clone(
         that end within the tolerance: 1.0 unless the environment changed), ``mse_start`` and ``mse_end``
         (the policy mean's squared error against the residuals before and after the fit).
     """
-    import torch
-
     from agents.config import RunConfig
     from agents.runs import RunFolder
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
-    from flatbody_env.progress import progress_bar
 
     validation.integer("epochs", epochs, low=1, high=10_000)
     validation.integer("batch_size", batch_size, low=1, high=1 << 20)
@@ -359,31 +363,20 @@ def clone(
     obs = obs.reshape(-1, obs.shape[-1]).astype(np.float32)
     act = act.reshape(-1, act.shape[-1]).astype(np.float32)
 
-    torch.manual_seed(seed)
     t0 = time.perf_counter()
     ppo = agent.model
-    x = torch.as_tensor(agent.vecnormalize.normalize_obs(obs), dtype=torch.float32)
-    y = torch.as_tensor(act)
-    pol = ppo.policy
-
-    def mean_action(xb):
-        return pol.action_net(pol.mlp_extractor.forward_actor(pol.extract_features(xb, pol.pi_features_extractor)))
-
-    with torch.no_grad():
-        mse_start = float(((mean_action(x) - y) ** 2).mean())
-    params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
-    opt = torch.optim.Adam(params, lr=learning_rate)
-    rows = []
-    for epoch in progress_bar(range(epochs), desc="clone", unit="epoch", enabled=progress):
-        perm = torch.randperm(len(x))
-        for i in range(0, len(x), batch_size):
-            b = perm[i : i + batch_size]
-            loss = ((mean_action(x[b]) - y[b]) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        with torch.no_grad():
-            rows.append({"epoch": epoch + 1, "mse": float(((mean_action(x) - y) ** 2).mean())})
+    x = agent.vecnormalize.normalize_obs(obs)
+    mse_start, rows = fit_policy_mean(
+        ppo.policy,
+        x,
+        act,
+        epochs=epochs,
+        batch_size=batch_size,
+        learning_rate=learning_rate,
+        seed=seed,
+        progress=progress,
+        desc="clone",
+    )
     mse_end = rows[-1]["mse"]
     wall = time.perf_counter() - t0
     from agents.numpy_policy import read_pickled
@@ -415,3 +408,312 @@ def clone(
         "mse_start": mse_start,
         "mse_end": mse_end,
     }
+
+
+def fit_policy_mean(
+    policy,
+    x: np.ndarray,
+    y: np.ndarray,
+    *,
+    epochs: int,
+    batch_size: int,
+    learning_rate: float,
+    seed: int,
+    anneal: bool = False,
+    progress: bool = True,
+    desc: str = "fit",
+) -> tuple[float, list[dict[str, Any]]]:
+    """Fit the mean action of an SB3 actor-critic ``policy`` (its actor's layers) to ``y`` (M, n) at the normalised
+    observations ``x`` (M, d) by least squares: Adam on shuffled minibatches, the rate constant or, with ``anneal``,
+    brought to 0 over the epochs along a cosine. Returns the squared error before the fit and one row per epoch
+    (``epoch``, ``mse`` over all pairs)."""
+    import torch
+
+    from flatbody_env.progress import progress_bar
+
+    torch.manual_seed(seed)
+    xt = torch.as_tensor(x, dtype=torch.float32)
+    yt = torch.as_tensor(y, dtype=torch.float32)
+    pol = policy
+
+    def mean_action(xb):
+        return pol.action_net(pol.mlp_extractor.forward_actor(pol.extract_features(xb, pol.pi_features_extractor)))
+
+    with torch.no_grad():
+        mse_start = float(((mean_action(xt) - yt) ** 2).mean())
+    params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
+    opt = torch.optim.Adam(params, lr=learning_rate)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs) if anneal else None
+    rows = []
+    for epoch in progress_bar(range(epochs), desc=desc, unit="epoch", enabled=progress):
+        perm = torch.randperm(len(xt))
+        for i in range(0, len(xt), batch_size):
+            b = perm[i : i + batch_size]
+            loss = ((mean_action(xt[b]) - yt[b]) ** 2).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        if schedule is not None:
+            schedule.step()
+        with torch.no_grad():
+            rows.append({"epoch": epoch + 1, "mse": float(((mean_action(xt) - yt) ** 2).mean())})
+    return mse_start, rows
+
+
+# -- distilling the planner (DAgger) ------------------------------------------------------------------------------
+
+RESIDUAL_OF_PRIOR = {"none": None, "lqr": "heuristic", "passivity": "passivity", "pumping": "pumping"}
+"""The residual form a distilled policy acts in, by the law the task's planner perturbs (:attr:`PlannerSettings.prior`):
+the policy learns what the planner adds to the law, as the planner plans it."""
+
+
+MAX_ROUND_EPISODES = 2048
+"""Episodes one round of :func:`distill` plans at most (the planner rolls out ``samples`` bodies for each)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class DistillSettings:
+    """DAgger of the task's planner (:func:`distill`).
+
+    rounds : int
+        Collections of demonstrations: the first executes the planner, each later one the policy fitted so far (the
+        planner labels the states that policy visits: Ross, Gordon and Bagnell's DAgger, AISTATS 2011).
+    epochs, batch_size, learning_rate : int, int, float
+        The fit after each round (:func:`fit_policy_mean` on every pair so far, from the initial weights, the rate
+        annealed to 0 along a cosine).
+    """
+
+    rounds: int = 5
+    epochs: int = 30
+    batch_size: int = 512
+    learning_rate: float = 1e-3
+
+    def __post_init__(self) -> None:
+        validation.integer("rounds", self.rounds, low=1, high=100)
+        validation.integer("epochs", self.epochs, low=1, high=10_000)
+        validation.integer("batch_size", self.batch_size, low=1, high=1 << 20)
+        validation.number("learning_rate", self.learning_rate, low=1e-8, high=1.0)
+
+
+def distill_config(env_id: str, *, seed: int = 0, overrides: list[str] | None = None, planner: dict | None = None):
+    """The run configuration of a policy distilled from ``env_id``'s planner: SB3's PPO entry of the task (its network
+    and observation normalisation; :func:`agents.config.resolve`) acting as an additive residual on the law the planner
+    perturbs (:data:`RESIDUAL_OF_PRIOR`; a planner around no law: the policy acts alone), then ``overrides``."""
+    from agents.config import resolve
+    from agents.planner import settings_for
+
+    residual = RESIDUAL_OF_PRIOR[settings_for(env_id, planner).prior]
+    form = ["residual=null"] if residual is None else [f"residual={residual}", "residual_mode=additive"]
+    return resolve("ppo", env_id, seed=seed, overrides=[*form, *(overrides or [])])
+
+
+def _demonstrations(env_id, env_kwargs, seeds, planner_settings, planner_seed, label, execute, bar):
+    """One round of :func:`distill`: the seeded episodes run together, the planner consulted at every step; returns the
+    observations (M, d) of the steps of running episodes, the planner's labels there (``label(obs, action)``, (M, n))
+    and the share of episodes that end in success. ``execute(obs)`` acts (None: the planner's own actions)."""
+    from agents.planner import Planner
+    from flatbody_env.env.registration import task_spec
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    steps = task_spec(env_id).max_episode_steps
+    n = len(seeds)
+    venv = FlatBodyVectorEnv(num_envs=n, max_episode_steps=steps, **env_kwargs)
+    planner = Planner(env_kwargs, n, planner_settings, seed=planner_seed)
+    obs, _ = venv.reset(seed=[int(s) for s in seeds])
+    seen, labels = [], []
+    alive = np.ones(n, dtype=bool)
+    success = np.zeros(n, dtype=bool)
+    for _ in range(steps):
+        a = planner.act(obs, venv.body_params)
+        seen.append(obs[alive].copy())
+        labels.append(label(obs, a)[alive])
+        if execute is not None:
+            a = execute(obs)
+        obs, _, term, trunc, info = venv.step(a)
+        done = alive & (term | trunc)
+        success[done] = np.asarray(info["is_success"])[done]
+        alive &= ~(term | trunc)
+        bar.update(1)
+        if not alive.any():
+            break
+    venv.close()
+    return np.concatenate(seen), np.concatenate(labels).astype(np.float32), float(success.mean())
+
+
+def distill(
+    config,
+    out: str | Path,
+    *,
+    seeds: tuple[int, int],
+    settings: DistillSettings | None = None,
+    planner: dict[str, Any] | None = None,
+    progress: bool = True,
+    force: bool = False,
+    command: list[str] | None = None,
+) -> dict:
+    """Distil the task's planner (:mod:`agents.planner`) into ``config``'s policy by DAgger; write the run folder ``out``.
+
+    The planner plans from the observed state with the true model (on ``FlatBodyAnyBody-v1`` the body's constants the
+    policy does not see): a privileged, slow expert — 5,760 body-steps per control step — whose choices a network
+    learns to make from the observation alone, at the cost of one forward pass. Round 0 runs the planner on the first
+    share of the training episodes (``seeds`` LO:HI split evenly over the rounds); each later round runs the policy
+    fitted so far and records what the planner would have done in the states the policy reaches; after each round the
+    policy's mean action is fitted to every pair so far (:class:`DistillSettings`). A label is the residual the
+    planner adds to the run's law (clip((a_planner − law(obs)) / residual_scale, −1, 1); the policy's action itself
+    where the run has no residual), so the run executes the law plus the policy, as the planner does.
+
+    Parameters
+    ----------
+    config : agents.config.RunConfig
+        A PPO run (:func:`distill_config`; or a distilled run's ``config.yml``, which repeats it): its task, network,
+        seed (weights, fit, the planner's noise) and residual form (additive, ungated).
+    seeds : (int, int)
+        LO, HI: the training episodes LO … HI − 1, below the evaluation seeds (:data:`agents.evaluate.EVAL_SEED`).
+    planner : dict, optional
+        Overrides of the task's planner settings (:func:`agents.planner.parse_overrides`).
+
+    Returns
+    -------
+    dict
+        ``rounds``: one row per round (``round``, ``episodes``, ``executed`` — planner or policy —,
+        ``executed_success``, ``pairs`` so far, ``mse`` after the fit); ``pairs``; ``wall_time_s``.
+    """
+    import copy
+
+    from agents.config import RunConfig
+    from agents.evaluate import EVAL_SEED, env_kwargs_for, residual_action
+    from agents.planner import label as planner_label
+    from agents.planner import settings_for
+    from agents.runs import RunFolder
+    from agents.train import new_model
+    from flatbody_env.env.registration import task_spec
+    from flatbody_env.progress import progress_bar
+
+    s = settings or DistillSettings()
+    if not isinstance(config, RunConfig) or config.algo != "ppo":
+        raise ValueError("config: distil into a PPO run's configuration (agents.imitation.distill_config)")
+    lo, hi = (validation.integer("seeds", int(v), low=0, high=EVAL_SEED) for v in seeds)
+    if not lo < hi or not s.rounds <= hi - lo <= MAX_ROUND_EPISODES * s.rounds:
+        raise ValueError(
+            f"seeds: give LO:HI below {EVAL_SEED} with 1 to {MAX_ROUND_EPISODES} episodes per round ({s.rounds} rounds)"
+        )
+    hp = config.hyperparams
+    if hp.get("residual") and (hp.get("residual_mode", "additive") != "additive" or hp.get("residual_gate", 0.0)):
+        raise ValueError("hyperparams.residual_mode: distil into an additive, ungated residual (residual_gate 0)")
+    scale = float(hp.get("residual_scale", 1.0))
+    validation.requirement(
+        "hyperparams.residual_scale",
+        scale,
+        not hp.get("residual") or scale > 0,
+        "be > 0 to distil (it scales the label)",
+    )
+    planner_settings = settings_for(config.env_id, planner)
+    run = RunFolder.new(out, force=force)  # before any work: never a folder holding a run, /, or the home folder
+    env_kwargs = env_kwargs_for(config.env_id, config.env_kwargs)
+    form = residual_action(env_kwargs, hp)
+
+    def label(obs, action):
+        if form is None:
+            return np.asarray(action, dtype=np.float64)
+        law = form.controller.predict(np.asarray(obs, dtype=np.float64))[0]
+        return np.clip((np.asarray(action, dtype=np.float64) - law) / scale, -1.0, 1.0)
+
+    import torch
+
+    torch.set_num_threads(1)
+    model, venv = new_model(config)
+    vecnorm = venv if hasattr(venv, "obs_rms") else None
+    initial = copy.deepcopy(model.policy.state_dict())
+
+    def normalised(obs):
+        return vecnorm.normalize_obs(obs) if vecnorm is not None and vecnorm.norm_obs else obs
+
+    def execute(obs):
+        actions, _ = model.predict(normalised(np.asarray(obs, dtype=np.float32)), deterministic=True)
+        return actions if form is None else form(obs, actions)
+
+    steps = task_spec(config.env_id).max_episode_steps
+    chunks = np.array_split(np.arange(lo, hi), s.rounds)
+    bar = progress_bar(total=s.rounds * steps, desc="distill", unit="step", enabled=progress)
+    seen, labels, rows = [], [], []
+    t0 = time.perf_counter()
+    for r, chunk in enumerate(chunks):
+        o, u, ok = _demonstrations(
+            config.env_id,
+            env_kwargs,
+            chunk,
+            planner_settings,
+            config.seed + r,
+            label,
+            None if r == 0 else execute,
+            bar,
+        )
+        if r == 0 and vecnorm is not None and vecnorm.norm_obs:
+            # the normalisation the network sees: the demonstrations' own statistics (VecNormalize's running ones)
+            vecnorm.obs_rms.mean = o.mean(axis=0).astype(np.float64)
+            vecnorm.obs_rms.var = o.var(axis=0).astype(np.float64)
+            vecnorm.obs_rms.count = float(len(o))
+        seen.append(o)
+        labels.append(u)
+        model.policy.load_state_dict(initial)
+        x, y = np.concatenate(seen), np.concatenate(labels)
+        _, fit = fit_policy_mean(
+            model.policy,
+            normalised(x),
+            y,
+            epochs=s.epochs,
+            batch_size=s.batch_size,
+            learning_rate=s.learning_rate,
+            seed=config.seed,
+            anneal=True,
+            progress=False,
+        )
+        rows.append(
+            {
+                "round": r,
+                "episodes": len(chunk),
+                "executed": "planner" if r == 0 else "policy",
+                "executed_success": ok,
+                "pairs": len(x),
+                "mse": fit[-1]["mse"],
+            }
+        )
+    bar.close()
+    wall = time.perf_counter() - t0
+    imitation = {
+        "method": "distill",
+        "expert": planner_label(planner_settings),
+        "planner": dict(planner or {}),
+        "seeds": [lo, hi],
+        "rounds": s.rounds,
+        "epochs": s.epochs,
+        "batch_size": s.batch_size,
+        "learning_rate": s.learning_rate,
+    }
+    config = config.replace(trained_agent=None, curriculum=None, imitation=imitation)
+    run.start(config, force=force)  # config.yml, the first file: the folder is trusted from here on
+    run.save("model.zip", lambda tmp: model.save(str(tmp)))
+    if vecnorm is not None:
+        run.save("vecnormalize.pkl", lambda tmp: vecnorm.save(str(tmp)))
+    run.write_progress(rows)
+    run.write_run(config, timesteps=0, wall_time_s=wall, command=command, pairs=int(len(x)))
+    run.export_policy()
+    venv.close()
+    return {"rounds": rows, "pairs": int(len(x)), "wall_time_s": wall}
+
+
+def distill_settings_of(config) -> tuple[DistillSettings, dict[str, Any], tuple[int, int]]:
+    """What a distilled run's ``config.yml`` says to repeat it (its ``prior.imitation``): the settings, the planner's
+    overrides and the seeds; ``ValueError`` naming ``config.yml`` for any other run."""
+    from agents.planner import parse_overrides
+
+    im = config.imitation or {}
+    if im.get("method") != "distill":
+        raise ValueError("config.yml: not a policy distilled from the planner (prior.imitation.method: distill)")
+    try:
+        settings = DistillSettings(**{k: im[k] for k in ("rounds", "epochs", "batch_size", "learning_rate")})
+        lo, hi = (int(v) for v in im["seeds"])
+        planner = parse_overrides([f"{k}={v}" for k, v in dict(im.get("planner") or {}).items()], "planner")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"config.yml: prior.imitation: {type(exc).__name__}: {str(exc)[:80]}") from None
+    return settings, planner, (lo, hi)

@@ -524,7 +524,6 @@ def _train_sb3(
         check_trusted(config.trained_agent, "model.zip and vecnormalize.pkl (pickles)", where="trained_agent")
 
     import torch
-    from stable_baselines3.common.vec_env import VecNormalize
 
     torch.set_num_threads(threads)
     total, nenv, seed = config.n_timesteps, config.n_envs, config.seed
@@ -535,18 +534,7 @@ def _train_sb3(
     unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
     if not resume:
         folder.start(config, force=force)  # config.yml, the first file: the folder is trusted from here on
-    env = make_vec_env(
-        nenv,
-        seed,
-        hp.get("env_kwargs"),
-        hp.get("residual"),
-        float(hp.get("success_bonus", 0.0)),
-        float(hp.get("residual_scale", 1.0)),
-        float(hp.get("residual_gate", 0.0)),
-        float(hp.get("precision_bonus", 0.0)),
-        str(hp.get("residual_mode", "additive")),
-        env_id=config.env_id,
-    )
+    env = _vec_env_of(config)
     cls = _algo_class(algo)
     start, resumed_from, state = 0, None, None
     if resume:
@@ -555,12 +543,7 @@ def _train_sb3(
     elif config.trained_agent is not None:
         model, env = _load_trained_agent(cls, Path(config.trained_agent), env, norm, hp, algo_kwargs, seed)
     else:
-        if norm:
-            env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
-        noise = action_noise(hp, env.action_space)
-        if noise is not None:
-            algo_kwargs["action_noise"] = noise
-        model = cls(hp.get("policy", "MlpPolicy"), env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
+        model, env = new_model(config, env)
     planned = start + -(-(total - start) // unit) * unit if unit and total > start else max(total, start)
     if planned > total and notes:
         what = "rollouts of n_envs x n_steps" if algo == "ppo" else "collections of n_envs x train_freq"
@@ -639,6 +622,48 @@ def _train_sb3(
     return TrainResult(out=folder.path, timesteps=int(model.num_timesteps), wall_time_s=wall, resumed_from=resumed_from)
 
 
+def _vec_env_of(config: RunConfig):
+    """The run's training environments (:func:`make_vec_env` with its hyperparameters), before ``VecNormalize``."""
+    hp = config.hyperparams
+    return make_vec_env(
+        config.n_envs,
+        config.seed,
+        hp.get("env_kwargs"),
+        hp.get("residual"),
+        float(hp.get("success_bonus", 0.0)),
+        float(hp.get("residual_scale", 1.0)),
+        float(hp.get("residual_gate", 0.0)),
+        float(hp.get("precision_bonus", 0.0)),
+        str(hp.get("residual_mode", "additive")),
+        env_id=config.env_id,
+    )
+
+
+def new_model(config: RunConfig, env=None):
+    """A fresh SB3 model of the run ``config`` (its algorithm and hyperparameters, weights drawn from its seed) and its
+    vectorised environment (``env``, or :func:`make_vec_env` of the run's), inside ``VecNormalize`` where the run
+    normalises; returns ``(model, env)``. What :func:`train` starts from without a prior, and what
+    :func:`agents.imitation.distill` fits."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    hp = config.hyperparams
+    if env is None:
+        env = _vec_env_of(config)
+    norm = hp.get("normalize") or None
+    if norm is True:
+        norm = {"norm_obs": True, "norm_reward": True}
+    if norm:
+        env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
+    algo_kwargs = algo_kwargs_of(hp)
+    noise = action_noise(hp, env.action_space)
+    if noise is not None:
+        algo_kwargs["action_noise"] = noise
+    model = _algo_class(config.algo)(
+        hp.get("policy", "MlpPolicy"), env, seed=config.seed, device="cpu", verbose=0, **algo_kwargs
+    )
+    return model, env
+
+
 def _curriculum_settings(curriculum: dict[str, Any]) -> dict[str, Any]:
     """The keywords of :func:`agents.curriculum.curriculum_callback` from a run's ``curriculum`` (its ``history`` left
     out: what a run did, not what it is told)."""
@@ -662,6 +687,7 @@ __all__ = [
     "algo_kwargs_of",
     "check_resumed",
     "make_vec_env",
+    "new_model",
     "rollout_steps",
     "train",
     "train_config",

@@ -255,6 +255,16 @@ def check_output_path(name: str, text: str | os.PathLike, suffixes: tuple[str, .
     return p
 
 
+def shown_path(path: str | os.PathLike, base: str | os.PathLike | None = None) -> str:
+    """``path`` as a saved file names it: relative to ``base`` (default: the working directory) when it lies below it —
+    the same on every machine —, else as given."""
+    p = Path(path)
+    try:
+        return str(p.resolve().relative_to(Path(base if base is not None else Path.cwd()).resolve()))
+    except ValueError:
+        return str(p)
+
+
 def replace_marked_block(path: str | os.PathLike, name: str, text: str, *, kind: str = "bench") -> Path:
     """Replace the text between ``<!-- KIND:NAME -->`` and ``<!-- /KIND:NAME -->`` in ``path`` (a
     Markdown page) with ``text``, atomically. Each marker is a line of its own (a marker quoted in
@@ -274,6 +284,7 @@ def replace_marked_block(path: str | os.PathLike, name: str, text: str, *, kind:
 
 
 __all__ = [
+    "shown_path",
     "OutputError",
     "append_line",
     "atomic_open",

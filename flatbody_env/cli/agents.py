@@ -76,9 +76,13 @@ def _run_config(args):
             _refuse_with(flag, given, "with --config (the configuration holds the hyperparameters)")
         config = RunConfig.read(args.config, where="--config")
         if config.imitation is not None:
+            again = (
+                f"flatbody imitate distill --config {args.config[:80]} repeats it"
+                if config.imitation.get("method") == "distill"
+                else "flatbody imitate clone made it (run.json beside it holds the command)"
+            )
             raise ValueError(
-                f"--config: {args.config[:80]!r} is a policy cloned from plans (prior.imitation): "
-                "flatbody imitate clone made it (run.json beside it holds the command)"
+                f"--config: {args.config[:80]!r} is a policy imitated from plans (prior.imitation): {again}"
             )
         for flag, given, recorded in (("--algo", args.algo, config.algo), ("--env", args.env, config.env_id)):
             validation.requirement(
@@ -267,6 +271,8 @@ def _imitate(args) -> int:
 
     from agents.imitation import Plans, PlanSettings, _residual_agent, clone, plan
 
+    if args.step == "distill":
+        return _distill(args)
     if args.step == "plan":
         settings = PlanSettings(
             knots=args.knots,
@@ -304,6 +310,50 @@ def _imitate(args) -> int:
     print(
         f"cloned {res['plans']} plans ({res['pairs']} steps; replayed {res['replayed_success']:.0%} within the "
         f"tolerance): squared error {res['mse_start']:.4f} -> {res['mse_end']:.4f}; wrote {args.out}"
+    )
+    return 0
+
+
+def _distill(args) -> int:
+    """``flatbody imitate distill``: every flag checked, then :func:`agents.imitation.distill`."""
+    from dataclasses import asdict
+
+    from agents.config import RunConfig
+    from agents.imitation import DistillSettings, distill, distill_config, distill_settings_of
+    from agents.planner import parse_overrides
+
+    given = {k: getattr(args, k) for k in ("rounds", "epochs", "batch_size", "learning_rate")}
+    planner = parse_overrides(args.planner, "--planner") if args.planner else None
+    if args.config:
+        for flag, value in (("--env", args.env), ("--hyperparams", args.hyperparams), ("--planner", args.planner)):
+            validation.requirement(flag, value, value is None, "be left out with --config (config.yml holds it)")
+        config = RunConfig.read(args.config, where="--config")
+        settings, planner, seeds = distill_settings_of(config)
+        settings = DistillSettings(**{**asdict(settings), **{k: v for k, v in given.items() if v is not None}})
+        seeds = args.seeds or seeds
+        if args.seed is not None:
+            config = config.replace(seed=args.seed)
+    else:
+        validation.requirement("--env", args.env, args.env is not None, "be given (the task), or give --config")
+        config = distill_config(args.env, seed=args.seed or 0, overrides=args.hyperparams, planner=planner)
+        settings = DistillSettings(**{k: v for k, v in given.items() if v is not None})
+        seeds = args.seeds or (0, 1000)
+    res = distill(
+        config,
+        args.out,
+        seeds=seeds,
+        settings=settings,
+        planner=planner,
+        progress=not args.no_progress,
+        force=args.force,
+        command=_command(),
+    )
+    last = res["rounds"][-1]
+    print(
+        f"distilled {config.env_id}'s planner in {len(res['rounds'])} rounds ({res['pairs']} steps; the last round's "
+        f"policy succeeded in {last['executed_success']:.0%} of its {last['episodes']} episodes; squared error "
+        f"{last['mse']:.4f}) in {res['wall_time_s'] / 60:.1f} min; wrote {args.out} "
+        f"(flatbody evaluate {args.out} --env {config.env_id})"
     )
     return 0
 
@@ -740,6 +790,33 @@ def register(sub) -> None:
     q.add_argument("--force", action="store_true", help="write into DIR even if it holds a run (overwrites it)")
     q.add_argument("--no-progress", action="store_true", help="no progress bar")
     q.add_argument("--trust", action="store_true", help=_TRUST_HELP)
+    q = steps.add_parser("distill", help="DAgger of the task's planner into a PPO policy: a new run folder")
+    q.add_argument("--env", metavar="ID", help="the task (its planner is the expert); or --config")
+    q.add_argument("--config", metavar="FILE", help="a distilled run's config.yml: distil it again as it was made")
+    q.add_argument("--out", required=True, metavar="DIR", help="the new run folder")
+    q.add_argument(
+        "--seeds", type=seed_range("seeds"), default=None, help="LO:HI, training episodes (HI excluded; default 0:1000)"
+    )
+    q.add_argument(
+        "--seed", type=int_at_least("seed", 0, validation.MAX_SEED), default=None, help="weights, fit, noise"
+    )
+    for name, low, high, default, what in (
+        ("rounds", 1, 100, 5, "DAgger rounds: the first runs the planner, each later one the policy so far"),
+        ("epochs", 1, 10_000, 30, "epochs of the fit after each round"),
+        ("batch-size", 1, 1 << 20, 512, "minibatch of the fit"),
+    ):
+        key = name.replace("-", "_")
+        q.add_argument(f"--{name}", type=int_at_least(key, low, high), default=None, help=f"{what} (default {default})")
+    q.add_argument(
+        "--learning-rate",
+        type=number("learning_rate", low=1e-8, high=1.0),
+        default=None,
+        help="Adam's rate, annealed to 0 over each fit (default 0.001)",
+    )
+    q.add_argument("--hyperparams", nargs="*", metavar="KEY=VALUE", help="override the PPO entry (network, residual)")
+    q.add_argument("--planner", nargs="+", metavar="KEY=VALUE", help="the expert's settings (as evaluate's)")
+    q.add_argument("--force", action="store_true", help="write into DIR even if it holds a run (overwrites it)")
+    q.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(handler=_imitate)
 
     p = sub.add_parser(

@@ -218,6 +218,11 @@ def test_a_clone_config_is_not_retrained_by_config(tmp_path, config_home, capsys
     folder.write_config(config.replace(imitation={"plans": ["p.npz"]}))
     assert main(["train", "--config", str(folder.path / "config.yml"), "--out", str(tmp_path / "o")]) == 2
     assert "imitate clone" in _one_line(capsys)
+    folder.write_config(
+        config.replace(imitation={"method": "distill"})
+    )  # a distilled policy: the command that repeats it
+    assert main(["train", "--config", str(folder.path / "config.yml"), "--out", str(tmp_path / "o")]) == 2
+    assert "imitate distill --config" in _one_line(capsys)
 
 
 @pytest.mark.parametrize("algo", ["ppo", "rsl-ppo"])

@@ -222,6 +222,12 @@ CASES = {
         _files("plans.npz"),
         True,
     ),
+    ("imitate", "distill"): (
+        ["--env", "FlatBodyTorque-v1", "--seeds", "0:1", "--rounds", "1", "--epochs", "1"]
+        + ["--planner", "samples=2", "horizon=2", "--no-progress", "--out", "{tmp}/dist"],
+        _files("dist/model.zip", "dist/config.yml", "dist/policy.npz", "dist/progress.csv"),
+        False,
+    ),
     ("evaluate",): (
         [MODEL, "--episodes", "1", "--no-baselines", "--json", "--out", "{tmp}/eval.json"],
         _files("eval.json"),
