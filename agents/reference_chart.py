@@ -161,7 +161,8 @@ LADDER_CAPTION = (
     "episodes, with its 95 % Wilson interval. zero, random, passivity, LQR and the LQR with centrifugal pumping\n"
     "(reach tasks): classic references; planner: MPPI over the env's own transition from the observed state;\n"
     "witness: the solvability certificate of FlatBodyTorque-v1's starts (the open-loop actions that reach the target\n"
-    "by construction), not a policy; agent (ALGO): trained agents."
+    "by construction), not a policy; agent (ALGO): the shipped agents — agent (distilled): the planner distilled\n"
+    "into a network by DAgger (the prior track: it imitates the planner, which plans with the true model)."
 )
 
 

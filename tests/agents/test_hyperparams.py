@@ -210,13 +210,20 @@ def test_device_cuda_without_a_gpu_is_one_line_naming_the_flag(tmp_path, capsys)
 
 def test_the_shipped_agents_configurations_read_and_check(tmp_path):
     """Every agents/models/* config.yml reads as a RunConfig whose prior is labelled: the v0 agents' (format 1) on the
-    prior track, the shipped v1 agent's (format 2) from scratch."""
+    prior track, the shipped v1 agent's (format 2) from scratch, the distilled v1 agents' (format 2) on the prior track:
+    a residual on the law their planner perturbs and the distillation that fitted it."""
     from agents.numpy_policy import MODELS_DIR, SHIPPED_AGENT
 
     for folder in sorted(MODELS_DIR.iterdir()):
         config = RunConfig.read(folder)
-        assert config.env_id.endswith("-v0" if folder.name != SHIPPED_AGENT else "-v1") and config.seed >= 0
-        assert config.prior is None or set(config.prior) <= {"residual", "trained_agent", "curriculum"}
+        distilled = folder.name.startswith("distilled-")
+        assert config.env_id.endswith("-v1" if folder.name == SHIPPED_AGENT or distilled else "-v0")
+        assert config.seed >= 0
+        if distilled:
+            assert set(config.prior) == {"residual", "imitation"} and config.imitation["method"] == "distill"
+            assert folder.name == f"distilled-{config.env_id}" and config.algo == "ppo"
+        else:
+            assert config.prior is None or set(config.prior) <= {"residual", "trained_agent", "curriculum"}
     shipped = RunConfig.read(MODELS_DIR / SHIPPED_AGENT)
     assert shipped.prior is None and shipped.env_id == "FlatBody-v1" and shipped.hyperparams["residual"] is None
     assert RunConfig.read(MODELS_DIR / "rsl-ppo-FlatBody-v0").algo == "rsl-ppo"
