@@ -411,7 +411,7 @@ def clone(
 
 
 def fit_policy_mean(
-    policy,
+    pol,
     x: np.ndarray,
     y: np.ndarray,
     *,
@@ -423,7 +423,7 @@ def fit_policy_mean(
     progress: bool = True,
     desc: str = "fit",
 ) -> tuple[float, list[dict[str, Any]]]:
-    """Fit the mean action of an SB3 actor-critic ``policy`` (its actor's layers) to ``y`` (M, n) at the normalised
+    """Fit the mean action of an SB3 actor-critic policy ``pol`` (its actor's layers) to ``y`` (M, n) at the normalised
     observations ``x`` (M, d) by least squares: Adam on shuffled minibatches, the rate constant or, with ``anneal``,
     brought to 0 over the epochs along a cosine. Returns the squared error before the fit and one row per epoch
     (``epoch``, ``mse`` over all pairs)."""
@@ -434,7 +434,6 @@ def fit_policy_mean(
     torch.manual_seed(seed)
     xt = torch.as_tensor(x, dtype=torch.float32)
     yt = torch.as_tensor(y, dtype=torch.float32)
-    pol = policy
 
     def mean_action(xb):
         return pol.action_net(pol.mlp_extractor.forward_actor(pol.extract_features(xb, pol.pi_features_extractor)))
@@ -461,11 +460,6 @@ def fit_policy_mean(
 
 
 # -- distilling the planner (DAgger) ------------------------------------------------------------------------------
-
-RESIDUAL_OF_PRIOR = {"none": None, "lqr": "heuristic", "passivity": "passivity", "pumping": "pumping"}
-"""The residual form a distilled policy acts in, by the law the task's planner perturbs (:attr:`PlannerSettings.prior`):
-the policy learns what the planner adds to the law, as the planner plans it."""
-
 
 MAX_ROUND_EPISODES = 2048
 """Episodes one round of :func:`distill` plans at most (the planner rolls out ``samples`` bodies for each)."""
@@ -498,11 +492,12 @@ class DistillSettings:
 def distill_config(env_id: str, *, seed: int = 0, overrides: list[str] | None = None, planner: dict | None = None):
     """The run configuration of a policy distilled from ``env_id``'s planner: SB3's PPO entry of the task (its network
     and observation normalisation; :func:`agents.config.resolve`) acting as an additive residual on the law the planner
-    perturbs (:data:`RESIDUAL_OF_PRIOR`; a planner around no law: the policy acts alone), then ``overrides``."""
+    perturbs (:data:`agents.planner.LAW_OF_PRIOR`; a planner around no law: the policy acts alone), then ``overrides``:
+    the policy learns what the planner adds to the law, as the planner plans it."""
     from agents.config import resolve
-    from agents.planner import settings_for
+    from agents.planner import LAW_OF_PRIOR, settings_for
 
-    residual = RESIDUAL_OF_PRIOR[settings_for(env_id, planner).prior]
+    residual = LAW_OF_PRIOR[settings_for(env_id, planner).prior]
     form = ["residual=null"] if residual is None else [f"residual={residual}", "residual_mode=additive"]
     return resolve("ppo", env_id, seed=seed, overrides=[*form, *(overrides or [])])
 

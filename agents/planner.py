@@ -41,7 +41,9 @@ FAILED_DISTANCE = 10.0
 """The distance a candidate scores after its episode ended by failure (the ``"distance"`` objective)."""
 
 
-PRIOR_LAWS = ("none", "lqr", "passivity", "pumping")
+LAW_OF_PRIOR = {"none": None, "lqr": "heuristic", "passivity": "passivity", "pumping": "pumping"}
+"""Each value of :attr:`PlannerSettings.prior` and the law of :data:`agents.heuristic.LAWS` it names (None: no law)."""
+PRIOR_LAWS = tuple(LAW_OF_PRIOR)
 """The values of :attr:`PlannerSettings.prior`."""
 
 
@@ -121,7 +123,7 @@ class Planner:
         if s.prior != "none":
             from agents.heuristic import LAWS
 
-            law = LAWS["heuristic" if s.prior == "lqr" else s.prior]
+            law = LAWS[LAW_OF_PRIOR[s.prior]]
             self.law = law(self.config.body, self.config.control, self.config.limits)
         self.plan = np.zeros((self.episodes, s.horizon, self.n_act))
         t = np.linspace(0.0, 1.0, s.horizon)
@@ -284,6 +286,7 @@ def label(settings: PlannerSettings) -> str:
 
 
 __all__ = [
+    "LAW_OF_PRIOR",
     "PLANNERS",
     "PRIOR_LAWS",
     "AROUND_PUMPING",
