@@ -653,6 +653,55 @@ def resolve(
     )
 
 
+POLICY_FORM = (
+    "policy",
+    "policy_kwargs",
+    "use_sde",
+    "normalize",
+    "residual",
+    "residual_mode",
+    "residual_scale",
+    "residual_gate",
+)
+"""The hyperparameters that say what a policy's numbers mean — its network, observation statistics and the law its action
+adds to — which a fine-tuning run (``trained_agent``) takes from the run it starts from (:func:`fine_tuning`)."""
+
+
+def fine_tuning(config: RunConfig) -> RunConfig:
+    """``config`` with :data:`POLICY_FORM` taken from its ``trained_agent``'s ``config.yml`` (unchanged without a trained
+    agent, or where that folder has no ``config.yml``): the loaded weights act as they were trained — a residual on
+    the pumping law stays one — and ``config.yml`` names the network that is trained. The rollout and update settings
+    stay the run's own. ``ValueError`` naming ``trained_agent`` for another algorithm (or rsl-ppo: it does not
+    fine-tune), naming ``hyperparams.KEY`` where an override (``source.overrides``) sets one of those keys otherwise."""
+    if config.trained_agent is None:
+        return config
+    if config.algo not in SB3_ALGOS:
+        raise ValueError(f"trained_agent: {config.algo} does not fine-tune a trained agent (ppo, sac and td3 do)")
+    path = Path(config.trained_agent) / "config.yml"
+    if not path.is_file():
+        return config
+    trained = RunConfig.read(path, where="trained_agent")
+    if trained.algo != config.algo:
+        raise ValueError(
+            f"trained_agent: {str(config.trained_agent)[:80]!r} is a {trained.algo} run; it fine-tunes with "
+            f"--algo {trained.algo}, not {config.algo}"
+        )
+    overridden = {str(item).split("=", 1)[0].strip().split(".")[0] for item in config.source.get("overrides") or []}
+    hp = copy.deepcopy(config.hyperparams)
+    for key in POLICY_FORM:
+        ours, theirs = hp.get(key), trained.hyperparams.get(key)
+        if key in overridden and ours != theirs:
+            raise ValueError(
+                f"hyperparams.{key}: the trained agent {str(config.trained_agent)[:80]!r} has {theirs!r}; a fine-tuning "
+                f"run keeps its policy's form (got {str(ours)[:80]!r})"
+            )
+        if key in trained.hyperparams:
+            hp[key] = copy.deepcopy(theirs)
+        else:
+            hp.pop(key, None)
+    return config.replace(hyperparams=check_hyperparams(config.algo, hp, config.env_id))
+
+
 __all__ = [
     "ACTIVATIONS",
     "ALGOS",
@@ -663,6 +712,7 @@ __all__ = [
     "FIELDS",
     "HYPERPARAMS_DIR",
     "MODEL_FORMATS",
+    "POLICY_FORM",
     "RSL_DEFAULTS",
     "RunConfig",
     "SB3_ALGOS",
@@ -671,6 +721,7 @@ __all__ = [
     "check_device",
     "checked_env_kwargs",
     "check_hyperparams",
+    "fine_tuning",
     "hyperparams_path",
     "load_hyperparams",
     "parse_env_kwargs",

@@ -447,6 +447,10 @@ def train_config(
 
     validation.integer("threads", threads, low=1, high=validation.MAX_WORKERS)
     validation.integer("checkpoint_freq", checkpoint_freq, low=0, high=validation.MAX_TIMESTEPS)
+    if not resume:
+        from agents.config import fine_tuning
+
+        config = fine_tuning(config)  # the trained agent's policy form; before anything is written
     if config.algo == "rsl-ppo":
         if extra_callbacks:
             raise ValueError("extra_callbacks: SB3 callbacks do not run in rsl-ppo (give callback)")

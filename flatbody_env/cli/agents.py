@@ -604,8 +604,8 @@ def _add_run_arguments(p, *, seed_default) -> None:
     p.add_argument(
         "--trained-agent",
         metavar="RUN",
-        help="fine-tune: start from this run folder's model.zip and vecnormalize.pkl "
-        "(this run's hyperparameters; SB3 algorithms)",
+        help="fine-tune: start from this run folder's model.zip and vecnormalize.pkl (its network, statistics and "
+        "residual form; this run's rollout and update settings; SB3 algorithms)",
     )
     p.add_argument(
         "--force",

@@ -198,6 +198,36 @@ def test_fine_tuning_starts_from_the_given_run(tmp_path):
         )
 
 
+def test_fine_tuning_keeps_the_trained_agents_policy_form(tmp_path):
+    """A fine-tuning run takes the trained agent's network, statistics and residual form (its weights act as they were
+    trained): its config.yml says so without an override; an override that changes one of them, another algorithm
+    and rsl-ppo are refused naming the field, before anything is written."""
+    import yaml
+
+    from agents.config import POLICY_FORM
+    from agents.train import train
+
+    tiny = ["n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=1"]
+    form = ["policy_kwargs.net_arch=[8]", "residual=heuristic", "residual_mode=additive", "residual_scale=0.3"]
+    kw = dict(n_timesteps=32, progress=False, checkpoint_freq=0, notes=False)
+    train("ppo", tmp_path / "a", overrides=tiny + form, **kw)
+    train("ppo", tmp_path / "b", overrides=[*tiny, "learning_rate=1e-4"], trained_agent=tmp_path / "a", **kw)
+    a, b = (yaml.safe_load((tmp_path / n / "config.yml").read_text())["hyperparams"] for n in "ab")
+    assert b["residual"] == "heuristic" and b["residual_scale"] == 0.3 and b["policy_kwargs"]["net_arch"] == [8]
+    assert all(a.get(k) == b.get(k) for k in POLICY_FORM) and b["learning_rate"] == 1e-4  # the run's own settings stay
+    refusals = {
+        "hyperparams.residual": dict(algo="ppo", overrides=[*tiny, "residual=passivity"]),
+        "hyperparams.policy_kwargs": dict(algo="ppo", overrides=[*tiny, "policy_kwargs.net_arch=[16]"]),
+        "is a ppo run": dict(algo="sac", overrides=["learning_starts=0"]),
+    }
+    for field, given in refusals.items():
+        with pytest.raises(ValueError, match=field):
+            train(given["algo"], tmp_path / "c", overrides=given["overrides"], trained_agent=tmp_path / "a", **kw)
+        assert not (tmp_path / "c" / "config.yml").exists()
+    with pytest.raises(ValueError, match="trained_agent: rsl-ppo does not fine-tune"):
+        train("rsl-ppo", tmp_path / "d", n_timesteps=10**6, trained_agent=tmp_path / "a", progress=False, notes=False)
+
+
 def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_line(tmp_path, monkeypatch, capsys):
     """clone's files go through the writing door: a full disk is one line naming the file (exit 1, no traceback, no
     temporary left, the folder not trusted), a link planted at one of its names is refused, never written through."""
