@@ -83,11 +83,12 @@ Policy = Callable[[np.ndarray], np.ndarray]
 
 
 def shipped_agents(env_id: str) -> dict[str, Path]:
-    """The shipped agents of a task: ``{algo: folder}`` for every ``MODELS_DIR/<algo>-<env_id>/model.zip``."""
+    """The shipped agents of a task: ``{algo: folder}`` for every ``MODELS_DIR/<algo>-<env_id>/model.zip`` (``algo``
+    may hold a dash: ``rsl-ppo``; every task id starts with ``FlatBody``, so ``*-<env_id>`` matches that task only)."""
     found = {}
     for folder in sorted(MODELS_DIR.glob(f"*-{env_id}")):
         algo = folder.name[: -len(env_id) - 1]
-        if (folder / "model.zip").exists() and algo and "-" not in algo:
+        if (folder / "model.zip").exists() and algo:
             found[algo] = folder
     return found
 

@@ -57,7 +57,7 @@ COLOURS = {
 }
 MARKERS = {"heuristic": "o", "passivity": "s", "zero": "v", "planner": "D", "witness": "P", "pumping": "X"}
 """Each policy's marker (with its colour: policies told apart in print and by colour-blind readers)."""
-AGENT_COLOURS = ("#d62728", "#8c564b", "#e377c2", "#17becf", "#000000")
+AGENT_COLOURS = ("#d62728", "#e377c2", "#17becf", "#8c564b", "#000000")
 AGENT_MARKERS = ("^", "<", ">", "h", "*")
 
 

@@ -403,8 +403,10 @@ def _evaluate_tasks(args) -> int:
     from flatbody_env.env.registration import V1_IDS, task_spec
 
     if args.env is None and not args.out_dir:  # --docs alone: the table from the saved reports, no evaluation
+        from flatbody_env.output import shown_path
+
         update_docs(args.docs, REFERENCE_DIR)
-        print(f"updated the table in {args.docs} from {REFERENCE_DIR}")
+        print(f"updated the table in {args.docs} from {shown_path(REFERENCE_DIR)}")
         return 0
     if args.model is not None and args.env == "all":
         raise ValueError("--env: give one task id with MODEL (all evaluates the shipped agents)")
