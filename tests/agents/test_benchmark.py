@@ -173,3 +173,24 @@ def test_a_saved_table_joins_this_runs_rows_which_replace_its_cases(tmp_path, ca
         err = capsys.readouterr().err
         assert err.startswith("flatbody") and "--with" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "b").exists()  # refused before anything trains
+
+
+def test_the_saved_side_tables_are_what_docs_say_and_their_own_report():
+    """The off-policy runs at PPO's budget (``agents/data/benchmark/off-policy-3e5.json``): their final cells are the
+    report of their own rows (mean success and its t-interval over the seeds), and docs/tasks.md quotes those figures
+    and each seed's success as they are saved."""
+    from pathlib import Path
+
+    from agents.benchmark import DATA_DIR
+
+    saved = json.loads((DATA_DIR / "off-policy-3e5.json").read_text())
+    page = (Path(__file__).resolve().parents[2] / "docs" / "tasks.md").read_text(encoding="utf-8")
+    for algo in ("sac", "td3"):
+        rows = sorted((r for r in saved["rows"] if r["algo"] == algo), key=lambda r: r["seed"])
+        assert [r["seed"] for r in rows] == [0, 1, 2, 3, 4] and {r["budget"] for r in rows} == {300_000}
+        success = [r["final"]["success_rate"] for r in rows]
+        mean, lo, hi = mean_interval(success)
+        assert saved["final"]["cells"][f"{algo}|FlatBody-v1"]["success_mean"] == pytest.approx([mean, lo, hi])
+        quoted = f"{algo.upper()} **{mean:.0%} ({lo:.0%}–{hi:.0%})**".replace("%", " %")
+        seeds = "(" + ", ".join(f"{s * 100:.0f}" for s in success)
+        assert quoted in page.replace("\n", " ") and seeds in page.replace("\n", " "), (quoted, seeds)
