@@ -680,7 +680,10 @@ def fine_tuning(config: RunConfig) -> RunConfig:
     path = Path(config.trained_agent) / "config.yml"
     if not path.is_file():
         return config
-    trained = RunConfig.read(path, where="trained_agent")
+    try:
+        trained = RunConfig.read(path, where="trained_agent")
+    except ValueError as exc:  # its config.yml is not a run's: say whose it is
+        raise ValueError(f"trained_agent: {str(config.trained_agent)[:80]!r}: {exc}") from None
     if trained.algo != config.algo:
         raise ValueError(
             f"trained_agent: {str(config.trained_agent)[:80]!r} is a {trained.algo} run; it fine-tunes with "

@@ -224,6 +224,14 @@ def test_fine_tuning_keeps_the_trained_agents_policy_form(tmp_path):
         with pytest.raises(ValueError, match=field):
             train(given["algo"], tmp_path / "c", overrides=given["overrides"], trained_agent=tmp_path / "a", **kw)
         assert not (tmp_path / "c" / "config.yml").exists()
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "model.zip").write_bytes((tmp_path / "a" / "model.zip").read_bytes())
+    for text in ("::: [", "format: 2\nalgo: 12\n"):  # a config.yml that is not a run's: one line naming the argument
+        (bad / "config.yml").write_text(text)
+        with pytest.raises(ValueError, match="^trained_agent: .*config.yml"):
+            train("ppo", tmp_path / "c", overrides=tiny, trained_agent=bad, **kw)
+        assert not (tmp_path / "c" / "config.yml").exists()
     with pytest.raises(ValueError, match="trained_agent: rsl-ppo does not fine-tune"):
         train("rsl-ppo", tmp_path / "d", n_timesteps=10**6, trained_agent=tmp_path / "a", progress=False, notes=False)
 
