@@ -74,6 +74,13 @@ def algo_kwargs_of(hp: dict[str, Any]) -> dict[str, Any]:
     return algo_kwargs
 
 
+def normalize_of(hp: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``VecNormalize`` keywords of a hyperparameter entry's ``normalize`` (``true``: observations and rewards; a
+    mapping as given), or None where the run does not normalise."""
+    norm = hp.get("normalize") or None
+    return {"norm_obs": True, "norm_reward": True} if norm is True else norm
+
+
 def action_noise(hp: dict[str, Any], action_space):
     """The exploration noise added to SAC's or TD3's actions (``noise_type``: ``normal`` or ``ornstein-uhlenbeck``,
     of standard deviation ``noise_std``, default 0.1), as RL Zoo builds it; None without ``noise_type``."""
@@ -531,9 +538,7 @@ def _train_sb3(
 
     torch.set_num_threads(threads)
     total, nenv, seed = config.n_timesteps, config.n_envs, config.seed
-    norm = hp.get("normalize") or None
-    if norm is True:
-        norm = {"norm_obs": True, "norm_reward": True}
+    norm = normalize_of(hp)
     algo_kwargs = algo_kwargs_of(hp)
     unit = rollout_steps(algo, {**hp, "n_envs": nenv, **algo_kwargs})
     if not resume:
@@ -653,9 +658,7 @@ def new_model(config: RunConfig, env=None):
     hp = config.hyperparams
     if env is None:
         env = _vec_env_of(config)
-    norm = hp.get("normalize") or None
-    if norm is True:
-        norm = {"norm_obs": True, "norm_reward": True}
+    norm = normalize_of(hp)
     if norm:
         env = VecNormalize(env, gamma=float(hp.get("gamma", 0.99)), **norm)
     algo_kwargs = algo_kwargs_of(hp)
@@ -692,6 +695,7 @@ __all__ = [
     "check_resumed",
     "make_vec_env",
     "new_model",
+    "normalize_of",
     "rollout_steps",
     "train",
     "train_config",

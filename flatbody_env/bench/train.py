@@ -106,7 +106,7 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv, VecMonitor, VecNormalize
 
-    from agents.train import algo_kwargs_of
+    from agents.train import algo_kwargs_of, normalize_of
 
     torch.set_num_threads(1)
     n = int(hp.get("n_envs", 1))
@@ -133,9 +133,7 @@ def _run(env_id: str, hp: dict, timesteps: int, seed: int) -> TrainTiming:
         base.seed(seed)
         venv, clock = _timed(base)
         venv = VecMonitor(venv)
-    norm = hp.get("normalize") or None
-    if norm is True:
-        norm = {"norm_obs": True, "norm_reward": True}
+    norm = normalize_of(hp)
     if norm:
         venv = VecNormalize(venv, gamma=float(hp.get("gamma", 0.99)), **norm)
     model = PPO(hp.get("policy", "MlpPolicy"), venv, seed=seed, device="cpu", verbose=0, **algo_kwargs_of(hp))
