@@ -255,16 +255,17 @@ def _benchmark(args) -> int:
         + grid
         + f" --out {args.out}"
     )
-    if args.with_table is not None:  # read and checked before anything trains
-        saved = validation.read_json("--with", args.with_table)
-        join_rows([], saved)
-        command += f" --with {args.with_table}"
+    saved_tables = []  # read and checked before anything trains; the first named wins over the later ones
+    for path in args.with_table or []:
+        saved_tables.append(validation.read_json("--with", path))
+        join_rows([], saved_tables[-1])
+        command += f" --with {path}"
     if args.retrain:
         _forget_runs(spec, args)
     result = run_sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, resume=args.resume,
                        progress=not args.no_progress)  # fmt: skip
     rows = [r for r in rows_of(result) if isinstance(r, dict) and "curve" in r]
-    if args.with_table is not None:
+    for saved in saved_tables:
         rows = join_rows(rows, saved)
     shown = {r["env_id"] for r in rows}
     references = [r for r in load_reports(REFERENCE_DIR) if r["env_id"] in shown]
@@ -593,9 +594,11 @@ def register(sub) -> None:
     p.add_argument(
         "--with",
         dest="with_table",
+        action="append",
         metavar="TABLE.json",
         help="a saved benchmark table (an earlier benchmark's or another machine's benchmark.json) whose cases join "
-        "this run's in the report; this run's replace those of the same algorithm, task and seed",
+        "this run's in the report; this run's replace those of the same algorithm, task and seed; repeatable, a "
+        "table named earlier replacing the cases of one named later",
     )
     p.add_argument(
         "--hyperparam-grid",

@@ -194,3 +194,37 @@ def test_the_saved_side_tables_are_what_docs_say_and_their_own_report():
         quoted = f"{algo.upper()} **{mean:.0%} ({lo:.0%}–{hi:.0%})**".replace("%", " %")
         seeds = "(" + ", ".join(f"{s * 100:.0f}" for s in success)
         assert quoted in page.replace("\n", " ") and seeds in page.replace("\n", " "), (quoted, seeds)
+
+
+def test_several_saved_tables_join_in_order_the_first_named_winning(tmp_path):
+    """``--with A --with B``: this run's cases replace A's and B's, A's replace B's (a side table named before the
+    main table replaces its cases), and the report holds every case once."""
+    from agents.benchmark import BUDGETS
+    from flatbody_env.cli.main import main
+    from flatbody_env.sweep.store import ResultStore
+    from flatbody_env.sweep.tasks import plan
+
+    envs = ["FlatBody-v1"]
+    spec = {"kind": "benchmark", "algos": ["td3"], "envs": envs, "seeds": [0, 1], "budgets": {**BUDGETS, "td3": 1500},
+            "eval_seed": 10000}  # fmt: skip
+    out = tmp_path / "b"
+    with ResultStore(out) as store:  # a finished benchmark of td3 on seeds 0-1: --resume trains nothing
+        store.begin(spec, resume=False)
+        for task, row in zip(plan(spec, out), _rows("td3", envs, [0, 1], lambda e, s: 0.9), strict=True):
+            store.put(task.key, payload=row)
+    side = {"rows": _rows("td3", envs, range(4), lambda e, s: 0.6) + _rows("sac", envs, range(2), lambda e, s: 0.5)}
+    main_table = {
+        "rows": _rows("td3", envs, range(5), lambda e, s: 0.1) + _rows("ppo", envs, range(2), lambda e, s: 0.3)
+    }
+    paths = []
+    for name, table in (("side", side), ("main", main_table)):
+        paths.append(tmp_path / f"{name}.json")
+        paths[-1].write_text(json.dumps(table))
+    args = ["benchmark", "--algos", "td3", "--envs", "FlatBody-v1", "--seeds", "0-1", "--budget", "td3=1500"]
+    assert main([*args, "--out", str(out), "--resume", "--no-progress", "--workers", "0",
+                 "--with", str(paths[0]), "--with", str(paths[1])]) == 0  # fmt: skip
+    rows = json.loads((out / "benchmark.json").read_text())["rows"]
+    got = {(r["algo"], r["seed"]): r["final"]["success_rate"] for r in rows}
+    assert len(rows) == len(got) == 5 + 2 + 2
+    assert got == {("td3", 0): 0.9, ("td3", 1): 0.9, ("td3", 2): 0.6, ("td3", 3): 0.6, ("td3", 4): 0.1,
+                   ("sac", 0): 0.5, ("sac", 1): 0.5, ("ppo", 0): 0.3, ("ppo", 1): 0.3}  # fmt: skip
