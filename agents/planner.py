@@ -7,7 +7,8 @@ entries), K candidate action sequences over a horizon of H env steps are rolled 
 own batched transition (:class:`flatbody_env.env.core.EnvCore`: the same integrator, domain and reward —
 no formula is restated), scored by the env's own reward summed over the horizon (a body whose episode ends
 stops earning), and combined by MPPI's exponential weights (temperature ``temperature`` × the spread of
-the returns); the plan's first action is applied, the plan is shifted by one step and warm-starts the next.
+the returns); the plan's first action is applied, the plan is shifted by one step and warm-starts the next
+(``warm_start``).
 
 Candidates are the nominal plan plus Gaussian noise on ``knots`` control points linearly interpolated over
 the horizon (smooth actions, few dimensions), clipped to [−1, 1]; one candidate is the nominal plan itself
@@ -74,6 +75,10 @@ class PlannerSettings:
     """A feedback law the candidates perturb: ``"none"`` (open-loop action sequences), ``"lqr"``, ``"passivity"`` or
     ``"pumping"`` (the LQR with centrifugal pumping) — closed-loop rollouts: the action at each step is
     clip(law(observation) + the candidate's perturbation); :mod:`agents.heuristic`. The row's label names it."""
+    warm_start: bool = True
+    """Whether each control step starts from the previous step's plan shifted by one step (MPPI's warm start, which
+    carries what the earlier steps found); ``False``: from the zero perturbation at every step, so the action is a
+    function of the observation alone — what a network distilled from the planner can represent (docs/agents.md)."""
     objective: str = "distance"
     """What a candidate scores: ``"distance"`` — minus log(d + :data:`LOG_FLOOR`) of the task distance d summed over
     the horizon (the env's own distance, so no formula is restated; a body whose episode ends scores
@@ -91,6 +96,7 @@ class PlannerSettings:
         validation.number("terminal", self.terminal, low=0.0, high=1e6)
         validation.string("objective", self.objective, choices=("distance", "reward"))
         validation.string("prior", self.prior, choices=PRIOR_LAWS)
+        validation.boolean("warm_start", self.warm_start)
 
     @property
     def body_steps(self) -> int:
@@ -144,6 +150,8 @@ class Planner:
         t0 = time.perf_counter()
         s, B, K, n = self.settings, self.episodes, self.settings.samples, self.n_act
         self._obs = obs
+        if not s.warm_start:
+            self.plan[:] = 0.0
         Y, T = state_from_observation(np.asarray(obs, dtype=np.float64)[:, :16])
         d = self._distance(Y, T, bodies_P)
         scale = (s.noise * np.clip(d / s.noise_distance, s.noise_floor, 1.0))[:, None, None, None]
@@ -260,7 +268,12 @@ def parse_overrides(items: list[str] | None, where: str = "planner") -> dict[str
         key, eq, text = str(item).partition("=")
         if not eq or key not in kinds:
             raise validation.refusal(where, f"be KEY=VALUE with KEY one of {', '.join(kinds)}", item)
-        kind = {"int": int, "float": float}.get(str(kinds[key]), str)
+        kind = {"int": int, "float": float, "bool": bool}.get(str(kinds[key]), str)
+        if kind is bool:
+            if text.lower() not in ("true", "false"):
+                raise validation.refusal(f"{where}.{key}", "be true or false", text)
+            out[key] = text.lower() == "true"
+            continue
         try:
             out[key] = kind(text)
         except ValueError:
@@ -280,9 +293,10 @@ PRIOR_NAMES = {"lqr": "the LQR", "pumping": "the LQR with pumping", "passivity":
 
 def label(settings: PlannerSettings) -> str:
     """The report's name of the planner row: the law its plans perturb, and the model it rolls out."""
+    fresh = "" if settings.warm_start else ", no warm start"
     if settings.prior == "none":
-        return "planner (MPPI over open-loop plans, true model)"
-    return f"planner (MPPI around {PRIOR_NAMES.get(settings.prior, settings.prior)}, true model)"
+        return f"planner (MPPI over open-loop plans{fresh}, true model)"
+    return f"planner (MPPI around {PRIOR_NAMES.get(settings.prior, settings.prior)}{fresh}, true model)"
 
 
 __all__ = [

@@ -78,6 +78,27 @@ def test_the_planner_row_names_the_law_its_plans_perturb():
     assert len(set(names.values())) == len(PRIOR_LAWS)
 
 
+def test_without_warm_start_the_planners_action_is_a_function_of_the_observation():
+    """``warm_start=False``: the plan found at one step does not carry to the next, so with the same noise the action
+    in a state is the same whatever came before; with the warm start (the default) the earlier plan changes it."""
+    from agents.planner import Planner, PlannerSettings, label
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kw = env_kwargs_for("FlatBody-v1")
+    env = FlatBodyVectorEnv(2, **kw)
+    obs, _ = env.reset(seed=[10000, 10001])
+    before, _, _, _, _ = env.step(np.full((2, env.single_action_space.shape[0]), 0.5, dtype=np.float32))
+    for warm in (False, True):
+        settings = PlannerSettings(samples=8, horizon=10, prior="none", warm_start=warm)
+        fresh, primed = Planner(kw, 2, settings, seed=3), Planner(kw, 2, settings, seed=3)
+        primed.act(before)  # a step before: its plan warm-starts the next only with warm_start
+        primed.rng = np.random.default_rng(3)  # the same noise for the step compared
+        a, b = fresh.act(obs), primed.act(obs)
+        assert np.array_equal(a, b) != warm, warm
+    assert label(settings) == "planner (MPPI over open-loop plans, true model)"
+    assert label(PlannerSettings(warm_start=False)) == "planner (MPPI over open-loop plans, no warm start, true model)"
+
+
 @pytest.mark.slow
 def test_the_planner_holds_more_unstable_starts_than_the_passivity_law_it_perturbs():
     from agents.evaluate import run_episodes
@@ -96,6 +117,7 @@ def test_planner_settings_are_checked():
         ({"prior": "pid"}, "prior"),
         ({"noise_floor": float("nan")}, "noise_floor"),
         ({"noise_distance": 0.0}, "noise_distance"),
+        ({"warm_start": "no"}, "warm_start"),
     ):
         with pytest.raises(ValueError, match=f"^{field}"):
             PlannerSettings(**kw)
@@ -106,6 +128,8 @@ def test_planner_overrides_are_typed_and_checked_before_anything_runs():
 
     got = parse_overrides(["samples=256", "horizon=160", "noise=0.6", "prior=none"])
     assert got == {"samples": 256, "horizon": 160, "noise": 0.6, "prior": "none"}
+    assert parse_overrides(["warm_start=false"]) == {"warm_start": False}
+    assert parse_overrides(["warm_start=True"]) == {"warm_start": True}
     s = settings_for("FlatBodyTorque-v1", got)
     assert (s.samples, s.horizon, s.noise, s.prior, s.knots) == (256, 160, 0.6, "none", 8)  # knots: the task's own
     assert settings_for("FlatBody-v1", {"samples": 8}).prior == "lqr"  # the task's own law stays unless overridden
@@ -120,6 +144,7 @@ def test_planner_overrides_are_typed_and_checked_before_anything_runs():
         (["samples=1"], r"^--planner.samples: must be an integer \(allowed range \[2, 4096\]\)"),
         (["noise=inf"], "^--planner.noise: must"),
         (["prior=pid"], "^--planner.prior: must be one of none, lqr, passivity"),
+        (["warm_start=1"], "^--planner.warm_start: must be true or false, got '1'"),
     ):
         with pytest.raises(ValueError, match=match):
             parse_overrides(bad, "--planner")
