@@ -228,3 +228,23 @@ def test_several_saved_tables_join_in_order_the_first_named_winning(tmp_path):
     assert len(rows) == len(got) == 5 + 2 + 2
     assert got == {("td3", 0): 0.9, ("td3", 1): 0.9, ("td3", 2): 0.6, ("td3", 3): 0.6, ("td3", 4): 0.1,
                    ("sac", 0): 0.5, ("sac", 1): 0.5, ("ppo", 0): 0.3, ("ppo", 1): 0.3}  # fmt: skip
+
+
+def test_the_saved_table_is_every_algorithm_on_every_v1_task_at_the_default_budgets():
+    """``agents/data/benchmark/benchmark.json`` holds five training seeds of each algorithm on each v1 task, each at its
+    algorithm's budget of :data:`agents.benchmark.BUDGETS` (so ``flatbody benchmark --out DIR`` trains this table); its
+    ``FlatBody-v1`` cells of SAC and TD3 are the runs of ``off-policy-3e5.json``, and the runs at 10⁵ steps it held
+    before are ``off-policy-1e5.json``'s."""
+    from agents.benchmark import ALGOS, BUDGETS, DATA_DIR
+    from flatbody_env.env.registration import V1_IDS
+
+    rows = json.loads((DATA_DIR / "benchmark.json").read_text())["rows"]
+    cases = {(r["algo"], r["env_id"], r["seed"]) for r in rows}
+    assert len(cases) == len(rows) == len(ALGOS) * len(V1_IDS) * 5
+    assert cases == {(a, e, s) for a in ALGOS for e in V1_IDS for s in range(5)}
+    assert all(r["budget"] == BUDGETS[r["algo"]] for r in rows)
+    side = json.loads((DATA_DIR / "off-policy-3e5.json").read_text())["rows"]
+    mine = {(r["algo"], r["seed"]): r for r in rows if r["env_id"] == "FlatBody-v1" and r["algo"] in ("sac", "td3")}
+    assert {(r["algo"], r["seed"]): r for r in side} == mine
+    before = json.loads((DATA_DIR / "off-policy-1e5.json").read_text())["rows"]
+    assert len(before) == 2 * len(V1_IDS) * 5 and {r["budget"] for r in before} == {100_000}

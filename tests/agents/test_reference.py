@@ -105,13 +105,23 @@ def test_docs_table_is_the_one_regenerated_from_the_shipped_reports():
                 )
 
 
+RANK_EXCEPTIONS = {
+    ("FlatBody-v1", "ppo seed 4 (300,000 steps)", "td3 seed 0 (300,000 steps)"),
+    ("FlatBody-v1", "ppo seed 4 (300,000 steps)", "td3 seed 3 (300,000 steps)"),
+    ("FlatBody-v1", "ppo seed 4 (300,000 steps)", "td3 seed 4 (300,000 steps)"),
+    ("FlatBodySlow-v1", "ppo seed 2 (300,000 steps)", "td3 seed 2 (300,000 steps)"),
+}
+"""The pairs (task, the more successful, the less successful) that break "return ranks like success", each named in
+docs/tasks.md ("Reward"): policies that reach the tolerance and do not stay earn more than ones that end inside it more
+often."""
+
+
 def test_return_ranks_like_success_on_every_v1_task():
     """The reward agrees with the score: over the shipped v1 reports — the baselines and the planner —, every learned
-    run of the saved benchmark table and the shipped agent, all on the same 100 episodes of a task (seeds 10000…),
-    whenever one causal policy succeeds at least 10 points more often than another, its mean return is higher too
-    (the witness, which replays the answer open loop, is left out). The off-policy runs at three times the table's budget
-    (``off-policy-3e5.json``) are not in it: three of their pairs with the table's runs break the rule (docs/tasks.md,
-    "Reward")."""
+    run of the saved benchmark tables (the main table and the off-policy runs at 10⁵ steps it held before) and the
+    shipped agent, all on the same 100 episodes of a task (seeds 10000…), whenever one causal policy succeeds at least
+    10 points more often than another, its mean return is higher too (the witness, which replays the answer open loop,
+    is left out) — but for the documented pairs of :data:`RANK_EXCEPTIONS`, which are exactly the pairs that break it."""
     from agents.benchmark import DATA_DIR as BENCHMARK_DIR
     from agents.evaluate import shipped_model_dir
 
@@ -124,20 +134,26 @@ def test_return_ranks_like_success_on_every_v1_task():
                 for name, e in rep["policies"].items()
                 if "episodes" in e and name != "witness"
             ]
-    for row in json.loads((BENCHMARK_DIR / "benchmark.json").read_text())["rows"]:
-        name = f"{row['algo']} seed {row['seed']}"
-        policies[row["env_id"]].append((name, row["final"]["success_rate"], row["final"]["return"]))
+    for table in ("benchmark.json", "off-policy-1e5.json"):
+        for row in json.loads((BENCHMARK_DIR / table).read_text())["rows"]:
+            name = f"{row['algo']} seed {row['seed']} ({row['budget']:,} steps)"
+            policies[row["env_id"]].append((name, row["final"]["success_rate"], row["final"]["return"]))
     shipped = json.loads((shipped_model_dir() / "evaluation.json").read_text())
     assert (shipped["seed"], shipped["episodes"]) == (10_000, 100)
     policies[shipped["env_id"]].append(("shipped agent", shipped["agent"]["success_rate"], shipped["agent"]["return"]))
-    pairs = 0
+    pairs, broken = 0, set()
     for env_id, rows in policies.items():
+        assert len({a for a, _, _ in rows}) == len(rows), env_id  # every policy once
         for a, sa, ra in rows:
             for b, sb, rb in rows:
                 if sa - sb >= 0.10:
                     pairs += 1
-                    assert ra > rb, (env_id, a, sa, ra, b, sb, rb)
-    assert pairs >= 500
+                    if not ra > rb:
+                        broken.add((env_id, a, b))
+    assert broken == RANK_EXCEPTIONS
+    assert pairs >= 1_000
+    page = (ROOT / "docs" / "tasks.md").read_text(encoding="utf-8").replace("\n", " ")
+    assert f"{len(broken)} of the {pairs:,} pairs" in page
 
 
 def test_no_medium_or_hard_v1_task_is_solved_by_a_classic_controller():
