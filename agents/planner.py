@@ -269,10 +269,8 @@ def parse_overrides(items: list[str] | None, where: str = "planner") -> dict[str
         if not eq or key not in kinds:
             raise validation.refusal(where, f"be KEY=VALUE with KEY one of {', '.join(kinds)}", item)
         kind = {"int": int, "float": float, "bool": bool}.get(str(kinds[key]), str)
-        if kind is bool:
-            if text.lower() not in ("true", "false"):
-                raise validation.refusal(f"{where}.{key}", "be true or false", text)
-            out[key] = text.lower() == "true"
+        if kind is bool:  # read as YAML, as --env-kwargs values are
+            out[key] = validation.boolean(f"{where}.{key}", validation.parse_yaml(f"{where}.{key}", text))
             continue
         try:
             out[key] = kind(text)

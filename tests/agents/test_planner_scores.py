@@ -144,7 +144,8 @@ def test_planner_overrides_are_typed_and_checked_before_anything_runs():
         (["samples=1"], r"^--planner.samples: must be an integer \(allowed range \[2, 4096\]\)"),
         (["noise=inf"], "^--planner.noise: must"),
         (["prior=pid"], "^--planner.prior: must be one of none, lqr, passivity"),
-        (["warm_start=1"], "^--planner.warm_start: must be true or false, got '1'"),
+        (["warm_start=1"], "^--planner.warm_start: must be true or false, got 1"),
+        (["warm_start=maybe"], "^--planner.warm_start: must be true or false"),
     ):
         with pytest.raises(ValueError, match=match):
             parse_overrides(bad, "--planner")
