@@ -114,6 +114,9 @@ FIELDS: dict[str, dict[str, Field]] = {
         "use_sde": Field(kind=_B),
         "sde_sample_freq": Field(kind=_I, low=-1, high=1_000_000),
         "target_kl": Field(kind=_N, positive=True, high=10.0, nullable=True),
+        # fine-tuning a trained agent (agents.train): its exploration, and a first stretch that fits the critic alone
+        "fine_tune_log_std": Field(kind=_N, low=-20.0, high=2.0),
+        "critic_warmup": Field(kind=_I, low=0, high=validation.MAX_TIMESTEPS),
         "policy_kwargs": Field(
             kind="mapping",
             fields={
@@ -674,6 +677,12 @@ def fine_tuning(config: RunConfig) -> RunConfig:
     stay the run's own. ``ValueError`` naming ``trained_agent`` for another algorithm (or rsl-ppo: it does not
     fine-tune), naming ``hyperparams.KEY`` where an override (``source.overrides``) sets one of those keys otherwise."""
     if config.trained_agent is None:
+        validation.requirement(
+            "hyperparams.fine_tune_log_std",
+            config.hyperparams.get("fine_tune_log_std"),
+            "fine_tune_log_std" not in config.hyperparams,
+            "come with a trained agent (--trained-agent); a new run's is policy_kwargs.log_std_init",
+        )
         return config
     if config.algo not in SB3_ALGOS:
         raise ValueError(f"trained_agent: {config.algo} does not fine-tune a trained agent (ppo, sac and td3 do)")

@@ -45,6 +45,8 @@ _META_KEYS = (
     "precision_bonus",
     "noise_type",
     "noise_std",
+    "fine_tune_log_std",
+    "critic_warmup",
 )
 """Keys of a hyperparameter entry that are not SB3 constructor keywords."""
 
@@ -197,15 +199,58 @@ def _load_saved(
 
 def _load_trained_agent(cls, folder: Path, env, norm, hp: dict[str, Any], algo_kwargs: dict[str, Any], seed: int):
     """The model and (normalised) env of a fine-tuning run (:func:`train`'s ``trained_agent``): the run's weights,
-    optimiser state and statistics; this run's rollout and update settings (not its network)."""
+    optimiser state and statistics; this run's rollout and update settings (not its network); with
+    ``fine_tune_log_std``, every entry of the policy's log standard deviation (PPO's ``log_std``, gSDE's matrix too)
+    set to that value."""
     keep = {k: v for k, v in algo_kwargs.items() if k != "policy_kwargs"}  # the network is the loaded one's
     model, env = _load_saved(
         cls, folder / "model.zip", folder / "vecnormalize.pkl", env, norm, "trained_agent", custom_objects=keep
     )
     if norm:
         env.norm_reward, env.gamma = bool(norm.get("norm_reward", True)), float(hp.get("gamma", 0.99))
+    if "fine_tune_log_std" in hp:
+        import torch
+
+        with torch.no_grad():
+            model.policy.log_std.fill_(float(hp["fine_tune_log_std"]))
     model.set_random_seed(seed)
     return model, env
+
+
+def actor_parameters(policy) -> list:
+    """The parameters of an SB3 actor-critic policy that shape its actions (the actor's layers, the action head and the
+    log standard deviation), not the value function's."""
+    return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(), policy.log_std]
+
+
+def _critic_warmup_callback(until: int):
+    """Hold the actor (:func:`actor_parameters`) fixed while fewer than ``until`` env steps are trained, so that PPO's
+    first updates fit the value function to the policy it starts from (a fine-tuned policy is not moved by the
+    advantages of an untrained critic); the whole policy trains from the first rollout at or past ``until``."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class CriticWarmup(BaseCallback):
+        held = False
+
+        def _hold(self, held: bool) -> None:
+            for p in actor_parameters(self.model.policy):
+                p.requires_grad_(not held)
+            self.held = held
+
+        def _on_training_start(self) -> None:
+            self._hold(self.model.num_timesteps < until)
+
+        def _on_rollout_start(self) -> None:
+            if self.held and self.model.num_timesteps >= until:
+                self._hold(False)
+
+        def _on_training_end(self) -> None:
+            self._hold(False)
+
+        def _on_step(self) -> bool:
+            return True
+
+    return CriticWarmup()
 
 
 def _progress_callback(total: int, start: int, enabled: bool):
@@ -564,6 +609,8 @@ def _train_sb3(
     model.set_logger(folder.progress_logger(f"resumed-{start}" if resume else ""))
 
     callbacks = [_progress_callback(planned, start, progress), *(extra_callbacks or [])]
+    if int(hp.get("critic_warmup", 0)) > start:
+        callbacks.append(_critic_warmup_callback(int(hp["critic_warmup"])))
     curriculum = None
     if config.curriculum is not None:
         from agents.curriculum import curriculum_callback
@@ -691,6 +738,7 @@ __all__ = [
     "ALGOS",
     "ENV_ID",
     "action_noise",
+    "actor_parameters",
     "algo_kwargs_of",
     "check_resumed",
     "make_vec_env",

@@ -271,3 +271,43 @@ def test_clone_writes_through_the_one_door_full_disk_and_planted_links_are_one_l
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "vecnormalize.pkl" in line and "symbolic link" in line
     assert victim.read_bytes() == b"unchanged"
+
+
+def test_fine_tuning_sets_the_exploration_and_warms_the_critic_up_with_the_actor_held(tmp_path):
+    """``fine_tune_log_std`` sets every entry of the loaded policy's log std (its other weights unchanged);
+    ``critic_warmup`` trains the value function alone over its first steps — the actor's weights leave the warm-up as
+    they entered it, the critic's move — and the whole policy after it; the exploration setting without a trained
+    agent is refused naming the field, before anything is written."""
+    import torch
+
+    from agents.train import actor_parameters, train
+
+    tiny = ["n_envs=2", "n_steps=16", "batch_size=32", "n_epochs=2", "policy_kwargs.net_arch=[8]"]
+    kw = dict(progress=False, checkpoint_freq=0, notes=False)
+    train("ppo", tmp_path / "a", n_timesteps=32, overrides=tiny, **kw)
+
+    def policy(name):
+        return Agent(tmp_path / name, backend="sb3").model.policy
+
+    def actor(p):
+        return [q.detach().clone() for q in actor_parameters(p)]
+
+    def critic(p):
+        return [q.detach().clone() for q in [*p.mlp_extractor.value_net.parameters(), *p.value_net.parameters()]]
+
+    a = policy("a")
+    held = [*tiny[:4], "learning_rate=0.01", "fine_tune_log_std=-3.5", "critic_warmup=64"]
+    train("ppo", tmp_path / "b", n_timesteps=64, overrides=held, trained_agent=tmp_path / "a", **kw)
+    b = policy("b")
+    assert torch.all(b.log_std == -3.5) and not torch.all(a.log_std == -3.5)
+    assert all(torch.equal(x, y) for x, y in zip(actor(a)[:-1], actor(b)[:-1]))  # the actor held through the warm-up
+    assert not all(torch.equal(x, y) for x, y in zip(critic(a), critic(b)))  # the critic learned
+    assert all(q.requires_grad for q in actor_parameters(b))
+    train("ppo", tmp_path / "c", n_timesteps=96, overrides=held, trained_agent=tmp_path / "a", **kw)
+    c = policy("c")  # past the warm-up: the actor trains
+    assert not all(torch.equal(x, y) for x, y in zip(actor(b)[:-1], actor(c)[:-1]))
+    with pytest.raises(ValueError, match="^hyperparams.fine_tune_log_std: must come with a trained agent"):
+        train("ppo", tmp_path / "d", n_timesteps=32, overrides=[*tiny, "fine_tune_log_std=-3"], **kw)
+    assert not (tmp_path / "d" / "config.yml").exists()
+    with pytest.raises(ValueError, match="^hyperparams.critic_warmup: unknown field"):
+        train("sac", tmp_path / "e", n_timesteps=32, overrides=["critic_warmup=10"], **kw)
