@@ -440,7 +440,9 @@ def fit_policy_mean(
 
     with torch.no_grad():
         mse_start = float(((mean_action(xt) - yt) ** 2).mean())
-    params = [*pol.mlp_extractor.policy_net.parameters(), *pol.action_net.parameters()]
+    from agents.train import actor_parameters
+
+    params = [p for p in actor_parameters(pol) if p is not pol.log_std]  # the mean's: the fit leaves the noise alone
     opt = torch.optim.Adam(params, lr=learning_rate)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs) if anneal else None
     rows = []
