@@ -56,7 +56,6 @@ def body_constants(body: Body) -> np.ndarray:
 class ReachAnyBody(ReachStationaryEllipse):
     """Reach a stationary ellipse of a body drawn per episode (module docstring)."""
 
-    compiled_resets: ClassVar[bool] = False
     varies_body: ClassVar[bool] = True
 
     inertia_range: tuple[float, float] = (0.5, 2.0)
@@ -94,15 +93,10 @@ class ReachAnyBody(ReachStationaryEllipse):
             dtype=float,
         )
 
-    def constants_from(self, u) -> np.ndarray:
-        """(J, J3, κ, a, b) from :data:`BODY_DRAWS` uniforms: lo·(hi/lo)^u each (vectorised over u (..., 5))."""
-        r = self.ranges()
-        u = np.asarray(u, dtype=float)
-        return r[:, 0] * (r[:, 1] / r[:, 0]) ** u
-
     def sample_body(self, rng: np.random.Generator) -> Body:
-        """A body (module docstring) from :data:`BODY_DRAWS` uniforms of ``rng``."""
-        return body_from_constants(self.constants_from(rng.random(BODY_DRAWS)))
+        """A body (module docstring) from :data:`BODY_DRAWS` uniforms u of ``rng``: lo·(hi/lo)^u each of (J, J3, κ, a, b)."""
+        r = self.ranges()
+        return body_from_constants(r[:, 0] * (r[:, 1] / r[:, 0]) ** rng.random(BODY_DRAWS))
 
     def draw(
         self,
@@ -119,9 +113,6 @@ class ReachAnyBody(ReachStationaryEllipse):
         return Episode(
             state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target, body=own
         )
-
-    def observation_extra(self, body: Body) -> np.ndarray:
-        return body_constants(body) if self.observe_body else np.zeros(0)
 
     def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if not self.observe_body:

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -124,6 +124,15 @@ class EnvConfig:
     def kernel_draws(self) -> bool:
         """Whether the transition draws the episodes (the v1 ids) rather than the host (the v0 ids)."""
         return self.task.draws == "philox"
+
+    def controls(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The clipped actions (N, n) and the controls u = (τ1, τ2, τ3, f_ϱ) (N, 4) that the finite actions ``A``
+        (N, n) apply: the transition's arithmetic (:func:`~flatbody_env.env.transition.controls_body`)."""
+        m = self.mask
+        clipped = np.clip(A, -1.0, 1.0) if m.any() else np.zeros_like(A)
+        U = np.zeros((A.shape[0], 4))
+        U[:, m] = clipped[:, : int(m.sum())] * self.limits[m]
+        return clipped, U
 
     def left_domain(self, y: np.ndarray) -> str | None:
         """None inside the documented domain, else what left it (:func:`~flatbody_env.env.task.domain_code`)."""
@@ -221,17 +230,7 @@ def configure(
         if not track:
             raise
         # methods that do not carry R: drawing/recording integrates with the reference (info names it)
-        stepper = make_env_step(
-            ROTATION_INTEGRATOR,
-            body,
-            Tolerances(
-                rtol=rtol,
-                atol=atol,
-                max_nfev=validation.ENV_STEP_MAX_NFEV,
-                max_wall_time=validation.ENV_STEP_MAX_SECONDS,
-            ),
-            with_rotation=True,
-        )
+        stepper = make_env_step(ROTATION_INTEGRATOR, body, replace(tolerances, step=None), with_rotation=True)
     limits = np.array([torque_limit, torque_limit, torque_limit, force_limit], dtype=np.float64)
     sb = (float(stretch_bounds[0]), float(stretch_bounds[1]))
     rb = (float(rho_bounds[0]), float(rho_bounds[1]))
@@ -271,7 +270,7 @@ def configure(
     if config.kernel_draws:  # the v1 ids draw in the transition: a built-in potential, reachability by the table or off
         if custom is not None:
             raise ValueError("body: a custom potential cannot be drawn by the v1 resets (use a built-in potential)")
-        if task.compiled_targets and not _sampler(config).applies:
+        if task.compiled_targets and _draw_config(config) is None:
             raise _outside_the_table(config)
     return config
 
@@ -328,8 +327,8 @@ class EnvCore:
             why = self.device_unsupported()
             if why:
                 raise ValueError(why)
-        self.sampler = _sampler(c)
-        self.scfg = np.ascontiguousarray(self.sampler.cfg if self.sampler.applies else np.zeros(16), dtype=np.float64)
+        scfg = _draw_config(c)
+        self.scfg = np.ascontiguousarray(scfg if scfg is not None else np.zeros(16), dtype=np.float64)
         kind, coeffs = _batch_kinds().get(st.method, (0, np.zeros(1)))
         self.coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
         self.xcfg = self._xcfg(kind)
@@ -358,11 +357,7 @@ class EnvCore:
         self.OBS = alloc((n, c.observation_size), np.float32)
         self.FINAL = alloc((n, c.observation_size), np.float32)
         self.FLAGS = alloc((2,), np.int64)
-        base = np.tile(np.asarray(c.body.kernel_params(), dtype=np.float64)[:, None], (1, n))
-        if backend == "cpu":
-            self.S[tr.P0 : tr.P0 + 9] = base
-        else:
-            self._write_rows(tr.P0, base)
+        self._write_rows(tr.P0, np.tile(np.asarray(c.body.kernel_params(), dtype=np.float64)[:, None], (1, n)))
         if backend == "cpu":
             self.CFG = tr.pack_config(self.xcfg, c.kcfg, self.scfg, self.coeffs)
             self._work = (np.zeros(tr.WF_SIZE), np.zeros(tr.WI_SIZE, np.int64))
@@ -571,18 +566,21 @@ class EnvCore:
                 self._reset_launch(np.isin(np.arange(self.num_envs), idx), tr.RESET_START, True, False)
                 self._check()
                 return
-            episodes = [self._draw_with_options(i, options) for i in idx.tolist()]
+            if c.kernel_draws and "target" not in options:  # the state alone: the seed's episode's target (and body)
+                self._reset_launch(np.isin(np.arange(self.num_envs), idx), tr.RESET_DRAW, True, False)
+                self._check()
+            field = "options.state" if "state" in options else "initial_noise"
+            for i in idx.tolist():
+                ep = self._draw_with_options(i, options)
+                c.check_start(ep.state, field)
+                self._write_episode(i, ep)
         else:
-            episodes = self.host_draw(idx)
-        field = "options.state" if options and "state" in options else "initial_noise"
-        for i, ep in zip(idx.tolist(), episodes, strict=True):
-            c.check_start(ep.state, field)
-            self._write_episode(i, ep)
+            self.host_draw(idx)
 
-    def host_draw(self, idx: np.ndarray) -> list[Episode]:
+    def host_draw(self, idx: np.ndarray) -> None:
         """The v0 ids' draws for the bodies ``idx`` from their numpy generators (each draws what a single env reset
-        would): the task's compiled sampler where it applies, else the task's draws
-        (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.draw_batch`)."""
+        would: the task's :meth:`~flatbody_env.env.task.ReachStationaryEllipse.draw_batch`), written into ``S``;
+        ValueError naming ``initial_noise`` for a start outside the domain."""
         c = self.config
         rngs = [self.rngs[i] for i in idx.tolist()]
         if any(r is None for r in rngs):
@@ -591,25 +589,23 @@ class EnvCore:
             for k, i in enumerate(idx.tolist()):
                 if rngs[k] is None:
                     rngs[k] = self.rngs[i] = seeding.np_random(None)[0]
-        if c.task.compiled_resets and self.sampler.applies:
-            m = idx.size
-            Y = np.empty((11, m))
-            TG = self.sampler.sample(rngs, Y, np.arange(m))
-            return [Episode(state=Y[:, k].copy(), target=TG[k].copy()) for k in range(m)]
-        episodes: list[Episode] = []
         for k in range(0, len(rngs), HOST_DRAW_CHUNK):  # bounded memory: the reversed runs of a chunk at a time
             chunk = rngs[k : k + HOST_DRAW_CHUNK]
-            episodes += c.task.draw_batch(chunk, c.body, limits=c.limits, control=c.control, simulator=self)
-        return episodes
+            episodes = c.task.draw_batch(chunk, c.body, limits=c.limits, control=c.control, simulator=self)
+            for i, ep in zip(idx[k : k + HOST_DRAW_CHUNK].tolist(), episodes, strict=True):
+                c.check_start(ep.state, "initial_noise")
+                self._write_episode(i, ep)
 
     def _draw_with_options(self, i: int, options: Mapping[str, Any]) -> Episode:
-        """The target and/or state that ``options`` give; what they do not give is drawn by the task (the v0 ids: from
-        the body's generator)."""
+        """The target and/or state that ``options`` give; what they do not give is drawn by the task from the body's
+        generator (the v0 ids) or is the target the transition has drawn for the seed's episode (the v1 ids)."""
         c = self.config
         body = self.body_of(i)
         rng = self.rngs[i] or np.random.default_rng()
         if "target" in options:
             target = _target_from(c.task, options["target"], body)
+        elif c.kernel_draws:
+            target = None
         else:
             target = c.task.sample_target(rng, body, limits=c.limits, control=c.control)
         if "state" in options:
@@ -620,7 +616,8 @@ class EnvCore:
             y = pack(options["state"], validate=False)
         else:
             y = c.task.start_near(rng, target, c.control, body=body)
-        return Episode(state=y, target=target_row(target), ellipse=target)
+        row = self.S[tr.TG0 : tr.TG0 + 6, i].copy() if target is None else target_row(target)
+        return Episode(state=y, target=row, ellipse=target)
 
     def _write_episode(self, i: int, ep: Episode) -> None:
         self.S[tr.Y0 : tr.Y0 + 11, i] = ep.state
@@ -657,9 +654,7 @@ class EnvCore:
         if host and self.autoreset == "next":  # the v0 ids: the host draws the pending resets before the launch
             pending = np.flatnonzero(self.K[tr.K_PENDING])
             if pending.size:
-                for i, ep in zip(pending.tolist(), self.host_draw(pending), strict=True):
-                    c.check_start(ep.state, "initial_noise")
-                    self._write_episode(i, ep)
+                self.host_draw(pending)
         if self._mode == "lanes":
             tr.cpu("step_lanes")(A, self.S, self.K, self.OBS, self.FINAL, self.FLAGS, *self._dev)
         else:
@@ -711,9 +706,7 @@ class EnvCore:
         if host and self.autoreset == "same":
             ended = np.flatnonzero(self.K[tr.K_HOST])
             if ended.size:
-                for i, ep in zip(ended.tolist(), self.host_draw(ended), strict=True):
-                    c.check_start(ep.state, "initial_noise")
-                    self._write_episode(i, ep)
+                self.host_draw(ended)
                 self._reset_launch(self.K[tr.K_HOST] != 0, tr.RESET_OBSERVE, False, False)
                 self._check()
         self._add_custom_energy(None)
@@ -761,12 +754,11 @@ class EnvCore:
         if actions.ndim != 3 or actions.shape[1] != n or actions.shape[2] != c.n_act:
             raise ValueError(f"actions: expected shape (steps, {n}, {c.n_act}), got {actions.shape}")
         out, status, nfev, codes = np.empty_like(Y), np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
-        U, A = np.empty((4, n)), np.empty((n, c.n_act))
+        if not np.isfinite(actions).all():
+            raise validation.refusal("actions", "be finite numbers")
         ok = np.ones(n, dtype=bool)
-        mask = c.mask.astype(np.uint8)
         for k in range(actions.shape[0]):
-            if not compiled.controls_batch(np.ascontiguousarray(actions[k]), mask, c.limits, A, U):
-                raise validation.refusal("actions", "be finite numbers")
+            U = np.ascontiguousarray(c.controls(actions[k])[1].T)
             self._stepper.advance_batch(Y, U, c.dt, out, status, nfev)
             compiled.domain_codes(out, c.kcfg, codes)
             ok &= (status == 0) & (codes == 0)
@@ -810,11 +802,10 @@ def _outside_the_table(c: EnvConfig) -> ValueError:
     )
 
 
-def _sampler(c: EnvConfig):
-    from flatbody_env.env import compiled
-    from flatbody_env.env.sampling import EpisodeSampler
+def _draw_config(c: EnvConfig) -> np.ndarray | None:
+    from flatbody_env.env.sampling import draw_config
 
-    return EpisodeSampler(c.task, c.body, c.limits, c.control, compiled)
+    return draw_config(c.task, c.body, c.limits, c.control)
 
 
 def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any]) -> ReachStationaryEllipse:
@@ -904,18 +895,18 @@ def _checked_options(options: Any) -> dict[str, Any]:
 
 
 def _target_from(task: ReachStationaryEllipse, spec: Any, body: Body) -> StationaryEllipse:
-    """The task's target of ``reset(options={"target": spec})``; a shape without a stationary ellipse (or one whose
-    ellipse cannot be computed) is a ``ValueError`` naming ``options.target``."""
+    """The task's target of ``reset(options={"target": spec})`` (``spec`` as :func:`_checked_options` left it: a
+    :class:`~flatbody_env.physics.equilibria.StationaryEllipse`, or ``lambda``, ``mu`` and optionally ``branch``,
+    ``sign``); a shape without a stationary ellipse (or one whose ellipse cannot be computed) is a ``ValueError``
+    naming ``options.target``."""
+    if isinstance(spec, StationaryEllipse):
+        return spec
+    branch, sign = spec.get("branch", task.target_branch), float(spec.get("sign", 1.0))
     try:
-        return task.target_from(spec, body)
+        return stationary_from_shape(body, spec["lambda"], spec["mu"], branch=branch, sign=sign)
     except ValueError as exc:
-        text = str(exc)
-        if text.startswith("options."):
-            raise
-        if text.startswith("target"):
-            raise ValueError(f"options.{text}") from None
-        head, sep, rest = text.partition(": ")
-        raise ValueError(f"options.target: {rest if sep and head == 'lambda, mu' else text}") from None
+        head, sep, rest = str(exc).partition(": ")
+        raise ValueError(f"options.target: {rest if sep and head == 'lambda, mu' else exc}") from None
 
 
 def target_of(core: EnvCore, i: int) -> StationaryEllipse:

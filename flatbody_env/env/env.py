@@ -109,7 +109,9 @@ class FlatBodyEnv(gym.Env):
     initial state has the target's
     p_θ (conserved by every control), shape and spin within ``initial_noise`` (15 %) of the target,
     small momenta and a uniform θ; without torque |s| equals |s3*| (the Casimir is conserved).
-    ``reset(options={"state": {...eleven names...}})`` sets the state exactly.
+    ``reset(options={"state": {...eleven names...}})`` sets the state exactly; without a target beside it, the target
+    is the one the seed's episode draws (the v1 ids: the same as ``reset(seed=...)``'s; the v0 ids: drawn from the
+    seed's generator).
 
     ## Info
 
@@ -217,17 +219,7 @@ class FlatBodyEnv(gym.Env):
     dt = property(lambda self: self.config.dt)
     stepper = property(lambda self: self.config.stepper, doc="The integrator's env stepper (the seam's).")
     tolerances = property(lambda self: self.config.tolerances)
-    stretch_bounds = property(lambda self: self.config.stretch_bounds)
-    rho_bounds = property(lambda self: self.config.rho_bounds)
-    momentum_bound = property(lambda self: self.config.momentum_bound)
-    gap_min = property(lambda self: self.config.gap_min)
-    track_rotation = property(lambda self: self.config.track_rotation)
-    custom_potential = property(lambda self: self.config.custom_potential)
-    observation_size = property(lambda self: self.config.observation_size)
     reward_names = property(lambda self: self._names, doc='The names of ``info["reward_terms"]`` (the task\'s).')
-    sampler = property(
-        lambda self: self.core.sampler, doc="The episode sampler of the v0 draws (:mod:`flatbody_env.env.sampling`)."
-    )
     stepping_integrator = property(lambda self: self._method, doc="The method that really integrates.")
     kernel_config = property(lambda self: self.config.kcfg, doc="The task's kernel configuration ``cfg`` (read only).")
 
@@ -285,20 +277,14 @@ class FlatBodyEnv(gym.Env):
         """None inside the documented domain, else what left it."""
         return self.config.left_domain(y)
 
-    def check_start(self, y: np.ndarray, field: str) -> None:
-        """ValueError naming ``field`` when the initial state ``y`` lies outside the domain."""
-        self.config.check_start(y, field)
-
     def controls(self, action) -> tuple[np.ndarray, np.ndarray]:
         """The clipped action a (n,) and the controls u = (τ1, τ2, τ3, f_ϱ) (4,) it applies. ValueError for a
         non-finite or wrong-sized action."""
         a = self._action(action)
         if not np.isfinite(a).all():
             raise validation.refusal("action", f"be {a.size} finite real numbers in [-1, 1]", action)
-        clipped = np.clip(a, -1.0, 1.0) if self.config.mask.any() else np.zeros_like(a)
-        u = np.zeros(4)
-        u[self.config.mask] = clipped[: int(self.config.mask.sum())] * self.config.limits[self.config.mask]
-        return clipped, u
+        clipped, u = self.config.controls(a[None])
+        return clipped[0], u[0]
 
     def _action(self, action) -> np.ndarray:
         """``action`` as (n,) float64 real numbers, or ``ValueError`` naming ``action`` (finiteness is checked by the
@@ -317,8 +303,6 @@ class FlatBodyEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         if seed is not None:
-            from flatbody_env.physics import validation
-
             validation.integer("seed", seed, low=0, high=validation.MAX_SEED)
         self.core.reset(seeds=None if seed is None else [seed], options=options)
         self._started = True

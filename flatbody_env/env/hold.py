@@ -46,12 +46,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
 from flatbody_env.env.sampling import BALL_DRAWS, HYPERBOLIC, START_BALL, ball_state_kernel
-from flatbody_env.env.task import DEFAULT_LIMITS, TASK_HOLD, Episode, ReachStationaryEllipse, target_row
+from flatbody_env.env.task import TASK_HOLD, ReachStationaryEllipse
 from flatbody_env.physics import validation
 from flatbody_env.physics.body import Body
 from flatbody_env.physics.equilibria import StationaryEllipse
@@ -155,33 +155,6 @@ class HoldUnstableEllipse(ReachStationaryEllipse):
         self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body
     ) -> np.ndarray:
         return self.sample_initial_state(rng, target, control, body=body)
-
-    def draw(
-        self,
-        rng: np.random.Generator,
-        body: Body,
-        *,
-        limits=DEFAULT_LIMITS,
-        control: str = "torque+dilatation",
-        simulator: Any = None,
-    ) -> Episode:
-        """A hyperbolic target (:meth:`sample_target`), then a start inside the success ball (:meth:`sample_initial_state`)."""
-        target = self.sample_target(rng, body, limits=limits, control=control)
-        return Episode(
-            state=self.sample_initial_state(rng, target, control, body=body), target=target_row(target), ellipse=target
-        )
-
-    # --- termination and the alive term (one body: floats; N bodies: arrays) -----------------------
-    def leaves(self, distance, ended):
-        """True where the distance exceeds ``success_tolerance`` on a step that did not end otherwise."""
-        out = np.logical_and(np.asarray(distance) > self.success_tolerance, np.logical_not(ended))
-        return out if out.ndim else bool(out)
-
-    def extra_terms(self, ended, left, terms) -> None:
-        """``alive`` into ``terms[6]`` (+w on a step that does not end the episode), and ``failure`` = −penalty
-        on a step that leaves the ball (``left``)."""
-        terms[5] = np.where(left, -self.failure_penalty, terms[5])
-        terms[6] = np.where(ended, 0.0, self.w_alive)
 
 
 __all__ = ["HoldUnstableEllipse"]

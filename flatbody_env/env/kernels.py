@@ -8,8 +8,6 @@ reward terms and the scalars of ``info`` — by calling the task's kernels
 eq. (41) of the paper. No numpy allocation, so the same code runs in Python (generic integrators)
 and, through :func:`flatbody_env.integrators.jit.retarget`, compiled (single body; and
 :func:`post_step_lanes`, the same decisions and formulas over N bodies in loops numba vectorises).
-:func:`controls_batch` is the one place where actions (one or N) are clipped and scaled into the
-controls u = (τ1, τ2, τ3, f_ϱ).
 
 ``cfg`` is the task's configuration vector (:meth:`~flatbody_env.env.task.ReachStationaryEllipse.kernel_config`);
 ``P`` the body's kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`).
@@ -18,7 +16,6 @@ Scalars ``sc`` (float64, 4): distance, energy H, |s|² (the Casimir), domain cod
 
 from __future__ import annotations
 
-import math
 
 from flatbody_env.env.task import CFG_SIZE, DOMAIN_CODES, domain_code, observe_kernel, score_kernel
 from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
@@ -154,36 +151,4 @@ def post_step_lanes(Y_old, Y_new, status, A, n_act, T, cfg, P, Y_out, OBS, TERMS
         observe_kernel(Y_out[:, k], T[k], OBS[k])
 
 
-def controls_batch(A, mask, limits, A_out, U_out):
-    """Clip N actions ``A`` (N, n) to [−1, 1] into ``A_out`` (N, n) and scale the driven controls into
-    ``U_out`` (4, N) (one body: N = 1). Returns False if any action entry is not finite.
-
-    ``mask`` (4,) marks which of (τ1, τ2, τ3, f_ϱ) the action drives, in order; ``limits`` (4,) holds
-    torque_limit ×3 and force_limit. Without a driven control (``control="none"``) ``A_out`` is zero.
-    Control by control over all bodies (loops numba vectorises)."""
-    n = A.shape[0]
-    m = A.shape[1]
-    for k in range(n):
-        for i in range(m):
-            if not math.isfinite(A[k, i]):
-                return False
-    driven = 0
-    for j in range(4):
-        if mask[j]:
-            driven += 1
-    for k in range(n):
-        for i in range(m):
-            A_out[k, i] = min(1.0, max(-1.0, A[k, i])) if driven > 0 else 0.0
-    c = 0
-    for j in range(4):
-        if mask[j]:
-            for k in range(n):
-                U_out[j, k] = A_out[k, c] * limits[j]
-            c += 1
-        else:
-            for k in range(n):
-                U_out[j, k] = 0.0
-    return True
-
-
-__all__ = ["CFG_SIZE", "DOMAIN_CODES", "controls_batch", "domain_code", "post_step", "post_step_lanes"]
+__all__ = ["CFG_SIZE", "DOMAIN_CODES", "domain_code", "post_step", "post_step_lanes"]

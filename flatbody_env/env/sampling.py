@@ -1,22 +1,16 @@
-"""The reset's draws as plain-float kernels: a target and an initial state from a block of uniforms.
+"""The reset's draws as plain-float kernels: a target and an initial state from uniforms.
 
 :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target` and
-:meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_initial_state` draw from a numpy
-``Generator``: three uniforms per candidate target shape, then ten (nine without torque) for the
-initial state. The formulas they apply to those numbers live once, as plain-float kernels that both
-run — the settling-rate table's :func:`~flatbody_env.env.targets.decide_kernel`, the inverse problem
-and stability test :func:`~flatbody_env.physics.equilibria.stationary_shape_kernel`, and
-:func:`initial_state_kernel`. The candidate loop of ``sample_target`` (which also serves bodies these
-kernels do not: custom potentials, a thickness found by root finding) is mirrored here by
-:func:`candidate_kernel` and :func:`sample_episode_kernel`, so that the batched reset
-(:func:`sample_episodes`, compiled by :mod:`flatbody_env.env.compiled`) draws the same episodes from
-the same stream, bit for bit — the tests hold the two to that.
-
-The batched reset takes, per body, a block of uniforms drawn ahead from that body's generator; it
-returns how many of them the episode used (the caller puts the generator back where the Python
-methods would have left it), or a code: :data:`NEED_MORE` (the block ran out), :data:`NEED_DECISION`
-(the table is unsure about a candidate: the exact Riccati test decides, in Python, and the kernel
-is run again with the answer in ``decisions``) or :data:`NO_TARGET` (the attempts ran out).
+:meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_initial_state` (the v0 ids' draws) take their
+uniforms from a numpy ``Generator``: three per candidate target shape, then ten (nine without torque) for the
+initial state; the v1 ids' draws (:func:`flatbody_env.env.transition.draw_body`) take theirs from a counter-based
+stream. The formulas both apply to those numbers live once, as plain-float kernels — the settling-rate table's
+:func:`~flatbody_env.env.targets.decide_kernel`, the inverse problem and stability test
+:func:`~flatbody_env.physics.equilibria.stationary_shape_kernel`, :func:`initial_state_kernel` and
+:func:`ball_state_kernel`. :func:`candidate_kernel` is the candidate loop's body of ``sample_target`` (which also
+serves bodies these kernels do not: custom potentials, a thickness found by root finding) for the compiled draws;
+the tests hold it to ``sample_target``'s choices on the same uniforms, bit for bit. :func:`draw_config` gives the
+compiled draws their configuration.
 
 ``cfg`` (:data:`CFG_SIZE`): 0–1 λ* range lo, hi; 2–3 aspect range lo, hi; 4 the settling-rate
 threshold; 5 how reachability is decided (1: the settling-rate table, 0: the exact test for every
@@ -32,13 +26,11 @@ body's kernel parameters (:meth:`~flatbody_env.physics.body.Body.kernel_params`)
 
 from __future__ import annotations
 
-import importlib
 import math
 
 import numpy as np
 
 from flatbody_env.env.targets import ACCEPT, REJECT, UNSURE, decide_kernel
-from flatbody_env.physics.controllability import settling_rate, target_state
 from flatbody_env.physics.equilibria import equilibrium_thickness, stationary_shape_kernel, stencil_step
 from flatbody_env.physics.potentials import potential_kernel
 
@@ -52,9 +44,6 @@ BALL_DRAWS = 12
 """Uniforms of :func:`ball_state_kernel`."""
 MAX_ATTEMPTS = 500
 """Candidate shapes drawn before a reset gives up (:data:`NO_TARGET`)."""
-NEED_MORE, NEED_DECISION, NO_TARGET = -1, -2, -3
-DECIDE_ACCEPT, DECIDE_REJECT = 1, 2
-"""Values of ``decisions[a]`` for candidate a, set by the caller after the exact test (0: not decided)."""
 
 
 def potential_stencil_kernel(P, lam, mu, rho, pot):
@@ -183,6 +172,13 @@ def initial_state_kernel(u, noise, torque, lam, mu, rho, s3t, pt, y):
     y[10] = -pi + (pi - -pi) * u[o + 6]
 
 
+def normal_pair(u, k):
+    """Two standard normals from the uniforms ``u[2k]``, ``u[2k + 1]`` by the Box–Muller transform:
+    √(−2 ln(1 − u₂ₖ)) (cos, sin)(2π u₂ₖ₊₁)."""
+    r = math.sqrt(-2.0 * math.log(1.0 - u[2 * k]))
+    return r * math.cos(2.0 * math.pi * u[2 * k + 1]), r * math.sin(2.0 * math.pi * u[2 * k + 1])
+
+
 def ball_state_kernel(u, r_lo, r_hi, lam, mu, rho, s3t, pt, J, J3, y):
     """A state at task distance R from the target, R uniform in [``r_lo``, ``r_hi``], in a uniformly
     random direction, from 12 uniforms ``u`` (the start of :class:`~flatbody_env.env.hold.HoldUnstableEllipse`).
@@ -199,33 +195,11 @@ def ball_state_kernel(u, r_lo, r_hi, lam, mu, rho, s3t, pt, J, J3, y):
     .. [1] V. Kovalchuk and E. E. Rożko, "Classical models of affinely-rigid bodies with 'thickness' in
        degenerate dimension", arXiv:0902.3573 (2009).
     """
-    z0 = 0.0
-    z1 = 0.0
-    z2 = 0.0
-    z3 = 0.0
-    z4 = 0.0
-    z5 = 0.0
-    z6 = 0.0
-    z7 = 0.0
-    z8 = 0.0
-    for k in range(5):
-        r = math.sqrt(-2.0 * math.log(1.0 - u[2 * k]))
-        c = r * math.cos(2.0 * math.pi * u[2 * k + 1])
-        s = r * math.sin(2.0 * math.pi * u[2 * k + 1])
-        if k == 0:
-            z0 = c
-            z1 = s
-        elif k == 1:
-            z2 = c
-            z3 = s
-        elif k == 2:
-            z4 = c
-            z5 = s
-        elif k == 3:
-            z6 = c
-            z7 = s
-        else:
-            z8 = c
+    z0, z1 = normal_pair(u, 0)
+    z2, z3 = normal_pair(u, 1)
+    z4, z5 = normal_pair(u, 2)
+    z6, z7 = normal_pair(u, 3)
+    z8, _ = normal_pair(u, 4)
     norm = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2 + z3 * z3 + z4 * z4 + z5 * z5 + z6 * z6 + z7 * z7 + z8 * z8)
     radius = r_lo + (r_hi - r_lo) * u[10]
     f = radius / norm if norm > 0.0 else 0.0
@@ -245,304 +219,38 @@ def ball_state_kernel(u, r_lo, r_hi, lam, mu, rho, s3t, pt, J, J3, y):
     y[10] = -math.pi + 2.0 * math.pi * u[11]
 
 
-def sample_episode_kernel(
-    D,
-    n,
-    cfg,
-    P,
-    grid,
-    rate,
-    margin,
-    invalid,
-    edge_lo,
-    edge_hi,
-    refined,
-    fine_rate,
-    fine_margin,
-    decisions,
-    y,
-    tgt,
-    pot,
-    table_code,
-    cand,
-):
-    """One episode (target and initial state) from the uniforms ``D[:n]`` of one body.
-
-    ``decisions`` (:data:`MAX_ATTEMPTS`,) int64: the exact test's answers for unsure candidates
-    (:data:`DECIDE_ACCEPT`, :data:`DECIDE_REJECT`; 0 = not asked yet). Outputs ``y`` (11,), ``tgt``
-    (6,) = (λ*, μ*, ϱ*, s3*, p_θ*, sign); ``cand`` (10,) holds the last candidate (on :data:`NEED_DECISION`:
-    the one to test, its index in ``table_code[0]``).
-
-    Returns the number of uniforms used (> 0), or :data:`NEED_MORE`, :data:`NEED_DECISION`, :data:`NO_TARGET`.
-    """
-    ball = cfg[13] == START_BALL
-    m = BALL_DRAWS if ball else (0 if cfg[13] == START_NONE else (10 if cfg[7] != 0.0 else 9))
-    for a in range(MAX_ATTEMPTS):
-        if 3 * a + 3 > n:
-            return NEED_MORE
-        code = candidate_kernel(
-            D[3 * a],
-            D[3 * a + 1],
-            D[3 * a + 2],
-            cfg,
-            P,
-            pot,
-            table_code,
-            grid,
-            rate,
-            margin,
-            invalid,
-            edge_lo,
-            edge_hi,
-            refined,
-            fine_rate,
-            fine_margin,
-            cand,
-        )
-        if code == REJECT:
-            continue
-        if code == UNSURE:
-            if decisions[a] == 0:
-                table_code[0] = a
-                return NEED_DECISION
-            if decisions[a] != DECIDE_ACCEPT:
-                continue
-        used = 3 * a + 3
-        if used + m > n:
-            return NEED_MORE
-        for i in range(5):
-            tgt[i] = cand[i]
-        tgt[5] = cand[9]
-        if cfg[13] == START_NONE:
-            return used
-        if ball:
-            ball_state_kernel(
-                D[used : used + m], cfg[14], cfg[15], cand[0], cand[1], cand[2], cand[3], cand[4], P[0], P[2], y
-            )
-        else:
-            initial_state_kernel(
-                D[used : used + m], cfg[6], cfg[7] != 0.0, cand[0], cand[1], cand[2], cand[3], cand[4], y
-            )
-        return used + m
-    return NO_TARGET
-
-
-def sample_episodes(
-    D,
-    counts,
-    cfg,
-    P,
-    grid,
-    rate,
-    margin,
-    invalid,
-    edge_lo,
-    edge_hi,
-    refined,
-    fine_rate,
-    fine_margin,
-    decisions,
-    Y,
-    cols,
-    TG,
-    used,
-    pot,
-    table_code,
-    cand,
-):
-    """:func:`sample_episode_kernel` for m bodies: body b's uniforms in ``D[b, :counts[b]]`` (m, K), its
-    decisions in ``decisions[b]`` (m, :data:`MAX_ATTEMPTS`); its state into column ``cols[b]`` of
-    ``Y`` (11, N), its target (λ*, μ*, ϱ*, s3*, p_θ*, sign) into ``TG[b]`` (m, 6), the uniforms used (or the
-    code) into ``used[b]``, its last candidate into ``cand[b]`` (m, 10) and ``table_code[b]`` (m,)."""
-    for b in range(D.shape[0]):
-        used[b] = sample_episode_kernel(
-            D[b],
-            counts[b],
-            cfg,
-            P,
-            grid,
-            rate,
-            margin,
-            invalid,
-            edge_lo,
-            edge_hi,
-            refined,
-            fine_rate,
-            fine_margin,
-            decisions[b],
-            Y[:, cols[b]],
-            TG[b],
-            pot,
-            table_code[b : b + 1],
-            cand[b],
-        )
-
-
-class EpisodeSampler:
-    """Resets for one or many bodies, each with its own ``Generator``, through :func:`sample_episodes`.
-
-    Draws exactly what :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target` followed by
-    :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_initial_state` draw from the same
-    generators, and leaves each generator where they would: a block of :data:`DRAWS` uniforms is
-    drawn ahead, the generator is put back to its state before the block and advanced by the
-    uniforms the episode used. Applies (:attr:`applies`) to built-in, in-plane isotropic potentials
-    with the thickness potential (ϱ* constant) when reachability is decided by the settling-rate table
-    or not filtered; otherwise the caller uses the task's methods.
-
-    Parameters
-    ----------
-    task : ReachStationaryEllipse
-    body : Body
-    limits : (4,) control limits
-    control : str
-    kernels : module
-        :mod:`flatbody_env.env.compiled` (compiled) or this module (plain Python): ``sample_episodes``;
-        handed in by the caller (this module imports neither :mod:`~flatbody_env.env.compiled` nor anything above it).
-    """
-
-    DRAWS = 3 * 32 + 10
-    """Uniforms drawn ahead per body (32 candidate shapes; about 5 are needed on average)."""
-
-    def __init__(self, task, body, limits, control: str, kernels) -> None:
-        self.task, self.body, self.control, self.kernels = task, body, control, kernels
-        self._compiled = kernels.__name__ != __name__
-        self.limits = np.asarray(limits, dtype=float)
-        filtered = task.filter_applies(control)
-        table = task.table_for(body, self.limits, control) if filtered else None
-        self.applies = bool(
-            task.compiled_targets
-            and body.compiled
-            and body.inertia.is_isotropic
-            and body.thickness is not None
-            and (table is not None or not filtered)
-        )
-        """Whether resets go through the kernels (class docstring)."""
-        if not self.applies:
-            return
-        mode = 1.0 if table is not None else 2.0
-        (l0, l1), (a0, a1) = task.target_lambda, task.target_aspect
-        self.cfg = np.array(
-            [
-                l0,
-                l1,
-                a0,
-                a1,
-                task.min_settling_rate,
-                mode,
-                task.initial_noise,
-                1.0 if "torque" in control else 0.0,
-                equilibrium_thickness(body, l0, l0 / a1),
-                *task.sampler_settings(),
-            ]
-        )
-        assert self.cfg.size == CFG_SIZE
-        self.P = np.ascontiguousarray(body.kernel_params(), dtype=np.float64)
-        if table is not None:
-            self.table = table.kernel_arrays()
-        else:  # never read (mode 2): arrays of the right types
-            self.table = (
-                np.zeros(6),
-                np.zeros((2, 2)),
-                np.zeros((1, 1)),
-                np.zeros((1, 1), np.uint8),
-                np.zeros((1, 1)),
-                np.zeros((1, 1)),
-                np.full((1, 1), -1, np.int64),
-                np.zeros((1, 2, 2)),
-                np.zeros((1, 1, 1)),
-            )
-        self._pot = np.empty((7, 4))
-        self.refills = 0
-        """Bodies that needed more uniforms than the block drawn ahead (a diagnostic count)."""
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state["kernels"] = self.kernels.__name__  # a module: pickled by name, re-imported on unpickling
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
-        # by the name the caller's module had: this module never names :mod:`.compiled`, which imports it
-        # (no import circle; the caller hands the kernels in)
-        self.kernels = importlib.import_module(state["kernels"])
-
-    def sample(self, rngs, Y: np.ndarray, cols) -> np.ndarray:
-        """Draw one episode per generator in ``rngs``: body b's initial state into column ``cols[b]``
-        of ``Y`` (11, N); returns the targets (m, 6) = (λ*, μ*, ϱ*, s3*, p_θ*, sign of (s3*, p_θ*)).
-
-        Raises
-        ------
-        ValueError
-            As :meth:`~flatbody_env.env.task.ReachStationaryEllipse.sample_target` when no target is
-            found in :data:`MAX_ATTEMPTS` candidates.
-        """
-        if not self.applies:
-            raise RuntimeError(
-                "EpisodeSampler.sample: this configuration draws through the task's methods (see applies)"
-            )
-        m = len(rngs)
-        cols = np.asarray(cols, dtype=np.int64)
-        D = np.empty((m, self.DRAWS))
-        states = []
-        for b, rng in enumerate(rngs):
-            states.append(rng.bit_generator.state)
-            rng.random(out=D[b])
-        counts = np.full(m, self.DRAWS, dtype=np.int64)
-        decisions = np.zeros((m, MAX_ATTEMPTS), dtype=np.int64)
-        TG = np.empty((m, 6))
-        used = np.empty(m, dtype=np.int64)
-        codes = np.empty(m, dtype=np.int64)
-        cand = np.empty((m, 10))
-        self.kernels.sample_episodes(
-            D, counts, self.cfg, self.P, *self.table, decisions, Y, cols, TG, used, self._pot, codes, cand
-        )
-        for b in np.flatnonzero(used < 0):
-            row = D[b : b + 1]
-            while used[b] < 0:
-                if used[b] == NO_TARGET:
-                    raise ValueError(self.task.no_target_message)
-                if used[b] == NEED_MORE:  # a long run of rejections: draw enough for every attempt
-                    rngs[b].bit_generator.state = states[b]
-                    row = rngs[b].random((1, 3 * MAX_ATTEMPTS + 10))
-                    self.refills += 1
-                    counts[b] = row.shape[1]
-                else:  # NEED_DECISION: the exact test for candidate codes[b]
-                    c = cand[b]
-                    y = target_state(c[0], c[1], c[2], c[3], c[4])
-                    rate = settling_rate(self.body, y, self.limits, np.ones(4, dtype=bool))
-                    decisions[b, codes[b]] = DECIDE_ACCEPT if rate >= self.task.min_settling_rate else DECIDE_REJECT
-                self.kernels.sample_episodes(
-                    row,
-                    counts[b : b + 1],
-                    self.cfg,
-                    self.P,
-                    *self.table,
-                    decisions[b : b + 1],
-                    Y,
-                    cols[b : b + 1],
-                    TG[b : b + 1],
-                    used[b : b + 1],
-                    self._pot,
-                    codes[b : b + 1],
-                    cand[b : b + 1],
-                )
-        for b, rng in enumerate(rngs):
-            rng.bit_generator.state = states[b]
-            rng.random(int(used[b]))
-        return TG
+def draw_config(task, body, limits, control: str) -> np.ndarray | None:
+    """The configuration vector ``cfg`` (:data:`CFG_SIZE`, module docstring) of the compiled draws of ``task`` for
+    ``body``, the control ``limits`` (4,) and ``control``, or None where they do not apply: they need a built-in,
+    in-plane isotropic potential with the thickness potential (ϱ* constant), and reachability decided by the
+    settling-rate table or not filtered (elsewhere the task's Python methods draw)."""
+    limits = np.asarray(limits, dtype=float)
+    filtered = task.filter_applies(control)
+    table = task.table_for(body, limits, control) if filtered else None
+    if not (
+        task.compiled_targets
+        and body.compiled
+        and body.inertia.is_isotropic
+        and body.thickness is not None
+        and (table is not None or not filtered)
+    ):
+        return None
+    (l0, l1), (a0, a1) = task.target_lambda, task.target_aspect
+    cfg = np.array(
+        [
+            l0, l1, a0, a1, task.min_settling_rate, 1.0 if table is not None else 2.0, task.initial_noise,
+            1.0 if "torque" in control else 0.0, equilibrium_thickness(body, l0, l0 / a1), *task.sampler_settings(),
+        ]
+    )  # fmt: skip
+    assert cfg.size == CFG_SIZE
+    return cfg
 
 
 __all__ = [
     "BALL_DRAWS",
     "CFG_SIZE",
-    "DECIDE_ACCEPT",
-    "EpisodeSampler",
-    "DECIDE_REJECT",
     "HYPERBOLIC",
     "MAX_ATTEMPTS",
-    "NEED_DECISION",
-    "NEED_MORE",
-    "NO_TARGET",
     "STABLE",
     "START_BALL",
     "START_NOISE",
@@ -550,7 +258,6 @@ __all__ = [
     "ball_state_kernel",
     "candidate_kernel",
     "initial_state_kernel",
+    "draw_config",
     "potential_stencil_kernel",
-    "sample_episode_kernel",
-    "sample_episodes",
 ]

@@ -146,79 +146,31 @@ class SettlingRateTable:
         """:data:`ACCEPT`, :data:`REJECT`, :data:`ACCEPT_IF_STABLE` (an edge cell: accept if a stable
         ellipse exists at this shape) or :data:`UNSURE` (run the exact test) (module docstring;
         :func:`decide_kernel` on plain-float copies of the arrays)."""
-        return decide_kernel(
-            lam,
-            aspect,
-            threshold,
-            self._grid,
-            self._rate,
-            self._margin,
-            self._invalid,
-            self._edge_lo,
-            self._edge_hi,
-            self._refined,
-            self._fine_rate,
-            self._fine_margin,
-        )
+        return decide_kernel(lam, aspect, threshold, self._grid, *self._lists)
 
     def kernel_arrays(self) -> tuple:
         """The arrays :func:`decide_kernel` reads, as numpy arrays (for the compiled reset):
-        ``grid`` (l0, a0, dl, da, n_λ, n_a), ``rate``, ``margin``, ``invalid`` (uint8), ``edge_lo``,
-        ``edge_hi``, ``refined``, ``fine_rate``, ``fine_margin``."""
+        ``grid`` (l0, a0, dl, da, n_λ, n_a), then those of :data:`KERNEL_ARRAYS` (``rate``, ``margin``, ``invalid``
+        (uint8), ``edge_lo``, ``edge_hi``, ``refined``, ``fine_rate``, ``fine_margin``)."""
         return (
             np.array(self._grid, dtype=np.float64),
-            np.ascontiguousarray(self.rate, dtype=np.float64),
-            np.ascontiguousarray(self.margin, dtype=np.float64),
-            np.ascontiguousarray(self.invalid, dtype=np.uint8),
-            np.ascontiguousarray(self.edge_lo, dtype=np.float64),
-            np.ascontiguousarray(self.edge_hi, dtype=np.float64),
-            np.ascontiguousarray(self.refined, dtype=np.int64),
-            np.ascontiguousarray(self.fine_rate, dtype=np.float64),
-            np.ascontiguousarray(self.fine_margin, dtype=np.float64),
+            *(np.ascontiguousarray(getattr(self, name), dtype=dtype) for name, dtype in KERNEL_ARRAYS),
         )
 
     def __post_init__(self) -> None:
         # plain-float copies for the per-draw lookup (numpy scalar indexing costs more than the arithmetic)
-        object.__setattr__(self, "_rate", self.rate.tolist())
-        object.__setattr__(self, "_margin", self.margin.tolist())
-        object.__setattr__(self, "_invalid", self.invalid.tolist())
-        object.__setattr__(self, "_edge_lo", self.edge_lo.tolist())
-        object.__setattr__(self, "_edge_hi", self.edge_hi.tolist())
-        object.__setattr__(self, "_refined", self.refined.tolist())
-        object.__setattr__(self, "_fine_rate", self.fine_rate.tolist())
-        object.__setattr__(self, "_fine_margin", self.fine_margin.tolist())
-        object.__setattr__(
-            self,
-            "_grid",
-            [
-                float(self.lambdas[0]),
-                float(self.aspects[0]),
-                float(self.lambdas[1] - self.lambdas[0]),
-                float(self.aspects[1] - self.aspects[0]),
-                float(len(self.lambdas)),
-                float(len(self.aspects)),
-            ],
-        )
+        object.__setattr__(self, "_lists", tuple(getattr(self, name).tolist() for name, _ in KERNEL_ARRAYS))
+        lam, asp = self.lambdas, self.aspects
+        grid = [float(lam[0]), float(asp[0]), float(lam[1] - lam[0]), float(asp[1] - asp[0]), len(lam), len(asp)]
+        object.__setattr__(self, "_grid", [float(g) for g in grid])
 
     # --- file -----------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(
-            tmp,
-            lambdas=self.lambdas,
-            aspects=self.aspects,
-            rate=self.rate,
-            margin=self.margin,
-            invalid=self.invalid,
-            edge_lo=self.edge_lo,
-            edge_hi=self.edge_hi,
-            refined=self.refined,
-            fine_rate=self.fine_rate,
-            fine_margin=self.fine_margin,
-            meta=np.array(json.dumps(self.meta, sort_keys=True)),
-        )
+        arrays = {name: getattr(self, name) for name in ("lambdas", "aspects", *dict(KERNEL_ARRAYS))}
+        np.savez_compressed(tmp, **arrays, meta=np.array(json.dumps(self.meta, sort_keys=True)))
         tmp.replace(path)
 
     @classmethod
@@ -227,19 +179,19 @@ class SettlingRateTable:
             meta = json.loads(str(f["meta"]))
             if meta.get("version") != TABLE_VERSION:
                 raise ValueError(f"table: {path} has version {meta.get('version')!r}, expected {TABLE_VERSION}")
-            return cls(
-                lambdas=f["lambdas"],
-                aspects=f["aspects"],
-                rate=f["rate"],
-                margin=f["margin"],
-                invalid=f["invalid"],
-                edge_lo=f["edge_lo"],
-                edge_hi=f["edge_hi"],
-                refined=f["refined"],
-                fine_rate=f["fine_rate"],
-                fine_margin=f["fine_margin"],
-                meta=meta,
-            )
+            return cls(**{name: f[name] for name in ("lambdas", "aspects", *dict(KERNEL_ARRAYS))}, meta=meta)
+
+
+KERNEL_ARRAYS = (
+    ("rate", np.float64), ("margin", np.float64), ("invalid", np.uint8), ("edge_lo", np.float64),
+    ("edge_hi", np.float64), ("refined", np.int64), ("fine_rate", np.float64), ("fine_margin", np.float64),
+)  # fmt: skip
+"""The table's arrays after the grid that :func:`decide_kernel` reads, in its order, with the compiled reset's dtypes."""
+EMPTY_KERNEL_ARRAYS = (
+    np.zeros(6), np.zeros((2, 2)), np.zeros((1, 1)), np.zeros((1, 1), np.uint8), np.zeros((1, 1)), np.zeros((1, 1)),
+    np.full((1, 1), -1, np.int64), np.zeros((1, 2, 2)), np.zeros((1, 1, 1)),
+)  # fmt: skip
+"""Arrays of :meth:`SettlingRateTable.kernel_arrays`' types for kernels that never read a table."""
 
 
 def decide_kernel(
@@ -435,6 +387,8 @@ def shipped_table() -> SettlingRateTable | None:
 
 __all__ = [
     "ACCEPT",
+    "EMPTY_KERNEL_ARRAYS",
+    "KERNEL_ARRAYS",
     "ACCEPT_IF_STABLE",
     "REJECT",
     "UNSURE",

@@ -95,7 +95,7 @@ References
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -192,24 +192,23 @@ class ReachStationaryEllipse:
     ``FlatBodySlow-v0``, and the base of the other tasks (``docs/tasks.md``).
 
     What a task owns and the environment asks it for: the draws of a reset (:meth:`draw`,
-    :meth:`draw_batch`), the reward terms (:attr:`reward_names`; the kernels' six and the task's own,
-    :meth:`extra_terms`), the termination beyond the domain (:meth:`leaves`), the entries the
-    observation adds to the 16 shared ones (:meth:`observation_extra`) and the configuration of the
-    compiled reset (:meth:`sampler_settings`).
+    :meth:`draw_batch`), the reward terms (:attr:`reward_names`), the entries the observation adds to the 16
+    shared ones (:attr:`observation_extra_names`) and the configuration of the compiled reset
+    (:meth:`sampler_settings`); the transition computes the task's own terms and termination from its
+    :attr:`kind`.
     """
 
     target_branch: ClassVar[str] = "circulation"
     """The branch of the targets (:data:`flatbody_env.physics.equilibria.BRANCHES`)."""
     compiled_targets: ClassVar[bool] = True
-    """Whether the episode sampler's kernels (:class:`~flatbody_env.env.sampling.EpisodeSampler`) can draw its targets."""
-    compiled_resets: ClassVar[bool] = True
-    """Whether they draw its whole reset (target and start); else the environment asks :meth:`draw_batch`."""
+    """Whether the compiled draws' kernels (:mod:`flatbody_env.env.sampling`) can draw its targets (the v1 ids)."""
     varies_body: ClassVar[bool] = False
     """Whether each episode draws its own body (:attr:`Episode.body`)."""
     extra_reward_names: ClassVar[tuple[str, ...]] = ()
-    """Reward terms beyond the kernels' six (:data:`REWARD_TERMS`), computed by :meth:`extra_terms`."""
+    """Reward terms beyond the kernels' six (:data:`REWARD_TERMS`), computed by the transition for the task's
+    :attr:`kind`."""
     observation_extra_names: ClassVar[tuple[str, ...]] = ()
-    """Observation entries after the 16 of :data:`OBSERVATION_NAMES` (:meth:`observation_extra`)."""
+    """Observation entries after the 16 of :data:`OBSERVATION_NAMES` (the transition writes them at a reset)."""
     kind: ClassVar[int] = TASK_REACH
     """The transition's task kind (:data:`TASK_REACH`, :data:`TASK_HOLD`, :data:`TASK_WITNESS`)."""
 
@@ -307,21 +306,9 @@ class ReachStationaryEllipse:
         circulation branch, stable class, the noise start."""
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
-    def observation_extra(self, body: Body) -> np.ndarray:
-        """The observation's entries after the 16 shared ones (none here)."""
-        return np.zeros(0)
-
     def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds (low, high) of :meth:`observation_extra`."""
+        """Bounds (low, high) of the entries of :attr:`observation_extra_names`."""
         return np.zeros(0), np.zeros(0)
-
-    def leaves(self, distance, ended):
-        """Termination by the task beyond the domain and the integrator (bool, or bool array for N bodies): none here."""
-        return np.zeros(np.shape(distance), dtype=bool) if np.ndim(distance) else False
-
-    def extra_terms(self, ended, left, terms) -> None:
-        """Write the terms of :attr:`extra_reward_names` into ``terms[6:]`` (and the ``failure`` term of a
-        step the task ends, ``left``): none here."""
 
     def start_near(
         self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body
@@ -344,7 +331,9 @@ class ReachStationaryEllipse:
         that simulate while they draw; unused here.
         """
         target = self.sample_target(rng, body, limits=limits, control=control)
-        return Episode(state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target)
+        return Episode(
+            state=self.start_near(rng, target, control, body=body), target=target_row(target), ellipse=target
+        )
 
     def draw_batch(
         self,
@@ -433,22 +422,6 @@ class ReachStationaryEllipse:
             _TABLE_FOR.clear()
         _TABLE_FOR[key] = (body, table)
         return table
-
-    def target_from(self, spec: Mapping[str, float] | StationaryEllipse, body: Body) -> StationaryEllipse:
-        """A target from ``{"lambda", "mu"[, "branch", "sign"]}`` or a ready StationaryEllipse."""
-        if isinstance(spec, StationaryEllipse):
-            return spec
-        if not isinstance(spec, Mapping) or "lambda" not in spec or "mu" not in spec:
-            raise ValueError('target: expected {"lambda": ..., "mu": ...} (and optionally "branch", "sign")')
-        unknown = set(spec) - {"lambda", "mu", "branch", "sign", "rho", "s3", "p_theta"}
-        if unknown:
-            raise ValueError(f"target.{sorted(unknown)[0]}: unknown field (allowed: lambda, mu, branch, sign)")
-        lam, mu = float(spec["lambda"]), float(spec["mu"])
-        if not (math.isfinite(lam) and math.isfinite(mu) and lam > 0 and mu > 0) or lam == mu:
-            raise ValueError(f"target.lambda: need finite λ, μ > 0 with λ ≠ μ, got {lam}, {mu}")
-        return stationary_from_shape(
-            body, lam, mu, branch=spec.get("branch", self.target_branch), sign=float(spec.get("sign", 1.0))
-        )
 
     def sample_initial_state(self, rng: np.random.Generator, target: StationaryEllipse, control: str) -> np.ndarray:
         """A state near the target from which the controls can reach it (module docstring)."""

@@ -221,7 +221,8 @@ def proximity(d, tol, margin):
 
 def controls_body(A, b, xcfg, a, u):
     """Clip body ``b``'s action ``A[b]`` to [−1, 1] into ``a`` and scale the driven controls into ``u`` =
-    (τ1, τ2, τ3, f_ϱ) (:func:`flatbody_env.env.kernels.controls_batch`'s arithmetic). False for a non-finite entry."""
+    (τ1, τ2, τ3, f_ϱ) (:func:`scale_controls`; the Python faces: :meth:`~flatbody_env.env.core.EnvConfig.controls`).
+    False for a non-finite entry."""
     m = A.shape[1]
     for i in range(m):
         if not math.isfinite(A[b, i]):
@@ -232,6 +233,13 @@ def controls_body(A, b, xcfg, a, u):
             driven += 1
     for i in range(m):
         a[i] = min(1.0, max(-1.0, A[b, i])) if driven > 0 else 0.0
+    scale_controls(xcfg, a, u)
+    return True
+
+
+def scale_controls(xcfg, a, u):
+    """The driven controls ``u`` = (τ1, τ2, τ3, f_ϱ) of the clipped action ``a``: each driven one its entry of ``a``
+    times its limit, the others 0."""
     c = 0
     for j in range(4):
         if xcfg[X_MASK + j] != 0.0:
@@ -239,7 +247,20 @@ def controls_body(A, b, xcfg, a, u):
             c += 1
         else:
             u[j] = 0.0
-    return True
+
+
+def integrate_body(xcfg, coeffs, y, u, p, out, K13, ynew, ytmp, vel, force, f, counters):
+    """One env step of the state ``y`` under the controls ``u`` into ``out`` by the configured method
+    (:func:`~flatbody_env.integrators.twopolar_kernels.env_step_into`, at most
+    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV` evaluations, ``counters[3]``); returns its status."""
+    counters[0] = 0
+    counters[1] = 0
+    counters[2] = 0
+    counters[3] = int(xcfg[X_MAX_NFEV])
+    return env_step_into(
+        int(xcfg[X_KIND]), coeffs, y, u, p, xcfg[X_DT], xcfg[X_H], xcfg[X_RTOL], xcfg[X_ATOL], xcfg[X_ETOL], out, K13,
+        ynew, ytmp, vel, force, f, counters,
+    )  # fmt: skip
 
 
 def load_body(b, S, y, tg, p):
@@ -371,8 +392,6 @@ def witness_start(
     h_hi = int(xcfg[X_WIT + 7])
     no_dil = 1.0 if xcfg[X_MASK + 3] == 0.0 else 0.0
     no_tau = 1.0 if xcfg[X_MASK + 2] == 0.0 else 0.0
-    dt = xcfg[X_DT]
-    kind = int(xcfg[X_KIND])
     for _ in range(int(xcfg[X_WIT + 1])):
         for i in range(BALL_DRAWS):
             uu[i] = uniform_at(k0, k1, e, STREAM_EPISODE, j + i)
@@ -396,38 +415,9 @@ def witness_start(
         ok = True
         for k in range(steps):
             for c in range(n_act):
-                a[c] = square_wave(k, amp, int(wp[1 + 2 * c]), int(wp[2 + 2 * c]))
-            c = 0
-            for jj in range(4):
-                if xcfg[X_MASK + jj] != 0.0:
-                    u[jj] = min(1.0, max(-1.0, a[c])) * xcfg[X_LIMITS + jj]
-                    c += 1
-                else:
-                    u[jj] = 0.0
-            counters[0] = 0
-            counters[1] = 0
-            counters[2] = 0
-            counters[3] = int(xcfg[X_MAX_NFEV])
-            status = env_step_into(
-                kind,
-                coeffs,
-                y,
-                u,
-                p,
-                dt,
-                xcfg[X_H],
-                xcfg[X_RTOL],
-                xcfg[X_ATOL],
-                xcfg[X_ETOL],
-                out,
-                K13,
-                ynew,
-                ytmp,
-                vel,
-                force,
-                f,
-                counters,
-            )
+                a[c] = min(1.0, max(-1.0, square_wave(k, amp, int(wp[1 + 2 * c]), int(wp[2 + 2 * c]))))
+            scale_controls(xcfg, a, u)
+            status = integrate_body(xcfg, coeffs, y, u, p, out, K13, ynew, ytmp, vel, force, f, counters)
             if status != 0 or domain_code(out, kcfg) != 0:
                 ok = False
                 break
@@ -511,15 +501,6 @@ def stagger_body(b, K, max_steps):
 
 
 # --------------------------------------------------------------------------------------------- step
-def finish_body(b, status, nfev, y, ynew, a, p, tg, S, K, OBS, kcfg, xcfg, yout, terms, sc, vel, force):
-    """After the integrator: body ``b``'s kept state, observation, reward, termination, truncation and episode
-    statistics (module docstring); ``y`` the state before the step, ``ynew`` the integrator's result with ``status``
-    and ``nfev`` evaluations, ``a`` the clipped action: :func:`~flatbody_env.env.kernels.post_step` (domain, kept
-    state, observation, distance, energy), then :func:`close_step`. Returns 1 when the episode ended in this step."""
-    ended = post_step(y, ynew, status, a, int(xcfg[X_NACT]), tg, kcfg, p, yout, OBS[b], terms, sc, vel, force)
-    return close_step(b, ended, status, nfev, S, K, kcfg, xcfg, yout, terms, sc)
-
-
 def close_step(b, ended, status, nfev, S, K, kcfg, xcfg, yout, terms, sc):
     """The task's part of body ``b``'s step after :func:`~flatbody_env.env.kernels.post_step` (``ended``, the kept state
     ``yout``, the v0 terms ``terms``, the scalars ``sc`` = distance, energy, |s|², domain code): the task's own
@@ -623,23 +604,15 @@ STEP_ENDED = -1
 def advance_body(b, A, S, K, OBS, coeffs, kcfg, xcfg, y, tg, p, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout,
                  terms, sc):  # fmt: skip
     """Body ``b``'s step without a reset: its action clipped and scaled (:func:`controls_body`), the integrator
-    (:func:`~flatbody_env.integrators.twopolar_kernels.env_step_into`, at most
-    :data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV` evaluations, ``counters[3]``), then :func:`finish_body`.
-    Returns 0, :data:`STEP_ENDED` when the episode ended, or :data:`ERR_ACTION` (the body is left untouched)."""
+    (:func:`integrate_body`), then :func:`~flatbody_env.env.kernels.post_step` (domain, kept state, observation,
+    distance, energy) and :func:`close_step`. Returns 0, :data:`STEP_ENDED` when the episode ended, or
+    :data:`ERR_ACTION` (the body is left untouched)."""
     if not controls_body(A, b, xcfg, a, u):
         return ERR_ACTION
     load_body(b, S, y, tg, p)
-    counters[0] = 0
-    counters[1] = 0
-    counters[2] = 0
-    counters[3] = int(xcfg[X_MAX_NFEV])
-    status = env_step_into(
-        int(xcfg[X_KIND]), coeffs, y, u, p, xcfg[X_DT], xcfg[X_H], xcfg[X_RTOL], xcfg[X_ATOL], xcfg[X_ETOL], out, K13,
-        ynew, ytmp, vel, force, f, counters,
-    )  # fmt: skip
-    if finish_body(b, status, counters[0], y, out, a, p, tg, S, K, OBS, kcfg, xcfg, yout, terms, sc, vel, force) == 0:
-        return 0
-    return STEP_ENDED
+    status = integrate_body(xcfg, coeffs, y, u, p, out, K13, ynew, ytmp, vel, force, f, counters)
+    ended = post_step(y, out, status, a, int(xcfg[X_NACT]), tg, kcfg, p, yout, OBS[b], terms, sc, vel, force)
+    return STEP_ENDED if close_step(b, ended, status, counters[0], S, K, kcfg, xcfg, yout, terms, sc) != 0 else 0
 
 
 def step_body(
@@ -737,15 +710,10 @@ def work_views(WF, WI):
 def _table():
     """The shipped settling-rate table's arrays (:meth:`flatbody_env.env.targets.SettlingRateTable.kernel_arrays`):
     constants of the CPU loops (the only table the v1 draws read; zeros of the right types without the file)."""
-    from flatbody_env.env.targets import shipped_table
+    from flatbody_env.env.targets import EMPTY_KERNEL_ARRAYS, shipped_table
 
     table = shipped_table()
-    if table is not None:
-        return tuple(np.ascontiguousarray(a) for a in table.kernel_arrays())
-    return (
-        np.zeros(6), np.zeros((2, 2)), np.zeros((1, 1)), np.zeros((1, 1), np.uint8), np.zeros((1, 1)), np.zeros((1, 1)),
-        np.full((1, 1), -1, np.int64), np.zeros((1, 2, 2)), np.zeros((1, 1, 1)),
-    )  # fmt: skip
+    return table.kernel_arrays() if table is not None else EMPTY_KERNEL_ARRAYS
 
 
 TABLE = _table()
@@ -1019,7 +987,6 @@ __all__ = [
     "cpu",
     "cuda_kernels",
     "draw_body",
-    "finish_body",
     "lanes",
     "philox4x32",
     "proximity",

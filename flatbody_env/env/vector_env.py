@@ -62,8 +62,6 @@ def batch_arguments(
 ) -> tuple[int, int, AutoresetMode]:
     """The batch's size, episode length and autoreset mode, checked before any allocation (shared by
     :class:`FlatBodyVectorEnv` and the torch vector env). ValueError naming the argument and its range."""
-    from flatbody_env.physics import validation
-
     num_envs = validation.count("num_envs", num_envs, high=max_batch or validation.MAX_BATCH)
     max_episode_steps = validation.count("max_episode_steps", max_episode_steps, high=validation.MAX_EPISODE_STEPS)
     try:
@@ -82,8 +80,6 @@ def batch_arguments(
 def seed_list(seed, n: int) -> list[int] | None:
     """Per-body seeds of ``reset(seed=...)``: an int s gives s, s + 1, …; a list gives itself (length n); None keeps
     each body's stream. ValueError naming ``seed``."""
-    from flatbody_env.physics import validation
-
     if seed is None:
         return None
     if isinstance(seed, (list, tuple)):
@@ -303,12 +299,7 @@ class FlatBodyVectorEnv(VectorEnv):
 
     def controls(self, actions) -> np.ndarray:
         """The controls u = (τ1, τ2, τ3, f_ϱ) (N, 4) that ``actions`` (N, n) apply (clipped and scaled)."""
-        A = np.clip(self._actions(actions), -1.0, 1.0)
-        m = self.config.mask
-        U = np.zeros((self.num_envs, 4))
-        if m.any():
-            U[:, m] = A[:, : int(m.sum())] * self.config.limits[m]
-        return U
+        return self.config.controls(self._actions(actions))[1]
 
     # --- VectorEnv API ------------------------------------------------------------------------------------
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
@@ -355,8 +346,8 @@ class FlatBodyVectorEnv(VectorEnv):
             K[:, sl] = core.K
         return S, K
 
-    def _info(self, *, step: bool) -> dict[str, Any]:
-        S, K = self._arrays()
+    def _info(self, *, step: bool, arrays=None) -> dict[str, Any]:
+        S, K = arrays if arrays is not None else self._arrays()
         return episode_info(
             S,
             K,
@@ -381,15 +372,7 @@ class FlatBodyVectorEnv(VectorEnv):
             for f in futures:
                 f.result()
         S, K = self._arrays()
-        info = episode_info(
-            S,
-            K,
-            dt=self.config.dt,
-            tol=self.config.task.success_tolerance,
-            method=self._method,
-            names=self.reward_names,
-            step=True,
-        )
+        info = self._info(step=True, arrays=(S, K))
         terminated = K[tr.K_TERMINATED] != 0
         truncated = K[tr.K_TRUNCATED] != 0
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP:

@@ -121,7 +121,6 @@ def uncontrolled_offset(y, tg, J, J3, no_dilatation, no_torque):
 class ReachWithWitness(ReachStationaryEllipse):
     """Reach a stationary ellipse from a start that comes with a witness (module docstring)."""
 
-    compiled_resets: ClassVar[bool] = False
     kind: ClassVar[int] = TASK_WITNESS
 
     min_settling_rate: float = 0.0
@@ -175,19 +174,8 @@ class ReachWithWitness(ReachStationaryEllipse):
         )
 
     def sampler_settings(self) -> tuple[float, ...]:
-        """The episode sampler draws the targets only (:data:`~flatbody_env.env.sampling.START_NONE`)."""
+        """The compiled draws draw the targets only (:data:`~flatbody_env.env.sampling.START_NONE`)."""
         return (0.0, 0.0, 0.0, 0.0, START_NONE, 0.0, 0.0)
-
-    def draw(
-        self,
-        rng: np.random.Generator,
-        body: Body,
-        *,
-        limits=DEFAULT_LIMITS,
-        control: str = "torque+dilatation",
-        simulator: Any = None,
-    ) -> Episode:
-        return self.draw_batch([rng], body, limits=limits, control=control, simulator=simulator)[0]
 
     def draw_batch(
         self,
@@ -200,20 +188,15 @@ class ReachWithWitness(ReachStationaryEllipse):
     ) -> list[Episode]:
         """Targets, then witnessed starts for all generators at once (module docstring, "The draw").
 
-        ``simulator`` is the environment (:meth:`flatbody_env.env.env.FlatBodyEnv.rollout` runs the reversed
-        runs of all bodies as one batch; its ``sampler`` draws the targets). Each generator draws what it
+        ``simulator`` is the environment's batch (:meth:`flatbody_env.env.core.EnvCore.rollout` runs the reversed
+        runs of all bodies as one batch). Each generator draws what it
         would draw alone: the targets' uniforms, then per attempt :meth:`attempt_draws` uniforms.
         """
         if simulator is None:
             raise ValueError("simulator: ReachWithWitness draws its starts by simulation; pass the environment")
         m = len(rngs)
-        sampler = simulator.sampler
-        if sampler.applies:
-            targets = sampler.sample(list(rngs), np.empty((11, m)), np.arange(m))
-            ellipses: list = [None] * m
-        else:
-            ellipses = [self.sample_target(rng, body, limits=limits, control=control) for rng in rngs]
-            targets = np.array([target_row(t) for t in ellipses]).reshape(m, 6)
+        ellipses = [self.sample_target(rng, body, limits=limits, control=control) for rng in rngs]
+        targets = np.array([target_row(t) for t in ellipses]).reshape(m, 6)
         mask = control_mask(control)
         n_act = max(int(mask.sum()), 1)
         steps = self.witness_steps

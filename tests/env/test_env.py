@@ -151,6 +151,31 @@ def test_holding_the_target_is_success():
     assert not term and info["is_success"] and info["distance"] < 1e-8 and r > -1e-7
 
 
+@pytest.mark.parametrize(
+    "env_id", ["FlatBody-v1", "FlatBodyHoldUnstable-v1", "FlatBodyTorque-v1", "FlatBodyAnyBody-v1"]
+)
+def test_a_given_state_keeps_the_seed_s_target_and_body(env_id):
+    """reset(seed=s, options={"state": ...}) on a v1 id: the given state, with the target and body of the seed's own
+    episode (what reset(seed=s) draws), on the single env and on a body of the vector env alike."""
+    from flatbody_env.env.registration import task_spec
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kwargs = task_spec(env_id).kwargs
+    env = FlatBodyEnv(**kwargs)
+    env.reset(seed=11)
+    drawn_target, drawn_body, state = env.target_vector, env.kernel_params, dict(env.state, theta=0.25, p_lambda=0.01)
+    env.reset(seed=99)
+    obs, _ = env.reset(seed=11, options={"state": state})
+    assert env.state == state
+    np.testing.assert_array_equal(env.target_vector, drawn_target)
+    np.testing.assert_array_equal(env.kernel_params, drawn_body)
+    np.testing.assert_array_equal(obs[12:16], drawn_target.astype(np.float32))
+    venv = FlatBodyVectorEnv(num_envs=3, **kwargs)
+    venv.reset(seed=9, options={"state": state})  # body i: seed 9 + i
+    np.testing.assert_array_equal(venv.target_vectors[2], drawn_target)
+    np.testing.assert_array_equal(venv.states[2], env.physics_state)
+
+
 def test_leaving_the_domain_terminates_with_a_finite_observation():
     env = FlatBodyEnv()
     env.reset(seed=0)

@@ -1,14 +1,19 @@
-"""The batched reset (:class:`flatbody_env.env.sampling.EpisodeSampler`) draws what the task's Python
-methods draw from the same generators, bit for bit, and leaves the generators where they would."""
+"""The compiled draws' candidate kernel (:func:`flatbody_env.env.sampling.candidate_kernel`, what the v1 resets run)
+makes the choices of the task's Python draws (``sample_target``, the v0 resets) on the same uniforms, bit for bit;
+the v0 resets draw the task's Python episodes."""
 
 import numpy as np
 import pytest
 
-from flatbody_env.env import compiled, sampling
+from flatbody_env.env import sampling
 from flatbody_env.env.env import FlatBodyEnv
-from flatbody_env.env.sampling import EpisodeSampler
+from flatbody_env.env.sampling import MAX_ATTEMPTS, draw_config
+from flatbody_env.env.targets import ACCEPT, EMPTY_KERNEL_ARRAYS, REJECT, UNSURE, shipped_table
 from flatbody_env.env.task import target_vector
+from flatbody_env.integrators.jit import retarget
 from flatbody_env.physics.equilibria import stationary_from_shape
+
+COMPILED = retarget(sampling.candidate_kernel)
 
 
 def _python_episode(env: FlatBodyEnv, seed: int):
@@ -18,78 +23,69 @@ def _python_episode(env: FlatBodyEnv, seed: int):
     return y, target, rng.random()
 
 
-@pytest.mark.parametrize("kernels", [compiled, sampling], ids=["compiled", "python"])
-@pytest.mark.parametrize("control", ["torque+dilatation", "torque", "dilatation"])
-def test_sampler_draws_the_python_episodes_bit_for_bit(kernels, control):
-    env = FlatBodyEnv(control=control)
-    sampler = EpisodeSampler(env.task, env.body, env.limits, control, kernels)
-    assert sampler.applies
-    n = 300 if kernels is compiled else 40
-    rngs = [np.random.default_rng(s) for s in range(n)]
-    Y = np.full((11, n + 3), np.nan)
-    cols = np.arange(n) + 3  # columns other than 0..n-1: the sampler writes where it is told
-    TG = sampler.sample(rngs, Y, cols)
+def _kernel_target(env: FlatBodyEnv, cfg: np.ndarray, seed: int, kernel):
+    """``sample_target``'s loop on the candidate kernel: its three uniforms per candidate from the seed's generator;
+    a shape the table cannot judge goes to the exact test (the Python draws' rule). Returns the candidate record
+    (10,), the answers seen and the generator's next draw."""
+    rng = np.random.default_rng(seed)
+    table = shipped_table().kernel_arrays() if cfg[5] == 1.0 else EMPTY_KERNEL_ARRAYS
+    P = np.ascontiguousarray(env.body.kernel_params(), dtype=np.float64)
+    pot, code, cand = np.empty((7, 4)), np.zeros(1, np.int64), np.empty(10)
+    seen = set()
+    for _ in range(MAX_ATTEMPTS):
+        u = rng.random(3)
+        answer = kernel(u[0], u[1], u[2], cfg, P, pot, code, *table, cand)
+        seen.add(int(answer))
+        if answer == REJECT:
+            continue
+        if answer == UNSURE:
+            target = stationary_from_shape(env.body, cand[0], cand[1], branch=env.task.target_branch, sign=cand[9])
+            if not env.task.reachable(target, env.body, env.limits, env.control):
+                continue
+        return cand, seen, rng.random()
+    raise AssertionError("no target")
+
+
+@pytest.mark.parametrize("kernel", [COMPILED, sampling.candidate_kernel], ids=["compiled", "python"])
+@pytest.mark.parametrize(
+    "setting", ["torque+dilatation", "torque", "dilatation", "exact test", "hold"]
+)  # the table, no filter (two controls), every stable shape to the exact test, the rotation branch's saddles
+def test_the_candidate_kernel_chooses_the_python_draws_targets_bit_for_bit(kernel, setting):
+    if setting == "hold":
+        env = FlatBodyEnv(task="hold-unstable")
+    else:
+        env = FlatBodyEnv(control="torque+dilatation" if setting == "exact test" else setting)
+    cfg = draw_config(env.task, env.body, env.limits, env.control)
+    assert cfg is not None
+    if setting == "exact test":
+        cfg[5] = 0.0
+    n = 300 if kernel is COMPILED and setting != "exact test" else 30
+    answers = set()
     for s in range(n):
-        y, target, next_draw = _python_episode(env, s)
-        np.testing.assert_array_equal(Y[:, cols[s]], y)
-        np.testing.assert_array_equal(TG[s, :4], target_vector(target))
-        assert TG[s, 4] == target.p_theta
-        assert rngs[s].random() == next_draw  # the generator was left where the Python methods leave it
-    assert np.isnan(Y[:, :3]).all()
+        rng = np.random.default_rng(s)
+        target = env.task.sample_target(rng, env.body, limits=env.limits, control=env.control)
+        cand, seen, next_draw = _kernel_target(env, cfg, s, kernel)
+        answers |= seen
+        np.testing.assert_array_equal(cand[:5], [target.lam, target.mu, target.rho, target.s3, target.p_theta])
+        assert rng.random() == next_draw  # as many candidates drawn
+    assert REJECT in answers and (UNSURE in answers) == (setting == "exact test")
+    assert ACCEPT in answers or setting == "exact test"
 
 
-def test_sampler_runs_the_exact_test_where_the_table_cannot_decide():
-    """Mode 0 (every shape unsure) asks Python for the Riccati test of each stable candidate and runs
-    the kernel again: the same episodes as the task without the table."""
-    env = FlatBodyEnv()
-    exact = FlatBodyEnv(settling_table=False)
-    sampler = EpisodeSampler(env.task, env.body, env.limits, env.control, compiled)
-    sampler.cfg[5] = 0.0
-    rngs = [np.random.default_rng(s) for s in range(6)]
-    Y = np.empty((11, 6))
-    TG = sampler.sample(rngs, Y, np.arange(6))
-    for s in range(6):
-        y, target, next_draw = _python_episode(exact, s)
-        np.testing.assert_array_equal(Y[:, s], y)
-        np.testing.assert_array_equal(TG[s, :4], target_vector(target))
-        assert rngs[s].random() == next_draw
-
-
-def test_sampler_draws_more_after_a_long_run_of_rejections():
-    """A high threshold that most shapes fail: some bodies need more than the block drawn ahead."""
-    env = FlatBodyEnv(min_settling_rate=0.24)
-    sampler = EpisodeSampler(env.task, env.body, env.limits, env.control, compiled)
-    assert sampler.applies
-    n = 40
-    rngs = [np.random.default_rng(s) for s in range(n)]
-    Y = np.empty((11, n))
-    TG = sampler.sample(rngs, Y, np.arange(n))
-    assert sampler.refills > 0, "the range should need more than one block for some seeds"
-    for s in range(n):
-        y, target, next_draw = _python_episode(env, s)
-        np.testing.assert_array_equal(Y[:, s], y)
-        np.testing.assert_array_equal(TG[s, :4], target_vector(target))
-        assert rngs[s].random() == next_draw
-
-
-def test_sampler_gives_up_like_the_task():
+def test_the_draws_give_up_with_the_task_s_message():
     env = FlatBodyEnv(min_settling_rate=5.0)  # no shape of the table's ranges settles that fast
-    assert env.sampler.applies
-    with pytest.raises(ValueError, match="target_lambda/target_aspect"):
-        env.sampler.sample([np.random.default_rng(0)], np.empty((11, 1)), [0])
     with pytest.raises(ValueError, match="target_lambda/target_aspect"):
         env.reset(seed=0)
     outside = FlatBodyEnv(
         target_lambda=(1.25, 1.3), target_aspect=(1.3, 1.4), min_settling_rate=5.0
-    )  # outside the table: Python path
-    assert not outside.sampler.applies
+    )  # outside the table: every shape to the exact test
+    assert draw_config(outside.task, outside.body, outside.limits, outside.control) is None
     with pytest.raises(ValueError, match="target_lambda/target_aspect"):
         outside.reset(seed=0)
 
 
-def test_single_env_reset_uses_the_sampler_and_builds_the_same_target():
+def test_single_env_reset_draws_the_python_episode_and_builds_its_target():
     env = FlatBodyEnv()
-    assert env.sampler.applies
     obs, info = env.reset(seed=5)
     y, target, _ = _python_episode(env, 5)
     np.testing.assert_array_equal(env.physics_state, y)
@@ -118,20 +114,3 @@ def test_a_sampled_start_outside_the_domain_names_the_noise():
             env.reset(seed=seed)
     with pytest.raises(ValueError, match="initial_noise: the initial state starts outside the domain"):
         FlatBodyVectorEnv(num_envs=50, initial_noise=3.0).reset(seed=0)
-
-
-@pytest.mark.parametrize("kernels", [compiled, sampling], ids=["compiled", "python"])
-def test_sampler_pickles_with_the_kernels_it_was_handed(kernels):
-    """The sampler is handed its kernels (sampling.py imports no module above it): pickled, it comes back with
-    the same module, by name, and draws the same episodes."""
-    import pickle
-
-    env = FlatBodyEnv()
-    sampler = EpisodeSampler(env.task, env.body, env.limits, env.control, kernels)
-    clone = pickle.loads(pickle.dumps(sampler))
-    assert clone.kernels is kernels
-    Y1, Y2 = np.empty((11, 3)), np.empty((11, 3))
-    a = sampler.sample([np.random.default_rng(s) for s in range(3)], Y1, [0, 1, 2])
-    b = clone.sample([np.random.default_rng(s) for s in range(3)], Y2, [0, 1, 2])
-    np.testing.assert_array_equal(Y1, Y2)
-    np.testing.assert_array_equal(a, b)

@@ -8,6 +8,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from flatbody_env.env import compiled
+from flatbody_env.env import transition as tr
+from flatbody_env.env.core import EnvCore
 from flatbody_env.env.env import FlatBodyEnv
 from flatbody_env.env.task import OBSERVATION_SIZE, REWARD_TERMS, ReachStationaryEllipse, state_from_observation
 from flatbody_env.env.vector_env import FlatBodyVectorEnv
@@ -253,15 +255,18 @@ def test_lane_bookkeeping_equals_the_per_body_kernel(kernels, bodies):
 
 @pytest.mark.parametrize("control", ["torque+dilatation", "torque", "dilatation", "none"])
 def test_controls_clip_and_scale_each_body_alike(control):
-    """controls_batch on N actions equals it on each action alone (the single env's call), and the
-    clipping and scaling are the documented ones."""
+    """The transition's controls of N actions (the step path's compiled loop) equal the Python faces' on each action
+    alone (the single env's call) and on the batch (the vector env's), and the clipping and scaling are the documented
+    ones; a non-finite action gives its body no controls there and is refused by the faces."""
     env = FlatBodyEnv(control=control)
     n_act = env.action_space.shape[0]
     mask = env.mask.astype(np.uint8)
     rng = np.random.default_rng(0)
     A = rng.uniform(-2, 2, (50, n_act))
-    A_out, U = np.empty_like(A), np.empty((4, 50))
-    assert compiled.controls_batch(A, mask, env.limits, A_out, U)
+    core = EnvCore(env.config, 50)
+    A_out, U = np.zeros_like(A), np.empty((4, 50))
+    tr.cpu("controls_lanes")(A, core.S, core.K, core.xcfg, A_out, U)
+    np.testing.assert_array_equal(env.config.controls(A)[1], U.T)
     for i in range(50):
         a, u = env.controls(A[i])
         np.testing.assert_array_equal(A_out[i], a)
@@ -270,11 +275,11 @@ def test_controls_clip_and_scale_each_body_alike(control):
         np.testing.assert_array_equal(a, clipped)
         np.testing.assert_array_equal(u[mask.astype(bool)], clipped[: mask.sum()] * env.limits[mask.astype(bool)])
         assert not u[~mask.astype(bool)].any()
-    if n_act:
-        A[7, 0] = np.inf
-        assert not compiled.controls_batch(A, mask, env.limits, A_out, U)
-        with pytest.raises(ValueError, match="action"):
-            env.controls(A[7])
+    A[7, 0] = np.inf
+    tr.cpu("controls_lanes")(A, core.S, core.K, core.xcfg, A_out, U)
+    assert not U[:, 7].any() and U[:, 8].any() == bool(mask.any())
+    with pytest.raises(ValueError, match="action"):
+        env.controls(A[7])
 
 
 def _steps_alike(one, other, *, seed: int, steps: int) -> None:

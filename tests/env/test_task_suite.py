@@ -15,8 +15,8 @@ from gymnasium.utils.env_checker import check_env
 import flatbody_env  # noqa: F401  (registers the tasks)
 from flatbody_env.env.any_body import BODY_OBSERVATION_NAMES, body_constants
 from flatbody_env.env.env import FlatBodyEnv
+from flatbody_env.env.task import target_row
 from flatbody_env.env.registration import TASK_IDS, TASKS, V1_IDS, task_spec
-from flatbody_env.env.sampling import EpisodeSampler
 from flatbody_env.env.vector_env import FlatBodyVectorEnv
 from flatbody_env.env.witness import REVERSAL
 from flatbody_env.physics.controllability import linearize, settling_rate
@@ -54,14 +54,15 @@ def _target_state(tg):
     return np.array([0.0, 0.0, tg[3], tg[4], 0.0, 0.0, 0.0, tg[0], tg[1], tg[2], 0.0])
 
 
-def _compiled_draws(env: FlatBodyEnv, n: int, seed0: int = 0):
-    """n draws of the env's compiled episode sampler: states (11, n), targets (n, 6)."""
-    from flatbody_env.env import compiled
-
-    sampler = EpisodeSampler(env.task, env.body, env.limits, env.control, compiled)
-    assert sampler.applies
-    Y = np.full((11, n), np.nan)
-    TG = sampler.sample([np.random.default_rng(seed0 + s) for s in range(n)], Y, np.arange(n))
+def _draws(env: FlatBodyEnv, n: int, seed0: int = 0):
+    """n of the task's v0 draws (a target, then its start, from the generator seeded seed0 + s): states (11, n),
+    targets (n, 6)."""
+    Y, TG = np.empty((11, n)), np.empty((n, 6))
+    for s in range(n):
+        rng = np.random.default_rng(seed0 + s)
+        target = env.task.sample_target(rng, env.body, limits=env.limits, control=env.control)
+        Y[:, s] = env.task.start_near(rng, target, env.control, body=env.body)
+        TG[s] = target_row(target)
     return Y, TG
 
 
@@ -225,7 +226,7 @@ def _check_stable_circulation(Y, TG, env):
 
 def test_flatbody_v0_draws_stable_fast_targets():
     env = _env("FlatBody-v0")
-    Y, TG = _compiled_draws(env, N_DRAWS)
+    Y, TG = _draws(env, N_DRAWS)
     _check_stable_circulation(Y, TG, env)
     # the reachability rule on a random subsample, by the exact test (a Riccati solve each)
     for k in np.random.default_rng(0).choice(N_DRAWS, 40, replace=False):
@@ -234,7 +235,7 @@ def test_flatbody_v0_draws_stable_fast_targets():
 
 def test_flatbody_slow_draws_every_stable_target_of_the_ranges():
     slow, fast = _env("FlatBodySlow-v0"), _env("FlatBody-v0")
-    Y, TG = _compiled_draws(slow, N_DRAWS)
+    Y, TG = _draws(slow, N_DRAWS)
     _check_stable_circulation(Y, TG, slow)
     # no filter: the draws cover the existence region, whose shapes are mostly slow (r < 0.15)
     rates = np.array([settling_rate(slow.body, _target_state(TG[k]), slow.limits) for k in range(60)])
@@ -251,7 +252,7 @@ def test_flatbody_slow_draws_every_stable_target_of_the_ranges():
 def test_hold_unstable_draws_hyperbolic_targets_and_starts_inside_the_ball():
     env = _env("FlatBodyHoldUnstable-v0")
     task = env.task
-    Y, TG = _compiled_draws(env, N_DRAWS)
+    Y, TG = _draws(env, N_DRAWS)
     J, J3 = env.body.inertia.J1, env.body.inertia.J3
     lam, mu, rho, s3, pt = TG[:, 0], TG[:, 1], TG[:, 2], TG[:, 3], TG[:, 4]
     assert (np.abs(s3) > np.abs(pt)).all()  # the rotation family
@@ -302,7 +303,7 @@ def test_hold_unstable_without_control_leaves_and_ends_the_episode():
 def test_underactuated_targets_are_stable_circulation_ellipses(env_id):
     env = _env(env_id)
     env.reset(seed=0)
-    _, TG = _compiled_draws(env, N_DRAWS)
+    _, TG = _draws(env, N_DRAWS)
     _check_stable_circulation(np.tile(TG[:, 4], (11, 1)), TG, env)
     # no settling filter: the linear settling rate is 0 for these controls (not linearly controllable)
     for k in range(3):

@@ -266,7 +266,7 @@ def cli_cases(folder: Path) -> list[Case]:
                 "--scene",
                 "default",
                 "--t-end",
-                "1e4",
+                "4e4",
                 "--method",
                 "RK4",
                 "--step",
