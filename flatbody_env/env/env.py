@@ -146,7 +146,7 @@ class FlatBodyEnv(gym.Env):
     weights and ranges of the task (:class:`~flatbody_env.env.task.ReachStationaryEllipse` and its subclasses).
     The other registered ids (``FlatBodySlow-v0``, ``FlatBodyHoldUnstable-v0``, ``FlatBodyTorque-v0``,
     ``FlatBodyDilatation-v0``, ``FlatBodyAnyBody-v0``) are this class with another task; a task may add reward
-    terms, end episodes of its own accord and append observation entries (:attr:`observation_size`). ``integrator``
+    terms, end episodes of its own accord and append observation entries (``observation_space``). ``integrator``
     is any name of
     ``flatbody methods``; the default :data:`DEFAULT_INTEGRATOR` is the fastest method measured to keep
     the episode state error ≤ 1e-8 (``docs/env.md``).
