@@ -83,7 +83,7 @@ def test_compiled_fixed_step_refuses_a_run_predicted_past_the_wall_clock_budget(
                 "--scene",
                 "default",
                 "--t-end",
-                "1e4",
+                "4e4",
                 "--method",
                 "RK4",
                 "--step",
