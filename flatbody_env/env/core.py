@@ -567,6 +567,7 @@ class EnvCore:
                 self._check()
                 return
             if c.kernel_draws and "target" not in options:  # the state alone: the seed's episode's target (and body)
+                c.check_start(pack(options["state"], validate=False), "options.state")  # before anything is drawn
                 self._reset_launch(np.isin(np.arange(self.num_envs), idx), tr.RESET_DRAW, True, False)
                 self._check()
             field = "options.state" if "state" in options else "initial_noise"
@@ -609,10 +610,6 @@ class EnvCore:
         else:
             target = c.task.sample_target(rng, body, limits=c.limits, control=c.control)
         if "state" in options:
-            try:
-                validate_state(options["state"], where="options.state")
-            except ValueError as exc:
-                raise ValueError(str(exc)) from None
             y = pack(options["state"], validate=False)
         else:
             y = c.task.start_near(rng, target, c.control, body=body)
@@ -891,6 +888,10 @@ def _checked_options(options: Any) -> dict[str, Any]:
         options["target"] = checked
     if "state" in options:
         options["state"] = v.mapping("options.state", options["state"])
+        try:
+            validate_state(options["state"], where="options.state")
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
     return options
 
 

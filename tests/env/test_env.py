@@ -156,7 +156,8 @@ def test_holding_the_target_is_success():
 )
 def test_a_given_state_keeps_the_seed_s_target_and_body(env_id):
     """reset(seed=s, options={"state": ...}) on a v1 id: the given state, with the target and body of the seed's own
-    episode (what reset(seed=s) draws), on the single env and on a body of the vector env alike."""
+    episode (what reset(seed=s) draws), on the single env and on a body of the vector env alike; a state outside the
+    domain is refused before anything is drawn."""
     from flatbody_env.env.registration import task_spec
     from flatbody_env.env.vector_env import FlatBodyVectorEnv
 
@@ -170,6 +171,11 @@ def test_a_given_state_keeps_the_seed_s_target_and_body(env_id):
     np.testing.assert_array_equal(env.target_vector, drawn_target)
     np.testing.assert_array_equal(env.kernel_params, drawn_body)
     np.testing.assert_array_equal(obs[12:16], drawn_target.astype(np.float32))
+    before = env.physics_state
+    with pytest.raises(ValueError, match=r"^options\.state: the initial state starts outside the domain"):
+        env.reset(seed=12, options={"state": dict(state, rho=0.05)})
+    np.testing.assert_array_equal(env.physics_state, before)  # refused before anything was drawn or written
+    np.testing.assert_array_equal(env.target_vector, drawn_target)
     venv = FlatBodyVectorEnv(num_envs=3, **kwargs)
     venv.reset(seed=9, options={"state": state})  # body i: seed 9 + i
     np.testing.assert_array_equal(venv.target_vectors[2], drawn_target)
