@@ -38,6 +38,7 @@ from gymnasium import spaces
 
 from flatbody_env.env import transition as tr
 from flatbody_env.env.registration import TASK_CLASSES
+from flatbody_env.env.sampling import draw_config
 from flatbody_env.env.task import (
     CONTROLS,
     TASK_WITNESS,
@@ -270,7 +271,7 @@ def configure(
     if config.kernel_draws:  # the v1 ids draw in the transition: a built-in potential, reachability by the table or off
         if custom is not None:
             raise ValueError("body: a custom potential cannot be drawn by the v1 resets (use a built-in potential)")
-        if task.compiled_targets and _draw_config(config) is None:
+        if task.compiled_targets and draw_config(task, body, limits, control) is None:
             raise _outside_the_table(config)
     return config
 
@@ -327,7 +328,7 @@ class EnvCore:
             why = self.device_unsupported()
             if why:
                 raise ValueError(why)
-        scfg = _draw_config(c)
+        scfg = draw_config(c.task, c.body, c.limits, c.control)
         self.scfg = np.ascontiguousarray(scfg if scfg is not None else np.zeros(16), dtype=np.float64)
         kind, coeffs = _batch_kinds().get(st.method, (0, np.zeros(1)))
         self.coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
@@ -797,12 +798,6 @@ def _outside_the_table(c: EnvConfig) -> ValueError:
         f"{', '.join(names)}: the v1 resets decide reachability by the shipped settling-rate table, which holds the "
         f"default body, limits and target ranges only{ranges}; with these settings pass min_settling_rate=0"
     )
-
-
-def _draw_config(c: EnvConfig) -> np.ndarray | None:
-    from flatbody_env.env.sampling import draw_config
-
-    return draw_config(c.task, c.body, c.limits, c.control)
 
 
 def _as_task(task: str | ReachStationaryEllipse, task_kwargs: Mapping[str, Any]) -> ReachStationaryEllipse:

@@ -161,7 +161,7 @@ class SettlingRateTable:
         # plain-float copies for the per-draw lookup (numpy scalar indexing costs more than the arithmetic)
         object.__setattr__(self, "_lists", tuple(getattr(self, name).tolist() for name, _ in KERNEL_ARRAYS))
         lam, asp = self.lambdas, self.aspects
-        grid = [float(lam[0]), float(asp[0]), float(lam[1] - lam[0]), float(asp[1] - asp[0]), len(lam), len(asp)]
+        grid = [lam[0], asp[0], lam[1] - lam[0], asp[1] - asp[0], len(lam), len(asp)]
         object.__setattr__(self, "_grid", [float(g) for g in grid])
 
     # --- file -----------------------------------------------------------------------------------
