@@ -58,27 +58,38 @@ def _order(label: str) -> tuple:
 
 def run_case(algo: str, env_id: str, seed: int, budget: int, out: str | Path, *, eval_seed: int, curve_episodes: int = CURVE_EPISODES,
              final_episodes: int = FINAL_EPISODES, command: list[str] | None = None,
-             overrides: list[str] | None = None) -> dict[str, Any]:  # fmt: skip
+             overrides: list[str] | None = None, hyperparams: list[str] | None = None,
+             device: str = "cpu") -> dict[str, Any]:  # fmt: skip
     """Train ``algo`` from scratch on ``env_id`` with ``seed`` for ``budget`` env steps into ``out`` and evaluate it
     along the way (module docstring); the row: ``{"algo", "env_id", "seed", "budget", "curve": [...], "final": {...},
     "train_seconds", "run"}``. ``overrides``: one point of a hyperparameter grid (``["learning_rate=0.0003"]``, as
     ``flatbody train --hyperparams``); its row's ``algo`` is then the variant's label (:func:`variant_label`), and
-    ``"base_algo"`` and ``"overrides"`` say what it is."""
+    ``"base_algo"`` and ``"overrides"`` say what it is. ``hyperparams``: fixed overrides of every case (``flatbody
+    benchmark --hyperparams``) and ``device`` the torch device (rsl-ppo; ``"cuda"``: env and policy on the GPU); both
+    are named in the label (``"rsl-ppo n_envs=65536 device=cuda"``) and kept in the row (``"hyperparams"``,
+    ``"device"``), so that such rows join a CPU table as columns of their own."""
     from agents.evaluate import Agent, HeldOutEvaluations
     from agents.train import train
 
+    fixed = list(hyperparams or [])
     at = [max(1, int(round(f * budget))) for f in EVAL_POINTS[:-1]]
     curve = HeldOutEvaluations(env_id, at, seed=eval_seed, episodes=curve_episodes)
     result = train(
         algo, out, seed=seed, n_timesteps=int(budget), env_id=env_id, checkpoint_freq=0, threads=1, progress=False,
-        force=True, notes=False, command=command, overrides=list(overrides or []), evaluations=curve,
+        force=True, notes=False, command=command, overrides=[*fixed, *(overrides or [])], evaluations=curve,
+        device=device,
     )  # fmt: skip
     train_s = curve.train_seconds()
     final = curve.figures(Agent(out), final_episodes)
     curve.points.append({"env_steps": int(result.timesteps), "train_seconds": float(train_s), **final})
     variant = {"base_algo": algo, "overrides": list(overrides)} if overrides else {}
+    if fixed:
+        variant.update(base_algo=algo, hyperparams=fixed)
+    if device != "cpu":
+        variant.update(base_algo=algo, device=device)
+    label = variant_label(algo, [*fixed, *(overrides or []), *([f"device={device}"] if device != "cpu" else [])])
     return {
-        "algo": variant_label(algo, overrides),
+        "algo": label,
         **variant,
         "env_id": env_id,
         "seed": int(seed),

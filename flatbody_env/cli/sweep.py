@@ -245,14 +245,27 @@ def _benchmark(args) -> int:
         "budgets": budgets,
         "eval_seed": args.eval_seed,
     }
-    grid = ""
+    extra = ""
+    if args.device != "cpu":  # a CPU benchmark's specification stays as it was (its store resumes as before)
+        from agents.config import check_device
+
+        sb3 = [a for a in algos if a != "rsl-ppo"]
+        if sb3:
+            raise ValueError(
+                f"--device: {args.device} trains rsl-ppo only (SB3's {', '.join(sb3)} run on the CPU); give --algos rsl-ppo"
+            )
+        spec["device"] = check_device(args.device, "--device")  # no GPU: one line naming --device
+        extra += f" --device {args.device}"
+    if args.hyperparams:
+        spec["hyperparams"] = _fixed_overrides(args.hyperparams, algos, envs)
+        extra += " --hyperparams " + " ".join(spec["hyperparams"])
     if args.hyperparam_grid is not None:
-        spec["grid"] = _hyperparam_grid(args.hyperparam_grid, algos, envs)
-        grid = f" --hyperparam-grid {args.hyperparam_grid}"
+        spec["grid"] = _hyperparam_grid(args.hyperparam_grid, algos, envs, spec.get("hyperparams", []))
+        extra += f" --hyperparam-grid {args.hyperparam_grid}"
     command = (
         f"flatbody benchmark --algos {','.join(algos)} --envs {args.envs} --seeds {args.seeds} "
         + " ".join(f"--budget {a}={budgets[a]}" for a in algos)
-        + grid
+        + extra
         + f" --out {args.out}"
     )
     saved_tables = []  # read and checked before anything trains; the first named wins over the later ones
@@ -311,9 +324,31 @@ MAX_GRID_VALUES = 16
 """Values of one ``--hyperparam-grid``: each one trains every algorithm, task and seed once more."""
 
 
-def _hyperparam_grid(text: str, algos: list[str], envs: list[str]) -> dict[str, Any]:
-    """``KEY=V1,V2,...`` as ``{"key", "values"}``, each value checked now — for every algorithm and task, as the run
-    would check it (:func:`agents.config.resolve`) — so a bad value stops the benchmark before anything trains."""
+def _fixed_overrides(items: list[str], algos: list[str], envs: list[str]) -> list[str]:
+    """``--hyperparams KEY=VALUE ...`` of a benchmark, checked now for every algorithm and task as the runs would check
+    them (:func:`agents.config.resolve`), so a bad value stops the benchmark before anything trains."""
+    from agents.config import resolve
+
+    validation.requirement(
+        "--hyperparams", items, len(items) <= MAX_GRID_VALUES, f"hold at most {MAX_GRID_VALUES} items"
+    )
+    for item in items:
+        key, sep, _ = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--hyperparams: expected KEY=VALUE (e.g. n_envs=65536), got {item!r:.60}")
+    for algo in algos:
+        for env_id in envs:
+            try:
+                resolve(algo, env_id, overrides=list(items))
+            except ValueError as e:
+                raise ValueError(f"--hyperparams: {algo} on {env_id}: {e}") from None
+    return list(items)
+
+
+def _hyperparam_grid(text: str, algos: list[str], envs: list[str], fixed: list[str] = ()) -> dict[str, Any]:
+    """``KEY=V1,V2,...`` as ``{"key", "values"}``, each value checked now — for every algorithm and task, with the
+    fixed overrides ``fixed``, as the run would check it (:func:`agents.config.resolve`) — so a bad value stops the
+    benchmark before anything trains."""
     from agents.config import resolve
 
     key, sep, rest = text.partition("=")
@@ -332,7 +367,7 @@ def _hyperparam_grid(text: str, algos: list[str], envs: list[str]) -> dict[str, 
         for algo in algos:
             for env_id in envs:
                 try:
-                    resolve(algo, env_id, overrides=[f"{key}={value}"])
+                    resolve(algo, env_id, overrides=[*fixed, f"{key}={value}"])
                 except ValueError as e:
                     raise ValueError(f"--hyperparam-grid: {algo} on {env_id}: {e}") from None
     return {"key": key, "values": values}
@@ -586,6 +621,18 @@ def register(sub) -> None:
         "--algos", default="ppo,sac,td3,rsl-ppo", metavar="A,B", help="algorithms (default ppo,sac,td3,rsl-ppo)"
     )
     p.add_argument("--envs", default="all", metavar="ID,ID", help="v1 ids, or all (default)")
+    p.add_argument(
+        "--hyperparams",
+        nargs="*",
+        metavar="KEY=VALUE",
+        help="fixed overrides of every algorithm's YAML entries (e.g. n_envs=65536 on a GPU), named in the rows",
+    )
+    p.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="torch device of rsl-ppo's env and policy (cuda: the whole env step and PPO on the GPU; default cpu)",
+    )
     p.add_argument(
         "--retrain",
         metavar="A,B",

@@ -184,7 +184,10 @@ def benchmark_case(task: Task) -> dict[str, Any]:
 
     p = task.params
     overrides = list(p.get("overrides") or [])
-    grid = [f"--hyperparam-grid={o}" for o in overrides]
+    fixed = list(p.get("hyperparams") or [])
+    device = p.get("device", "cpu")
+    flags = [f"--device={device}"] if device != "cpu" else []
+    flags += [f"--hyperparams={o}" for o in fixed] + [f"--hyperparam-grid={o}" for o in overrides]
     return run_case(
         p["algo"],
         p["env_id"],
@@ -198,9 +201,11 @@ def benchmark_case(task: Task) -> dict[str, Any]:
             f"--algos={p['algo']}",
             f"--envs={p['env_id']}",
             f"--seeds={p['seed']}",
-            *grid,
+            *flags,
         ],
         overrides=overrides,
+        hyperparams=fixed,
+        device=device,
     )
 
 
@@ -259,7 +264,7 @@ def extends(stored: dict[str, Any], spec: dict[str, Any]) -> bool:
     """
     if stored.get("kind") != "benchmark" or spec.get("kind") != "benchmark":
         return False
-    if any(stored.get(k) != spec.get(k) for k in ("envs", "seeds", "eval_seed", "grid")):
+    if any(stored.get(k) != spec.get(k) for k in ("envs", "seeds", "eval_seed", "grid", "device", "hyperparams")):
         return False
     old, new = stored.get("algos") or [], spec.get("algos") or []
     if not set(old) <= set(new):
@@ -338,11 +343,13 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
     elif kind == "benchmark":  # seed by seed: a benchmark stopped early holds whole seeds of every algorithm and task
         grid = spec.get("grid")  # a hyperparameter grid: each algorithm once per value
         variants = [[f"{grid['key']}={v}"] for v in grid["values"]] if grid else [[]]
+        fixed = list(spec.get("hyperparams") or [])
+        device = spec.get("device", "cpu")
         for seed in spec["seeds"]:
             for algo in spec["algos"]:
                 for overrides in variants:
                     for env_id in spec["envs"]:
-                        name = "@".join([algo, *overrides])
+                        name = "@".join([algo, *fixed, *overrides, *([f"device={device}"] if device != "cpu" else [])])
                         key = f"{name}.{env_id}.{seed:06d}"
                         tasks.append(
                             Task(
@@ -351,6 +358,8 @@ def plan(spec: dict[str, Any], out: str | Path) -> list[Task]:
                                 params={
                                     "algo": algo,
                                     "overrides": overrides,
+                                    **({"hyperparams": fixed} if fixed else {}),
+                                    **({"device": device} if device != "cpu" else {}),
                                     "env_id": env_id,
                                     "seed": seed,
                                     "budget": spec["budgets"][algo],

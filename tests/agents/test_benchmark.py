@@ -117,6 +117,53 @@ def test_a_bad_hyperparameter_grid_stops_the_benchmark_before_it_trains(tmp_path
     assert not (tmp_path / "b").exists()
 
 
+def test_fixed_hyperparameters_and_the_device_are_planned_named_and_checked_before_anything_trains(tmp_path, capsys):
+    """``--hyperparams`` and ``--device`` reach every case, name its key and its label; a stored benchmark resumes only
+    with the same ones; bad values, SB3 on CUDA and CUDA without a GPU are one line naming the flag, nothing trained."""
+    import torch
+
+    from flatbody_env.cli.main import main
+    from flatbody_env.sweep.tasks import extends, plan
+
+    spec = {"kind": "benchmark", "algos": ["rsl-ppo"], "envs": ["FlatBody-v1", "FlatBodySlow-v1"], "seeds": [0, 1],
+            "budgets": {"rsl-ppo": 5000}, "eval_seed": 7, "hyperparams": ["n_envs=65536"], "device": "cuda"}  # fmt: skip
+    tasks = plan(spec, tmp_path)
+    assert len(tasks) == 4 and all(t.key.startswith("rsl-ppo@n_envs=65536@device=cuda.") for t in tasks)
+    assert all(t.params["device"] == "cuda" and t.params["hyperparams"] == ["n_envs=65536"] for t in tasks)
+    plain = {k: v for k, v in spec.items() if k not in ("hyperparams", "device")}
+    assert all("device" not in t.params and "hyperparams" not in t.params for t in plan(plain, tmp_path))
+    assert not extends(plain, spec) and not extends(spec, plain) and extends(spec, dict(spec))
+    assert not extends(spec, {**spec, "hyperparams": ["n_envs=4096"]})
+    base = ["benchmark", "--envs", "FlatBody-v1", "--seeds", "0-1", "--out", str(tmp_path / "b"), "--no-progress"]
+    cases = [
+        (["--algos", "ppo,rsl-ppo", "--device", "cuda"], "--device: cuda trains rsl-ppo only"),
+        (["--algos", "rsl-ppo", "--hyperparams", "n_envs=0"], "hyperparams.n_envs"),
+        (["--algos", "rsl-ppo", "--hyperparams", "n_envs"], "expected KEY=VALUE"),
+        (["--algos", "ppo", "--hyperparams", "num_steps_per_env=8"], "--hyperparams: ppo on FlatBody-v1"),
+    ]
+    if not torch.cuda.is_available():
+        cases.append((["--algos", "rsl-ppo", "--device", "cuda"], "--device: must be cpu here: no CUDA GPU"))
+    for extra, words in cases:
+        assert main([*base, *extra]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "b").exists()
+
+
+def test_a_case_with_fixed_hyperparameters_trains_with_them_and_is_labelled_by_them(tmp_path):
+    import yaml
+
+    from agents.benchmark import run_case
+
+    row = run_case("rsl-ppo", "FlatBody-v1", 0, 128, tmp_path / "run", eval_seed=10_000, curve_episodes=2,
+                   final_episodes=2, hyperparams=["n_envs=8", "num_steps_per_env=8"])  # fmt: skip
+    assert row["algo"] == "rsl-ppo n_envs=8 num_steps_per_env=8" and row["base_algo"] == "rsl-ppo"
+    assert row["hyperparams"] == ["n_envs=8", "num_steps_per_env=8"] and "device" not in row and "overrides" not in row
+    hp = yaml.safe_load((tmp_path / "run" / "config.yml").read_text())["hyperparams"]
+    assert hp["n_envs"] == 8 and hp["num_steps_per_env"] == 8
+    assert row["curve"][-1]["env_steps"] == 128 and row["final"]["episodes"] == 2
+
+
 def test_retrain_removes_only_the_named_algorithms_runs_and_only_from_this_benchmark(tmp_path, capsys):
     import argparse
 
