@@ -628,7 +628,6 @@ def from_scratch_curve(
     eval_every_s: float = 30.0,
     episodes: int = 100,
     eval_seed: int = 10_000,
-    device: str = "cpu",
     force: bool = False,
 ):
     """Train rsl-ppo with :data:`FROM_SCRATCH` (then ``overrides``) for ``budget_s`` seconds of training wall time and write the curve.
@@ -638,8 +637,9 @@ def from_scratch_curve(
     through :class:`agents.evaluate.HeldOutEvaluations`); the evaluation time is left out of the wall time
     (``train_rsl``'s ``callback``). The training stops at the first
     evaluation at or past ``budget_s``, so the run folder ``out`` holds the last evaluated policy. ``csv_path``: one row
-    per evaluation (:data:`CURVE_HEADER`), rewritten after each. ``device``: the torch device of env and policy
-    (``"cuda"``: the torch env and the policy on the GPU, the evaluations' policy too). Returns the rows.
+    per evaluation (:data:`CURVE_HEADER`), rewritten after each. On the CPU: ``FlatBody-v0`` draws its episodes on
+    the host, so it runs on the CPU faces only (a v1 id trains on a GPU with ``flatbody train --device cuda``).
+    Returns the rows.
     """
     from agents.evaluate import HeldOutEvaluations
     from flatbody_env.output import write_csv
@@ -658,7 +658,7 @@ def from_scratch_curve(
         if row["time_s"] < min(due[0], budget_s):
             return False
         due[0] = row["time_s"] + eval_every_s
-        point = evaluations.add(int(row["timesteps"]), live_policy(runner.alg.actor, None, device))
+        point = evaluations.add(int(row["timesteps"]), live_policy(runner.alg.actor, None))
         rows.append(
             (
                 point["env_steps"],
@@ -680,7 +680,6 @@ def from_scratch_curve(
         seed=seed,
         n_timesteps=MAX_TIMESTEPS,
         overrides=[*FROM_SCRATCH, *(overrides or [])],
-        device=device,
     )
     train_rsl(config, folder, progress=False, callback=callback, force=force)
     return rows
@@ -688,7 +687,7 @@ def from_scratch_curve(
 
 SCRATCH_CAPTION = (
     "Each point: the training policy at that moment (deterministic, no LQR) on {episodes} held-out episodes; wall time: training only\n"
-    "(the evaluations left out), one torch thread on a shared 2-core machine. Dotted: the goal, success ≥ {success:.0%} and mean\n"
+    "(the evaluations left out), {machine}. Dotted: the goal, success ≥ {success:.0%} and mean\n"
     "final distance ≤ {distance:g}, within {budget:g} s (vertical line). {note}"
 )
 
@@ -703,8 +702,10 @@ def plot_curve(
     episodes: int = 100,
     note: str = "",
     title: str = "rsl-ppo from scratch (no LQR prior)",
+    machine: str = "one torch thread on a shared 2-core machine",
 ) -> None:
-    """Success and mean final distance against wall time, drawn from the saved curve ``csv_path`` (:func:`from_scratch_curve`)."""
+    """Success and mean final distance against wall time, drawn from the saved curve ``csv_path`` (:func:`from_scratch_curve`;
+    ``machine`` names where it trained in the caption)."""
     from flatbody_env.figures import PALETTE, chart, fraction_axis
     from flatbody_env.physics import validation
 
@@ -728,7 +729,12 @@ def plot_curve(
         c.title(title)
         c.caption(
             SCRATCH_CAPTION.format(
-                episodes=episodes, success=success_goal, distance=distance_goal, budget=budget_s, note=note
+                episodes=episodes,
+                success=success_goal,
+                distance=distance_goal,
+                budget=budget_s,
+                note=note,
+                machine=machine,
             ),
             fontsize=7,
         )

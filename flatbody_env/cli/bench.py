@@ -9,6 +9,7 @@ writes its files (:func:`~flatbody_env.bench.harness.write_report`). ``--plot-on
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from flatbody_env.cli.args import int_at_least, int_list, name_list, output_dir, output_file, positive_float
@@ -53,7 +54,26 @@ def _gpu(args) -> int:
     from flatbody_env.bench.harness import write_report
     from flatbody_env.progress import progress_bar
 
+    import json
+
+    from flatbody_env.output import atomic_write
+
+    out = Path(args.out)
     bar = progress_bar(desc="bench gpu", unit="row")
+    rows: list[dict] = []
+
+    def progress(row: dict) -> None:
+        """Each row as it is measured: a line on stderr, and ``--out`` rewritten with the rows so far (marked partial),
+        so that a run stopped early (a time limit on a lent GPU) keeps what it measured."""
+        rows.append(row)
+        atomic_write(out, json.dumps({"partial": True, "rows": rows}, indent=1) + "\n")
+        bar.update(1)
+        bar.set_postfix_str(f"{row['backend']} {row['method']} N={row['n']}")
+        sys.stderr.write(
+            f"bench gpu: {row['what'].split(' (')[0]} {row['env'] or '-'} {row['backend']} {row['method']} N={row['n']}: "
+            f"{row['steps_per_s']:.3g} body-steps/s\n"
+        )
+
     try:
         result = run(
             sizes=args.sizes,
@@ -61,11 +81,10 @@ def _gpu(args) -> int:
             steps=args.steps,
             repeats=args.repeats,
             only=args.backends,
-            progress=lambda row: (bar.update(1), bar.set_postfix_str(f"{row['backend']} {row['method']} N={row['n']}")),
+            progress=progress,
         )
     finally:
         bar.close()
-    out = Path(args.out)
     rep = report(result, out.stem)
     _show(rep)
     _wrote(write_report(rep, out.parent))

@@ -525,23 +525,23 @@ class EnvCore:
     def _seed(self, idx: np.ndarray, seeds) -> None:
         """Each reset body's seed: the given one, or (none given, never seeded) one from fresh entropy."""
         if seeds is None:
-            fresh = [i for i in idx.tolist() if not self.seeded[i]]
-            if not fresh:
+            idx = idx[~self.seeded[idx]]
+            if idx.size == 0:
                 return
             base = int(np.random.SeedSequence().generate_state(1, np.uint64)[0] >> np.uint64(2))
-            seeds = {i: base + i for i in fresh}
+            values = base + idx
         else:
-            seeds = {i: int(seeds[i]) for i in idx.tolist()}
-        if not seeds:
+            values = np.array([int(seeds[i]) for i in idx.tolist()], dtype=np.int64)
+        if idx.size == 0:
             return
-        from gymnasium.utils import seeding
-
         K = self.K if self.backend == "cpu" else self.K.copy_to_host()
-        for i, s in seeds.items():
-            K[tr.K_SEED, i] = s
-            K[tr.K_EPISODE, i] = 0
-            self.seeded[i] = True
-            if not self.config.kernel_draws:
+        K[tr.K_SEED, idx] = values
+        K[tr.K_EPISODE, idx] = 0
+        self.seeded[idx] = True
+        if not self.config.kernel_draws:  # the v0 ids: a numpy generator per body (Gymnasium's seeding)
+            from gymnasium.utils import seeding
+
+            for i, s in zip(idx.tolist(), values.tolist(), strict=True):
                 self.rngs[i] = seeding.np_random(s)[0]
         if self.backend != "cpu":
             self.K.copy_to_device(K)

@@ -894,24 +894,19 @@ cuda = None
 """numba.cuda in the kernels' globals (bound by :func:`flatbody_env.integrators.cuda.kernel` when it compiles them)."""
 
 
-def _cuda_work():
-    """The work arrays of :func:`work_views` as CUDA local arrays."""
-    counters = cuda.local.array(4, int64)  # counters[3], the step's evaluations budget, is set before each step (xcfg)
-    a = cuda.local.array(4, float64)
-    for i in range(4):
-        a[i] = 0.0
-    terms = cuda.local.array(7, float64)
-    for i in range(7):
-        terms[i] = 0.0
-    return (
-        cuda.local.array(11, float64), cuda.local.array(6, float64), cuda.local.array(9, float64),
-        cuda.local.array(16, float64), cuda.local.array((7, 4), float64), cuda.local.array(1, int64),
-        cuda.local.array(10, float64),
-        cuda.local.array(12, float64), a, cuda.local.array(4, float64), cuda.local.array(11, float64),
-        cuda.local.array((13, 11), float64), cuda.local.array(11, float64), cuda.local.array(11, float64),
-        cuda.local.array(7, float64), cuda.local.array(4, float64), cuda.local.array(11, float64), counters,
-        cuda.local.array(11, float64), terms, cuda.local.array(4, float64),
-    )  # fmt: skip
+def _cuda_work(WF, WI):
+    """The work arrays of one thread (:func:`work_views`) over ``WF`` (:data:`WF_SIZE` float64) and ``WI``
+    (:data:`WI_SIZE` int64), the kernel's own local arrays, zeroed as the CPU loops' are when first allocated.
+
+    The kernel allocates them itself (``cuda.local.array`` in its own body): a local array lives as long as the function
+    that allocates it, so a helper that allocated and returned them would hand out memory whose lifetime ended — on a GPU
+    the compiler may then place other arrays over it (numba's simulator, which makes local arrays numpy arrays, cannot
+    show that)."""
+    for i in range(WF.size):
+        WF[i] = 0.0
+    for i in range(WI.size):
+        WI[i] = 0
+    return work_views(WF, WI)
 
 
 def _step_kernel(
@@ -921,7 +916,7 @@ def _step_kernel(
     """One thread per body: :func:`step_body` with local work arrays (the CUDA side of :func:`step_lanes`)."""
     b = cuda.grid(1)
     if b < S.shape[1]:
-        work = _cuda_work()
+        work = _cuda_work(cuda.local.array(WF_SIZE, float64), cuda.local.array(WI_SIZE, int64))
         err = step_body(
             b, A, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
             fine_rate, fine_margin, *work,
@@ -938,7 +933,7 @@ def _reset_kernel(
     """One thread per body: :func:`reset_body` where ``MASK[b]`` is set (the CUDA side of :func:`reset_lanes`)."""
     b = cuda.grid(1)
     if b < S.shape[1] and MASK[b] != 0:
-        work = _cuda_work()
+        work = _cuda_work(cuda.local.array(WF_SIZE, float64), cuda.local.array(WI_SIZE, int64))
         reset_slot(
             b, mode, write_info, stagger, S, K, OBS, FINAL, FLAGS, coeffs, kcfg, scfg, xcfg, grid, rate, margin,
             invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, *work,

@@ -376,33 +376,22 @@ def test_from_scratch_curve_evaluates_the_policy_it_ships_and_the_chart_reads_th
 
 
 @pytest.mark.gpu
-def test_from_scratch_curve_trains_on_the_gpu_and_the_agent_runs_on_the_cpu(tmp_path):
-    """On a CUDA GPU: env and policy on the device, the curve's point equals the saved agent's evaluation on the CPU."""
-    import csv
-
+def test_rsl_ppo_trains_a_v1_task_on_the_gpu_and_the_agent_runs_on_the_cpu(tmp_path):
+    """On a CUDA GPU: env and policy on the device (``flatbody train --device cuda``); the held-out evaluation made
+    during training (the live policy on the GPU) equals the saved agent's evaluation on the CPU (numpy policy)."""
     import torch
 
-    from agents.evaluate import Agent, run_episodes
-    from agents.rsl import from_scratch_curve
+    from agents.evaluate import Agent, HeldOutEvaluations, run_episodes
+    from agents.train import train
 
     if not torch.cuda.is_available():
         pytest.skip("no CUDA GPU here")
-    table = tmp_path / "curve.csv"
-    rows = from_scratch_curve(
-        tmp_path / "run",
-        table,
-        budget_s=1e-3,
-        eval_every_s=1e-3,
-        episodes=4,
-        eval_seed=10_000,
-        overrides=["n_envs=64", "num_steps_per_env=8"],
-        device="cuda",
-    )
-    assert len(rows) == 1 and rows[0][0] == 512
-    with open(table, newline="") as fh:
-        saved = list(csv.reader(fh))
-    recs = run_episodes(Agent(tmp_path / "run"), episodes=4, seed=10_000)
-    assert float(saved[1][3]) == pytest.approx(np.mean([r["final_distance"] for r in recs]), rel=1e-3)
+    evals = HeldOutEvaluations("FlatBody-v1", [512], seed=10_000, episodes=4)
+    result = train("rsl-ppo", tmp_path / "run", env_id="FlatBody-v1", seed=0, n_timesteps=512, n_envs=64,
+                   overrides=["num_steps_per_env=8"], device="cuda", progress=False, evaluations=evals)  # fmt: skip
+    assert result.timesteps == 512 and len(evals.points) == 1
+    recs = run_episodes(Agent(tmp_path / "run"), episodes=4, seed=10_000, env_id="FlatBody-v1")
+    assert evals.points[0]["final_distance"] == pytest.approx(np.mean([r["final_distance"] for r in recs]), rel=1e-3)
 
 
 def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tmp_path, monkeypatch):

@@ -114,6 +114,32 @@ def test_bench_gpu_backends_are_checked(tmp_path, capsys):
     assert not (tmp_path / "g.json").exists()
 
 
+def test_bench_gpu_keeps_the_rows_it_measured_when_stopped(tmp_path, capsys, monkeypatch):
+    """Each row is written to ``--out`` (marked partial) and printed as it is measured, so that a run stopped by a time
+    limit keeps its figures; a completed run replaces the file with the whole report."""
+    import json
+
+    import flatbody_env.bench.gpu as gpu
+
+    real = gpu.run
+
+    def stopped(**kw):
+        kw["progress"]({"what": "dynamics", "env": "", "backend": "cpu-serial", "method": "RK4", "n": 8,
+                        "steps_per_s": 1.5e5, "device_name": "x"})  # fmt: skip
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gpu, "run", stopped)
+    out = tmp_path / "g.json"
+    assert main(["bench", "gpu", "--sizes", "8", "--out", str(out)]) == 130  # Ctrl-C, or a time limit's signal
+    saved = json.loads(out.read_text())
+    assert saved["partial"] and [r["n"] for r in saved["rows"]] == [8]
+    assert "dynamics - cpu-serial RK4 N=8: 1.5e+05 body-steps/s" in capsys.readouterr().err
+    monkeypatch.setattr(gpu, "run", real)
+    assert main(["bench", "gpu", "--sizes", "8", "--steps", "1", "--repeats", "1", "--methods", "RK4",
+                 "--backends", "cpu-serial", "--out", str(out)]) == 0  # fmt: skip
+    assert "partial" not in json.loads(out.read_text())
+
+
 @pytest.mark.parametrize(
     "argv",
     [

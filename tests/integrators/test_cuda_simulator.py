@@ -105,6 +105,39 @@ def test_every_device_function_is_retargeted(report):
     assert r["numpy_ufuncs"] == []
 
 
+def test_no_function_hands_out_a_cuda_local_array():
+    """A CUDA local array lives as long as the function that allocates it: a function that returned one (or a tuple
+    holding one) would hand its caller memory the GPU compiler may reuse for other arrays — which the simulator, whose
+    local arrays are numpy arrays, never shows (the env's step kernel did so once: every step of every body ended on a
+    real GPU while the simulator agreed bit for bit). Every function of the package that calls ``cuda.local.array`` is
+    read here, and none returns a name bound to one, nor the call itself."""
+    import ast
+    from pathlib import Path
+
+    import flatbody_env
+
+    def is_alloc(node) -> bool:
+        return isinstance(node, ast.Call) and ast.unparse(node.func).endswith("local.array")
+
+    def returned(node):  # what a return statement hands out: the value, or the items of a tuple or list
+        if isinstance(node, (ast.Tuple, ast.List)):
+            return [m for e in node.elts for m in returned(e.value if isinstance(e, ast.Starred) else e)]
+        return [node]
+
+    seen = 0
+    for path in Path(flatbody_env.__file__).parent.rglob("*.py"):
+        for fn in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(fn, ast.FunctionDef) or not any(is_alloc(n) for n in ast.walk(fn)):
+                continue
+            seen += 1
+            local = {t.id for n in ast.walk(fn) if isinstance(n, ast.Assign) and is_alloc(n.value)
+                     for t in n.targets if isinstance(t, ast.Name)}  # fmt: skip
+            for ret in (n for n in ast.walk(fn) if isinstance(n, ast.Return) and n.value is not None):
+                leaked = [n for n in returned(ret.value) if is_alloc(n) or (isinstance(n, ast.Name) and n.id in local)]
+                assert not leaked, f"{path.name}:{ret.lineno} {fn.name} returns a CUDA local array"
+    assert seen >= 4  # the kernels of integrators/cuda.py and env/transition.py, the device initial step
+
+
 def test_device_numpy_is_numpy_with_math_scalars():
     """``np`` in device code: numpy's own attributes, the scalar ufuncs as their math twins: the correctly rounded ones
     (sqrt, abs) give numpy's float64 results, the others (libm's atan2) agree to an ulp."""
