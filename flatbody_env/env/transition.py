@@ -661,9 +661,15 @@ def pack_config(xcfg, kcfg, scfg, coeffs) -> np.ndarray:
     return np.concatenate([xcfg, kcfg, scfg, coeffs]).astype(np.float64)
 
 
-def work_views(WF, WI):
-    """The work arrays of one body's step or reset (:func:`step_body`'s docstring) as views of the flat ``WF``
-    (:data:`WF_SIZE` floats) and ``WI`` (:data:`WI_SIZE` int64), allocated once by the caller."""
+WF_FLAT = WF_SIZE - 28 - 143
+"""Floats of one body's one-dimensional work arrays (:func:`flat_views`); the two 2-D ones follow them in ``WF``."""
+
+
+def flat_views(WF, WI):
+    """The one-dimensional work arrays of one body's step or reset (:func:`step_body`'s docstring) as views of the flat
+    ``WF`` (at least :data:`WF_FLAT` floats) and ``WI`` (:data:`WI_SIZE` int64): ``y``, ``tg``, ``p``, ``sl``,
+    ``table_code``, ``cand``, ``uu``, ``a``, ``u``, ``out``, ``ynew``, ``ytmp``, ``vel``, ``force``, ``f``,
+    ``counters``, ``yout``, ``terms``, ``sc``."""
     o = 0
     y = WF[o : o + 11]
     o += 11
@@ -673,8 +679,6 @@ def work_views(WF, WI):
     o += 9
     sl = WF[o : o + 16]
     o += 16
-    pot = WF[o : o + 28].reshape((7, 4))
-    o += 28
     cand = WF[o : o + 10]
     o += 10
     uu = WF[o : o + 12]
@@ -685,8 +689,6 @@ def work_views(WF, WI):
     o += 4
     out = WF[o : o + 11]
     o += 11
-    K13 = WF[o : o + 143].reshape((13, 11))
-    o += 143
     ynew = WF[o : o + 11]
     o += 11
     ytmp = WF[o : o + 11]
@@ -704,6 +706,18 @@ def work_views(WF, WI):
     sc = WF[o : o + 4]
     counters = WI[0:4]
     table_code = WI[4:5]
+    return y, tg, p, sl, table_code, cand, uu, a, u, out, ynew, ytmp, vel, force, f, counters, yout, terms, sc
+
+
+def work_views(WF, WI):
+    """Every work array of one body's step or reset, in :func:`step_body`'s order, as views of the flat ``WF``
+    (:data:`WF_SIZE` floats: :func:`flat_views`, then ``pot`` (7, 4) and ``K13`` (13, 11)) and ``WI``, allocated once
+    by the caller (the CPU loops)."""
+    y, tg, p, sl, table_code, cand, uu, a, u, out, ynew, ytmp, vel, force, f, counters, yout, terms, sc = flat_views(
+        WF, WI
+    )
+    pot = WF[WF_FLAT : WF_FLAT + 28].reshape((7, 4))
+    K13 = WF[WF_FLAT + 28 : WF_FLAT + 171].reshape((13, 11))
     return y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout, terms, sc
 
 
@@ -894,19 +908,30 @@ cuda = None
 """numba.cuda in the kernels' globals (bound by :func:`flatbody_env.integrators.cuda.kernel` when it compiles them)."""
 
 
-def _cuda_work(WF, WI):
-    """The work arrays of one thread (:func:`work_views`) over ``WF`` (:data:`WF_SIZE` float64) and ``WI``
-    (:data:`WI_SIZE` int64), the kernel's own local arrays, zeroed as the CPU loops' are when first allocated.
+def _cuda_work(WF, WI, pot, K13):
+    """The work arrays of one thread in :func:`step_body`'s order: :func:`flat_views` of ``WF`` (:data:`WF_FLAT`
+    float64) and ``WI`` (:data:`WI_SIZE` int64), and ``pot`` (7, 4), ``K13`` (13, 11) — the kernel's own local arrays,
+    zeroed as the CPU loops' are when first allocated.
 
     The kernel allocates them itself (``cuda.local.array`` in its own body): a local array lives as long as the function
     that allocates it, so a helper that allocated and returned them would hand out memory whose lifetime ended — on a GPU
     the compiler may then place other arrays over it (numba's simulator, which makes local arrays numpy arrays, cannot
-    show that)."""
+    show that). The 2-D arrays are allocated 2-D rather than reshaped from ``WF``: numba-cuda reshapes by linking a
+    CUDA source of its own, and a kernel that links one cannot be cached on disk."""
     for i in range(WF.size):
         WF[i] = 0.0
     for i in range(WI.size):
         WI[i] = 0
-    return work_views(WF, WI)
+    for i in range(7):
+        for j in range(4):
+            pot[i, j] = 0.0
+    for i in range(13):
+        for j in range(11):
+            K13[i, j] = 0.0
+    y, tg, p, sl, table_code, cand, uu, a, u, out, ynew, ytmp, vel, force, f, counters, yout, terms, sc = flat_views(
+        WF, WI
+    )
+    return y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f, counters, yout, terms, sc
 
 
 def _step_kernel(
@@ -916,7 +941,12 @@ def _step_kernel(
     """One thread per body: :func:`step_body` with local work arrays (the CUDA side of :func:`step_lanes`)."""
     b = cuda.grid(1)
     if b < S.shape[1]:
-        work = _cuda_work(cuda.local.array(WF_SIZE, float64), cuda.local.array(WI_SIZE, int64))
+        work = _cuda_work(
+            cuda.local.array(WF_FLAT, float64),
+            cuda.local.array(WI_SIZE, int64),
+            cuda.local.array((7, 4), float64),
+            cuda.local.array((13, 11), float64),
+        )
         err = step_body(
             b, A, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
             fine_rate, fine_margin, *work,
@@ -933,7 +963,12 @@ def _reset_kernel(
     """One thread per body: :func:`reset_body` where ``MASK[b]`` is set (the CUDA side of :func:`reset_lanes`)."""
     b = cuda.grid(1)
     if b < S.shape[1] and MASK[b] != 0:
-        work = _cuda_work(cuda.local.array(WF_SIZE, float64), cuda.local.array(WI_SIZE, int64))
+        work = _cuda_work(
+            cuda.local.array(WF_FLAT, float64),
+            cuda.local.array(WI_SIZE, int64),
+            cuda.local.array((7, 4), float64),
+            cuda.local.array((13, 11), float64),
+        )
         reset_slot(
             b, mode, write_info, stagger, S, K, OBS, FINAL, FLAGS, coeffs, kcfg, scfg, xcfg, grid, rate, margin,
             invalid, edge_lo, edge_hi, refined, fine_rate, fine_margin, *work,

@@ -39,16 +39,18 @@ compares them with the CPU kernels in a subprocess.
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 import os
 import types
+import warnings
 
 import numpy as np
 from numba import float64, int64
 
 from flatbody_env.integrators import batch_solve as _bs
 from flatbody_env.integrators.batch_solve import env_step_body, solve_body
-from flatbody_env.integrators.jit import Target, rebound, retarget
+from flatbody_env.integrators.jit import _KERNEL_SOURCE_DIRS, _PACKAGE, CACHE, Target, rebound, retarget
 from flatbody_env.integrators.twopolar_kernels import dop853_initial_step_into
 
 INSTALL_HINT = 'pip install "flatbody[gpu]" on a machine with an NVIDIA driver'
@@ -267,20 +269,68 @@ def _solve_kernel(kind, coeffs, Y0, times, u, P, h, rtol, atol, ENERGY_TOL, max_
 
 
 @functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """A hash of the source every device kernel is compiled from (the modules of the physics, integrator and env
+    layers): part of the key of the kernels' on-disk cache, so that an edit anywhere beneath a kernel compiles it anew
+    (numba alone compares only the kernel's own file)."""
+    h = hashlib.sha256()
+    for path in sorted(_PACKAGE.glob("*/*.py")):
+        if path.parent.name in _KERNEL_SOURCE_DIRS:
+            h.update(path.relative_to(_PACKAGE).as_posix().encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def _cache_class():
+    """numba-cuda's kernel cache with :func:`source_digest` in its key; an entry that cannot be read or written costs
+    a compile and a warning, never the launch."""
+    from numba.cuda.dispatcher import CUDACache
+
+    class SourceDigestCache(CUDACache):
+        def _index_key(self, sig, codegen):
+            return (*super()._index_key(sig, codegen), source_digest())
+
+        def load_overload(self, sig, target_context):
+            try:
+                return super().load_overload(sig, target_context)
+            except Exception as exc:  # a damaged or foreign entry: compiled anew
+                warnings.warn(f"CUDA kernel cache: not read ({type(exc).__name__}: {exc}); compiling", stacklevel=2)
+                return None
+
+        def save_overload(self, sig, data):
+            try:
+                super().save_overload(sig, data)
+            except Exception as exc:  # the kernel runs all the same; the next process compiles it again
+                warnings.warn(f"CUDA kernel cache: not written ({type(exc).__name__}: {exc})", stacklevel=2)
+
+    return SourceDigestCache
+
+
+def _jit(func, target, constants):
+    """A CUDA kernel from the module-level plain-Python ``func`` re-bound on the CUDA target, with an on-disk cache
+    (where :data:`~.jit.CACHE` allows one; not under the simulator, which compiles nothing): the env's kernels take
+    ≈ 40 s to compile on first use (PTX, then the driver's machine code), loaded from the cache afterwards, in any
+    process, until a kernel's source changes (:func:`source_digest`) or another GPU model or driver asks for other
+    machine code (numba-cuda keys entries by compute capability and CUDA version)."""
+    dispatcher = constants["cuda"].jit(rebound(func, target, **constants))
+    if CACHE and not simulated():
+        dispatcher._cache = _cache_class()(dispatcher.py_func)
+    return dispatcher
+
+
+@functools.lru_cache(maxsize=1)
 def _kernels():
     target, constants = _target()
-    module = constants["cuda"]
-    return module.jit(rebound(_env_step_kernel, target, **constants)), module.jit(
-        rebound(_solve_kernel, target, **constants)
-    )
+    return _jit(_env_step_kernel, target, constants), _jit(_solve_kernel, target, constants)
 
 
 @functools.cache
 def kernel(func):
     """The CUDA kernel compiled from ``func``, a module-level plain-Python kernel from outside this module (the env's,
-    :mod:`flatbody_env.env.transition`) whose ``cuda`` global is bound here, with the same device twins as :func:`env_step`'s."""
+    :mod:`flatbody_env.env.transition`) whose ``cuda`` global is bound here, with the same device twins as
+    :func:`env_step`'s; cached on disk (:func:`_jit`)."""
     target, constants = _target()
-    return constants["cuda"].jit(rebound(func, target, **constants))
+    return _jit(func, target, constants)
 
 
 # --------------------------------------------------------------------------------------------- host API

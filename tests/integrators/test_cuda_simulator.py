@@ -138,6 +138,45 @@ def test_no_function_hands_out_a_cuda_local_array():
     assert seen >= 4  # the kernels of integrators/cuda.py and env/transition.py, the device initial step
 
 
+def _a_kernel():  # a module-level function for the cache's locator (its source file is this one)
+    return None
+
+
+def test_the_kernel_cache_is_keyed_by_the_kernels_sources_and_never_stops_a_launch(tmp_path, monkeypatch):
+    """The env's CUDA kernels are cached on disk (≈ 40 s of compiling on first use): the key holds a digest of every
+    source file of the kernel layers, so an edit beneath a kernel compiles it anew, and an entry that cannot be read or
+    written is a warning and a compile, never an error at the launch."""
+    from numba.cuda.dispatcher import CUDACache
+
+    from flatbody_env.integrators import cuda
+
+    pkg = tmp_path / "pkg"
+    for sub in ("env", "integrators", "service"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "m.py").write_text("x = 1\n")
+    monkeypatch.setattr(cuda, "_PACKAGE", pkg)
+    digest = cuda.source_digest.__wrapped__
+    first = digest()
+    (pkg / "service" / "m.py").write_text("x = 2\n")  # not a kernel layer
+    assert digest() == first
+    (pkg / "integrators" / "m.py").write_text("x = 2\n")
+    assert digest() != first
+
+    cache = cuda._cache_class()(_a_kernel)
+    monkeypatch.setattr(CUDACache, "_index_key", lambda self, sig, codegen: ("sig", "codegen"))
+    assert cache._index_key(None, None) == ("sig", "codegen", cuda.source_digest())
+
+    def broken(*args, **kwargs):
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(CUDACache, "load_overload", broken)
+    monkeypatch.setattr(CUDACache, "save_overload", broken)
+    with pytest.warns(UserWarning, match="not read .*disk gone.*compiling"):
+        assert cache.load_overload(None, None) is None
+    with pytest.warns(UserWarning, match="not written .*disk gone"):
+        cache.save_overload(None, object())
+
+
 def test_device_numpy_is_numpy_with_math_scalars():
     """``np`` in device code: numpy's own attributes, the scalar ufuncs as their math twins: the correctly rounded ones
     (sqrt, abs) give numpy's float64 results, the others (libm's atan2) agree to an ulp."""
