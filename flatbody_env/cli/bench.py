@@ -77,11 +77,12 @@ def _gpu(args) -> int:
     try:
         result = run(
             sizes=args.sizes,
-            methods=args.methods,
+            methods=[] if args.no_dynamics else args.methods,
             steps=args.steps,
             repeats=args.repeats,
             only=args.backends,
             progress=progress,
+            envs=args.envs,
         )
     finally:
         bar.close()
@@ -217,6 +218,12 @@ def _gpu_methods():
     return GPU_METHODS
 
 
+def _v1_ids():
+    from flatbody_env.env.registration import V1_IDS
+
+    return V1_IDS
+
+
 def _gpu_backends():
     from flatbody_env.bench.gpu import BACKENDS
 
@@ -313,6 +320,14 @@ def register(sub) -> None:
         metavar="NAME,...",
         help="time only these (cpu-serial, cpu-parallel, cuda; default: every one here), e.g. cuda alone at large N",
     )
+    p.add_argument(
+        "--envs",
+        type=name_list("envs", _v1_ids),
+        default=None,
+        metavar="ID,...",
+        help="the v1 ids of the whole-env-step rows (default: every one on cuda, FlatBody-v1 on the CPU)",
+    )
+    p.add_argument("--no-dynamics", action="store_true", help="the whole-env-step rows only (no dynamics-only rows)")
     p.add_argument("--steps", type=int_at_least("steps", 1, 100000), default=10, help="env steps per timed block")
     p.add_argument("--repeats", type=int_at_least("repeats", 1, 100), default=3, help="timed blocks; the best is kept")
     p.set_defaults(handler=_gpu)

@@ -135,9 +135,10 @@ def test_bench_gpu_keeps_the_rows_it_measured_when_stopped(tmp_path, capsys, mon
     assert saved["partial"] and [r["n"] for r in saved["rows"]] == [8]
     assert "dynamics - cpu-serial RK4 N=8: 1.5e+05 body-steps/s" in capsys.readouterr().err
     monkeypatch.setattr(gpu, "run", real)
-    assert main(["bench", "gpu", "--sizes", "8", "--steps", "1", "--repeats", "1", "--methods", "RK4",
-                 "--backends", "cpu-serial", "--out", str(out)]) == 0  # fmt: skip
-    assert "partial" not in json.loads(out.read_text())
+    assert main(["bench", "gpu", "--sizes", "8", "--steps", "1", "--repeats", "1", "--no-dynamics", "--envs",
+                 "FlatBodyTorque-v1", "--backends", "cpu-serial", "--out", str(out)]) == 0  # fmt: skip
+    done = json.loads(out.read_text())
+    assert "partial" not in done and [(r["env"], r["n"]) for r in done["rows"]] == [("FlatBodyTorque-v1", 8)]
 
 
 @pytest.mark.parametrize(
