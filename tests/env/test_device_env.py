@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flatbody_env.env.registration import V1_IDS
+
 pytestmark = pytest.mark.gpu
 
 N = 256
@@ -101,21 +103,8 @@ def _run(env_id: str, mode) -> dict:
     return figures
 
 
-@pytest.mark.parametrize(
-    "env_id",
-    [
-        "FlatBody-v1",
-        "FlatBodySlow-v1",
-        "FlatBodySlowHard-v1",
-        "FlatBodyHoldUnstable-v1",
-        "FlatBodyTorque-v1",
-        "FlatBodyAnyBody-v1",
-    ],
-)
+@pytest.mark.parametrize("env_id", V1_IDS)
 def test_every_v1_id_draws_and_steps_on_the_gpu_as_on_the_cpu(env_id):
-    from flatbody_env.env.registration import V1_IDS
-
-    assert env_id in V1_IDS
     f = _run(env_id, "SameStep")
     assert f["reset_target"] <= 1e-12, f  # the same episodes: targets (and bodies) from the same uniforms
     assert f["reset_state"] <= (1e-9 if f["witnessed"] else 1e-12), f  # a witnessed start is integrated first
