@@ -685,6 +685,32 @@ def from_scratch_curve(
     return rows
 
 
+def curve_from_run(run: str | Path, csv_path: str | Path) -> list[tuple[int, float, float, float]]:
+    """The curve of :func:`plot_curve` (:data:`CURVE_HEADER`) from a run folder trained with ``--eval-freq`` (its
+    ``evaluations.csv`` and ``progress.csv``): each evaluation's env steps, success and mean final distance, and its
+    wall time — the training time of the run's ``progress.csv`` at that step (the evaluations left out), counted from
+    the end of the first PPO iteration, which on a GPU includes compiling the env's kernels. Writes ``csv_path`` and
+    returns the rows; ``ValueError`` naming ``run`` when an evaluation's step is not an iteration of the run."""
+    from flatbody_env.output import write_csv
+    from flatbody_env.physics import validation
+
+    folder = Path(run)
+    progress = validation.read_csv("run", folder / "progress.csv")
+    evaluations = validation.read_csv("run", folder / "evaluations.csv")
+    if not progress or not evaluations:
+        raise ValueError(f"run: {folder} holds no iterations or no evaluations (train it with --eval-freq)")
+    at = {int(r["timesteps"]): float(r["time_s"]) for r in progress}
+    first = float(progress[0]["time_s"])
+    rows = []
+    for r in evaluations:
+        steps = int(r["env_steps"])
+        if steps not in at:
+            raise ValueError(f"run: the evaluation at {steps} steps is not at an iteration of {folder}")
+        rows.append((steps, round(at[steps] - first, 2), float(r["success_rate"]), float(r["final_distance"])))
+    write_csv(csv_path, CURVE_HEADER, [(t, f"{w:.2f}", f"{s_:.3f}", f"{d:.6f}") for t, w, s_, d in rows])
+    return rows
+
+
 SCRATCH_CAPTION = (
     "Each point: the training policy at that moment (deterministic, no LQR) on {episodes} held-out episodes; wall time: training only\n"
     "(the evaluations left out), {machine}. Dotted: the goal, success ≥ {success:.0%} and mean\n"
@@ -749,6 +775,7 @@ __all__ = [
     "RslVecEnv",
     "TorchResidual",
     "export_sb3",
+    "curve_from_run",
     "from_scratch_curve",
     "live_policy",
     "plot_curve",

@@ -394,6 +394,23 @@ def test_rsl_ppo_trains_a_v1_task_on_the_gpu_and_the_agent_runs_on_the_cpu(tmp_p
     assert evals.points[0]["final_distance"] == pytest.approx(np.mean([r["final_distance"] for r in recs]), rel=1e-3)
 
 
+def test_the_gpu_curve_is_its_saved_run_record_and_the_docs_quote_it(tmp_path):
+    """docs/img/rsl_ppo_cuda_v1.csv is :func:`agents.rsl.curve_from_run` of the saved record of the GPU run, and
+    docs/agents.md quotes its first evaluation at 95 % (steps and seconds); a folder without the tables is refused."""
+    from pathlib import Path
+
+    from agents.rsl import curve_from_run
+
+    root = Path(__file__).resolve().parents[2]
+    rows = curve_from_run(root / "agents/data/gpu/rsl-ppo-FlatBody-v1-cuda", tmp_path / "c.csv")
+    assert (tmp_path / "c.csv").read_text() == (root / "docs/img/rsl_ppo_cuda_v1.csv").read_text()
+    steps, seconds, _, _ = next(r for r in rows if r[2] >= 0.95)
+    text = " ".join((root / "docs/agents.md").read_text().split())
+    assert f"95 % at {steps / 1e6:.1f} M steps, **{seconds:.1f} s** after the compile" in text
+    with pytest.raises(ValueError, match="^run: "):
+        curve_from_run(tmp_path, tmp_path / "x.csv")
+
+
 def test_committed_from_scratch_chart_redraws_from_its_table_without_overlaps(tmp_path, monkeypatch):
     """docs/img/from_scratch.png is drawn from docs/img/from_scratch.csv alone; its caption says what the lines are."""
     from pathlib import Path

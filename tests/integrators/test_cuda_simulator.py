@@ -177,6 +177,30 @@ def test_the_kernel_cache_is_keyed_by_the_kernels_sources_and_never_stops_a_laun
         cache.save_overload(None, object())
 
 
+def _power_of_ten(x: float) -> str:
+    mantissa, exponent = f"{x:.1e}".split("e")
+    return f"{mantissa} × 10{str(int(exponent)).translate(str.maketrans('-0123456789', '⁻⁰¹²³⁴⁵⁶⁷⁸⁹'))}"
+
+
+def test_the_gpu_equality_figures_in_the_docs_are_the_saved_report():
+    """docs/gpu.md's figures of every v1 id on an H200 against the CPU are those of the report the GPU test wrote
+    (``agents/data/gpu/device_env_h200.json``): every id in SAME_STEP, FlatBody-v1 in NEXT_STEP too, every body's ends
+    agreeing, and the largest differences the page quotes."""
+    import json
+    from pathlib import Path
+
+    from flatbody_env.env.registration import V1_IDS
+
+    root = Path(__file__).resolve().parents[2]
+    report = json.loads((root / "agents/data/gpu/device_env_h200.json").read_text())
+    assert sorted(report) == sorted([f"{e}:SameStep" for e in V1_IDS] + ["FlatBody-v1:NextStep"])
+    assert all(r["ends_agree"] == r["bodies"] and r["resets"] >= r["bodies"] for r in report.values())
+    draws = max(max(r["reset_target"], r["reset_state"]) for r in report.values())
+    states = max(r["state"] for r in report.values())
+    text = " ".join((root / "docs/gpu.md").read_text().split())
+    assert f"≤ {_power_of_ten(draws)} for the draws, ≤ {_power_of_ten(states)} for the states" in text
+
+
 def test_device_numpy_is_numpy_with_math_scalars():
     """``np`` in device code: numpy's own attributes, the scalar ufuncs as their math twins: the correctly rounded ones
     (sqrt, abs) give numpy's float64 results, the others (libm's atan2) agree to an ulp."""
