@@ -451,10 +451,8 @@ class EnvCore:
         """Write rows ``row``… of ``S`` from host values (both backends)."""
         if self.backend == "cpu":
             self.S[row : row + values.shape[0]] = values
-        else:
-            host = self.S.copy_to_host()
-            host[row : row + values.shape[0]] = values
-            self.S.copy_to_device(host)
+        else:  # those rows alone (contiguous in the row-major array), not the whole batch there and back
+            self.S[row : row + values.shape[0]].copy_to_device(np.ascontiguousarray(values, dtype=np.float64))
 
     def host(self, name: str) -> np.ndarray:
         """A host copy of array ``name`` (``S``, ``K``, ``OBS``, ``FINAL``)."""
