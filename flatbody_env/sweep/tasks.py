@@ -187,7 +187,7 @@ def benchmark_case(task: Task) -> dict[str, Any]:
     fixed = list(p.get("hyperparams") or [])
     device = p.get("device", "cpu")
     flags = [f"--device={device}"] if device != "cpu" else []
-    flags += [f"--hyperparams={o}" for o in fixed] + [f"--hyperparam-grid={o}" for o in overrides]
+    flags += (["--hyperparams", *fixed] if fixed else []) + [f"--hyperparam-grid={o}" for o in overrides]
     return run_case(
         p["algo"],
         p["env_id"],

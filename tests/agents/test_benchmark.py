@@ -151,17 +151,30 @@ def test_fixed_hyperparameters_and_the_device_are_planned_named_and_checked_befo
 
 
 def test_a_case_with_fixed_hyperparameters_trains_with_them_and_is_labelled_by_them(tmp_path):
+    """A benchmark case (the sweep's task, as ``flatbody benchmark --hyperparams`` plans it) trains with every fixed
+    override, is labelled by them, and its ``run.json`` names a command that gives them all."""
+    import json
+
     import yaml
 
-    from agents.benchmark import run_case
+    import agents.benchmark as bm
+    from flatbody_env.cli.main import build_parser
+    from flatbody_env.sweep.tasks import benchmark_case, plan
 
-    row = run_case("rsl-ppo", "FlatBody-v1", 0, 128, tmp_path / "run", eval_seed=10_000, curve_episodes=2,
-                   final_episodes=2, hyperparams=["n_envs=8", "num_steps_per_env=8"])  # fmt: skip
+    fixed = ["n_envs=8", "num_steps_per_env=8"]
+    spec = {"kind": "benchmark", "algos": ["rsl-ppo"], "envs": ["FlatBody-v1"], "seeds": [0, 1],
+            "budgets": {"rsl-ppo": 128}, "eval_seed": 10_000, "hyperparams": fixed}  # fmt: skip
+    task = plan(spec, tmp_path)[0]
+    row = benchmark_case(task)
     assert row["algo"] == "rsl-ppo n_envs=8 num_steps_per_env=8" and row["base_algo"] == "rsl-ppo"
-    assert row["hyperparams"] == ["n_envs=8", "num_steps_per_env=8"] and "device" not in row and "overrides" not in row
-    hp = yaml.safe_load((tmp_path / "run" / "config.yml").read_text())["hyperparams"]
+    assert row["hyperparams"] == fixed and "device" not in row and "overrides" not in row
+    run = tmp_path / "runs" / task.key
+    hp = yaml.safe_load((run / "config.yml").read_text())["hyperparams"]
     assert hp["n_envs"] == 8 and hp["num_steps_per_env"] == 8
-    assert row["curve"][-1]["env_steps"] == 128 and row["final"]["episodes"] == 2
+    assert row["curve"][-1]["env_steps"] == 128 and row["final"]["episodes"] == bm.FINAL_EPISODES
+    command = json.loads((run / "run.json").read_text())["command"]
+    args = build_parser().parse_args([*command[command.index("benchmark") :], "--out", str(tmp_path / "again")])
+    assert args.hyperparams == fixed
 
 
 def test_retrain_removes_only_the_named_algorithms_runs_and_only_from_this_benchmark(tmp_path, capsys):
