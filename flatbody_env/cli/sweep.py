@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import sys
 from pathlib import Path
 from typing import Any
@@ -258,7 +259,7 @@ def _benchmark(args) -> int:
         extra += f" --device {args.device}"
     if args.hyperparams:
         spec["hyperparams"] = _fixed_overrides(args.hyperparams, algos, envs)
-        extra += " --hyperparams " + " ".join(spec["hyperparams"])
+        extra += " --hyperparams " + " ".join(shlex.quote(item) for item in spec["hyperparams"])
     if args.hyperparam_grid is not None:
         spec["grid"] = _hyperparam_grid(args.hyperparam_grid, algos, envs, spec.get("hyperparams", []))
         extra += f" --hyperparam-grid {args.hyperparam_grid}"
