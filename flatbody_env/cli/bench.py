@@ -64,7 +64,7 @@ def _gpu(args) -> int:
 
     def progress(row: dict) -> None:
         """Each row as it is measured: a line on stderr, and ``--out`` rewritten with the rows so far (marked partial),
-        so that a run stopped early (a time limit on a lent GPU) keeps what it measured."""
+        so that a run stopped early (by a time limit, say) keeps what it measured."""
         rows.append(row)
         atomic_write(out, json.dumps({"partial": True, "rows": rows}, indent=1) + "\n")
         bar.update(1)
