@@ -517,14 +517,17 @@ def _planner_policy(
     planner = Planner(kwargs, n, settings_for(env_id, overrides), seed=seed)
 
     def act(obs):
-        a = planner.act(obs, env.body_params)
+        a = planner.act(obs, env.body_params, env.max_episode_steps - env.episode_steps)
         if compute is not None:
             compute["seconds"] = compute.get("seconds", 0.0) + planner.seconds
             compute["episode_steps"] = compute.get("episode_steps", 0) + n
-            compute["body_steps_per_step"] = planner.settings.body_steps
+            compute["body_steps"] = compute.get("body_steps", 0) + planner.body_steps
+            # as rolled out: a horizon to the episode's end shrinks, and its first step refines more often
+            compute["body_steps_per_step"] = round(compute["body_steps"] / compute["episode_steps"])
             compute["label"] = label(planner.settings)
             compute["settings"] = dataclasses.asdict(planner.settings)
             planner.seconds = 0.0
+            planner.body_steps = 0
         return a
 
     return act

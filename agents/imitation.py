@@ -40,7 +40,7 @@ planner rolls out thousands of body-steps per control step with the true model.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -521,7 +521,7 @@ def _demonstrations(env_id, env_kwargs, seeds, planner_settings, planner_seed, l
     alive = np.ones(n, dtype=bool)
     success = np.zeros(n, dtype=bool)
     for _ in range(steps):
-        a = planner.act(obs, venv.body_params)
+        a = planner.act(obs, venv.body_params, venv.max_episode_steps - venv.episode_steps)
         seen.append(obs[alive].copy())
         labels.append(label(obs, a)[alive])
         if execute is not None:
@@ -680,7 +680,8 @@ def distill(
     imitation = {
         "method": "distill",
         "expert": planner_label(planner_settings),
-        "planner": dict(planner or {}),
+        "planner": asdict(planner_settings),  # every setting, so a later change of the task's planner
+        # (agents.planner.PLANNERS) does not change what this config repeats
         "seeds": [lo, hi],
         "rounds": s.rounds,
         "epochs": s.epochs,
@@ -701,7 +702,8 @@ def distill(
 
 def distill_settings_of(config) -> tuple[DistillSettings, dict[str, Any], tuple[int, int]]:
     """What a distilled run's ``config.yml`` says to repeat it (its ``prior.imitation``): the settings, the planner's
-    overrides and the seeds; ``ValueError`` naming ``config.yml`` for any other run."""
+    settings (every one, as :func:`agents.planner.settings_for` overrides) and the seeds; ``ValueError`` naming
+    ``config.yml`` for any other run."""
     from agents.planner import parse_overrides
 
     im = config.imitation or {}

@@ -4,6 +4,7 @@ residual; ``--config`` repeats a distillation bit for bit; bad input is one line
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -78,7 +79,9 @@ def test_distill_writes_a_run_that_executes_the_law_plus_its_residual_and_repeat
     }
     saved = yaml.safe_load((tmp_path / "d" / "config.yml").read_text())
     im = saved["prior"]["imitation"]
-    assert im["method"] == "distill" and im["seeds"] == [0, 2] and im["planner"] == TINY and im["rounds"] == 2
+    assert im["method"] == "distill" and im["seeds"] == [0, 2] and im["rounds"] == 2
+    # every setting of the planner, not only the overrides: what the task's planner is later does not change the run
+    assert im["planner"] == dataclasses.asdict(settings_for(ENV, TINY)) and im["planner"]["samples"] == 4
     assert "pumping" in im["expert"] and json.loads((tmp_path / "d" / "run.json").read_text())["n_timesteps"] == 0
 
     # the exported policy (numpy) is the SB3 model's mean action; the run executes the law plus it

@@ -99,6 +99,60 @@ def test_without_warm_start_the_planners_action_is_a_function_of_the_observation
     assert label(PlannerSettings(warm_start=False)) == "planner (MPPI over open-loop plans, no warm start, true model)"
 
 
+def test_a_horizon_to_the_episodes_end_scores_each_plan_on_its_own_remaining_steps():
+    """``to_end``: an episode with h steps left is rolled out h steps and its terminal weight falls on the h-th state —
+    the same returns, candidate for candidate, as a fixed horizon of h (the first h steps of the same candidates), for
+    two episodes with different steps left planned together; and only as many body-steps are rolled out."""
+    from agents.planner import Planner, PlannerSettings
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kw = env_kwargs_for("FlatBodyTorque-v1")
+    env = FlatBodyVectorEnv(2, **kw)
+    obs, _ = env.reset(seed=[10000, 10001])
+    from flatbody_env.env.task import state_from_observation
+
+    y, t = state_from_observation(obs.astype(np.float64))
+    common = {"samples": 4, "prior": "pumping", "terminal": 50.0}
+    cand = np.random.default_rng(1).uniform(-0.5, 0.5, (2, 4, 12, env.single_action_space.shape[0]))
+    to_end = Planner(kw, 2, PlannerSettings(horizon=12, to_end=True, **common))
+    to_end._obs = obs
+    got = to_end._rollout(y, t, None, cand, np.array([7, 3]))
+    assert to_end.body_steps == 2 * 4 * 7  # the batch runs to the longer of the two ends
+    for b, h in ((0, 7), (1, 3)):
+        fixed = Planner(kw, 2, PlannerSettings(horizon=h, **common))
+        fixed._obs = obs
+        want = fixed._rollout(y, t, None, np.ascontiguousarray(cand[:, :, :h]), np.array([h, h]))
+        np.testing.assert_array_equal(got[b], want[b])
+    assert not np.array_equal(got[1], to_end._rollout(y, t, None, cand, np.array([7, 7]))[1])
+
+
+def test_a_plan_to_the_end_refines_first_and_needs_the_steps_left():
+    """``initial_iterations`` refinements at the first step after a reset, ``iterations`` later; the horizon shrinks
+    with the steps left; ``to_end`` without ``steps_left`` is one ValueError naming it."""
+    from agents.planner import Planner, PlannerSettings, label
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kw = env_kwargs_for("FlatBodyTorque-v1")
+    env = FlatBodyVectorEnv(1, **kw)
+    obs, _ = env.reset(seed=10000)
+    settings = PlannerSettings(samples=4, horizon=10, to_end=True, initial_iterations=3, prior="pumping")
+    planner = Planner(kw, 1, settings)
+    counts = []
+    for left in (10, 9, 4, 0):  # 0: just truncated, before the autoreset (one step rolled out)
+        before = planner.body_steps
+        planner.act(obs, None, np.array([left]))
+        counts.append(planner.body_steps - before)
+    assert counts == [3 * 4 * 10, 4 * 9, 4 * 4, 4 * 1]
+    planner.reset()
+    before = planner.body_steps
+    planner.act(obs, None, np.array([10]))
+    assert planner.body_steps - before == 3 * 4 * 10
+    for bad in (None, np.array([-1]), np.array([1.5]), np.array([3, 3])):
+        with pytest.raises(ValueError, match="^steps_left"):
+            planner.act(obs, None, bad)
+    assert label(settings) == "planner (MPPI around the LQR with pumping, to the episode's end, true model)"
+
+
 @pytest.mark.slow
 def test_the_planner_holds_more_unstable_starts_than_the_passivity_law_it_perturbs():
     from agents.evaluate import run_episodes
@@ -118,6 +172,9 @@ def test_planner_settings_are_checked():
         ({"noise_floor": float("nan")}, "noise_floor"),
         ({"noise_distance": 0.0}, "noise_distance"),
         ({"warm_start": "no"}, "warm_start"),
+        ({"to_end": 1}, "to_end"),
+        ({"initial_iterations": -1}, "initial_iterations"),
+        ({"initial_iterations": 65}, "initial_iterations"),
     ):
         with pytest.raises(ValueError, match=f"^{field}"):
             PlannerSettings(**kw)
