@@ -67,6 +67,23 @@ def test_the_planner_acts_and_counts_its_compute():
     assert summarize(records)["success_rate"] in (0.0, 1.0)
 
 
+def test_a_planner_to_the_end_learns_the_steps_left_from_the_env_and_reports_what_it_rolled_out():
+    """Through ``evaluate``: the env's clock gives the planner its steps left, the horizon shrinks over the episode's
+    last steps, and the compute reported is the body-steps rolled out (the first step's extra refinements included)."""
+    from agents.evaluate import run_episodes
+
+    compute: dict = {}
+    small = {"samples": 4, "horizon": 10, "knots": 4, "initial_iterations": 2}
+    records = run_episodes(
+        "planner", episodes=1, seed=10000, env_id="FlatBodyAnyBody-v1", compute=compute, planner=small
+    )
+    steps = compute["episode_steps"]
+    assert records[0]["length"] == steps == 400  # the whole episode (none ends early here)
+    rolled = 4 * 10 * 2 + sum(4 * min(10, 400 - k) for k in range(1, steps))
+    assert compute["body_steps_per_step"] == round(rolled / steps)
+    assert compute["settings"]["to_end"] and "to the episode's end" in compute["label"]
+
+
 def test_the_planner_row_names_the_law_its_plans_perturb():
     """Every prior by the name its baseline row has (the reference table names the planner from its settings)."""
     from agents.planner import PRIOR_LAWS, PlannerSettings, label
