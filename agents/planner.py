@@ -240,29 +240,32 @@ class Planner:
         )
         alive = np.ones(B * K, dtype=bool)
         total = np.zeros(B * K)
+        steps = int(horizons.max())
         last = np.repeat(horizons, K) - 1  # each body's last step of its horizon
+        ragged = bool((horizons < steps).any())  # episodes with fewer steps left than others: masked per body
         end = np.zeros(B * K)  # the distance there
         A = np.empty((B * K, self.n_act))
         reward = s.objective == "reward"
         obs0 = None
         if self.law is not None:
             obs0 = np.repeat(np.asarray(self._obs, dtype=np.float32), K, axis=0)
-        for h in range(int(horizons.max())):
+        for h in range(steps):
             A[:] = cand[:, :, h].reshape(B * K, self.n_act)
             if self.law is not None:
                 A[:] = np.clip(self.law.predict(obs0 if h == 0 else core.OBS)[0] + A, -1.0, 1.0)
             core.step(A)
-            counts = alive & (h <= last)
+            within = (h <= last) if ragged else True
             if reward:
-                total += np.where(counts, core.S[tr.R_REWARD], 0.0)
+                total += np.where(alive & within, core.S[tr.R_REWARD], 0.0)
             else:
-                total -= np.where(
-                    h <= last, libm.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR), 0.0
-                )
+                score = libm.log(np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE) + LOG_FLOOR)
+                total -= np.where(within, score, 0.0) if ragged else score
             alive &= core.K[tr.K_TERMINATED] == 0
-            if s.terminal > 0:  # the horizon's last state; a body whose episode ended on it or before scores as failed
-                end = np.where(h == last, np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE), end)
-        self.body_steps += B * K * int(horizons.max())
+            if s.terminal > 0 and (ragged or h == steps - 1):
+                # the horizon's last state; a body whose episode ended on it or before scores as failed
+                here = np.where(alive, core.S[tr.R_DISTANCE], FAILED_DISTANCE)
+                end = np.where(h == last, here, end) if ragged else here
+        self.body_steps += B * K * steps
         if s.terminal > 0:  # where the horizon ends counts as ``terminal`` steps of the distance objective there
             total -= s.terminal * libm.log(end + LOG_FLOOR)
         return total.reshape(B, K)

@@ -19,7 +19,10 @@ The figures (:data:`FIGURES`), on the newest single-env id both trees register (
   the compiled kernel, the full model;
 * ``recording`` — ``flatbody record-env --env-id ID --max-steps 100`` to a finished ``.rrd``;
 * ``ppo`` — one PPO iteration of stable-baselines3 on ID (8 envs × 512 steps = 4096 env steps, 4 epochs, one torch
-  thread): the rollout and the update.
+  thread): the rollout and the update;
+* ``planner`` — ID's planner (``agents.planner.settings_for``) planning 8 reference episodes (seeds 10000 …) together,
+  5 control steps a block, per episode and control step (the first step, set up untimed, is the one that refines its
+  plan ``initial_iterations`` times; a horizon to the episode's end shrinks as the blocks go on, alike in both trees).
 
 Output (:func:`report`): ``compare.json``, ``compare.csv`` and ``compare.png`` (:func:`plot`), the table on the
 terminal. A ``REV`` that is not a commit of this checkout is refused with one line naming ``rev`` (exit 2).
@@ -62,6 +65,7 @@ FIGURES = {
     "simulate": Figure(what="compiled simulate, planar-v3 to t = 100 (DOP853-numba)", unit="ms per call", scale=1e3),
     "recording": Figure(what="record-env, {env}, 100 steps to a finished .rrd", unit="s per recording", scale=1.0),
     "ppo": Figure(what="SB3 PPO iteration on {env}, 8 x 512 env steps", unit="s per iteration", scale=1.0),
+    "planner": Figure(what="{env}'s planner, 8 episodes x 5 control steps", unit="ms per episode-step", scale=1e3),
 }
 """The core figures, in the order they are timed (module docstring)."""
 

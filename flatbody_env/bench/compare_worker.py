@@ -3,7 +3,8 @@ tree first on ``PYTHONPATH``, it times the core figures of *that* tree's code on
 
 It runs against any revision, old or new, so it imports nothing of the bench wing (an older tree has no harness, or
 another one) and uses only the public faces every revision has: ``gym.make`` of a FlatBody id,
-``FlatBodyVectorEnv``, ``simulate``, the ``flatbody record-env`` command, stable-baselines3's PPO. It times its own
+``FlatBodyVectorEnv``, ``simulate``, the ``flatbody record-env`` command, stable-baselines3's PPO, the task's planner
+(``agents.planner``: a revision before it reports that figure as not timed). It times its own
 blocks (the clock is in the process that runs the code) and answers the parent, which alternates the two trees'
 workers (:func:`flatbody_env.bench.compare.run`), one JSON line per request on its own pipe; everything the code
 prints goes to stderr.
@@ -34,6 +35,8 @@ SIMULATE_CALLS = 10
 RECORD_STEPS = 100
 PPO_ENVS = 8
 PPO_STEPS = 512
+PLANNER_EPISODES = 8
+PLANNER_STEPS = 5
 """The sizes of a timed block (module docstring of :mod:`flatbody_env.bench.compare`)."""
 
 _state: dict = {}
@@ -117,12 +120,34 @@ def _ppo(env_id: str):
     return block
 
 
+def _planner(env_id: str):
+    from agents.evaluate import env_kwargs_for
+    from agents.planner import Planner, settings_for
+    from flatbody_env.env.vector_env import FlatBodyVectorEnv
+
+    kwargs = env_kwargs_for(env_id)
+    env = FlatBodyVectorEnv(num_envs=PLANNER_EPISODES, **kwargs)
+    obs = [env.reset(seed=10000)[0]]
+    settings = settings_for(env_id)
+    planner = Planner(kwargs, PLANNER_EPISODES, settings, seed=0)
+    to_end = getattr(settings, "to_end", False)  # a tree whose planner has no horizon to the episode's end: False
+
+    def block() -> int:
+        for _ in range(PLANNER_STEPS):
+            left = (env.max_episode_steps - env.episode_steps,) if to_end else ()
+            obs[0] = env.step(planner.act(obs[0], env.body_params, *left))[0]
+        return PLANNER_STEPS * PLANNER_EPISODES
+
+    return block
+
+
 FIGURES = {
     "env-step": _env_step,
     "vector-step": _vector_step,
     "simulate": _simulate,
     "recording": _recording,
     "ppo": _ppo,
+    "planner": _planner,
 }
 
 

@@ -582,7 +582,7 @@ def register(sub) -> None:
         type=name_list("figures", _compare_figures),
         default=None,
         metavar="NAME,...",
-        help="only these figures (env-step, vector-step, simulate, recording, ppo; default all)",
+        help="only these figures (env-step, vector-step, simulate, recording, ppo, planner; default all)",
     )
     p.add_argument(
         "--env",

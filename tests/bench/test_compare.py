@@ -127,12 +127,13 @@ def test_compare_against_head_end_to_end(tmp_path, capsys):
 
     root = this_tree()
     before = subprocess.run(["git", "-C", str(root), "worktree", "list"], capture_output=True, text=True).stdout
-    argv = ["bench", "compare", "HEAD", "--figures", "simulate", "--rounds", "2", "--env", "FlatBodyAnyBody-v1"]
+    argv = ["bench", "compare", "HEAD", "--figures", "simulate,planner", "--rounds", "2", "--env", "FlatBodyAnyBody-v1"]
     assert main([*argv, "--out-dir", str(tmp_path)]) == 0
     data = json.loads((tmp_path / "compare.json").read_text())
     assert data["env_id"] == "FlatBodyAnyBody-v1"  # the task asked for, registered by both trees
-    (row,) = data["figures"]
-    assert row["figure"] == "simulate" and len(row["old_blocks"]) == len(row["new_blocks"]) == 2 and row["ratio"] > 0
+    assert [r["figure"] for r in data["figures"]] == ["simulate", "planner"]  # the planner: to the episode's end here
+    for row in data["figures"]:
+        assert len(row["old_blocks"]) == len(row["new_blocks"]) == 2 and row["ratio"] > 0, row
     assert data["rev_commit"] == resolve("HEAD", root) and set(FIGURES) >= {r["figure"] for r in data["figures"]}
     after = subprocess.run(["git", "-C", str(root), "worktree", "list"], capture_output=True, text=True).stdout
     assert after == before
