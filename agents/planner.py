@@ -15,11 +15,12 @@ the first step of an episode may refine its plan more often than the others (``i
 Candidates are the nominal plan plus Gaussian noise on ``knots`` control points linearly interpolated over
 the horizon (smooth actions, few dimensions), clipped to [−1, 1]; one candidate is the nominal plan itself
 and one the all-zero plan. ``iterations`` refinements per control step (MPPI with iterations: a
-cross-entropy flavour). The planner is causal: it sees the observation only — never the episode's witness
-or future draws. It uses the true model of the episode's body (for ``FlatBodyAnyBody-v1``, whose constants
+cross-entropy flavour). The planner is causal: it sees the observation only (and, with ``to_end``, the episode's
+clock) — never the episode's witness or future draws. It uses the true model of the episode's body (for ``FlatBodyAnyBody-v1``, whose constants
 the observation hides, that is privileged: the row says "true model").
 
-Compute per control step: ``samples`` × ``horizon`` × ``iterations`` body-steps (:attr:`Planner.body_steps`);
+Compute per control step: ``samples`` × ``horizon`` × ``iterations`` body-steps (:attr:`PlannerSettings.body_steps`;
+:attr:`Planner.body_steps` counts what was rolled out);
 episodes are planned together (their candidates in one batch), so the Python overhead is paid once per
 planning step for the whole batch.
 """

@@ -328,8 +328,6 @@ MAX_GRID_VALUES = 16
 def _fixed_overrides(items: list[str], algos: list[str], envs: list[str]) -> list[str]:
     """``--hyperparams KEY=VALUE ...`` of a benchmark, checked now for every algorithm and task as the runs would check
     them (:func:`agents.config.resolve`), so a bad value stops the benchmark before anything trains."""
-    from agents.config import resolve
-
     validation.requirement(
         "--hyperparams", items, len(items) <= MAX_GRID_VALUES, f"hold at most {MAX_GRID_VALUES} items"
     )
@@ -337,21 +335,27 @@ def _fixed_overrides(items: list[str], algos: list[str], envs: list[str]) -> lis
         key, sep, _ = item.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"--hyperparams: expected KEY=VALUE (e.g. n_envs=65536), got {item!r:.60}")
+    _check_overrides("--hyperparams", list(items), algos, envs)
+    return list(items)
+
+
+def _check_overrides(flag: str, overrides: list[str], algos: list[str], envs: list[str]) -> None:
+    """``overrides`` resolved for every algorithm and task as a run resolves them (:func:`agents.config.resolve`);
+    ``ValueError`` naming ``flag``, the algorithm and the task otherwise."""
+    from agents.config import resolve
+
     for algo in algos:
         for env_id in envs:
             try:
-                resolve(algo, env_id, overrides=list(items))
+                resolve(algo, env_id, overrides=overrides)
             except ValueError as e:
-                raise ValueError(f"--hyperparams: {algo} on {env_id}: {e}") from None
-    return list(items)
+                raise ValueError(f"{flag}: {algo} on {env_id}: {e}") from None
 
 
 def _hyperparam_grid(text: str, algos: list[str], envs: list[str], fixed: list[str] = ()) -> dict[str, Any]:
     """``KEY=V1,V2,...`` as ``{"key", "values"}``, each value checked now — for every algorithm and task, with the
     fixed overrides ``fixed``, as the run would check it (:func:`agents.config.resolve`) — so a bad value stops the
     benchmark before anything trains."""
-    from agents.config import resolve
-
     key, sep, rest = text.partition("=")
     values = [v.strip() for v in rest.split(",") if v.strip()]
     if not sep or not key.strip() or not values:
@@ -365,12 +369,7 @@ def _hyperparam_grid(text: str, algos: list[str], envs: list[str], fixed: list[s
     if len(set(values)) != len(values):
         raise ValueError(f"--hyperparam-grid: a value is given twice, got {text!r:.60}")
     for value in values:
-        for algo in algos:
-            for env_id in envs:
-                try:
-                    resolve(algo, env_id, overrides=[*fixed, f"{key}={value}"])
-                except ValueError as e:
-                    raise ValueError(f"--hyperparam-grid: {algo} on {env_id}: {e}") from None
+        _check_overrides("--hyperparam-grid", [*fixed, f"{key}={value}"], algos, envs)
     return {"key": key, "values": values}
 
 
