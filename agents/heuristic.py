@@ -116,18 +116,33 @@ from flatbody_env.physics.body import Body
 from flatbody_env.physics.controllability import REDUCED_STATE, linearize  # noqa: F401  (re-exported: the LQR's model)
 from flatbody_env.physics.hamiltonian import kinetic_iso, kinetic_kernel
 from flatbody_env.env.task import DEFAULT_LIMITS, OBS_TARGET, OBSERVATION_SIZE, control_mask, state_from_observation  # noqa: F401  (re-exported)
+from flatbody_env.env.any_body import BODY_OBSERVATION_NAMES
+
+
+def law_columns(obs: np.ndarray) -> np.ndarray:
+    """The entries of observations (..., d) a feedback law reads: the 16 shared ones and, where the observation holds
+    them, the body's 5 constants; the episode's elapsed time that a task may append last (``observe_time``: d = 17 or
+    22) is left out — the laws are time-invariant."""
+    d = obs.shape[-1]
+    return obs[..., :-1] if d in (OBSERVATION_SIZE + 1, OBSERVATION_SIZE + len(BODY_OBSERVATION_NAMES) + 1) else obs
 
 
 class FeedbackLaw(ABC):
     """What the controllers below share: SB3's ``predict`` over :meth:`act` (a batch) and :meth:`action` (one
-    observation, by default the batch of one)."""
+    observation, by default the batch of one). Each law's :meth:`_act` reads :func:`law_columns` of the
+    observations."""
 
     @abstractmethod
-    def act(self, obs: np.ndarray) -> np.ndarray:
+    def _act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, k) float32 for observations (N, 16) (or (N, 21) with the body's constants)."""
 
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Normalised actions (N, k) float32 for observations (N, d): (N, 16), (N, 21) with the body's constants, either
+        with the elapsed time after them (:func:`law_columns`)."""
+        return self._act(law_columns(np.asarray(obs)))
+
     def action(self, obs: np.ndarray) -> np.ndarray:
-        """Normalised action in [−1, 1]ⁿ for one observation (16,) (or (21,), :meth:`act`)."""
+        """Normalised action in [−1, 1]ⁿ for one observation (d,) (:meth:`act`)."""
         return self.act(np.asarray(obs)[None, :])[0]
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
@@ -204,8 +219,8 @@ class PassivityController(FeedbackLaw):
 
     def action(self, obs: np.ndarray) -> np.ndarray:
         """Normalised action in [−1, 1]ⁿ for one observation (16,), or (21,) with the body's constants
-        (``FlatBodyAnyBody-v0``: the body of those constants)."""
-        obs = np.asarray(obs)
+        (``FlatBodyAnyBody-v0``: the body of those constants); an elapsed time after them is ignored."""
+        obs = law_columns(np.asarray(obs))
         y, target = state_from_observation(obs[:OBSERVATION_SIZE])
         u = self.control(
             y, target, None if obs.shape[-1] == OBSERVATION_SIZE else _body_of(obs[OBSERVATION_SIZE:]).kernel_params()
@@ -215,7 +230,7 @@ class PassivityController(FeedbackLaw):
         a = np.clip(u[self.mask] / self.limits[self.mask], -1.0, 1.0)
         return a.astype(np.float32)
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
+    def _act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, n) float32 for observations (N, 16), one vectorised call (J1 = J2: the
         velocities by :func:`~flatbody_env.physics.hamiltonian.kinetic_iso` on arrays, the law of :meth:`control`
         row by row); other observations row by row (:meth:`action`)."""
@@ -475,7 +490,7 @@ class HeuristicController(FeedbackLaw):
             K[r] = self.gain(_target_state(targets[r], p_theta[r]))
         return K
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
+    def _act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, k) float32 for observations (N, 16), one vectorised call:
         a = clip(−K (x − x*), −1, 1) per row, with the row's stored gain (refreshed where its target changed).
 
@@ -578,7 +593,7 @@ class PumpingController(FeedbackLaw):
         u = env.unwrapped
         return cls(u.body, u.control, u.limits, gains=gains)
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
+    def _act(self, obs: np.ndarray) -> np.ndarray:
         """Normalised actions (N, k) float32 for observations (N, 16) (or (N, 21)), one vectorised call: the LQR's,
         with (τ1, τ2) replaced by the pumping law on the rows where :attr:`channel` asks for a spin."""
         obs = np.asarray(obs, dtype=np.float64)

@@ -75,7 +75,7 @@ class ReachAnyBody(ReachStationaryEllipse):
         return self.min_settling_rate == 0
 
     @property
-    def observation_extra_names(self) -> tuple[str, ...]:
+    def body_observation_names(self) -> tuple[str, ...]:
         return BODY_OBSERVATION_NAMES if self.observe_body else ()
 
     def __post_init__(self) -> None:
@@ -114,7 +114,7 @@ class ReachAnyBody(ReachStationaryEllipse):
             state=self.sample_initial_state(rng, target, control), target=target_row(target), ellipse=target, body=own
         )
 
-    def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def body_observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if not self.observe_body:
             return np.zeros(0), np.zeros(0)
         r = self.ranges()

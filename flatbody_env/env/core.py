@@ -37,7 +37,7 @@ import numpy as np
 from gymnasium import spaces
 
 from flatbody_env.env import transition as tr
-from flatbody_env.env.registration import TASK_CLASSES
+from flatbody_env.env.registration import MAX_EPISODE_STEPS, TASK_CLASSES
 from flatbody_env.env.sampling import draw_config
 from flatbody_env.env.task import (
     CONTROLS,
@@ -412,7 +412,10 @@ class EnvCore:
         x[tr.X_BETA] = task.w_proximity
         x[tr.X_MARGIN] = task.proximity_margin
         x[tr.X_VARY_BODY] = 1.0 if task.varies_body else 0.0
-        x[tr.X_OBS_BODY] = 1.0 if task.observation_extra_names else 0.0
+        x[tr.X_OBS_BODY] = 1.0 if task.body_observation_names else 0.0
+        if task.observe_time:
+            x[tr.X_OBS_TIME] = c.observation_size - 1
+            x[tr.X_TIME_UNIT] = MAX_EPISODE_STEPS
         if task.varies_body:
             x[tr.X_RANGES : tr.X_RANGES + 10] = task.ranges().ravel()
         if task.kind == TASK_WITNESS:
@@ -453,6 +456,21 @@ class EnvCore:
             self.S[row : row + values.shape[0]] = values
         else:  # those rows alone (contiguous in the row-major array), not the whole batch there and back
             self.S[row : row + values.shape[0]].copy_to_device(np.ascontiguousarray(values, dtype=np.float64))
+
+    def set_clocks(self, steps: np.ndarray) -> None:
+        """Set every body's episode clock to ``steps`` (N,) (CPU) and, where the task observes time, its observation
+        of it, as a step would have written it (:meth:`observed_time`)."""
+        self.K[tr.K_CLOCK] = steps
+        t = self.observed_time(np.asarray(steps, dtype=np.float64))
+        if t is not None:
+            self.OBS[:, -1] = t
+
+    def observed_time(self, steps):
+        """The observation's ``time`` entry at the clocks ``steps`` (float64 numpy or torch, any backend) as
+        :func:`~flatbody_env.env.transition.observe_clock` computes it; None where the task does not observe time."""
+        if not self.config.task.observe_time:
+            return None
+        return steps.clip(max=tr.MAX_OBSERVED_STEPS) / MAX_EPISODE_STEPS
 
     def host(self, name: str) -> np.ndarray:
         """A host copy of array ``name`` (``S``, ``K``, ``OBS``, ``FINAL``)."""
@@ -729,10 +747,11 @@ class EnvCore:
         self.S[tr.TG0 : tr.TG0 + 6] = TG
         if P is not None:
             self.S[tr.P0 : tr.P0 + 9] = P
-            if self.config.task.observation_extra_names:  # the observed constants, as a reset writes them
+            if self.config.task.body_observation_names:  # the observed constants, as a reset writes them
                 self.OBS[:, 16:21] = P[list(tr.P_CONSTANTS)].T
         self.S[tr.R_RETURN] = 0.0
         self.K[[tr.K_CLOCK, tr.K_TERMINATED, tr.K_TRUNCATED, tr.K_PENDING, tr.K_HOST, tr.K_EP_DONE]] = 0
+        self.set_clocks(self.K[tr.K_CLOCK])
         self._seam = None
 
     def rollout(self, Y: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

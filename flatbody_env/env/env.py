@@ -82,6 +82,10 @@ class FlatBodyEnv(gym.Env):
     15   target_s3         target s3*                                    ±momentum_bound   J·s
     ===  ================  ============================================  ================  ==========
 
+    A task may append entries (the body's constants of ``FlatBodyAnyBody-v0``), and ``observe_time=True`` (a task
+    keyword, off on every registered id) appends the episode's elapsed time last: steps / 400, in [0, 2500], 0 at a
+    reset and 1 where the registered ids truncate (Gymnasium's ``TimeAwareObservation``, written by the transition).
+
     ## Rewards
 
     The reward is the sum of named terms, each returned in ``info["reward_terms"]``. The v1 ids

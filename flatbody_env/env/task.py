@@ -207,8 +207,9 @@ class ReachStationaryEllipse:
     extra_reward_names: ClassVar[tuple[str, ...]] = ()
     """Reward terms beyond the kernels' six (:data:`REWARD_TERMS`), computed by the transition for the task's
     :attr:`kind`."""
-    observation_extra_names: ClassVar[tuple[str, ...]] = ()
-    """Observation entries after the 16 of :data:`OBSERVATION_NAMES` (the transition writes them at a reset)."""
+    body_observation_names: ClassVar[tuple[str, ...]] = ()
+    """The body's constants the observation holds after the 16 of :data:`OBSERVATION_NAMES` (the transition writes
+    them at a reset; :class:`~flatbody_env.env.any_body.ReachAnyBody`)."""
     kind: ClassVar[int] = TASK_REACH
     """The transition's task kind (:data:`TASK_REACH`, :data:`TASK_HOLD`, :data:`TASK_WITNESS`)."""
 
@@ -238,8 +239,14 @@ class ReachStationaryEllipse:
     """β of the tolerance reward: the weight of its shaping term ``proximity`` (the ``success`` term has 1 − β)."""
     proximity_margin: float = 0.5
     """m of the tolerance reward: the excess distance beyond the tolerance where ``proximity`` falls to 0.1 β."""
+    observe_time: bool = False
+    """Append the episode's elapsed time to the observation (its last entry, ``time``): the steps since the reset over
+    :data:`~flatbody_env.env.registration.MAX_EPISODE_STEPS` (0 at a reset, 1 where every registered id truncates),
+    the information a time-limited task's policy lacks to be Markov (Pardo et al., ICML 2018; Gymnasium's
+    ``TimeAwareObservation``). Off on every registered id (``env_kwargs`` turns it on: a variant)."""
 
     def __post_init__(self) -> None:
+        validation.boolean("observe_time", self.observe_time)  # first: the observation's properties read it
         for name in (
             "w_shape",
             "w_spin",
@@ -306,9 +313,25 @@ class ReachStationaryEllipse:
         circulation branch, stable class, the noise start."""
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
-    def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds (low, high) of the entries of :attr:`observation_extra_names`."""
+    @property
+    def observation_extra_names(self) -> tuple[str, ...]:
+        """Observation entries after the 16 of :data:`OBSERVATION_NAMES`: :attr:`body_observation_names`, then ``time``
+        where the task observes it (:attr:`observe_time`)."""
+        return (*self.body_observation_names, *(("time",) if self.observe_time else ()))
+
+    def body_observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (low, high) of the entries of :attr:`body_observation_names`."""
         return np.zeros(0), np.zeros(0)
+
+    def observation_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds (low, high) of the entries of :attr:`observation_extra_names` (the time's: 0 to the longest episode
+        a vector env allows, in :data:`~flatbody_env.env.registration.MAX_EPISODE_STEPS`)."""
+        lo, hi = self.body_observation_bounds()
+        if self.observe_time:
+            from flatbody_env.env.registration import MAX_EPISODE_STEPS
+
+            lo, hi = np.append(lo, 0.0), np.append(hi, validation.MAX_EPISODE_STEPS / MAX_EPISODE_STEPS)
+        return lo, hi
 
     def start_near(
         self, rng: np.random.Generator, target: StationaryEllipse, control: str, *, body: Body

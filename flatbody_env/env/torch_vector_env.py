@@ -163,6 +163,9 @@ class FlatBodyTorchVectorEnv(VectorEnv):
             raise validation.refusal("steps", f"be {n} integers in [0, {top})")
         if self._gpu is not None:
             self._gpu.t["K"][tr.K_CLOCK].copy_(s.to(self.device))
+            t = self._gpu.core.observed_time(s.to(self.device, torch.float64))
+            if t is not None:  # the observed time, as a step would have written it
+                self._gpu.t["OBS"][:, -1] = t
         else:
             self.venv.set_episode_steps(s.cpu().numpy())
 

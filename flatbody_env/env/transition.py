@@ -146,7 +146,10 @@ X_MAX_NFEV = 47
 """Each body's budget of right-hand-side evaluations per env step
 (:data:`~flatbody_env.physics.validation.ENV_STEP_MAX_NFEV`;
 DOP853 checks it before each of its steps)."""
-X_SIZE = 48
+X_OBS_TIME, X_TIME_UNIT = 48, 49
+"""The observation's column of the episode's elapsed time (0: the task does not observe it) and the steps it counts
+in (:attr:`~flatbody_env.env.task.ReachStationaryEllipse.observe_time`; :func:`observe_clock`)."""
+X_SIZE = 50
 REWARD_TERMS, REWARD_TOLERANCE = 0, 1
 
 ERR_ACTION, ERR_NO_TARGET, ERR_START, ERR_NO_WITNESS = 1, 2, 3, 4
@@ -441,6 +444,19 @@ def witness_start(
     return False
 
 
+MAX_OBSERVED_STEPS = 1_000_000
+"""The observed time stops here (:data:`flatbody_env.physics.validation.MAX_EPISODE_STEPS`, the longest episode a
+vector env allows; an unlimited single env counts on), so it stays within the observation space."""
+
+
+def observe_clock(b, K, OBS, xcfg):
+    """Where the task observes time (:data:`X_OBS_TIME`): body ``b``'s elapsed steps, its clock over
+    :data:`X_TIME_UNIT` (0 at a reset, 1 at the v1 ids' truncation), into its observation ``OBS[b]``."""
+    col = int(xcfg[X_OBS_TIME])
+    if col != 0:
+        OBS[b, col] = min(K[K_CLOCK, b], MAX_OBSERVED_STEPS) / xcfg[X_TIME_UNIT]
+
+
 def reset_body(
     b, mode, write_info, S, K, OBS, coeffs, kcfg, scfg, xcfg, grid, rate, margin, invalid, edge_lo, edge_hi, refined,
     fine_rate, fine_margin, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew, ytmp, vel, force, f,
@@ -489,6 +505,7 @@ def reset_body(
     K[K_CLOCK, b] = 0
     K[K_PENDING, b] = 0
     K[K_HOST, b] = 0
+    observe_clock(b, K, OBS, xcfg)
     return ERR_START if sc[3] != 0.0 else 0
 
 
@@ -612,7 +629,9 @@ def advance_body(b, A, S, K, OBS, coeffs, kcfg, xcfg, y, tg, p, a, u, out, K13, 
     load_body(b, S, y, tg, p)
     status = integrate_body(xcfg, coeffs, y, u, p, out, K13, ynew, ytmp, vel, force, f, counters)
     ended = post_step(y, out, status, a, int(xcfg[X_NACT]), tg, kcfg, p, yout, OBS[b], terms, sc, vel, force)
-    return STEP_ENDED if close_step(b, ended, status, counters[0], S, K, kcfg, xcfg, yout, terms, sc) != 0 else 0
+    done = close_step(b, ended, status, counters[0], S, K, kcfg, xcfg, yout, terms, sc)
+    observe_clock(b, K, OBS, xcfg)
+    return STEP_ENDED if done != 0 else 0
 
 
 def step_body(
@@ -804,6 +823,7 @@ def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW
     coeffs = CFG[CO0:]
     YOUT, TERMS, SC, ENDED, ACT2, Tt, TG4, yk = LW
     n = S.shape[1]
+    timed = xcfg[X_OBS_TIME] != 0.0  # read once: the per-body loop below is the batch's hot path
     for b in range(n):
         for i in range(4):
             TG4[b, i] = S[TG0 + i, b]
@@ -842,7 +862,10 @@ def finish_lanes(AC, OUT, STATUS, NFEV, S, K, OBS, FINAL, FLAGS, CFG, WF, WI, LW
             for i in range(4):
                 sc[i] = SC[i, b]
             err = 0
-            if close_step(b, ENDED[b], STATUS[b], NFEV[b], S, K, kcfg, xcfg, yout, terms, sc) != 0:
+            done = close_step(b, ENDED[b], STATUS[b], NFEV[b], S, K, kcfg, xcfg, yout, terms, sc)
+            if timed:
+                observe_clock(b, K, OBS, xcfg)
+            if done != 0:
                 err = end_episode(
                     b, S, K, OBS, FINAL, coeffs, kcfg, scfg, xcfg, _GRID, _RATE, _MARGIN, _INVALID, _EDGE_LO, _EDGE_HI,
                     _REFINED, _FINE_RATE, _FINE_MARGIN, y, tg, p, sl, pot, table_code, cand, uu, a, u, out, K13, ynew,
@@ -880,6 +903,7 @@ def reset_slot(
             FINAL[b, i] = 0.0
     if stagger != 0:
         stagger_body(b, K, int(xcfg[X_MAX_STEPS]))
+        observe_clock(b, K, OBS, xcfg)
     if err != 0:
         FLAGS[0] = err
         FLAGS[1] = b

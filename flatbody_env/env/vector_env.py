@@ -282,7 +282,7 @@ class FlatBodyVectorEnv(VectorEnv):
         ):
             raise validation.refusal("steps", f"be {self.num_envs} integers in [0, {self.max_episode_steps})", steps)
         for core, sl in zip(self.cores, self._slices, strict=True):
-            core.K[tr.K_CLOCK] = s[sl]
+            core.set_clocks(s[sl])
 
     def _actions(self, actions) -> np.ndarray:
         """``actions`` as an (N, n) float64 array of finite numbers, or a ``ValueError`` naming ``actions``."""

@@ -265,40 +265,44 @@ def _simulator_report() -> dict:
 
     dev = cuda.require()
     report = {"simulated": cuda.simulated(), "runs": {}}
-    for env_id in V1_IDS:
-        cfg = configure(**_v1_kwargs(env_id, short_witness=True))
-        for mode in ("same", "next"):
-            c = EnvCore(cfg, 3, max_episode_steps=3, autoreset=mode)
-            g = EnvCore(cfg, 3, max_episode_steps=3, autoreset=mode, backend="cuda", threads_per_block=2)
+    cases = [(env_id, mode, {}) for env_id in V1_IDS for mode in ("same", "next")]
+    # the time observed after the body's constants (the observation's 22 columns)
+    cases.append(("FlatBodyAnyBody-v1", "next", {"observe_body": True, "observe_time": True}))
+    for env_id, mode, extra in cases:
+        cfg = configure(**{**_v1_kwargs(env_id, short_witness=True), **extra})
+        c = EnvCore(cfg, 3, max_episode_steps=3, autoreset=mode)
+        g = EnvCore(cfg, 3, max_episode_steps=3, autoreset=mode, backend="cuda", threads_per_block=2)
 
-            def diff(c=c, g=g):
-                return max(
-                    float(np.max(np.abs(c.host(k).astype(float) - g.host(k).astype(float))))
-                    for k in ("S", "K", "OBS", "FINAL")
-                )
+        def diff(c=c, g=g):
+            return max(
+                float(np.max(np.abs(c.host(k).astype(float) - g.host(k).astype(float))))
+                for k in ("S", "K", "OBS", "FINAL")
+            )
 
-            c.reset(seeds=[5, 6, 7])
-            g.reset(seeds=[5, 6, 7])
-            diffs = [diff()]
-            rng = np.random.default_rng(0)
-            for _ in range(4):
-                A = rng.uniform(-1, 1, (3, cfg.n_act)).astype(np.float32)
-                c.step(A)
-                g.step(dev.to_device(A))
-                diffs.append(diff())
-            episodes = g.host("K")[tr.K_EPISODE].tolist()
-            m = np.array([True, False, True])
-            c.reset(seeds=[8, 9, 10], mask=m, stagger=True)
-            g.reset(seeds=[8, 9, 10], mask=m, stagger=True)
+        c.reset(seeds=[5, 6, 7])
+        g.reset(seeds=[5, 6, 7])
+        diffs = [diff()]
+        rng = np.random.default_rng(0)
+        for _ in range(4):
+            A = rng.uniform(-1, 1, (3, cfg.n_act)).astype(np.float32)
+            c.step(A)
+            g.step(dev.to_device(A))
             diffs.append(diff())
-            A = np.zeros((3, cfg.n_act), np.float32)
-            A[:, 0] = np.inf
-            try:
-                g.step(dev.to_device(A))
-                error = ""
-            except ValueError as exc:
-                error = str(exc)
-            report["runs"][f"{env_id}:{mode}"] = {"diffs": diffs, "episodes": episodes, "action_error": error}
+        episodes = g.host("K")[tr.K_EPISODE].tolist()
+        m = np.array([True, False, True])
+        c.reset(seeds=[8, 9, 10], mask=m, stagger=True)
+        g.reset(seeds=[8, 9, 10], mask=m, stagger=True)
+        diffs.append(diff())
+        A = np.zeros((3, cfg.n_act), np.float32)
+        A[:, 0] = np.inf
+        try:
+            g.step(dev.to_device(A))
+            error = ""
+        except ValueError as exc:
+            error = str(exc)
+        key = f"{env_id}{'+time' if extra else ''}:{mode}"
+        report["runs"][key] = {"diffs": diffs, "episodes": episodes, "action_error": error}
+        report["runs"][key]["time"] = g.host("OBS")[:, -1].tolist() if extra else None
     return report
 
 
@@ -316,7 +320,10 @@ def test_cuda_kernels_equal_the_cpu_loops_under_the_simulator_for_every_v1_id(si
     from flatbody_env.env.registration import V1_IDS
 
     assert simulator["simulated"]
-    assert sorted(simulator["runs"]) == sorted(f"{e}:{m}" for e in V1_IDS for m in ("same", "next"))
+    assert sorted(simulator["runs"]) == sorted(
+        [f"{e}:{m}" for e in V1_IDS for m in ("same", "next")] + ["FlatBodyAnyBody-v1+time:next"]
+    )
+    assert max(simulator["runs"]["FlatBodyAnyBody-v1+time:next"]["time"]) > 0  # the clocks observed, staggered
     for key, run in simulator["runs"].items():
         assert run["diffs"] == [0.0] * len(run["diffs"]), key
         assert min(run["episodes"]) >= 1 and max(run["episodes"]) >= 2, key  # autoresets ran inside the kernels
