@@ -162,7 +162,8 @@ LADDER_CAPTION = (
     "(reach tasks): classic references; planner: MPPI over the env's own transition from the observed state;\n"
     "witness: the solvability certificate of FlatBodyTorque-v1's starts (the open-loop actions that reach the target\n"
     "by construction), not a policy; agent (ALGO): the shipped agents — agent (distilled): the planner distilled\n"
-    "into a network by DAgger (the prior track: it imitates the planner, which plans with the true model)."
+    "into a network by DAgger (the prior track: it imitates the planner, which plans with the true model);\n"
+    "agent (distilled-clock): the same with the episode's elapsed time in its observation."
 )
 
 

@@ -215,7 +215,8 @@ def test_device_cuda_without_a_gpu_is_one_line_naming_the_flag(tmp_path, capsys)
 def test_the_shipped_agents_configurations_read_and_check(tmp_path):
     """Every agents/models/* config.yml reads as a RunConfig whose prior is labelled: the v0 agents' (format 1) on the
     prior track, the shipped v1 agent's (format 2) from scratch, the distilled v1 agents' (format 2) on the prior track:
-    a residual on the law their planner perturbs and the distillation that fitted it."""
+    a residual on the law their planner perturbs and the distillation that fitted it (``distilled-clock-ID``: with the
+    episode's elapsed time in the observation, its env_kwargs say)."""
     from agents.numpy_policy import MODELS_DIR, SHIPPED_AGENT
 
     for folder in sorted(MODELS_DIR.iterdir()):
@@ -225,7 +226,9 @@ def test_the_shipped_agents_configurations_read_and_check(tmp_path):
         assert config.seed >= 0
         if distilled:
             assert set(config.prior) == {"residual", "imitation"} and config.imitation["method"] == "distill"
-            assert folder.name == f"distilled-{config.env_id}" and config.algo == "ppo"
+            # distilled-clock-ID: the same with the episode's elapsed time observed (a variant, named so)
+            clock = bool(config.env_kwargs.get("observe_time"))
+            assert folder.name == f"distilled-{'clock-' if clock else ''}{config.env_id}" and config.algo == "ppo"
         else:
             assert config.prior is None or set(config.prior) <= {"residual", "trained_agent", "curriculum"}
     shipped = RunConfig.read(MODELS_DIR / SHIPPED_AGENT)
