@@ -86,6 +86,7 @@ from flatbody_env.env.task import (  # noqa: F401  (TOLERANCE_TERMS: the reward'
 )
 from flatbody_env.env.witness import square_wave, uncontrolled_offset
 from flatbody_env.integrators.twopolar_kernels import env_step_into
+from flatbody_env.physics.validation import MAX_EPISODE_STEPS
 
 # --------------------------------------------------------------------------------------------- layout
 Y0, TG0, P0, W0 = 0, 11, 17, 26
@@ -444,9 +445,9 @@ def witness_start(
     return False
 
 
-MAX_OBSERVED_STEPS = 1_000_000
-"""The observed time stops here (:data:`flatbody_env.physics.validation.MAX_EPISODE_STEPS`, the longest episode a
-vector env allows; an unlimited single env counts on), so it stays within the observation space."""
+MAX_OBSERVED_STEPS = MAX_EPISODE_STEPS
+"""The observed time stops here (the longest episode a vector env allows; an unlimited single env counts on), so it
+stays within the observation space."""
 
 
 def observe_clock(b, K, OBS, xcfg):
