@@ -185,6 +185,7 @@ class RslVecEnv(_vec_env_base()):
 
         v = torch.as_tensor(value).to("cpu", torch.int64).clamp(0, self.max_episode_length - 1)
         self.env.set_episode_steps(v.numpy())
+        self._obs = self.env.observations.to(self.device)  # an observed time (observe_time) follows the clocks
 
     def _obs_dict(self, obs):
         from tensordict import TensorDict

@@ -140,6 +140,14 @@ class FlatBodyTorchVectorEnv(VectorEnv):
         return torch.from_numpy(self.venv.target_vectors)
 
     @property
+    def observations(self) -> torch.Tensor:
+        """The N current observations (N, d) (a copy; :attr:`FlatBodyVectorEnv.observations`)."""
+        self._open()
+        if self._gpu is not None:
+            return self._gpu.t["OBS"].clone()
+        return torch.from_numpy(self.venv.observations)
+
+    @property
     def episode_steps(self) -> torch.Tensor:
         """Each body's steps into its episode (N,) int64 (a copy)."""
         self._open()

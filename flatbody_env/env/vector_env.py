@@ -226,6 +226,12 @@ class FlatBodyVectorEnv(VectorEnv):
 
     # --- public state ---------------------------------------------------------------------------------
     @property
+    def observations(self) -> np.ndarray:
+        """The N current observations (N, d) (a copy), as the last reset or step returned them, the observed time
+        (``observe_time``) updated by :meth:`set_episode_steps` since."""
+        return self._gather("OBS")
+
+    @property
     def states(self) -> np.ndarray:
         """The N packed states (N, 11) float64 (a copy)."""
         return self._gather("S", slice(tr.Y0, tr.Y0 + 11)).T.copy()

@@ -67,6 +67,9 @@ def test_staggered_and_externally_set_clocks_are_observed():
     assert steps.max() > 0
     np.testing.assert_array_equal(obs[:, -1], (steps / MAX_EPISODE_STEPS).astype(np.float32))
     venv.set_episode_steps(np.array([0, 1, 7, 100, 250, 399]))
+    np.testing.assert_array_equal(  # observed before the next step (the host writes it with the clocks)
+        venv.observations[:, -1], np.array([0, 1, 7, 100, 250, 399], dtype=np.float32) / 400
+    )
     obs, *_ = venv.step(np.zeros((n, venv.single_action_space.shape[0])))
     np.testing.assert_array_equal(obs[:, -1], np.array([1, 2, 8, 101, 251, 400], dtype=np.float32) / 400)
     # the torch face sets its observation with its clocks
@@ -77,8 +80,21 @@ def test_staggered_and_externally_set_clocks_are_observed():
     tenv = FlatBodyTorchVectorEnv(n, device="cpu", max_episode_steps=400, **_kw(env_id, observe_time=True))
     tenv.reset(seed=2)
     tenv.set_episode_steps(torch.tensor([3, 0, 5, 9, 1, 2]))
+    np.testing.assert_array_equal(
+        tenv.observations[:, -1].numpy(), np.array([3, 0, 5, 9, 1, 2], dtype=np.float32) / 400
+    )
     obs, *_ = tenv.step(torch.zeros((n, tenv.single_action_space.shape[0])))
     np.testing.assert_array_equal(obs[:, -1].numpy(), np.array([4, 1, 6, 10, 2, 3], dtype=np.float32) / 400)
+    # rsl_rl's adapter: its init_at_random_ep_len sets the clocks, and the policy's first observation says them
+    from agents.rsl import RslVecEnv
+
+    adapter = RslVecEnv(
+        FlatBodyTorchVectorEnv(n, device="cpu", max_episode_steps=400, **_kw(env_id, observe_time=True))
+    )
+    adapter.episode_length_buf = torch.tensor([3, 0, 5, 9, 1, 2])
+    np.testing.assert_array_equal(
+        adapter.get_observations()["policy"][:, -1].numpy(), np.array([3, 0, 5, 9, 1, 2], dtype=np.float32) / 400
+    )
 
 
 @pytest.mark.parametrize(("env_id", "extra"), CASES[:2])
